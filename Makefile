@@ -1,0 +1,23 @@
+# mudoe developer and user entry points. Run `make setup` once, then `make test`.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: setup test bench identify oed detect report validate clean
+
+setup:
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --upgrade pip
+	$(BIN)/python -m pip install -e ".[test]"
+
+test:
+	$(BIN)/python -m pytest -q
+
+bench:
+	$(BIN)/python -m bench
+
+identify oed detect report validate:
+	@echo "make $@: not available yet (its issue has not landed); see README" >&2; exit 2
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache results

@@ -1,0 +1,418 @@
+"""The full-space weighted least-squares estimator (paper eq. 3) and its covariance (eq. 7).
+
+    min_{p, y_1..y_nq}  sum_k sum_j sum_i  (w_k / 2) ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2
+    s.t.                E(y_j, p, q_j) = 0,   j = 1..n_q,      lower <= p <= upper
+
+States and parameters are optimisation variables; Ipopt (through CasADi) solves the
+NLP with exact first and second derivatives.  Sums over series are folded into
+per-(input, sensor) means, so the NLP size does not grow with n_M.  The result is
+refined by at most a few exact reduced-space Newton steps (the same derivatives as
+the covariance, accepted only if they decrease the objective) and the second-order
+covariance
+
+    C = H^{-1} J^T Omega^2 J H^{-T},    H = J^T Omega J + S(Omega)
+
+is evaluated exactly by AD and the implicit function theorem.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from scipy import stats
+
+from models.contract import Model
+from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
+from .ipopt_solver import IpoptSettings, solve_nlp
+from .measurements import Measurements
+from .results import Estimate
+from .sensitivity import sensitivities
+from .state import solve_states
+
+__all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
+           "covariance_from_terms"]
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """Settings of :func:`identify` (defaults suit most problems).
+
+    Attributes
+    ----------
+    ipopt : IpoptSettings
+    refine_steps : int        maximum exact reduced Newton refinement steps after Ipopt
+    rank_rtol : float         relative singular value of the column-normalised sqrt(Omega) J
+                              below which the parameters count as not identifiable
+    ill_conditioned : float   condition number of the normalised information that triggers a note
+    s_ratio_note : float      ||S|| / ||J^T Omega J|| (normalised) that triggers a note
+    """
+
+    ipopt: IpoptSettings = field(default_factory=IpoptSettings)
+    refine_steps: int = 5
+    rank_rtol: float = 1e-9
+    ill_conditioned: float = 1e8
+    s_ratio_note: float = 0.1
+
+
+# ---------------------------------------------------------------------------- validation
+def _validate(model, data, p0, weights):
+    if not isinstance(model, Model):
+        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    if data.d_q != model.n_q_dim:
+        raise DataError(f"data.inputs: has {data.d_q} columns but model {model.name!r} has inputs "
+                        f"({', '.join(model.inputs)})")
+    if data.n_S != model.n_S:
+        raise DataError(f"data.z: has {data.n_S} sensors but model {model.name!r} has {model.n_S} "
+                        f"({', '.join(model.sensors)}); use data.select([...]) to match")
+    default_names = tuple(f"s{k + 1}" for k in range(data.n_S))
+    if data.sensors != default_names and data.sensors != model.sensors:
+        raise DataError(f"data.sensors {list(data.sensors)} do not match the model's sensors "
+                        f"{list(model.sensors)}; use data.select(model.sensors)")
+    try:
+        p0 = np.asarray(p0, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"p0: not numeric: {p0!r}") from None
+    if p0.shape != (model.n_p,):
+        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
+    for i, par in enumerate(model.params):
+        if not math.isfinite(p0[i]):
+            raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
+        if p0[i] < par.lower or p0[i] > par.upper:
+            raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
+                            f"[{par.lower:g}, {par.upper:g}]")
+    w = data._weights(weights)
+    if not np.any(w > 0):
+        raise DataError("weights: no sensor is selected (all weights are zero)")
+    n = data.n_data(w)
+    if n < model.n_p:
+        raise DataError(f"data: only {n} usable values in the selected sensors for {model.n_p} parameters; "
+                        "need at least as many values as parameters")
+    if data.sigma is None and n <= model.n_p:
+        raise DataError(f"data: sigma is unknown and n = {n} values leave no degree of freedom to estimate it "
+                        f"for {model.n_p} parameters; give sigma or more data")
+    return p0, w, n
+
+
+def _param_scale(model, p0):
+    s = np.empty(model.n_p)
+    for i, par in enumerate(model.params):
+        if par.scale is not None:
+            s[i] = par.scale
+        elif p0[i] != 0:
+            s[i] = abs(p0[i])
+        elif math.isfinite(par.lower) and math.isfinite(par.upper) and par.upper > par.lower:
+            s[i] = par.upper - par.lower
+        else:
+            s[i] = 1.0
+    return s
+
+
+def _state_scale(Y):
+    if Y.size == 0:
+        return np.ones(Y.shape[1])
+    s = np.abs(Y).max(axis=0)
+    top = s.max() if s.size else 0.0
+    floor = top * 1e-6 if top > 0 else 1.0
+    return np.where(s > floor, s, floor)
+
+
+# ---------------------------------------------------------------------------- the NLP
+def _build_nlp(model, inputs, zbar, cw, sig2, s_p, s_y, e_scale):
+    """CasADi expressions of the scaled full-space problem."""
+    n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
+    y = ca.SX.sym("y", n_y)
+    p = ca.SX.sym("p", n_p)
+    q = ca.SX.sym("q", model.n_q_dim)
+    zb = ca.SX.sym("zbar", model.n_S)
+    c = ca.SX.sym("c", model.n_S)
+    h = model.h_fun(y, p, q)
+    stage_f = 0.5 * ca.sum1(c * (h - zb) ** 2 / ca.DM(sig2))
+    stage_E = model.E_fun(y, p, q) * ca.DM(e_scale) if n_y else ca.SX(0, 1)
+    stage = ca.Function("stage", [y, p, q, zb, c], [stage_E, stage_f])
+    mapped = stage.map(n_q)
+    pt = ca.MX.sym("p_scaled", n_p)
+    yt = ca.MX.sym("y_scaled", n_y, n_q)
+    P = pt * ca.DM(s_p)
+    Y = ca.diag(ca.DM(s_y)) @ yt if n_y else ca.MX(0, n_q)
+    E_all, f_all = mapped(Y, P, ca.DM(inputs.T), ca.DM(zbar.T), ca.DM(cw.T))
+    x = ca.vertcat(pt, ca.vec(yt))
+    g = ca.vec(E_all) if n_y else ca.MX(0, 1)
+    return x, ca.sum2(f_all), g
+
+
+def _objective_terms(data, w, sig):
+    """Per-(input, sensor) means, weighted counts and the constant within-group term."""
+    counts = data.counts().astype(float)
+    zbar = np.nan_to_num(data.means(), nan=0.0)
+    cw = counts * w[None, :]
+    dev = np.where(data.mask(), data.z - zbar[None], 0.0)
+    const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
+    return zbar, cw, const
+
+
+def _reduced(model, p, data, w, sig, Y0):
+    """States, sensitivities, objective and gradient at p (reduced space)."""
+    Y = solve_states(model, p, data.inputs, Y0=Y0)
+    sens = sensitivities(model, p, data.inputs, Y)
+    zbar, cw, const = _objective_terms(data, w, sig)
+    dev = zbar - sens.h
+    f = 0.5 * float(np.sum(cw * dev ** 2 / sig ** 2)) + const
+    lam = -cw * dev / sig ** 2                      # d f / d h_jk
+    grad = np.einsum("jk,jkp->p", lam, sens.G)
+    return Y, sens, f, grad, lam
+
+
+def _gn_information(G, cw, sig):
+    """J^T Omega J = sum_jk c_jk w_k G_jk^T G_jk / sigma_k^2."""
+    return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
+
+
+def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
+    """Assumption 3: rank(sqrt(Omega) J) = n_p, checked on the column-normalised matrix.
+
+    Returns the condition number of the normalised matrix; raises IdentifiabilityError.
+    """
+    rows = (np.sqrt(cw) / sig)[:, :, None] * G * s_p[None, None, :]
+    J = rows.reshape(-1, model.n_p)
+    norms = np.linalg.norm(J, axis=0)
+    sens_names = tuple(model.sensors[k] for k in selected)
+    dead = [model.param_names[i] for i in range(model.n_p) if not norms[i] > 0]
+    if dead:
+        raise IdentifiabilityError(
+            f"not identifiable: parameter(s) {', '.join(dead)} do not influence the selected sensors "
+            f"({', '.join(sens_names)}) at any input (Assumption 3, rank(Omega J) = n_p, fails)",
+            params=dead, sensors=sens_names)
+    Jn = J / norms
+    sv, Vt = np.linalg.svd(Jn, full_matrices=False)[1:]
+    ratio = sv[-1] / sv[0] if sv[0] > 0 else 0.0
+    if J.shape[0] < model.n_p or ratio < rtol:
+        v = Vt[-1] if J.shape[0] >= model.n_p else np.ones(model.n_p)
+        involved = [model.param_names[i] for i in np.flatnonzero(np.abs(v) >= 0.1 * np.abs(v).max())]
+        raise IdentifiabilityError(
+            f"not identifiable: parameters {', '.join(involved)} cannot be told apart with sensors "
+            f"({', '.join(sens_names)}): rank(Omega J) < n_p = {model.n_p} (smallest relative singular value "
+            f"{ratio:.2e}); add a sensor or input that separates them, or fix one of them",
+            params=involved, sensors=sens_names)
+    return 1.0 / ratio
+
+
+def covariance_from_terms(F, F2, S):
+    """C = H^{-1} F2 H^{-T} with H = F + S (second order) and (F^{-1} F2 F^{-1}) (Gauss-Newton).
+
+    F = J^T Omega J, F2 = J^T Omega^2 J.  Returns (cov, cov_gn, H, H_ok) where H_ok is False when
+    H is singular (cov is then NaN).
+    """
+    H = F + S
+    n = F.shape[0]
+    Finv_F2 = np.linalg.solve(F, F2)
+    cov_gn = np.linalg.solve(F, Finv_F2.T).T
+    try:
+        cond = np.linalg.cond(H)
+        if not np.isfinite(cond) or cond > 1e15:
+            raise np.linalg.LinAlgError
+        A = np.linalg.solve(H, F2)
+        cov = np.linalg.solve(H, A.T).T
+        ok = True
+    except np.linalg.LinAlgError:
+        cov, ok = np.full((n, n), np.nan), False
+    return 0.5 * (cov + cov.T), 0.5 * (cov_gn + cov_gn.T), H, ok
+
+
+# ---------------------------------------------------------------------------- main entry
+def identify(model: Model, data: Measurements, p0, weights=None,
+             settings: IdentifySettings | None = None, Y0=None) -> Estimate:
+    """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7).
+
+    Parameters
+    ----------
+    model : models.Model
+    data : Measurements
+        z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
+    p0 : array_like (n_p,)
+        Start values (inside the bounds).  States start from the solution of E(y, p0, q_j) = 0.
+    weights : array_like (n_S,), optional
+        Sensor weights omega (0/1 selects sensors; default all ones).
+    settings : IdentifySettings, optional
+    Y0 : array (n_q, n_y), optional
+        Initial guess of the states (else solved from the model's own guess).
+
+    Returns
+    -------
+    Estimate
+
+    Raises
+    ------
+    DataError, TypeError
+        Bad input (the message names the argument).
+    IdentificationError
+        Ipopt failed (carries Ipopt's status), or the state equation could not be solved.
+    IdentifiabilityError
+        rank(Omega J) < n_p at the estimate (names the parameters and sensors).
+    """
+    settings = settings or IdentifySettings()
+    t_start = time.perf_counter()
+    p0, w, n = _validate(model, data, p0, weights)
+    selected = np.flatnonzero(w > 0)
+    if data.sigma is None:
+        zs = data.z[:, :, selected]
+        spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+        sig = np.full(model.n_S, spread)
+    else:
+        sig = np.asarray(data.sigma, float)
+
+    try:
+        Y_init = solve_states(model, p0, data.inputs, Y0=Y0)
+    except StateSolveError as exc:
+        raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
+                                  status="state solve failed") from None
+
+    s_p = _param_scale(model, p0)
+    s_y = _state_scale(Y_init)
+    if model.n_y:
+        from .state import numerics
+        num = numerics(model)
+        rowmax = np.zeros(model.n_y)
+        for j in range(data.n_q):
+            Ey = np.abs(np.asarray(ca.densify(num.E_y(Y_init[j], p0, data.inputs[j])[1]).full())) * s_y[None, :]
+            rowmax = np.maximum(rowmax, Ey.max(axis=1))
+        e_scale = np.where(rowmax > 0, 1.0 / np.where(rowmax > 0, rowmax, 1.0), 1.0)
+    else:
+        e_scale = np.ones(0)
+
+    zbar, cw, const = _objective_terms(data, w, sig)
+    x, f, g = _build_nlp(model, data.inputs, zbar, cw, sig ** 2, s_p, s_y, e_scale)
+    x0 = np.concatenate([p0 / s_p, (Y_init / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
+    lbx = np.concatenate([model.lower / s_p, np.full(data.n_q * model.n_y, -np.inf)])
+    ubx = np.concatenate([model.upper / s_p, np.full(data.n_q * model.n_y, np.inf)])
+    res = solve_nlp(x, f, g, x0, lbx, ubx, 0.0, 0.0, settings.ipopt, what=f"identification of {model.name}")
+    p = res.x[:model.n_p] * s_p
+    Y_ipopt = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
+
+    # ---- states consistent with p, then exact reduced Newton refinement
+    try:
+        Y, sens, fval, grad, lam = _reduced(model, p, data, w, sig, Y_ipopt)
+    except StateSolveError as exc:
+        raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
+                                  status=res.status) from None
+    lo, up = model.lower, model.upper
+    at_bound = (np.abs(p - lo) <= 1e-7 * s_p) | (np.abs(p - up) <= 1e-7 * s_p)
+    steps = 0
+    S_terms = None
+    for _ in range(settings.refine_steps if not np.any(at_bound) else 0):
+        F = _gn_information(sens.G, cw, sig)
+        S_terms = sens.hessians(lam[None])[0]
+        Hm = F + S_terms
+        try:
+            L = np.linalg.cholesky(Hm * np.outer(s_p, s_p))
+        except np.linalg.LinAlgError:
+            break
+        dp = -s_p * np.linalg.solve(L.T, np.linalg.solve(L, grad * s_p))
+        if np.max(np.abs(dp / s_p)) < 1e-15:
+            break
+        p_new = np.clip(p + dp, lo, up)
+        try:
+            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y)
+        except StateSolveError:
+            break
+        if not (f_new <= fval * (1 + 1e-14) + 1e-300):
+            break
+        p, Y, sens, fval, grad, lam = p_new, Y_new, sens_new, f_new, grad_new, lam_new
+        S_terms = None
+        steps += 1
+
+    # ---- identifiability, covariance, diagnostics
+    cond = check_identifiability(model, sens.G, cw, sig, s_p, settings.rank_rtol, selected)
+    F = _gn_information(sens.G, cw, sig)
+    F2 = _gn_information(sens.G, cw * w[None, :], sig)
+    S = sens.hessians(lam[None])[0] if S_terms is None else S_terms
+    resid = data.z - sens.h[None]
+    rss = float(np.nansum(resid[:, :, selected] ** 2))
+    dof = n - model.n_p
+    notes = []
+    if data.sigma is None:
+        s2 = rss / dof
+        factor = s2 / sig[0] ** 2
+        sig_used = np.full(model.n_S, math.sqrt(s2))
+        notes.append(f"sigma unknown: estimated s = {math.sqrt(s2):.4g} from RSS / (n - n_p) with {dof} dof; "
+                     "intervals use Student t, the ellipsoid n_p F(n_p, dof) quantiles")
+    else:
+        factor = 1.0
+        sig_used = sig
+    cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, S)
+    cov, cov_gn = cov * factor, cov_gn * factor
+    objective = (fval) / factor if data.sigma is None else fval
+    if res.status != "Solve_Succeeded":
+        notes.insert(0, f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
+    for i in np.flatnonzero(at_bound):
+        notes.append(f"parameter {model.param_names[i]} is at a bound ({p[i]:g}): the covariance assumes an "
+                     "interior optimum and is not valid for it")
+    Dn = 1.0 / np.sqrt(np.diag(F))
+    Fn = F * np.outer(Dn, Dn)
+    Sn = S * np.outer(Dn, Dn)
+    if cond ** 2 > settings.ill_conditioned:
+        notes.append(f"ill-conditioned: the normalised information J^T Omega J has condition number "
+                     f"{cond ** 2:.2e}; parameters are strongly correlated and their errors large")
+    s_ratio = np.linalg.norm(Sn, 2) / np.linalg.norm(Fn, 2)
+    if s_ratio > settings.s_ratio_note:
+        notes.append(f"second-order term large: ||S|| is {100 * s_ratio:.3g} % of ||J^T Omega J|| (normalised); "
+                     "the model fits poorly or is strongly nonlinear, so cov and cov_gn differ")
+    if not H_ok:
+        notes.append("H = J^T Omega J + S is singular: the second-order covariance is undefined (NaN); "
+                     "use cov_gn")
+    else:
+        if np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
+            notes.append("H = J^T Omega J + S is not positive definite: the estimate is not a strict local "
+                         "minimum in the reduced space; treat cov with caution")
+    if data.sigma is not None and dof > 0:
+        chi2 = 2.0 * objective
+        pval = float(stats.chi2.sf(chi2, dof))
+        if pval < 1e-3:
+            notes.append(f"residuals exceed the sensor sigmas: reduced chi2 = {chi2 / dof:.3g} "
+                         f"(chi2 test p = {pval:.2g}); the model or the sigmas are inadequate and cov "
+                         "understates the uncertainty")
+    grad_norm = float(np.linalg.norm(grad * s_p))
+    return Estimate(
+        p=p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
+        sensors=model.sensors, states=Y, fitted=sens.h, residuals=resid, weights=w, sigma=sig_used,
+        sigma_estimated=data.sigma is None, n_data=n, dof=dof, rss=rss, objective=objective,
+        information=F / factor, S=S / factor, H=H / factor, cov=cov, cov_gn=cov_gn, G=sens.G,
+        status=res.status, message=res.message, iterations=res.iterations,
+        solve_time=time.perf_counter() - t_start, refinement_steps=steps, grad_norm=grad_norm,
+        notes=tuple(notes), model_name=model.name)
+
+
+def information_contributions(model: Model, data: Measurements, p, states=None):
+    """Per-sensor Gauss-Newton information and second-order terms at p.
+
+    F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2,
+    S_k = sum_j d^2/dp^2 [ -c_jk (zbar_jk - h_k(y_j(p), p, q_j)) / sigma_k^2 ]
+
+    so that for sensor weights w:  J^T Omega J = sum_k w_k F_k,  S(Omega) = sum_k w_k S_k and
+    J^T Omega^2 J = sum_k w_k^2 F_k.
+
+    Returns
+    -------
+    F, S : ndarray (n_S, n_p, n_p)
+    """
+    if data.sigma is None:
+        raise DataError("data.sigma: information contributions need known sensor sigmas")
+    p = np.asarray(p, float).ravel()
+    if p.shape != (model.n_p,):
+        raise DataError(f"p: expected {model.n_p} values, got {p.size}")
+    sig = np.asarray(data.sigma, float)
+    w = np.ones(model.n_S)
+    Y = solve_states(model, p, data.inputs, Y0=states)
+    sens = sensitivities(model, p, data.inputs, Y)
+    zbar, cw, _ = _objective_terms(data, w, sig)
+    F = np.einsum("jk,jkp,jkr->kpr", cw / sig ** 2, sens.G, sens.G)
+    lam = -cw * (zbar - sens.h) / sig ** 2
+    lam_k = np.zeros((model.n_S, data.n_q, model.n_S))
+    for k in range(model.n_S):
+        lam_k[k, :, k] = lam[:, k]
+    S = sens.hessians(lam_k)
+    return F, S

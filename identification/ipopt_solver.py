@@ -1,0 +1,116 @@
+"""The one module that talks to Ipopt (through CasADi's ``nlpsol``).
+
+    min_x f(x)  s.t.  g(x) = 0,  lbx <= x <= ubx
+
+with exact first and second derivatives from CasADi AD.  Ipopt's return
+statuses are mapped to one table of messages; a failed solve raises, it never
+returns a solution.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from .errors import IdentificationError
+
+__all__ = ["IpoptSettings", "IpoptResult", "solve_nlp", "STATUS_MESSAGES"]
+
+#: Ipopt return status -> (accepted as a solution?, message for the user)
+STATUS_MESSAGES = {
+    "Solve_Succeeded": (True, "optimal solution found"),
+    "Solved_To_Acceptable_Level": (True, "solved only to Ipopt's acceptable tolerance, not its full tolerance"),
+    "Infeasible_Problem_Detected": (False, "the state equation could not be satisfied (locally infeasible)"),
+    "Search_Direction_Becomes_Too_Small": (False, "search direction too small: progress stalled; try other start values"),
+    "Diverging_Iterates": (False, "iterates diverge: a parameter or state grows without bound; check bounds and scaling"),
+    "User_Requested_Stop": (False, "stopped on request"),
+    "Feasible_Point_Found": (False, "only a feasible point was found"),
+    "Maximum_Iterations_Exceeded": (False, "maximum number of iterations reached; raise max_iter or improve p0"),
+    "Restoration_Failed": (False, "restoration phase failed: Ipopt could not regain feasibility; check the state equation"),
+    "Error_In_Step_Computation": (False, "error in the step computation (singular KKT system)"),
+    "Maximum_CpuTime_Exceeded": (False, "time limit reached"),
+    "Maximum_WallTime_Exceeded": (False, "time limit reached"),
+    "Not_Enough_Degrees_Of_Freedom": (False, "not enough degrees of freedom"),
+    "Invalid_Problem_Definition": (False, "invalid problem definition"),
+    "Invalid_Option": (False, "invalid Ipopt option"),
+    "Invalid_Number_Detected": (False, "NaN or Inf in a function or derivative value; check the model near p0"),
+    "Unrecoverable_Exception": (False, "Ipopt raised an unrecoverable exception"),
+    "NonIpopt_Exception_Thrown": (False, "an exception was thrown during function evaluation"),
+    "Insufficient_Memory": (False, "insufficient memory"),
+    "Internal_Error": (False, "Ipopt internal error"),
+}
+
+
+@dataclass(frozen=True)
+class IpoptSettings:
+    """Ipopt settings used by the estimator (defaults tuned for least squares)."""
+
+    tol: float = 1e-10
+    constr_viol_tol: float = 1e-10
+    acceptable_tol: float = 1e-7
+    max_iter: int = 3000
+    print_level: int = 0
+    linear_solver: str = "mumps"
+    expand: bool | None = None  # None: expand MX to SX when the problem is small
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class IpoptResult:
+    x: np.ndarray
+    f: float
+    status: str
+    message: str
+    accepted: bool
+    iterations: int
+    wall_time: float
+    stats: dict
+
+
+def solve_nlp(x, f, g, x0, lbx, ubx, lbg, ubg, settings: IpoptSettings = IpoptSettings(),
+              what: str = "problem") -> IpoptResult:
+    """Solve an NLP given as CasADi expressions of the variable vector ``x``.
+
+    Raises
+    ------
+    IdentificationError
+        When Ipopt's status is not an accepted one (see :data:`STATUS_MESSAGES`).
+    """
+    nlp = {"x": x, "f": f, "g": g}
+    n = x.size1()
+    expand = settings.expand if settings.expand is not None else (isinstance(x, ca.MX) and n <= 20000)
+    opts = {
+        "ipopt.tol": settings.tol,
+        "ipopt.constr_viol_tol": settings.constr_viol_tol,
+        "ipopt.acceptable_tol": settings.acceptable_tol,
+        "ipopt.max_iter": settings.max_iter,
+        "ipopt.print_level": settings.print_level,
+        "ipopt.sb": "yes",
+        "ipopt.linear_solver": settings.linear_solver,
+        "print_time": False,
+        "error_on_fail": False,
+    }
+    if isinstance(x, ca.MX):
+        opts["expand"] = bool(expand)
+    for k, v in settings.extra.items():
+        opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
+    solver = ca.nlpsol("mudoe_" + what.replace(" ", "_"), "ipopt", nlp, opts)
+    t0 = time.perf_counter()
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    wall = time.perf_counter() - t0
+    stats = solver.stats()
+    status = str(stats.get("return_status", "unknown"))
+    accepted, message = STATUS_MESSAGES.get(status, (False, f"unrecognised Ipopt status {status!r}"))
+    iters = int(stats.get("iter_count", -1))
+    if not accepted:
+        raise IdentificationError(f"Ipopt failed on the {what}: {status}: {message} (after {iters} iterations)",
+                                  status=status)
+    xs = np.asarray(sol["x"]).ravel()
+    if not np.all(np.isfinite(xs)):
+        raise IdentificationError(f"Ipopt returned non-finite values on the {what} (status {status})", status=status)
+    return IpoptResult(x=xs, f=float(sol["f"]), status=status, message=message, accepted=accepted,
+                       iterations=iters, wall_time=wall,
+                       stats={k: stats[k] for k in ("return_status", "iter_count", "success", "t_wall_total")
+                              if k in stats})

@@ -1,0 +1,179 @@
+"""The immutable result of an identification: estimate, covariances, diagnostics."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from scipy import stats
+
+from .regions import Ellipsoid
+
+__all__ = ["Estimate"]
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """Result of :func:`identification.identify`.
+
+    Attributes
+    ----------
+    p : ndarray (n_p,)            estimated parameters
+    param_names : tuple of str
+    states : ndarray (n_q, n_y)   states y_j(p) at the estimate
+    fitted : ndarray (n_q, n_S)   model outputs h(y_j, p, q_j)
+    residuals : ndarray (n_M, n_q, n_S)  z - h (NaN where missing), all sensors
+    weights : ndarray (n_S,)      sensor weights used
+    sigma : ndarray (n_S,)        sensor sigmas used for the covariance (estimated if unknown)
+    sigma_estimated : bool        sigma was estimated as s^2 = RSS / (n - n_p)
+    n_data, dof : int             number of used values, n - n_p
+    rss : float                   unweighted residual sum of squares over the selected sensors
+    objective : float             0.5 sum_k w_k sum_ij ((z_ijk - h_jk)/sigma_k)^2 (sigma as used)
+    information : ndarray         J^T Omega J (Gauss-Newton information), (n_p, n_p)
+    S : ndarray                   second-order term S(Omega), (n_p, n_p)
+    H : ndarray                   J^T Omega J + S
+    cov : ndarray                 second-order (Bard) covariance H^-1 J^T Omega^2 J H^-T
+    cov_gn : ndarray              Gauss-Newton covariance
+    G : ndarray (n_q, n_S, n_p)   total sensitivities dh/dp
+    status, message : str         Ipopt's status and its meaning
+    iterations : int ; solve_time : float (s) ; refinement_steps : int
+    grad_norm : float             ||J^T Omega r|| at the estimate (scaled by parameter scale)
+    notes : tuple of str          numbered notes printed by summary()
+    """
+
+    p: np.ndarray
+    param_names: tuple
+    param_units: tuple
+    sensors: tuple
+    states: np.ndarray
+    fitted: np.ndarray
+    residuals: np.ndarray
+    weights: np.ndarray
+    sigma: np.ndarray
+    sigma_estimated: bool
+    n_data: int
+    dof: int
+    rss: float
+    objective: float
+    information: np.ndarray
+    S: np.ndarray
+    H: np.ndarray
+    cov: np.ndarray
+    cov_gn: np.ndarray
+    G: np.ndarray
+    status: str
+    message: str
+    iterations: int
+    solve_time: float
+    refinement_steps: int
+    grad_norm: float
+    notes: tuple = ()
+    model_name: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("p", "states", "fitted", "residuals", "weights", "sigma", "information", "S", "H",
+                     "cov", "cov_gn", "G"):
+            a = np.array(getattr(self, name), dtype=float, copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    # ------------------------------------------------------------------ derived, cached
+    @property
+    def n_p(self) -> int:
+        return self.p.size
+
+    @property
+    def success(self) -> bool:
+        return self.status == "Solve_Succeeded"
+
+    @cached_property
+    def stderr(self) -> np.ndarray:
+        """Standard errors from the second-order covariance."""
+        return np.sqrt(np.diag(self.cov))
+
+    @cached_property
+    def stderr_gn(self) -> np.ndarray:
+        """Standard errors from the Gauss-Newton covariance."""
+        return np.sqrt(np.diag(self.cov_gn))
+
+    @cached_property
+    def correlation(self) -> np.ndarray:
+        d = self.stderr
+        return self.cov / np.outer(d, d)
+
+    @cached_property
+    def reduced_chi2(self) -> float:
+        """sum_ijk w_k (r_ijk / sigma_k)^2 / (n - n_p) (1 by construction when sigma was estimated)."""
+        return 2.0 * self.objective / self.dof if self.dof > 0 else float("nan")
+
+    def _quantile(self, alpha: float) -> float:
+        if not (0 < alpha < 1):
+            raise ValueError(f"alpha must lie in (0, 1), got {alpha}")
+        if self.sigma_estimated:
+            return float(stats.t.ppf(1 - alpha / 2, self.dof))
+        return float(stats.norm.ppf(1 - alpha / 2))
+
+    def conf_int(self, alpha: float = 0.05, kind: str = "second_order") -> np.ndarray:
+        """Marginal (1 - alpha) confidence intervals, shape (n_p, 2).
+
+        Normal quantiles with known sigma; Student t with n - n_p dof when sigma was estimated.
+        """
+        se = self._se(kind)
+        c = self._quantile(alpha)
+        return np.column_stack([self.p - c * se, self.p + c * se])
+
+    def _se(self, kind):
+        if kind == "second_order":
+            return self.stderr
+        if kind == "gauss_newton":
+            return self.stderr_gn
+        raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")
+
+    def ellipsoid(self, alpha: float = 0.05, kind: str = "second_order") -> Ellipsoid:
+        """The joint (1 - alpha) confidence ellipsoid G(alpha, p, C) (paper eq. 6)."""
+        if not (0 < alpha < 1):
+            raise ValueError(f"alpha must lie in (0, 1), got {alpha}")
+        C = self.cov if kind == "second_order" else self.cov_gn if kind == "gauss_newton" else None
+        if C is None:
+            raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")
+        if self.sigma_estimated:
+            g2 = self.n_p * float(stats.f.ppf(1 - alpha, self.n_p, self.dof))
+        else:
+            g2 = float(stats.chi2.ppf(1 - alpha, self.n_p))
+        return Ellipsoid(self.p.copy(), C.copy(), alpha, g2, self.param_names)
+
+    # ------------------------------------------------------------------ report
+    def summary(self, alpha: float = 0.05) -> str:
+        """A table of estimates, standard errors and intervals, ending with numbered notes."""
+        ci = self.conf_int(alpha)
+        lines = [f"Identification of {self.model_name or 'model'}",
+                 f"  status: {self.status} ({self.message}); iterations {self.iterations}, "
+                 f"{self.solve_time:.3g} s",
+                 f"  data: n = {self.n_data} values, dof = {self.dof}; sensors used: "
+                 f"{', '.join(s for s, w in zip(self.sensors, self.weights) if w > 0)}",
+                 f"  objective {self.objective:.6g}, RSS {self.rss:.6g}, reduced chi2 {self.reduced_chi2:.4g}"
+                 + (" (sigma estimated)" if self.sigma_estimated else ""),
+                 ""]
+        w = max(9, max(len(n) for n in self.param_names))
+        pct = f"{100 * (1 - alpha):g}%"
+        lines.append(f"{'parameter':<{w}} {'estimate':>14} {'std err':>11} {'std err GN':>11} "
+                     f"{pct + ' lower':>14} {pct + ' upper':>14}  unit")
+        for i, n in enumerate(self.param_names):
+            lines.append(f"{n:<{w}} {self.p[i]:>14.7g} {self.stderr[i]:>11.4g} {self.stderr_gn[i]:>11.4g} "
+                         f"{ci[i, 0]:>14.7g} {ci[i, 1]:>14.7g}  {self.param_units[i]}")
+        if self.n_p > 1:
+            lines.append("")
+            lines.append("correlation (second-order covariance):")
+            for i, n in enumerate(self.param_names):
+                lines.append(f"  {n:<{w}} " + " ".join(f"{c:>7.3f}" for c in self.correlation[i]))
+        if self.notes:
+            lines.append("")
+            lines.append("Notes:")
+            for k, note in enumerate(self.notes, 1):
+                lines.append(f"[{k}] {note}")
+        return "\n".join(lines)
+
+    def __repr__(self):
+        vals = ", ".join(f"{n}={v:.6g}" for n, v in zip(self.param_names, self.p))
+        return f"Estimate({vals}; status={self.status})"

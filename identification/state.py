@@ -1,0 +1,166 @@
+"""Numerical evaluation of a :class:`models.Model`: state solves and exact sensitivities.
+
+Solves E(y, p, q) = 0 for y by a damped Newton method with the exact (AD) Jacobian
+dE/dy, and evaluates model outputs.  All derivatives come from CasADi; linear
+algebra is done in NumPy/SciPy (dense for small states, sparse LU for large ones).
+"""
+from __future__ import annotations
+
+import weakref
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+
+from .errors import StateSolveError
+
+__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics"]
+
+_DENSE_LIMIT = 300
+
+
+def _to_scipy(dm: ca.DM):
+    """CasADi sparse DM -> scipy CSC matrix (keeps structural zeros out)."""
+    sp = dm.sparsity()
+    colind, row = sp.get_ccs()
+    return sps.csc_matrix((np.asarray(dm.nonzeros(), float), np.asarray(row), np.asarray(colind)), shape=dm.shape)
+
+
+class Numerics:
+    """Cached CasADi functions of one model.
+
+    Attributes
+    ----------
+    E_y : casadi.Function  (y, p, q) -> (E, dE/dy)
+    sens : casadi.Function (y, p, q) -> (h, dE/dy, dE/dp, dh/dy, dh/dp)
+    lag_hess : casadi.Function (y, p, q, lam_h, mu) -> Hessian of lam_h^T h + mu^T E w.r.t. (y, p)
+    """
+
+    def __init__(self, model):
+        self.model = model
+        S = ca.SX if model.symbolic == "SX" else ca.MX
+        y = S.sym("y", model.n_y)
+        p = S.sym("p", model.n_p)
+        q = S.sym("q", model.n_q_dim)
+        E = model.E_fun(y, p, q)
+        h = model.h_fun(y, p, q)
+        Ey = ca.jacobian(E, y)
+        self.E_y = ca.Function("E_y", [y, p, q], [E, Ey])
+        self.sens = ca.Function("sens", [y, p, q], [h, Ey, ca.jacobian(E, p), ca.jacobian(h, y), ca.jacobian(h, p)])
+        lam = S.sym("lam", model.n_S)
+        mu = S.sym("mu", model.n_y)
+        v = ca.vertcat(y, p)
+        L = ca.dot(lam, h) + (ca.dot(mu, E) if model.n_y else 0)
+        self.lag_hess = ca.Function("lag_hess", [y, p, q, lam, mu], [ca.hessian(L, v)[0]])
+        self.h = model.h_fun
+        self.dense = model.n_y <= _DENSE_LIMIT
+
+    def factor(self, Ey_dm):
+        """A solver x = Ey^{-1} b (and its transpose) for the state Jacobian."""
+        n = Ey_dm.shape[0]
+        if n == 0:
+            return None
+        if self.dense:
+            A = np.asarray(ca.densify(Ey_dm).full())
+            try:
+                import scipy.linalg as sla
+                lu = sla.lu_factor(A, check_finite=True)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise StateSolveError(f"dE/dy cannot be factorised: {exc}") from None
+            if np.any(np.abs(np.diag(lu[0])) <= 1e-300):
+                raise StateSolveError("dE/dy is singular (Assumption 2 (ii) of the paper fails)")
+            import scipy.linalg as sla
+            return lambda b, trans=0: sla.lu_solve(lu, b, trans=trans)
+        try:
+            lu = spla.splu(_to_scipy(Ey_dm).tocsc())
+        except RuntimeError as exc:
+            raise StateSolveError(f"dE/dy is singular: {exc}") from None
+        return lambda b, trans=0: lu.solve(np.asarray(b, float), trans="T" if trans else "N")
+
+
+_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def numerics(model) -> Numerics:
+    """The cached :class:`Numerics` of a model."""
+    num = _CACHE.get(model)
+    if num is None:
+        num = Numerics(model)
+        _CACHE[model] = num
+    return num
+
+
+def solve_state(model, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -> np.ndarray:
+    """Solve E(y, p, q) = 0 for the state y by damped Newton with the exact Jacobian.
+
+    Converged when the Newton step satisfies ||dy||_inf <= tol (1 + ||y||_inf) and the
+    residual did not grow.  Backtracking halves the step while ||E|| increases.
+
+    Raises
+    ------
+    StateSolveError
+        When Newton does not converge in ``max_iter`` iterations or dE/dy is singular.
+    """
+    num = numerics(model)
+    p = np.asarray(p, float).ravel()
+    q = np.asarray(q, float).ravel()
+    if model.n_y == 0:
+        return np.zeros(0)
+    y = model.y_guess(p, q) if y0 is None else np.array(y0, float).ravel()
+    E, Ey = num.E_y(y, p, q)
+    E = np.asarray(E).ravel()
+    nE = np.linalg.norm(E, np.inf)
+    for it in range(max_iter):
+        if not np.all(np.isfinite(E)):
+            raise StateSolveError(f"E(y, p, q) is not finite during the state solve at q={q.tolist()}, p={p.tolist()}")
+        solve = num.factor(Ey)
+        dy = -solve(E)
+        step = 1.0
+        for _ in range(30):
+            y_new = y + step * dy
+            E_new, Ey_new = num.E_y(y_new, p, q)
+            E_new = np.asarray(E_new).ravel()
+            n_new = np.linalg.norm(E_new, np.inf)
+            if np.isfinite(n_new) and (n_new <= nE * (1 - 1e-4 * step) or n_new <= 1e-300
+                                       or np.linalg.norm(step * dy, np.inf) <= 1e-14 * (1 + np.linalg.norm(y, np.inf))):
+                break
+            step *= 0.5
+        else:
+            raise StateSolveError(f"state solve: line search failed at q={q.tolist()}, p={p.tolist()} "
+                                  f"(||E|| = {nE:.3e})")
+        y, E, Ey, nE = y_new, E_new, Ey_new, n_new
+        if np.linalg.norm(step * dy, np.inf) <= tol * (1 + np.linalg.norm(y, np.inf)):
+            return y
+    raise StateSolveError(f"state solve: Newton did not converge in {max_iter} iterations at q={q.tolist()}, "
+                          f"p={p.tolist()} (||E||_inf = {nE:.3e})")
+
+
+def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
+    """States for every input row, shape (n_q, n_y); each solve starts from the previous one."""
+    inputs = np.atleast_2d(np.asarray(inputs, float))
+    Y = np.zeros((inputs.shape[0], model.n_y))
+    prev = None
+    for j, q in enumerate(inputs):
+        guess = Y0[j] if Y0 is not None else prev
+        try:
+            Y[j] = solve_state(model, p, q, y0=guess)
+        except StateSolveError:
+            if guess is None:
+                raise
+            Y[j] = solve_state(model, p, q, y0=None)  # retry from the model's own guess
+        prev = Y[j]
+    return Y
+
+
+def simulate(model, p, inputs, Y=None) -> np.ndarray:
+    """Model outputs h(y_j(p), p, q_j) for every input row, shape (n_q, n_S)."""
+    inputs = np.atleast_2d(np.asarray(inputs, float))
+    if inputs.shape[1] != model.n_q_dim:
+        raise ValueError(f"inputs: expected {model.n_q_dim} columns ({', '.join(model.inputs)}), got {inputs.shape[1]}")
+    p = np.asarray(p, float).ravel()
+    if p.shape != (model.n_p,):
+        raise ValueError(f"p: expected {model.n_p} values ({', '.join(model.param_names)}), got {p.size}")
+    if Y is None:
+        Y = solve_states(model, p, inputs)
+    return np.array([np.asarray(model.h_fun(Y[j], p, inputs[j])).ravel() for j in range(inputs.shape[0])])

@@ -1,0 +1,271 @@
+"""The model contract shared by identification and optimal design of experiments.
+
+A model is the state equation
+
+    E(y, p, q) = 0,      E: R^{d_y} x R^{n_p} x R^{d_q} -> R^{d_y}
+
+together with the observation operator
+
+    h(y, p, q) in R^{n_S}   (one named output per candidate sensor),
+
+both held symbolically as CasADi functions so that exact first and second
+derivatives are available by algorithmic differentiation.  An explicit model
+y = f(p, q) without a state is the special case d_y = 0 (see :meth:`Model.explicit`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Iterable, Sequence
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Parameter", "Model", "ModelError"]
+
+
+class ModelError(ValueError):
+    """A model definition is inconsistent (wrong dimension, bad name, bad bound)."""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """An unknown model parameter.
+
+    Parameters
+    ----------
+    name : str
+        Identifier used in tables and error messages.
+    lower, upper : float
+        Bounds (``-inf``/``inf`` when absent).  The estimator enforces them.
+    scale : float or None
+        Typical magnitude (same unit as the parameter).  Used to scale the
+        optimisation variable; ``None`` means "take it from the start value".
+    unit : str
+        Unit for reports, e.g. ``"N/mm"``.
+    """
+
+    name: str
+    lower: float = -math.inf
+    upper: float = math.inf
+    scale: float | None = None
+    unit: str = ""
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ModelError(f"parameter name must be a non-empty string, got {self.name!r}")
+        lo, up = float(self.lower), float(self.upper)
+        if math.isnan(lo) or math.isnan(up):
+            raise ModelError(f"parameter {self.name!r}: bounds must not be NaN")
+        if lo > up:
+            raise ModelError(f"parameter {self.name!r}: lower bound {lo} exceeds upper bound {up}")
+        if self.scale is not None and not (np.isfinite(self.scale) and self.scale > 0):
+            raise ModelError(f"parameter {self.name!r}: scale must be a positive finite number, got {self.scale!r}")
+        object.__setattr__(self, "lower", lo)
+        object.__setattr__(self, "upper", up)
+
+
+def _as_parameters(params) -> tuple[Parameter, ...]:
+    out = []
+    for item in params:
+        if isinstance(item, Parameter):
+            out.append(item)
+        elif isinstance(item, str):
+            out.append(Parameter(item))
+        elif isinstance(item, dict):
+            out.append(Parameter(**item))
+        else:
+            raise ModelError(f"params: each entry must be a name, a dict or a Parameter, got {item!r}")
+    return tuple(out)
+
+
+def _check_names(kind: str, names: Sequence[str]) -> tuple[str, ...]:
+    names = tuple(names)
+    for n in names:
+        if not isinstance(n, str) or not n:
+            raise ModelError(f"{kind}: every name must be a non-empty string, got {n!r}")
+    seen = set()
+    for n in names:
+        if n in seen:
+            raise ModelError(f"{kind}: name {n!r} appears twice")
+        seen.add(n)
+    return names
+
+
+def _as_column(expr, what: str, symbolic):
+    """Turn what a user callable returned into a CasADi column vector."""
+    if isinstance(expr, (list, tuple)):
+        expr = symbolic.vertcat(*[symbolic(e) if not isinstance(e, symbolic) else e for e in expr]) if expr else symbolic(0, 1)
+    elif isinstance(expr, (int, float, np.ndarray)):
+        expr = symbolic(expr)
+    elif not isinstance(expr, (ca.SX, ca.MX, ca.DM)):
+        raise ModelError(f"{what} must return a CasADi expression, a list of them or an array, got {type(expr).__name__}")
+    if expr.is_empty():
+        return symbolic(0, 1)
+    if expr.size2() != 1:
+        if expr.size1() == 1:
+            expr = expr.T
+        else:
+            raise ModelError(f"{what} must return a vector, got shape {expr.shape}")
+    return expr
+
+
+class Model:
+    """A parametrised quasi-static model ``E(y, p, q) = 0``, ``z ~ h(y, p, q)``.
+
+    Parameters
+    ----------
+    params : sequence of str, dict or Parameter
+        Unknown parameters p (order defines the vector p).
+    inputs : sequence of str
+        Names of the input components q (d_q of them).
+    sensors : sequence of str
+        Names of the candidate sensors, one per component of h.
+    n_y : int
+        State dimension d_y (0 for an explicit model).
+    E : callable (y, p, q) -> vector of length n_y
+        State equation residual, written with CasADi operations.
+    h : callable (y, p, q) -> vector of length n_S
+        Observation operator.
+    y_guess : callable (p, q) -> array, optional
+        Initial guess of the state for the Newton solve of E; zeros by default.
+    symbolic : {"SX", "MX"}
+        CasADi symbol type; SX (default) is fastest for scalar-heavy models.
+    name : str
+        Model name for reports.
+    sensor_units, input_units : sequence of str, optional
+        Units for reports.
+
+    Attributes
+    ----------
+    E_fun, h_fun : casadi.Function
+        ``(y, p, q) -> E`` and ``(y, p, q) -> h``.
+    """
+
+    def __init__(self, params, inputs, sensors, n_y: int, E: Callable | None, h: Callable,
+                 y_guess: Callable | None = None, symbolic: str = "SX", name: str = "model",
+                 sensor_units: Sequence[str] | None = None, input_units: Sequence[str] | None = None,
+                 description: str = ""):
+        self.params = _as_parameters(params)
+        _check_names("params", [p.name for p in self.params])
+        self.inputs = _check_names("inputs", inputs)
+        self.sensors = _check_names("sensors", sensors)
+        if not self.params:
+            raise ModelError("params: a model needs at least one parameter")
+        if not self.sensors:
+            raise ModelError("sensors: a model needs at least one sensor")
+        if isinstance(n_y, bool) or not isinstance(n_y, (int, np.integer)) or n_y < 0:
+            raise ModelError(f"n_y must be a non-negative integer, got {n_y!r}")
+        if symbolic not in ("SX", "MX"):
+            raise ModelError(f"symbolic must be 'SX' or 'MX', got {symbolic!r}")
+        self.n_y = int(n_y)
+        self.name = str(name)
+        self.description = description
+        self.symbolic = symbolic
+        self.sensor_units = tuple(sensor_units) if sensor_units is not None else ("",) * len(self.sensors)
+        self.input_units = tuple(input_units) if input_units is not None else ("",) * len(self.inputs)
+        if len(self.sensor_units) != len(self.sensors):
+            raise ModelError(f"sensor_units has {len(self.sensor_units)} entries, sensors has {len(self.sensors)}")
+        if len(self.input_units) != len(self.inputs):
+            raise ModelError(f"input_units has {len(self.input_units)} entries, inputs has {len(self.inputs)}")
+        S = ca.SX if symbolic == "SX" else ca.MX
+        y = S.sym("y", self.n_y)
+        p = S.sym("p", self.n_p)
+        q = S.sym("q", self.n_q_dim)
+        if self.n_y > 0:
+            if E is None:
+                raise ModelError(f"E: a model with n_y={self.n_y} states needs a state equation")
+            e_expr = _as_column(E(y, p, q), "E", S)
+            if e_expr.size1() != self.n_y:
+                raise ModelError(f"E returns {e_expr.size1()} equations but n_y = {self.n_y}; "
+                                 "the state equation must be square")
+        else:
+            if E is not None:
+                raise ModelError("E: an explicit model (n_y = 0) has no state equation; pass E=None")
+            e_expr = S(0, 1)
+        h_expr = _as_column(h(y, p, q), "h", S)
+        if h_expr.size1() != self.n_S:
+            raise ModelError(f"h returns {h_expr.size1()} outputs but {self.n_S} sensors are named "
+                             f"({', '.join(self.sensors)})")
+        self.E_fun = ca.Function("E", [y, p, q], [e_expr], ["y", "p", "q"], ["E"])
+        self.h_fun = ca.Function("h", [y, p, q], [h_expr], ["y", "p", "q"], ["h"])
+        self._y_guess = y_guess
+        self._check_finite_structure()
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def explicit(cls, params, inputs, sensors, h: Callable, **kw) -> "Model":
+        """An explicit model ``z ~ f(p, q)`` (no state): ``h`` takes ``(p, q)``."""
+        return cls(params, inputs, sensors, n_y=0, E=None, h=lambda y, p, q: h(p, q), **kw)
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_p(self) -> int:
+        return len(self.params)
+
+    @property
+    def n_S(self) -> int:
+        return len(self.sensors)
+
+    @property
+    def n_q_dim(self) -> int:
+        """Dimension d_q of one input vector q."""
+        return len(self.inputs)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([p.lower for p in self.params])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([p.upper for p in self.params])
+
+    def sensor_index(self, names: Iterable[str]) -> list[int]:
+        """Indices of sensors by name; unknown names raise listing the valid ones."""
+        idx = []
+        for n in names:
+            if n not in self.sensors:
+                raise ModelError(f"unknown sensor {n!r}; this model has {', '.join(self.sensors)}")
+            idx.append(self.sensors.index(n))
+        return idx
+
+    def y_guess(self, p, q) -> np.ndarray:
+        """Initial guess of the state for input q (zeros unless the model gives one)."""
+        if self._y_guess is None:
+            return np.zeros(self.n_y)
+        g = np.asarray(self._y_guess(np.asarray(p, float), np.asarray(q, float)), float).ravel()
+        if g.shape != (self.n_y,):
+            raise ModelError(f"y_guess returns {g.size} values, expected n_y = {self.n_y}")
+        return g
+
+    def _check_finite_structure(self):
+        # The state Jacobian must be structurally square and not structurally singular.
+        if self.n_y:
+            y, p, q = self.E_fun.sx_in() if self.symbolic == "SX" else self.E_fun.mx_in()
+            jac = ca.jacobian(self.E_fun(y, p, q), y)
+            sp = jac.sparsity()
+            if sp.sprank() < self.n_y:
+                raise ModelError(f"the state Jacobian dE/dy is structurally singular (structural rank "
+                                 f"{sp.sprank()} < n_y = {self.n_y}); some state does not enter E")
+
+    # ------------------------------------------------------------------ numerics
+    def solve_state(self, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -> np.ndarray:
+        """Solve E(y, p, q) = 0 for y by damped Newton (exact Jacobian).
+
+        Raises :class:`identification.errors.StateSolveError` when it does not converge.
+        """
+        from identification.state import solve_state  # local import: identification depends on models
+        return solve_state(self, p, q, y0=y0, tol=tol, max_iter=max_iter)
+
+    def simulate(self, p, inputs) -> np.ndarray:
+        """Model outputs h(y_j(p), p, q_j) for every input row, shape (n_q, n_S)."""
+        from identification.state import simulate
+        return simulate(self, p, inputs)
+
+    def __repr__(self):
+        return (f"Model({self.name!r}, params={list(self.param_names)}, inputs={list(self.inputs)}, "
+                f"sensors={list(self.sensors)}, n_y={self.n_y})")
