@@ -274,12 +274,12 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     s_p = _param_scale(model, p0)
     s_y = _state_scale(Y_init)
     if model.n_y:
-        from .state import numerics
+        from .state import _to_scipy, numerics
         num = numerics(model)
         rowmax = np.zeros(model.n_y)
         for j in range(data.n_q):
-            Ey = np.abs(np.asarray(ca.densify(num.E_y(Y_init[j], p0, data.inputs[j])[1]).full())) * s_y[None, :]
-            rowmax = np.maximum(rowmax, Ey.max(axis=1))
+            Ey = abs(_to_scipy(num.E_y(Y_init[j], p0, data.inputs[j])[1])).tocsr().multiply(s_y[None, :]).tocsr()
+            rowmax = np.maximum(rowmax, Ey.max(axis=1).toarray().ravel())
         e_scale = np.where(rowmax > 0, 1.0 / np.where(rowmax > 0, rowmax, 1.0), 1.0)
     else:
         e_scale = np.ones(0)

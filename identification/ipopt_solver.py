@@ -96,7 +96,7 @@ def solve_nlp(x, f, g, x0, lbx, ubx, lbg, ubg, settings: IpoptSettings = IpoptSe
         opts["expand"] = bool(expand)
     for k, v in settings.extra.items():
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
-    solver = ca.nlpsol("mudoe_" + what.replace(" ", "_"), "ipopt", nlp, opts)
+    solver = ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
     t0 = time.perf_counter()
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     wall = time.perf_counter() - t0

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .state import numerics
+from .state import _to_scipy, numerics
 
 __all__ = ["Sensitivities", "sensitivities"]
 
@@ -84,11 +84,11 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
         if model.n_y:
             solve = num.factor(Ey)
             Ep = np.asarray(Ep.full())
-            hy = np.asarray(hy.full())
+            hy = np.asarray(hy.full()) if num.dense else _to_scipy(hy)
             yp = -solve(Ep)
             if yp.ndim == 1:
                 yp = yp[:, None]
-            G[j] = hy @ yp + hp
+            G[j] = np.asarray(hy @ yp) + hp
             Z = np.vstack([yp, np.eye(model.n_p)])
         else:
             solve, hy = None, np.zeros((model.n_S, 0))

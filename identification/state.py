@@ -17,7 +17,7 @@ from .errors import StateSolveError
 
 __all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics"]
 
-_DENSE_LIMIT = 300
+_DENSE_LIMIT = 60
 
 
 def _to_scipy(dm: ca.DM):

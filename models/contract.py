@@ -248,9 +248,10 @@ class Model:
             y, p, q = self.E_fun.sx_in() if self.symbolic == "SX" else self.E_fun.mx_in()
             jac = ca.jacobian(self.E_fun(y, p, q), y)
             sp = jac.sparsity()
-            if sp.sprank() < self.n_y:
+            srank = ca.sprank(sp)
+            if srank < self.n_y:
                 raise ModelError(f"the state Jacobian dE/dy is structurally singular (structural rank "
-                                 f"{sp.sprank()} < n_y = {self.n_y}); some state does not enter E")
+                                 f"{srank} < n_y = {self.n_y}); some state does not enter E")
 
     # ------------------------------------------------------------------ numerics
     def solve_state(self, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -> np.ndarray:

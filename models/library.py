@@ -1,0 +1,56 @@
+"""Small reference models used in tests, benchmarks and examples."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .contract import Model, Parameter
+
+__all__ = ["spring_chain", "linear_model"]
+
+
+def spring_chain(n_y: int = 30, n_sensors: int = 4) -> Model:
+    """A chain of n_y nodes joined by hardening springs, fixed at one end.
+
+    State equation (N): for node i = 1..n_y with displacement u_i (mm), u_0 = 0,
+
+        E_i = f_i(u_i - u_{i-1}) - f_{i+1}(u_{i+1} - u_i) - Q_i(q) = 0,
+        f_i(d) = k a_i d + c k a_i d^3,   a_i = 1 + 0.5 sin(i)   (f_{n_y+1} = 0),
+
+    loads Q: q_1 (N) at the free end, q_2 (N) at the middle node.  Parameters: k (N/mm),
+    c (1/mm^2).  Sensors: displacements (mm) of n_sensors nodes spread along the chain.
+    """
+    if n_y < 2:
+        raise ValueError(f"n_y must be at least 2, got {n_y}")
+    n_sensors = int(min(n_sensors, n_y))
+    a = 1.0 + 0.5 * np.sin(np.arange(1, n_y + 1))
+    nodes = np.unique(np.linspace(n_y - 1, 0, n_sensors, endpoint=False).round().astype(int))[::-1]
+    mid = n_y // 2
+
+    def E(y, p, q):
+        k, c = p[0], p[1]
+        d = y - ca.vertcat(0, y[:-1])                     # elongation of spring i (between i-1 and i)
+        f = k * ca.DM(a) * (d + c * d ** 3)               # spring forces
+        f_next = ca.vertcat(f[1:], 0)
+        load = ca.SX.zeros(n_y)
+        load[n_y - 1] = q[0]
+        load[mid] = load[mid] + q[1]
+        return f - f_next - load
+
+    def h(y, p, q):
+        return ca.vertcat(*[y[i] for i in nodes])
+
+    return Model([Parameter("k", 1e-9, 1e9, unit="N/mm"), Parameter("c", -1e9, 1e9, unit="1/mm^2")],
+                 inputs=["q_tip", "q_mid"], sensors=[f"u{i + 1}" for i in nodes], n_y=n_y, E=E, h=h,
+                 name=f"spring chain (n_y={n_y})", sensor_units=["mm"] * len(nodes), input_units=["N", "N"])
+
+
+def linear_model(X_by_sensor) -> Model:
+    """An explicit linear model z_k = x_k(q)^T p with a fixed design per sensor (for exactness tests).
+
+    ``X_by_sensor`` is an array (n_S, n_p); the input q scales the design: h_k = q * X[k] @ p.
+    """
+    X = np.asarray(X_by_sensor, float)
+    n_S, n_p = X.shape
+    return Model.explicit([f"b{i + 1}" for i in range(n_p)], ["q"], [f"s{k + 1}" for k in range(n_S)],
+                          h=lambda p, q: q[0] * (ca.DM(X) @ p), name="linear")
