@@ -1,0 +1,117 @@
+r"""A planar stand-in for one linkage of the 3D Servo Press (geometry in docs/press_geometry.md).
+
+Quasi-static state equation (see :mod:`models.mechanism`)
+
+.. math::
+
+    E(y, p, q) = \nabla_y U(y; k_5, k_7) - e_{R_y} \, (q_P - q_\mathrm{fric}(q)) = 0
+    \qquad [\mathrm{N},\ \mathrm{N\,mm}],
+
+with y in R^34 (mm, rad): 10 joints x 2 + 2 anchors x 2 + 3 lever rotations +
+2 rigid bodies x 3 + 1 drive coordinate.  Unknown parameters: the axial stiffnesses
+k5 (upper spindle E0-E) and k7 (lower spindle F0-F) in N/mm.  Input: the process force
+q_P (N) acting vertically at the ram bearing R; **positive q_P pushes R upwards**
+(the reaction of the part on the ram while pressing), so the ram, the lever point D
+and the pressure bar move up.  Outputs: joint displacements in mm (multiply by 1000
+for micrometres): D_y, F_x, B0_y (the paper's three sensors, in this order) and, with
+``extra_sensors=True``, every other joint displacement direction.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+from .contract import Model
+from .mechanism import (Bar, Beam, Drive, Joint, Load, MechParameter, Mechanism, MechanismError,
+                        RigidBody, Support, build_model)
+
+__all__ = ["press_mechanism", "press_model", "PRESS_SENSORS", "PRESS_JOINTS", "K_NOMINAL"]
+
+#: the paper's three candidate sensors, in the paper's order
+PRESS_SENSORS = ("D_y", "F_x", "B0_y")
+
+#: nominal (k5, k7) in N/mm
+K_NOMINAL = (500.0, 500.0)
+
+#: joint coordinates in mm (y up); anchors E0, F0 are frame points, not joints
+PRESS_JOINTS = {
+    "A0": (150.0, 650.0),     # eccentric bearing on the frame
+    "A": (153.5, 630.3),      # eccentric pin (eccentricity 20 mm, angle -80 deg)
+    "B": (150.0, 400.0),      # lever input
+    "C": (-150.0, 400.0),     # lever fulcrum on the spindle carrier
+    "D": (0.0, 400.0),        # gear-unit output
+    "R": (-40.0, 85.0),       # ram bearing: process force acts here, vertically
+    "E": (-210.0, 400.0),     # upper spindle nut (guided horizontally)
+    "F": (-80.0, 340.0),      # lower spindle nut
+    "G": (-210.0, 340.0),     # guide-link joint
+    "B0": (-330.0, 220.0),    # guide-link pivot on the frame (line B0-G passes through C)
+}
+PRESS_ANCHORS = {"E0": (-210.0, 720.0), "F0": (-80.0, 20.0)}
+
+
+def press_mechanism(k5: float = K_NOMINAL[0], k7: float = K_NOMINAL[1]) -> Mechanism:
+    """The press linkage spec (nominal k5, k7 in N/mm; values documented in docs/press_geometry.md)."""
+    joints = [Joint(n, x, y) for n, (x, y) in PRESS_JOINTS.items()]
+    joints += [Joint(n, x, y, anchor=True) for n, (x, y) in PRESS_ANCHORS.items()]
+    k_bearing = 5000.0
+    elements = [
+        # 1 eccentric (rigid body) with its drive
+        RigidBody("ecc", ("A0", "A"), bearing=k_bearing),
+        Drive("drive", "ecc", k_shaft=2.0e6, k_hold=2.0e7),
+        # 2 spindle carrier (rigid body)
+        RigidBody("carrier", ("C", "E", "F", "G"), bearing=k_bearing),
+        # 3 lever: beam C-D-B (two elements)
+        Beam("lever", ("C", "D", "B"), EA=5.6e7, EI=7.5e9),
+        # bars 4-8
+        Bar("4", "A", "B", 5000.0),       # connecting rod
+        Bar("5", "E0", "E", "k5"),        # upper spindle (unknown)
+        Bar("6", "G", "B0", 5000.0),      # guide link
+        Bar("7", "F0", "F", "k7"),        # lower spindle (unknown)
+        Bar("8", "D", "R", 10000.0),      # pressure bar
+        # frame elasticity
+        Support("frame_A0", "A0", kx=1000.0, ky=700.0),
+        Support("frame_B0", "B0", kx=1000.0, ky=1000.0),
+        Support("frame_E0", "E0", kx=3000.0, ky=800.0),
+        Support("frame_F0", "F0", kx=3000.0, ky=800.0),
+        Support("ram_guide", "R", kx=3000.0),
+        Support("carrier_guide", "E", kx=5000.0),
+        # process force
+        Load("process", "R", fy=1.0, input="q_P"),
+    ]
+    params = [MechParameter("k5", float(k5), 1e-6, 1e6, 500.0, "N/mm"),
+              MechParameter("k7", float(k7), 1e-6, 1e6, 500.0, "N/mm")]
+    return Mechanism("press_linkage", joints, elements, params, inputs=("q_P",), sensors=PRESS_SENSORS)
+
+
+def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINAL[0],
+                k7: float = K_NOMINAL[1]) -> Model:
+    """The press :class:`models.Model` with parameters (k5, k7) and input q_P.
+
+    Parameters
+    ----------
+    extra_sensors : bool
+        Add every other joint displacement direction after D_y, F_x, B0_y.
+    friction : object, optional
+        A friction model with ``input_names`` (extra input columns after q_P) and
+        ``force(qvec)`` returning a CasADi scalar q_fric (N) from the full input vector
+        ``qvec = [q_P, *input_names]``; the vertical force at R becomes q_P - q_fric.
+    k5, k7 : float
+        Nominal values (the model's ``p_nominal``), N/mm.
+    """
+    mech = press_mechanism(k5, k7)
+    sensors = list(PRESS_SENSORS)
+    if extra_sensors:
+        sensors += [s for s in mech.all_sensors() if s not in sensors]
+    inputs: Sequence[str] = ("q_P",)
+    input_map = None
+    if friction is not None:
+        names = tuple(getattr(friction, "input_names", ()))
+        if not callable(getattr(friction, "force", None)):
+            raise MechanismError(f"friction {friction!r}: needs a method force(qvec) -> casadi scalar")
+        if "q_P" in names:
+            raise MechanismError(f"friction {friction!r}: input_names must not repeat 'q_P'")
+        inputs = ("q_P",) + names
+
+        def input_map(qd, qvec):
+            return {"q_P": qd["q_P"] - friction.force(qvec)}
+    return build_model(mech, sensors=sensors, unknowns=("k5", "k7"), inputs=inputs, input_map=input_map,
+                       name="press_linkage" if friction is None else f"press_linkage+{type(friction).__name__}")
