@@ -122,27 +122,33 @@ def _state_scale(Y):
 
 
 # ---------------------------------------------------------------------------- the NLP
-def _build_nlp(model, inputs, zbar, cw, sig2, s_p, s_y, e_scale):
-    """CasADi expressions of the scaled full-space problem."""
-    n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
+def _build_nlp(model, inputs, s_p, s_y, e_scale):
+    """CasADi expressions of the scaled full-space problem.
+
+    The data enter as NLP parameters (zbar, c / sigma^2 per input and sensor) so that one
+    compiled solver serves many data sets with the same inputs and scaling.
+    """
+    n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
     y = ca.SX.sym("y", n_y)
     p = ca.SX.sym("p", n_p)
     q = ca.SX.sym("q", model.n_q_dim)
-    zb = ca.SX.sym("zbar", model.n_S)
-    c = ca.SX.sym("c", model.n_S)
+    zb = ca.SX.sym("zbar", n_S)
+    c = ca.SX.sym("c", n_S)
     h = model.h_fun(y, p, q)
-    stage_f = 0.5 * ca.sum1(c * (h - zb) ** 2 / ca.DM(sig2))
+    stage_f = 0.5 * ca.sum1(c * (h - zb) ** 2)
     stage_E = model.E_fun(y, p, q) * ca.DM(e_scale) if n_y else ca.SX(0, 1)
     stage = ca.Function("stage", [y, p, q, zb, c], [stage_E, stage_f])
     mapped = stage.map(n_q)
     pt = ca.MX.sym("p_scaled", n_p)
     yt = ca.MX.sym("y_scaled", n_y, n_q)
+    Zb = ca.MX.sym("zbar", n_S, n_q)
+    Cw = ca.MX.sym("c", n_S, n_q)
     P = pt * ca.DM(s_p)
     Y = ca.diag(ca.DM(s_y)) @ yt if n_y else ca.MX(0, n_q)
-    E_all, f_all = mapped(Y, P, ca.DM(inputs.T), ca.DM(zbar.T), ca.DM(cw.T))
+    E_all, f_all = mapped(Y, P, ca.DM(inputs.T), Zb, Cw)
     x = ca.vertcat(pt, ca.vec(yt))
     g = ca.vec(E_all) if n_y else ca.MX(0, 1)
-    return x, ca.sum2(f_all), g
+    return x, ca.sum2(f_all), g, ca.vertcat(ca.vec(Zb), ca.vec(Cw))
 
 
 def _objective_terms(data, w, sig):
@@ -285,11 +291,13 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         e_scale = np.ones(0)
 
     zbar, cw, const = _objective_terms(data, w, sig)
-    x, f, g = _build_nlp(model, data.inputs, zbar, cw, sig ** 2, s_p, s_y, e_scale)
+    key = (model, data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), e_scale.tobytes())
+    par_value = np.concatenate([zbar.ravel(), (cw / sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
     x0 = np.concatenate([p0 / s_p, (Y_init / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
     lbx = np.concatenate([model.lower / s_p, np.full(data.n_q * model.n_y, -np.inf)])
     ubx = np.concatenate([model.upper / s_p, np.full(data.n_q * model.n_y, np.inf)])
-    res = solve_nlp(x, f, g, x0, lbx, ubx, 0.0, 0.0, settings.ipopt, what=f"identification of {model.name}")
+    res = solve_nlp(lambda: _build_nlp(model, data.inputs, s_p, s_y, e_scale), x0, lbx, ubx, 0.0, 0.0,
+                    par_value, settings.ipopt, what=f"identification of {model.name}", key=key)
     p = res.x[:model.n_p] * s_p
     Y_ipopt = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
 
@@ -312,8 +320,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         except np.linalg.LinAlgError:
             break
         dp = -s_p * np.linalg.solve(L.T, np.linalg.solve(L, grad * s_p))
-        if np.max(np.abs(dp / s_p)) < 1e-15:
-            break
+        small = np.max(np.abs(dp / s_p)) < 1e-12
         p_new = np.clip(p + dp, lo, up)
         try:
             Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y)
@@ -324,6 +331,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         p, Y, sens, fval, grad, lam = p_new, Y_new, sens_new, f_new, grad_new, lam_new
         S_terms = None
         steps += 1
+        if small:
+            break
 
     # ---- identifiability, covariance, diagnostics
     cond = check_identifiability(model, sens.G, cw, sig, s_p, settings.rank_rtol, selected)

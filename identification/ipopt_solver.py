@@ -9,7 +9,8 @@ returns a solution.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from collections import OrderedDict
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -54,7 +55,7 @@ class IpoptSettings:
     print_level: int = 0
     linear_solver: str = "mumps"
     expand: bool | None = None  # None: expand MX to SX when the problem is small
-    extra: dict = field(default_factory=dict)
+    extra: tuple = ()  # extra (option, value) pairs passed to nlpsol, e.g. (("ipopt.mu_init", 1e-3),)
 
 
 @dataclass(frozen=True)
@@ -69,16 +70,13 @@ class IpoptResult:
     stats: dict
 
 
-def solve_nlp(x, f, g, x0, lbx, ubx, lbg, ubg, settings: IpoptSettings = IpoptSettings(),
-              what: str = "problem") -> IpoptResult:
-    """Solve an NLP given as CasADi expressions of the variable vector ``x``.
+_SOLVERS: "OrderedDict[tuple, ca.Function]" = OrderedDict()
+_CACHE_SIZE = 16
 
-    Raises
-    ------
-    IdentificationError
-        When Ipopt's status is not an accepted one (see :data:`STATUS_MESSAGES`).
-    """
-    nlp = {"x": x, "f": f, "g": g}
+
+def _make_solver(build, settings: IpoptSettings):
+    x, f, g, par = build()
+    nlp = {"x": x, "f": f, "g": g, "p": par}
     n = x.size1()
     expand = settings.expand if settings.expand is not None else (isinstance(x, ca.MX) and n <= 20000)
     opts = {
@@ -94,11 +92,36 @@ def solve_nlp(x, f, g, x0, lbx, ubx, lbg, ubg, settings: IpoptSettings = IpoptSe
     }
     if isinstance(x, ca.MX):
         opts["expand"] = bool(expand)
-    for k, v in settings.extra.items():
+    for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
-    solver = ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
+    return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
+
+
+def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings = IpoptSettings(),
+              what: str = "problem", key=None) -> IpoptResult:
+    """Solve  min f(x; par)  s.t.  lbg <= g(x; par) <= ubg,  lbx <= x <= ubx  with Ipopt.
+
+    ``build()`` returns the CasADi expressions ``(x, f, g, par)``; it is called only when no
+    solver with the same ``key`` is cached (repeated identifications with new data reuse
+    the compiled derivatives).
+
+    Raises
+    ------
+    IdentificationError
+        When Ipopt's status is not an accepted one (see :data:`STATUS_MESSAGES`).
+    """
+    full_key = None if key is None else (key, settings)
+    solver = _SOLVERS.get(full_key) if full_key is not None else None
+    if solver is None:
+        solver = _make_solver(build, settings)
+        if full_key is not None:
+            _SOLVERS[full_key] = solver
+            while len(_SOLVERS) > _CACHE_SIZE:
+                _SOLVERS.popitem(last=False)
+    else:
+        _SOLVERS.move_to_end(full_key)
     t0 = time.perf_counter()
-    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=par_value)
     wall = time.perf_counter() - t0
     stats = solver.stats()
     status = str(stats.get("return_status", "unknown"))
