@@ -48,6 +48,8 @@ class IdentifySettings:
                               below which the parameters count as not identifiable
     ill_conditioned : float   condition number of the normalised information that triggers a note
     s_ratio_note : float      ||S|| / ||J^T Omega J|| (normalised) that triggers a note
+    decrement_tol : float     Newton decrement g^T H^-1 g (chi^2 units) accepted as optimal when
+                              Ipopt stalls (1e-10: within 1e-5 standard errors of the optimum)
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -55,6 +57,7 @@ class IdentifySettings:
     rank_rtol: float = 1e-9
     ill_conditioned: float = 1e8
     s_ratio_note: float = 0.1
+    decrement_tol: float = 1e-10
 
 
 # ---------------------------------------------------------------------------- validation
@@ -176,6 +179,16 @@ def _reduced(model, p, data, w, sig, Y0):
 def _gn_information(G, cw, sig):
     """J^T Omega J = sum_jk c_jk w_k G_jk^T G_jk / sigma_k^2."""
     return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
+
+
+def _newton_decrement(H, grad, s_p) -> float:
+    """g^T H^{-1} g (in objective units; inf when H is not positive definite)."""
+    try:
+        L = np.linalg.cholesky(H * np.outer(s_p, s_p))
+    except np.linalg.LinAlgError:
+        return float("inf")
+    v = np.linalg.solve(L, grad * s_p)
+    return float(v @ v)
 
 
 def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
@@ -334,11 +347,21 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         if small:
             break
 
+    # ---- Newton decrement g^T H^-1 g: the squared distance to the optimum in standard errors
+    F = _gn_information(sens.G, cw, sig)
+    if S_terms is None:
+        S_terms = sens.hessians(lam[None])[0]
+    decrement = _newton_decrement(F + S_terms, grad, s_p)
+    if res.accepted is None and not (decrement <= settings.decrement_tol):
+        raise IdentificationError(
+            f"Ipopt stalled on the identification of {model.name} ({res.status}) and the exact Newton "
+            f"refinement did not reach the optimum (Newton decrement {decrement:.2e} > "
+            f"{settings.decrement_tol:.0e}); try other start values", status=res.status)
+
     # ---- identifiability, covariance, diagnostics
     cond = check_identifiability(model, sens.G, cw, sig, s_p, settings.rank_rtol, selected)
-    F = _gn_information(sens.G, cw, sig)
     F2 = _gn_information(sens.G, cw * w[None, :], sig)
-    S = sens.hessians(lam[None])[0] if S_terms is None else S_terms
+    S = S_terms
     resid = data.z - sens.h[None]
     rss = float(np.nansum(resid[:, :, selected] ** 2))
     dof = n - model.n_p
@@ -355,7 +378,11 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, S)
     cov, cov_gn = cov * factor, cov_gn * factor
     objective = (fval) / factor if data.sigma is None else fval
-    if res.status != "Solve_Succeeded":
+    if res.accepted is None:
+        notes.insert(0, f"Ipopt stalled ({res.status}); the exact Newton refinement verified the optimum "
+                        f"(Newton decrement {decrement:.1e}, i.e. within {math.sqrt(max(decrement, 0)):.1e} "
+                        "standard errors)")
+    elif res.status != "Solve_Succeeded":
         notes.insert(0, f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
     for i in np.flatnonzero(at_bound):
         notes.append(f"parameter {model.param_names[i]} is at a bound ({p[i]:g}): the covariance assumes an "
@@ -392,7 +419,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         information=F / factor, S=S / factor, H=H / factor, cov=cov, cov_gn=cov_gn, G=sens.G,
         status=res.status, message=res.message, iterations=res.iterations,
         solve_time=time.perf_counter() - t_start, refinement_steps=steps, grad_norm=grad_norm,
-        notes=tuple(notes), model_name=model.name)
+        notes=tuple(notes), model_name=model.name,
+        extra={"newton_decrement": decrement / factor, "ipopt_iterations": res.iterations})
 
 
 def information_contributions(model: Model, data: Measurements, p, states=None):

@@ -19,12 +19,13 @@ from .errors import IdentificationError
 
 __all__ = ["IpoptSettings", "IpoptResult", "solve_nlp", "STATUS_MESSAGES"]
 
-#: Ipopt return status -> (accepted as a solution?, message for the user)
+#: Ipopt return status -> (accepted as a solution?, message for the user).  ``None`` means
+#: "stalled": returned to the caller, who must verify optimality itself before using x.
 STATUS_MESSAGES = {
     "Solve_Succeeded": (True, "optimal solution found"),
     "Solved_To_Acceptable_Level": (True, "solved only to Ipopt's acceptable tolerance, not its full tolerance"),
     "Infeasible_Problem_Detected": (False, "the state equation could not be satisfied (locally infeasible)"),
-    "Search_Direction_Becomes_Too_Small": (False, "search direction too small: progress stalled; try other start values"),
+    "Search_Direction_Becomes_Too_Small": (None, "search direction too small: Ipopt stalled"),
     "Diverging_Iterates": (False, "iterates diverge: a parameter or state grows without bound; check bounds and scaling"),
     "User_Requested_Stop": (False, "stopped on request"),
     "Feasible_Point_Found": (False, "only a feasible point was found"),
@@ -64,7 +65,7 @@ class IpoptResult:
     f: float
     status: str
     message: str
-    accepted: bool
+    accepted: bool | None   # None: stalled, the caller must verify optimality
     iterations: int
     wall_time: float
     stats: dict
@@ -127,7 +128,7 @@ def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings 
     status = str(stats.get("return_status", "unknown"))
     accepted, message = STATUS_MESSAGES.get(status, (False, f"unrecognised Ipopt status {status!r}"))
     iters = int(stats.get("iter_count", -1))
-    if not accepted:
+    if accepted is False:
         raise IdentificationError(f"Ipopt failed on the {what}: {status}: {message} (after {iters} iterations)",
                                   status=status)
     xs = np.asarray(sol["x"]).ravel()

@@ -1,0 +1,227 @@
+"""Exactness, derivative and agreement checks of the full-space estimator (issue 2, evidence 1 and 3)."""
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from identification import (DataError, IdentifiabilityError, IdentificationError, Measurements, identify,
+                            information_contributions, simulate, solve_states)
+from models import Model, ModelError, Parameter
+from models.library import linear_model, spring_chain
+
+
+def _chain_data(n_y=5, n_M=2, seed=0, rel_sigma=0.01, p_true=(2.0, 0.5)):
+    model = spring_chain(n_y)
+    Q = np.array([[f, 0.3 * f] for f in np.linspace(0.4, 3.0, 5)])
+    H = simulate(model, p_true, Q)
+    sig = rel_sigma * np.abs(H).max(axis=0)
+    rng = np.random.default_rng(seed)
+    z = H[None] + sig * rng.standard_normal((n_M,) + H.shape)
+    return model, Measurements(Q, z, sig, sensors=model.sensors)
+
+
+# ------------------------------------------------------------------ evidence 1: exactness
+def test_linear_model_covariance_is_exact():
+    X = np.array([[1.0, 0.5], [0.3, -1.0], [2.0, -1.0]])
+    model = linear_model(X)
+    q = np.linspace(0.5, 3.0, 6)
+    rng = np.random.default_rng(1)
+    sigma = np.array([0.1, 0.2, 0.3])
+    z = (q[:, None] * (X @ [1.5, -0.7]))[None] + sigma * rng.standard_normal((3, 6, 3))
+    z[1, 2, 0] = np.nan  # a missing value must be excluded
+    data = Measurements(q, z, sigma)
+    w = np.array([1.0, 0.0, 1.0])
+    est = identify(model, data, p0=[1.0, 1.0], weights=w)
+    rows, ys, ws = [], [], []
+    for i in range(3):
+        for j in range(6):
+            for k in range(3):
+                if w[k] > 0 and np.isfinite(z[i, j, k]):
+                    rows.append(q[j] * X[k]); ys.append(z[i, j, k]); ws.append(1 / sigma[k] ** 2)
+    A, b, W = np.array(rows), np.array(ys), np.diag(ws)
+    C = np.linalg.inv(A.T @ W @ A)
+    p_ls = C @ A.T @ W @ b
+    np.testing.assert_allclose(est.p, p_ls, rtol=1e-10)
+    np.testing.assert_allclose(est.cov, C, rtol=1e-10)
+    np.testing.assert_allclose(est.cov_gn, C, rtol=1e-10)
+    assert est.n_data == len(ys)
+    assert np.allclose(est.S, 0.0, atol=1e-12 * np.abs(est.information).max())
+
+
+def test_second_order_covariance_matches_finite_difference_of_dp_dz():
+    """C = (dp/dz) Sigma^2 (dp/dz)^T; dp/dz by central differences of full re-identifications."""
+    model, data = _chain_data(n_y=4, n_M=1, seed=3, rel_sigma=0.03)
+    est = identify(model, data, p0=[1.0, 0.1])
+    z0 = np.array(data.z)
+    D = np.zeros((model.n_p, z0.size))
+    for idx in range(z0.size):
+        i, j, k = np.unravel_index(idx, z0.shape)
+        step = 1e-4 * data.sigma[k]
+        ps = []
+        for sgn in (1, -1):
+            z = z0.copy()
+            z[i, j, k] += sgn * step
+            ps.append(identify(model, data.with_z(z), p0=est.p).p)
+        D[:, idx] = (ps[0] - ps[1]) / (2 * step)
+    sig2 = np.broadcast_to(data.sigma ** 2, z0.shape).ravel()
+    C_fd = D @ np.diag(sig2) @ D.T
+    rel = np.linalg.norm(C_fd - est.cov) / np.linalg.norm(est.cov)
+    assert rel < 1e-6, rel
+    # and the second-order term matters here: the Gauss-Newton covariance is measurably different
+    assert np.linalg.norm(est.cov_gn - est.cov) / np.linalg.norm(est.cov) > 1e-4
+
+
+# ------------------------------------------------------------------ evidence 3: agreement
+def test_full_space_equals_reduced_space_least_squares():
+    model, data = _chain_data(n_y=8, n_M=2, seed=5)
+    est = identify(model, data, p0=[1.0, 0.1])
+    mask = data.mask()
+
+    def resid(p):
+        H = simulate(model, p, data.inputs, Y=solve_states(model, p, data.inputs))  # inner Newton on E
+        return ((data.z - H[None]) / data.sigma)[mask]
+
+    ls = least_squares(resid, x0=[1.0, 0.1], method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                       x_scale="jac", max_nfev=2000)
+    assert ls.success
+    np.testing.assert_allclose(est.p, ls.x, rtol=1e-8)
+    assert est.objective == pytest.approx(0.5 * float(ls.fun @ ls.fun), rel=1e-10)
+
+
+def test_unknown_sigma_uses_rss_over_dof():
+    model, data = _chain_data(n_y=5, n_M=3, seed=7)
+    est_known = identify(model, data, p0=[1.0, 0.1], weights=[1, 0, 0, 0])
+    est = identify(model, data.with_sigma(None), p0=[1.0, 0.1], weights=[1, 0, 0, 0])
+    np.testing.assert_allclose(est.p, est_known.p, rtol=1e-9)
+    s2 = est.rss / (est.n_data - model.n_p)
+    np.testing.assert_allclose(est.cov_gn, est_known.cov_gn * s2 / data.sigma[0] ** 2, rtol=1e-8)
+    assert est.sigma_estimated and np.allclose(est.sigma, np.sqrt(s2))
+    assert est.reduced_chi2 == pytest.approx(1.0, rel=1e-10)
+
+
+def test_information_contributions_reassemble_the_estimate_terms():
+    model, data = _chain_data(n_y=5, n_M=2, seed=11)
+    w = np.array([1.0, 0.0, 1.0, 1.0])
+    est = identify(model, data, p0=[1.0, 0.1], weights=w)
+    F, S = information_contributions(model, data, est.p)
+    np.testing.assert_allclose(np.einsum("k,kij->ij", w, F), est.information, rtol=1e-9)
+    np.testing.assert_allclose(np.einsum("k,kij->ij", w, S), est.S, rtol=1e-7,
+                               atol=1e-9 * np.abs(est.information).max())
+
+
+def test_large_parameter_scales_are_handled():
+    """Parameters from 1e-6 to 1e6 and residuals of very different size in one fit."""
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["big", "small"],
+                           h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]), 1e-9 * p[0] * q[0]))
+    x = np.linspace(0, 4e5, 12)
+    p_true = np.array([3e6, 4e-6])
+    H = np.array([[p_true[0] * np.exp(-p_true[1] * xi), 1e-9 * p_true[0] * xi] for xi in x])
+    sigma = np.array([1e3, 1e-5])
+    rng = np.random.default_rng(2)
+    data = Measurements(x, H[None] + sigma * rng.standard_normal((2, 12, 2)), sigma)
+    est = identify(model, data, p0=[1e6, 1e-5])
+    assert np.all(np.abs(est.p - p_true) < 5 * est.stderr)
+
+
+# ------------------------------------------------------------------ diagnostics and errors
+def test_identifiability_error_names_parameters_and_sensors():
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"], h=lambda p, q: (p[0] + p[1]) * q[0])
+    data = Measurements(np.arange(1.0, 6.0), np.arange(1.0, 6.0).reshape(1, 5, 1) * 2, [0.1])
+    with pytest.raises(IdentifiabilityError) as exc:
+        identify(model, data, p0=[1.0, 0.5])
+    assert set(exc.value.params) == {"a", "b"} and exc.value.sensors == ("y",)
+    assert "a" in str(exc.value) and "y" in str(exc.value)
+
+
+def test_sensor_that_sees_nothing_is_reported():
+    model, data = _chain_data(n_y=5)
+    m2 = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["s1", "s2"],
+                        h=lambda p, q: ca.vertcat(p[0] * q[0], p[0] * q[0] ** 2 + p[1] * q[0]))
+    d2 = Measurements(np.arange(1.0, 5.0), np.ones((1, 4, 2)), [0.1, 0.1])
+    with pytest.raises(IdentifiabilityError, match="b") as exc:
+        identify(m2, d2, p0=[1.0, 1.0], weights=[1, 0])
+    assert exc.value.sensors == ("s1",)
+
+
+def test_ipopt_failure_raises_with_status():
+    model, data = _chain_data(n_y=5)
+    from identification import IdentifySettings, IpoptSettings
+    settings = IdentifySettings(ipopt=IpoptSettings(max_iter=1))
+    with pytest.raises(IdentificationError) as exc:
+        identify(model, data, p0=[0.2, 3.0], settings=settings)
+    assert exc.value.status == "Maximum_Iterations_Exceeded"
+    assert "Maximum_Iterations_Exceeded" in str(exc.value)
+
+
+def test_summary_has_table_and_numbered_notes():
+    model, data = _chain_data(n_y=5)
+    est = identify(model, data.with_sigma(None), p0=[1.0, 0.1])
+    text = est.summary()
+    assert "k" in text and "std err" in text and "[1] sigma unknown" in text
+    ci = est.conf_int(0.05)
+    assert ci.shape == (2, 2) and np.all(ci[:, 0] < est.p) and np.all(est.p < ci[:, 1])
+    ell = est.ellipsoid(0.05)
+    assert ell.contains(est.p) and ell.boundary().shape == (200, 2)
+
+
+def test_parameter_at_bound_is_noted():
+    model = Model.explicit(params=[Parameter("a", 0.0, 1.0), "b"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] + p[1])
+    x = np.arange(1.0, 8.0)
+    data = Measurements(x, (2.0 * x + 1.0).reshape(1, -1, 1), [0.1])
+    est = identify(model, data, p0=[0.5, 0.0])
+    assert est.p[0] == pytest.approx(1.0)
+    assert any("at a bound" in n for n in est.notes)
+
+
+def test_poor_fit_is_noted():
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] * q[0] + p[1])
+    x = np.linspace(0, 2, 15)
+    data = Measurements(x, (x ** 3).reshape(1, -1, 1), [0.01])
+    est = identify(model, data, p0=[1.0, 0.0])
+    assert any("residuals exceed the sensor sigmas" in n for n in est.notes)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(p0=[1.0]), "p0: expected 2 values"),
+    (dict(p0=[np.nan, 0.1]), "p0: start value of 'k' is not finite"),
+    (dict(p0=[-1.0, 0.1]), "outside its bounds"),
+    (dict(p0=[1.0, 0.1], weights=[0, 0, 0, 0]), "no sensor is selected"),
+    (dict(p0=[1.0, 0.1], weights=[1, 1]), "weights: expected 4"),
+])
+def test_bad_arguments_name_the_argument(kwargs, match):
+    model, data = _chain_data(n_y=5)
+    with pytest.raises(DataError, match=match):
+        identify(model, data, **kwargs)
+
+
+def test_fewer_data_than_parameters():
+    model = Model.explicit(params=["a", "b", "c"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] + p[1] * q[0] + p[2] * q[0] ** 2)
+    data = Measurements([1.0, 2.0], np.ones((1, 2, 1)), [0.1])
+    with pytest.raises(DataError, match="only 2 usable values .* 3 parameters"):
+        identify(model, data, p0=[0, 0, 0])
+
+
+def test_data_model_mismatch():
+    model, data = _chain_data(n_y=5)
+    with pytest.raises(DataError, match="inputs: has 1 columns"):
+        identify(model, Measurements(np.ones(5), np.ones((1, 5, 4)), None), p0=[1, 0.1])
+    with pytest.raises(DataError, match="has 2 sensors"):
+        identify(model, Measurements(data.inputs, np.ones((1, 5, 2)), None), p0=[1, 0.1])
+    with pytest.raises(TypeError, match="model: expected"):
+        identify("chain", data, p0=[1, 0.1])
+
+
+def test_model_with_wrong_E_size_is_rejected_at_build():
+    with pytest.raises(ModelError, match="E returns 1 equations but n_y = 2"):
+        Model(["a"], ["q"], ["y"], n_y=2, E=lambda y, p, q: y[0] - p[0], h=lambda y, p, q: y[0])
+    with pytest.raises(ModelError, match="h returns 2 outputs but 1 sensors"):
+        Model(["a"], ["q"], ["y"], n_y=1, E=lambda y, p, q: y - p[0], h=lambda y, p, q: ca.vertcat(y, y))
+    with pytest.raises(ModelError, match="structurally singular"):
+        Model(["a"], ["q"], ["y"], n_y=2, E=lambda y, p, q: ca.vertcat(y[0] - p[0], y[0] + q[0]),
+              h=lambda y, p, q: y[1])
+    with pytest.raises(ModelError, match="appears twice"):
+        Model.explicit(["a", "a"], ["q"], ["y"], h=lambda p, q: p[0])
+    with pytest.raises(ModelError, match="lower bound"):
+        Parameter("k", 2.0, 1.0)
