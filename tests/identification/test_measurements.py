@@ -66,7 +66,7 @@ def test_immutable(m):
 @pytest.mark.parametrize("kwargs, match", [
     (dict(inputs=np.ones((3, 1)), z=np.ones((2, 4, 1))), "z: has 4 inputs along axis 1 but inputs has 3 rows"),
     (dict(inputs=np.ones((3, 1)), z=np.ones((3, 1))), r"z: expected shape \(n_M, n_q, n_S\)"),
-    (dict(inputs=np.ones((2, 1)), z=[[[1.0, np.nan], [2.0, np.nan]]]), "sensor 's2' .* NaN only"),
+    (dict(inputs=np.ones((2, 1)), z=[[[1.0, np.nan], [2.0, np.nan]]]), "sensor 's2' .*NaN only"),
     (dict(inputs=np.ones((2, 1)), z=np.ones((1, 2, 2)), sigma=[1.0, 0.0]), "sigma: must be positive .* 's2'"),
     (dict(inputs=np.ones((2, 1)), z=np.ones((1, 2, 2)), sigma=[1.0, -2.0]), "sigma: must be positive"),
     (dict(inputs=np.ones((2, 1)), z=np.ones((1, 2, 2)), sigma=[1.0]), "sigma: expected 2 values"),
