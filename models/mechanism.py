@@ -57,6 +57,7 @@ displacement du = u_j - u_i):
   node, or, with a clearance-like smooth characteristic of width g (mm),
   U = k (d^2/2 - g^2 log cosh(d/g)), radial force F = k (d - g tanh(d/g));
 * support (frame elasticity):  U = kx/2 u_x^2 + ky/2 u_y^2 (either may be absent);
+  a beam node may also have a rotational spring to the frame, U = k_r/2 theta^2;
 * drive:  U = k_shaft/2 (theta_body - phi)^2 + k_hold/2 phi^2;
 * load:  potential -F.u with F = (fx, fy) * q[input] (or constant without input);
 * mass:  m g0 u_y with g0 = ``Mechanism.gravity`` in N/kg (0 switches gravity off).
@@ -137,12 +138,15 @@ class Beam:
     """Multi-node Euler-Bernoulli beam through pin nodes ``nodes`` (one element per span).
 
     ``EA`` in N, ``EI`` in N mm^2 (numbers or parameter names), same for all spans.
+    ``rot_supports`` maps beam nodes to a rotational spring to the frame (N mm/rad),
+    e.g. a clamp: U = k_r/2 theta^2.
     """
 
     name: str
     nodes: tuple[str, ...]
     EA: Number
     EI: Number
+    rot_supports: Mapping[str, Number] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -465,6 +469,9 @@ class Assembly:
                 ti = self.y[self._index[(bm.name, "rot", a)]] - rho
                 tj = self.y[self._index[(bm.name, "rot", b)]] - rho
                 U += 0.5 * EA / L0 * xi ** 2 + EI / L0 * (2 * ti ** 2 + 2 * ti * tj + 2 * tj ** 2)
+            for jn, kr in bm.rot_supports.items():
+                U += 0.5 * self.val(kr, f"beam {bm.name!r} rot_support at {jn!r}") * \
+                    self.y[self._index[(bm.name, "rot", jn)]] ** 2
         for bd in m.of(RigidBody):
             for jn in bd.joints:
                 k = self.val(bd.bearings.get(jn, bd.bearing), f"body {bd.name!r} bearing at {jn!r}")
@@ -567,6 +574,9 @@ def check(mech: Mechanism) -> None:
         for a, b in zip(bm.nodes[:-1], bm.nodes[1:]):
             if not math.hypot(joints[b].x - joints[a].x, joints[b].y - joints[a].y) > 1e-9:
                 raise MechanismError(f"beam {bm.name!r}: element {a!r}-{b!r} has zero length")
+        for jn in bm.rot_supports:
+            if jn not in bm.nodes:
+                raise MechanismError(f"beam {bm.name!r}: rot_support at {jn!r}, which is not a node of the beam")
         connected |= set(bm.nodes)
     bodies = {}
     for bd in mech.of(RigidBody):
@@ -706,9 +716,11 @@ def build_model(mech: Mechanism, sensors: Sequence[str] | None = None, unknowns:
 def solve_path(model: Model, p, inputs, y0=None, tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
     """States y_j with E(y_j, p, q_j) = 0 along the rows of ``inputs`` (Newton, continuation).
 
-    Plain Newton with the exact AD Jacobian, each row started from the previous
-    solution; stops when ||E||_inf <= tol * max(1, ||Q||_inf) ... measured as the step
-    size ||dy||_inf <= tol * max(1, ||y||_inf).  Returns shape (n_q, n_y).
+    Plain Newton with the exact AD Jacobian (dense numpy solve), each row started
+    from the previous solution; a row is converged when the Newton step satisfies
+    ||dy||_inf <= tol * max(1, ||y||_inf) (mm, rad).  Returns shape (n_q, n_y).
+    Intended for small mechanisms, tests and reports; the project's state solver
+    is :mod:`identification.state`.
     """
     p = np.asarray(p, float)
     inputs = np.atleast_2d(np.asarray(inputs, float))
