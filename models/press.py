@@ -68,8 +68,8 @@ def press_mechanism(k5: float = K_NOMINAL[0], k7: float = K_NOMINAL[1]) -> Mecha
         Bar("7", "F0", "F", "k7"),        # lower spindle (unknown)
         Bar("8", "D", "R", 10000.0),      # pressure bar
         # frame elasticity
-        Support("frame_A0", "A0", kx=1000.0, ky=700.0),
-        Support("frame_B0", "B0", kx=1000.0, ky=1000.0),
+        Support("frame_A0", "A0", kx=1000.0, ky=600.0),
+        Support("frame_B0", "B0", kx=5000.0, ky=5000.0),
         Support("frame_E0", "E0", kx=3000.0, ky=800.0),
         Support("frame_F0", "F0", kx=3000.0, ky=800.0),
         Support("ram_guide", "R", kx=3000.0),
