@@ -10,7 +10,7 @@ Newton solve started from the previous state.  Two solvers are timed:
 * ``python``: :func:`models.mechanism.solve_path`, plain Newton in Python with a
   CasADi function for (E, dE/dy) and numpy's dense solve.
 
-Run ``python -m bench press`` (``--repeat N`` sets the number of timed repetitions).
+Run ``python -m bench press`` (``--repeat=N`` sets the number of timed repetitions).
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def path_solver(model, n_q: int, tol: float = 1e-12):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench press")
-    ap.add_argument("--repeat", type=int, default=50)
+    ap.add_argument("--repeat", type=int, default=50, help="timed repetitions (write --repeat=N under python -m bench)")
     args = ap.parse_args(argv or [])
     model = press_model()
     p = model.p_nominal

@@ -15,16 +15,40 @@ q_P (N) acting vertically at the ram bearing R; **positive q_P pushes R upwards*
 and the pressure bar move up.  Outputs: joint displacements in mm (multiply by 1000
 for micrometres): D_y, F_x, B0_y (the paper's three sensors, in this order) and, with
 ``extra_sensors=True``, every other joint displacement direction.
+
+Geometry changes against the design-doc guess (/work/shared/design/press_linkage.md),
+made so that the sensor pairs behave as in the paper's OED table (pairs (D_y, F_x) and
+(F_x, B0_y) identify (k5, k7), (D_y, B0_y) is near-singular): the upper spindle nut E
+is lowered to the fulcrum height (y = 400 mm) and guided horizontally in the frame
+(``carrier_guide``), the lower spindle moves to x = -80 mm, and the guide-link pivot
+B0 moves to (-330, 220) so that the line B0-G passes through the fulcrum C.  Every
+force reaching the spindle carrier from outside (lever at C, guide link at G, guide
+at E) then acts on a line through C, so moment balance about C fixes the ratio of the
+spindle forces N5 : N7 = (x_F - x_C) : (x_C - x_E) for every load that does not act on
+the carrier itself: D_y and B0_y (and R_y) see (k5, k7) through one combination only,
+in the linear regime exactly, at 1.6 kN separated only by geometric nonlinearity.
+A horizontal force at F (the adjoint load of F_x) acts below C and brings a second
+combination.  The guide link makes the carrier statically indeterminate, so B0_y
+does depend on k5 and k7 (with a statically determinate carrier it would not).
+Details and numbers: docs/press_geometry.md.
 """
 from __future__ import annotations
 
+from itertools import combinations
 from typing import Sequence
+
+import casadi as ca
+import numpy as np
 
 from .contract import Model
 from .mechanism import (Bar, Beam, Drive, Joint, Load, MechParameter, Mechanism, MechanismError,
                         RigidBody, Support, build_model)
 
-__all__ = ["press_mechanism", "press_model", "PRESS_SENSORS", "PRESS_JOINTS", "K_NOMINAL"]
+__all__ = ["press_mechanism", "press_model", "press_identifiability", "PRESS_SENSORS", "PRESS_JOINTS",
+           "PRESS_ANCHORS", "K_NOMINAL", "Q_PAPER"]
+
+#: the paper's 29 set points: 15 loading steps 0..1600 N, 14 unloading steps back to 0 N
+Q_PAPER = tuple(float(v) for v in np.r_[np.linspace(0.0, 1600.0, 15), np.linspace(1600.0, 0.0, 15)[1:]])
 
 #: the paper's three candidate sensors, in the paper's order
 PRESS_SENSORS = ("D_y", "F_x", "B0_y")
@@ -40,12 +64,12 @@ PRESS_JOINTS = {
     "C": (-150.0, 400.0),     # lever fulcrum on the spindle carrier
     "D": (0.0, 400.0),        # gear-unit output
     "R": (-40.0, 85.0),       # ram bearing: process force acts here, vertically
-    "E": (-210.0, 400.0),     # upper spindle nut (guided horizontally)
-    "F": (-80.0, 340.0),      # lower spindle nut
+    "E": (-210.0, 400.0),     # upper spindle nut, guided horizontally (design doc: y = 460)
+    "F": (-80.0, 340.0),      # lower spindle nut (design doc: x = -90)
     "G": (-210.0, 340.0),     # guide-link joint
-    "B0": (-330.0, 220.0),    # guide-link pivot on the frame (line B0-G passes through C)
+    "B0": (-330.0, 220.0),    # guide-link pivot on the frame (line B0-G passes through C; design doc: y = 250)
 }
-PRESS_ANCHORS = {"E0": (-210.0, 720.0), "F0": (-80.0, 20.0)}
+PRESS_ANCHORS = {"E0": (-210.0, 720.0), "F0": (-80.0, 20.0)}   # F0 design doc: x = -90
 
 
 def press_mechanism(k5: float = K_NOMINAL[0], k7: float = K_NOMINAL[1]) -> Mechanism:
@@ -115,3 +139,45 @@ def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINA
             return {"q_P": qd["q_P"] - friction.force(qvec)}
     return build_model(mech, sensors=sensors, unknowns=("k5", "k7"), inputs=inputs, input_map=input_map,
                        name="press_linkage" if friction is None else f"press_linkage+{type(friction).__name__}")
+
+
+def press_identifiability(q_P: float = 1600.0, sensors: Sequence[str] = PRESS_SENSORS,
+                          k5: float = K_NOMINAL[0], k7: float = K_NOMINAL[1]) -> dict:
+    r"""Compliances and (k5, k7)-sensitivities of the press sensors, per sensor pair.
+
+    Linear regime: c_s = dh_s/dq_P (mm/N) and S_s = d c_s / d(k5, k7) at y = 0.  At the
+    load q_P (N): the implicit-function sensitivity dh/dp = h_p - h_y E_y^{-1} E_p of the
+    solved state (mm per N/mm).  For each sensor pair the singular values of the 2x2
+    sensitivity (scaled by the parameter scale 500 N/mm) and their ratio (0 = the pair
+    cannot separate k5 from k7).
+
+    Returns
+    -------
+    dict with keys ``sensors``, ``compliance`` (mm/kN), ``S_lin`` (mm/kN per 500 N/mm),
+    ``S_load`` (mm per 500 N/mm at q_P), ``h_load`` (mm), ``pairs`` {(a, b): dict(sv_lin,
+    ratio_lin, sv_load, ratio_load)}.
+    """
+    from .mechanism import linear_analysis, solve_path
+    model = press_model(extra_sensors=True, k5=k5, k7=k7)
+    idx = model.sensor_index(sensors)
+    p = model.p_nominal
+    c, S = linear_analysis(model, p)
+    qs = np.linspace(0.0, q_P, 9)[1:, None]
+    y = solve_path(model, p, qs)[-1]
+    ys, ps, qq = ca.SX.sym("y", model.n_y), ca.SX.sym("p", model.n_p), ca.SX.sym("q", model.n_q_dim)
+    E, h = model.E_fun(ys, ps, qq), model.h_fun(ys, ps, qq)
+    f = ca.Function("f", [ys, ps, qq], [ca.jacobian(E, ys), ca.jacobian(E, ps), ca.jacobian(h, ys),
+                                         ca.jacobian(h, ps), h])
+    Ey, Ep, hy, hp, hv = (np.array(a) for a in f(y, p, [q_P]))
+    Sq = hp - hy @ np.linalg.solve(Ey, Ep)
+    scale = np.array([pp.scale for pp in model.params])
+    S_lin = S[idx] * scale * 1e3
+    S_load = Sq[idx] * scale
+    pairs = {}
+    for a, b in combinations(range(len(idx)), 2):
+        sl = np.linalg.svd(S_lin[[a, b]], compute_uv=False)
+        sq = np.linalg.svd(S_load[[a, b]], compute_uv=False)
+        pairs[(sensors[a], sensors[b])] = dict(sv_lin=sl, ratio_lin=sl[1] / sl[0], sv_load=sq,
+                                              ratio_load=sq[1] / sq[0])
+    return dict(sensors=tuple(sensors), compliance=c[idx] * 1e3, S_lin=S_lin, S_load=S_load,
+                h_load=hv.ravel()[idx], pairs=pairs, q_P=q_P)
