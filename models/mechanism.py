@@ -154,7 +154,10 @@ class RigidBody:
     """A rigid body carrying the joints ``joints``; ``bearing`` radial stiffness (N/mm).
 
     ``bearings`` overrides the stiffness per joint; ``gap`` (mm, per joint) switches that
-    bearing to the smooth clearance characteristic F = k (d - g tanh(d/g)).
+    bearing to the smooth clearance characteristic F = k (d - g tanh(d/g)) + r k d with
+    r = ``gap_residual`` (default 0).  The clearance characteristic has zero stiffness
+    at d = 0; where no other element holds the joint, give r > 0 (e.g. 1e-3) or the
+    reference stiffness check reports the joint as free.
     """
 
     name: str
@@ -162,6 +165,7 @@ class RigidBody:
     bearing: Number
     bearings: Mapping[str, Number] = field(default_factory=dict)
     gap: Mapping[str, float] = field(default_factory=dict)
+    gap_residual: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -246,9 +250,9 @@ class Mechanism:
                 return p
         raise MechanismError(f"mechanism {self.name!r}: no parameter named {name!r}")
 
-    def all_sensors(self) -> tuple[str, ...]:
-        """Every pin-node displacement direction, in joint order."""
-        return tuple(f"{j.name}_{d}" for j in self.joints for d in "xy")
+    def all_sensors(self, anchors: bool = False) -> tuple[str, ...]:
+        """Every pin-node displacement direction (mm), in joint order; frame anchors only if asked."""
+        return tuple(f"{j.name}_{d}" for j in self.joints if anchors or not j.anchor for d in "xy")
 
 
 _KINDS = {"bar": Bar, "beam": Beam, "body": RigidBody, "support": Support, "drive": Drive,
@@ -481,7 +485,7 @@ class Assembly:
                 if g is None or linear_bearings:
                     U += 0.5 * k * s
                 else:
-                    U += k * _logcosh_energy(s, float(g))
+                    U += k * _logcosh_energy(s, float(g)) + 0.5 * float(bd.gap_residual) * k * s
         for sp in m.of(Support):
             uj = self.u(sp.joint)
             if sp.kx is not None:
@@ -592,6 +596,8 @@ def check(mech: Mechanism) -> None:
         for jn, g in bd.gap.items():
             if not (np.isfinite(g) and g > 0):
                 raise MechanismError(f"body {bd.name!r}: bearing gap at {jn!r} must be positive, got {g!r}")
+        if not (np.isfinite(bd.gap_residual) and bd.gap_residual >= 0):
+            raise MechanismError(f"body {bd.name!r}: gap_residual must be >= 0, got {bd.gap_residual!r}")
         bodies[bd.name] = bd
         connected |= set(bd.joints)
     for sp in mech.of(Support):
@@ -626,16 +632,26 @@ def _check_sensors(mech, sensors):
 def check_stiffness(asm: Assembly, rtol: float = 1e-10) -> None:
     """Raise if dE/dy at the reference state (y = 0, nominal p, q = 0) is singular.
 
-    Nonlinear (clearance) bearings are taken with their asymptotic linear stiffness.
-    The singular direction is reported by its largest state components.
+    Checked first with clearance bearings replaced by linear ones (a genuinely
+    under-constrained mechanism), then with the clearance characteristics (zero
+    stiffness at d = 0).  The singular direction is reported by its largest state
+    components.
     """
-    lin = Assembly(asm.mech, (), asm.inputs, None, linear_bearings=True)
+    _check_rank(Assembly(asm.mech, (), asm.inputs, None, linear_bearings=True), rtol, "")
+    gaps = [f"{bd.name}@{jn}" for bd in asm.mech.of(RigidBody) for jn in bd.gap if not bd.gap_residual > 0]
+    if gaps:
+        _check_rank(Assembly(asm.mech, (), asm.inputs, None), rtol,
+                    f" because clearance bearings ({', '.join(gaps)}) have zero stiffness at zero gap; "
+                    "give those bodies gap_residual > 0")
+
+
+def _check_rank(lin, rtol, why):
     K = np.array(ca.Function("K", [lin.y, lin.q], [ca.jacobian(lin.E, lin.y)])(
         np.zeros(lin.n_y), np.zeros(len(lin.inputs))))
     d = np.diag(K).copy()
     for k, dk in enumerate(d):
         if not dk > 0:
-            raise MechanismError(f"mechanism {asm.mech.name!r}: stiffness matrix is singular; state "
+            raise MechanismError(f"mechanism {lin.mech.name!r}: stiffness matrix is singular{why}; state "
                                  f"{lin.state_names[k]!r} has no stiffness at all")
     s = 1 / np.sqrt(d)
     Ks = K * s[:, None] * s[None, :]
@@ -644,8 +660,8 @@ def check_stiffness(asm: Assembly, rtol: float = 1e-10) -> None:
         v = V[:, 0] * s
         v = v / np.max(np.abs(v))
         big = [f"{lin.state_names[k]} ({v[k]:+.2f})" for k in np.argsort(-np.abs(v))[:4] if abs(v[k]) > 0.05]
-        raise MechanismError(f"mechanism {asm.mech.name!r}: stiffness matrix dE/dy is singular at the reference "
-                             f"state (under-constrained; scaled eigenvalue ratio {w[0] / w[-1]:.1e}); free motion "
+        raise MechanismError(f"mechanism {lin.mech.name!r}: stiffness matrix dE/dy is singular at the reference "
+                             f"state (under-constrained; scaled eigenvalue ratio {w[0] / w[-1]:.1e}){why}; free motion "
                              f"involves {', '.join(big)}")
 
 
@@ -730,7 +746,12 @@ def solve_path(model: Model, p, inputs, y0=None, tol: float = 1e-12, max_iter: i
     for j, q in enumerate(inputs):
         for it in range(max_iter):
             E, J = fun(y, p, q)
-            dy = np.linalg.solve(np.array(J), -np.array(E).ravel())
+            J = np.array(J)
+            d = np.sqrt(np.abs(np.diag(J))) if np.isfinite(J).all() else np.zeros(len(y))
+            if not (d > 0).all() or np.linalg.cond(J / d[:, None] / d[None, :]) > 1e14:
+                raise MechanismError(f"model {model.name!r}: state Jacobian singular or not finite at input row "
+                                     f"{j} ({q}), Newton iteration {it}")
+            dy = np.linalg.solve(J, -np.array(E).ravel())
             y = y + dy
             if np.max(np.abs(dy)) <= tol * max(1.0, np.max(np.abs(y))):
                 break

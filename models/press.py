@@ -113,7 +113,8 @@ def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINA
     Parameters
     ----------
     extra_sensors : bool
-        Add every other joint displacement direction after D_y, F_x, B0_y.
+        Add every other joint displacement direction after D_y, F_x, B0_y (20 in all;
+        the frame anchors E0, F0 are not joints and are left out).
     friction : object, optional
         A friction model with ``input_names`` (extra input columns after q_P) and
         ``force(qvec)`` returning a CasADi scalar q_fric (N) from the full input vector

@@ -147,7 +147,7 @@ def test_beam_linearisation_is_consistent_6x6_matrix():
 def test_state_equation_is_energy_gradient_and_jacobian_fd():
     mech = Mechanism(
         "mix", [Joint("A", 0, 0), Joint("B", 100, 10), Joint("C", 200, 0), Joint("D", 100, -80)],
-        [Beam("b", ("A", "B", "C"), EA=1e6, EI=1e8), RigidBody("r", ("A", "D", "C"), bearing="kb", gap={"D": 0.02}),
+        [Beam("b", ("A", "B", "C"), EA=1e6, EI=1e8), RigidBody("r", ("A", "D", "C"), bearing="kb", gap={"D": 0.02}, gap_residual=1e-3),
          Bar("1", "B", "D", 700.0), Support("s", "A", kx=1e3, ky=1e3), Support("t", "C", ky=2e3),
          Load("P", "B", fx=0.3, fy=-1.0, input="P"), Mass("m", "D", 5.0)],
         [MechParameter("kb", 4000.0)], inputs=("P",), sensors=("B_y",), gravity=9.80665)
@@ -170,9 +170,9 @@ def test_state_equation_is_energy_gradient_and_jacobian_fd():
 
 
 def test_clearance_bearing_force_law():
-    """Radial force of a gap bearing is k (d - g tanh(d/g)), also near d = 0."""
+    """Radial force of a gap bearing is k (d - g tanh(d/g)) + r k d, also near d = 0."""
     mech = Mechanism("gap", [Joint("A", 0, 0), Joint("B", 50, 0)],
-                     [RigidBody("r", ("A", "B"), bearing=1000.0, gap={"B": 0.025}),
+                     [RigidBody("r", ("A", "B"), bearing=1000.0, gap={"B": 0.025}, gap_residual=1e-3),
                       Support("s", "A", kx=1e3, ky=1e3), Support("t", "B", kx=1e3, ky=1e3)],
                      [MechParameter("x", 1.0)], sensors=("B_x",))
     asm = assemble(mech, unknowns=("x",))
@@ -185,7 +185,7 @@ def test_clearance_bearing_force_law():
         y[asm.state_names.index("B.y")] = 0.8 * d
         g = np.array(Uf(y)).ravel()
         F = np.hypot(g[asm.state_names.index("B.x")] - 1e3 * 0.6 * d, g[asm.state_names.index("B.y")] - 1e3 * 0.8 * d)
-        expected = 1000.0 * (d - 0.025 * math.tanh(d / 0.025))
+        expected = 1000.0 * (d - 0.025 * math.tanh(d / 0.025)) + 1.0 * d
         assert np.all(np.isfinite(g))
         np.testing.assert_allclose(F, expected, rtol=1e-9, atol=1e-15)
         assert np.all(np.isfinite(g[ib]))
@@ -313,3 +313,20 @@ def test_unknown_parameter_and_joint_references_are_named():
     with pytest.raises(MechanismError, match="bar 'ghost': refers to joint 'X'"):
         build_model(mech)
     assert issubclass(MechanismError, ValueError)
+
+
+def test_clearance_bearing_without_other_support_is_reported_and_residual_fixes_it():
+    joints = [Joint("A", 0, 0), Joint("B", 50, 0), Joint("C", 100, 0)]
+
+    def mech(r):
+        return Mechanism("gapfree", joints,
+                         [RigidBody("r", ("A", "B", "C"), bearing=1000.0, gap={"B": 0.02}, gap_residual=r),
+                          Support("s", "A", kx=1e3, ky=1e3), Support("t", "C", kx=1e3, ky=1e3),
+                          Load("P", "B", fy=1.0, input="P")],
+                         [MechParameter("x", 1.0)], inputs=("P",), sensors=("B_y",))
+    with pytest.raises(MechanismError, match=r"clearance bearings \(r@B\).*B\.[xy]"):
+        build_model(mech(0.0))
+    m = build_model(mech(1e-3))
+    y = solve_path(m, [1.0], [[0.0], [1.0], [10.0]])
+    # small load sits inside the gap (soft), a larger one closes it
+    assert y[1, 3] > 1.0 / 1000.0 and np.isfinite(y).all()
