@@ -702,11 +702,12 @@ def assemble(mech: Mechanism, unknowns: Sequence[str] | None = None, inputs: Seq
 def build_model(mech: Mechanism, sensors: Sequence[str] | None = None, unknowns: Sequence[str] | None = None,
                 inputs: Sequence[str] | None = None, input_map: Callable | None = None,
                 input_units: Sequence[str] | None = None, name: str | None = None) -> Model:
-    """The quasi-static :class:`models.Model` E(y, p, q) = dU/dy - Q(q) = 0 of a mechanism.
+    """The quasi-static :class:`models.Model` E(y, p, q) = dU/dy - Q(q) = 0 of a mechanism (N, N mm).
 
     Outputs are pin-node displacements (mm) named ``J_x``/``J_y``; the state is the one
-    described in the module docstring (``Assembly.state_names``); parameters p are the
-    declared ``unknowns`` (all declared parameters by default).
+    described in the module docstring; parameters p are the declared ``unknowns`` (all
+    declared parameters by default).  The returned model carries three extra plain
+    attributes: ``mechanism`` (the spec), ``state_names`` and ``p_nominal``.
     """
     sensors = tuple(mech.sensors if sensors is None else sensors)
     if not sensors:
@@ -722,7 +723,8 @@ def build_model(mech: Mechanism, sensors: Sequence[str] | None = None, unknowns:
                   sensor_units=("mm",) * len(sensors),
                   input_units=tuple(input_units) if input_units is not None else ("N",) * len(asm.inputs),
                   description=f"planar mechanism {mech.name!r}: {asm.n_y} states")
-    model.assembly = asm
+    # plain (picklable) extras; the symbolic Assembly is not kept (SX does not pickle)
+    model.mechanism = mech
     model.state_names = asm.state_names
     model.p_nominal = asm.nominal()
     return model

@@ -142,3 +142,9 @@ def test_documented_numbers_match(model):
     assert abs(pr[("F_x", "B0_y")]["ratio_load"] - 0.064) < 1e-3
     assert abs(pr[("D_y", "B0_y")]["ratio_load"] - 0.0063) < 1e-4
     assert pr[("D_y", "B0_y")]["ratio_lin"] < 1e-12
+
+
+def test_model_pickles(model):
+    import pickle
+    m2 = pickle.loads(pickle.dumps(model))
+    assert m2.state_names == model.state_names and m2.mechanism.name == "press_linkage"
