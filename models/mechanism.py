@@ -391,7 +391,7 @@ class Assembly:
         names = []
         for jt in mech.joints:
             for d in "xy":
-                self._index[(jt.name, d)] = len(names)
+                self._index[("pin", jt.name, d)] = len(names)
                 names.append(f"{jt.name}.{d}")
         for bm in mech.of(Beam):
             for jn in bm.nodes:
@@ -438,7 +438,7 @@ class Assembly:
         return float(v)
 
     def u(self, joint):
-        return ca.vertcat(self.y[self._index[(joint, "x")]], self.y[self._index[(joint, "y")]])
+        return ca.vertcat(self.y[self._index[("pin", joint, "x")]], self.y[self._index[("pin", joint, "y")]])
 
     def X(self, joint):
         jt = self.mech.joint(joint)
@@ -506,7 +506,7 @@ class Assembly:
         Q = ca.SX.zeros(self.n_y)
         for ld in self.mech.of(Load):
             scale = 1.0 if ld.input is None else self._qeff[ld.input]
-            ix, iy = self._index[(ld.joint, "x")], self._index[(ld.joint, "y")]
+            ix, iy = self._index[("pin", ld.joint, "x")], self._index[("pin", ld.joint, "y")]
             Q[ix] += float(ld.fx) * scale
             Q[iy] += float(ld.fy) * scale
         return Q
@@ -515,7 +515,7 @@ class Assembly:
         out = []
         for s in sensors:
             jn, _, d = s.rpartition("_")
-            out.append(self.y[self._index[(jn, d)]])
+            out.append(self.y[self._index[("pin", jn, d)]])
         return ca.vertcat(*out) if out else ca.SX(0, 1)
 
     def nominal(self) -> np.ndarray:
@@ -544,6 +544,13 @@ def _check_names(mech: Mechanism):
         if key in enames:
             raise MechanismError(f"mechanism {mech.name!r}: {type(el).__name__.lower()} {el.name!r} is declared twice")
         enames.add(key)
+        if isinstance(el, (Beam, RigidBody, Drive)) and el.name in seen:
+            raise MechanismError(f"{type(el).__name__.lower()} {el.name!r}: name clashes with a joint "
+                                 "(state names would collide)")
+    own = [el.name for el in mech.elements if isinstance(el, (Beam, RigidBody, Drive))]
+    for n in own:
+        if own.count(n) > 1:
+            raise MechanismError(f"mechanism {mech.name!r}: beams, bodies and drives share the name {n!r}")
     pn = [p.name for p in mech.parameters]
     for n in pn:
         if pn.count(n) > 1:

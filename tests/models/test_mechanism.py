@@ -330,3 +330,10 @@ def test_clearance_bearing_without_other_support_is_reported_and_residual_fixes_
     y = solve_path(m, [1.0], [[0.0], [1.0], [10.0]])
     # small load sits inside the gap (soft), a larger one closes it
     assert y[1, 3] > 1.0 / 1000.0 and np.isfinite(y).all()
+
+
+def test_body_named_like_a_joint_is_rejected():
+    mech = two_bar()
+    mech.elements = list(mech.elements) + [RigidBody("C", ("A", "B"), bearing=1.0)]
+    with pytest.raises(MechanismError, match="body 'C': name clashes with a joint"):
+        build_model(mech)
