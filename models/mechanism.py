@@ -55,7 +55,8 @@ displacement du = u_j - u_i):
   6EI/l^2, 4EI/l, 2EI/l);
 * bearing:  U = k/2 ||d||^2 with d the gap vector between the body point and the pin
   node, or, with a clearance-like smooth characteristic of width g (mm),
-  U = k (d^2/2 - g^2 log cosh(d/g)), radial force F = k (d - g tanh(d/g));
+  U = k (d^2/2 - g^2 log cosh(d/g)) + r k d^2/2, radial force
+  F = k (d - g tanh(d/g)) + r k d (r = ``RigidBody.gap_residual``, default 0);
 * support (frame elasticity):  U = kx/2 u_x^2 + ky/2 u_y^2 (either may be absent);
   a beam node may also have a rotational spring to the frame, U = k_r/2 theta^2;
 * drive:  U = k_shaft/2 (theta_body - phi)^2 + k_hold/2 phi^2;
