@@ -1,0 +1,396 @@
+r"""Pyomo models of the sensor-selection MINLP (paper eq. 9) solved by SCIP (``scip_direct``).
+
+.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k\ge n_p,\
+           \sum_k w_k = m\ (\text{or}\le m),\ c^Tw\le B,\ w_I = 1,\ w_O = 0.
+
+This is the only module that imports Pyomo's ``SolverFactory``.  Formulations:
+
+``"cuts"`` (Gauss-Newton, exact, convex-friendly outer approximation)
+    MILP master :math:`\min t` over the design constraints plus cuts, re-solved by SCIP:
+    D: :math:`t\ge -\log\det\bar M + p - \sum_k w_k\,\mathrm{tr}(\bar M^{-1}F_k)`;
+    A: :math:`t\ge 2\,\mathrm{tr}\bar M^{-1} - \sum_k w_k\,\mathrm{tr}(\bar M^{-2}F_k)`;
+    E (eigen-cuts): :math:`\max s` with :math:`s\le \sum_k w_k\,u^TF_ku` for eigenvectors
+    :math:`u` of :math:`\lambda_{\min}(\bar M)`.  All cuts are valid for every design by
+    convexity (concavity of :math:`\lambda_{\min}`); a singular design :math:`\bar S`
+    gets the cut :math:`\sum_{k\notin\bar S}w_k\ge1` (subsets of singular designs are
+    singular).  Terminates when the master bound meets the incumbent or a design repeats.
+``"naive"`` (Gauss-Newton, one nonconvex MINLP)
+    E: :math:`\max t` s.t. :math:`\sum_k w_kF_k - tI = LL^T`;  D: :math:`\sum_k w_kF_k = LL^T`,
+    :math:`\min -2\sum_i\log L_{ii}`;  A: :math:`(\sum_k w_kF_k)X = I`, :math:`\min\mathrm{tr}X`.
+``"second_order"``
+    :math:`H(w)X = I`, :math:`Y = G(w)X`, :math:`C = XY`; A: :math:`\min\mathrm{tr}C`;
+    E: :math:`tI - C = LL^T`, :math:`\min t`; D: :math:`C = LL^T`, :math:`\min 2\sum\log L_{ii}`.
+    Designs with singular :math:`G` returned by SCIP are cut off by the no-good above and
+    the model is re-solved.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .constraints import DesignConstraints
+from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria
+
+__all__ = ["ScipSettings", "ScipResult", "ScipUnavailableError", "scip_available", "solve_scip",
+           "STATUS_MESSAGES"]
+
+
+class ScipUnavailableError(RuntimeError):
+    """Pyomo or the ``scip_direct`` interface (PySCIPOpt) is not usable."""
+
+
+#: One table mapping Pyomo termination conditions to (status, message).
+STATUS_MESSAGES = {
+    "optimal": ("optimal", "SCIP proved optimality"),
+    "globallyOptimal": ("optimal", "SCIP proved global optimality"),
+    "locallyOptimal": ("feasible", "SCIP reported only local optimality"),
+    "feasible": ("feasible", "SCIP found a feasible design without proof of optimality"),
+    "maxTimeLimit": ("time_limit", "SCIP hit the time limit"),
+    "maxIterations": ("iteration_limit", "SCIP hit an iteration/node limit"),
+    "maxEvaluations": ("iteration_limit", "SCIP hit an evaluation limit"),
+    "infeasible": ("infeasible", "SCIP proved the design problem infeasible"),
+    "infeasibleOrUnbounded": ("infeasible", "SCIP reported infeasible or unbounded"),
+    "unbounded": ("error", "SCIP reported an unbounded problem (formulation error)"),
+    "userInterrupt": ("error", "SCIP was interrupted"),
+    "resourceInterrupt": ("error", "SCIP ran out of a resource (memory?)"),
+    "noSolution": ("error", "SCIP returned no solution"),
+    "solverFailure": ("error", "SCIP failed"),
+    "internalSolverError": ("error", "SCIP internal error"),
+    "error": ("error", "SCIP error"),
+    "invalidProblem": ("error", "SCIP rejected the model as invalid"),
+    "other": ("error", "SCIP stopped for an unspecified reason"),
+    "unknown": ("error", "SCIP termination condition unknown"),
+}
+
+
+@dataclass(frozen=True)
+class ScipSettings:
+    """Settings for :func:`solve_scip`.
+
+    Attributes
+    ----------
+    time_limit : float
+        Wall-clock seconds for the whole call (all master solves).
+    formulation : {"auto", "cuts", "naive", "second_order"}
+        ``auto``: ``cuts`` for Gauss-Newton, ``second_order`` otherwise.
+    gap_tol : float
+        Relative (A, E) / absolute on log det (D) tolerance for the cut loop.
+    max_rounds : int
+        Maximum master solves of the cut loop / no-good loop.
+    scip_options : tuple of (str, value)
+        Extra SCIP parameters.
+    """
+
+    time_limit: float = 60.0
+    formulation: str = "auto"
+    gap_tol: float = 1e-9
+    max_rounds: int = 500
+    scip_options: tuple = ()
+
+
+@dataclass(frozen=True)
+class ScipResult:
+    """Outcome of :func:`solve_scip`: ``status`` from :data:`STATUS_MESSAGES` plus
+    ``"optimal"``; ``message`` explains; ``value``/``w`` from exact re-evaluation."""
+
+    w: np.ndarray | None
+    value: float
+    lower_bound: float
+    status: str
+    message: str
+    rounds: int
+    wall_time: float
+    formulation: str
+
+
+def _pyomo():
+    try:
+        import pyomo.environ as pyo
+        from pyomo.opt import SolverFactory
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ScipUnavailableError(f"pyomo is not importable: {exc}") from exc
+    return pyo, SolverFactory
+
+
+def scip_available() -> bool:
+    """True when Pyomo's ``scip_direct`` interface can run."""
+    try:
+        _, SolverFactory = _pyomo()
+        return bool(SolverFactory("scip_direct").available(exception_flag=False))
+    except ScipUnavailableError:
+        return False
+
+
+def _base_model(pyo, cons: DesignConstraints):
+    mdl = pyo.ConcreteModel()
+    n = cons.n_candidates
+    mdl.K = pyo.RangeSet(0, n - 1)
+    mdl.w = pyo.Var(mdl.K, within=pyo.Binary)
+    mdl.cuts = pyo.ConstraintList()
+    tot = sum(mdl.w[k] for k in mdl.K)
+    mdl.min_np = pyo.Constraint(expr=tot >= cons.n_params)
+    if cons.n_sensors is not None:
+        mdl.card = pyo.Constraint(expr=tot == cons.n_sensors)
+    elif cons.max_sensors is not None:
+        mdl.card = pyo.Constraint(expr=tot <= cons.max_sensors)
+    if cons.costs is not None:
+        mdl.budget = pyo.Constraint(expr=sum(cons.costs[k] * mdl.w[k] for k in mdl.K) <= cons.budget)
+    for k in cons.include:
+        mdl.w[k].fix(1)
+    for k in cons.exclude:
+        mdl.w[k].fix(0)
+    return mdl
+
+
+def _solve(SolverFactory, mdl, time_left, options):
+    """Solve; return (status, message, loaded: bool, lower bound or None)."""
+    opt = SolverFactory("scip_direct")
+    if not opt.available(exception_flag=False):
+        raise ScipUnavailableError("Pyomo's scip_direct interface is not available (is PySCIPOpt installed?)")
+    opts = {"limits/time": max(float(time_left), 1.0), "display/verblevel": 0}
+    opts.update(dict(options))
+    res = opt.solve(mdl, load_solutions=False, options=opts)
+    tc = str(res.solver.termination_condition.value if hasattr(res.solver.termination_condition, "value")
+             else res.solver.termination_condition)
+    status, msg = STATUS_MESSAGES.get(tc, ("error", f"SCIP returned unmapped termination condition {tc!r}"))
+    loaded = False
+    if status in ("optimal", "feasible", "time_limit", "iteration_limit") and len(res.solution) > 0:
+        mdl.solutions.load_from(res)
+        loaded = True
+    lb = None
+    try:
+        lbv = res.problem.lower_bound
+        lb = float(lbv) if lbv is not None else None
+    except (AttributeError, TypeError, ValueError):
+        lb = None
+    return status, msg, loaded, lb
+
+
+def _read_w(mdl, n):
+    return np.array([round(mdl.w[k].value) == 1 if mdl.w[k].value is not None else False for k in range(n)])
+
+
+def solve_scip(F, S, cons: DesignConstraints, criterion, kind="gauss_newton", *,
+               settings: ScipSettings = ScipSettings(),
+               criteria_settings: CriteriaSettings = DEFAULT_SETTINGS) -> ScipResult:
+    r"""Solve :math:`\min_w \Psi(C(w))` subject to the design constraints with SCIP.
+
+    ``F``/``S`` must already be validated.  The returned ``value`` is always the exact
+    criterion of the returned design (re-evaluated in numpy), never SCIP's objective.
+
+    Raises
+    ------
+    ScipUnavailableError
+        If Pyomo/SCIP cannot be used.
+    ValueError
+        ``formulation``: unknown or incompatible with ``kind``.
+    """
+    crit = Criterion.parse(criterion)
+    kind = Kind.parse(kind)
+    form = settings.formulation
+    if form == "auto":
+        form = "cuts" if kind is Kind.GAUSS_NEWTON else "second_order"
+    if form not in ("cuts", "naive", "second_order"):
+        raise ValueError(f"formulation: unknown {form!r}; valid: 'auto', 'cuts', 'naive', 'second_order'")
+    if kind is Kind.SECOND_ORDER and form != "second_order":
+        raise ValueError(f"formulation: {form!r} is for Gauss-Newton criteria; use 'second_order'")
+    if kind is Kind.GAUSS_NEWTON and form == "second_order":
+        S = None
+    pyo, SolverFactory = _pyomo()
+    t0 = time.perf_counter()
+    if form == "cuts":
+        return _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, criteria_settings, t0)
+    return _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, criteria_settings, t0)
+
+
+def _exact(F, S, w, crit, kind, cs):
+    res = batch_criteria(F, S, w[None].astype(float), kind, settings=cs, validated=True)
+    return float(res.value(crit)[0]), bool(res.singular[0])
+
+
+def _tol(crit, v, gap_tol):
+    if not np.isfinite(v):
+        return 0.0
+    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
+
+
+def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
+    n, p, _ = F.shape
+    Fflat = F.reshape(n, -1)
+    mdl = _base_model(pyo, cons)
+    if crit is Criterion.E:
+        mdl.s = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
+        mdl.obj = pyo.Objective(expr=mdl.s, sense=pyo.maximize)
+    else:
+        mdl.t = pyo.Var()
+        mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
+
+    def add_cut(x):
+        """Add a tangent/eigen cut at (possibly fractional) x with regular M(x)."""
+        M = (x @ Fflat).reshape(p, p)
+        if crit is Criterion.E:
+            lam, U = np.linalg.eigh(M)
+            for j in range(p):
+                if lam[j] > lam[0] + 1e-9 * max(abs(lam[-1]), 1e-300) and j > 0:
+                    break
+                q = np.einsum("i,kij,j->k", U[:, j], F, U[:, j])
+                mdl.cuts.add(mdl.s <= sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
+            return
+        Minv = np.linalg.inv(M)
+        Minv = 0.5 * (Minv + Minv.T)
+        if crit is Criterion.D:
+            f = -np.linalg.slogdet(M)[1]
+            q = Fflat @ Minv.ravel()
+            c0 = f + p
+        else:
+            f = float(np.trace(Minv))
+            q = Fflat @ (Minv @ Minv).ravel()
+            c0 = 2.0 * f
+        mdl.cuts.add(mdl.t >= c0 - sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
+
+    # initial cut at the uniform relaxation point over available sensors
+    avail = np.ones(n)
+    avail[list(cons.exclude)] = 0.0
+    m0 = cons.max_size
+    x0 = avail * (m0 / avail.sum())
+    x0[list(cons.include)] = 1.0
+    if np.linalg.eigvalsh((x0 @ Fflat).reshape(p, p))[0] <= 0:
+        return ScipResult(None, np.inf, np.inf, "infeasible",
+                          "no admissible design has full-rank information (all available sensors are singular)",
+                          0, time.perf_counter() - t0, "cuts")
+    add_cut(x0)
+    best_w, best_v = None, np.inf
+    seen = set()
+    lb = -np.inf
+    status, msg = "error", "no SCIP round completed"
+    rounds = 0
+    while rounds < settings.max_rounds:
+        left = settings.time_limit - (time.perf_counter() - t0)
+        if left <= 0:
+            status, msg = "time_limit", "time limit reached in the cut loop"
+            break
+        st, m_msg, loaded, _ = _solve(SolverFactory, mdl, left, settings.scip_options)
+        rounds += 1
+        if st == "infeasible":
+            if best_w is None:
+                status, msg = "infeasible", m_msg + " (no admissible regular design)"
+            else:
+                status, msg = "optimal", "all remaining designs cut off"
+                lb = best_v
+            break
+        if st != "optimal" or not loaded:
+            status, msg = st, m_msg + " (master problem of the cut loop)"
+            break
+        w = _read_w(mdl, n)
+        obj = float(pyo.value(mdl.obj))
+        lb_round = (1.0 / obj if obj > 0 else np.inf) if crit is Criterion.E else obj
+        lb = max(lb, lb_round) if np.isfinite(lb_round) else lb
+        v, sing = _exact(F, None, w, crit, Kind.GAUSS_NEWTON, cs)
+        key = w.tobytes()
+        if sing or not np.isfinite(v):
+            mdl.cuts.add(sum(mdl.w[k] for k in range(n) if not w[k]) >= 1)
+            seen.add(key)
+            continue
+        if v < best_v:
+            best_w, best_v = w, v
+        if key in seen:
+            status, msg = "optimal", ("master repeated a design: incumbent optimal up to SCIP's "
+                                      "feasibility tolerance on the cuts")
+            break
+        if lb >= best_v - _tol(crit, best_v, settings.gap_tol):
+            status, msg = "optimal", "master bound meets the incumbent"
+            lb = min(lb, best_v)
+            break
+        seen.add(key)
+        add_cut(w.astype(float))
+    else:
+        status, msg = "iteration_limit", f"cut loop reached max_rounds = {settings.max_rounds}"
+    return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, "cuts")
+
+
+def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs, t0):
+    n, p, _ = F.shape
+    mdl = _base_model(pyo, cons)
+    P = range(p)
+    fscale = float(np.max(np.abs(F)))
+    M = {(i, j): sum(float(F[k, i, j]) * mdl.w[k] for k in range(n) if F[k, i, j] != 0.0) for i in P for j in P}
+    tri = [(i, j) for i in P for j in P if j <= i]
+    delta = 1e-6 * np.sqrt(fscale)
+    if form == "naive":
+        mdl.L = pyo.Var(tri)
+        for i in P:
+            mdl.L[i, i].setlb(delta if crit is not Criterion.A else None)
+        if crit is Criterion.E:
+            mdl.t = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
+            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j] - (mdl.t if i == j else 0.0)
+                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+            mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.maximize)
+        elif crit is Criterion.D:
+            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j]
+                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+            mdl.obj = pyo.Objective(expr=-2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
+        else:
+            mdl.X = pyo.Var(P, P)
+            mdl.eq = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(M[i, l] * mdl.X[l, j] for l in P)
+                                    == (1.0 if i == j else 0.0))
+            mdl.obj = pyo.Objective(expr=sum(mdl.X[i, i] for i in P), sense=pyo.minimize)
+    else:  # second_order
+        Sx = np.zeros_like(F) if S is None else S
+        Hm = {(i, j): sum(float(F[k, i, j] + Sx[k, i, j]) * mdl.w[k] for k in range(n)
+                          if F[k, i, j] + Sx[k, i, j] != 0.0) for i in P for j in P}
+        mdl.X = pyo.Var(P, P)
+        mdl.Y = pyo.Var(P, P)
+        mdl.C = pyo.Var(P, P)
+        mdl.hx = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(Hm[i, l] * mdl.X[l, j] for l in P)
+                                == (1.0 if i == j else 0.0))
+        mdl.gx = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.Y[i, j] == sum(M[i, l] * mdl.X[l, j] for l in P))
+        mdl.cc = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.C[i, j] == sum(mdl.X[i, l] * mdl.Y[l, j] for l in P))
+        if crit is Criterion.A:
+            mdl.obj = pyo.Objective(expr=sum(mdl.C[i, i] for i in P), sense=pyo.minimize)
+        else:
+            mdl.L = pyo.Var(tri)
+            for i in P:
+                mdl.L[i, i].setlb(0.0)
+            if crit is Criterion.E:
+                mdl.t = pyo.Var(bounds=(0.0, None))
+                mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: (mdl.t if i == j else 0.0) - mdl.C[i, j]
+                                        == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+                mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
+            else:
+                for i in P:
+                    mdl.L[i, i].setlb(1e-12)
+                mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: mdl.C[i, j]
+                                        == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+                mdl.obj = pyo.Objective(expr=2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
+    rounds = 0
+    status, msg = "error", "no SCIP solve completed"
+    best_w, best_v, lb = None, np.inf, -np.inf
+    while rounds < settings.max_rounds:
+        left = settings.time_limit - (time.perf_counter() - t0)
+        if left <= 0:
+            status, msg = "time_limit", "time limit reached"
+            break
+        st, msg, loaded, slb = _solve(SolverFactory, mdl, left, settings.scip_options)
+        rounds += 1
+        status = st
+        if not loaded:
+            break
+        w = _read_w(mdl, n)
+        v, sing = _exact(F, S if form == "second_order" else None, w, crit, kind, cs)
+        if sing:
+            # rank-deficient G: cut off this design and all its subsets, re-solve
+            mdl.cuts.add(sum(mdl.w[k] for k in range(n) if not w[k]) >= 1)
+            status, msg = "error", "SCIP returned a singular design; cut off and re-solved"
+            continue
+        best_w, best_v = w, v
+        if slb is not None and status == "optimal":
+            if form == "naive" and crit is Criterion.E:
+                lb = v  # maximisation of t; SCIP proved optimality
+            else:
+                lb = v
+        break
+    else:
+        status, msg = "iteration_limit", f"no-good loop reached max_rounds = {settings.max_rounds}"
+    return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, form)
