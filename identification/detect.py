@@ -1,0 +1,694 @@
+r"""Detection of model uncertainty: the paper's Algorithm 1 (lines 01-17), with a calibrated statistic.
+
+For every split (calibration set, validation set) the parameters are identified twice,
+p_cal with covariance C_cal and p_val with C_val (paper eqs. 3 and 7), and tested with
+
+.. math::
+
+    \text{paper (line 08):}\quad
+    \alpha_\min = 1 - F_{\chi^2_{n_p}}\big((p_v - p_c)^\top C_c^{-1} (p_v - p_c)\big),
+
+    \text{two-sample Wald (default):}\quad
+    \alpha_\min^{(2)} = 1 - F_{\chi^2_{n_p}}\big((p_v - p_c)^\top (C_c + C_v)^{-1} (p_v - p_c)\big).
+
+The calibration and validation sets hold disjoint data points, so under a correct model
+p_v - p_c has covariance C_c + C_v; the paper's statistic ignores C_v and, for sets of
+equal size, is about twice a chi^2_{n_p} variable, which inflates its size (measured by
+:mod:`identification.montecarlo`).  A model is rejected when some split has
+alpha_min < TOL / n_tests (Bonferroni, lines 09-16); Holm's step-down procedure is
+reported alongside (its model-level decision coincides with Bonferroni's, since both
+reject the family exactly when the smallest p-value is below TOL / n_tests; they differ
+in which individual splits are flagged).
+
+Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
+series z_2 - z_1, z_4 - z_3, ... over all inputs; the repeatability standard deviation
+of a sensor is std(differences) / sqrt(2) (same unit as z).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Sequence
+
+import numpy as np
+from scipy import stats
+
+from models.contract import Model
+from .errors import DataError, IdentificationError
+from .estimator import IdentifySettings, identify, information_contributions
+from .measurements import Measurements
+from .regions import CovarianceError, mahalanobis2
+from .splits import Split, SplitError
+
+__all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
+           "NormalityError", "normality_check", "run_split_tests", "decide", "STATISTICS", "CORRECTIONS"]
+
+STATISTICS = ("two_sample", "paper")
+CORRECTIONS = ("bonferroni", "holm")
+
+
+class NormalityError(DataError):
+    """Line 05 of Algorithm 1 failed: the differences of repeated series are not Gaussian.
+
+    Attributes
+    ----------
+    check : NormalityCheck
+    """
+
+    def __init__(self, message: str, check: "NormalityCheck | None" = None):
+        super().__init__(message)
+        self.check = check
+
+
+@dataclass(frozen=True)
+class DetectSettings:
+    """Settings of :func:`detect` (defaults follow the paper, with the calibrated statistic).
+
+    Attributes
+    ----------
+    tol : float                family-wise test level TOL in (0, 1) (paper: 5 %)
+    statistic : str            "two_sample" (default, C_cal + C_val) or "paper" (C_cal only)
+    correction : str           "bonferroni" (paper) or "holm"
+    normality : str            "check" (raise NormalityError on failure) or "override" (record only)
+    normality_level : float    level of each per-sensor Shapiro-Wilk test (paper: 5 %)
+    covariance : str           "second_order" (paper eq. 7) or "gauss_newton"
+    n_design_sensors : int | None  sensors chosen by the OED when design is a criterion (default n_p)
+    identify : IdentifySettings | None  passed to identify()
+    """
+
+    tol: float = 0.05
+    statistic: str = "two_sample"
+    correction: str = "bonferroni"
+    normality: str = "check"
+    normality_level: float = 0.05
+    covariance: str = "second_order"
+    n_design_sensors: int | None = None
+    identify: IdentifySettings | None = None
+
+    def __post_init__(self):
+        tol = float(self.tol) if isinstance(self.tol, (int, float, np.floating)) else float("nan")
+        if not (0.0 < tol < 1.0):
+            raise ValueError(f"tol: the test level TOL must lie in (0, 1), got {self.tol!r}")
+        if self.statistic not in STATISTICS:
+            raise ValueError(f"statistic: expected one of {STATISTICS}, got {self.statistic!r}")
+        if self.correction not in CORRECTIONS:
+            raise ValueError(f"correction: expected one of {CORRECTIONS}, got {self.correction!r}")
+        if self.normality not in ("check", "override"):
+            raise ValueError(f"normality: expected 'check' or 'override', got {self.normality!r}")
+        if not (0.0 < float(self.normality_level) < 1.0):
+            raise ValueError(f"normality_level: must lie in (0, 1), got {self.normality_level!r}")
+        if self.covariance not in ("second_order", "gauss_newton"):
+            raise ValueError(f"covariance: expected 'second_order' or 'gauss_newton', got {self.covariance!r}")
+        object.__setattr__(self, "tol", tol)
+
+
+# ---------------------------------------------------------------------------- normality (line 05)
+@dataclass(frozen=True)
+class NormalityCheck:
+    """Shapiro-Wilk test of z_{2m} - z_{2m-1} (m = 1..n_M/2, all inputs) per sensor.
+
+    Attributes
+    ----------
+    sensors : tuple of str
+    pvalue : ndarray (n_S,)        Shapiro-Wilk p-values (NaN when not computable)
+    sigma_rep : ndarray (n_S,)     repeatability std(differences) / sqrt(2), unit of z
+    n_diff : ndarray (n_S,)        number of differences used
+    level : float                  test level per sensor
+    gated : tuple of str           sensors whose result decides the gate (the selected sensors)
+    passed : bool                  every gated sensor has p >= level
+    overridden : bool              the gate failed and normality="override" let the run continue
+    pairs : tuple                  0-based series pairs (first, second) differenced
+    note : str
+    """
+
+    sensors: tuple
+    pvalue: np.ndarray
+    sigma_rep: np.ndarray
+    n_diff: np.ndarray
+    level: float
+    gated: tuple
+    passed: bool
+    overridden: bool = False
+    pairs: tuple = ()
+    note: str = ""
+
+    def __post_init__(self):
+        for name in ("pvalue", "sigma_rep", "n_diff"):
+            a = np.array(getattr(self, name), dtype=float, copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    def table(self) -> str:
+        lines = [f"{'sensor':<10} {'SW p-value %':>12} {'sigma_rep':>11} {'n':>4}  gate"]
+        for k, s in enumerate(self.sensors):
+            pv = self.pvalue[k]
+            ok = "" if s not in self.gated else ("pass" if pv >= self.level else "FAIL")
+            lines.append(f"{s:<10} {100 * pv:>12.2f} {self.sigma_rep[k]:>11.4g} {int(self.n_diff[k]):>4}  {ok}")
+        return "\n".join(lines)
+
+
+def normality_check(data: Measurements, level: float = 0.05, weights=None) -> NormalityCheck:
+    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor.
+
+    tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q}; the pairs are
+    consecutive series (an odd last series is left out).  Returns the p-values and the
+    repeatability sigma std(tilde z_k) / sqrt(2) (unit of z); never raises on a failed test.
+    """
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    w = data._weights(weights)
+    n_pairs = data.n_M // 2
+    pairs = tuple((2 * m, 2 * m + 1) for m in range(n_pairs))
+    gated = tuple(s for s, wk in zip(data.sensors, w) if wk > 0)
+    pv = np.full(data.n_S, np.nan)
+    sig = np.full(data.n_S, np.nan)
+    nd = np.zeros(data.n_S)
+    notes = []
+    if n_pairs == 0:
+        return NormalityCheck(data.sensors, pv, sig, nd, level, gated, False, pairs=pairs,
+                              note="only one series: differences of repeated series cannot be formed")
+    if data.n_M % 2:
+        notes.append(f"series {data.n_M} (odd count) left out of the differences")
+    for k in range(data.n_S):
+        d = np.concatenate([data.z[b, :, k] - data.z[a, :, k] for a, b in pairs])
+        d = d[np.isfinite(d)]
+        nd[k] = d.size
+        if d.size >= 2:
+            sig[k] = float(np.std(d, ddof=1)) / math.sqrt(2.0)
+        if d.size >= 3 and np.ptp(d) > 0:
+            pv[k] = float(stats.shapiro(d).pvalue)
+        else:
+            notes.append(f"sensor {data.sensors[k]!r}: {d.size} differences"
+                         + (" all equal" if d.size >= 3 else "") + "; Shapiro-Wilk not computable")
+    passed = all(np.isfinite(pv[k]) and pv[k] >= level for k in range(data.n_S) if w[k] > 0)
+    return NormalityCheck(data.sensors, pv, sig, nd, float(level), gated, bool(passed), pairs=pairs,
+                          note="; ".join(notes))
+
+
+# ---------------------------------------------------------------------------- one split
+@dataclass(frozen=True, eq=False)
+class SplitTest:
+    """The two fits of one split and both statistics.
+
+    Attributes
+    ----------
+    model, split : str
+    cal_label, val_label : str     1-based input labels (as the paper's table)
+    ok : bool                      both fits and both statistics were computed
+    stage, error : str             where and why it failed ("" when ok)
+    p_cal, p_val : ndarray (n_p,)  estimates (NaN if the fit failed)
+    C_cal, C_val : ndarray         covariances (NaN if the fit failed)
+    d2_paper, d2_two_sample : float  (p_val - p_cal)^T C^{-1} (p_val - p_cal) (chi^2 units)
+    alpha_paper, alpha_two_sample : float  p-values alpha_min (NaN if not computed)
+    n_cal, n_val : int             number of values used by each fit
+    notes : tuple of str           estimator notes of the two fits
+    """
+
+    model: str
+    split: str
+    cal_label: str
+    val_label: str
+    ok: bool
+    stage: str
+    error: str
+    p_cal: np.ndarray
+    p_val: np.ndarray
+    C_cal: np.ndarray
+    C_val: np.ndarray
+    d2_paper: float
+    d2_two_sample: float
+    alpha_paper: float
+    alpha_two_sample: float
+    n_cal: int = 0
+    n_val: int = 0
+    notes: tuple = ()
+
+    def __post_init__(self):
+        for name in ("p_cal", "p_val", "C_cal", "C_val"):
+            a = np.array(getattr(self, name), dtype=float, copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    def alpha(self, statistic: str) -> float:
+        if statistic == "two_sample":
+            return self.alpha_two_sample
+        if statistic == "paper":
+            return self.alpha_paper
+        raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}")
+
+
+def _failed(model_name, split, stage, msg, n_p, p_cal=None, C_cal=None, n_cal=0, notes=()):
+    nanv, nanm = np.full(n_p, np.nan), np.full((n_p, n_p), np.nan)
+    c, v = split.label()
+    return SplitTest(model_name, split.name, c, v, False, stage, msg,
+                     nanv if p_cal is None else p_cal, nanv, nanm if C_cal is None else C_cal, nanm,
+                     math.nan, math.nan, math.nan, math.nan, n_cal, 0, tuple(notes))
+
+
+def _fit(model, data, p0, weights, settings):
+    est = identify(model, data, p0, weights=weights, settings=settings.identify)
+    C = est.cov if settings.covariance == "second_order" else est.cov_gn
+    return est, C
+
+
+def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None,
+                    settings: DetectSettings | None = None, model_name: str | None = None) -> tuple:
+    """Lines 06-08 for every split: fits (p_cal, C_cal), (p_val, C_val) and both alpha_min.
+
+    A failed fit or a singular covariance is recorded in its :class:`SplitTest` (``ok=False``,
+    with the stage and the reason), never dropped and never raised.
+    """
+    settings = settings or DetectSettings()
+    name = model_name or model.name
+    n_sel = int(np.count_nonzero(data._weights(weights) > 0))
+    out = []
+    for split in splits:
+        try:
+            split.check(data.n_q, data.n_M, model.n_p, n_sel)
+        except SplitError as exc:
+            out.append(_failed(name, split, "split", str(exc), model.n_p))
+            continue
+        try:
+            est_c, C_c = _fit(model, split.calibration(data), p0, weights, settings)
+        except (IdentificationError, DataError) as exc:
+            out.append(_failed(name, split, "calibration fit", f"{type(exc).__name__}: {exc}", model.n_p))
+            continue
+        try:
+            est_v, C_v = _fit(model, split.validation(data), p0, weights, settings)
+        except (IdentificationError, DataError) as exc:
+            out.append(_failed(name, split, "validation fit", f"{type(exc).__name__}: {exc}", model.n_p,
+                               est_c.p, C_c, est_c.n_data, est_c.notes))
+            continue
+        notes = tuple(f"calibration fit: {n}" for n in est_c.notes) + tuple(f"validation fit: {n}" for n in est_v.notes)
+        c, v = split.label()
+        try:
+            d2p = mahalanobis2(est_v.p, est_c.p, C_c, "C_cal")
+            d2t = mahalanobis2(est_v.p, est_c.p, C_c + C_v, "C_cal + C_val")
+        except CovarianceError as exc:
+            out.append(SplitTest(name, split.name, c, v, False, "statistic", f"CovarianceError: {exc}", est_c.p,
+                                 est_v.p, C_c, C_v, math.nan, math.nan, math.nan, math.nan, est_c.n_data,
+                                 est_v.n_data, notes))
+            continue
+        n_p = model.n_p
+        out.append(SplitTest(name, split.name, c, v, True, "", "", est_c.p, est_v.p, C_c, C_v, d2p, d2t,
+                             float(stats.chi2.sf(d2p, n_p)), float(stats.chi2.sf(d2t, n_p)),
+                             est_c.n_data, est_v.n_data, notes))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------- decision (lines 09-17)
+@dataclass(frozen=True)
+class ModelDecision:
+    """The verdict of Algorithm 1 for one model, one statistic and one multiple-test correction.
+
+    Attributes
+    ----------
+    model : str
+    decision : str        "reject" (model uncertainty detected), "accept" or "undecided"
+    statistic, correction : str
+    tol : float           family-wise level TOL
+    n_tests : int         planned number of tests (all splits, failed ones included)
+    threshold : float     TOL / n_tests (the first, smallest threshold of Holm)
+    flagged : tuple       splits whose hypothesis is rejected under this correction
+    failed : tuple        splits without a p-value
+    min_alpha : float     smallest alpha_min over the computed splits (NaN if none)
+    reason : str
+    """
+
+    model: str
+    decision: str
+    statistic: str
+    correction: str
+    tol: float
+    n_tests: int
+    threshold: float
+    flagged: tuple
+    failed: tuple
+    min_alpha: float
+    reason: str
+
+
+def decide(tests: Sequence[SplitTest], tol: float, statistic: str = "two_sample",
+           correction: str = "bonferroni") -> ModelDecision:
+    """Bonferroni: reject when some alpha_min < TOL / n_tests (lines 09-16).  Holm: step-down.
+
+    Failed splits count in n_tests (the correction covers every planned test) and rank last
+    in Holm's ordering.  Without a rejection, a failed split makes the verdict "undecided".
+    """
+    tol = float(tol)
+    if not (0.0 < tol < 1.0):
+        raise ValueError(f"tol: must lie in (0, 1), got {tol!r}")
+    if correction not in CORRECTIONS:
+        raise ValueError(f"correction: expected one of {CORRECTIONS}, got {correction!r}")
+    if not tests:
+        raise ValueError("tests: no split tests to decide on")
+    n = len(tests)
+    model = tests[0].model
+    a = np.array([t.alpha(statistic) if t.ok else np.nan for t in tests])
+    failed = tuple(t.split for t in tests if not t.ok)
+    if correction == "bonferroni":
+        flag = np.isfinite(a) & (a < tol / n)
+    else:
+        order = np.argsort(np.where(np.isfinite(a), a, np.inf), kind="stable")
+        flag = np.zeros(n, bool)
+        for rank, i in enumerate(order):
+            if np.isfinite(a[i]) and a[i] < tol / (n - rank):
+                flag[i] = True
+            else:
+                break
+    flagged = tuple(tests[i].split for i in np.flatnonzero(flag))
+    amin = float(np.nanmin(a)) if np.any(np.isfinite(a)) else math.nan
+    if flagged:
+        dec = "reject"
+        i = int(np.nanargmin(a))
+        reason = (f"alpha_min = {100 * a[i]:.3g} % < TOL/n_tests = {100 * tol / n:.3g} % on split "
+                  f"{tests[i].split!r}")
+    elif failed:
+        dec = "undecided"
+        reason = "; ".join(f"split {t.split!r} failed at the {t.stage}: {t.error}" for t in tests if not t.ok)
+    else:
+        dec = "accept"
+        reason = f"every alpha_min >= TOL/n_tests = {100 * tol / n:.3g} % (smallest {100 * amin:.3g} %)"
+    return ModelDecision(model, dec, statistic, correction, tol, n, tol / n, flagged, failed, amin, reason)
+
+
+# ---------------------------------------------------------------------------- result
+@dataclass(frozen=True, eq=False)
+class DetectionResult:
+    """Immutable result of :func:`detect`.
+
+    Attributes
+    ----------
+    settings : DetectSettings
+    models : tuple of str
+    splits : tuple of Split
+    tests : tuple of SplitTest     every (model, split), models outer
+    decisions : tuple of ModelDecision   the primary verdict per model (settings' statistic, correction)
+    all_decisions : tuple of ModelDecision  every model x statistic x correction
+    normality : tuple of (model, NormalityCheck)
+    design : tuple of (model, tuple of sensor names used, how chosen)
+    notes : tuple of str
+    """
+
+    settings: DetectSettings
+    models: tuple
+    splits: tuple
+    tests: tuple
+    decisions: tuple
+    all_decisions: tuple
+    normality: tuple
+    design: tuple
+    notes: tuple = ()
+
+    def decision(self, model: str | None = None, statistic: str | None = None,
+                 correction: str | None = None) -> ModelDecision:
+        """The verdict for a model (default: the only / first one)."""
+        model = self.models[0] if model is None else model
+        if model not in self.models:
+            raise KeyError(f"model: {model!r} not in {list(self.models)}")
+        st = statistic or self.settings.statistic
+        co = correction or self.settings.correction
+        for d in self.all_decisions:
+            if d.model == model and d.statistic == st and d.correction == co:
+                return d
+        raise KeyError(f"no decision for {(model, st, co)}")
+
+    @property
+    def verdicts(self) -> Mapping:
+        """{model: "reject" | "accept" | "undecided"} (primary statistic and correction)."""
+        return MappingProxyType({d.model: d.decision for d in self.decisions})
+
+    def tests_of(self, model: str) -> tuple:
+        return tuple(t for t in self.tests if t.model == model)
+
+    def alphas(self, model: str | None = None, statistic: str | None = None) -> np.ndarray:
+        """alpha_min per split (NaN for failed splits)."""
+        model = self.models[0] if model is None else model
+        st = statistic or self.settings.statistic
+        return np.array([t.alpha(st) if t.ok else np.nan for t in self.tests_of(model)])
+
+    def summary(self) -> str:
+        """Per model: a table of both statistics per split, the verdicts, numbered notes."""
+        s = self.settings
+        n = len(self.splits)
+        notes = list(self.notes)
+
+        def note(text):
+            notes.append(text)
+            return f"[{len(notes)}]"
+
+        lines = [f"Detection of model uncertainty (Algorithm 1): TOL = {100 * s.tol:g} %, n_tests = {n}, "
+                 f"per-test level TOL/n_tests = {100 * s.tol / n:.4g} %",
+                 f"decision statistic: {s.statistic} "
+                 + ("(Wald on p_val - p_cal with C_cal + C_val)" if s.statistic == "two_sample"
+                    else "(paper: p_val in G(alpha, p_cal, C_cal))") + f", correction: {s.correction}",
+                 ""]
+        seen = []
+        for mname, chk in self.normality:
+            if any(chk is c for c in seen):
+                continue
+            seen.append(chk)
+            head = (f"Normality gate (line 05), Shapiro-Wilk on differences of series pairs "
+                    f"{', '.join(f'z{b + 1}-z{a + 1}' for a, b in chk.pairs) or '(none)'} at {100 * chk.level:g} %"
+                    + (f" [data of {mname}]" if len(self.models) > 1 else ""))
+            status = "passed" if chk.passed else ("FAILED, overridden by the user "
+                                                  + note("normality='override': the Gaussian error assumption "
+                                                         "failed its check; the p-values below rely on it")
+                                                  if chk.overridden else "FAILED")
+            lines += [head + f": {status}", chk.table()]
+            if chk.note:
+                lines[-1] += " " + note(chk.note)
+            lines.append("")
+        for mname, used, how in self.design:
+            lines.append(f"sensors for {mname}: {', '.join(used)} ({how})")
+        if self.design:
+            lines.append("")
+        thr = s.tol / n
+        for mname in self.models:
+            lines.append(f"Model {mname}")
+            w = max(10, max(len(sp.name) for sp in self.splits))
+            lines.append(f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha paper %':>13} "
+                         f"{'alpha 2-sample %':>16}  Bonf. paper/2s  Holm paper/2s")
+            dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
+            for t in self.tests_of(mname):
+                if t.ok:
+                    def mark(stat):
+                        a = t.alpha(stat)
+                        return f"{100 * a:.3g}" + ("*" if a < thr else "") if a >= 1e-4 else "<0.01*"
+                    fl = ["R" if t.split in dec[(st, co)].flagged else "-" for co in CORRECTIONS for st in ("paper", "two_sample")]
+                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {mark('paper'):>13} "
+                                 f"{mark('two_sample'):>16}  {fl[0]:>6}/{fl[1]:<7} {fl[2]:>5}/{fl[3]}")
+                    for nt in t.notes:
+                        lines[-1] += " " + note(f"{mname}, {t.split}: {nt}")
+                else:
+                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>13} {'failed':>16}"
+                                 f"  " + note(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
+            for st in STATISTICS:
+                for co in CORRECTIONS:
+                    d = dec[(st, co)]
+                    primary = st == s.statistic and co == s.correction
+                    tag = f"{d.decision.upper()}" if primary else d.decision
+                    lines.append(f"  {'>> ' if primary else '   '}{st:<10} {co:<10}: {tag:<9} ({d.reason})")
+            lines.append("")
+        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected; >> = the decision")
+        if s.statistic == "paper":
+            note("the paper's statistic ignores the validation estimate's covariance C_val; under a correct model "
+                 "its size exceeds TOL (see identification.montecarlo)")
+        if notes:
+            lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)]
+        return "\n".join(lines)
+
+    def __repr__(self):
+        v = ", ".join(f"{m}: {d}" for m, d in self.verdicts.items())
+        return f"DetectionResult({v}; {len(self.splits)} splits, statistic={self.settings.statistic})"
+
+
+# ---------------------------------------------------------------------------- design (lines 02-03)
+def _design_weights(model, data, p0, design, settings, notes):
+    """Sensor weights from design: None, weights, sensor names, or an OED criterion ("A", "D", "E")."""
+    if design is None:
+        return None, "all sensors given"
+    if isinstance(design, str):
+        try:
+            from oed.design import select_sensors_from_information  # lazy: oed is optional here
+        except ImportError as exc:
+            raise DataError(f"design={design!r}: the OED front door oed.design.select_sensors_from_information "
+                            f"is not available ({exc}); pass sensor names or weights instead") from None
+        from .estimator import identify as _identify
+        est = _identify(model, data, p0, settings=settings.identify)
+        F, S = information_contributions(model, data, est.p, states=est.states)
+        n_sel = settings.n_design_sensors or model.n_p
+        ret = select_sensors_from_information(F, S, criterion=design, n_sensors=n_sel)
+        w = None
+        for attr in ("w", "weights", "design"):
+            if hasattr(ret, attr):
+                w = getattr(ret, attr)
+                break
+        w = np.asarray(ret if w is None else w, float).ravel()
+        if w.shape != (model.n_S,):
+            raise DataError(f"design={design!r}: the OED returned {w.size} weights for {model.n_S} sensors")
+        return w, f"{design}-optimal design of {n_sel} sensors from the initial fit on all sensors (lines 02-03)"
+    items = list(design)
+    if items and all(isinstance(x, str) for x in items):
+        unknown = [x for x in items if x not in model.sensors]
+        if unknown:
+            raise DataError(f"design: unknown sensor(s) {unknown}; the model has {list(model.sensors)}")
+        return np.array([1.0 if s in items else 0.0 for s in model.sensors]), "sensor names given"
+    try:
+        w = np.asarray(items, float)
+    except (TypeError, ValueError):
+        raise DataError(f"design: expected None, a criterion name, sensor names or weights, got {design!r}") from None
+    if w.shape != (model.n_S,):
+        raise DataError(f"design: expected {model.n_S} sensor weights, got {w.size}")
+    return w, "sensor weights given"
+
+
+# ---------------------------------------------------------------------------- main entry
+def _as_mapping(what, value, names):
+    if isinstance(value, Mapping):
+        missing = [n for n in names if n not in value]
+        if missing:
+            raise DataError(f"{what}: no entry for model(s) {missing}")
+        return {n: value[n] for n in names}
+    return {n: value for n in names}
+
+
+def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, statistic: str = "two_sample",
+           correction: str = "bonferroni", weights=None, design=None, normality: str = "check",
+           settings: DetectSettings | None = None) -> DetectionResult:
+    r"""Algorithm 1: is the model rejected by calibration / validation tests?
+
+    For each split: p_cal, C_cal and p_val, C_val by :func:`identify` (eqs. 3, 7), then
+
+        alpha_paper = 1 - F_chi2(n_p)((p_val - p_cal)^T C_cal^{-1} (p_val - p_cal))
+        alpha_2s    = 1 - F_chi2(n_p)((p_val - p_cal)^T (C_cal + C_val)^{-1} (p_val - p_cal))
+
+    (chi^2 units, dimensionless p-values) and the model is rejected when some alpha_min of
+    the chosen statistic is below TOL / n_tests (Bonferroni; Holm reported as well).  All
+    splits are evaluated (the paper stops at the first rejection; the verdict is the same).
+
+    Parameters
+    ----------
+    model : models.Model or mapping {name: Model}
+        One candidate, or several (e.g. M1, M2, M3) tested on the same splits.
+    measurements : Measurements or mapping {name: Measurements}
+        The campaign (per model when their inputs differ).  sigma per sensor should be known
+        (the paper fixes it); with sigma=None it is estimated and the chi^2 law is approximate.
+    splits : sequence of Split
+        The n_tests scenarios (e.g. :func:`identification.splits.press_scenarios`).
+    p0 : array_like (n_p,) or mapping {name: array}
+        Start values of every fit.
+    tol : float
+        Family-wise level TOL in (0, 1).
+    statistic : {"two_sample", "paper"}
+        Which alpha_min decides (both are always reported).
+    correction : {"bonferroni", "holm"}
+    weights : array_like (n_S,), optional
+        Sensor weights (0/1) of the fits; exclusive with ``design``.
+    design : None, str, sequence of str or array
+        Lines 02-03: an OED criterion ("A", "D", "E"; needs :mod:`oed`), sensor names, or weights.
+    normality : {"check", "override"}
+        "check" raises :class:`NormalityError` when a selected sensor fails the Shapiro-Wilk gate;
+        "override" records the failure and continues.
+    settings : DetectSettings, optional
+        Overrides the keyword defaults above (tol, statistic, correction, normality).
+
+    Returns
+    -------
+    DetectionResult
+
+    Raises
+    ------
+    ValueError
+        tol outside (0, 1), unknown statistic / correction / normality.
+    NormalityError
+        Line 05 failed and normality="check".
+    DataError, TypeError, SplitError
+        Bad arguments (named in the message).  A fit failing on a split does not raise: it is
+        recorded and the model's verdict becomes "undecided" unless another split rejects it.
+    """
+    if settings is None:
+        settings = DetectSettings(tol=tol, statistic=statistic, correction=correction, normality=normality)
+    if isinstance(splits, Split):
+        splits = (splits,)
+    splits = tuple(splits)
+    if not splits:
+        raise SplitError("splits: at least one split (test scenario) is needed")
+    for sp in splits:
+        if not isinstance(sp, Split):
+            raise TypeError(f"splits: expected Split objects, got {type(sp).__name__}")
+    names_sp = [sp.name for sp in splits]
+    if len(set(names_sp)) != len(names_sp):
+        raise SplitError(f"splits: names must be unique, got {names_sp}")
+    if isinstance(model, Mapping):
+        models = dict(model)
+        if not models:
+            raise DataError("model: the mapping of models is empty")
+    elif isinstance(model, Model):
+        models = {model.name: model}
+    else:
+        raise TypeError(f"model: expected a models.Model or a mapping of them, got {type(model).__name__}")
+    names = tuple(models)
+    for n_, m_ in models.items():
+        if not isinstance(m_, Model):
+            raise TypeError(f"model[{n_!r}]: expected a models.Model, got {type(m_).__name__}")
+    datas = _as_mapping("measurements", measurements, names)
+    p0s = _as_mapping("p0", p0, names)
+    if weights is not None and design is not None:
+        raise DataError("weights, design: give one of them, not both")
+
+    notes = []
+    tests, normal, designs = [], [], []
+    checks = []
+    for name in names:
+        m, data = models[name], datas[name]
+        if not isinstance(data, Measurements):
+            raise TypeError(f"measurements[{name!r}]: expected an identification.Measurements, "
+                            f"got {type(data).__name__}")
+        for sp in splits:
+            sp.check(data.n_q, data.n_M)
+        w, how = _design_weights(m, data, p0s[name], design, settings, notes)
+        if w is None and weights is not None:
+            w, how = data._weights(weights), "sensor weights given"
+        used = tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0)
+        designs.append((name, used, how))
+        # normality (line 05): once per distinct z and sensor selection
+        chk = None
+        for (z, wk, c) in checks:
+            if z is data.z or (z.shape == data.z.shape and np.array_equal(z, data.z, equal_nan=True)):
+                if np.array_equal(wk, data._weights(w)):
+                    chk = c
+        if chk is None:
+            chk = normality_check(data, settings.normality_level, w)
+            if not chk.passed:
+                bad = [s for k, s in enumerate(chk.sensors) if s in chk.gated and not chk.pvalue[k] >= chk.level]
+                msg = (f"normality gate (Algorithm 1, line 05) failed for sensor(s) {', '.join(bad)}: Shapiro-Wilk "
+                       f"p-value(s) {', '.join(f'{100 * chk.pvalue[chk.sensors.index(s)]:.3g} %' for s in bad)} "
+                       f"< {100 * chk.level:g} % on the differences of repeated series"
+                       + (f" ({chk.note})" if chk.note else "")
+                       + "; acquire new data, or pass normality='override' to continue on record")
+                if settings.normality == "check":
+                    raise NormalityError(msg, chk)
+                chk = NormalityCheck(chk.sensors, chk.pvalue, chk.sigma_rep, chk.n_diff, chk.level, chk.gated,
+                                     False, True, chk.pairs, chk.note)
+                notes.append(f"override: {msg}")
+            checks.append((data.z, data._weights(w), chk))
+        normal.append((name, chk))
+        if data.sigma is None:
+            notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
+                         "approximate")
+        tests.extend(run_split_tests(m, data, splits, p0s[name], w, settings, model_name=name))
+
+    all_dec, prim = [], []
+    for name in names:
+        mt = [t for t in tests if t.model == name]
+        for st in STATISTICS:
+            for co in CORRECTIONS:
+                d = decide(mt, settings.tol, st, co)
+                all_dec.append(d)
+                if st == settings.statistic and co == settings.correction:
+                    prim.append(d)
+    return DetectionResult(settings, names, splits, tuple(tests), tuple(prim), tuple(all_dec), tuple(normal),
+                           tuple(designs), tuple(notes))
