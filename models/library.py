@@ -9,7 +9,7 @@ from .contract import Model, Parameter
 __all__ = ["spring_chain", "linear_model"]
 
 
-def spring_chain(n_y: int = 30, n_sensors: int = 4) -> Model:
+def spring_chain(n_y: int = 30, n_sensors: int = 4, n_groups: int = 1) -> Model:
     """A chain of n_y nodes joined by hardening springs, fixed at one end.
 
     State equation (N): for node i = 1..n_y with displacement u_i (mm), u_0 = 0,
@@ -19,16 +19,23 @@ def spring_chain(n_y: int = 30, n_sensors: int = 4) -> Model:
 
     loads Q: q_1 (N) at the free end, q_2 (N) at the middle node.  Parameters: k (N/mm),
     c (1/mm^2).  Sensors: displacements (mm) of n_sensors nodes spread along the chain.
+    With ``n_groups > 1`` the springs fall into that many consecutive groups with their own
+    stiffness k1..kG (N/mm), for benchmarks with more parameters.
     """
     if n_y < 2:
         raise ValueError(f"n_y must be at least 2, got {n_y}")
     n_sensors = int(min(n_sensors, n_y))
+    if not 1 <= n_groups <= n_y:
+        raise ValueError(f"n_groups must lie in [1, n_y], got {n_groups}")
     a = 1.0 + 0.5 * np.sin(np.arange(1, n_y + 1))
     nodes = np.unique(np.linspace(n_y - 1, 0, n_sensors, endpoint=False).round().astype(int))[::-1]
     mid = n_y // 2
 
+    groups = np.minimum(np.arange(n_y) * n_groups // n_y, n_groups - 1)
+
     def E(y, p, q):
-        k, c = p[0], p[1]
+        k = ca.vertcat(*[p[g] for g in groups]) if n_groups > 1 else p[0]
+        c = p[n_groups]
         d = y - ca.vertcat(0, y[:-1])                     # elongation of spring i (between i-1 and i)
         f = k * ca.DM(a) * (d + c * d ** 3)               # spring forces
         f_next = ca.vertcat(f[1:], 0)
@@ -40,7 +47,9 @@ def spring_chain(n_y: int = 30, n_sensors: int = 4) -> Model:
     def h(y, p, q):
         return ca.vertcat(*[y[i] for i in nodes])
 
-    return Model([Parameter("k", 1e-9, 1e9, unit="N/mm"), Parameter("c", -1e9, 1e9, unit="1/mm^2")],
+    ks = [Parameter("k", 1e-9, 1e9, unit="N/mm")] if n_groups == 1 else \
+        [Parameter(f"k{g + 1}", 1e-9, 1e9, unit="N/mm") for g in range(n_groups)]
+    return Model(ks + [Parameter("c", -1e9, 1e9, unit="1/mm^2")],
                  inputs=["q_tip", "q_mid"], sensors=[f"u{i + 1}" for i in nodes], n_y=n_y, E=E, h=h,
                  name=f"spring chain (n_y={n_y})", sensor_units=["mm"] * len(nodes), input_units=["N", "N"])
 
