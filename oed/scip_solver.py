@@ -81,6 +81,12 @@ class ScipSettings:
         Maximum master solves of the cut loop / no-good loop.
     scip_options : tuple of (str, value)
         Extra SCIP parameters.
+    inverse_bound_factor : float
+        ``second_order`` only: SCIP's spatial branch-and-bound needs bounded variables, so
+        the entries of :math:`X = H(w)^{-1}` are bounded by this factor times the largest
+        entry of :math:`H^{-1}` of a heuristic incumbent.  This is a *modelling assumption*
+        (designs with a much larger inverse Hessian are excluded) and is reported in
+        ``ScipResult.assumption``.  All other bounds used are rigorous.
     """
 
     time_limit: float = 60.0
@@ -88,6 +94,7 @@ class ScipSettings:
     gap_tol: float = 1e-9
     max_rounds: int = 500
     scip_options: tuple = ()
+    inverse_bound_factor: float = 1e3
 
 
 @dataclass(frozen=True)
@@ -103,6 +110,7 @@ class ScipResult:
     rounds: int
     wall_time: float
     formulation: str
+    assumption: str = ""
 
 
 def _pyomo():
@@ -310,18 +318,51 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
     return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, "cuts")
 
 
+def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
+    """Best design among the first ``max_designs`` admissible designs (lexicographic) and
+    the Gauss-Newton greedy/exchange design (if admissible); (w, value) or (None, inf)."""
+    from .enumeration import iter_designs
+    from .bnb import BnBSettings, _Problem, greedy_exchange
+    best_w, best_v = None, np.inf
+    seen = 0
+    for W in iter_designs(cons, 5000):
+        res = batch_criteria(F, S, W, kind, settings=cs, validated=True)
+        v = res.value(crit)
+        j = int(np.argmin(v))
+        if v[j] < best_v:
+            best_w, best_v = W[j].copy(), float(v[j])
+        seen += len(W)
+        if seen >= max_designs:
+            break
+    prob = _Problem(F, crit, BnBSettings(), cs)
+    state = np.full(F.shape[0], -1, dtype=np.int8)
+    state[list(cons.include)] = 1
+    state[list(cons.exclude)] = 0
+    wg, _ = greedy_exchange(prob, state, cons.max_size)
+    if cons.is_admissible(wg):
+        v, _s = _exact(F, S, wg, crit, kind, cs)
+        if v < best_v:
+            best_w, best_v = wg, v
+    return best_w, best_v
+
+
 def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs, t0):
     n, p, _ = F.shape
     mdl = _base_model(pyo, cons)
     P = range(p)
     fscale = float(np.max(np.abs(F)))
+    assumption = ""
+    w_inc, U = _heuristic_incumbent(F, S if form == "second_order" else None, cons, crit, kind, cs)
+    Mdiag_max = float(np.max(np.einsum("kii->i", F)))
+    Mabs = np.abs(F).sum(axis=0)
     M = {(i, j): sum(float(F[k, i, j]) * mdl.w[k] for k in range(n) if F[k, i, j] != 0.0) for i in P for j in P}
     tri = [(i, j) for i in P for j in P if j <= i]
     delta = 1e-6 * np.sqrt(fscale)
     if form == "naive":
-        mdl.L = pyo.Var(tri)
+        lb_ = np.sqrt(Mdiag_max)  # rigorous: M = LL^T (or M - tI = LL^T, t >= 0) => |L_ij| <= sqrt(M_ii)
+        mdl.L = pyo.Var(tri, bounds=(-lb_, lb_))
         for i in P:
-            mdl.L[i, i].setlb(delta if crit is not Criterion.A else None)
+            mdl.L[i, i].setlb(delta)
         if crit is Criterion.E:
             mdl.t = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
             mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j] - (mdl.t if i == j else 0.0)
@@ -332,33 +373,53 @@ def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs,
                                     == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
             mdl.obj = pyo.Objective(expr=-2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
         else:
-            mdl.X = pyo.Var(P, P)
+            # rigorous: X = M^{-1} is PD, so trace(X) <= U implies |X_ij| <= U
+            xb = U if np.isfinite(U) else None
+            mdl.X = pyo.Var(P, P, bounds=(None if xb is None else -xb, xb))
             mdl.eq = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(M[i, l] * mdl.X[l, j] for l in P)
                                     == (1.0 if i == j else 0.0))
             mdl.obj = pyo.Objective(expr=sum(mdl.X[i, i] for i in P), sense=pyo.minimize)
+            if xb is not None:
+                mdl.cutoff = pyo.Constraint(expr=sum(mdl.X[i, i] for i in P) <= U * (1 + 1e-9))
     else:  # second_order
         Sx = np.zeros_like(F) if S is None else S
         Hm = {(i, j): sum(float(F[k, i, j] + Sx[k, i, j]) * mdl.w[k] for k in range(n)
                           if F[k, i, j] + Sx[k, i, j] != 0.0) for i in P for j in P}
-        mdl.X = pyo.Var(P, P)
-        mdl.Y = pyo.Var(P, P)
-        mdl.C = pyo.Var(P, P)
+        xb = yb = cb = None
+        if np.isfinite(U):
+            Hinc = ((w_inc.astype(float)) @ (F + Sx).reshape(n, -1)).reshape(p, p)
+            xb = settings.inverse_bound_factor * float(np.max(np.abs(np.linalg.inv(Hinc))))
+            yb = float(np.max(Mabs.sum(axis=1))) * xb  # |(G X)_ij| <= sum_l |G_il| xb
+            cb = p * xb * yb
+            if crit in (Criterion.A, Criterion.E):
+                cb = min(cb, U * (1 + 1e-9))  # rigorous: C PSD, trace/lambda_max <= U
+            assumption = (f"|H(w)^-1|_ij <= {xb:.3g} (= {settings.inverse_bound_factor:g} x the largest entry "
+                          "for a heuristic design); designs violating it are excluded")
+        bnd = lambda b: (None if b is None else -b, b)  # noqa: E731
+        mdl.X = pyo.Var(P, P, bounds=bnd(xb))
+        mdl.Y = pyo.Var(P, P, bounds=bnd(yb))
+        mdl.C = pyo.Var(P, P, bounds=bnd(cb))
         mdl.hx = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(Hm[i, l] * mdl.X[l, j] for l in P)
                                 == (1.0 if i == j else 0.0))
         mdl.gx = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.Y[i, j] == sum(M[i, l] * mdl.X[l, j] for l in P))
         mdl.cc = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.C[i, j] == sum(mdl.X[i, l] * mdl.Y[l, j] for l in P))
         if crit is Criterion.A:
             mdl.obj = pyo.Objective(expr=sum(mdl.C[i, i] for i in P), sense=pyo.minimize)
+            if np.isfinite(U):
+                mdl.cutoff = pyo.Constraint(expr=sum(mdl.C[i, i] for i in P) <= U * (1 + 1e-9))
         else:
-            mdl.L = pyo.Var(tri)
-            for i in P:
-                mdl.L[i, i].setlb(0.0)
             if crit is Criterion.E:
-                mdl.t = pyo.Var(bounds=(0.0, None))
+                lbd = None if cb is None else np.sqrt(2 * cb)  # t - C_ii <= 2 cb
+                mdl.L = pyo.Var(tri, bounds=bnd(lbd))
+                for i in P:
+                    mdl.L[i, i].setlb(0.0)
+                mdl.t = pyo.Var(bounds=(0.0, None if not np.isfinite(U) else U * (1 + 1e-9)))
                 mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: (mdl.t if i == j else 0.0) - mdl.C[i, j]
                                         == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
                 mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
             else:
+                lbd = None if cb is None else np.sqrt(cb)  # C = LL^T => |L_ij| <= sqrt(C_ii)
+                mdl.L = pyo.Var(tri, bounds=bnd(lbd))
                 for i in P:
                     mdl.L[i, i].setlb(1e-12)
                 mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: mdl.C[i, j]
@@ -393,4 +454,12 @@ def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs,
         break
     else:
         status, msg = "iteration_limit", f"no-good loop reached max_rounds = {settings.max_rounds}"
-    return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, form)
+    if best_w is None and w_inc is not None and status != "infeasible":
+        msg += "; SCIP found no design, returning the heuristic incumbent"
+        best_w, best_v = w_inc, U
+    elif best_w is not None and w_inc is not None and U < best_v - _tol(crit, best_v, 1e-9):
+        if status == "optimal":
+            status = "feasible"
+            msg += "; a heuristic design beats SCIP's 'optimal' one (numerical tolerance?), proof discarded"
+        best_w, best_v = w_inc, U
+    return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, form, assumption)

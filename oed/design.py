@@ -1,0 +1,369 @@
+r"""Front door for optimal sensor selection.
+
+Solves
+
+.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k \ge n_p,\
+           \sum_k w_k = m \ (\text{or} \le m_{\max}),\ c^Tw \le B,\ w_I=1,\ w_O=0,
+
+with :math:`C` the second-order covariance :math:`H^{-1}(\sum_k w_k^2F_k)H^{-1}` or the
+Gauss-Newton covariance :math:`(\sum_k w_kF_k)^{-1}` and :math:`\Psi` = trace (A),
+log det (D) or lambda_max (E).
+
+``method="auto"``: exact enumeration when the number of admissible designs is at most
+``DesignSettings.enumeration_limit`` (2e5); otherwise our branch-and-bound for
+Gauss-Newton criteria without costs; otherwise SCIP via Pyomo.  If SCIP is unavailable or
+fails, enumeration is used when it is affordable (``enumeration_fallback_limit``) and the
+fallback is recorded in :attr:`DesignResult.notes`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bnb import BnBSettings, branch_and_bound
+from .constraints import DesignConstraints, make_constraints
+from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, validate_information
+from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
+
+__all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
+           "design_table", "select_sensors"]
+
+_METHODS = ("auto", "scip", "bnb", "enumerate")
+
+
+@dataclass(frozen=True)
+class DesignSettings:
+    """Settings of :func:`select_sensors_from_information`.
+
+    Attributes
+    ----------
+    enumeration_limit : int
+        ``auto`` enumerates when the admissible design count is at most this.
+    enumeration_fallback_limit : int
+        Largest design count enumerated as a fallback after a SCIP failure.
+    gap_tol : float
+        Optimality tolerance (relative for A/E, absolute on log det for D).
+    criteria : CriteriaSettings
+    scip_formulation : str
+        Passed to :class:`oed.scip_solver.ScipSettings` (``auto``, ``cuts``, ``naive``, ``second_order``).
+    """
+
+    enumeration_limit: int = 200_000
+    enumeration_fallback_limit: int = 5_000_000
+    gap_tol: float = 1e-9
+    criteria: CriteriaSettings = DEFAULT_SETTINGS
+    scip_formulation: str = "auto"
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """Immutable outcome of a sensor selection.
+
+    Attributes
+    ----------
+    sensors : tuple of str
+        Names of the chosen sensors.
+    indices : tuple of int
+    weights : tuple of bool
+        Boolean weight per candidate sensor.
+    criterion, kind : str
+    value : float
+        Criterion value (D: log det C).  ``inf`` if no regular design was found.
+    det : float or None
+        det C for the D criterion.
+    lower_bound : float
+        Proven lower bound on the optimal value (same scale as ``value``).
+    gap : float
+        ``value - lower_bound`` (0 when proven optimal).
+    proven_optimal : bool
+    method : str
+        Method actually used (``enumerate``, ``bnb``, ``scip``).
+    status, message : str
+    wall_time : float
+    near_singular : str
+        Reason text when the chosen design is near-singular, else ''.
+    notes : tuple of str
+        Fallbacks and modelling assumptions.
+    """
+
+    sensors: tuple
+    indices: tuple
+    weights: tuple
+    criterion: str
+    kind: str
+    value: float
+    det: float | None
+    lower_bound: float
+    gap: float
+    proven_optimal: bool
+    method: str
+    status: str
+    message: str
+    wall_time: float
+    near_singular: str = ""
+    notes: tuple = field(default_factory=tuple)
+
+    def summary(self) -> str:
+        """Human-readable multi-line summary."""
+        lines = [
+            f"OED ({self.kind}, {self.criterion}-criterion) via {self.method}: status {self.status}"
+            + (" (proven optimal)" if self.proven_optimal else ""),
+            f"  sensors ({len(self.indices)}): {', '.join(self.sensors) if self.sensors else '-'}",
+            f"  value: {self.value:.10g}" + (f"  (det C = {self.det:.6g})" if self.det is not None else ""),
+            f"  lower bound: {self.lower_bound:.10g}  gap: {self.gap:.3g}",
+            f"  wall time: {self.wall_time:.3f} s",
+        ]
+        if self.message:
+            lines.append(f"  message: {self.message}")
+        if self.near_singular:
+            lines.append(f"  WARNING: {self.near_singular}")
+        for n in self.notes:
+            lines.append(f"  note: {n}")
+        return "\n".join(lines)
+
+
+def _names(sensor_names, n):
+    if sensor_names is None:
+        return tuple(f"s{k}" for k in range(n))
+    names = tuple(str(s) for s in sensor_names)
+    if len(names) != n:
+        raise ValueError(f"sensor_names: expected {n} names (one per candidate sensor), got {len(names)}")
+    if len(set(names)) != n:
+        raise ValueError("sensor_names: names must be unique")
+    return names
+
+
+def _tol(crit, v, gap_tol):
+    if not np.isfinite(v):
+        return 0.0
+    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
+
+
+def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton", n_sensors=None,
+                                    max_sensors=None, costs=None, budget=None, include=(), exclude=(),
+                                    method="auto", time_limit=60.0, sensor_names=None, *,
+                                    settings: DesignSettings = DesignSettings()) -> DesignResult:
+    r"""Optimal sensor subset :math:`\arg\min_{w} \Psi(C(w))` from per-sensor information.
+
+    Parameters
+    ----------
+    F : array_like, shape (n_S, n_p, n_p)
+        Gauss-Newton information contributions :math:`F_k=J_k^TJ_k` (symmetric PSD).
+    S : array_like or None, shape (n_S, n_p, n_p)
+        Second-order terms (symmetric); required for ``kind="second_order"`` unless zero.
+    criterion : {"A", "D", "E"}
+    kind : {"gauss_newton", "second_order"}
+    n_sensors : int or None
+        Exact number of sensors.
+    max_sensors : int or None
+        Upper bound on the number of sensors.
+    costs, budget : array_like and float, or None
+        Per-sensor costs and budget :math:`c^Tw\le B`.
+    include, exclude : sequence of int or str
+        Forced-in / forced-out sensors (indices or names).
+    method : {"auto", "scip", "bnb", "enumerate"}
+    time_limit : float
+        Seconds for B&B / SCIP (enumeration ignores it).
+    sensor_names : sequence of str or None
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (message names the argument).
+    RuntimeError
+        When no method could produce a design (e.g. SCIP failed and enumeration is too big).
+    """
+    t0 = time.perf_counter()
+    crit = Criterion.parse(criterion)
+    kind_e = Kind.parse(kind)
+    if method not in _METHODS:
+        raise ValueError(f"method: unknown {method!r}; valid: {', '.join(_METHODS)}")
+    try:
+        time_limit = float(time_limit)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"time_limit: must be a number, got {time_limit!r}") from exc
+    if not time_limit > 0:
+        raise ValueError(f"time_limit: must be positive, got {time_limit}")
+    F, S = validate_information(F, S, settings=settings.criteria)
+    n, p, _ = F.shape
+    names = _names(sensor_names, n)
+    cons = make_constraints(n, p, n_sensors=n_sensors, max_sensors=max_sensors, costs=costs, budget=budget,
+                            include=include, exclude=exclude, sensor_names=names)
+    Suse = S if kind_e is Kind.SECOND_ORDER else None
+    count = cons.count_designs()
+    notes = []
+    chosen = method
+    if method == "auto":
+        if count <= settings.enumeration_limit:
+            chosen = "enumerate"
+        elif kind_e is Kind.GAUSS_NEWTON and cons.costs is None:
+            chosen = "bnb"
+        else:
+            chosen = "scip"
+    if chosen == "bnb":
+        if kind_e is not Kind.GAUSS_NEWTON:
+            raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
+                             "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
+        if cons.costs is not None:
+            raise ValueError("method: 'bnb' does not support costs/budget; use 'scip' or 'enumerate'")
+
+    w = None
+    value = lb = np.inf
+    status = message = ""
+    used = chosen
+    if chosen == "bnb":
+        r = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=time_limit, gap_tol=settings.gap_tol),
+                             criteria_settings=settings.criteria)
+        w, value, lb, status = r.w, r.value, r.lower_bound, r.status
+        message = f"{r.nodes} nodes, root bound {r.root_bound:.6g}, initial incumbent {r.initial_incumbent:.6g}"
+        if cons.max_sensors is not None and cons.n_sensors is None:
+            notes.append(f"sum w <= {cons.max_sensors} solved as sum w = {cons.max_size} (GN criteria are monotone)")
+    elif chosen == "scip":
+        from . import scip_solver  # the only module importing Pyomo's SolverFactory
+        try:
+            r = scip_solver.solve_scip(F, Suse, cons, crit, kind_e,
+                                       settings=scip_solver.ScipSettings(time_limit=time_limit, gap_tol=settings.gap_tol,
+                                                                         formulation=settings.scip_formulation),
+                                       criteria_settings=settings.criteria)
+            w, value, lb, status, message = r.w, r.value, r.lower_bound, r.status, r.message
+            message = f"{r.formulation}: {message} ({r.rounds} SCIP solve(s))"
+            if r.assumption:
+                notes.append("modelling bound: " + r.assumption)
+            failed = r.status in ("error",) or (r.w is None and r.status != "infeasible")
+        except scip_solver.ScipUnavailableError as exc:
+            failed = True
+            status, message = "error", f"SCIP unavailable: {exc}"
+        if failed:
+            if method == "scip" and count > settings.enumeration_fallback_limit:
+                raise RuntimeError(f"method: SCIP failed ({message}) and enumeration of {count} designs is too large")
+            if count <= settings.enumeration_fallback_limit:
+                notes.append(f"SCIP failed ({status}: {message}); fell back to exact enumeration")
+                chosen = "enumerate"
+            else:
+                raise RuntimeError(f"SCIP failed ({status}: {message}) and enumeration of {count} designs exceeds "
+                                   f"enumeration_fallback_limit = {settings.enumeration_fallback_limit}")
+        else:
+            used = "scip"
+    if chosen == "enumerate":
+        if count > settings.enumeration_fallback_limit and method == "enumerate":
+            raise ValueError(f"method: enumeration of {count} admissible designs exceeds "
+                             f"{settings.enumeration_fallback_limit}; use 'bnb' or 'scip'")
+        r = enumerate_designs(F, Suse, cons, crit, kind_e,
+                              settings=EnumerationSettings(max_designs=max(settings.enumeration_fallback_limit, count)),
+                              criteria_settings=settings.criteria)
+        w, value = r.w, r.value
+        lb = value
+        status = "optimal" if np.isfinite(value) else "infeasible"
+        message = f"enumerated {r.n_evaluated} admissible designs ({r.n_singular} singular)"
+        used = "enumerate"
+    if status == "infeasible" or w is None or not np.isfinite(value):
+        status = "infeasible"
+        message = (message + "; " if message else "") + "no admissible design has full-rank information"
+        w = None
+    near = ""
+    det = None
+    if w is not None:
+        res = batch_criteria(F, Suse, np.asarray(w, dtype=float)[None], kind_e, settings=settings.criteria,
+                             validated=True)
+        if res.singular[0]:  # never return a singular design
+            raise RuntimeError(f"internal error: method {used} returned a singular design")
+        value = float(res.value(crit)[0])
+        near = res.reason[0] if res.near_singular[0] else ""
+        if crit is Criterion.D:
+            det = float(res.det[0])
+    lb = float(min(lb, value)) if np.isfinite(value) else lb
+    gap = float(value - lb) if np.isfinite(value) and np.isfinite(lb) else np.inf
+    proven = status == "optimal" and gap <= _tol(crit, value, settings.gap_tol) * 1.000001 + 1e-300
+    if status == "optimal" and not proven:
+        status = "feasible"
+    wt = np.zeros(n, dtype=bool) if w is None else np.asarray(w, dtype=bool)
+    idx = tuple(int(k) for k in np.flatnonzero(wt))
+    return DesignResult(sensors=tuple(names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
+                        criterion=crit.value, kind=kind_e.value, value=float(value), det=det, lower_bound=float(lb),
+                        gap=gap, proven_optimal=bool(proven), method=used, status=status, message=message,
+                        wall_time=time.perf_counter() - t0, near_singular=near, notes=tuple(notes))
+
+
+@dataclass(frozen=True)
+class DesignRow:
+    """One admissible sensor combination of :func:`design_table`."""
+
+    mask: str
+    sensors: tuple
+    A: float
+    det: float
+    logdet: float
+    E: float
+    flag: str  # '', 'near-singular' or 'singular'
+    reason: str
+
+
+@dataclass(frozen=True)
+class DesignTable:
+    """All admissible combinations (rows) for a press-style table."""
+
+    kind: str
+    rows: tuple
+
+    def to_text(self) -> str:
+        """Fixed-width text table (A, det, log det, E, flag)."""
+        out = [f"{'combination':<14}{'Psi_A':>14}{'Psi_D (det)':>14}{'log det':>12}{'Psi_E':>14}  flag"]
+        for r in self.rows:
+            out.append(f"{r.mask:<14}{r.A:>14.4e}{r.det:>14.4e}{r.logdet:>12.4f}{r.E:>14.4e}  "
+                       + r.reason)
+        return "\n".join(out)
+
+
+def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, max_rows=100_000,
+                 settings: CriteriaSettings = DEFAULT_SETTINGS) -> DesignTable:
+    r"""A, D (det and log det), E of :math:`C(w)` for every combination with
+    :math:`\sum_k w_k \ge` ``min_sensors`` (default :math:`n_p`), flagged singular/near-singular.
+
+    ``kind`` defaults to ``"second_order"`` when ``S`` is given, else ``"gauss_newton"``.
+    Rows are ordered by size (largest first, as in the paper's table) then lexicographically.
+    """
+    F, S = validate_information(F, S, settings=settings)
+    n, p, _ = F.shape
+    names = _names(sensor_names, n)
+    kind_e = Kind.parse(kind if kind is not None else ("second_order" if S is not None else "gauss_newton"))
+    if min_sensors is None:
+        min_sensors = p
+    if isinstance(min_sensors, bool) or not isinstance(min_sensors, (int, np.integer)) or not 1 <= min_sensors <= n:
+        raise ValueError(f"min_sensors: must be an integer in 1..{n}, got {min_sensors!r}")
+    cons = DesignConstraints(n_candidates=n, n_params=int(min_sensors))
+    if cons.count_designs() > max_rows:
+        raise ValueError(f"min_sensors: {cons.count_designs()} combinations exceed max_rows = {max_rows}")
+    rows = []
+    for W in iter_designs(cons):
+        res = batch_criteria(F, S, W, kind_e, settings=settings, validated=True)
+        for i in range(len(W)):
+            flag = "singular" if res.singular[i] else ("near-singular" if res.near_singular[i] else "")
+            rows.append(DesignRow(mask="".join("1" if b else "0" for b in W[i]),
+                                  sensors=tuple(names[k] for k in np.flatnonzero(W[i])),
+                                  A=float(res.A[i]), det=float(res.det[i]), logdet=float(res.logdet[i]),
+                                  E=float(res.E[i]), flag=flag, reason=res.reason[i]))
+    rows.sort(key=lambda r: (-len(r.sensors), tuple(-int(c) for c in r.mask)))
+    return DesignTable(kind=kind_e.value, rows=tuple(rows))
+
+
+def select_sensors(model, data, p, **kw) -> DesignResult:
+    r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model.
+
+    Calls ``identification.information_contributions(model, data, p) -> (F, S)`` (shapes
+    ``(n_S, n_p, n_p)`` each; imported lazily here because the identification package is
+    wired separately) and passes ``F``, ``S`` and all keyword arguments to
+    :func:`select_sensors_from_information`.
+    """
+    try:
+        from identification import information_contributions
+    except ImportError as exc:
+        raise RuntimeError("select_sensors: identification.information_contributions is not available yet "
+                           f"({exc}); call select_sensors_from_information(F, S, ...) directly") from exc
+    F, S = information_contributions(model, data, p)
+    return select_sensors_from_information(F, S, **kw)
