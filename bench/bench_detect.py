@@ -1,0 +1,101 @@
+"""Monte Carlo size, coverage, power and timing of Algorithm 1 on the press (issue 5).
+
+Studies (``--study``):
+
+* ``size``: campaigns simulated by the press model M1 itself (k5 = k7 = 500 N/mm, the
+  paper's 29 loads, n_M = 2 series, sensors D_y and F_x as chosen by the paper's E-optimal
+  design, sigma = the paper's (15.18, 4.895, 3.904) um written in mm), tested on the paper's
+  four scenarios at TOL = 5 % with Bonferroni.  Reports the family-wise rejection rate of
+  the paper's statistic and of the two-sample statistic with Clopper-Pearson 95 %
+  intervals, and the coverage of the 95 % ellipsoids of every fit.
+* ``timing``: the same four-scenario test, ``--n-rep`` replications on ``--workers``
+  processes, and ``--serial-rep`` replications in this process; prints the time per
+  replication and the speed-up ratio.
+* ``power``: campaigns from the virtual prototype (:mod:`models.prototype`) if it exposes
+  a generator, M1 (and M2/M3 when :mod:`models.friction` provides them) tested on them.
+
+Run ``python -m bench.bench_detect --study size --n-rep 2000`` (or via ``python -m bench detect``
+with ``--study=size --n-rep=2000``).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from identification.detect import DetectSettings  # noqa: E402
+from identification.montecarlo import MonteCarloSettings, size_study  # noqa: E402
+from identification.splits import press_scenarios  # noqa: E402
+from models.press import Q_PAPER, press_model  # noqa: E402
+
+#: the paper's sensor sigmas (section 5), m -> mm
+SIGMA_PAPER_MM = np.array([1.518e-05, 4.895e-06, 3.904e-06]) * 1e3
+WEIGHTS_110 = np.array([1.0, 1.0, 0.0])      # D_y, F_x (the paper's E-optimal pair)
+P0 = np.array([450.0, 550.0])                 # start values of every fit (N/mm)
+
+
+def _machine() -> str:
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = (float("nan"),) * 3
+    return (f"{platform.processor() or platform.machine()}, nproc {os.cpu_count()}, "
+            f"load average {load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}, python {platform.python_version()}")
+
+
+def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progress=True):
+    model = press_model()
+    settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
+                                  detect=DetectSettings(tol=0.05, normality="override"))
+    return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, press_scenarios(),
+                      p0=P0, n_M=2, weights=WEIGHTS_110, settings=settings, name="M1")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="bench detect")
+    ap.add_argument("--study", choices=("size", "timing", "power"), default="size")
+    ap.add_argument("--n-rep", type=int, default=2000)
+    ap.add_argument("--serial-rep", type=int, default=None, help="replications of the serial run (timing)")
+    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--seed", type=int, default=20261121)
+    ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    ap.add_argument("--no-progress", action="store_true")
+    args = ap.parse_args(argv or [])
+    print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}", flush=True)
+    if args.study == "size":
+        res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        print(res.description)
+        print(res.table())
+        for st in ("paper", "two_sample"):
+            r = res.rejection_rate("M1", st)
+            print(f"size {st}: {r}")
+        print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication")
+    elif args.study == "timing":
+        par = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        n_ser = args.serial_rep or args.n_rep
+        ser = run_size(n_ser, 1, args.seed, None, not args.no_progress)
+        same = np.array_equal(par.alpha_two_sample[:n_ser], ser.alpha_two_sample, equal_nan=True)
+        per_par = par.wall_time / par.n_rep
+        per_ser = ser.wall_time / ser.n_rep
+        print(f"parallel: {par.n_rep} replications in {par.wall_time:.1f} s on {par.backend} "
+              f"({per_par * 1e3:.0f} ms per replication)")
+        print(f"serial:   {ser.n_rep} replications in {ser.wall_time:.1f} s ({per_ser * 1e3:.0f} ms per replication)")
+        print(f"speed-up (serial / parallel time per replication): {per_ser / per_par:.2f}; serial estimate for "
+              f"{par.n_rep}: {per_ser * par.n_rep:.0f} s; first {n_ser} replications identical: {same}")
+    else:
+        try:
+            from models import prototype  # noqa: F401
+        except ImportError as exc:
+            print(f"power study: models.prototype not importable ({exc})")
+            return
+        print("power study: see identification.montecarlo.power_study; needs a prototype generator "
+              "rng -> Measurements (not wired here yet)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,605 @@
+r"""Monte Carlo validation of Algorithm 1: size, power and ellipsoid coverage.
+
+Replication r draws a campaign z^(r) (n_M x n_q x n_S) and runs every split test of
+:func:`identification.detect.run_split_tests`.  Estimated quantities (each a binomial
+proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 95 %):
+
+* **size** (data from the candidate model itself, z = h(y(p*), p*, q) + sigma eps):
+  the family-wise rejection rate P(min_s alpha_min,s < TOL / n_tests), for the paper's
+  statistic and the two-sample one; a calibrated test has size <= TOL;
+* **power** (data from another generator, e.g. the virtual prototype): the rejection rate
+  of each candidate model;
+* **coverage**: the fraction of replications in which the true parameters p* lie in the
+  (1 - alpha) confidence ellipsoid {p : (p - p_hat)^T C^{-1} (p - p_hat) <= chi2_{n_p}(1 - alpha)}
+  of each calibration and validation fit.
+
+Replications are independent: replication r uses the random stream
+``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
+depend on the number of workers or on the backend (serial, local processes, Dask).
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy import stats
+
+from models.contract import Model
+from .detect import CORRECTIONS, STATISTICS, DetectSettings, run_split_tests
+from .errors import DataError, IdentificationError
+from .measurements import Measurements
+from .splits import Split, SplitError
+from .state import simulate, solve_states
+
+__all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
+           "Rate", "clopper_pearson", "ModelCampaign"]
+
+
+# ---------------------------------------------------------------------------- statistics helpers
+@dataclass(frozen=True)
+class Rate:
+    """A binomial proportion k / n with its Clopper-Pearson interval [lo, hi] (level ``level``)."""
+
+    k: int
+    n: int
+    lo: float
+    hi: float
+    level: float = 0.95
+
+    @property
+    def rate(self) -> float:
+        return self.k / self.n if self.n else math.nan
+
+    def __str__(self):
+        if not self.n:
+            return "n/a"
+        return f"{100 * self.rate:.2f} % [{100 * self.lo:.2f}, {100 * self.hi:.2f}] ({self.k}/{self.n})"
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> Rate:
+    """Exact binomial interval: lo = B^{-1}(a/2; k, n-k+1), hi = B^{-1}(1-a/2; k+1, n-k), a = 1 - level."""
+    k, n = int(k), int(n)
+    if n < 0 or not (0 <= k <= max(n, 0)):
+        raise ValueError(f"k, n: need 0 <= k <= n, got k={k}, n={n}")
+    if not (0.0 < level < 1.0):
+        raise ValueError(f"level: must lie in (0, 1), got {level}")
+    if n == 0:
+        return Rate(0, 0, math.nan, math.nan, level)
+    a = 1.0 - level
+    lo = 0.0 if k == 0 else float(stats.beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(stats.beta.ppf(1 - a / 2, k + 1, n - k))
+    return Rate(k, n, lo, hi, level)
+
+
+# ---------------------------------------------------------------------------- settings
+@dataclass(frozen=True)
+class MonteCarloSettings:
+    """Settings of the Monte Carlo studies.
+
+    Attributes
+    ----------
+    n_rep : int              replications
+    seed : int               root of numpy.random.SeedSequence (replication r uses spawn(n_rep)[r])
+    workers : int | None     local processes (None: os.cpu_count(); 1: serial in this process)
+    scheduler : object       Dask scheduler address (str) or a distributed.Client; None: local
+    chunk_size : int | None  replications per task (None: about 8 tasks per worker, at most 50)
+    progress : bool          progress bar on stderr (tqdm if installed)
+    coverage_alpha : float   the ellipsoid level checked for coverage (0.05: 95 % ellipsoids)
+    ci_level : float         level of the Clopper-Pearson intervals
+    detect : DetectSettings  tol, covariance kind, identify settings (normality is not gated here)
+    """
+
+    n_rep: int = 2000
+    seed: int = 20261121
+    workers: int | None = None
+    scheduler: object = None
+    chunk_size: int | None = None
+    progress: bool = True
+    coverage_alpha: float = 0.05
+    ci_level: float = 0.95
+    detect: DetectSettings = field(default_factory=lambda: DetectSettings(normality="override"))
+
+    def __post_init__(self):
+        if int(self.n_rep) < 1:
+            raise ValueError(f"n_rep: need at least one replication, got {self.n_rep}")
+        if self.workers is not None and int(self.workers) < 1:
+            raise ValueError(f"workers: must be >= 1 or None, got {self.workers}")
+        if self.chunk_size is not None and int(self.chunk_size) < 1:
+            raise ValueError(f"chunk_size: must be >= 1 or None, got {self.chunk_size}")
+        if not (0.0 < float(self.coverage_alpha) < 1.0):
+            raise ValueError(f"coverage_alpha: must lie in (0, 1), got {self.coverage_alpha}")
+        if not (0.0 < float(self.ci_level) < 1.0):
+            raise ValueError(f"ci_level: must lie in (0, 1), got {self.ci_level}")
+        if not isinstance(self.detect, DetectSettings):
+            raise TypeError(f"detect: expected DetectSettings, got {type(self.detect).__name__}")
+
+
+# ---------------------------------------------------------------------------- data generators
+class ModelCampaign:
+    """Simulated campaign from a model: z_ijk = h_k(y(p*), p*, q_j) + sigma_k eps_ijk, eps ~ N(0, 1).
+
+    Picklable; the noise-free outputs are computed once at construction.
+
+    Parameters
+    ----------
+    model : Model
+    p_true : array_like (n_p,)     the truth p* (units of the model's parameters)
+    inputs : array_like (n_q, d_q)
+    sigma : array_like (n_S,)      noise standard deviation per sensor (unit of the outputs)
+    n_M : int                      series per campaign
+    """
+
+    def __init__(self, model: Model, p_true, inputs, sigma, n_M: int = 2):
+        self.p_true = np.asarray(p_true, float).ravel()
+        if self.p_true.shape != (model.n_p,):
+            raise DataError(f"p_true: expected {model.n_p} values ({', '.join(model.param_names)}), "
+                            f"got {self.p_true.size}")
+        self.inputs = np.atleast_2d(np.asarray(inputs, float))
+        if self.inputs.shape[0] == 1 and model.n_q_dim == 1 and self.inputs.shape[1] > 1:
+            self.inputs = self.inputs.T
+        self.H = simulate(model, self.p_true, self.inputs)
+        s = np.asarray(sigma, float)
+        self.sigma = np.full(model.n_S, float(s)) if s.ndim == 0 else s.ravel()
+        if self.sigma.shape != (model.n_S,) or not np.all(np.isfinite(self.sigma) & (self.sigma > 0)):
+            raise DataError(f"sigma: expected {model.n_S} positive values, got {np.asarray(sigma).tolist()}")
+        if int(n_M) < 1:
+            raise DataError(f"n_M: need at least one series, got {n_M}")
+        self.n_M = int(n_M)
+        self.sensors = model.sensors
+        self.input_names = model.inputs
+
+    def __call__(self, rng: np.random.Generator) -> Measurements:
+        eps = rng.standard_normal((self.n_M,) + self.H.shape)
+        return Measurements(self.inputs, self.H[None] + self.sigma * eps, self.sigma, sensors=self.sensors,
+                            input_names=self.input_names)
+
+
+# ---------------------------------------------------------------------------- the replication
+@dataclass(frozen=True, eq=False)
+class _Task:
+    token: str
+    names: tuple
+    models: tuple
+    p0s: tuple
+    weights: tuple
+    splits: tuple
+    generator: Callable
+    truth: tuple          # per model: p* or None
+    detect: DetectSettings
+    coverage_alpha: float
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(task):
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    _WORKER["task"] = task
+    _WORKER["states"] = {}
+
+
+def _task_for(task):
+    """The worker's copy of the task (models kept once per worker so compiled NLPs are reused)."""
+    if task is None:
+        return _WORKER["task"]
+    cached = _WORKER.get("task")
+    if cached is None or cached.token != task.token:
+        _init_worker(task)
+    return _WORKER["task"]
+
+
+def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
+    rng = np.random.default_rng(seed)
+    data = task.generator(rng)
+    n_m, n_s = len(task.names), len(task.splits)
+    a_p = np.full((n_m, n_s), np.nan)
+    a_t = np.full((n_m, n_s), np.nan)
+    cov = np.full((n_m, n_s, 2), np.nan)
+    errors = []
+    g2 = None
+    sw = None
+    for im, name in enumerate(task.names):
+        model = task.models[im]
+        d = data[name] if isinstance(data, Mapping) else data
+        if sw is None:
+            sw = _shapiro_pvalues(d)
+        key = (name, d.inputs.tobytes())
+        st0 = _WORKER.setdefault("states", {}).get(key)
+        if st0 is None:
+            try:
+                st0 = solve_states(model, task.p0s[im], d.inputs)
+            except IdentificationError:
+                st0 = None
+            _WORKER["states"][key] = st0
+        tests = run_split_tests(model, d, task.splits, task.p0s[im], task.weights[im], task.detect, name, st0)
+        truth = task.truth[im]
+        if truth is not None and g2 is None:
+            g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p)
+        for js, t in enumerate(tests):
+            if t.ok:
+                a_p[im, js] = t.alpha_paper
+                a_t[im, js] = t.alpha_two_sample
+            else:
+                errors.append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
+            if truth is not None:
+                for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
+                    if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
+                        try:
+                            L = np.linalg.cholesky(C)
+                        except np.linalg.LinAlgError:
+                            continue
+                        v = np.linalg.solve(L, truth - p)
+                        cov[im, js, kk] = float(v @ v <= g2)
+    return {"alpha_paper": a_p, "alpha_two_sample": a_t, "covered": cov, "errors": errors,
+            "shapiro": sw}
+
+
+def _shapiro_pvalues(d: Measurements) -> np.ndarray:
+    pairs = d.n_M // 2
+    out = np.full(d.n_S, np.nan)
+    if pairs == 0:
+        return out
+    for k in range(d.n_S):
+        x = np.concatenate([d.z[2 * m + 1, :, k] - d.z[2 * m, :, k] for m in range(pairs)])
+        x = x[np.isfinite(x)]
+        if x.size >= 3 and np.ptp(x) > 0:
+            out[k] = stats.shapiro(x).pvalue
+    return out
+
+
+def _run_chunk(task, chunk):
+    """Replications [(index, SeedSequence), ...] -> [(index, result dict), ...]."""
+    t = _task_for(task)
+    return [(i, _replicate(t, s)) for i, s in chunk]
+
+
+# ---------------------------------------------------------------------------- progress
+class _Progress:
+    def __init__(self, total: int, desc: str, enabled: bool):
+        self.total, self.done, self.enabled = total, 0, enabled
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+        self.bar = None
+        if enabled:
+            try:
+                from tqdm import tqdm
+                self.bar = tqdm(total=total, desc=desc, unit="rep", file=sys.stderr, smoothing=0.1)
+            except ImportError:
+                self.bar = None
+        self.desc = desc
+
+    def update(self, n: int):
+        self.done += n
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(n)
+            return
+        now = time.perf_counter()
+        if now - self.last >= 0.5 or self.done == self.total:
+            self.last = now
+            el = now - self.t0
+            eta = el / self.done * (self.total - self.done) if self.done else float("nan")
+            sys.stderr.write(f"\r{self.desc}: {self.done}/{self.total} replications, {el:.0f} s elapsed, "
+                             f"ETA {eta:.0f} s")
+            sys.stderr.flush()
+
+    def close(self):
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.close()
+        else:
+            sys.stderr.write("\n")
+
+
+# ---------------------------------------------------------------------------- execution backends
+def _chunks(n_rep, seed, n_workers, chunk_size):
+    children = np.random.SeedSequence(seed).spawn(n_rep)
+    size = chunk_size or max(1, min(50, math.ceil(n_rep / (8 * max(1, n_workers)))))
+    items = list(enumerate(children))
+    return [items[i:i + size] for i in range(0, n_rep, size)]
+
+
+def _execute(task: _Task, settings: MonteCarloSettings, desc: str):
+    """Run every replication; returns (results ordered by index, backend text, workers)."""
+    n_rep = int(settings.n_rep)
+    out = [None] * n_rep
+    prog = _Progress(n_rep, desc, settings.progress)
+    try:
+        if settings.scheduler is not None:
+            from dask.distributed import Client, as_completed
+            client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
+            try:
+                n_w = max(1, len(client.scheduler_info().get("workers", {})))
+                chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
+                tf = client.scatter(task, broadcast=True)
+                futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
+                for fut in as_completed(futs):
+                    res = fut.result()
+                    for i, r in res:
+                        out[i] = r
+                    prog.update(len(res))
+                backend = f"dask ({client.scheduler.address}, {n_w} workers)"
+            finally:
+                if client is not settings.scheduler:
+                    client.close()
+            return out, backend, n_w
+        n_w = int(settings.workers or os.cpu_count() or 1)
+        chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
+        if n_w == 1:
+            _init_worker(task)
+            for ch in chunks:
+                res = _run_chunk(None, ch)
+                for i, r in res:
+                    out[i] = r
+                prog.update(len(res))
+            return out, "serial (this process)", 1
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed as f_completed
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
+                                 initializer=_init_worker, initargs=(task,)) as ex:
+            futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
+            for fut in f_completed(futs):
+                res = fut.result()
+                for i, r in res:
+                    out[i] = r
+                prog.update(len(res))
+        return out, f"local processes ({n_w} workers, spawn)", n_w
+    finally:
+        prog.close()
+
+
+# ---------------------------------------------------------------------------- result
+@dataclass(frozen=True, eq=False)
+class MonteCarloResult:
+    """Monte Carlo rejection rates and coverages (immutable).
+
+    Attributes
+    ----------
+    kind : str                  "size" (data from the candidate model) or "power"
+    models, splits : tuple      model names and the Split objects
+    tol : float                 family-wise level TOL
+    n_rep : int
+    alpha_paper, alpha_two_sample : ndarray (n_rep, n_models, n_splits)   NaN where a split failed
+    covered : ndarray (n_rep, n_models, n_splits, 2)   1/0 p* in the cal/val ellipsoid, NaN if n/a
+    shapiro : ndarray (n_rep, n_S)   normality-gate p-values of each simulated campaign
+    errors : tuple              (replication, model, split, stage, message) of every failed split
+    seed, backend, workers, wall_time, coverage_alpha, ci_level, description
+    """
+
+    kind: str
+    models: tuple
+    splits: tuple
+    tol: float
+    n_rep: int
+    alpha_paper: np.ndarray
+    alpha_two_sample: np.ndarray
+    covered: np.ndarray
+    shapiro: np.ndarray
+    errors: tuple
+    seed: int
+    backend: str
+    workers: int
+    wall_time: float
+    coverage_alpha: float
+    ci_level: float
+    description: str = ""
+
+    def __post_init__(self):
+        for name in ("alpha_paper", "alpha_two_sample", "covered", "shapiro"):
+            a = np.array(getattr(self, name), dtype=float, copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    def _im(self, model):
+        model = self.models[0] if model is None else model
+        if model not in self.models:
+            raise KeyError(f"model: {model!r} not in {list(self.models)}")
+        return self.models.index(model)
+
+    def _alpha(self, statistic):
+        if statistic == "two_sample":
+            return self.alpha_two_sample
+        if statistic == "paper":
+            return self.alpha_paper
+        raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}")
+
+    def decisions(self, model=None, statistic: str = "two_sample") -> np.ndarray:
+        """Per replication: 1 reject, 0 accept, NaN undecided (Bonferroni at TOL / n_tests).
+
+        (Holm rejects the family exactly when Bonferroni does.)
+        """
+        a = self._alpha(statistic)[:, self._im(model), :]
+        thr = self.tol / a.shape[1]
+        rej = np.any(a < thr, axis=1)
+        undec = ~rej & np.any(~np.isfinite(a), axis=1)
+        return np.where(rej, 1.0, np.where(undec, np.nan, 0.0))
+
+    def rejection_rate(self, model=None, statistic: str = "two_sample") -> Rate:
+        """Family-wise rejection rate over the decided replications, with Clopper-Pearson CI."""
+        d = self.decisions(model, statistic)
+        ok = np.isfinite(d)
+        return clopper_pearson(int(np.sum(d[ok])), int(ok.sum()), self.ci_level)
+
+    def n_undecided(self, model=None, statistic: str = "two_sample") -> int:
+        return int(np.sum(~np.isfinite(self.decisions(model, statistic))))
+
+    def split_rejection_rate(self, split: int, model=None, statistic: str = "two_sample",
+                             level: float | None = None) -> Rate:
+        """Rejection rate of one split's hypothesis at ``level`` (default TOL / n_tests)."""
+        a = self._alpha(statistic)[:, self._im(model), split]
+        lev = self.tol / len(self.splits) if level is None else level
+        ok = np.isfinite(a)
+        return clopper_pearson(int(np.sum(a[ok] < lev)), int(ok.sum()), self.ci_level)
+
+    def coverage(self, model=None, split: int | None = None, which: str = "both") -> Rate:
+        """Fraction of fits whose (1 - coverage_alpha) ellipsoid contains p* (size studies only).
+
+        Fits of one replication are dependent (shared data); the interval treats all pooled
+        fits as independent and is therefore too narrow when pooling splits -- use one split
+        and ``which`` = "cal" or "val" for an exact binomial interval.
+        """
+        c = self.covered[:, self._im(model)]
+        if split is not None:
+            c = c[:, [split]]
+        if which == "cal":
+            c = c[..., 0]
+        elif which == "val":
+            c = c[..., 1]
+        elif which != "both":
+            raise ValueError(f"which: expected 'cal', 'val' or 'both', got {which!r}")
+        c = c[np.isfinite(c)]
+        return clopper_pearson(int(c.sum()), int(c.size), self.ci_level)
+
+    def table(self) -> str:
+        """Markdown table of rejection rates (both statistics) and, for size studies, coverage."""
+        lev = 100 * self.tol / len(self.splits)
+        lines = [f"{self.kind} study: {self.n_rep} replications, TOL = {100 * self.tol:g} %, "
+                 f"{len(self.splits)} splits (per-test level {lev:.4g} %), Clopper-Pearson {100 * self.ci_level:g} % "
+                 f"intervals; {self.backend}, {self.wall_time:.1f} s",
+                 "",
+                 "| model | statistic | family-wise rejection rate | undecided | "
+                 + " | ".join(f"split {j + 1} ({sp.name})" for j, sp in enumerate(self.splits)) + " |",
+                 "|---|---|---|---|" + "---|" * len(self.splits)]
+        for m in self.models:
+            for st in ("paper", "two_sample"):
+                cells = [f"{100 * self.split_rejection_rate(j, m, st).rate:.2f} %" for j in range(len(self.splits))]
+                lines.append(f"| {m} | {st} | {self.rejection_rate(m, st)} | {self.n_undecided(m, st)} | "
+                             + " | ".join(cells) + " |")
+        if self.kind == "size" and np.any(np.isfinite(self.covered)):
+            lines += ["", f"Coverage of the {100 * (1 - self.coverage_alpha):g} % ellipsoids (p* inside):", "",
+                      "| model | split | calibration fit | validation fit |", "|---|---|---|---|"]
+            for m in self.models:
+                for j, sp in enumerate(self.splits):
+                    lines.append(f"| {m} | {sp.name} | {self.coverage(m, j, 'cal')} | {self.coverage(m, j, 'val')} |")
+        sw = self.shapiro
+        if sw.size and np.any(np.isfinite(sw)):
+            rates = [f"{100 * np.mean(sw[:, k][np.isfinite(sw[:, k])] < 0.05):.1f} %" for k in range(sw.shape[1])]
+            lines += ["", "Normality gate (Shapiro-Wilk 5 %) rejection rate per sensor: " + ", ".join(rates)]
+        if self.errors:
+            lines += ["", f"{len(self.errors)} failed split fits, e.g.: {self.errors[0]}"]
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- drivers
+def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, weights=None, truth=None,
+                    kind: str = "power", settings: MonteCarloSettings | None = None,
+                    description: str = "") -> MonteCarloResult:
+    """Replicate ``generator(rng) -> Measurements`` (or {model: Measurements}) and test every model.
+
+    Parameters
+    ----------
+    models : Model or mapping {name: Model}
+    generator : picklable callable (numpy Generator) -> Measurements or mapping {name: Measurements}
+    splits : sequence of Split
+    p0 : array_like or mapping {name: array}   start values of the fits
+    weights : array_like or mapping, optional  sensor weights per model
+    truth : array_like or mapping, optional    p* per model, for the coverage of the ellipsoids
+    kind : "size" or "power"                   label of the study
+    settings : MonteCarloSettings
+    """
+    settings = settings or MonteCarloSettings()
+    if kind not in ("size", "power"):
+        raise ValueError(f"kind: expected 'size' or 'power', got {kind!r}")
+    if not callable(generator):
+        raise TypeError(f"generator: expected a callable rng -> Measurements, got {type(generator).__name__}")
+    if isinstance(models, Model):
+        models = {models.name: models}
+    if not isinstance(models, Mapping) or not models:
+        raise TypeError("models: expected a models.Model or a non-empty mapping {name: Model}")
+    names = tuple(models)
+    splits = tuple(splits)
+    if not splits:
+        raise SplitError("splits: at least one split is needed")
+
+    def per(what, v):
+        if isinstance(v, Mapping):
+            missing = [n for n in names if n not in v]
+            if missing:
+                raise DataError(f"{what}: no entry for model(s) {missing}")
+            return tuple(v[n] for n in names)
+        return tuple(v for _ in names)
+
+    p0s = tuple(np.asarray(v, float).ravel() for v in per("p0", p0))
+    for n, m, v in zip(names, models.values(), p0s):
+        if v.shape != (m.n_p,):
+            raise DataError(f"p0[{n!r}]: expected {m.n_p} values, got {v.size}")
+    tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in per("truth", truth))
+    task = _Task(uuid.uuid4().hex, names, tuple(models.values()), p0s, per("weights", weights), splits, generator,
+                 tr, settings.detect, float(settings.coverage_alpha))
+    # fail early (in this process) on a generator or split that does not fit the models
+    probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
+    for n, m in zip(names, models.values()):
+        d = probe[n] if isinstance(probe, Mapping) else probe
+        if not isinstance(d, Measurements):
+            raise TypeError(f"generator: must return Measurements (or a mapping of them), got {type(d).__name__}")
+        for sp in splits:
+            sp.check(d.n_q, d.n_M)
+    t0 = time.perf_counter()
+    out, backend, n_w = _execute(task, settings, f"{kind} study")
+    wall = time.perf_counter() - t0
+    errors = tuple((i,) + e for i, r in enumerate(out) for e in r["errors"])
+    return MonteCarloResult(
+        kind=kind, models=names, splits=splits, tol=settings.detect.tol, n_rep=int(settings.n_rep),
+        alpha_paper=np.stack([r["alpha_paper"] for r in out]),
+        alpha_two_sample=np.stack([r["alpha_two_sample"] for r in out]),
+        covered=np.stack([r["covered"] for r in out]), shapiro=np.stack([r["shapiro"] for r in out]),
+        errors=errors, seed=int(settings.seed), backend=backend, workers=n_w, wall_time=wall,
+        coverage_alpha=float(settings.coverage_alpha), ci_level=float(settings.ci_level), description=description)
+
+
+def size_study(model: Model, p_true, inputs, sigma, splits: Sequence[Split], p0=None, n_M: int = 2,
+               weights=None, settings: MonteCarloSettings | None = None, name: str | None = None) -> MonteCarloResult:
+    """Size and coverage: campaigns simulated by ``model`` at p* (z = h(p*) + sigma eps), tested with ``model``.
+
+    The family-wise rejection rate estimates the type-I error of Algorithm 1 (target: <= TOL).
+    ``p0`` defaults to p*.
+    """
+    gen = ModelCampaign(model, p_true, inputs, sigma, n_M)
+    nm = name or model.name
+    return run_monte_carlo({nm: model}, gen, splits, gen.p_true if p0 is None else p0, weights, gen.p_true,
+                           kind="size", settings=settings,
+                           description=f"data from {nm} at p* = {gen.p_true.tolist()}, sigma = {gen.sigma.tolist()}, "
+                                       f"n_M = {n_M}, n_q = {gen.inputs.shape[0]}")
+
+
+def power_study(models, generator: Callable, splits: Sequence[Split], p0, weights=None,
+                settings: MonteCarloSettings | None = None, description: str = "") -> MonteCarloResult:
+    """Power: campaigns from ``generator`` (e.g. the virtual prototype), each model tested on them."""
+    return run_monte_carlo(models, generator, splits, p0, weights, None, kind="power", settings=settings,
+                           description=description)
+
+
+def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=None, sigma=None, n_M: int = 2,
+             generator: Callable | None = None, weights=None, n_rep: int = 2000, tol: float = 0.05,
+             seed: int = 20261121, workers: int | None = None, scheduler=None, progress: bool = True,
+             settings: MonteCarloSettings | None = None) -> MonteCarloResult:
+    """Front door (``mudoe validate``): a size study without ``generator``, a power study with one.
+
+    Size: data from ``model`` at ``p_true`` with noise ``sigma`` at ``inputs`` (n_M series);
+    the rejection rate at TOL should not exceed TOL for a calibrated statistic.  Power: data
+    from ``generator(rng)``; the rejection rate of each model in ``model`` (a Model or a
+    mapping {name: Model}).  Replications run on local processes (``workers``) or on a Dask
+    cluster (``scheduler`` address or Client); the numbers do not depend on either.
+    """
+    if settings is None:
+        settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
+                                      progress=progress, detect=DetectSettings(tol=tol, normality="override"))
+    if generator is None:
+        if isinstance(model, Mapping):
+            raise DataError("model: a size study takes one model (the data generator itself)")
+        if p_true is None or inputs is None or sigma is None:
+            raise DataError("p_true, inputs, sigma: a size study needs the truth, the inputs and the noise level")
+        return size_study(model, p_true, inputs, sigma, splits, p0, n_M, weights, settings)
+    if p0 is None:
+        raise DataError("p0: a power study needs start values for the fits")
+    return power_study(model, generator, splits, p0, weights, settings)
