@@ -147,10 +147,37 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
     yt = ca.MX.sym("y_scaled", n_y, n_q)
     Zb = ca.MX.sym("zbar", n_S, n_q)
     Cw = ca.MX.sym("c", n_S, n_q)
-    E_all, f_all = mapped(yt if n_y else ca.MX(0, n_q), pt, ca.DM(inputs.T), Zb, Cw)
+    Q = ca.DM(inputs.T)
+    E_all, f_all = mapped(yt if n_y else ca.MX(0, n_q), pt, Q, Zb, Cw)
     x = ca.vertcat(pt, ca.vec(yt))
     g = ca.vec(E_all) if n_y else ca.MX(0, 1)
-    return x, ca.sum2(f_all), g, ca.vertcat(ca.vec(Zb), ca.vec(Cw))
+    par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
+
+    # Hessian of the Lagrangian, assembled from one symbolic stage Hessian: the stages couple
+    # only through p, so H = [[sum_j H_pp^j, H_py^1 ... H_py^nq], [., blockdiag(H_yy^j)]].
+    # Building it per stage costs one stage Hessian instead of CasADi's global colouring.
+    sf = ca.SX.sym("sigma_f")
+    lg = ca.SX.sym("lam_g", n_y)
+    v = ca.vertcat(p, y)
+    L_stage = sf * stage_f + (ca.dot(lg, stage_E) if n_y else 0)
+    H_stage = ca.Function("H_stage", [y, p, q, zb, c, sf, lg], [ca.hessian(L_stage, v)[0]]).map(n_q)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", n_y * n_q)
+    H_all = H_stage(yt if n_y else ca.MX(0, n_q), pt, Q, Zb, Cw, lam_f,
+                    ca.reshape(lam_g, n_y, n_q) if n_y else ca.MX(0, n_q))
+    nv = n_p + n_y
+    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]
+    H_pp = sum(b[:n_p, :n_p] for b in blocks[1:]) + blocks[0][:n_p, :n_p]
+    if n_y:
+        rows = [ca.horzcat(H_pp, *[b[:n_p, n_p:] for b in blocks])]
+        for j, b in enumerate(blocks):
+            rows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[n_p:, n_p:], ca.MX(n_y, (n_q - 1 - j) * n_y)))
+        H = ca.vertcat(*rows)
+    else:
+        H = H_pp
+    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(H)],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    return x, ca.sum2(f_all), g, par, hess_lag
 
 
 def _objective_terms(data, w, sig):

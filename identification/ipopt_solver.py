@@ -76,7 +76,8 @@ _CACHE_SIZE = 16
 
 
 def _make_solver(build, settings: IpoptSettings):
-    x, f, g, par = build()
+    built = build()
+    x, f, g, par = built[:4]
     nlp = {"x": x, "f": f, "g": g, "p": par}
     n = x.size1()
     expand = settings.expand if settings.expand is not None else (isinstance(x, ca.MX) and n <= 20000)
@@ -93,6 +94,8 @@ def _make_solver(build, settings: IpoptSettings):
     }
     if isinstance(x, ca.MX):
         opts["expand"] = bool(expand)
+    if len(built) > 4 and built[4] is not None:
+        opts["hess_lag"] = built[4]
     for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
     return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
@@ -102,7 +105,8 @@ def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings 
               what: str = "problem", key=None) -> IpoptResult:
     """Solve  min f(x; par)  s.t.  lbg <= g(x; par) <= ubg,  lbx <= x <= ubx  with Ipopt.
 
-    ``build()`` returns the CasADi expressions ``(x, f, g, par)``; it is called only when no
+    ``build()`` returns the CasADi expressions ``(x, f, g, par)`` and optionally a Function
+    ``(x, par, lam_f, lam_g) -> triu(Hessian of the Lagrangian)``; it is called only when no
     solver with the same ``key`` is cached (repeated identifications with new data reuse
     the compiled derivatives).
 
