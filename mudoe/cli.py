@@ -1,0 +1,260 @@
+"""The ``mudoe`` command line: identify | oed | detect | report | validate | simulate.
+
+Every subcommand reads a study config (TOML, see ``configs/press.toml``), runs a thin layer
+over the library and writes its outputs atomically into ``--out`` (default ``results/``).
+Summaries go to stdout (JSON with ``--json``), progress to stderr.
+
+Exit codes: 0 success; 2 bad input (config, data, arguments: one line on stderr, no
+traceback); 3 a library piece the command needs is not available yet; 1 a computation
+failed (one line; ``--debug`` shows the traceback); 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_BAD_INPUT", "EXIT_MISSING"]
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_MISSING = 0, 1, 2, 3
+
+_COMMANDS = {
+    "identify": "identify the parameters of every model variant on the study's data",
+    "oed": "optimal sensor selection: criteria of every sensor combination and the chosen design",
+    "detect": "Algorithm 1: calibration/validation tests, alpha_min for both statistics, verdict per model",
+    "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
+    "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
+    "simulate": "generate a campaign on the virtual prototype and write it as CSV (both layouts)",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises instead of exiting, so that main() controls the one-line message."""
+
+    def error(self, message):
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (``--help`` on every subcommand)."""
+    p = _Parser(prog="mudoe", description="Model uncertainty via optimal design of experiments. "
+                "Each command takes a study config (TOML); see README 'Commands' and 'Config reference'.")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, help_ in _COMMANDS.items():
+        sp = sub.add_parser(name, help=help_, description=help_ + ".")
+        sp.add_argument("config", metavar="CONFIG", help="study config file (TOML), e.g. configs/press.toml")
+        sp.add_argument("--out", metavar="DIR", default="results",
+                        help="output folder (default: results/); files are written atomically")
+        sp.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+        sp.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+        sp.add_argument("--debug", action="store_true", help="show the traceback of an unexpected failure")
+        if name == "validate":
+            sp.add_argument("--runs", type=int, default=None, metavar="N",
+                            help="replications (default: [validate] n_runs of the config)")
+            sp.add_argument("--workers", type=int, default=1, metavar="N",
+                            help="local worker processes (default 1)")
+        if name == "simulate":
+            sp.add_argument("--seed", type=int, default=None, help="random seed (default: [data] seed)")
+    return p
+
+
+def _bad_input_types():
+    from identification.errors import DataError
+    from identification.splits import SplitError
+    from models.contract import ModelError
+    from .config import ConfigError
+    from .data_io import DataFileError
+    return (ConfigError, DataFileError, DataError, SplitError, ModelError)
+
+
+def _print_line(msg: str) -> None:
+    print(" ".join(str(msg).split()), file=sys.stderr)
+
+
+def main(argv=None) -> int:
+    """Run the CLI; returns the exit code (never raises for bad input)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        _print_line(f"{exc} (see mudoe --help)")
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:          # --help
+        return int(exc.code or 0)
+    if not args.command:
+        parser.print_help(sys.stderr)
+        return EXIT_BAD_INPUT
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    try:
+        return _run(args)
+    except KeyboardInterrupt:
+        _print_line("mudoe: interrupted")
+        return 130
+    except Exception as exc:  # noqa: BLE001 -- the CLI boundary turns every failure into one line
+        from .study import MissingPieceError
+        bad = _bad_input_types()
+        if isinstance(exc, bad):
+            _print_line(f"mudoe {args.command}: error: {exc}")
+            return EXIT_BAD_INPUT
+        if isinstance(exc, MissingPieceError):
+            _print_line(f"mudoe {args.command}: not available: {exc}")
+            return EXIT_MISSING
+        if isinstance(exc, OSError):
+            _print_line(f"mudoe {args.command}: error: {exc}")
+            return EXIT_BAD_INPUT
+        if args.debug:
+            raise
+        _print_line(f"mudoe {args.command}: failed: {type(exc).__name__}: {exc} (rerun with --debug for details)")
+        return EXIT_FAILED
+
+
+def _run(args) -> int:
+    from .config import load_config
+    from .study import Progress, StudyResults, prepare
+    t0 = time.perf_counter()
+    cfg = load_config(args.config)
+    progress = Progress(enabled=not args.quiet)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        from .config import ConfigError
+        raise ConfigError(f"--out: {out} exists and is not a folder")
+    if args.command == "simulate":
+        return _simulate(cfg, args, progress, out)
+    study = prepare(cfg, progress)
+    results = StudyResults(study)
+    handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
+               "report": _report}[args.command]
+    code = handler(study, results, args, progress, out)
+    if not args.quiet:
+        print(f"mudoe: {args.command} finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/",
+              file=sys.stderr)
+    return code
+
+
+def _emit(args, text: str, obj) -> None:
+    from .serialize import dumps
+    sys.stdout.write(dumps(obj) if args.json else text.rstrip() + "\n")
+    sys.stdout.flush()
+
+
+def _write(out: Path, name: str, text: str) -> Path:
+    from .data_io import atomic_write_text
+    return atomic_write_text(out / name, text)
+
+
+def _identify(study, results, args, progress, out) -> int:
+    from .serialize import dumps, estimate_dict
+    from .study import run_identify
+    run_identify(study, results, progress)
+    obj = {v: estimate_dict(e) for v, e in results.estimates.items()}
+    obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
+    text = "\n\n".join([e.summary() for e in results.estimates.values()]
+                       + [f"{v}: identification failed: {e}" for v, e in results.estimate_errors.items()])
+    _write(out, "identify.json", dumps(obj))
+    _write(out, "identify.txt", text + "\n")
+    _emit(args, text, obj)
+    return EXIT_FAILED if results.estimate_errors else EXIT_OK
+
+
+def _oed_text(results) -> str:
+    from reports.tables import oed_table_text
+    return oed_table_text(results)
+
+
+def _oed(study, results, args, progress, out) -> int:
+    from .serialize import dumps, oed_dict
+    from .study import run_oed
+    run_oed(study, results, progress)
+    obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
+    text = _oed_text(results)
+    _write(out, "oed.json", dumps(obj))
+    _write(out, "oed.txt", text + "\n")
+    _emit(args, text, obj)
+    return EXIT_OK
+
+
+def _detect(study, results, args, progress, out) -> int:
+    from .serialize import detection_dict, dumps
+    from .study import run_detect
+    run_detect(study, results, progress)
+    obj = detection_dict(results.detection)
+    text = results.detection.summary()
+    _write(out, "detect.json", dumps(obj))
+    _write(out, "detect.txt", text + "\n")
+    _emit(args, text, obj)
+    return EXIT_OK
+
+
+def _validate(study, results, args, progress, out) -> int:
+    import dataclasses
+    from .serialize import dumps, validation_dict
+    from .study import run_validate
+    if args.runs is not None:
+        if args.runs < 1:
+            from .config import ConfigError
+            raise ConfigError(f"--runs: need at least one replication, got {args.runs}")
+        cfg = dataclasses.replace(study.cfg, validate=dataclasses.replace(study.cfg.validate, n_runs=args.runs))
+        study = dataclasses.replace(study, cfg=cfg)
+        results.study = study
+    if args.workers < 1:
+        from .config import ConfigError
+        raise ConfigError(f"--workers: need at least one worker, got {args.workers}")
+    run_validate(study, results, progress, workers=args.workers)
+    obj = validation_dict(results.validation)
+    text = results.validation.table()
+    _write(out, "validate.json", dumps(obj))
+    _write(out, "validate.txt", text + "\n")
+    _emit(args, text, obj)
+    return EXIT_OK
+
+
+def _report(study, results, args, progress, out) -> int:
+    from reports.builder import build_report
+    from .study import MissingPieceError, run_detect, run_identify, run_oed
+    t0 = time.perf_counter()
+    run_identify(study, results, progress)
+    try:
+        run_oed(study, results, progress)
+    except MissingPieceError as exc:
+        results.notes.append(f"optimal design not available: {exc}")
+    try:
+        run_detect(study, results, progress)
+    except MissingPieceError as exc:
+        results.notes.append(f"detection not available: {exc}")
+    except _bad_input_types() as exc:      # e.g. the normality gate failed: report it, do not hide it
+        results.detection_error = f"{type(exc).__name__}: {exc}"
+        results.notes.append(f"detection stopped: {exc}")
+    results.timing = dict(progress.timing)
+    results.timing["analysis_total"] = time.perf_counter() - t0
+    with progress.step("build report"):
+        paths = build_report(results, out)
+    text = "\n".join(str(p) for p in paths)
+    if results.detection is not None:
+        text = "\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n" + text
+    _emit(args, text, {"files": [str(p) for p in paths],
+                       "verdicts": dict(results.detection.verdicts) if results.detection is not None else {}})
+    return EXIT_OK
+
+
+def _simulate(cfg, args, progress, out) -> int:
+    from models.prototype import generate_campaign, write_campaign
+    seed = cfg.data.seed if args.seed is None else args.seed
+    if seed < 0:
+        from .config import ConfigError
+        raise ConfigError(f"--seed: must be non-negative, got {seed}")
+    with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
+        camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
+    paths = write_campaign(camp, out)
+    text = "\n".join(str(p) for p in paths)
+    _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,484 @@
+"""CSV import and export of measurement campaigns in two layouts.
+
+Paper layout (one file per sensor, like the paper's ``Messungen_*.csv``)::
+
+    force_N,series_1,series_2,...       <- header: force column, then one column per series
+    0.0000,0.0000,0.0000,...            <- one row per set point
+    114.2857,105.2311,104.9876,...
+
+Tidy long layout (one file)::
+
+    series,index,set_force_N,actual_force_N,sensor,raw_um,value_um
+    1,1,0.0000,0.0000,D_y,0.0000,0.0000
+
+Required tidy columns: ``series``, ``set_force``, ``sensor``, ``value`` (or ``raw``);
+optional: ``index`` (1-based set-point number; default: order of appearance),
+``actual_force``, ``raw``.  A column name may carry its unit as a suffix (``_N``,
+``_kN``, ``_mm``, ``_um``, ``_m``); it must then agree with the units declared in the
+config.  Empty cells and ``NaN``/``NA`` mark a missing reading; set forces must be known.
+Everything is converted once to the model's units (mm, N).
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
+
+__all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
+           "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
+
+_MISSING = {"", "nan", "na", "n/a", "null", "none"}
+
+
+class DataFileError(ValueError):
+    """A data file is missing or malformed; the message names the file and the line."""
+
+
+@dataclass(frozen=True, eq=False)
+class Campaign:
+    """A campaign in the model's units.
+
+    Attributes
+    ----------
+    q_set : ndarray (n_q,)            set-point forces (N)
+    q_actual : ndarray (n_M, n_q) or None   actual forces (N) when the data carry them
+    z : ndarray (n_M, n_q, n_S)       readings (mm), NaN = missing, force-corrected if asked
+    sensors : tuple of str
+    series : tuple of str             series labels (from the header / the series column)
+    files : tuple of str              files read (empty for the prototype)
+    source : str                      one-line description
+    sha256 : str                      hash of the files (or of the arrays for the prototype)
+    """
+
+    q_set: np.ndarray
+    q_actual: np.ndarray | None
+    z: np.ndarray
+    sensors: tuple
+    series: tuple
+    files: tuple = ()
+    source: str = ""
+    sha256: str = ""
+    notes: tuple = field(default_factory=tuple)
+
+    @property
+    def n_M(self) -> int:
+        return self.z.shape[0]
+
+    @property
+    def n_q(self) -> int:
+        return self.z.shape[1]
+
+
+# ---------------------------------------------------------------------------- helpers
+def atomic_write_text(path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def sha256_files(paths: Sequence) -> str:
+    """sha256 over the bytes of the files (in the given order, names included)."""
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(Path(p).name.encode())
+        h.update(Path(p).read_bytes())
+    return h.hexdigest()
+
+
+def _read_rows(path: Path) -> list[list[str]]:
+    if not path.exists():
+        raise DataFileError(f"{path}: data file not found; check [data] directory/files in the config")
+    if not path.is_file():
+        raise DataFileError(f"{path}: is not a file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFileError(f"{path}: cannot read ({exc})") from None
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows or not any(c.strip() for c in rows[0]):
+        raise DataFileError(f"{path}:1: empty file; expected a header line")
+    return rows
+
+
+def _split_unit(name: str, units: dict) -> tuple[str, str | None]:
+    """'set_force_kN' -> ('set_force', 'kN'); unit suffixes are matched case-sensitively."""
+    n = name.strip()
+    for sep in ("_", " "):
+        for u in sorted(units, key=len, reverse=True):
+            if n.endswith(sep + u):
+                return n[: -len(u) - 1].strip().lower(), u
+    for u in units:
+        if n.endswith(f"[{u}]") or n.endswith(f"({u})"):
+            return n[: -len(u) - 2].strip().rstrip("_ ").lower(), u
+    return n.lower(), None
+
+
+def _check_unit(path, col, found, declared, what):
+    if found is not None and found != declared:
+        raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares "
+                            f"{what} = {declared!r}; fix the header or [data] {what}")
+
+
+def _number(path, line, col, cell, allow_missing=True):
+    c = cell.strip()
+    if c.lower() in _MISSING:
+        if allow_missing:
+            return math.nan
+        raise DataFileError(f"{path}:{line}: column {col!r} is empty or NaN; set forces must be known")
+    try:
+        v = float(c)
+    except ValueError:
+        raise DataFileError(f"{path}:{line}: column {col!r}: {c!r} is not a number "
+                            "(use an empty cell or NaN for a missing reading)") from None
+    if math.isinf(v):
+        raise DataFileError(f"{path}:{line}: column {col!r}: infinite value {c!r}; use NaN for a missing reading")
+    if math.isnan(v) and not allow_missing:
+        raise DataFileError(f"{path}:{line}: column {col!r} is NaN; set forces must be known")
+    return v
+
+
+def _body(rows):
+    """(line number, row) of the data rows, blank lines skipped."""
+    return [(i + 1, r) for i, r in enumerate(rows) if i > 0 and any(c.strip() for c in r)]
+
+
+# ---------------------------------------------------------------------------- paper layout
+def _read_paper_file(path: Path, force_unit: str):
+    rows = _read_rows(path)
+    header = [h.strip() for h in rows[0]]
+    base, unit = _split_unit(header[0], FORCE_UNITS)
+    if not base.startswith("force") and base not in ("q", "q_p", "set_force", "load"):
+        raise DataFileError(f"{path}:1: wrong header: the first column must be the set force (e.g. 'force_N'), "
+                            f"got {header[0]!r}")
+    _check_unit(path, header[0], unit, force_unit, "force_unit")
+    if len(header) < 2:
+        raise DataFileError(f"{path}:1: wrong header: expected the force column then one column per series, "
+                            f"got only {header!r}")
+    if any(not h for h in header):
+        raise DataFileError(f"{path}:1: wrong header: empty column name in {header!r}")
+    body = _body(rows)
+    if not body:
+        raise DataFileError(f"{path}: no data rows after the header")
+    q = np.empty(len(body))
+    z = np.empty((len(header) - 1, len(body)))
+    for j, (line, r) in enumerate(body):
+        if len(r) != len(header):
+            raise DataFileError(f"{path}:{line}: ragged row: {len(r)} fields but the header has {len(header)}")
+        q[j] = _number(path, line, header[0], r[0], allow_missing=False)
+        for i in range(1, len(header)):
+            z[i - 1, j] = _number(path, line, header[i], r[i])
+    return q, z, tuple(header[1:])
+
+
+def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: str = "N",
+                      actual_forces_file=None) -> Campaign:
+    """Read one CSV per sensor (force column, then one column per series).
+
+    Parameters
+    ----------
+    files : dict {sensor: path}
+        In the order of the model's sensors.
+    displacement_unit, force_unit : str
+        Units of the readings and forces in the files (converted to mm and N).
+    actual_forces_file : path, optional
+        Actual forces in the same layout (set force, then one column per series).
+
+    Returns
+    -------
+    Campaign (z not force-corrected)
+
+    Raises
+    ------
+    DataFileError
+        Missing file, wrong header, ragged row, text in a numeric column (file and line),
+        files that disagree in set forces or series.
+    """
+    if displacement_unit not in LENGTH_UNITS:
+        raise DataFileError(f"displacement_unit: {displacement_unit!r} is not one of {', '.join(LENGTH_UNITS)}")
+    if force_unit not in FORCE_UNITS:
+        raise DataFileError(f"force_unit: {force_unit!r} is not one of {', '.join(FORCE_UNITS)}")
+    if not files:
+        raise DataFileError("files: no sensor files given")
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    q_ref = series_ref = None
+    zs, paths = [], []
+    first = None
+    for sensor, f in files.items():
+        path = Path(f)
+        q, z, ser = _read_paper_file(path, force_unit)
+        if q_ref is None:
+            q_ref, series_ref, first = q, ser, path
+        else:
+            if q.shape != q_ref.shape or not np.allclose(q, q_ref, rtol=1e-9, atol=1e-9):
+                raise DataFileError(f"{path}: set forces differ from those of {first} ({q.size} vs {q_ref.size} "
+                                    "rows); every sensor file must list the same set points")
+            if len(ser) != len(series_ref):
+                raise DataFileError(f"{path}:1: {len(ser)} series columns but {first} has {len(series_ref)}")
+        zs.append(z)
+        paths.append(path)
+    z = np.stack(zs, axis=2) * fl
+    q_act = None
+    if actual_forces_file:
+        path = Path(actual_forces_file)
+        qa_set, qa, ser = _read_paper_file(path, force_unit)
+        if qa_set.shape != q_ref.shape or not np.allclose(qa_set, q_ref, rtol=1e-9, atol=1e-9):
+            raise DataFileError(f"{path}: set forces differ from those of {first}")
+        if qa.shape[0] != z.shape[0]:
+            raise DataFileError(f"{path}:1: {qa.shape[0]} series columns but the readings have {z.shape[0]}")
+        if np.isnan(qa).any():
+            i, j = np.argwhere(np.isnan(qa))[0]
+            raise DataFileError(f"{path}:{j + 2}: actual force of series {ser[i]!r} is missing")
+        q_act = qa * ff
+        paths.append(path)
+    return Campaign(q_set=q_ref * ff, q_actual=q_act, z=z, sensors=tuple(files), series=series_ref,
+                    files=tuple(str(p) for p in paths), source=f"CSV, paper layout ({len(files)} files)",
+                    sha256=sha256_files(paths))
+
+
+def write_paper_layout(directory, q_set, z, sensors: Sequence[str], displacement_unit: str = "um",
+                       force_unit: str = "N", series: Sequence[str] | None = None, q_actual=None,
+                       stem: str = "measurements_") -> list[Path]:
+    """Write z (mm) and q_set (N) as one CSV per sensor (atomically); returns the paths.
+
+    With ``q_actual`` (n_M, n_q) also writes ``<stem>actual_forces.csv`` in the same layout.
+    Values are written with 17 significant digits (exact round trip).
+    """
+    z = np.asarray(z, float)
+    q_set = np.asarray(q_set, float).ravel()
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    n_M = z.shape[0]
+    series = list(series) if series is not None else [f"series_{i + 1}" for i in range(n_M)]
+    head = f"force_{force_unit}," + ",".join(series)
+    out = []
+
+    def fmt(v):
+        return "NaN" if not np.isfinite(v) else repr(float(v))
+
+    for k, s in enumerate(sensors):
+        lines = [head] + [",".join([fmt(q_set[j] / ff)] + [fmt(z[i, j, k] / fl) for i in range(n_M)])
+                          for j in range(q_set.size)]
+        out.append(atomic_write_text(Path(directory) / f"{stem}{s}.csv", "\n".join(lines) + "\n"))
+    if q_actual is not None:
+        qa = np.asarray(q_actual, float)
+        lines = [head] + [",".join([fmt(q_set[j] / ff)] + [fmt(qa[i, j] / ff) for i in range(n_M)])
+                          for j in range(q_set.size)]
+        out.append(atomic_write_text(Path(directory) / f"{stem}actual_forces.csv", "\n".join(lines) + "\n"))
+    return out
+
+
+# ---------------------------------------------------------------------------- tidy layout
+def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
+                     sensors: Sequence[str] | None = None) -> Campaign:
+    """Read the tidy long table (one row per series, set point and sensor).
+
+    Parameters
+    ----------
+    path : path
+    displacement_unit, force_unit : str
+        Declared units (a unit suffix in a column name must agree).
+    value_column : {"value", "raw"}
+        Which reading column to use.
+    sensors : sequence of str, optional
+        Expected sensors (order of the result); a sensor in the file outside this list is an error.
+
+    Raises
+    ------
+    DataFileError
+        Missing file or column, ragged row, text in a numeric column (file and line), duplicate
+        rows, unknown sensor, set forces that differ between series.
+    """
+    path = Path(path)
+    rows = _read_rows(path)
+    header = [h.strip() for h in rows[0]]
+    cols = {}
+    for i, h in enumerate(header):
+        units = FORCE_UNITS if "force" in h.lower() else LENGTH_UNITS
+        base, unit = _split_unit(h, units)
+        if base in cols:
+            raise DataFileError(f"{path}:1: wrong header: column {base!r} appears twice")
+        cols[base] = (i, h, unit)
+        if base in ("set_force", "actual_force"):
+            _check_unit(path, h, unit, force_unit, "force_unit")
+        elif base in ("value", "raw"):
+            _check_unit(path, h, unit, displacement_unit, "displacement_unit")
+    need = ["series", "set_force", "sensor", value_column]
+    missing = [c for c in need if c not in cols]
+    if missing:
+        raise DataFileError(f"{path}:1: wrong header: missing column(s) {', '.join(missing)}; expected "
+                            f"series, [index,] set_force_<unit>, [actual_force_<unit>,] sensor, "
+                            f"{value_column}_<unit>; got {','.join(header)}")
+    body = _body(rows)
+    if not body:
+        raise DataFileError(f"{path}: no data rows after the header")
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    recs = []
+    order_series, order_sensors = [], []
+    counter = {}
+    for line, r in body:
+        if len(r) != len(header):
+            raise DataFileError(f"{path}:{line}: ragged row: {len(r)} fields but the header has {len(header)}")
+        ser = r[cols["series"][0]].strip()
+        sen = r[cols["sensor"][0]].strip()
+        if not ser:
+            raise DataFileError(f"{path}:{line}: column 'series' is empty")
+        if not sen:
+            raise DataFileError(f"{path}:{line}: column 'sensor' is empty")
+        if sensors is not None and sen not in sensors:
+            raise DataFileError(f"{path}:{line}: unknown sensor {sen!r}; the model has {', '.join(sensors)}")
+        if "index" in cols:
+            c = r[cols["index"][0]].strip()
+            try:
+                idx = int(c)
+            except ValueError:
+                raise DataFileError(f"{path}:{line}: column 'index': {c!r} is not an integer") from None
+            if idx < 1:
+                raise DataFileError(f"{path}:{line}: column 'index' is 1-based, got {idx}")
+        else:
+            idx = counter.get((ser, sen), 0) + 1
+            counter[(ser, sen)] = idx
+        qs = _number(path, line, cols["set_force"][1], r[cols["set_force"][0]], allow_missing=False)
+        qa = (_number(path, line, cols["actual_force"][1], r[cols["actual_force"][0]], allow_missing=False)
+              if "actual_force" in cols else math.nan)
+        v = _number(path, line, cols[value_column][1], r[cols[value_column][0]])
+        if ser not in order_series:
+            order_series.append(ser)
+        if sen not in order_sensors:
+            order_sensors.append(sen)
+        recs.append((line, ser, idx, sen, qs, qa, v))
+    sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
+    absent = [s for s in sens if s not in order_sensors]
+    if absent:
+        raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
+    n_M, n_q = len(order_series), max(rec[2] for rec in recs)
+    z = np.full((n_M, n_q, len(sens)), np.nan)
+    seen = np.zeros(z.shape, bool)
+    q_set = np.full(n_q, np.nan)
+    q_act = np.full((n_M, n_q), np.nan)
+    for line, ser, idx, sen, qs, qa, v in recs:
+        i, j, k = order_series.index(ser), idx - 1, sens.index(sen)
+        if seen[i, j, k]:
+            raise DataFileError(f"{path}:{line}: duplicate row for series {ser!r}, index {idx}, sensor {sen!r}")
+        seen[i, j, k] = True
+        if np.isnan(q_set[j]):
+            q_set[j] = qs
+        elif not math.isclose(q_set[j], qs, rel_tol=1e-9, abs_tol=1e-9):
+            raise DataFileError(f"{path}:{line}: set force {qs:g} of index {idx} differs from {q_set[j]:g} "
+                                "given earlier for the same index")
+        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], qa, rel_tol=1e-9, abs_tol=1e-9):
+            raise DataFileError(f"{path}:{line}: actual force {qa:g} differs from {q_act[i, j]:g} given for "
+                                f"another sensor of series {ser!r}, index {idx}")
+        q_act[i, j] = qa
+        z[i, j, k] = v
+    if np.isnan(q_set).any():
+        j = int(np.flatnonzero(np.isnan(q_set))[0])
+        raise DataFileError(f"{path}: no row for set-point index {j + 1}")
+    has_actual = "actual_force" in cols
+    if has_actual and np.isnan(q_act).any():
+        i, j = np.argwhere(np.isnan(q_act))[0]
+        raise DataFileError(f"{path}: no actual force for series {order_series[i]!r}, index {j + 1}")
+    return Campaign(q_set=q_set * ff, q_actual=q_act * ff if has_actual else None, z=z * fl, sensors=sens,
+                    series=tuple(order_series), files=(str(path),), source="CSV, tidy layout",
+                    sha256=sha256_files([path]))
+
+
+def write_tidy_layout(path, q_set, z, sensors: Sequence[str], displacement_unit: str = "um",
+                      force_unit: str = "N", series: Sequence[str] | None = None, q_actual=None) -> Path:
+    """Write z (mm), q_set (N) as the tidy long table (atomically, 17 significant digits)."""
+    z = np.asarray(z, float)
+    q_set = np.asarray(q_set, float).ravel()
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    n_M = z.shape[0]
+    series = list(series) if series is not None else [str(i + 1) for i in range(n_M)]
+
+    def fmt(v):
+        return "NaN" if not np.isfinite(v) else repr(float(v))
+
+    head = ["series", "index", f"set_force_{force_unit}"]
+    if q_actual is not None:
+        head.append(f"actual_force_{force_unit}")
+        qa = np.asarray(q_actual, float)
+    head += ["sensor", f"value_{displacement_unit}"]
+    lines = [",".join(head)]
+    for i in range(n_M):
+        for j in range(q_set.size):
+            for k, s in enumerate(sensors):
+                row = [series[i], str(j + 1), fmt(q_set[j] / ff)]
+                if q_actual is not None:
+                    row.append(fmt(qa[i, j] / ff))
+                row += [s, fmt(z[i, j, k] / fl)]
+                lines.append(",".join(row))
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+# ---------------------------------------------------------------------------- from a config
+def _force_correct(c: Campaign, where: str) -> Campaign:
+    if c.q_actual is None:
+        raise DataFileError(f"{where}: force_correction = true needs actual forces (tidy column actual_force_<unit> "
+                            "or [data] actual_forces_file)")
+    qd, qa = c.q_set[None, :], c.q_actual
+    if np.any((qa <= 0) & (qd > 0)):
+        i, j = np.argwhere((qa <= 0) & (qd > 0))[0]
+        raise DataFileError(f"{where}: actual force {qa[i, j]:g} N of series {c.series[i]!r} at set point "
+                            f"{j + 1} is not positive; cannot apply z * q_set / q_actual")
+    factor = np.where(qd > 0, qd / np.where(qa > 0, qa, 1.0), 1.0)
+    return Campaign(c.q_set, c.q_actual, c.z * factor[:, :, None], c.sensors, c.series, c.files, c.source,
+                    c.sha256, c.notes + ("force correction z * q_set / q_actual applied",))
+
+
+def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
+    """The campaign of a study in mm and N, with every series (the study's subset is applied later).
+
+    Parameters
+    ----------
+    cfg : StudyConfig
+    sensors : sequence of str
+        The model's sensors (order of z).
+    """
+    d = cfg.data
+    if d.source == "prototype":
+        from models.prototype import generate_campaign
+        pc = generate_campaign(seed=d.seed, n_series=d.n_series)
+        idx = [pc.sensors.index(s) if s in pc.sensors else None for s in sensors]
+        if None in idx:
+            raise DataFileError(f"[data] source = \"prototype\" provides sensors {', '.join(pc.sensors)} only; the "
+                                f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
+        z = pc.z[:, :, idx]
+        h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
+        return Campaign(pc.q_set, pc.q_actual, z, tuple(sensors), tuple(f"series_{i + 1}" for i in range(pc.n_M)),
+                        (), f"virtual prototype (seed {d.seed}, {d.n_series} series)", h.hexdigest())
+    base = cfg.resolve(d.directory)
+    if d.layout == "paper":
+        files = {}
+        for s in sensors:
+            files[s] = base / d.files.get(s, f"measurements_{s}.csv")
+        extra = [s for s in d.files if s not in sensors]
+        if extra:
+            raise DataFileError(f"{cfg.path}: [data.files] names unknown sensor(s) {', '.join(extra)}; the model "
+                                f"has {', '.join(sensors)}")
+        c = read_paper_layout(files, d.displacement_unit, d.force_unit,
+                              base / d.actual_forces_file if d.actual_forces_file else None)
+    else:
+        c = read_tidy_layout(base / d.file, d.displacement_unit, d.force_unit, d.value_column, sensors)
+    if d.force_correction:
+        c = _force_correct(c, cfg.path)
+    return c

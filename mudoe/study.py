@@ -1,0 +1,405 @@
+"""A study: the config turned into models, data, sigma, splits -- and thin runs of the library.
+
+Every function here is a thin layer over :mod:`identification`, :mod:`oed` and :mod:`models`:
+it only assembles their arguments from a :class:`mudoe.config.StudyConfig` and collects
+their results in :class:`StudyResults` for the CLI and the report builder.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import platform
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from identification import Measurements, identify, information_contributions
+from identification.detect import NormalityCheck, normality_check
+from identification.splits import PRESS_SCENARIO_NAMES, Split, press_scenarios, random_splits
+from models.contract import Model, Parameter
+
+from .config import ConfigError, StudyConfig
+from .data_io import Campaign, DataFileError, load_campaign
+
+__all__ = ["Study", "StudyResults", "prepare", "run_identify", "run_oed", "run_detect", "run_validate",
+           "Progress", "MissingPieceError", "package_versions"]
+
+
+class MissingPieceError(RuntimeError):
+    """A library piece this command needs is not available (yet); the message says which."""
+
+
+# ---------------------------------------------------------------------------- progress
+class Progress:
+    """Progress lines on a stream (stderr by default) for steps that may take over a second.
+
+    Parameters
+    ----------
+    enabled : bool
+    stream : file-like, optional (default sys.stderr at call time)
+    """
+
+    def __init__(self, enabled: bool = True, stream=None):
+        self.enabled = enabled
+        self.stream = stream
+        self.timing: dict = {}
+
+    def _out(self, text):
+        if self.enabled:
+            print(text, file=self.stream or sys.stderr, flush=True)
+
+    @contextmanager
+    def step(self, label: str):
+        """Print ``label ...`` and, when done, the elapsed time; record it in ``timing``."""
+        self._out(f"mudoe: {label} ...")
+        t0 = time.perf_counter()
+        yield
+        dt = time.perf_counter() - t0
+        self.timing[label] = self.timing.get(label, 0.0) + dt
+        self._out(f"mudoe: {label} done in {dt:.1f} s")
+
+
+# ---------------------------------------------------------------------------- the study
+@dataclass(frozen=True, eq=False)
+class Study:
+    """Everything a run needs, assembled from a config.
+
+    Attributes
+    ----------
+    cfg : StudyConfig
+    campaign : Campaign          every series, model units (mm, N)
+    sensors : tuple of str       the model's sensors (order of z)
+    sigma : ndarray or None      sensor sigma (mm) used by every fit (None: estimated)
+    sigma_table : tuple of dict  per sensor: sigma_rep, sigma_man, sigma (mm) and how obtained
+    normality : NormalityCheck   Shapiro-Wilk on differences of consecutive series (all series)
+    models : dict {variant: Model}
+    data : dict {variant: Measurements}   the study's series, with each variant's inputs
+    data_all : dict {variant: Measurements}  every series
+    p0 : ndarray                 start values
+    splits : tuple of Split
+    """
+
+    cfg: StudyConfig
+    campaign: Campaign
+    sensors: tuple
+    sigma: np.ndarray | None
+    sigma_table: tuple
+    normality: NormalityCheck
+    models: dict
+    data: dict
+    data_all: dict
+    p0: np.ndarray
+    splits: tuple
+    notes: tuple = ()
+
+
+@dataclass
+class StudyResults:
+    """What the commands produced (fields stay None when the command was not run)."""
+
+    study: Study
+    estimates: dict = field(default_factory=dict)
+    estimate_errors: dict = field(default_factory=dict)
+    oed: object = None
+    oed_table: object = None
+    oed_variant: str = ""
+    design_sensors: tuple = ()
+    design_how: str = ""
+    detection: object = None
+    detection_error: str = ""
+    validation: object = None
+    timing: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+def package_versions() -> dict:
+    """Versions of Python and the packages the results depend on."""
+    out = {"python": platform.python_version()}
+    for pkg in ("mudoe", "numpy", "scipy", "casadi", "matplotlib", "pyscipopt", "pyomo"):
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+# ---------------------------------------------------------------------------- models
+def _friction_variant(variant: str, campaign: Campaign, cfg: StudyConfig):
+    """(friction object, input matrix) of a friction variant from :mod:`models.friction`.
+
+    Expected API (``models.friction``): ``make_friction(variant, q_set, train=...)`` returning an
+    object with ``input_names`` and ``force(qvec)`` (see :func:`models.press.press_model`) and a
+    method ``inputs(q_set) -> ndarray (n_q, 1 + len(input_names))``.
+    """
+    try:
+        import models.friction as fr
+    except ImportError as exc:
+        raise MissingPieceError(f"[model] variants: {variant} needs models.friction, which is not available "
+                                f"({exc}); use variants = [\"M1\"] until it lands") from None
+    make = getattr(fr, "make_friction", None)
+    if make is None:
+        raise MissingPieceError(f"[model] variants: models.friction has no make_friction(variant, q_set, train=...) "
+                                f"needed for {variant}")
+    train = campaign.z if variant == "M3" else None
+    fric = make(variant, campaign.q_set, train=train)
+    inputs = np.asarray(fric.inputs(campaign.q_set), float)
+    return fric, inputs
+
+
+def _build_models(cfg: StudyConfig, campaign: Campaign | None = None):
+    """{variant: (Model, input matrix or None)}; the input matrix needs the campaign."""
+    from models.press import press_model
+    if cfg.model.name != "press":
+        raise ConfigError(f"{cfg.path}: [model] name: unknown model {cfg.model.name!r}; known models: press")
+    out = {}
+    for v in cfg.model.variants:
+        if v == "M1":
+            m = press_model(extra_sensors=cfg.model.extra_sensors)
+            q = None if campaign is None else campaign.q_set[:, None]
+        else:
+            if campaign is None:
+                raise MissingPieceError("internal: friction variants need the campaign")
+            fric, q = _friction_variant(v, campaign, cfg)
+            m = press_model(extra_sensors=cfg.model.extra_sensors, friction=fric)
+        out[v] = (_apply_parameters(cfg, m), q)
+    return out
+
+
+def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
+    """Replace the model's bounds by the config's (the model is this study's own instance)."""
+    if not cfg.parameters:
+        return m
+    names = [p.name for p in cfg.parameters]
+    unknown = [n for n in names if n not in m.param_names]
+    if unknown:
+        raise ConfigError(f"{cfg.path}: [[parameters]] unknown parameter(s) {', '.join(unknown)}; the model has "
+                          f"{', '.join(m.param_names)}")
+    missing = [n for n in m.param_names if n not in names]
+    if missing:
+        raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
+    new = []
+    for par in m.params:
+        pc = cfg.parameters[names.index(par.name)]
+        new.append(Parameter(par.name, pc.lower, pc.upper, par.scale, par.unit))
+    m.params = tuple(new)
+    return m
+
+
+def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
+    if cfg.parameters:
+        d = {p.name: p.start for p in cfg.parameters}
+        return np.array([d[n] for n in m.param_names], float)
+    nominal = getattr(m, "p_nominal", None)
+    if nominal is None:
+        raise ConfigError(f"{cfg.path}: [[parameters]] give start values for {', '.join(m.param_names)}")
+    return np.asarray(nominal, float)
+
+
+# ---------------------------------------------------------------------------- sigma
+def _sigma(cfg: StudyConfig, sensors, norm: NormalityCheck):
+    if not cfg.sensors:
+        return None, tuple(dict(sensor=s, how="estimated from the residuals (no [[sensors]] given)",
+                                sigma_rep=float(norm.sigma_rep[k]), sigma_man=math.nan, sigma=math.nan)
+                           for k, s in enumerate(sensors))
+    names = cfg.sensor_names()
+    unknown = [n for n in names if n not in sensors]
+    if unknown:
+        raise ConfigError(f"{cfg.path}: [[sensors]] unknown sensor(s) {', '.join(unknown)}; the model has "
+                          f"{', '.join(sensors)}")
+    missing = [s for s in sensors if s not in names]
+    if missing:
+        raise ConfigError(f"{cfg.path}: [[sensors]] no entry for sensor(s) {', '.join(missing)} of the model "
+                          f"({', '.join(sensors)}); list every sensor with sigma or sigma_man")
+    lf = cfg.length_factor
+    sig, rows = [], []
+    for k, s in enumerate(sensors):
+        sc = cfg.sensors[names.index(s)]
+        rep = float(norm.sigma_rep[k])
+        if sc.sigma is not None:
+            v, how, man = sc.sigma * lf, "given", math.nan
+        elif sc.sigma_man is not None:
+            if not math.isfinite(rep):
+                raise DataFileError(f"{cfg.path}: sensor {s!r}: sigma_man needs the repeatability of the data, "
+                                    "which needs at least two series; give sigma directly")
+            man = sc.sigma_man * lf
+            v, how = math.sqrt(rep ** 2 + man ** 2), "sqrt(sigma_rep^2 + sigma_man^2)"
+        else:
+            v, how, man = math.nan, "estimated", math.nan
+        sig.append(v)
+        rows.append(dict(sensor=s, how=how, sigma_rep=rep, sigma_man=man, sigma=v))
+    sig = np.array(sig)
+    if np.all(np.isnan(sig)):
+        return None, tuple(rows)
+    if np.any(np.isnan(sig)):
+        bad = [s for s, v in zip(sensors, sig) if math.isnan(v)]
+        raise ConfigError(f"{cfg.path}: [[sensors]] {', '.join(bad)} lack sigma or sigma_man while others have "
+                          "one; give every sensor a sigma, or none (common sigma estimated)")
+    return sig, tuple(rows)
+
+
+# ---------------------------------------------------------------------------- splits
+def _splits(cfg: StudyConfig, n_q: int, q_set) -> tuple:
+    s = cfg.splits
+    out = []
+    if s.scenarios:
+        allsc = press_scenarios(n_q)
+        wanted = PRESS_SCENARIO_NAMES if "paper" in s.scenarios else s.scenarios
+        out += [sp for sp in allsc if sp.name in wanted]
+    if s.random.n:
+        excl = tuple(int(j) for j in np.flatnonzero(np.asarray(q_set) == 0)) if s.random.exclude_zero_force else ()
+        out += list(random_splits(n_q, s.random.n, s.random.cal_fraction, s.random.seed, exclude=excl))
+    for c in s.custom:
+        out.append(Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "user split"))
+    names = [sp.name for sp in out]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{cfg.path}: [splits] split names must be unique, got {names}")
+    return tuple(out)
+
+
+def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
+    """Load the data, build the models, compose sigma and the splits of a study.
+
+    Raises
+    ------
+    ConfigError, DataFileError, identification.DataError, identification.splits.SplitError
+        Bad config or data (the message names the file / key).
+    MissingPieceError
+        A model variant needs a package that is not available yet.
+    """
+    progress = progress or Progress(False)
+    from models.press import PRESS_SENSORS, press_model
+    sensors = tuple(press_model(extra_sensors=cfg.model.extra_sensors).sensors) if cfg.model.extra_sensors \
+        else PRESS_SENSORS
+    with progress.step(f"load data ({cfg.data.source})"):
+        campaign = load_campaign(cfg, sensors)
+    n_M = campaign.n_M
+    if cfg.data.series is not None:
+        bad = [i for i in cfg.data.series if i >= n_M]
+        if bad:
+            raise ConfigError(f"{cfg.path}: [data] series {bad} out of range: the data hold {n_M} series "
+                              "(0-based indices)")
+    m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, input_names=("q_P",),
+                         series=campaign.series)
+    norm = normality_check(m_all)
+    sigma, sig_rows = _sigma(cfg, sensors, norm)
+    with progress.step("build models " + ", ".join(cfg.model.variants)):
+        built = _build_models(cfg, campaign)
+    models, data, data_all = {}, {}, {}
+    for v, (m, q) in built.items():
+        if tuple(m.sensors) != tuple(sensors):
+            raise ConfigError(f"{cfg.path}: model {v} has sensors {list(m.sensors)} but the data {list(sensors)}")
+        full = Measurements(q, campaign.z, sigma, sensors=sensors, input_names=m.inputs, series=campaign.series)
+        models[v] = m
+        data_all[v] = full
+        data[v] = full if cfg.data.series is None else full.subset(series=list(cfg.data.series))
+    first = next(iter(models.values()))
+    p0 = _p0(cfg, first)
+    splits = _splits(cfg, campaign.n_q, campaign.q_set)
+    n_study = n_M if cfg.data.series is None else len(cfg.data.series)
+    for sp in splits:
+        sp.check(campaign.n_q, n_study, first.n_p, 1)
+    return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
+                 campaign.notes)
+
+
+# ---------------------------------------------------------------------------- runs
+def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
+    """Identify every variant on the study's data (all sensors); failures are recorded, not raised."""
+    from identification.errors import IdentificationError
+    progress = progress or Progress(False)
+    for v, m in study.models.items():
+        with progress.step(f"identify {v}"):
+            try:
+                results.estimates[v] = identify(m, study.data[v], study.p0)
+            except IdentificationError as exc:
+                results.estimate_errors[v] = f"{type(exc).__name__}: {exc}"
+    return results
+
+
+def _oed_variant(study: Study) -> str:
+    return study.cfg.oed.variant or list(study.models)[-1]
+
+
+def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
+    """Lines 02-03 of Algorithm 1: information of every sensor at the estimate, design table, chosen design."""
+    try:
+        from oed.design import design_table, select_sensors_from_information
+    except ImportError as exc:
+        raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
+    progress = progress or Progress(False)
+    v = _oed_variant(study)
+    if v not in results.estimates:
+        run_identify(study, results, progress)
+    if v not in results.estimates:
+        raise MissingPieceError(f"oed: the fit of variant {v} failed ({results.estimate_errors.get(v)}); "
+                                "no information matrix to design with")
+    est = results.estimates[v]
+    o = study.cfg.oed
+    with progress.step(f"optimal sensor design ({o.criterion}, {v})"):
+        F, S = information_contributions(study.models[v], study.data[v], est.p, states=est.states)
+        n_p = study.models[v].n_p
+        table = design_table(F, S if o.kind == "second_order" else None, study.sensors,
+                             o.min_sensors or n_p, kind=o.kind)
+        res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind,
+                                              n_sensors=o.n_sensors or n_p, include=o.include, exclude=o.exclude,
+                                              sensor_names=study.sensors)
+    results.oed, results.oed_table, results.oed_variant = res, table, v
+    results.design_sensors = tuple(res.sensors)
+    results.design_how = (f"{o.criterion}-optimal ({o.kind} covariance) design of {len(res.sensors)} sensors "
+                          f"at the {v} estimate")
+    return results
+
+
+def run_detect(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
+    """Algorithm 1 (lines 05-17) on every variant with the chosen sensors."""
+    from identification.detect import DetectSettings, detect
+    progress = progress or Progress(False)
+    d = study.cfg.detect
+    if d.sensors == "oed":
+        if not results.design_sensors:
+            run_oed(study, results, progress)
+        design = list(results.design_sensors)
+    elif d.sensors == "all":
+        design, results.design_how = list(study.sensors), "all sensors"
+        results.design_sensors = tuple(study.sensors)
+    else:
+        design, results.design_how = list(d.sensors), "sensors given in [detect] sensors"
+        results.design_sensors = tuple(d.sensors)
+    settings = DetectSettings(tol=d.tol, statistic=d.statistic, correction=d.correction, normality=d.normality,
+                              covariance=d.covariance)
+    with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
+        results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
+                                   design=design, settings=settings)
+    return results
+
+
+def run_validate(study: Study, results: StudyResults, progress: Progress | None = None,
+                 workers: int | None = 1) -> StudyResults:
+    """Monte Carlo size study of Algorithm 1 for one variant (data simulated from its own estimate)."""
+    try:
+        from identification.montecarlo import validate
+    except ImportError as exc:
+        raise MissingPieceError(f"validate: identification.montecarlo is not available ({exc})") from None
+    progress = progress or Progress(False)
+    vc = study.cfg.validate
+    v = vc.variant
+    if v not in results.estimates:
+        run_identify(study, results, progress)
+    if v not in results.estimates:
+        raise MissingPieceError(f"validate: the fit of variant {v} failed ({results.estimate_errors.get(v)})")
+    est = results.estimates[v]
+    data = study.data[v]
+    sigma = est.sigma
+    w = None
+    if results.design_sensors:
+        w = np.array([1.0 if s in results.design_sensors else 0.0 for s in study.sensors])
+    with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications"):
+        results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p, inputs=data.inputs,
+                                      sigma=sigma, n_M=data.n_M, weights=w, n_rep=vc.n_runs,
+                                      tol=study.cfg.detect.tol, seed=vc.seed, workers=workers,
+                                      progress=progress.enabled)
+    return results
