@@ -52,11 +52,15 @@ class ModelConfig:
         Friction variants: ``"M1"`` (none), ``"M2"`` (Coulomb), ``"M3"`` (hysteresis network).
     extra_sensors : bool
         Expose every joint displacement as a candidate sensor (not only D_y, F_x, B0_y).
+    friction_file : str
+        Trained constants of M2 / M3 (relative to the config file); "" = the shipped
+        ``data/press_friction.json``.
     """
 
     name: str = "press"
     variants: tuple = ("M1", "M2", "M3")
     extra_sensors: bool = False
+    friction_file: str = ""
 
 
 @dataclass(frozen=True)
@@ -364,7 +368,7 @@ def _str_list(ctx, section, key, v):
 
 
 def _parse_model(ctx, t):
-    _check_keys(ctx, "model", t, {"name", "variants", "extra_sensors"})
+    _check_keys(ctx, "model", t, {"name", "variants", "extra_sensors", "friction_file"})
     kw = {}
     if "name" in t:
         kw["name"] = _str(ctx, "model", "name", t["name"])
@@ -385,6 +389,8 @@ def _parse_model(ctx, t):
         kw["variants"] = v
     if "extra_sensors" in t:
         kw["extra_sensors"] = _bool(ctx, "model", "extra_sensors", t["extra_sensors"])
+    if "friction_file" in t:
+        kw["friction_file"] = _str(ctx, "model", "friction_file", t["friction_file"])
     return ModelConfig(**kw)
 
 

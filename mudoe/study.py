@@ -53,14 +53,20 @@ class Progress:
             print(text, file=self.stream or sys.stderr, flush=True)
 
     @contextmanager
-    def step(self, label: str):
-        """Print ``label ...`` and, when done, the elapsed time; record it in ``timing``."""
-        self._out(f"mudoe: {label} ...")
+    def step(self, label: str, announce: bool = True):
+        """Print ``label ...`` and, when done, the elapsed time; record it in ``timing``.
+
+        With ``announce=False`` (quick steps, e.g. reading the data) nothing is printed unless the
+        step took over a second, so that a bad-input error stays the only line on stderr.
+        """
+        if announce:
+            self._out(f"mudoe: {label} ...")
         t0 = time.perf_counter()
         yield
         dt = time.perf_counter() - t0
         self.timing[label] = self.timing.get(label, 0.0) + dt
-        self._out(f"mudoe: {label} done in {dt:.1f} s")
+        if announce or dt > 1.0:
+            self._out(f"mudoe: {label} done in {dt:.1f} s")
 
 
 # ---------------------------------------------------------------------------- the study
@@ -129,25 +135,19 @@ def package_versions() -> dict:
 
 # ---------------------------------------------------------------------------- models
 def _friction_variant(variant: str, campaign: Campaign, cfg: StudyConfig):
-    """(friction object, input matrix) of a friction variant from :mod:`models.friction`.
-
-    Expected API (``models.friction``): ``make_friction(variant, q_set, train=...)`` returning an
-    object with ``input_names`` and ``force(qvec)`` (see :func:`models.press.press_model`) and a
-    method ``inputs(q_set) -> ndarray (n_q, 1 + len(input_names))``.
-    """
+    """(friction object, input matrix) of M2 / M3 from :mod:`models.friction` (stored, trained constants)."""
     try:
         import models.friction as fr
     except ImportError as exc:
         raise MissingPieceError(f"[model] variants: {variant} needs models.friction, which is not available "
-                                f"({exc}); use variants = [\"M1\"] until it lands") from None
-    make = getattr(fr, "make_friction", None)
-    if make is None:
-        raise MissingPieceError(f"[model] variants: models.friction has no make_friction(variant, q_set, train=...) "
-                                f"needed for {variant}")
-    train = campaign.z if variant == "M3" else None
-    fric = make(variant, campaign.q_set, train=train)
-    inputs = np.asarray(fric.inputs(campaign.q_set), float)
-    return fric, inputs
+                                f"({exc}); use variants = [\"M1\"]") from None
+    path = cfg.resolve(cfg.model.friction_file) if cfg.model.friction_file else fr.FRICTION_JSON
+    try:
+        consts = fr.load_friction(path)
+    except fr.FrictionError as exc:
+        raise ConfigError(f"{cfg.path}: [model] friction_file: {exc}") from None
+    fric = consts["coulomb"] if variant == "M2" else consts["network"]
+    return fric, fr.model_inputs(variant, campaign.q_set)
 
 
 def _build_models(cfg: StudyConfig, campaign: Campaign | None = None):
@@ -274,7 +274,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     from models.press import PRESS_SENSORS, press_model
     sensors = tuple(press_model(extra_sensors=cfg.model.extra_sensors).sensors) if cfg.model.extra_sensors \
         else PRESS_SENSORS
-    with progress.step(f"load data ({cfg.data.source})"):
+    with progress.step(f"load data ({cfg.data.source})", announce=cfg.data.source == "prototype"):
         campaign = load_campaign(cfg, sensors)
     n_M = campaign.n_M
     if cfg.data.series is not None:
@@ -286,7 +286,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
                          series=campaign.series)
     norm = normality_check(m_all)
     sigma, sig_rows = _sigma(cfg, sensors, norm)
-    with progress.step("build models " + ", ".join(cfg.model.variants)):
+    with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
         built = _build_models(cfg, campaign)
     models, data, data_all = {}, {}, {}
     for v, (m, q) in built.items():

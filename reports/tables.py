@@ -23,7 +23,7 @@ def fmt_alpha(a: float) -> str:
 def normality_rows(study) -> tuple[list, list]:
     """Header and rows of the paper's 'Analysis of the measurement data' table (um)."""
     n = study.normality
-    head = ["sensor", "Shapiro-Wilk p-value (%)", "sigma_rep (um)", "sigma_man (um)", "sigma used (um)", "how"]
+    head = ["sensor", "Shapiro-Wilk p (%)", "sigma_rep (um)", "sigma_man (um)", "sigma used (um)", "how sigma was obtained"]
     rows = []
     for k, s in enumerate(n.sensors):
         st = study.sigma_table[k]
@@ -65,26 +65,39 @@ def oed_table_text(results) -> str:
 
 
 def estimate_rows(results) -> tuple[list, list]:
-    """Estimates with standard errors and correlation: the full-data fit and every split's two fits."""
-    head = ["model", "data", "sensors", "k / unit", "estimate", "std err", "corr"]
+    """One row per fit: the fit on all study data and both fits of every split.
+
+    Columns: model, data, sensors, each parameter's estimate and standard error (second-order
+    covariance, unit of the parameter), and the correlation of the first two parameters.
+    """
+    first = next(iter(results.study.models.values()))
+    names, units = first.param_names, [p.unit for p in first.params]
+    head = ["model", "data", "sensors"]
+    for n, u in zip(names, units):
+        head += [f"{n} ({u})", f"std err {n}"]
+    if len(names) >= 2:
+        head.append(f"corr({names[0]},{names[1]})")
+
+    def row(model, data, sensors, p, C):
+        ok = np.all(np.isfinite(C)) and np.all(np.isfinite(p))
+        se = np.sqrt(np.diag(C)) if ok else np.full(len(p), np.nan)
+        r = [model, data, sensors]
+        for i in range(len(names)):
+            r += [f"{p[i]:.2f}" if np.isfinite(p[i]) else "failed", f"{se[i]:.2f}" if np.isfinite(se[i]) else "-"]
+        if len(names) >= 2:
+            r.append(f"{C[0, 1] / (se[0] * se[1]):.3f}" if ok and se[0] > 0 and se[1] > 0 else "-")
+        return r
+
     rows = []
     for v, e in results.estimates.items():
         used = "all" if np.all(e.weights > 0) else ",".join(s for s, w in zip(e.sensors, e.weights) if w > 0)
-        for i, n in enumerate(e.param_names):
-            rows.append([v, "all study data", used, f"{n} ({e.param_units[i]})", f"{e.p[i]:.2f}",
-                         f"{e.stderr[i]:.2f}", f"{e.correlation[0, 1]:.3f}" if (i == 0 and e.n_p == 2) else ""])
+        rows.append(row(v, "all study data", used, e.p, e.cov))
     det = results.detection
     if det is not None:
-        names = results.study.models[det.models[0]].param_names
         for t in det.tests:
-            for which, p, C in (("cal", t.p_cal, t.C_cal), ("val", t.p_val, t.C_val)):
-                se = np.sqrt(np.diag(C)) if np.all(np.isfinite(C)) else np.full(len(p), np.nan)
-                corr = C[0, 1] / (se[0] * se[1]) if len(p) == 2 and np.all(np.isfinite(se)) and se.all() else math.nan
-                for i, n in enumerate(names):
-                    rows.append([t.model, f"{t.split} ({which})", ",".join(results.design_sensors), n,
-                                 f"{p[i]:.2f}" if np.isfinite(p[i]) else "failed",
-                                 f"{se[i]:.2f}" if np.isfinite(se[i]) else "-",
-                                 f"{corr:.3f}" if (i == 0 and np.isfinite(corr)) else ""])
+            sens = ",".join(results.design_sensors)
+            rows.append(row(t.model, f"{t.split}: calibration", sens, t.p_cal, t.C_cal))
+            rows.append(row(t.model, f"{t.split}: validation", sens, t.p_val, t.C_val))
     return head, rows
 
 
