@@ -38,7 +38,8 @@ import numpy as np
 
 __all__ = ["Coulomb", "PreisachNetwork", "direction_inputs", "memory_inputs", "model_inputs",
            "inverse_forces", "friction_samples", "fit_coulomb", "train_preisach", "retrain",
-           "load_friction", "candidate_models", "FRICTION_JSON", "FrictionError"]
+           "load_friction", "candidate_models", "fit_candidates", "FRICTION_JSON", "FrictionError",
+           "TRAINING_DEFAULTS"]
 
 FRICTION_JSON = Path(__file__).resolve().parent.parent / "data" / "press_friction.json"
 
@@ -518,3 +519,45 @@ def candidate_models(path=FRICTION_JSON) -> dict:
     fr = load_friction(path)
     return {"M1": press_model(), "M2": press_model(friction=fr["coulomb"]),
             "M3": press_model(friction=fr["network"])}
+
+
+def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: Sequence[str] = ("D_y", "F_x"),
+                   models: dict | None = None, inputs: Sequence[int] | None = None) -> dict:
+    r"""Identify (k5, k7) with M1, M2 and M3 on (held-out) series of a campaign.
+
+    .. math::
+
+        \min_{k_5, k_7} \sum_{i, j, k \in \text{sensors}} \bigl((z_{ijk} - h_k(y_j, k_5, k_7, \bar q_j))
+        / \sigma_k\bigr)^2,\quad E(y_j, k_5, k_7, \bar q_j) = 0,
+
+    sigma_k = the campaign's composed sigma sqrt(sigma_rep^2 + sigma_man^2) (mm), \bar q_j
+    the model's inputs from :func:`model_inputs` of the set points.
+
+    Parameters
+    ----------
+    campaign : Campaign, optional      default: the shipped campaign
+    series : sequence of int, optional default: ``models.prototype.TEST_SERIES`` (the held-out two)
+    sensors : sequence of str          sensors with weight 1 (the others weight 0)
+    models : dict, optional            {name: Model}, default :func:`candidate_models`
+    inputs : sequence of int, optional 0-based set points to use (default all 29)
+
+    Returns
+    -------
+    dict {name: Estimate}
+    """
+    from identification import identify
+    from .press import K_NOMINAL
+    from .prototype import TEST_SERIES, read_campaign
+    campaign = read_campaign() if campaign is None else campaign
+    models = candidate_models() if models is None else models
+    out = {}
+    for name, model in models.items():
+        data = campaign.measurements(series=TEST_SERIES if series is None else series,
+                                     inputs=model_inputs(name, campaign.q_set))
+        if inputs is not None:
+            data = data.subset(inputs=list(inputs))
+        unknown = set(sensors) - set(model.sensors)
+        if unknown:
+            raise FrictionError(f"sensors: {sorted(unknown)} are not sensors of {model.name!r}")
+        out[name] = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
+    return out
