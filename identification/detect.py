@@ -525,7 +525,7 @@ def _design_weights(model, data, p0, design, settings, notes):
         est = _identify(model, data, p0, settings=settings.identify)
         F, S = information_contributions(model, data, est.p, states=est.states)
         n_sel = settings.n_design_sensors or model.n_p
-        ret = select_sensors_from_information(F, S, criterion=design, n_sensors=n_sel)
+        ret = select_sensors_from_information(F, S, criterion=design, n_sensors=n_sel, sensor_names=list(model.sensors))
         w = None
         for attr in ("w", "weights", "design"):
             if hasattr(ret, attr):

@@ -1,0 +1,181 @@
+"""Algorithm 1 (detect): both statistics, Bonferroni / Holm, normality gate, failures, errors."""
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from identification import Measurements, alpha_min, alpha_min_two_sample, identify, simulate
+from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check)
+from identification.splits import Split, input_range_split, press_scenarios
+from models.contract import Model
+from models.library import linear_model
+
+Q = np.r_[np.linspace(0.0, 1.6, 15), np.linspace(1.6, 0.0, 15)[1:]][:, None]   # loading-unloading, 29 loads
+X = np.array([[1.0, 0.3], [0.2, 1.0]])
+P_TRUE = np.array([1.0, 2.0])
+SIGMA = np.array([0.01, 0.02])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return linear_model(X)
+
+
+def campaign(model, seed, n_M=2, offset_unloading=0.0):
+    rng = np.random.default_rng(seed)
+    H = simulate(model, P_TRUE, Q)
+    z = H[None] + SIGMA * rng.standard_normal((n_M,) + H.shape)
+    z[:, 15:, 0] += offset_unloading        # a "hysteresis": unloading sits higher on sensor 1
+    return Measurements(Q, z, SIGMA, sensors=model.sensors)
+
+
+def test_correct_model_is_accepted_and_statistics_match_regions(model):
+    data = campaign(model, 1)
+    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5])
+    assert res.verdicts[model.name] == "accept"
+    assert res.decision().statistic == "two_sample" and res.decision().correction == "bonferroni"
+    assert len(res.tests) == 4 and all(t.ok for t in res.tests)
+    # every number equals the identification API applied by hand
+    for sp, t in zip(press_scenarios(), res.tests):
+        ec = identify(model, sp.calibration(data), [0.5, 1.5])
+        ev = identify(model, sp.validation(data), [0.5, 1.5])
+        assert t.alpha_paper == pytest.approx(alpha_min(ev.p, ec.p, ec.cov), rel=1e-6, abs=1e-12)
+        assert t.alpha_two_sample == pytest.approx(alpha_min_two_sample(ev.p, ec.p, ec.cov, ev.cov), rel=1e-6,
+                                                   abs=1e-12)
+        # C_cal + C_val >= C_cal, so the paper's alpha is never larger
+        assert t.alpha_paper <= t.alpha_two_sample + 1e-12
+    text = res.summary()
+    assert "alpha paper %" in text and "alpha 2-sample %" in text and ">> two_sample bonferroni: ACCEPT" in text
+    assert "Normality gate" in text and "sigma_rep" in text
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.tests = ()
+
+
+def test_hysteresis_is_detected_on_loading_vs_unloading(model):
+    data = campaign(model, 2, offset_unloading=0.05)      # 5 sigma offset on the unloading branch
+    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5], statistic="paper")
+    for st in ("paper", "two_sample"):
+        d = res.decision(statistic=st)
+        assert d.decision == "reject"
+        assert "loading vs unloading" in d.flagged
+    assert res.decision().statistic == "paper"
+    assert ">> paper      bonferroni: REJECT" in res.summary()
+
+
+def test_several_models_and_sensor_design(model):
+    # truth with a curvature c q^2 (c = 0.05 per unit input^2); the linear model misses it
+    curved = Model.explicit(["b1", "b2"], ["q"], ["s1", "s2"], name="curved",
+                            h=lambda p, q: q[0] * (ca.DM(X) @ p) + 0.05 * q[0] ** 2)
+    rng = np.random.default_rng(3)
+    H = simulate(curved, P_TRUE, Q)
+    data = Measurements(Q, H[None] + SIGMA * rng.standard_normal((2,) + H.shape), SIGMA, sensors=model.sensors)
+    splits = press_scenarios() + (input_range_split(Q, exclude=(0, 28)),)
+    res = detect({"M_true": curved, "M_linear": model}, data, splits, p0=[0.5, 1.5])
+    assert res.verdicts["M_true"] == "accept"
+    assert res.verdicts["M_linear"] == "reject"
+    # a consistent misfit is invisible to splits with the same load range (both directions, alternate
+    # points): only the input-range split sees the curvature
+    assert res.decision("M_linear").flagged == (splits[-1].name,)
+    assert len(res.normality) == 2 and res.normality[0][1] is res.normality[1][1]   # checked once
+    r1 = detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["s1", "s2"])
+    assert r1.design[0][1] == ("s1", "s2")
+    with pytest.raises(Exception, match="weights, design"):
+        detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["s1"], weights=[1, 0])
+    with pytest.raises(Exception, match="design: unknown sensor"):
+        detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["nope"])
+
+
+def test_failed_fit_is_recorded_and_makes_the_verdict_undecided(model):
+    data = campaign(model, 4)
+    # calibration on the unloaded point q = 0 only: no information on p (not identifiable)
+    splits = (press_scenarios()[0], Split("degenerate", [0, 28], [1, 2, 3]))
+    res = detect(model, data, splits, p0=[0.5, 1.5])
+    bad = res.tests[1]
+    assert not bad.ok and bad.stage == "calibration fit" and "Identifiab" in bad.error
+    assert np.isnan(bad.alpha_two_sample)
+    d = res.decision()
+    assert d.decision == "undecided" and "degenerate" in d.reason and d.n_tests == 2
+    assert "failed" in res.summary()
+
+
+def test_tol_and_option_errors(model):
+    data = campaign(model, 5)
+    for tol in (0.0, 1.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="tol"):
+            detect(model, data, press_scenarios(), p0=[1, 2], tol=tol)
+    with pytest.raises(ValueError, match="statistic"):
+        detect(model, data, press_scenarios(), p0=[1, 2], statistic="wald")
+    with pytest.raises(ValueError, match="correction"):
+        detect(model, data, press_scenarios(), p0=[1, 2], correction="sidak")
+    with pytest.raises(ValueError, match="normality"):
+        detect(model, data, press_scenarios(), p0=[1, 2], normality="skip")
+    with pytest.raises(Exception, match="p0"):
+        detect(model, data, press_scenarios(), p0=[1, 2, 3])
+    with pytest.raises(Exception, match="splits"):
+        detect(model, data, [], p0=[1, 2])
+    with pytest.raises(Exception, match="val_inputs index 40"):
+        detect(model, data, [Split("far", [1], [40])], p0=[1, 2])
+
+
+def test_normality_gate_raises_or_records_the_override(model):
+    rng = np.random.default_rng(6)
+    H = simulate(model, P_TRUE, Q)
+    # strongly skewed errors: exponential, 6 series
+    z = H[None] + SIGMA * (rng.exponential(1.0, (6,) + H.shape) ** 3)
+    data = Measurements(Q, z, SIGMA, sensors=model.sensors)
+    with pytest.raises(NormalityError, match="line 05.*Shapiro-Wilk") as exc:
+        detect(model, data, press_scenarios(), p0=[0.5, 1.5])
+    assert not exc.value.check.passed
+    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5], normality="override")
+    assert res.normality[0][1].overridden
+    assert "overridden" in res.summary() and "override" in res.summary()
+
+
+def test_repeatability_sigma_is_std_of_differences_over_sqrt2(model):
+    data = campaign(model, 7, n_M=6)
+    chk = normality_check(data)
+    assert chk.pairs == ((0, 1), (2, 3), (4, 5))
+    for k in range(2):
+        d = np.concatenate([data.z[b, :, k] - data.z[a, :, k] for a, b in chk.pairs])
+        assert chk.sigma_rep[k] == pytest.approx(np.std(d, ddof=1) / np.sqrt(2), rel=1e-12)
+        # 87 differences: the relative standard error of a sample sd is 1/sqrt(2 * 86) = 7.6 %;
+        # the band 25 % is 3.3 standard errors
+        assert chk.sigma_rep[k] == pytest.approx(SIGMA[k], rel=0.25)
+    one = Measurements(Q, data.z[:1], SIGMA)
+    assert not normality_check(one).passed
+
+
+def _t(name, a):
+    n = np.full(2, np.nan)
+    return SplitTest("m", name, "", "", True, "", "", n, n, np.eye(2), np.eye(2), 1.0, 1.0, a, a)
+
+
+def test_bonferroni_and_holm():
+    tests = [_t("a", 0.001), _t("b", 0.015), _t("c", 0.3), _t("d", 0.5)]
+    b = decide(tests, 0.05, "two_sample", "bonferroni")
+    h = decide(tests, 0.05, "two_sample", "holm")
+    assert b.flagged == ("a",) and h.flagged == ("a", "b")       # 0.015 < 0.05/3 but >= 0.05/4
+    assert b.decision == h.decision == "reject" and b.threshold == pytest.approx(0.0125)
+    ok = [_t("a", 0.0126), _t("b", 0.9)]
+    assert decide(ok, 0.05).decision == "reject"                 # 0.0126 < 0.025
+    assert decide([_t("a", 0.0126)] * 4, 0.05).decision == "accept"
+    with pytest.raises(ValueError, match="tol"):
+        decide(tests, 1.0)
+    with pytest.raises(ValueError, match="correction"):
+        decide(tests, 0.05, correction="x")
+    assert DetectSettings().statistic == "two_sample"
+
+
+def test_design_from_the_oed_front_door():
+    pytest.importorskip("oed.design", reason="oed.design (issue 4) not available")
+    X3 = np.array([[1.0, 0.3], [0.2, 1.0], [1.0, 1.02]])     # sensor 3 nearly repeats a combination
+    m3 = linear_model(X3)
+    rng = np.random.default_rng(8)
+    H = simulate(m3, P_TRUE, Q)
+    sig = np.array([0.01, 0.02, 0.01])
+    data = Measurements(Q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig, sensors=m3.sensors)
+    res = detect(m3, data, press_scenarios(), p0=[0.5, 1.5], design="E")
+    used = res.design[0][1]
+    assert len(used) == 2 and "E-optimal" in res.design[0][2]
+    assert res.verdicts[m3.name] == "accept"
