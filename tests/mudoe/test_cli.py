@@ -9,8 +9,6 @@ import pytest
 
 from mudoe.cli import main
 
-from .conftest import config_text
-
 REPO = Path(__file__).resolve().parents[2]
 
 
