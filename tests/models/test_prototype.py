@@ -151,3 +151,17 @@ def test_repeatability_table_rejects_bad_pairs():
         repeatability_table(np.zeros((2, 5, 1)), pairs=((1, 0), (3, 2)))
     with pytest.raises(PrototypeError, match="z"):
         repeatability_table(np.zeros((2, 5)))
+
+
+def test_force_displacement_figure_shows_six_series_and_hysteresis(shipped):
+    from reports.press_figures import plot_campaign
+    fig = plot_campaign(sensor="D_y", campaign=shipped)
+    ax = fig.axes[0]
+    lines = ax.get_lines()
+    assert len(lines) == 6
+    for ln in lines:
+        x, y = ln.get_data()
+        assert np.allclose(x, shipped.q_set)
+        assert y[21] - y[7] > 50.0                   # um: unloading above loading at 800 N
+    with pytest.raises(ValueError, match="sensor"):
+        plot_campaign(sensor="X_y", campaign=shipped)
