@@ -354,21 +354,25 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
     return results
 
 
+def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> tuple:
+    """The sensors of the tests: the OED design, all sensors, or the names given ([detect] sensors)."""
+    d = study.cfg.detect
+    if d.sensors == "oed":
+        if not results.design_sensors:
+            run_oed(study, results, progress)
+    elif d.sensors == "all":
+        results.design_sensors, results.design_how = tuple(study.sensors), "all sensors"
+    else:
+        results.design_sensors, results.design_how = tuple(d.sensors), "sensors given in [detect] sensors"
+    return results.design_sensors
+
+
 def run_detect(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Algorithm 1 (lines 05-17) on every variant with the chosen sensors."""
     from identification.detect import DetectSettings, detect
     progress = progress or Progress(False)
     d = study.cfg.detect
-    if d.sensors == "oed":
-        if not results.design_sensors:
-            run_oed(study, results, progress)
-        design = list(results.design_sensors)
-    elif d.sensors == "all":
-        design, results.design_how = list(study.sensors), "all sensors"
-        results.design_sensors = tuple(study.sensors)
-    else:
-        design, results.design_how = list(d.sensors), "sensors given in [detect] sensors"
-        results.design_sensors = tuple(d.sensors)
+    design = list(_design_sensors(study, results, progress))
     settings = DetectSettings(tol=d.tol, statistic=d.statistic, correction=d.correction, normality=d.normality,
                               covariance=d.covariance)
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
@@ -394,9 +398,8 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     est = results.estimates[v]
     data = study.data[v]
     sigma = est.sigma
-    w = None
-    if results.design_sensors:
-        w = np.array([1.0 if s in results.design_sensors else 0.0 for s in study.sensors])
+    used = _design_sensors(study, results, progress)
+    w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
     with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications"):
         results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p, inputs=data.inputs,
                                       sigma=sigma, n_M=data.n_M, weights=w, n_rep=vc.n_runs,
