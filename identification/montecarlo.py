@@ -39,7 +39,7 @@ from .splits import Split, SplitError
 from .state import simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
-           "Rate", "clopper_pearson", "ModelCampaign"]
+           "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -488,6 +488,91 @@ class MonteCarloResult:
         if self.errors:
             lines += ["", f"{len(self.errors)} failed split fits, e.g.: {self.errors[0]}"]
         return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- linearised prediction
+@dataclass(frozen=True)
+class LinearizedSize:
+    """Rejection probabilities of Algorithm 1 under the linearised model (no fitting).
+
+    Attributes
+    ----------
+    family_paper, family_two_sample : float   P(some split has alpha_min < TOL / n_tests)
+    split_paper, split_two_sample : ndarray   per split P(alpha_min < TOL / n_tests)
+    eig_ratio : tuple of ndarray              per split eigenvalues of C_cal^{-1} (C_cal + C_val)
+                                              (the paper's statistic is sum_i lambda_i chi2_1)
+    n_draws : int ; mc_se : float             draws and the largest binomial standard error
+    """
+
+    family_paper: float
+    family_two_sample: float
+    split_paper: np.ndarray
+    split_two_sample: np.ndarray
+    eig_ratio: tuple
+    n_draws: int
+    mc_se: float
+
+
+def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split], n_M: int = 2, weights=None,
+                    tol: float = 0.05, n_draws: int = 200_000, seed: int = 0) -> LinearizedSize:
+    r"""Size of both statistics when the model is linear in p near p* (exact for linear models).
+
+    With sensitivities G_jk = dh_k/dp at p*, the Gauss-Newton estimate of a set A is
+    p_A - p* = F_A^{-1} sum_{j in A, k} (n_A w_k / sigma_k^2) G_jk^T epsbar_jk (F_A its
+    information), so p_val - p_cal is a linear map of the noise.  Gaussian noise is drawn
+    directly (``n_draws`` campaigns, no fits) and the statistics are
+
+        d2_paper = D^T F_cal D,   d2_2s = D^T (F_cal^{-1} + F_val^{-1})^{-1} D,   D = p_val - p_cal,
+
+    compared with chi2_{n_p}(1 - TOL / n_tests).  Agreement with :func:`size_study` checks that
+    the linearisation (and the chi^2 law) hold for a nonlinear model.
+    """
+    from .sensitivity import sensitivities
+    p_true = np.asarray(p_true, float).ravel()
+    q = np.atleast_2d(np.asarray(inputs, float))
+    sig = np.broadcast_to(np.asarray(sigma, float), (model.n_S,)).copy()
+    w = np.ones(model.n_S) if weights is None else np.asarray(weights, float)
+    if not (0.0 < float(tol) < 1.0):
+        raise ValueError(f"tol: must lie in (0, 1), got {tol}")
+    splits = tuple(splits)
+    for sp in splits:
+        sp.check(q.shape[0], n_M, model.n_p, int(np.count_nonzero(w > 0)))
+    Y = solve_states(model, p_true, q)
+    G = sensitivities(model, p_true, q, Y).G                      # (n_q, n_S, n_p)
+    n_p = model.n_p
+    thr = stats.chi2.ppf(1 - tol / len(splits), n_p)
+    rng = np.random.default_rng(seed)
+
+    n_q, n_S = q.shape[0], model.n_S
+
+    def est_map(qi, si):
+        """(M, C): p_hat - p* = vec(eps)^T M for eps (n_M, n_q, n_S); C the covariance of p_hat."""
+        ser = list(range(n_M)) if si is None else list(si)
+        qi = list(qi)
+        Gq = G[qi]
+        F = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, w / sig ** 2)
+        F2 = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, w ** 2 / sig ** 2)
+        A = np.linalg.solve(F, np.eye(n_p))
+        M = np.zeros((n_M, n_q, n_S, n_p))
+        M[np.ix_(ser, qi)] = (Gq * (w / sig ** 2)[None, :, None]) @ A
+        return M.reshape(-1, n_p), A @ F2 @ A
+
+    maps = [(est_map(sp.cal_inputs, sp.cal_series), est_map(sp.val_inputs, sp.val_series)) for sp in splits]
+    eig = tuple(np.sort(np.linalg.eigvals(np.linalg.solve(Cc, Cc + Cv)).real) for (_, Cc), (_, Cv) in maps)
+    Dmaps = [(Mv - Mc, np.linalg.inv(Cc), np.linalg.inv(Cc + Cv)) for (Mc, Cc), (Mv, Cv) in maps]
+    rej_p = np.zeros((n_draws, len(splits)), bool)
+    rej_t = np.zeros((n_draws, len(splits)), bool)
+    block = 50000
+    for b0 in range(0, n_draws, block):
+        nb = min(block, n_draws - b0)
+        eps = (rng.standard_normal((nb, n_M, n_q, n_S)) * sig).reshape(nb, -1)
+        for js, (MD, Wp, Wt) in enumerate(Dmaps):
+            D = eps @ MD
+            rej_p[b0:b0 + nb, js] = np.einsum("bp,pr,br->b", D, Wp, D) > thr
+            rej_t[b0:b0 + nb, js] = np.einsum("bp,pr,br->b", D, Wt, D) > thr
+    fp, ft = float(rej_p.any(axis=1).mean()), float(rej_t.any(axis=1).mean())
+    se = math.sqrt(max(fp * (1 - fp), ft * (1 - ft), 1e-12) / n_draws)
+    return LinearizedSize(fp, ft, rej_p.mean(axis=0), rej_t.mean(axis=0), eig, int(n_draws), se)
 
 
 # ---------------------------------------------------------------------------- drivers

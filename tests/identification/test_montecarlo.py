@@ -1,0 +1,117 @@
+"""Monte Carlo validation of Algorithm 1: size of both statistics, coverage, determinism across backends.
+
+Model: the linear two-sensor model h = q X p (exact Wald statistics, so the linearised
+prediction of :func:`linearized_size` is exact up to its own 200 000-draw Monte Carlo error,
+< 0.1 %).  The full Monte Carlo (fits by :func:`identify`) uses N = 200 replications of the
+interleaved loading+unloading split of a 29-load campaign (13 vs 14 loads, so C_cal != C_val); a rejection rate r then has binomial standard error
+sqrt(r (1 - r) / N) (1.5 % at r = 5 %, 2.9 % at r = 22 %).  The bands below are 3.5 such
+standard errors (a fixed seed keeps the test deterministic).
+"""
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from identification.detect import DetectSettings
+from identification.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
+                                       run_monte_carlo, size_study, validate)
+from identification.splits import press_scenarios
+from models.library import linear_model
+
+Q = np.r_[np.linspace(0.0, 1.6, 15), np.linspace(1.6, 0.0, 15)[1:]][:, None]
+X = np.array([[1.0, 0.3], [0.2, 1.0]])
+P_TRUE = np.array([1.0, 2.0])
+SIGMA = np.array([0.01, 0.02])
+N_REP = 200
+
+
+@pytest.fixture(scope="module")
+def model():
+    return linear_model(X)
+
+
+def test_clopper_pearson_matches_scipy():
+    for k, n in ((0, 10), (3, 10), (10, 10), (47, 2000)):
+        r = clopper_pearson(k, n)
+        ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
+        assert r.lo == pytest.approx(ci.low, abs=1e-12) and r.hi == pytest.approx(ci.high, abs=1e-12)
+    assert clopper_pearson(0, 10).hi == pytest.approx(1 - 0.025 ** 0.1)
+    with pytest.raises(ValueError, match="k, n"):
+        clopper_pearson(5, 3)
+
+
+def test_linearized_size_is_exact_for_equal_information(model):
+    # calibration and validation at the same loads (loading vs unloading without the peak is
+    # the same set of loads mirrored): C_cal = C_val, so d2_paper = 2 chi2_2 and
+    # P(2 chi2_2 > chi2_2(1 - a)) = exp(-chi2_2(1 - a) / 4)
+    from identification.splits import Split
+    sp = Split("mirror", range(1, 14), range(15, 28))
+    r = linearized_size(model, P_TRUE, Q, SIGMA, [sp], tol=0.05, n_draws=200_000)
+    thr = stats.chi2.ppf(0.95, 2)
+    assert np.allclose(r.eig_ratio[0], 2.0)
+    assert r.split_paper[0] == pytest.approx(math.exp(-thr / 4), abs=4 * r.mc_se)   # 22.4 %
+    assert r.split_two_sample[0] == pytest.approx(0.05, abs=4 * r.mc_se)
+
+
+def test_size_of_both_statistics_and_coverage(model):
+    splits = press_scenarios()[3:]            # loading+unloading interleaved
+    settings = MonteCarloSettings(n_rep=N_REP, seed=7, workers=1, progress=False)
+    res = size_study(model, P_TRUE, Q, SIGMA, splits, p0=[0.5, 1.5], settings=settings)
+    pred = linearized_size(model, P_TRUE, Q, SIGMA, splits, tol=0.05, n_draws=200_000)
+    assert res.n_rep == N_REP and not res.errors
+    for st, p in (("paper", pred.family_paper), ("two_sample", pred.family_two_sample)):
+        r = res.rejection_rate(statistic=st)
+        se = math.sqrt(p * (1 - p) / N_REP)
+        assert abs(r.rate - p) <= 3.5 * se + 4 * pred.mc_se, (st, r, p)
+    # the key finding: the paper's statistic is inflated far above TOL, the two-sample one is not
+    assert pred.family_paper > 0.2 and abs(pred.family_two_sample - 0.05) < 0.01
+    assert res.rejection_rate(statistic="paper").lo > 0.05
+    # every alpha_min of the two-sample statistic is Uniform(0, 1) for a linear model
+    a = res.alpha_two_sample[:, 0, 0]
+    assert stats.kstest(a, "uniform").pvalue > 1e-3
+    # 95 % ellipsoids: coverage of the calibration fits of one split (binomial, N = 200)
+    cov = res.coverage(split=0, which="cal")
+    assert abs(cov.rate - 0.95) <= 3.5 * math.sqrt(0.95 * 0.05 / N_REP), cov
+    text = res.table()
+    assert "family-wise rejection rate" in text and "Coverage" in text
+
+
+def test_same_seeds_same_numbers_serial_processes_and_dask(model):
+    splits = press_scenarios()[2:3]
+    common = dict(n_rep=6, seed=11, progress=False, chunk_size=2)
+    serial = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(workers=1, **common))
+    local = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(workers=2, **common))
+    assert "2 workers" in local.backend
+    np.testing.assert_array_equal(serial.alpha_two_sample, local.alpha_two_sample)
+    np.testing.assert_array_equal(serial.alpha_paper, local.alpha_paper)
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+            distributed.Client(cl) as client:
+        dk = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(scheduler=client, **common))
+    assert "dask" in dk.backend
+    np.testing.assert_array_equal(serial.alpha_two_sample, dk.alpha_two_sample)
+    np.testing.assert_array_equal(serial.covered, dk.covered)
+
+
+def test_power_against_a_wrong_model_and_errors(model):
+    # data with a hysteresis offset on the unloading branch (2 sigma on sensor 1)
+    class Hysteresis(ModelCampaign):
+        pass
+
+    gen = ModelCampaign(model, P_TRUE, Q, SIGMA, n_M=2)
+    gen.H = gen.H.copy()
+    gen.H[15:, 0] += 0.02
+    res = run_monte_carlo(model, gen, press_scenarios()[2:3], [0.5, 1.5], kind="power",
+                          settings=MonteCarloSettings(n_rep=20, seed=3, workers=1, progress=False))
+    assert res.rejection_rate().rate >= 0.9
+    with pytest.raises(ValueError, match="n_rep"):
+        MonteCarloSettings(n_rep=0)
+    with pytest.raises(TypeError, match="generator"):
+        run_monte_carlo(model, 3, press_scenarios(), [1, 2])
+    with pytest.raises(Exception, match="p_true"):
+        validate(model, press_scenarios(), inputs=Q, sigma=SIGMA)
+    with pytest.raises(Exception, match="p_true"):
+        ModelCampaign(model, [1.0], Q, SIGMA)
+    with pytest.raises(ValueError, match="tol"):
+        DetectSettings(tol=0.0)
