@@ -47,9 +47,12 @@ class ModelConfig:
     Attributes
     ----------
     name : str
-        Model family; ``"press"`` (the press linkage of :mod:`models.press`).
+        Model family: ``"press"`` (the press linkage of :mod:`models.press`), or your own
+        factory ``"package.module:function"`` with ``function(variant) -> models.Model``
+        (README "Add your own model").
     variants : tuple of str
-        Friction variants: ``"M1"`` (none), ``"M2"`` (Coulomb), ``"M3"`` (hysteresis network).
+        Press: friction variants ``"M1"`` (none), ``"M2"`` (Coulomb), ``"M3"`` (hysteresis
+        network).  Own factory: any names, passed to the factory (default ``("default",)``).
     extra_sensors : bool
         Expose every joint displacement as a candidate sensor (not only D_y, F_x, B0_y).
     friction_file : str
@@ -209,11 +212,14 @@ class OEDConfig:
 
 @dataclass(frozen=True)
 class ValidateConfig:
-    """Monte Carlo check of covariance and test size (:mod:`identification.montecarlo`)."""
+    """Monte Carlo check of covariance and test size (:mod:`identification.montecarlo`).
+
+    ``variant``: the model variant simulated and tested ("" = the first listed).
+    """
 
     n_runs: int = 200
     seed: int = 1
-    variant: str = "M1"
+    variant: str = ""
 
 
 @dataclass(frozen=True)
@@ -372,16 +378,19 @@ def _parse_model(ctx, t):
     kw = {}
     if "name" in t:
         kw["name"] = _str(ctx, "model", "name", t["name"])
-        if kw["name"] not in MODEL_VARIANTS:
+        if kw["name"] not in MODEL_VARIANTS and not re.fullmatch(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*", kw["name"]):
             raise ctx.error("model", "name", f"unknown model {kw['name']!r}; known models: "
-                            f"{', '.join(MODEL_VARIANTS)}")
+                            f"{', '.join(MODEL_VARIANTS)}, or your own factory as \"package.module:function\"")
     name = kw.get("name", ModelConfig.name)
+    custom = name not in MODEL_VARIANTS
+    if custom and "variants" not in t:
+        kw["variants"] = ("default",)
     if "variants" in t:
         v = _str_list(ctx, "model", "variants", t["variants"])
         if not v:
             raise ctx.error("model", "variants", "list at least one variant")
         for x in v:
-            if x not in MODEL_VARIANTS[name]:
+            if not custom and x not in MODEL_VARIANTS[name]:
                 raise ctx.error("model", "variants", f"unknown variant {x!r} of model {name!r}; known: "
                                 f"{', '.join(MODEL_VARIANTS[name])}")
         if len(set(v)) != len(v):
@@ -652,7 +661,7 @@ def _cross_checks(ctx, cfg: StudyConfig) -> None:
     if o.variant and o.variant not in cfg.model.variants:
         raise ctx.error("oed", "variant", f"variant {o.variant!r} is not among [model] variants "
                         f"{list(cfg.model.variants)}")
-    if cfg.validate.variant not in cfg.model.variants:
+    if cfg.validate.variant and cfg.validate.variant not in cfg.model.variants:
         raise ctx.error("validate", "variant", f"variant {cfg.validate.variant!r} is not among [model] variants "
                         f"{list(cfg.model.variants)}")
     if isinstance(cfg.detect.sensors, tuple):

@@ -134,8 +134,8 @@ def package_versions() -> dict:
 
 
 # ---------------------------------------------------------------------------- models
-def _friction_variant(variant: str, campaign: Campaign, cfg: StudyConfig):
-    """(friction object, input matrix) of M2 / M3 from :mod:`models.friction` (stored, trained constants)."""
+def _friction_variant(variant: str, cfg: StudyConfig):
+    """(friction object, inputs_fn) of M2 / M3 from :mod:`models.friction` (stored, trained constants)."""
     try:
         import models.friction as fr
     except ImportError as exc:
@@ -147,26 +147,45 @@ def _friction_variant(variant: str, campaign: Campaign, cfg: StudyConfig):
     except fr.FrictionError as exc:
         raise ConfigError(f"{cfg.path}: [model] friction_file: {exc}") from None
     fric = consts["coulomb"] if variant == "M2" else consts["network"]
-    return fric, fr.model_inputs(variant, campaign.q_set)
+    return fric, (lambda q_set: fr.model_inputs(variant, q_set))
 
 
-def _build_models(cfg: StudyConfig, campaign: Campaign | None = None):
-    """{variant: (Model, input matrix or None)}; the input matrix needs the campaign."""
-    from models.press import press_model
-    if cfg.model.name != "press":
-        raise ConfigError(f"{cfg.path}: [model] name: unknown model {cfg.model.name!r}; known models: press")
+def _build_models(cfg: StudyConfig) -> dict:
+    """{variant: (Model, inputs_fn)} with inputs_fn(q_set) -> input matrix (n_q, d_q)."""
     out = {}
+    if cfg.model.name == "press":
+        from models.press import press_model
+        for v in cfg.model.variants:
+            if v == "M1":
+                m = press_model(extra_sensors=cfg.model.extra_sensors)
+                fn = None
+            else:
+                fric, fn = _friction_variant(v, cfg)
+                m = press_model(extra_sensors=cfg.model.extra_sensors, friction=fric)
+            out[v] = (_apply_parameters(cfg, m), fn)
+        return out
+    factory = _factory(cfg)
     for v in cfg.model.variants:
-        if v == "M1":
-            m = press_model(extra_sensors=cfg.model.extra_sensors)
-            q = None if campaign is None else campaign.q_set[:, None]
-        else:
-            if campaign is None:
-                raise MissingPieceError("internal: friction variants need the campaign")
-            fric, q = _friction_variant(v, campaign, cfg)
-            m = press_model(extra_sensors=cfg.model.extra_sensors, friction=fric)
-        out[v] = (_apply_parameters(cfg, m), q)
+        m = factory(v)
+        if not isinstance(m, Model):
+            raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
+                              f"{type(m).__name__}, expected a models.Model")
+        out[v] = (_apply_parameters(cfg, m), getattr(m, "mudoe_inputs", None))
     return out
+
+
+def _factory(cfg: StudyConfig) -> Callable:
+    import importlib
+    mod_name, _, fn_name = cfg.model.name.partition(":")
+    try:
+        mod = importlib.import_module(mod_name)
+    except ImportError as exc:
+        raise ConfigError(f"{cfg.path}: [model] name: cannot import {mod_name!r} ({exc}); is its folder on "
+                          "PYTHONPATH?") from None
+    fn = getattr(mod, fn_name, None)
+    if not callable(fn):
+        raise ConfigError(f"{cfg.path}: [model] name: {mod_name} has no function {fn_name!r}")
+    return fn
 
 
 def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
@@ -271,9 +290,9 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         A model variant needs a package that is not available yet.
     """
     progress = progress or Progress(False)
-    from models.press import PRESS_SENSORS, press_model
-    sensors = tuple(press_model(extra_sensors=cfg.model.extra_sensors).sensors) if cfg.model.extra_sensors \
-        else PRESS_SENSORS
+    with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
+        built = _build_models(cfg)
+    sensors = tuple(next(iter(built.values()))[0].sensors)
     with progress.step(f"load data ({cfg.data.source})", announce=cfg.data.source == "prototype"):
         campaign = load_campaign(cfg, sensors)
     n_M = campaign.n_M
@@ -282,14 +301,12 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         if bad:
             raise ConfigError(f"{cfg.path}: [data] series {bad} out of range: the data hold {n_M} series "
                               "(0-based indices)")
-    m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, input_names=("q_P",),
-                         series=campaign.series)
+    m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
     norm = normality_check(m_all)
     sigma, sig_rows = _sigma(cfg, sensors, norm)
-    with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
-        built = _build_models(cfg, campaign)
     models, data, data_all = {}, {}, {}
-    for v, (m, q) in built.items():
+    for v, (m, fn) in built.items():
+        q = campaign.q_set[:, None] if fn is None else np.asarray(fn(campaign.q_set), float)
         if tuple(m.sensors) != tuple(sensors):
             raise ConfigError(f"{cfg.path}: model {v} has sensors {list(m.sensors)} but the data {list(sensors)}")
         full = Measurements(q, campaign.z, sigma, sensors=sensors, input_names=m.inputs, series=campaign.series)
@@ -390,7 +407,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         raise MissingPieceError(f"validate: identification.montecarlo is not available ({exc})") from None
     progress = progress or Progress(False)
     vc = study.cfg.validate
-    v = vc.variant
+    v = vc.variant or next(iter(study.models))
     if v not in results.estimates:
         run_identify(study, results, progress)
     if v not in results.estimates:

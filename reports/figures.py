@@ -25,6 +25,15 @@ def _ax(ax, figsize=(6.0, 4.0)):
     return ax
 
 
+def _force_label(study) -> str:
+    """x-axis label from the first input of the study's model (name and unit, N by default)."""
+    m = next(iter(study.models.values()))
+    name = m.inputs[0]
+    unit = (m.input_units[0] if m.input_units else "") or "N"
+    pretty = "process force $q_P$" if name == "q_P" else f"input {name}"
+    return f"{pretty} ({unit})"
+
+
 def _style(v, k=0):
     cyc = ["#9467bd", "#8c564b", "#e377c2", "#17becf"]
     return VARIANT_STYLE.get(v, dict(color=cyc[k % len(cyc)], ls=":"))
@@ -63,7 +72,7 @@ def measurement_loops(study, estimates: dict, sensor: str, ax=None, all_series: 
     for n, (v, e) in enumerate(estimates.items()):
         st = _style(v, n)
         ax.plot(c.q_set, _UM * e.fitted[:, k], lw=1.6, label=f"{v} at its estimate", zorder=3, **st)
-    ax.set_xlabel("process force $q_P$ (N)")
+    ax.set_xlabel(_force_label(study))
     ax.set_ylabel(f"{sensor} displacement (um)")
     ax.set_title(f"Sensor {sensor}", fontsize=10)
     ax.legend(fontsize=7, loc="best")
@@ -140,7 +149,7 @@ def residuals_plot(study, est, variant: str, ax=None):
     ax.axhline(0, color="0.3", lw=0.6)
     for y in (-2, 2):
         ax.axhline(y, color="0.5", lw=0.6, ls="--")
-    ax.set_xlabel("process force $q_P$ (N)")
+    ax.set_xlabel(_force_label(study))
     ax.set_ylabel("standardized residual (z - h)/sigma (-)")
     ax.set_title(f"{variant} (reduced chi2 {est.reduced_chi2:.3g})", fontsize=10)
     ax.legend(fontsize=7, loc="best")
