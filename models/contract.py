@@ -224,6 +224,21 @@ class Model:
     def upper(self) -> np.ndarray:
         return np.array([p.upper for p in self.params])
 
+    def with_bounds(self, bounds: dict) -> "Model":
+        """A copy of this model with other parameter bounds, ``{name: (lower, upper)}``.
+
+        The symbolic functions are shared; only the parameter metadata changes.
+        """
+        import copy
+        unknown = [n for n in bounds if n not in self.param_names]
+        if unknown:
+            raise ModelError(f"bounds: unknown parameter(s) {', '.join(unknown)}; the model has "
+                             f"{', '.join(self.param_names)}")
+        new = copy.copy(self)
+        new.params = tuple(Parameter(p.name, *bounds[p.name], scale=p.scale, unit=p.unit) if p.name in bounds
+                           else p for p in self.params)
+        return new
+
     def sensor_index(self, names: Iterable[str]) -> list[int]:
         """Indices of sensors by name; unknown names raise listing the valid ones."""
         idx = []

@@ -20,7 +20,7 @@ import numpy as np
 from identification import Measurements, identify, information_contributions
 from identification.detect import NormalityCheck, normality_check
 from identification.splits import PRESS_SCENARIO_NAMES, Split, press_scenarios, random_splits
-from models.contract import Model, Parameter
+from models.contract import Model, ModelError
 
 from .config import ConfigError, StudyConfig
 from .data_io import Campaign, DataFileError, load_campaign
@@ -189,7 +189,7 @@ def _factory(cfg: StudyConfig) -> Callable:
 
 
 def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
-    """Replace the model's bounds by the config's (the model is this study's own instance)."""
+    """A copy of the model with the config's parameter bounds."""
     if not cfg.parameters:
         return m
     names = [p.name for p in cfg.parameters]
@@ -200,12 +200,10 @@ def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
     missing = [n for n in m.param_names if n not in names]
     if missing:
         raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
-    new = []
-    for par in m.params:
-        pc = cfg.parameters[names.index(par.name)]
-        new.append(Parameter(par.name, pc.lower, pc.upper, par.scale, par.unit))
-    m.params = tuple(new)
-    return m
+    try:
+        return m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
+    except ModelError as exc:
+        raise ConfigError(f"{cfg.path}: [[parameters]] {exc}") from None
 
 
 def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
