@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -58,14 +59,14 @@ def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progres
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench detect")
-    ap.add_argument("--study", choices=("size", "timing", "power"), default="size")
+    ap.add_argument("--study", choices=("size", "timing", "power", "press"), default="size")
     ap.add_argument("--n-rep", type=int, default=2000)
     ap.add_argument("--serial-rep", type=int, default=None, help="replications of the serial run (timing)")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--seed", type=int, default=20261121)
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
     ap.add_argument("--no-progress", action="store_true")
-    args = ap.parse_args(argv or [])
+    args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}", flush=True)
     if args.study == "size":
         res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
@@ -87,14 +88,80 @@ def main(argv=None):
         print(f"serial:   {ser.n_rep} replications in {ser.wall_time:.1f} s ({per_ser * 1e3:.0f} ms per replication)")
         print(f"speed-up (serial / parallel time per replication): {per_ser / per_par:.2f}; serial estimate for "
               f"{par.n_rep}: {per_ser * par.n_rep:.0f} s; first {n_ser} replications identical: {same}")
+    elif args.study == "power":
+        res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        print(res.description)
+        print(res.table())
+        print(f"wall {res.wall_time:.1f} s on {res.backend}")
     else:
-        try:
-            from models import prototype  # noqa: F401
-        except ImportError as exc:
-            print(f"power study: models.prototype not importable ({exc})")
-            return
-        print("power study: see identification.montecarlo.power_study; needs a prototype generator "
-              "rng -> Measurements (not wired here yet)")
+        run_press()
+
+
+class PrototypeCampaign:
+    """Picklable generator rng -> Measurements: a fresh virtual-prototype campaign of n_series series.
+
+    Each replication draws the campaign seed from its own stream; the prototype (CasADi
+    functions) is built once per worker and not pickled.  sigma: the paper's fixed values (mm).
+    """
+
+    def __init__(self, n_series: int = 2, sigma_mm=SIGMA_PAPER_MM):
+        self.n_series = int(n_series)
+        self.sigma = np.asarray(sigma_mm, float)
+        self._proto = None
+
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["_proto"] = None
+        return d
+
+    def __call__(self, rng):
+        from models.prototype import PrototypeConfig, VirtualPrototype, generate_campaign
+        if self._proto is None:
+            self._proto = VirtualPrototype(PrototypeConfig())
+        c = generate_campaign(seed=int(rng.integers(2 ** 32)), n_series=self.n_series, prototype=self._proto)
+        return c.measurements(sigma=self.sigma)
+
+
+def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
+    from identification.montecarlo import power_study
+    models = {"M1": press_model()}
+    settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
+                                  detect=DetectSettings(tol=0.05, normality="override"))
+    return power_study(models, PrototypeCampaign(), press_scenarios(), P0, WEIGHTS_110, settings,
+                       description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
+                                   "after a run-in cycle, seed per replication), sigma = the paper's fixed values")
+
+
+def run_press():
+    """Algorithm 1 on the press campaign: the two held-out series, M1 (and M2/M3 when available)."""
+    from identification.detect import detect, normality_check
+    from models import prototype as pt
+    files = sorted(pt.CAMPAIGN_DIR.glob("*")) if pt.CAMPAIGN_DIR.exists() else []
+    if files:
+        camp = pt.read_campaign()
+        origin = f"read from {pt.CAMPAIGN_DIR}"
+    else:
+        camp = pt.generate_campaign(pt.CAMPAIGN_SEED)
+        origin = (f"{pt.CAMPAIGN_DIR} not shipped yet: regenerated in memory by generate_campaign(seed="
+                  f"{pt.CAMPAIGN_SEED}), the campaign ship_campaign() would write")
+    print(f"campaign: {origin}; {camp.n_M} series")
+    full = camp.measurements(sigma="composed")
+    print("normality gate on all series (pairs 2-1, 4-3, 6-5), as the paper's table 'Analysis of the measurement "
+          "data':")
+    print(normality_check(full).table())
+    try:
+        from models.friction import candidate_models, model_inputs
+        models = candidate_models()
+        inputs = {n: model_inputs(n, camp.q_set) for n in models}
+    except ImportError as exc:
+        print(f"models.friction not available ({exc}): M2 and M3 not tested")
+        models = {"M1": press_model()}
+        inputs = {"M1": camp.q_set[:, None]}
+    datas = {n: camp.measurements(series=pt.TEST_SERIES, inputs=inputs[n], sigma="composed") for n in models}
+    d1 = next(iter(datas.values()))
+    print(f"held-out series {[i + 1 for i in pt.TEST_SERIES]}, composed sigma (mm): {np.round(d1.sigma, 6).tolist()}")
+    res = detect(models, datas, press_scenarios(), P0, design=["D_y", "F_x"], normality="check")
+    print(res.summary())
 
 
 if __name__ == "__main__":
