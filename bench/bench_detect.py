@@ -92,6 +92,9 @@ def main(argv=None):
         res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
         print(res.description)
         print(res.table())
+        for m in res.models:
+            for st in ("paper", "two_sample"):
+                print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
         print(f"wall {res.wall_time:.1f} s on {res.backend}")
     else:
         run_press()
@@ -104,8 +107,9 @@ class PrototypeCampaign:
     functions) is built once per worker and not pickled.  sigma: the paper's fixed values (mm).
     """
 
-    def __init__(self, n_series: int = 2, sigma_mm=SIGMA_PAPER_MM):
+    def __init__(self, n_series: int = 2, sigma_mm=SIGMA_PAPER_MM, names=("M1",)):
         self.n_series = int(n_series)
+        self.names = tuple(names)
         self.sigma = np.asarray(sigma_mm, float)
         self._proto = None
 
@@ -119,15 +123,22 @@ class PrototypeCampaign:
         if self._proto is None:
             self._proto = VirtualPrototype(PrototypeConfig())
         c = generate_campaign(seed=int(rng.integers(2 ** 32)), n_series=self.n_series, prototype=self._proto)
-        return c.measurements(sigma=self.sigma)
+        if self.names == ("M1",):
+            return c.measurements(sigma=self.sigma)
+        from models.friction import model_inputs
+        return {n: c.measurements(inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
 
 
 def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
     from identification.montecarlo import power_study
-    models = {"M1": press_model()}
+    try:
+        from models.friction import candidate_models
+        models = candidate_models()
+    except ImportError:
+        models = {"M1": press_model()}
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
                                   detect=DetectSettings(tol=0.05, normality="override"))
-    return power_study(models, PrototypeCampaign(), press_scenarios(), P0, WEIGHTS_110, settings,
+    return power_study(models, PrototypeCampaign(names=tuple(models)), press_scenarios(), P0, WEIGHTS_110, settings,
                        description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
                                    "after a run-in cycle, seed per replication), sigma = the paper's fixed values")
 
