@@ -657,6 +657,9 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
         w, how = _design_weights(m, data, p0s[name], design, settings, notes)
         if w is None and weights is not None:
             w, how = data._weights(weights), "sensor weights given"
+        n_sel = int(np.count_nonzero(data._weights(w) > 0))
+        for sp in splits:
+            sp.check(data.n_q, data.n_M, m.n_p, n_sel)
         used = tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0)
         designs.append((name, used, how))
         # normality (line 05): once per distinct z and sensor selection

@@ -116,6 +116,9 @@ def test_tol_and_option_errors(model):
         detect(model, data, [], p0=[1, 2])
     with pytest.raises(Exception, match="val_inputs index 40"):
         detect(model, data, [Split("far", [1], [40])], p0=[1, 2])
+    one = Measurements(Q, data.z[:1], SIGMA)
+    with pytest.raises(Exception, match="'thin'.*calibration set has 1 points x 1 sensor"):
+        detect(model, one, [Split("thin", [3], [4, 5])], p0=[1, 2], weights=[1, 0], normality="override")
 
 
 def test_normality_gate_raises_or_records_the_override(model):
