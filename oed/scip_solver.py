@@ -159,7 +159,10 @@ def _solve(SolverFactory, mdl, time_left, options):
         raise ScipUnavailableError("Pyomo's scip_direct interface is not available (is PySCIPOpt installed?)")
     opts = {"limits/time": max(float(time_left), 1.0), "display/verblevel": 0}
     opts.update(dict(options))
-    res = opt.solve(mdl, load_solutions=False, options=opts)
+    try:
+        res = opt.solve(mdl, load_solutions=False, options=opts)
+    except Exception as exc:  # PySCIPOpt raises plain Exception on bad input data; never silent
+        return "error", f"SCIP raised {type(exc).__name__}: {exc}", False, None
     tc = str(res.solver.termination_condition.value if hasattr(res.solver.termination_condition, "value")
              else res.solver.termination_condition)
     status, msg = STATUS_MESSAGES.get(tc, ("error", f"SCIP returned unmapped termination condition {tc!r}"))
@@ -236,7 +239,8 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
         mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
 
     def add_cut(x):
-        """Add a tangent/eigen cut at (possibly fractional) x with regular M(x)."""
+        """Add a tangent/eigen cut at (possibly fractional) x with regular M(x); False if the
+        cut is numerically unusable (non-finite or > 1e15 coefficients) and was not added."""
         M = (x @ Fflat).reshape(p, p)
         if crit is Criterion.E:
             lam, U = np.linalg.eigh(M)
@@ -244,8 +248,10 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
                 if lam[j] > lam[0] + 1e-9 * max(abs(lam[-1]), 1e-300) and j > 0:
                     break
                 q = np.einsum("i,kij,j->k", U[:, j], F, U[:, j])
+                if not np.all(np.isfinite(q)) or np.max(np.abs(q)) > 1e15:
+                    return False
                 mdl.cuts.add(mdl.s <= sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
-            return
+            return True
         Minv = np.linalg.inv(M)
         Minv = 0.5 * (Minv + Minv.T)
         if crit is Criterion.D:
@@ -256,7 +262,10 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
             f = float(np.trace(Minv))
             q = Fflat @ (Minv @ Minv).ravel()
             c0 = 2.0 * f
+        if not (np.all(np.isfinite(q)) and np.isfinite(c0)) or max(np.max(np.abs(q)), abs(c0)) > 1e15:
+            return False
         mdl.cuts.add(mdl.t >= c0 - sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
+        return True
 
     # initial cut at the uniform relaxation point over available sensors
     avail = np.ones(n)
@@ -270,7 +279,7 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
                           0, time.perf_counter() - t0, "cuts")
     add_cut(x0)
     best_w, best_v = None, np.inf
-    seen = set()
+    with_cut = set()
     lb = -np.inf
     status, msg = "error", "no SCIP round completed"
     rounds = 0
@@ -293,26 +302,27 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
             break
         w = _read_w(mdl, n)
         obj = float(pyo.value(mdl.obj))
-        lb_round = (1.0 / obj if obj > 0 else np.inf) if crit is Criterion.E else obj
-        lb = max(lb, lb_round) if np.isfinite(lb_round) else lb
+        master_lb = (1.0 / obj if obj > 0 else np.inf) if crit is Criterion.E else obj
         v, sing = _exact(F, None, w, crit, Kind.GAUSS_NEWTON, cs)
         key = w.tobytes()
         if sing or not np.isfinite(v):
             mdl.cuts.add(sum(mdl.w[k] for k in range(n) if not w[k]) >= 1)
-            seen.add(key)
             continue
         if v < best_v:
             best_w, best_v = w, v
-        if key in seen:
+        # global bound: every design not yet excluded by a no-good has value >= master_lb
+        lb = min(master_lb, best_v)
+        if key in with_cut:
             status, msg = "optimal", ("master repeated a design: incumbent optimal up to SCIP's "
                                       "feasibility tolerance on the cuts")
             break
         if lb >= best_v - _tol(crit, best_v, settings.gap_tol):
             status, msg = "optimal", "master bound meets the incumbent"
-            lb = min(lb, best_v)
             break
-        seen.add(key)
-        add_cut(w.astype(float))
+        if add_cut(w.astype(float)):
+            with_cut.add(key)
+        else:  # numerically unusable cut: exclude exactly this (evaluated) design
+            mdl.cuts.add(sum(1 - mdl.w[k] for k in range(n) if w[k]) + sum(mdl.w[k] for k in range(n) if not w[k]) >= 1)
     else:
         status, msg = "iteration_limit", f"cut loop reached max_rounds = {settings.max_rounds}"
     return ScipResult(best_w, best_v, lb, status, msg, rounds, time.perf_counter() - t0, "cuts")
