@@ -19,10 +19,10 @@ import sys
 import time
 from math import comb
 
-import numpy as np
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # tiny matrices: BLAS threads only add contention
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
 
 
 def _instance(n, p, seed):

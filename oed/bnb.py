@@ -161,10 +161,10 @@ class _Problem:
             return f + self.p - s
         if self.crit is Criterion.A:
             return 2.0 * f - s
-        s = np.asarray(s, dtype=float)
-        with np.errstate(divide="ignore"):
-            out = np.where(s > 0, 1.0 / np.where(s > 0, s, 1.0), np.inf)
-        return out if out.ndim else float(out)
+        if np.ndim(s) == 0:
+            return 1.0 / s if s > 0 else np.inf
+        pos = s > 0
+        return np.where(pos, 1.0 / np.where(pos, s, 1.0), np.inf)
 
 
 def _top_r(qf, r):
