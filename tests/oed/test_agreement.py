@@ -53,6 +53,8 @@ def test_bnb_matches_enumeration_200_instances(block):
         assert b.status == "optimal", (seed, b.status)
         assert np.isfinite(e.value)
         assert b.lower_bound <= b.value
+        # the root relaxation bound is a valid lower bound on the enumerated optimum
+        assert b.root_bound <= e.value + (REL if crit == "D" else REL * abs(e.value)), (seed, b.root_bound, e.value)
         if not close(crit, e.value, b.value):
             mism.append((seed, crit, n, p, m, e.value, b.value))
         # the returned design really has the reported value

@@ -178,3 +178,22 @@ def test_select_sensors_passes_through(monkeypatch):
     monkeypatch.setitem(sys.modules, "identification", fake)
     r = select_sensors("M", "DATA", [1.0, 2.0], criterion="D", n_sensors=3)
     assert calls["args"] == ("M", "DATA", [1.0, 2.0]) and len(r.indices) == 3
+
+
+def test_unfinished_bnb_reports_gap_not_optimality():
+    from oed.bnb import BnBSettings, branch_and_bound
+    from oed.constraints import make_constraints
+    from oed.criteria import criterion_value
+    F = rank_one(12, 60, 6)
+    b = branch_and_bound(F, make_constraints(60, 6, n_sensors=8), "E", settings=BnBSettings(node_limit=1))
+    assert b.status == "node_limit" and b.gap > 0 and b.lower_bound < b.value
+    assert b.value == pytest.approx(criterion_value(F, None, b.w, "E", "gauss_newton"), rel=1e-12)
+
+
+def test_scip_time_limit_is_reported_not_silent():
+    F = rank_one(13, 30, 4)
+    r = select_sensors_from_information(F, criterion="A", n_sensors=8, method="scip", time_limit=1.0,
+                                        settings=__import__("oed").DesignSettings(scip_formulation="naive"))
+    assert r.method == "scip"
+    assert r.proven_optimal or (r.status in ("time_limit", "feasible") and "time limit" in r.message.lower())
+    assert r.gap >= 0 and len(r.indices) == 8
