@@ -174,8 +174,8 @@ def _top_r(qf, r):
 
 
 def greedy_exchange(prob: _Problem, state, m, W0=None):
-    """Greedy forward selection (regularised D-ranking until regular) then best-improvement
-    Fedorov exchange.  ``state``: -1 free, 0 out, 1 in.  Returns (boolean w, value)."""
+    r"""Heuristic for :math:`\min_w \Psi((\sum_k w_kF_k)^{-1})`, :math:`\sum w = m`: greedy forward
+    selection (regularised D-ranking until regular) then best-improvement Fedorov exchange.  ``state``: -1 free, 0 out, 1 in.  Returns (boolean w, value)."""
     n = prob.n
     Fflat = prob.Fflat
     p = prob.p

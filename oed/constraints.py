@@ -95,7 +95,7 @@ def _index_list(name, values, n):
 
 def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None, costs=None,
                      budget=None, include=(), exclude=(), sensor_names=None) -> DesignConstraints:
-    r"""Validate and build :class:`DesignConstraints`.
+    r"""Build :math:`g(w)\le0`: :math:`\sum w\ge n_p`, :math:`\sum w=m` or :math:`\le m_{\max}`, :math:`c^Tw\le B`, fixings.
 
     Ensures :math:`n_S \ge n_p`, :math:`n_p \le m \le n_S`, consistency of forced
     sensors, and that at least one design meets the budget

@@ -105,7 +105,7 @@ DEFAULT_SETTINGS = CriteriaSettings()
 
 
 def validate_information(F, S=None, *, settings: CriteriaSettings = DEFAULT_SETTINGS):
-    r"""Validate the information contributions and return float arrays ``(F, S)``.
+    r"""Check :math:`F_k=F_k^T\succeq0`, :math:`S_k=S_k^T` and return float arrays ``(F, S)``.
 
     Checks :math:`F_k = F_k^T \succeq 0` and :math:`S_k = S_k^T` (tolerances relative to
     :math:`\max_k\|F_k\|`), finiteness and shapes ``(n_S, n_p, n_p)``.
@@ -194,7 +194,7 @@ def _scaled_eigs(M, F_scale, settings):
 
 def batch_criteria(F, S, W, kind="gauss_newton", *, settings: CriteriaSettings = DEFAULT_SETTINGS,
                    validated: bool = False) -> BatchCriteria:
-    r"""Evaluate A, D, E for a batch of designs.
+    r"""Batched :math:`\Psi_A=\mathrm{tr}\,C(w)`, :math:`\Psi_D=\log\det C(w)`, :math:`\Psi_E=\lambda_{\max}(C(w))`.
 
     Computes :math:`C(w)` (second-order, :math:`H^{-1} G H^{-1}` with
     :math:`G=\sum_k w_k^2F_k`, :math:`H=\sum_k w_k(F_k+S_k)`) or :math:`C_{GN}(w)=G^{-1}`
