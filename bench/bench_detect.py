@@ -66,10 +66,12 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=20261121)
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--save", default=None, help="write the per-replication arrays to this .npz file")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}", flush=True)
     if args.study == "size":
         res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        _save(args.save, res)
         print(res.description)
         print(res.table())
         for st in ("paper", "two_sample"):
@@ -78,6 +80,8 @@ def main(argv=None):
         print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication")
     elif args.study == "timing":
         par = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        _save(args.save, par)
+        print(par.table())
         n_ser = args.serial_rep or args.n_rep
         ser = run_size(n_ser, 1, args.seed, None, not args.no_progress)
         same = np.array_equal(par.alpha_two_sample[:n_ser], ser.alpha_two_sample, equal_nan=True)
@@ -90,6 +94,7 @@ def main(argv=None):
               f"{par.n_rep}: {per_ser * par.n_rep:.0f} s; first {n_ser} replications identical: {same}")
     elif args.study == "power":
         res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        _save(args.save, res)
         print(res.description)
         print(res.table())
         for m in res.models:
@@ -98,6 +103,13 @@ def main(argv=None):
         print(f"wall {res.wall_time:.1f} s on {res.backend}")
     else:
         run_press()
+
+
+def _save(path, res):
+    if path:
+        np.savez(path, alpha_paper=res.alpha_paper, alpha_two_sample=res.alpha_two_sample, covered=res.covered,
+                 shapiro=res.shapiro, models=np.array(res.models), splits=np.array([s.name for s in res.splits]))
+        print(f"saved per-replication arrays to {path}")
 
 
 class PrototypeCampaign:
