@@ -134,3 +134,23 @@ def test_scip_naive_and_second_order_match_enumeration_subset():
         assert s2.status == "optimal", s2.message
         assert s2.assumption  # the modelling bound is reported
         assert close(crit, e2.value, s2.value), (seed, crit, e2.value, s2.value)
+
+
+def test_bnb_with_forced_sensors_matches_enumeration():
+    """40 seeded instances with random include/exclude sets (and max_sensors on odd seeds)."""
+    for seed in range(40):
+        F, n, p, m, crit, rng = random_instance(9000 + seed, max_n=14)
+        F, _ = validate_information(F)
+        perm = rng.permutation(n)
+        n_inc = int(rng.integers(0, min(2, m) + 1))
+        n_exc = int(rng.integers(0, max(0, n - m - 1) + 1)) if n - m > 1 else 0
+        inc, exc = tuple(int(k) for k in perm[:n_inc]), tuple(int(k) for k in perm[n_inc:n_inc + min(n_exc, 3)])
+        kw = dict(max_sensors=m) if seed % 2 else dict(n_sensors=m)
+        cons = make_constraints(n, p, include=inc, exclude=exc, **kw)
+        e = enumerate_designs(F, None, cons, crit)
+        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30))
+        if not np.isfinite(e.value):
+            assert b.status == "infeasible" or not np.isfinite(b.value)
+            continue
+        assert b.status == "optimal" and close(crit, e.value, b.value), (seed, crit, e.value, b.value)
+        assert all(b.w[k] for k in inc) and not any(b.w[k] for k in exc)
