@@ -54,6 +54,10 @@ class BnBSettings:
     node_limit : int or None
     e_betas : tuple of float
         Soft-min sharpness continuation for the E relaxation (``t = beta / lambda_min``).
+    early_branch : bool
+        At non-root nodes stop the relaxation (after ``early_branch_min_iters`` iterations)
+        once the criterion at the relaxed point is below incumbent - tol: the relaxation
+        optimum, hence every bound it can give, is then too small to prune.
     """
 
     time_limit: float = 60.0
@@ -62,6 +66,8 @@ class BnBSettings:
     node_iters: int = 40
     node_limit: int | None = None
     e_betas: tuple = (30.0, 300.0, 3000.0)
+    early_branch: bool = True
+    early_branch_min_iters: int = 3
 
 
 @dataclass(frozen=True)
@@ -333,6 +339,11 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                             break
                     # relaxation gap check
                     if np.isfinite(primal) and primal - lb <= 1e-7 * max(abs(primal), 1.0 if crit is Criterion.D else 0.0):
+                        break
+                    # early branching: primal = Psi at a relaxed point >= relaxation optimum >= any bound
+                    # this relaxation can give, so once primal < incumbent - tol it can never prune.
+                    if (prob.settings.early_branch and iters < prob.settings.root_iters
+                            and it >= prob.settings.early_branch_min_iters and primal < thr):
                         break
                     # spectral projected gradient step (minimise phi, gradient -q)
                     y = _proj_capped_simplex(x[free] + alpha * qf, r)
