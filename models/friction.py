@@ -27,14 +27,13 @@ reads it); they are fixed constants of M2/M3, not identified parameters.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import casadi as ca
 import numpy as np
+from .fileio import atomic_write_text
 
 __all__ = ["Coulomb", "PreisachNetwork", "direction_inputs", "memory_inputs", "model_inputs",
            "inverse_forces", "friction_samples", "fit_coulomb", "train_preisach", "retrain",
@@ -453,22 +452,6 @@ def train_preisach(U, f, n_hidden: int = 4, reg: float = 1e-2, sigma_f: float = 
 
 
 # ---------------------------------------------------------------------------- storage
-def _atomic_write(path: Path, text: str):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 TRAINING_DEFAULTS = dict(n_hidden=4, reg=1e-2, sigma_f=20.0, n_starts=8, seed=0)
 
 
@@ -499,7 +482,7 @@ def retrain(campaign=None, path=FRICTION_JSON, write: bool = True, **training) -
                                                                   - s["f"]) ** 2)))),
     )
     if write:
-        _atomic_write(Path(path), json.dumps(out, indent=1) + "\n")
+        atomic_write_text(Path(path), json.dumps(out, indent=1) + "\n")
     return out
 
 

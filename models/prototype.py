@@ -37,8 +37,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import tempfile
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
@@ -49,6 +47,7 @@ from scipy import stats
 
 from .mechanism import MechanismError, RigidBody, Support, build_model
 from .press import PRESS_SENSORS, Q_PAPER, press_mechanism
+from .fileio import atomic_write_text
 
 __all__ = ["PrototypeConfig", "VirtualPrototype", "Campaign", "generate_campaign", "write_campaign",
            "read_campaign", "ship_campaign", "repeatability_table", "composed_sigma", "CAMPAIGN_DIR",
@@ -463,22 +462,6 @@ def composed_sigma(z, sigma_man_um: Sequence[float] = SIGMA_MAN_UM):
 
 
 # ---------------------------------------------------------------------------- files
-def _atomic_write(path: Path, text: str):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "w", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _fmt(v: float) -> str:
     return f"{v:.4f}"
 
@@ -506,7 +489,7 @@ def write_campaign(campaign: Campaign, directory=CAMPAIGN_DIR) -> list[Path]:
         for j, q in enumerate(campaign.q_set):
             lines.append(",".join([_fmt(q)] + [_fmt(1e3 * campaign.z[i, j, k]) for i in range(campaign.n_M)]))
         p = d / f"{_FILE_STEM}{sname}.csv"
-        _atomic_write(p, "\n".join(lines) + "\n")
+        atomic_write_text(p, "\n".join(lines) + "\n")
         written.append(p)
     lines = ["series,index,set_force_N,actual_force_N,sensor,raw_um,value_um"]
     for i in range(campaign.n_M):
@@ -515,13 +498,13 @@ def write_campaign(campaign: Campaign, directory=CAMPAIGN_DIR) -> list[Path]:
                 lines.append(f"{i + 1},{j + 1},{_fmt(q)},{_fmt(campaign.q_actual[i, j])},{sname},"
                              f"{_fmt(1e3 * campaign.z_raw[i, j, k])},{_fmt(1e3 * campaign.z[i, j, k])}")
     p = d / "campaign_long.csv"
-    _atomic_write(p, "\n".join(lines) + "\n")
+    atomic_write_text(p, "\n".join(lines) + "\n")
     written.append(p)
     meta = dict(seed=campaign.seed, n_series=campaign.n_M, sensors=list(campaign.sensors),
                 units=dict(force="N", displacement="um"), config=campaign.config,
                 generator="models.prototype.ship_campaign()")
     p = d / "campaign.json"
-    _atomic_write(p, json.dumps(meta, indent=1, sort_keys=True, default=list) + "\n")
+    atomic_write_text(p, json.dumps(meta, indent=1, sort_keys=True, default=list) + "\n")
     written.append(p)
     return written
 

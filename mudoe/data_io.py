@@ -24,8 +24,6 @@ import csv
 import hashlib
 import io
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -33,6 +31,7 @@ from typing import Sequence
 import numpy as np
 
 from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
+from models.fileio import atomic_write_text
 
 __all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
@@ -80,22 +79,6 @@ class Campaign:
 
 
 # ---------------------------------------------------------------------------- helpers
-def atomic_write_text(path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
-
 def sha256_files(paths: Sequence) -> str:
     """sha256 over the bytes of the files (in the given order, names included)."""
     h = hashlib.sha256()
