@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -99,6 +100,24 @@ def _validate(model, data, p0, weights):
         raise DataError(f"data: sigma is unknown and n = {n} values leave no degree of freedom to estimate it "
                         f"for {model.n_p} parameters; give sigma or more data")
     return p0, w, n
+
+
+_Y_INIT: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+
+
+def _initial_states(model, p0, inputs, Y0):
+    """States at the start values (cached per model, p0 and inputs: repeated fits of new data)."""
+    if Y0 is not None:
+        return solve_states(model, p0, inputs, Y0=Y0)
+    key = (model, p0.tobytes(), inputs.tobytes())
+    Y = _Y_INIT.get(key)
+    if Y is None:
+        Y = solve_states(model, p0, inputs)
+        Y.setflags(write=False)
+        _Y_INIT[key] = Y
+        while len(_Y_INIT) > 32:
+            _Y_INIT.popitem(last=False)
+    return Y
 
 
 def _param_scale(model, p0):
@@ -311,7 +330,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         sig = np.asarray(data.sigma, float)
 
     try:
-        Y_init = solve_states(model, p0, data.inputs, Y0=Y0)
+        Y_init = _initial_states(model, p0, data.inputs, Y0)
     except StateSolveError as exc:
         raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                   status="state solve failed") from None
@@ -359,6 +378,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         except np.linalg.LinAlgError:
             break
         dp = -s_p * np.linalg.solve(L.T, np.linalg.solve(L, grad * s_p))
+        if np.max(np.abs(dp / s_p)) < 1e-13:
+            break                          # converged to round-off: keep p and its terms
         small = np.max(np.abs(dp / s_p)) < 1e-12
         p_new = np.clip(p + dp, lo, up)
         try:

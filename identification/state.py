@@ -55,6 +55,22 @@ class Numerics:
         self.lag_hess = ca.Function("lag_hess", [y, p, q, lam, mu], [ca.hessian(L, v)[0]])
         self.h = model.h_fun
         self.dense = model.n_y <= _DENSE_LIMIT
+        self._maps = {}
+
+    def mapped(self, name: str, n: int):
+        """``getattr(self, name).map(n)``, cached (one call evaluates all inputs)."""
+        key = (name, n)
+        f = self._maps.get(key)
+        if f is None:
+            f = self._maps[key] = getattr(self, name).map(n)
+        return f
+
+    @staticmethod
+    def blocks(dm, n: int) -> np.ndarray:
+        """Split a horizontally concatenated mapped output (r, c*n) into an array (n, r, c)."""
+        a = np.asarray(dm.full()) if hasattr(dm, "full") else np.asarray(dm)
+        r = a.shape[0]
+        return a.reshape(r, n, -1).transpose(1, 0, 2)
 
     def factor(self, Ey_dm):
         """A solver x = Ey^{-1} b (and its transpose) for the state Jacobian."""
@@ -136,9 +152,52 @@ def solve_state(model, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -
                           f"p={p.tolist()} (||E||_inf = {nE:.3e})")
 
 
+def _solve_states_batched(model, p, inputs, Y0, tol: float = 1e-12, max_iter: int = 8):
+    """Newton on all inputs at once (dense states, good guesses); None when it does not converge.
+
+    One mapped CasADi call per iteration evaluates E and dE/dy at every input; full Newton
+    steps are taken only while every residual decreases, else the caller falls back to the
+    damped per-input solve.
+    """
+    num = numerics(model)
+    n = inputs.shape[0]
+    f = num.mapped("E_y", n)
+    Y = np.array(Y0, float)
+    Q = inputs.T
+    E, Ey = f(Y.T, p, Q)
+    E = np.asarray(E.full()).T
+    nE = np.abs(E).max(axis=1)
+    for _ in range(max_iter):
+        if not np.all(np.isfinite(E)):
+            return None
+        try:
+            dY = -np.linalg.solve(num.blocks(Ey, n), E[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            return None
+        Y = Y + dY
+        if np.abs(dY).max() <= tol * (1 + np.abs(Y).max()):
+            return Y
+        E, Ey = f(Y.T, p, Q)
+        E = np.asarray(E.full()).T
+        nE_new = np.abs(E).max(axis=1)
+        if np.any(nE_new > nE) and np.any(nE_new > 1e-300):
+            return None
+        nE = nE_new
+    return None
+
+
 def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
-    """States for every input row, shape (n_q, n_y); each solve starts from the previous one."""
+    """States for every input row, shape (n_q, n_y); each solve starts from the previous one.
+
+    With a guess ``Y0`` for every input and a small (dense) state, all inputs are first
+    solved together by undamped Newton; the damped per-input solve is the fallback.
+    """
     inputs = np.atleast_2d(np.asarray(inputs, float))
+    p = np.asarray(p, float).ravel()
+    if Y0 is not None and model.n_y and numerics(model).dense:
+        Y = _solve_states_batched(model, p, inputs, Y0)
+        if Y is not None:
+            return Y
     Y = np.zeros((inputs.shape[0], model.n_y))
     prev = None
     for j, q in enumerate(inputs):
