@@ -32,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from .detect import CORRECTIONS, STATISTICS, DetectSettings, run_split_tests
+from .detect import STATISTICS, DetectSettings, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
 from .splits import Split, SplitError
