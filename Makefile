@@ -20,8 +20,20 @@ bench:
 	$(BIN)/python -m bench
 
 # the study commands: thin calls of the CLI on the default study (outputs in results/)
-identify oed detect report validate:
-	$(BIN)/mudoe $@ configs/press.toml
+identify:
+	$(BIN)/mudoe identify configs/press.toml
+
+oed:
+	$(BIN)/mudoe oed configs/press.toml
+
+detect:
+	$(BIN)/mudoe detect configs/press.toml
+
+report:
+	$(BIN)/mudoe report configs/press.toml
+
+validate:
+	$(BIN)/mudoe validate configs/press.toml
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache results
