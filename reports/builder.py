@@ -35,6 +35,12 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
             est = ", ".join(f"{n} = {p:.1f} +- {s:.1f} {u}" for n, p, s, u in
                             zip(e.param_names, e.p, e.stderr, e.param_units))
             parts.append(f"Fit on all study data (all sensors): {est}; reduced chi2 {e.reduced_chi2:.3g}.")
+            misfit = [n for n in e.notes if n.startswith("residuals exceed the sensor sigmas")]
+            if misfit:
+                rejected = det is not None and v in det.models and det.decision(v).decision == "reject"
+                parts.append(f"Goodness of fit: {misfit[0]}." + ("" if rejected else
+                             " The split tests compare parameter sets, and a misfit that is the same in every "
+                             "split does not move them: read 'not rejected' together with this line."))
         elif v in results.estimate_errors:
             parts.append(f"The fit on all study data failed: {results.estimate_errors[v]}.")
         if det is not None and v in det.models:
