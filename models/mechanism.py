@@ -742,45 +742,30 @@ def build_model(mech: Mechanism, sensors: Sequence[str] | None = None, unknowns:
 def solve_path(model: Model, p, inputs, y0=None, tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
     """States y_j with E(y_j, p, q_j) = 0 along the rows of ``inputs`` (Newton, continuation).
 
-    Plain Newton with the exact AD Jacobian (dense numpy solve), each row started
-    from the previous solution; a row is converged when the Newton step satisfies
-    ||dy||_inf <= tol * max(1, ||y||_inf) (mm, rad).  Returns shape (n_q, n_y).
-    Intended for small mechanisms, tests and reports; the project's state solver
-    is :mod:`identification.state`.
+    Each row is solved by the project's state solver (:func:`identification.state.solve_state`:
+    damped Newton with the exact AD Jacobian, converged when ||dy||_inf <= tol (1 + ||y||_inf),
+    mm and rad), started from the previous row's solution (``y0`` or the model's guess for the
+    first row).  Returns shape (n_q, n_y).
+
+    Raises
+    ------
+    MechanismError
+        Naming the input row where Newton failed or dE/dy was singular.
     """
+    from identification.errors import StateSolveError   # identification builds on models: import late
+    from identification.state import solve_state
+
     p = np.asarray(p, float)
     inputs = np.atleast_2d(np.asarray(inputs, float))
-    fun = _newton_fun(model)
-    y = np.zeros(model.n_y) if y0 is None else np.asarray(y0, float)
     out = np.empty((inputs.shape[0], model.n_y))
+    y = None if y0 is None else np.asarray(y0, float)
     for j, q in enumerate(inputs):
-        for it in range(max_iter):
-            E, J = fun(y, p, q)
-            J = np.array(J)
-            d = np.sqrt(np.abs(np.diag(J))) if np.isfinite(J).all() else np.zeros(len(y))
-            if not (d > 0).all() or np.linalg.cond(J / d[:, None] / d[None, :]) > 1e14:
-                raise MechanismError(f"model {model.name!r}: state Jacobian singular or not finite at input row "
-                                     f"{j} ({q}), Newton iteration {it}")
-            dy = np.linalg.solve(J, -np.array(E).ravel())
-            y = y + dy
-            if np.max(np.abs(dy)) <= tol * max(1.0, np.max(np.abs(y))):
-                break
-        else:
-            raise MechanismError(f"model {model.name!r}: Newton did not converge at input row {j} ({q})")
+        try:
+            y = solve_state(model, p, q, y0=y, tol=tol, max_iter=max_iter)
+        except StateSolveError as exc:
+            raise MechanismError(f"model {model.name!r}: input row {j} ({q}): {exc}") from None
         out[j] = y
     return out
-
-
-def _newton_fun(model):
-    f = getattr(model, "_mech_newton", None)
-    if f is None:
-        y = ca.SX.sym("y", model.n_y)
-        p = ca.SX.sym("p", model.n_p)
-        q = ca.SX.sym("q", model.n_q_dim)
-        E = model.E_fun(y, p, q)
-        f = ca.Function("EJ", [y, p, q], [E, ca.jacobian(E, y)])
-        model._mech_newton = f
-    return f
 
 
 def linear_analysis(model: Model, p, q0=None, load_input: int = 0):
