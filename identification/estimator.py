@@ -143,6 +143,23 @@ def _state_scale(Y):
     return np.where(s > floor, s, floor)
 
 
+def _equation_scale(model, p0, inputs, Y, s_y):
+    """1 / max_j max_i |dE_r/dy_i (y_j, p0, q_j)| s_y,i per equation r (1 where a row is zero)."""
+    if not model.n_y:
+        return np.ones(0)
+    from .state import _to_scipy, numerics
+    num = numerics(model)
+    if num.dense:
+        Ey = num.batched("E_y", inputs.shape[0])(Y, p0, inputs)[1]
+        rowmax = np.abs(Ey * s_y[None, None, :]).max(axis=(0, 2))
+    else:
+        rowmax = np.zeros(model.n_y)
+        for j in range(inputs.shape[0]):
+            Ey = abs(_to_scipy(num.E_y(Y[j], p0, inputs[j])[1])).tocsr().multiply(s_y[None, :]).tocsr()
+            rowmax = np.maximum(rowmax, Ey.max(axis=1).toarray().ravel())
+    return np.where(rowmax > 0, 1.0 / np.where(rowmax > 0, rowmax, 1.0), 1.0)
+
+
 # ---------------------------------------------------------------------------- the NLP
 def _build_nlp(model, inputs, s_p, s_y, e_scale):
     """CasADi expressions of the scaled full-space problem.
@@ -337,16 +354,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
 
     s_p = _param_scale(model, p0)
     s_y = _state_scale(Y_init)
-    if model.n_y:
-        from .state import _to_scipy, numerics
-        num = numerics(model)
-        rowmax = np.zeros(model.n_y)
-        for j in range(data.n_q):
-            Ey = abs(_to_scipy(num.E_y(Y_init[j], p0, data.inputs[j])[1])).tocsr().multiply(s_y[None, :]).tocsr()
-            rowmax = np.maximum(rowmax, Ey.max(axis=1).toarray().ravel())
-        e_scale = np.where(rowmax > 0, 1.0 / np.where(rowmax > 0, rowmax, 1.0), 1.0)
-    else:
-        e_scale = np.ones(0)
+    e_scale = _equation_scale(model, p0, data.inputs, Y_init, s_y)
 
     zbar, cw, const = _objective_terms(data, w, sig)
     key = (model, data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), e_scale.tobytes())

@@ -77,21 +77,20 @@ class _BatchedSensitivities(Sensitivities):
         lam = np.asarray(lam, float)
         Ey, hy, Z = self._cache
         n_q = Z.shape[0]
-        f = self._num.mapped("lag_hess", n_q)
+        f = self._num.batched("lag_hess", n_q)
         out = np.zeros((lam.shape[0], Z.shape[2], Z.shape[2]))
         for a in range(lam.shape[0]):
             rhs = -np.einsum("jsy,js->jy", hy, lam[a])
             mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0] if Ey.shape[1] else rhs
-            Hl = self._num.blocks(f(self._Y.T, self._p, self._inputs.T, lam[a].T, mu.T), n_q)
+            Hl = f(self._Y, self._p, self._inputs, lam[a], mu)[0]
             out[a] = np.einsum("jva,jvw,jwb->ab", Z, Hl, Z)
         return 0.5 * (out + out.transpose(0, 2, 1))
 
 
 def _sensitivities_batched(model, num, p, inputs, Y):
     n_q = inputs.shape[0]
-    h, Ey, Ep, hy, hp = num.mapped("sens", n_q)(Y.T, p, inputs.T)
-    h = np.asarray(h.full()).T
-    Ey, Ep, hy, hp = (num.blocks(a, n_q) for a in (Ey, Ep, hy, hp))
+    h, Ey, Ep, hy, hp = num.batched("sens", n_q)(Y, p, inputs)
+    h = h[:, :, 0]
     yp = -np.linalg.solve(Ey, Ep)
     G = np.einsum("jsy,jyp->jsp", hy, yp) + hp
     eye = np.broadcast_to(np.eye(model.n_p), (n_q, model.n_p, model.n_p))
