@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from identification import (DataError, IdentifiabilityError, IdentificationError, Measurements, identify,
+from identification import (DataError, IdentifiabilityError, IdentificationError, IdentifySettings, Measurements,
+                            identify,
                             information_contributions, simulate, solve_states)
 from models import Model, ModelError, Parameter
 from models.library import linear_model, spring_chain
@@ -225,3 +226,42 @@ def test_model_with_wrong_E_size_is_rejected_at_build():
         Model.explicit(["a", "a"], ["q"], ["y"], h=lambda p, q: p[0])
     with pytest.raises(ModelError, match="lower bound"):
         Parameter("k", 2.0, 1.0)
+
+
+# ------------------------------------------------------------------ lazy bounds and the predictor
+def test_lazy_bounds_interior_solution_equals_bounded_solve():
+    """Pass 1 (no parameter bounds) is kept only inside the bounds; it is the bounded optimum."""
+    model, data = _chain_data(n_y=6, n_M=2, seed=11)
+    bounded = model.with_bounds({"k": (0.5, 10.0), "c": (0.01, 5.0)})
+    lazy = identify(bounded, data, p0=[1.0, 0.1])
+    strict = identify(bounded, data, p0=[1.0, 0.1], settings=IdentifySettings(lazy_bounds=False))
+    assert lazy.extra["ipopt_passes"] == 1 and strict.extra["ipopt_passes"] == 1
+    np.testing.assert_allclose(lazy.p, strict.p, rtol=1e-9)
+    np.testing.assert_allclose(lazy.cov, strict.cov, rtol=1e-7)
+
+
+def test_lazy_bounds_falls_back_to_the_bounded_problem_when_a_bound_is_active():
+    model = Model.explicit(params=[Parameter("a", 0.0, 1.0), "b"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] + p[1])
+    x = np.arange(1.0, 8.0)
+    data = Measurements(x, (2.0 * x + 1.0).reshape(1, -1, 1), [0.1])
+    lazy = identify(model, data, p0=[0.5, 0.0])
+    strict = identify(model, data, p0=[0.5, 0.0], settings=IdentifySettings(lazy_bounds=False))
+    assert lazy.extra["ipopt_passes"] == 2
+    np.testing.assert_allclose(lazy.p, strict.p, rtol=1e-9, atol=1e-9)
+    assert lazy.p[0] <= 1.0
+
+
+def test_predictor_changes_only_the_start_point():
+    from models.press import press_model
+    model = press_model()
+    q = np.linspace(100.0, 1600.0, 8)[:, None]
+    Y = solve_states(model, [520.0, 480.0], q)
+    H = simulate(model, [520.0, 480.0], q, Y=Y)
+    sig = np.array([0.015, 0.005, 0.004])
+    rng = np.random.default_rng(4)
+    data = Measurements(q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig)
+    a = identify(model, data, p0=[450.0, 550.0])
+    b = identify(model, data, p0=[450.0, 550.0], settings=IdentifySettings(predictor_step=0.0))
+    np.testing.assert_allclose(a.p, b.p, rtol=1e-10)
+    assert a.iterations <= b.iterations
