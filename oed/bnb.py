@@ -54,6 +54,9 @@ class BnBSettings:
     node_limit : int or None
     e_betas : tuple of float
         Soft-min sharpness continuation for the E relaxation (``t = beta / lambda_min``).
+    batch_size : int
+        Number of best-bound nodes branched together; their children's relaxations are
+        solved simultaneously (vectorised over the batch).
     early_branch : bool
         At non-root nodes stop the relaxation (after ``early_branch_min_iters`` iterations)
         once the criterion at the relaxed point is below incumbent - tol: the relaxation
@@ -68,6 +71,7 @@ class BnBSettings:
     e_betas: tuple = (30.0, 300.0, 3000.0)
     early_branch: bool = True
     early_branch_min_iters: int = 3
+    batch_size: int = 32
 
 
 @dataclass(frozen=True)
@@ -161,6 +165,34 @@ class _Problem:
             q = self.Fflat @ (Minv @ Minv).ravel()
         return f, q, f
 
+    def smooth_batch(self, X, tE):
+        """Batched :meth:`smooth` for the rows of X (B, n): (phi, Q (B, n), primal); phi = inf if M(x) is not PD (A, D)."""
+        B = X.shape[0]
+        M = (X @ self.Fflat).reshape(B, self.p, self.p)
+        lam, U = np.linalg.eigh(M)
+        l0 = lam[:, 0]
+        Ut = U.transpose(0, 2, 1)
+        if self.crit is Criterion.E:
+            e = np.exp(-tE[:, None] * (lam - l0[:, None]))
+            se = e.sum(axis=1)
+            Z = (U * (e / se[:, None])[:, None, :]) @ Ut
+            Q = Z.reshape(B, -1) @ self.Fflat.T
+            with np.errstate(divide="ignore"):
+                primal = np.where(l0 > 0, 1.0 / np.where(l0 > 0, l0, 1.0), np.inf)
+            return -(l0 - np.log(se) / tE), Q, primal
+        ok = l0 > 1e-13 * np.abs(lam[:, -1])
+        ls = np.where(ok[:, None], lam, 1.0)
+        inv = 1.0 / ls
+        if self.crit is Criterion.D:
+            fval = -np.log(ls).sum(axis=1)
+            wts = inv
+        else:
+            fval = inv.sum(axis=1)
+            wts = inv * inv
+        Q = ((U * wts[:, None, :]) @ Ut).reshape(B, -1) @ self.Fflat.T
+        fval = np.where(ok, fval, np.inf)
+        return fval, Q, fval.copy()
+
     def bound_from_s(self, f, s):
         """h(s): lower bound on the criterion from the linear-form maximum s."""
         if self.crit is Criterion.D:
@@ -236,6 +268,53 @@ def greedy_exchange(prob: _Problem, state, m, W0=None):
     return w, val
 
 
+def _proj_capped_simplex_batch(Y, free, r):
+    """Row-wise projection onto ``{0 <= x_k <= 1 (k free), sum_free x = r}``.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (B, n)
+    free : ndarray of bool, shape (B, n)
+        Entries outside ``free`` are returned as 0.  Every row needs ``0 < r < free.sum()``.
+    r : ndarray of int, shape (B,)
+
+    Returns
+    -------
+    ndarray, shape (B, n)
+        Exact (up to rounding): ``s(tau) = sum_j c_j (b_j - tau)_+`` over the breakpoints
+        ``b = (y, y - 1)`` with signs ``c = (+1, -1)`` is evaluated at all sorted breakpoints
+        by cumulative sums, and the root of ``s(tau) = r`` is interpolated on its piece.
+    """
+    B, n = Y.shape
+    rf = r.astype(float)
+    lo = np.min(np.where(free, Y, np.inf), axis=1)
+    Yc = np.where(free, Y, (lo - 2.0)[:, None])  # non-free: below every relevant tau
+    bp = np.concatenate([Yc, Yc - 1.0], axis=1)
+    sg = np.concatenate([np.ones((B, n)), -np.ones((B, n))], axis=1)
+    order = np.argsort(-bp, axis=1, kind="stable")
+    b = np.take_along_axis(bp, order, axis=1)
+    c = np.take_along_axis(sg, order, axis=1)
+    C0 = np.cumsum(c, axis=1) - c  # exclusive sums over breakpoints above b_k
+    C1 = np.cumsum(c * b, axis=1) - c * b
+    s = C1 - C0 * b  # s at tau = b_k (nondecreasing in k)
+    k = np.minimum(np.count_nonzero(s < rf[:, None], axis=1), 2 * n - 1)
+    ar = np.arange(B)
+    c0, c1 = C0[ar, k], C1[ar, k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = np.where(c0 > 0, (c1 - rf) / np.where(c0 > 0, c0, 1.0), b[ar, k])
+    return np.where(free, np.clip(Y - tau[:, None], 0.0, 1.0), 0.0)
+
+
+def _rowwise_top(Q, free, r):
+    """For each row: descending order of Q over ``free`` (non-free last), sorted values and top-r sum."""
+    Qf = np.where(free, Q, -np.inf)
+    order = np.argsort(-Qf, axis=1, kind="stable")
+    Qs = np.take_along_axis(Qf, order, axis=1)
+    cs = np.cumsum(np.where(np.isfinite(Qs), Qs, 0.0), axis=1)
+    ar = np.arange(Q.shape[0])
+    return order, Qs, cs[ar, r - 1]
+
+
 def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSettings = BnBSettings(),
                      criteria_settings: CriteriaSettings = DEFAULT_SETTINGS) -> BnBResult:
     r"""Proven-optimal GN design :math:`\min \Psi((\sum_k w_kF_k)^{-1})` by branch and bound.
@@ -243,6 +322,10 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
     Supports cardinality constraints (``n_sensors`` or ``max_sensors``, reduced to an exact
     count by monotonicity) and forced-in/out sensors.  Costs/budget are not supported
     (use SCIP or enumeration).  ``F`` must already be validated.
+
+    Nodes are processed in batches (``settings.batch_size`` best-bound parents, i.e. twice
+    as many children); the relaxations of a batch are solved simultaneously with batched
+    linear algebra.
 
     Raises
     ------
@@ -265,135 +348,224 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
     if np.isinf(prob.exact(avail[None])[0]):
         return BnBResult(None, np.inf, np.inf, np.inf, "infeasible", 0, time.perf_counter() - t0, np.inf, np.inf)
 
-    inc_w, inc_v = greedy_exchange(prob, state0, m)
-    init_inc = inc_v
-    nodes = 0
+    inc = {}
+    inc["w"], inc["v"] = greedy_exchange(prob, state0, m)
+    init_inc = inc["v"]
+    isE = crit is Criterion.E
+    betas = tuple(settings.e_betas) if isE else (None,)
+    floorD = 1.0 if crit is Criterion.D else 0.0
+
+    def thr():
+        return inc["v"] - prob.tol(inc["v"])
+
+    def offer(W):
+        """Exact values of designs W (b, n); update the incumbent; returns the values."""
+        v = prob.exact(W)
+        j = int(np.argmin(v))
+        if v[j] < inc["v"]:
+            inc["w"], inc["v"] = W[j].copy(), float(v[j])
+        return v
+
+    def relax(S, X0, iters, root, lb0):
+        """Solve the relaxations of the nodes S (B, n) (-1 free, 0 out, 1 in) together.
+
+        ``lb0``: bounds known beforehand (the parents').  Returns (lb, X, S) for the nodes
+        that are neither pruned nor leaves."""
+        S = S.copy()
+        B = S.shape[0]
+        best = np.array(lb0, dtype=float)
+        keep = np.ones(B, dtype=bool)
+        X = np.zeros((B, n))
+        f = np.full(B, np.inf)
+        Q = np.zeros((B, n))
+        primal = np.full(B, np.inf)
+        alpha = np.ones(B)
+        tE = np.ones(B)
+        stage = np.zeros(B, dtype=int)
+        sit = np.zeros(B, dtype=int)
+        n_it = max(iters // len(betas), 5) if isE else iters
+        act = np.ones(B, dtype=bool)
+
+        def screen(I):
+            """Drop infeasible rows, evaluate leaves; returns the rows of I still to be solved."""
+            fr = S[I] == -1
+            on = S[I] == 1
+            r = m - on.sum(axis=1)
+            nf = fr.sum(axis=1)
+            bad = (r < 0) | (r > nf)
+            leaf = ~bad & ((r == 0) | (r == nf))
+            if leaf.any():
+                offer(on[leaf] | (fr[leaf] & (r[leaf] == nf[leaf])[:, None]))
+            gone = bad | leaf
+            keep[I[gone]] = False
+            act[I[gone]] = False
+            return I[~gone]
+
+        def start(I, Xs):
+            """(Re)initialise rows I from warm starts Xs (projected onto the node polytope)."""
+            if I.size == 0:
+                return
+            fr = S[I] == -1
+            on = S[I] == 1
+            r = m - on.sum(axis=1)
+            nf = fr.sum(axis=1)
+            uni = np.where(fr, (r / nf)[:, None], 0.0) + on
+            Xi = uni if Xs is None else _proj_capped_simplex_batch(Xs, fr, r) + on
+            if isE:
+                lam0 = np.linalg.eigvalsh((Xi @ prob.Fflat).reshape(-1, p, p))[:, 0]
+                badx = lam0 <= 0
+                Xi[badx] = uni[badx]
+                lam0[badx] = np.linalg.eigvalsh((Xi[badx] @ prob.Fflat).reshape(-1, p, p))[:, 0]
+                tE[I] = np.array(betas)[stage[I]] / np.maximum(lam0, 1e-300)
+            fi, qi, pi = prob.smooth_batch(Xi, tE[I])
+            badf = ~np.isfinite(fi)
+            if badf.any():
+                Xi[badf] = uni[badf]
+                fi[badf], qi[badf], pi[badf] = prob.smooth_batch(Xi[badf], tE[I][badf])
+                still = ~np.isfinite(fi)
+                if still.any():
+                    # singular even at the uniform point: prune only if the exact criterion of the
+                    # largest design of the node is infinite; otherwise keep it unbounded (branch on).
+                    full = (S[I][still] != 0)
+                    dead = np.isinf(prob.exact(full))
+                    rows = I[still]
+                    keep[rows[dead]] = False
+                    act[rows] = False
+                    X[rows] = Xi[still]
+            X[I], f[I], Q[I], primal[I] = Xi, fi, qi, pi
+            qn = np.linalg.norm(np.where(fr, qi, 0.0), axis=1)
+            alpha[I] = 1.0 / np.maximum(np.where(np.isfinite(qn), qn, 1.0), 1e-300)
+            sit[I] = 0
+
+        I0 = screen(np.arange(B))
+        start(I0, None if X0 is None else X0[I0])
+        while True:
+            I = np.flatnonzero(act)
+            if I.size == 0:
+                break
+            fr = S[I] == -1
+            on = S[I] == 1
+            r = m - on.sum(axis=1)
+            QI = Q[I]
+            order, Qs, top = _rowwise_top(QI, fr, r)
+            s = np.where(on, QI, 0.0).sum(axis=1) + top
+            fI = f[I]
+            lb = prob.bound_from_s(fI, s)
+            best[I] = np.maximum(best[I], lb)
+            th = thr()
+            pruned = best[I] >= th
+            keep[I[pruned]] = False
+            act[I[pruned]] = False
+            fixed = np.zeros(I.size, dtype=bool)
+            if np.isfinite(inc["v"]):
+                ar = np.arange(I.size)
+                q_r = Qs[ar, r - 1]
+                q_r1 = Qs[ar, r]
+                rank = np.empty_like(order)
+                np.put_along_axis(rank, order, np.arange(n)[None, :].repeat(I.size, 0), axis=1)
+                chosen = rank < r[:, None]
+                with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                    lb_in = prob.bound_from_s(fI[:, None], (s - q_r)[:, None] + QI)
+                    lb_out = prob.bound_from_s(fI[:, None], (s + q_r1)[:, None] - QI)
+                fix0 = fr & ~chosen & (lb_in >= th)
+                fix1 = fr & chosen & (lb_out >= th)
+                fixed = (fix0 | fix1).any(axis=1) & ~pruned
+                if fixed.any():
+                    J = I[fixed]
+                    SJ = S[J]
+                    SJ[fix0[fixed]] = 0
+                    SJ[fix1[fixed]] = 1
+                    S[J] = SJ
+                    J2 = screen(J)
+                    start(J2, X[J2])
+            # stage end: relaxation gap closed, early branching, iteration limit
+            cont = ~pruned & ~fixed
+            pI = primal[I]
+            with np.errstate(invalid="ignore"):
+                gapok = np.isfinite(pI) & (pI - lb <= 1e-7 * np.maximum(np.abs(pI), floorD))
+            eb = (settings.early_branch and not root) & (sit[I] >= settings.early_branch_min_iters) & (pI < th)
+            end = cont & (gapok | eb | (sit[I] >= n_it))
+            J = I[cont & ~end]
+            if J.size:
+                frJ = S[J] == -1
+                onJ = (S[J] == 1).astype(float)
+                rJ = m - onJ.sum(axis=1).astype(int)
+                Y = _proj_capped_simplex_batch(X[J] + alpha[J, None] * Q[J], frJ, rJ) + onJ
+                Dd = Y - X[J]
+                dn = np.einsum("ij,ij->i", Dd, Dd)
+                slope = -np.einsum("ij,ij->i", Q[J], Dd)
+                lam_s = np.ones(J.size)
+                ok = dn >= 1e-24
+                stuck = ~ok
+                pend = np.flatnonzero(ok)
+                fnew = np.empty(J.size)
+                qnew = np.empty((J.size, n))
+                pnew = np.empty(J.size)
+                while pend.size:
+                    Xn = X[J[pend]] + lam_s[pend, None] * Dd[pend]
+                    fn, qn, pn = prob.smooth_batch(Xn, tE[J[pend]])
+                    acc = np.isfinite(fn) & (fn <= f[J[pend]] + 1e-4 * lam_s[pend] * slope[pend])
+                    a = pend[acc]
+                    fnew[a], qnew[a], pnew[a] = fn[acc], qn[acc], pn[acc]
+                    rest = pend[~acc]
+                    lam_s[rest] *= 0.5
+                    fail = lam_s[rest] < 1e-8
+                    stuck[rest[fail]] = True
+                    pend = rest[~fail]
+                good = ~stuck
+                Jg = J[good]
+                if Jg.size:
+                    sv = lam_s[good, None] * Dd[good]
+                    yv = -(qnew[good] - Q[Jg]) * frJ[good]
+                    sy = np.einsum("ij,ij->i", sv, yv)
+                    ss = np.einsum("ij,ij->i", sv, sv)
+                    qnorm = np.linalg.norm(Q[Jg] * frJ[good], axis=1)
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        a_new = np.where(sy > 1e-300, ss / np.where(sy > 1e-300, sy, 1.0), alpha[Jg] * 4.0)
+                    alpha[Jg] = np.minimum(np.maximum(a_new, 1e-12 / np.maximum(qnorm, 1e-300)), 1e12)
+                    X[Jg] = X[Jg] + sv
+                    f[Jg], Q[Jg], primal[Jg] = fnew[good], qnew[good], pnew[good]
+                    sit[Jg] += 1
+                end_idx = np.concatenate([I[end], J[stuck]])
+            else:
+                end_idx = I[end]
+            if end_idx.size:
+                if isE:
+                    nxt = end_idx[stage[end_idx] + 1 < len(betas)]
+                    fin = end_idx[stage[end_idx] + 1 >= len(betas)]
+                    stage[nxt] += 1
+                    start(nxt, X[nxt])
+                else:
+                    fin = end_idx
+                act[fin] = False
+        K = np.flatnonzero(keep)
+        if K.size:
+            # rounding heuristic (+ exchange from the rounded point when it improves)
+            fr = S[K] == -1
+            r = m - (S[K] == 1).sum(axis=1)
+            order = np.argsort(-np.where(fr, X[K], -np.inf), axis=1, kind="stable")
+            W = S[K] == 1
+            sel = np.arange(n)[None, :] < r[:, None]
+            np.put_along_axis(W, order, np.take_along_axis(W, order, axis=1) | sel, axis=1)
+            old = inc["v"]
+            v = prob.exact(W)
+            j = int(np.argmin(v))
+            if v[j] < old:
+                w2, v2 = greedy_exchange(prob, state0, m, W0=W[j])
+                inc["w"], inc["v"] = (w2, v2) if v2 < v[j] else (W[j].copy(), float(v[j]))
+        return best[K], X[K], S[K]
+
+    lb, x, st = relax(state0[None], None, settings.root_iters, True, [-np.inf])
+    nodes = 1
     counter = 0
     heap = []
-    root_bound = -np.inf
-
-    def solve_node(state, x0, iters):
-        """Returns (lb, x, state) with possible extra fixings; lb = inf if pruned."""
-        nonlocal inc_w, inc_v
-        best_lb = -np.inf
-        while True:
-            free = np.flatnonzero(state == -1)
-            ones = state == 1
-            r = m - int(ones.sum())
-            if r < 0 or r > free.size:
-                return np.inf, None, state
-            if r == 0 or r == free.size:
-                w = ones.copy()
-                w[free] = True if r == free.size else False
-                v = float(prob.exact(w[None])[0])
-                if v < inc_v:
-                    inc_w, inc_v = w, v
-                return np.inf, None, state
-            x = np.where(ones, 1.0, 0.0)
-            xf = x0[free] if x0 is not None else np.full(free.size, r / free.size)
-            xf = _proj_capped_simplex(xf, r)
-            x[free] = xf
-            betas = prob.settings.e_betas if crit is Criterion.E else (None,)
-            n_it = max(iters // len(betas), 5)
-            fixed_more = False
-            for beta in betas:
-                tE = 0.0
-                if crit is Criterion.E:
-                    lam0 = np.linalg.eigvalsh((x @ prob.Fflat).reshape(p, p))[0]
-                    if lam0 <= 0:
-                        x[free] = r / free.size
-                        lam0 = np.linalg.eigvalsh((x @ prob.Fflat).reshape(p, p))[0]
-                    tE = beta / max(lam0, 1e-300)
-                f, q, primal = prob.smooth(x, tE)
-                if not np.isfinite(f):
-                    x[free] = r / free.size
-                    f, q, primal = prob.smooth(x, tE)
-                    if not np.isfinite(f):
-                        return np.inf, None, state  # node cannot reach full rank
-                alpha = 1.0 / max(np.linalg.norm(q[free]), 1e-300)
-                for it in range(n_it):
-                    qf = q[free]
-                    order, top = _top_r(qf, r)
-                    s = float(q[ones].sum()) + top
-                    lb = prob.bound_from_s(f, s)
-                    best_lb = max(best_lb, lb)
-                    thr = inc_v - prob.tol(inc_v)
-                    if best_lb >= thr:
-                        return np.inf, None, state
-                    # reduced-cost fixing with this (valid) linear form
-                    if np.isfinite(inc_v):
-                        q_r = qf[order[r - 1]]
-                        q_r1 = qf[order[r]]
-                        chosen = order[:r]
-                        other = order[r:]
-                        lb_in = prob.bound_from_s(f, s - q_r + qf[other])
-                        lb_out = prob.bound_from_s(f, s - qf[chosen] + q_r1)
-                        fix0 = other[lb_in >= thr]
-                        fix1 = chosen[lb_out >= thr]
-                        if fix0.size or fix1.size:
-                            state = state.copy()
-                            state[free[fix0]] = 0
-                            state[free[fix1]] = 1
-                            x0 = x
-                            fixed_more = True
-                            break
-                    # relaxation gap check
-                    if np.isfinite(primal) and primal - lb <= 1e-7 * max(abs(primal), 1.0 if crit is Criterion.D else 0.0):
-                        break
-                    # early branching: primal = Psi at a relaxed point >= relaxation optimum >= any bound
-                    # this relaxation can give, so once primal < incumbent - tol it can never prune.
-                    if (prob.settings.early_branch and iters < prob.settings.root_iters
-                            and it >= prob.settings.early_branch_min_iters and primal < thr):
-                        break
-                    # spectral projected gradient step (minimise phi, gradient -q)
-                    y = _proj_capped_simplex(x[free] + alpha * qf, r)
-                    d = y - x[free]
-                    dn = float(np.dot(d, d))
-                    if dn < 1e-24:
-                        break
-                    slope = -float(np.dot(qf, d))
-                    lam_s = 1.0
-                    while True:
-                        xn = x.copy()
-                        xn[free] = x[free] + lam_s * d
-                        fn, qn, pn = prob.smooth(xn, tE)
-                        if np.isfinite(fn) and fn <= f + 1e-4 * lam_s * slope:
-                            break
-                        lam_s *= 0.5
-                        if lam_s < 1e-8:
-                            fn = None
-                            break
-                    if fn is None:
-                        break
-                    sv = lam_s * d
-                    yv = -(qn[free] - qf)
-                    sy = float(np.dot(sv, yv))
-                    alpha = float(np.dot(sv, sv)) / sy if sy > 1e-300 else alpha * 4.0
-                    alpha = min(max(alpha, 1e-12 / max(np.linalg.norm(qf), 1e-300)), 1e12)
-                    x, f, q, primal = xn, fn, qn, pn
-                if fixed_more:
-                    break
-            if fixed_more:
-                continue
-            # rounding heuristic
-            free = np.flatnonzero(state == -1)
-            w = state == 1
-            w[free[np.argsort(-x[free], kind="stable")[:r]]] = True
-            v = float(prob.exact(w[None])[0])
-            if v < inc_v:
-                w2, v2 = greedy_exchange(prob, state0, m, W0=w)
-                inc_w, inc_v = (w2, v2) if v2 < v else (w, v)
-            return best_lb, x, state
-
-    lb, x, st = solve_node(state0, None, settings.root_iters)
-    nodes = 1
-    root_bound = lb if np.isfinite(lb) else inc_v
+    root_bound = float(lb[0]) if lb.size and np.isfinite(lb[0]) else inc["v"]
     status = "optimal"
-    if np.isfinite(lb):
-        heapq.heappush(heap, (lb, counter, st, x))
+    if lb.size:
+        heapq.heappush(heap, (float(lb[0]), counter, st[0], x[0]))
     while heap:
-        lb, _, st, x = heap[0]
-        if lb >= inc_v - prob.tol(inc_v):
+        th = thr()
+        if heap[0][0] >= th:
             heap = []
             break
         if time.perf_counter() - t0 > settings.time_limit:
@@ -402,22 +574,33 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
         if settings.node_limit is not None and nodes >= settings.node_limit:
             status = "node_limit"
             break
-        heapq.heappop(heap)
-        free = np.flatnonzero(st == -1)
-        k = free[int(np.argmin(np.abs(x[free] - 0.5)))]
-        for val in (1, 0):
-            child = st.copy()
-            child[k] = val
-            clb, cx, cst = solve_node(child, x, settings.node_iters)
-            nodes += 1
-            clb = max(clb, lb)
-            if np.isfinite(clb) and clb < inc_v - prob.tol(inc_v):
+        nb = max(1, settings.batch_size)
+        if settings.node_limit is not None:
+            nb = max(1, min(nb, (settings.node_limit - nodes) // 2))
+        parents = []
+        while heap and len(parents) < nb and heap[0][0] < th:
+            parents.append(heapq.heappop(heap))
+        S_c, X_c, lb_p = [], [], []
+        for plb, _, pst, px in parents:
+            free = np.flatnonzero(pst == -1)
+            k = free[int(np.argmin(np.abs(px[free] - 0.5)))]
+            for val in (1, 0):
+                child = pst.copy()
+                child[k] = val
+                S_c.append(child)
+                X_c.append(px)
+                lb_p.append(plb)
+        clb, cx, cst = relax(np.array(S_c), np.array(X_c), settings.node_iters, False, lb_p)
+        nodes += len(S_c)
+        th = thr()
+        for i in range(clb.size):
+            if clb[i] < th:
                 counter += 1
-                heapq.heappush(heap, (clb, counter, cst, cx))
-    glb = min([h[0] for h in heap], default=inc_v)
-    glb = min(glb, inc_v)
-    gap = inc_v - glb
-    if status == "optimal" and not np.isfinite(inc_v):
+                heapq.heappush(heap, (float(clb[i]), counter, cst[i], cx[i]))
+    glb = min([h[0] for h in heap], default=inc["v"])
+    glb = min(glb, inc["v"])
+    gap = inc["v"] - glb
+    if status == "optimal" and not np.isfinite(inc["v"]):
         status = "infeasible"
-    return BnBResult(w=inc_w, value=inc_v, lower_bound=glb, gap=gap, status=status, nodes=nodes,
+    return BnBResult(w=inc["w"], value=inc["v"], lower_bound=glb, gap=gap, status=status, nodes=nodes,
                      wall_time=time.perf_counter() - t0, root_bound=root_bound, initial_incumbent=init_inc)
