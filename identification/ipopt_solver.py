@@ -55,6 +55,10 @@ class IpoptSettings:
     max_iter: int = 3000
     print_level: int = 0
     linear_solver: str = "mumps"
+    #: MUMPS ordering (ICNTL(7)); 6 = QAMD, which detects the quasi-dense rows and columns of
+    #: the parameters (they couple to every state): MUMPS's analysis of the spring-chain KKT
+    #: matrix (30 000 rows) drops from 0.23 s to 0.007 s per solve.  None keeps Ipopt's default.
+    mumps_pivot_order: int | None = 6
     expand: bool | None = None  # None: expand MX to SX when the problem is small (<= 1000 variables)
     extra: tuple = ()  # extra (option, value) pairs passed to nlpsol, e.g. (("ipopt.mu_init", 1e-3),)
 
@@ -96,6 +100,8 @@ def _make_solver(build, settings: IpoptSettings):
     }
     if isinstance(x, ca.MX):
         opts["expand"] = bool(expand)
+    if settings.linear_solver == "mumps" and settings.mumps_pivot_order is not None:
+        opts["ipopt.mumps_pivot_order"] = int(settings.mumps_pivot_order)
     if len(built) > 4 and built[4] is not None:
         opts["hess_lag"] = built[4]
     for k, v in settings.extra:
