@@ -54,6 +54,9 @@ class BnBSettings:
     node_limit : int or None
     e_betas : tuple of float
         Soft-min sharpness continuation for the E relaxation (``t = beta / lambda_min``).
+    nonmonotone : int
+        Memory of the non-monotone (Grippo-Lampariello-Lucidi) Armijo line search of the
+        projected-gradient relaxation solve (1 = monotone).
     batch_size : int
         Number of best-bound nodes branched together; their children's relaxations are
         solved simultaneously (vectorised over the batch).
@@ -71,7 +74,8 @@ class BnBSettings:
     e_betas: tuple = (30.0, 300.0, 3000.0)
     early_branch: bool = True
     early_branch_min_iters: int = 3
-    batch_size: int = 32
+    batch_size: int = 128
+    nonmonotone: int = 5
 
 
 @dataclass(frozen=True)
@@ -380,6 +384,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
         Q = np.zeros((B, n))
         primal = np.full(B, np.inf)
         alpha = np.ones(B)
+        fhist = np.full((B, max(1, settings.nonmonotone)), np.inf)
         tE = np.ones(B)
         stage = np.zeros(B, dtype=int)
         sit = np.zeros(B, dtype=int)
@@ -433,6 +438,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     act[rows] = False
                     X[rows] = Xi[still]
             X[I], f[I], Q[I], primal[I] = Xi, fi, qi, pi
+            fhist[I] = fi[:, None]
             qn = np.linalg.norm(np.where(fr, qi, 0.0), axis=1)
             alpha[I] = 1.0 / np.maximum(np.where(np.isfinite(qn), qn, 1.0), 1e-300)
             sit[I] = 0
@@ -504,7 +510,8 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                 while pend.size:
                     Xn = X[J[pend]] + lam_s[pend, None] * Dd[pend]
                     fn, qn, pn = prob.smooth_batch(Xn, tE[J[pend]])
-                    acc = np.isfinite(fn) & (fn <= f[J[pend]] + 1e-4 * lam_s[pend] * slope[pend])
+                    fref = fhist[J[pend]].max(axis=1)  # non-monotone (GLL) reference value
+                    acc = np.isfinite(fn) & (fn <= fref + 1e-4 * lam_s[pend] * slope[pend])
                     a = pend[acc]
                     fnew[a], qnew[a], pnew[a] = fn[acc], qn[acc], pn[acc]
                     rest = pend[~acc]
@@ -525,10 +532,16 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     alpha[Jg] = np.minimum(np.maximum(a_new, 1e-12 / np.maximum(qnorm, 1e-300)), 1e12)
                     X[Jg] = X[Jg] + sv
                     f[Jg], Q[Jg], primal[Jg] = fnew[good], qnew[good], pnew[good]
+                    fhist[Jg] = np.concatenate([fhist[Jg][:, 1:], fnew[good][:, None]], axis=1)
                     sit[Jg] += 1
                 end_idx = np.concatenate([I[end], J[stuck]])
             else:
                 end_idx = I[end]
+            if isE and eb.any():
+                # early branching ends the node in every stage: no Z can give a bound above the
+                # relaxation optimum, which is <= primal < incumbent - tol.
+                act[I[cont & eb]] = False
+                end_idx = end_idx[act[end_idx]]
             if end_idx.size:
                 if isE:
                     nxt = end_idx[stage[end_idx] + 1 < len(betas)]
