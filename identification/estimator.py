@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sps
 from scipy import stats
 
 from models.contract import Model
@@ -193,7 +194,6 @@ def _equation_scale(model, p0, inputs, Y, s_y):
     """1 / max_j max_i |dE_r/dy_i (y_j, p0, q_j)| s_y,i per equation r (1 where a row is zero)."""
     if not model.n_y:
         return np.ones(0)
-    from .state import _to_scipy, numerics
     num = numerics(model)
     if num.dense:
         Ey = num.batched("E_y", inputs.shape[0])(Y, p0, inputs)[1]
@@ -201,7 +201,8 @@ def _equation_scale(model, p0, inputs, Y, s_y):
     else:
         rowmax = np.zeros(model.n_y)
         for j in range(inputs.shape[0]):
-            Ey = abs(_to_scipy(num.E_y(Y[j], p0, inputs[j])[1])).tocsr().multiply(s_y[None, :]).tocsr()
+            Ey = num.point("E_y")(Y[j], p0, inputs[j])[1]
+            Ey = abs(sps.csr_matrix(Ey) @ sps.diags(s_y))
             rowmax = np.maximum(rowmax, Ey.max(axis=1).toarray().ravel())
     return np.where(rowmax > 0, 1.0 / np.where(rowmax > 0, rowmax, 1.0), 1.0)
 

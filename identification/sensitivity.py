@@ -16,8 +16,9 @@ which is the paper's appendix formula with the y'' term folded into the adjoint 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sps
 
-from .state import _to_scipy, numerics
+from .state import numerics
 
 __all__ = ["Sensitivities", "sensitivities"]
 
@@ -62,8 +63,7 @@ class Sensitivities:
                     mu = solve(-(hy.T @ lj), trans=1)
                 else:
                     mu = np.zeros(0)
-                Hl = self._num.lag_hess(self._Y[j], self._p, self._inputs[j], lj, mu)
-                Hl = Hl.sparse() if hasattr(Hl, "sparse") and not self._num.dense else np.asarray(Hl.full())
+                Hl = self._num.point("lag_hess")(self._Y[j], self._p, self._inputs[j], lj, mu)[0]
                 out[a] += Z.T @ (Hl @ Z)
         return 0.5 * (out + out.transpose(0, 2, 1))
 
@@ -98,6 +98,10 @@ def _sensitivities_batched(model, num, p, inputs, Y):
     return _BatchedSensitivities(h, G, num, p, inputs, Y, (Ey, hy, Z))
 
 
+def _dense(a) -> np.ndarray:
+    return a.toarray() if sps.issparse(a) else np.asarray(a, float)
+
+
 def sensitivities(model, p, inputs, Y) -> Sensitivities:
     """Outputs h and total sensitivities G = dh/dp at every input (exact, by AD + IFT)."""
     num = numerics(model)
@@ -110,13 +114,12 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
     G = np.zeros((n_q, model.n_S, model.n_p))
     cache = []
     for j in range(n_q):
-        hj, Ey, Ep, hy, hp = num.sens(Y[j], p, inputs[j])
-        h[j] = np.asarray(hj).ravel()
-        hp = np.asarray(hp.full())
+        hj, Ey, Ep, hy, hp = num.point("sens")(Y[j], p, inputs[j])
+        h[j] = hj
+        hp = _dense(hp)
         if model.n_y:
             solve = num.factor(Ey)
-            Ep = np.asarray(Ep.full())
-            hy = np.asarray(hy.full()) if num.dense else _to_scipy(hy)
+            Ep = _dense(Ep)
             yp = -solve(Ep)
             if yp.ndim == 1:
                 yp = yp[:, None]

@@ -65,6 +65,19 @@ class Numerics:
             f = self._maps[key] = getattr(self, name).map(n)
         return f
 
+    def point(self, name: str) -> "_Point":
+        """Evaluator of ``getattr(self, name)`` at one point, NumPy in, NumPy/SciPy out.
+
+        Column-vector outputs come back as 1-D arrays; matrices as dense arrays for small
+        (dense) models and as SciPy CSC matrices otherwise, read straight from CasADi's
+        nonzero buffer (no DM conversion).
+        """
+        key = ("point", name)
+        f = self._maps.get(key)
+        if f is None:
+            f = self._maps[key] = _Point(getattr(self, name), self.dense)
+        return f
+
     def batched(self, name: str, n: int) -> "_Batched":
         """Evaluator of ``getattr(self, name)`` at n points at once, NumPy in, NumPy out.
 
@@ -88,12 +101,16 @@ class Numerics:
         return a.reshape(r, n, -1).transpose(1, 0, 2)
 
     def factor(self, Ey_dm):
-        """A solver x = Ey^{-1} b (and its transpose) for the state Jacobian."""
+        """A solver x = Ey^{-1} b (and its transpose) for the state Jacobian.
+
+        ``Ey_dm``: a CasADi DM, a NumPy array or a SciPy sparse matrix.
+        """
         n = Ey_dm.shape[0]
         if n == 0:
             return None
         if self.dense:
-            A = np.asarray(ca.densify(Ey_dm).full())
+            A = np.asarray(ca.densify(Ey_dm).full()) if isinstance(Ey_dm, ca.DM) else (
+                Ey_dm.toarray() if sps.issparse(Ey_dm) else np.asarray(Ey_dm, float))
             try:
                 import scipy.linalg as sla
                 lu = sla.lu_factor(A, check_finite=True)
@@ -103,11 +120,54 @@ class Numerics:
                 raise StateSolveError("dE/dy is singular (Assumption 2 (ii) of the paper fails)")
             import scipy.linalg as sla
             return lambda b, trans=0: sla.lu_solve(lu, b, trans=trans)
+        A = _to_scipy(Ey_dm) if isinstance(Ey_dm, ca.DM) else sps.csc_matrix(Ey_dm)
         try:
-            lu = spla.splu(_to_scipy(Ey_dm).tocsc())
+            lu = spla.splu(A)
         except RuntimeError as exc:
             raise StateSolveError(f"dE/dy is singular: {exc}") from None
         return lambda b, trans=0: lu.solve(np.asarray(b, float), trans="T" if trans else "N")
+
+
+class _Point:
+    """A CasADi function evaluated through a FunctionBuffer at one point (see Numerics.point)."""
+
+    def __init__(self, f: ca.Function, dense: bool):
+        sym = f.mx_in()
+        outs = f.call(sym)
+        outs = [ca.densify(o) if (dense or o.size2() == 1) else o for o in outs]
+        self._f = ca.Function(f"{f.name()}_point", sym, outs)
+        self._in = [f.nnz_in(i) for i in range(f.n_in())]
+        self._out = []
+        for i in range(self._f.n_out()):
+            sp = self._f.sparsity_out(i)
+            colind, row = sp.get_ccs()
+            self._out.append((sp.size1(), sp.size2(), sp.nnz(), np.asarray(row, np.int32),
+                              np.asarray(colind, np.int32)))
+
+    def __call__(self, *args) -> list:
+        buf, ev = self._f.buffer()
+        keep = []
+        for i, (a, n) in enumerate(zip(args, self._in)):
+            a = np.ascontiguousarray(np.asarray(a, float).ravel())
+            if a.size != n:
+                raise ValueError(f"argument {i}: expected {n} values, got {a.size}")
+            keep.append(a)
+            buf.set_arg(i, memoryview(a))
+        data = [np.empty(nnz) for (_, _, nnz, _, _) in self._out]
+        for i, d in enumerate(data):
+            buf.set_res(i, memoryview(d))
+        ev()
+        if buf.ret() != 0:
+            raise StateSolveError(f"evaluation of {self._f.name()} failed (CasADi return code {buf.ret()})")
+        res = []
+        for d, (r, c, nnz, row, colind) in zip(data, self._out):
+            if c == 1:
+                res.append(d)
+            elif nnz == r * c:
+                res.append(d.reshape(c, r).T)
+            else:
+                res.append(sps.csc_matrix((d, row, colind), shape=(r, c)))
+        return res
 
 
 class _Batched:
@@ -182,8 +242,8 @@ def solve_state(model, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -
     if model.n_y == 0:
         return np.zeros(0)
     y = model.y_guess(p, q) if y0 is None else np.array(y0, float).ravel()
-    E, Ey = num.E_y(y, p, q)
-    E = np.asarray(E).ravel()
+    f = num.point("E_y")
+    E, Ey = f(y, p, q)
     nE = np.linalg.norm(E, np.inf)
     for it in range(max_iter):
         if not np.all(np.isfinite(E)):
@@ -193,8 +253,7 @@ def solve_state(model, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -
         step = 1.0
         for _ in range(30):
             y_new = y + step * dy
-            E_new, Ey_new = num.E_y(y_new, p, q)
-            E_new = np.asarray(E_new).ravel()
+            E_new, Ey_new = f(y_new, p, q)
             n_new = np.linalg.norm(E_new, np.inf)
             if np.isfinite(n_new) and (n_new <= nE * (1 - 1e-4 * step) or n_new <= 1e-300
                                        or np.linalg.norm(step * dy, np.inf) <= 1e-14 * (1 + np.linalg.norm(y, np.inf))):
