@@ -406,7 +406,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
             act[I[gone]] = False
             return I[~gone]
 
-        def start(I, Xs):
+        def start(I, Xs, keep_alpha=False):
             """(Re)initialise rows I from warm starts Xs (projected onto the node polytope)."""
             if I.size == 0:
                 return
@@ -439,8 +439,9 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     X[rows] = Xi[still]
             X[I], f[I], Q[I], primal[I] = Xi, fi, qi, pi
             fhist[I] = fi[:, None]
-            qn = np.linalg.norm(np.where(fr, qi, 0.0), axis=1)
-            alpha[I] = 1.0 / np.maximum(np.where(np.isfinite(qn), qn, 1.0), 1e-300)
+            if not keep_alpha:
+                qn = np.linalg.norm(np.where(fr, qi, 0.0), axis=1)
+                alpha[I] = 1.0 / np.maximum(np.where(np.isfinite(qn), qn, 1.0), 1e-300)
             sit[I] = 0
 
         I0 = screen(np.arange(B))
@@ -547,7 +548,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     nxt = end_idx[stage[end_idx] + 1 < len(betas)]
                     fin = end_idx[stage[end_idx] + 1 >= len(betas)]
                     stage[nxt] += 1
-                    start(nxt, X[nxt])
+                    start(nxt, X[nxt], keep_alpha=True)
                 else:
                     fin = end_idx
                 act[fin] = False
