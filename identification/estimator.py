@@ -291,7 +291,20 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
         H = H_pp
     hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(H)],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-    return x, ca.sum2(f_all), g, par, hess_lag
+    jac_g = None
+    if n_y and model.symbolic == "SX":
+        # constraint Jacobian from the model's cached first derivatives (no symbolic Jacobian
+        # of the mapped graph): rows of stage j = e * [dE/dp diag(s_p), 0 .. dE/dy diag(s_y) .. 0]
+        num = numerics(model)
+        _, Ey, Ep, _, _ = num.sens(y_un, p_un, q)
+        es = ca.diag(ca.DM(e_scale))
+        J_stage = ca.Function("J_stage", [y, p, q], [ca.mtimes(es, ca.mtimes(Ep, ca.diag(ca.DM(s_p)))),
+                                                     ca.mtimes(es, ca.mtimes(Ey, ca.diag(ca.DM(s_y))))]).map(n_q)
+        Jp_all, Jy_all = J_stage(yt, pt, Q)
+        rows = [ca.horzcat(Jp_all[:, j * n_p:(j + 1) * n_p], ca.MX(n_y, j * n_y), Jy_all[:, j * n_y:(j + 1) * n_y],
+                           ca.MX(n_y, (n_q - 1 - j) * n_y)) for j in range(n_q)]
+        jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    return x, ca.sum2(f_all), g, par, hess_lag, jac_g
 
 
 def _objective_terms(data, w, sig):

@@ -104,6 +104,8 @@ def _make_solver(build, settings: IpoptSettings):
         opts["ipopt.mumps_pivot_order"] = int(settings.mumps_pivot_order)
     if len(built) > 4 and built[4] is not None:
         opts["hess_lag"] = built[4]
+    if len(built) > 5 and built[5] is not None:
+        opts["jac_g"] = built[5]
     for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
     return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
