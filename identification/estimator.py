@@ -234,9 +234,13 @@ def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f, st
     perm = list(range(n_y, n_y + n_p)) + list(range(n_y))
     Hl = Hl[perm, perm]                                    # order (p, y)
     J = ca.horzcat(hp, hy)
-    H = sf * ca.mtimes(J.T, ca.mtimes(ca.diag(c), J)) + Hl
-    D = ca.diag(ca.DM(np.concatenate([s_p, s_y])))        # sparse diagonal
-    return ca.mtimes(D, ca.mtimes(H, D))
+    H = sf * ca.mtimes(J.T, c * J) + Hl
+    # D H D on the nonzeros only (an elementwise product with D_i D_j on H's own sparsity)
+    d = np.concatenate([s_p, s_y])
+    sp = H.sparsity()
+    colind, row = (np.asarray(a) for a in sp.get_ccs())
+    col = np.repeat(np.arange(sp.size2()), np.diff(colind))
+    return H * ca.DM(sp, d[row] * d[col])
 
 
 def _build_nlp(model, inputs, s_p, s_y, e_scale):

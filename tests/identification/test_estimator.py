@@ -265,3 +265,27 @@ def test_predictor_changes_only_the_start_point():
     b = identify(model, data, p0=[450.0, 550.0], settings=IdentifySettings(predictor_step=0.0))
     np.testing.assert_allclose(a.p, b.p, rtol=1e-10)
     assert a.iterations <= b.iterations
+
+
+@pytest.mark.parametrize("which", ["press", "chain"])
+def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
+    """The NLP's stage Hessian, assembled from the model's lag_hess and dh/d(p, y), is exact."""
+    from identification.estimator import _stage_hessian
+    from models.press import press_model
+    model = press_model() if which == "press" else spring_chain(7, n_sensors=4, n_groups=2)
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    y, p, q = ca.SX.sym("y", n_y), ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
+    zb, c, sf, lg = ca.SX.sym("zb", n_S), ca.SX.sym("c", n_S), ca.SX.sym("sf"), ca.SX.sym("lg", n_y)
+    rng = np.random.default_rng(0)
+    s_p, s_y, e = rng.uniform(0.5, 2, n_p), rng.uniform(0.5, 2, n_y), rng.uniform(0.5, 2, n_y)
+    y_un, p_un = y * ca.DM(s_y), p * ca.DM(s_p)
+    f = 0.5 * ca.sum1(c * (model.h_fun(y_un, p_un, q) - zb) ** 2)
+    E = model.E_fun(y_un, p_un, q) * ca.DM(e)
+    H_ref = ca.hessian(sf * f + ca.dot(lg, E), ca.vertcat(p, y))[0]
+    H = _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e, f, E)
+    F = ca.Function("F", [y, p, q, zb, c, sf, lg], [ca.densify(H_ref), ca.densify(H)])
+    scale_p = 500.0 if which == "press" else 1.0
+    args = [rng.uniform(0, 1, n_y), rng.uniform(1, 3, n_p) * scale_p, rng.uniform(1, 3, model.n_q_dim) * 100,
+            rng.uniform(0, 1, n_S), rng.uniform(0, 1, n_S), 0.7, rng.uniform(-1, 1, n_y)]
+    a, b = (np.array(v) for v in F(*args))
+    assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
