@@ -6,7 +6,8 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
 
 * **size** (data from the candidate model itself, z = h(y(p*), p*, q) + sigma eps):
   the family-wise rejection rate P(min_s alpha_min,s < TOL / n_tests), for the paper's
-  statistic and the two-sample one; a calibrated test has size <= TOL;
+  statistic, the two-sample Wald one and the likelihood ratio; a calibrated test has
+  size <= TOL;
 * **power** (data from another generator, e.g. the virtual prototype): the rejection rate
   of each candidate model;
 * **coverage**: the fraction of replications in which the true parameters p* lie in the
@@ -32,7 +33,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from .detect import STATISTICS, DetectSettings, run_split_tests
+from .detect import DEFAULT_STATISTIC, STATISTICS, DetectSettings, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
 from .splits import Split, SplitError
@@ -201,6 +202,7 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
     n_m, n_s = len(task.names), len(task.splits)
     a_p = np.full((n_m, n_s), np.nan)
     a_t = np.full((n_m, n_s), np.nan)
+    a_l = np.full((n_m, n_s), np.nan)
     cov = np.full((n_m, n_s, 2), np.nan)
     errors = []
     g2 = None
@@ -226,6 +228,9 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
             if t.ok:
                 a_p[im, js] = t.alpha_paper
                 a_t[im, js] = t.alpha_two_sample
+                a_l[im, js] = t.alpha_lr
+                if t.lr_error:
+                    errors.append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
             else:
                 errors.append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
             if truth is not None:
@@ -237,7 +242,7 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
                             continue
                         v = np.linalg.solve(L, truth - p)
                         cov[im, js, kk] = float(v @ v <= g2)
-    return {"alpha_paper": a_p, "alpha_two_sample": a_t, "covered": cov, "errors": errors,
+    return {"alpha_paper": a_p, "alpha_two_sample": a_t, "alpha_lr": a_l, "covered": cov, "errors": errors,
             "shapiro": sw}
 
 
@@ -369,7 +374,8 @@ class MonteCarloResult:
     models, splits : tuple      model names and the Split objects
     tol : float                 family-wise level TOL
     n_rep : int
-    alpha_paper, alpha_two_sample : ndarray (n_rep, n_models, n_splits)   NaN where a split failed
+    alpha_paper, alpha_two_sample, alpha_lr : ndarray (n_rep, n_models, n_splits)   NaN where a split
+                                failed (alpha_lr also where the pooled fit failed)
     covered : ndarray (n_rep, n_models, n_splits, 2)   1/0 p* in the cal/val ellipsoid, NaN if n/a
     shapiro : ndarray (n_rep, n_S)   normality-gate p-values of each simulated campaign
     errors : tuple              (replication, model, split, stage, message) of every failed split
@@ -383,6 +389,7 @@ class MonteCarloResult:
     n_rep: int
     alpha_paper: np.ndarray
     alpha_two_sample: np.ndarray
+    alpha_lr: np.ndarray
     covered: np.ndarray
     shapiro: np.ndarray
     errors: tuple
@@ -395,7 +402,7 @@ class MonteCarloResult:
     description: str = ""
 
     def __post_init__(self):
-        for name in ("alpha_paper", "alpha_two_sample", "covered", "shapiro"):
+        for name in ("alpha_paper", "alpha_two_sample", "alpha_lr", "covered", "shapiro"):
             a = np.array(getattr(self, name), dtype=float, copy=True)
             a.setflags(write=False)
             object.__setattr__(self, name, a)
@@ -407,13 +414,15 @@ class MonteCarloResult:
         return self.models.index(model)
 
     def _alpha(self, statistic):
+        if statistic == "likelihood_ratio":
+            return self.alpha_lr
         if statistic == "two_sample":
             return self.alpha_two_sample
         if statistic == "paper":
             return self.alpha_paper
         raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}")
 
-    def decisions(self, model=None, statistic: str = "two_sample") -> np.ndarray:
+    def decisions(self, model=None, statistic: str = DEFAULT_STATISTIC) -> np.ndarray:
         """Per replication: 1 reject, 0 accept, NaN undecided (Bonferroni at TOL / n_tests).
 
         (Holm rejects the family exactly when Bonferroni does.)
@@ -424,16 +433,16 @@ class MonteCarloResult:
         undec = ~rej & np.any(~np.isfinite(a), axis=1)
         return np.where(rej, 1.0, np.where(undec, np.nan, 0.0))
 
-    def rejection_rate(self, model=None, statistic: str = "two_sample") -> Rate:
+    def rejection_rate(self, model=None, statistic: str = DEFAULT_STATISTIC) -> Rate:
         """Family-wise rejection rate over the decided replications, with Clopper-Pearson CI."""
         d = self.decisions(model, statistic)
         ok = np.isfinite(d)
         return clopper_pearson(int(np.sum(d[ok])), int(ok.sum()), self.ci_level)
 
-    def n_undecided(self, model=None, statistic: str = "two_sample") -> int:
+    def n_undecided(self, model=None, statistic: str = DEFAULT_STATISTIC) -> int:
         return int(np.sum(~np.isfinite(self.decisions(model, statistic))))
 
-    def split_rejection_rate(self, split: int, model=None, statistic: str = "two_sample",
+    def split_rejection_rate(self, split: int, model=None, statistic: str = DEFAULT_STATISTIC,
                              level: float | None = None) -> Rate:
         """Rejection rate of one split's hypothesis at ``level`` (default TOL / n_tests)."""
         a = self._alpha(statistic)[:, self._im(model), split]
@@ -461,7 +470,7 @@ class MonteCarloResult:
         return clopper_pearson(int(c.sum()), int(c.size), self.ci_level)
 
     def table(self) -> str:
-        """Markdown table of rejection rates (both statistics) and, for size studies, coverage."""
+        """Markdown table of rejection rates (all three statistics) and, for size studies, coverage."""
         lev = 100 * self.tol / len(self.splits)
         lines = [f"{self.kind} study: {self.n_rep} replications, TOL = {100 * self.tol:g} %, "
                  f"{len(self.splits)} splits (per-test level {lev:.4g} %), Clopper-Pearson {100 * self.ci_level:g} % "
@@ -471,7 +480,7 @@ class MonteCarloResult:
                  + " | ".join(f"split {j + 1} ({sp.name})" for j, sp in enumerate(self.splits)) + " |",
                  "|---|---|---|---|" + "---|" * len(self.splits)]
         for m in self.models:
-            for st in ("paper", "two_sample"):
+            for st in ("paper", "two_sample", "likelihood_ratio"):
                 cells = [f"{100 * self.split_rejection_rate(j, m, st).rate:.2f} %" for j in range(len(self.splits))]
                 lines.append(f"| {m} | {st} | {self.rejection_rate(m, st)} | {self.n_undecided(m, st)} | "
                              + " | ".join(cells) + " |")
@@ -515,7 +524,10 @@ class LinearizedSize:
 
 def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split], n_M: int = 2, weights=None,
                     tol: float = 0.05, n_draws: int = 200_000, seed: int = 0) -> LinearizedSize:
-    r"""Size of both statistics when the model is linear in p near p* (exact for linear models).
+    r"""Size of the Wald statistics when the model is linear in p near p* (exact for linear models).
+
+    For a linear model the likelihood ratio equals the two-sample Wald statistic, so
+    ``family_two_sample`` is its linearised size too.
 
     With sensitivities G_jk = dh_k/dp at p*, the Gauss-Newton estimate of a set A is
     p_A - p* = F_A^{-1} sum_{j in A, k} (n_A w_k / sigma_k^2) G_jk^T epsbar_jk (F_A its
@@ -637,6 +649,7 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
         kind=kind, models=names, splits=splits, tol=settings.detect.tol, n_rep=int(settings.n_rep),
         alpha_paper=np.stack([r["alpha_paper"] for r in out]),
         alpha_two_sample=np.stack([r["alpha_two_sample"] for r in out]),
+        alpha_lr=np.stack([r["alpha_lr"] for r in out]),
         covered=np.stack([r["covered"] for r in out]), shapiro=np.stack([r["shapiro"] for r in out]),
         errors=errors, seed=int(settings.seed), backend=backend, workers=n_w, wall_time=wall,
         coverage_alpha=float(settings.coverage_alpha), ci_level=float(settings.ci_level), description=description)

@@ -152,6 +152,31 @@ class Split:
         """The validation subset of a :class:`Measurements`."""
         return data.subset(inputs=list(self.val_inputs), series=None if self.val_series is None else list(self.val_series))
 
+    def pooled_points(self, n_M: int) -> tuple:
+        """The sorted (input, series) pairs of calibration and validation together (0-based)."""
+        pts = set()
+        for qi, si in ((self.cal_inputs, self.cal_series), (self.val_inputs, self.val_series)):
+            for j in qi:
+                for i in (range(n_M) if si is None else si):
+                    pts.add((j, i))
+        return tuple(sorted(pts))
+
+    def pooled(self, data):
+        """Calibration and validation data together, as one campaign (the null hypothesis fit).
+
+        Inputs are those of either set (in campaign order); a value that belongs to neither
+        set (possible when the sets use different series) is NaN, i.e. missing, so the
+        pooled objective is exactly the sum of the calibration and validation objectives.
+        """
+        pts = self.pooled_points(data.n_M)
+        qs = sorted({j for j, _ in pts})
+        series = sorted({i for _, i in pts})
+        z = np.full((len(series), len(qs), data.n_S), np.nan)
+        for j, i in pts:
+            z[series.index(i), qs.index(j)] = data.z[i, j]
+        sub = data.subset(inputs=qs, series=series)
+        return sub.with_z(z)
+
     def label(self, one_based: bool = True) -> tuple[str, str]:
         """Short texts of the calibration and validation sets (1-based like the paper by default)."""
         def one(qi, si):

@@ -180,7 +180,7 @@ class DetectConfig:
     """
 
     tol: float = 0.05
-    statistic: str = "two_sample"
+    statistic: str = "likelihood_ratio"
     correction: str = "bonferroni"
     normality: str = "check"
     covariance: str = "second_order"
@@ -548,7 +548,7 @@ def _parse_detect(ctx, t):
         kw["tol"] = float(_num(ctx, "detect", "tol", t["tol"]))
         if not 0 < kw["tol"] < 1:
             raise ctx.error("detect", "tol", f"TOL must lie in (0, 1), got {kw['tol']}")
-    ch = {"statistic": ("two_sample", "paper"), "correction": ("bonferroni", "holm"),
+    ch = {"statistic": ("likelihood_ratio", "two_sample", "paper"), "correction": ("bonferroni", "holm"),
           "normality": ("check", "override"), "covariance": ("second_order", "gauss_newton")}
     for k, c in ch.items():
         if k in t:

@@ -59,7 +59,8 @@ def detection_dict(det) -> dict:
         tests.append(dict(model=t.model, split=t.split, calibration=t.cal_label, validation=t.val_label, ok=t.ok,
                           stage=t.stage, error=t.error, p_cal=t.p_cal, p_val=t.p_val, C_cal=t.C_cal, C_val=t.C_val,
                           d2_paper=t.d2_paper, d2_two_sample=t.d2_two_sample, alpha_paper=t.alpha_paper,
-                          alpha_two_sample=t.alpha_two_sample, n_cal=t.n_cal, n_val=t.n_val, notes=list(t.notes)))
+                          alpha_two_sample=t.alpha_two_sample, lr=t.lr, alpha_lr=t.alpha_lr, lr_error=t.lr_error,
+                          n_cal=t.n_cal, n_val=t.n_val, notes=list(t.notes)))
     decisions = [jsonable(d) for d in det.all_decisions]
     for d, dd in zip(det.all_decisions, decisions):
         dd["primary"] = (d.statistic == det.settings.statistic and d.correction == det.settings.correction)
@@ -83,11 +84,11 @@ def oed_dict(res, table, variant: str) -> dict:
 
 
 def validation_dict(mc) -> dict:
-    """Rejection rates (both statistics) and coverage of a Monte Carlo result."""
+    """Rejection rates (all three statistics) and coverage of a Monte Carlo result."""
     out = dict(kind=mc.kind, models=list(mc.models), n_rep=mc.n_rep, tol=mc.tol, seed=mc.seed,
                wall_time=mc.wall_time, description=mc.description, rates={})
     for m in mc.models:
-        for st in ("paper", "two_sample"):
+        for st in ("paper", "two_sample", "likelihood_ratio"):
             r = mc.rejection_rate(m, st)
             out["rates"][f"{m}/{st}"] = dict(rate=r.rate, lo=r.lo, hi=r.hi, k=r.k, n=r.n)
     if mc.kind == "size":

@@ -45,7 +45,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
             parts.append(f"The fit on all study data failed: {results.estimate_errors[v]}.")
         if det is not None and v in det.models:
             d = det.decision(v)
-            other = "paper" if det.settings.statistic == "two_sample" else "two_sample"
+            other = "two_sample" if det.settings.statistic != "two_sample" else "likelihood_ratio"
             d2 = det.decision(v, other)
             word = {"reject": "REJECTED: model uncertainty detected", "accept": "not rejected",
                     "undecided": "UNDECIDED"}[d.decision]
@@ -215,22 +215,23 @@ def _ellipse_page(results):
 def _alpha_page(results):
     from .tables import alpha_rows, draw_table
     det = results.detection
-    fig = _page("alpha_min (in %) per split and model, both statistics")
+    fig = _page("alpha_min (in %) per split and model, three statistics")
     if det is None:
         _text(fig, 0.04, 0.85, "Detection was not run: " + (results.detection_error or "see the notes"), size=10)
         return fig
     y = 0.88
-    for st, label in (("two_sample", "two-sample Wald statistic, C_cal + C_val"),
+    for st, label in (("likelihood_ratio", "likelihood ratio: pooled fit vs separate fits"),
+                      ("two_sample", "two-sample Wald statistic, C_cal + C_val"),
                       ("paper", "paper's statistic, C_cal only")):
         head, rows, flags = alpha_rows(det, st)
         prim = " (the decision)" if st == det.settings.statistic else ""
-        h = 0.05 * (len(rows) + 1)
+        h = 0.03 * (len(rows) + 1)
         ax = fig.add_axes([0.04, y - h - 0.03, 0.92, h])
         n_m = len(det.models)
         draw_table(ax, head, rows, flags=flags, fontsize=8.5, title=f"{label}{prim}",
                    col_widths=[0.38, 0.22] + [0.36 / n_m] * n_m)
-        y -= h + 0.1
-    _text(fig, 0.04, max(y, 0.12),
+        y -= h + 0.065
+    _text(fig, 0.04, min(max(y, 0.03), 0.12),
           f"TOL = {100 * det.settings.tol:g} %, n_tests = {len(det.splits)}, correction: {det.settings.correction}. "
           f"Red cells: alpha_min < TOL/n_tests (the split's hypothesis is rejected); a model is rejected when any "
           f"split is red. '<< 0.01' means alpha_min < 0.01 %. The paper's statistic ignores the validation "

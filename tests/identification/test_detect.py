@@ -1,5 +1,6 @@
-"""Algorithm 1 (detect): both statistics, Bonferroni / Holm, normality gate, failures, errors."""
+"""Algorithm 1 (detect): the three statistics, Bonferroni / Holm, normality gate, failures, errors."""
 import dataclasses
+import re
 
 import casadi as ca
 import numpy as np
@@ -34,7 +35,7 @@ def test_correct_model_is_accepted_and_statistics_match_regions(model):
     data = campaign(model, 1)
     res = detect(model, data, press_scenarios(), p0=[0.5, 1.5])
     assert res.verdicts[model.name] == "accept"
-    assert res.decision().statistic == "two_sample" and res.decision().correction == "bonferroni"
+    assert res.decision().statistic == "likelihood_ratio" and res.decision().correction == "bonferroni"
     assert len(res.tests) == 4 and all(t.ok for t in res.tests)
     # every number equals the identification API applied by hand
     for sp, t in zip(press_scenarios(), res.tests):
@@ -45,8 +46,14 @@ def test_correct_model_is_accepted_and_statistics_match_regions(model):
                                                    abs=1e-12)
         # C_cal + C_val >= C_cal, so the paper's alpha is never larger
         assert t.alpha_paper <= t.alpha_two_sample + 1e-12
+        # linear model, known sigma: the likelihood ratio IS the two-sample Wald statistic
+        assert t.lr == pytest.approx(t.d2_two_sample, rel=1e-7, abs=1e-10)
+        assert t.alpha_lr == pytest.approx(t.alpha_two_sample, rel=1e-6, abs=1e-12)
+        eu = identify(model, sp.pooled(data), [0.5, 1.5])
+        assert t.lr == pytest.approx(2 * (eu.objective - ec.objective - ev.objective), rel=1e-8, abs=1e-10)
     text = res.summary()
-    assert "alpha paper %" in text and "alpha 2-sample %" in text and ">> two_sample bonferroni: ACCEPT" in text
+    assert "alpha paper %" in text and "alpha 2-sample %" in text and "alpha LR %" in text
+    assert ">> likelihood_ratio bonferroni: ACCEPT" in text
     assert "Normality gate" in text and "sigma_rep" in text
     with pytest.raises(dataclasses.FrozenInstanceError):
         res.tests = ()
@@ -55,12 +62,12 @@ def test_correct_model_is_accepted_and_statistics_match_regions(model):
 def test_hysteresis_is_detected_on_loading_vs_unloading(model):
     data = campaign(model, 2, offset_unloading=0.05)      # 5 sigma offset on the unloading branch
     res = detect(model, data, press_scenarios(), p0=[0.5, 1.5], statistic="paper")
-    for st in ("paper", "two_sample"):
+    for st in ("paper", "two_sample", "likelihood_ratio"):
         d = res.decision(statistic=st)
         assert d.decision == "reject"
         assert "loading vs unloading" in d.flagged
     assert res.decision().statistic == "paper"
-    assert ">> paper      bonferroni: REJECT" in res.summary()
+    assert re.search(r">> paper +bonferroni: REJECT", res.summary())
 
 
 def test_several_models_and_sensor_design(model):
@@ -151,7 +158,7 @@ def test_repeatability_sigma_is_std_of_differences_over_sqrt2(model):
 
 def _t(name, a):
     n = np.full(2, np.nan)
-    return SplitTest("m", name, "", "", True, "", "", n, n, np.eye(2), np.eye(2), 1.0, 1.0, a, a)
+    return SplitTest("m", name, "", "", True, "", "", n, n, np.eye(2), np.eye(2), 1.0, 1.0, a, a, lr=1.0, alpha_lr=a)
 
 
 def test_bonferroni_and_holm():
@@ -167,7 +174,16 @@ def test_bonferroni_and_holm():
         decide(tests, 1.0)
     with pytest.raises(ValueError, match="correction"):
         decide(tests, 0.05, correction="x")
-    assert DetectSettings().statistic == "two_sample"
+    assert DetectSettings().statistic == "likelihood_ratio"
+    for st in ("likelihood_ratio", "paper"):
+        assert decide(tests, 0.05, st).flagged == ("a",)
+    with pytest.raises(ValueError, match="statistic"):
+        decide(tests, 0.05, "wald")
+    # a split whose pooled fit failed: LR undecided, the Wald statistics still decide
+    lost = dataclasses.replace(_t("a", 0.5), alpha_lr=float("nan"), lr_error="pooled fit failed: x")
+    d = decide([lost, _t("b", 0.4)], 0.05, "likelihood_ratio")
+    assert d.decision == "undecided" and d.failed == ("a",) and "pooled fit failed" in d.reason
+    assert decide([lost, _t("b", 0.4)], 0.05, "two_sample").decision == "accept"
 
 
 def test_design_from_the_oed_front_door():
@@ -182,3 +198,26 @@ def test_design_from_the_oed_front_door():
     used = res.design[0][1]
     assert len(used) == 2 and "E-optimal" in res.design[0][2]
     assert res.verdicts[m3.name] == "accept"
+
+
+def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
+    """sigma estimated: F = ((RSS_pooled - RSS_c - RSS_v) / n_p) / ((RSS_c + RSS_v) / (n_c + n_v - 2 n_p))."""
+    from scipy import stats
+    rng = np.random.default_rng(7)
+    H = simulate(model, P_TRUE, Q)
+    z = H[None] + 0.01 * rng.standard_normal((2,) + H.shape)
+    data = Measurements(Q, z, None, sensors=model.sensors)
+    sp = press_scenarios()[2]
+    t = detect(model, data, [sp], p0=[0.5, 1.5]).tests[0]
+
+    def rss(d):
+        A = np.concatenate([np.kron(np.ones((d.n_M, 1)), d.inputs[:, :1] * X[k]) for k in range(2)])
+        b = np.concatenate([d.z[:, :, k].ravel() for k in range(2)])
+        ok = np.isfinite(b)
+        res = np.linalg.lstsq(A[ok], b[ok], rcond=None)
+        return float(np.sum((A[ok] @ res[0] - b[ok]) ** 2)), int(ok.sum())
+
+    (rc, nc), (rv, nv), (ru, _) = rss(sp.calibration(data)), rss(sp.validation(data)), rss(sp.pooled(data))
+    F = ((ru - rc - rv) / 2) / ((rc + rv) / (nc + nv - 4))
+    assert t.lr == pytest.approx(F, rel=1e-6)
+    assert t.alpha_lr == pytest.approx(stats.f.sf(F, 2, nc + nv - 4), rel=1e-6)

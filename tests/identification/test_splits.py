@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from identification import Measurements
 from identification.splits import (PRESS_SCENARIO_NAMES, Split, SplitError, input_range_split, press_scenarios,
                                    random_splits, series_split)
 from models.press import Q_PAPER
@@ -131,3 +132,17 @@ def test_series_split_and_labels():
     cal, val = press_scenarios()[0].label()
     assert cal == "q2,q4..q14" and val == "q3,q5..q15"
     assert s.swapped().cal_series == (2,)
+
+
+def test_pooled_data_is_the_union_of_both_sets_with_the_rest_missing():
+    z = np.arange(3 * 4 * 2, dtype=float).reshape(3, 4, 2)          # 3 series, 4 inputs, 2 sensors
+    data = Measurements(np.arange(4.0), z, [1.0, 1.0])
+    sp = Split("mixed", cal_inputs=[0, 1], val_inputs=[1, 3], cal_series=[0], val_series=[2])
+    pooled = sp.pooled(data)
+    assert pooled.n_q == 3 and pooled.n_M == 2                      # inputs 0, 1, 3; series 0, 2
+    np.testing.assert_array_equal(pooled.inputs.ravel(), [0.0, 1.0, 3.0])
+    np.testing.assert_array_equal(pooled.z[0, :2], z[0, :2])        # calibration: series 0, inputs 0, 1
+    np.testing.assert_array_equal(pooled.z[1, 1:], z[2, [1, 3]])    # validation: series 2, inputs 1, 3
+    assert np.all(np.isnan(pooled.z[0, 2])) and np.all(np.isnan(pooled.z[1, 0]))
+    n_points = sum(len(s.calibration(data).z[:, :, 0].ravel()) for s in (sp,)) + sp.validation(data).z[:, :, 0].size
+    assert int(pooled.mask()[:, :, 0].sum()) == n_points

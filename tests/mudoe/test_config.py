@@ -20,7 +20,7 @@ def test_shipped_press_config_parses_with_paper_values():
 def test_empty_config_gives_defaults():
     cfg = parse_config("", "empty.toml")
     assert cfg.model.name == "press" and cfg.data.layout == "paper" and cfg.splits.scenarios == ("paper",)
-    assert cfg.detect.statistic == "two_sample" and cfg.oed.kind == "second_order"
+    assert cfg.detect.statistic == "likelihood_ratio" and cfg.oed.kind == "second_order"
     assert cfg.parameters == () and cfg.sensors == ()
 
 
@@ -50,7 +50,7 @@ def test_unknown_key_names_key_file_and_line(text, key, line):
     ("[[sensors]]\nname = \"D_y\"\nsigma_man = -1.0\n", ["sigma_man must be non-negative"]),
     ("[data]\ndisplacement_unit = \"inch\"\n", ["inch", "mm, um, m"]),
     ("[detect]\ntol = 1.5\n", ["TOL must lie in (0, 1)"]),
-    ("[detect]\nstatistic = \"t\"\n", ["two_sample"]),
+    ("[detect]\nstatistic = \"t\"\n", ["likelihood_ratio", "two_sample"]),
     ("[[parameters]]\nname = \"k5\"\nstart = 5.0\nlower = 10.0\n", ["outside"]),
     ("[splits]\nscenarios = [\"nope\"]\n", ["unknown scenario"]),
     ("[oed]\ncriterion = \"Q\"\n", ["A, D, E"]),
