@@ -74,7 +74,7 @@ def main(argv=None):
         _save(args.save, res)
         print(res.description)
         print(res.table())
-        for st in ("paper", "two_sample"):
+        for st in ("paper", "two_sample", "likelihood_ratio"):
             r = res.rejection_rate("M1", st)
             print(f"size {st}: {r}")
         print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication")
@@ -84,7 +84,9 @@ def main(argv=None):
         print(par.table())
         n_ser = args.serial_rep or args.n_rep
         ser = run_size(n_ser, 1, args.seed, None, not args.no_progress)
-        same = np.array_equal(par.alpha_two_sample[:n_ser], ser.alpha_two_sample, equal_nan=True)
+        same = all(np.array_equal(a[:n_ser], b, equal_nan=True) for a, b in
+                   ((par.alpha_lr, ser.alpha_lr), (par.alpha_two_sample, ser.alpha_two_sample),
+                    (par.alpha_paper, ser.alpha_paper)))
         per_par = par.wall_time / par.n_rep
         per_ser = ser.wall_time / ser.n_rep
         print(f"parallel: {par.n_rep} replications in {par.wall_time:.1f} s on {par.backend} "
@@ -98,7 +100,7 @@ def main(argv=None):
         print(res.description)
         print(res.table())
         for m in res.models:
-            for st in ("paper", "two_sample"):
+            for st in ("paper", "two_sample", "likelihood_ratio"):
                 print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
         print(f"wall {res.wall_time:.1f} s on {res.backend}")
     else:
@@ -107,7 +109,8 @@ def main(argv=None):
 
 def _save(path, res):
     if path:
-        np.savez(path, alpha_paper=res.alpha_paper, alpha_two_sample=res.alpha_two_sample, covered=res.covered,
+        np.savez(path, alpha_paper=res.alpha_paper, alpha_two_sample=res.alpha_two_sample, alpha_lr=res.alpha_lr,
+                 covered=res.covered,
                  shapiro=res.shapiro, models=np.array(res.models), splits=np.array([s.name for s in res.splits]))
         print(f"saved per-replication arrays to {path}")
 

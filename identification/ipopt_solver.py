@@ -102,10 +102,10 @@ def _make_solver(build, settings: IpoptSettings):
         opts["expand"] = bool(expand)
     if settings.linear_solver == "mumps" and settings.mumps_pivot_order is not None:
         opts["ipopt.mumps_pivot_order"] = int(settings.mumps_pivot_order)
-    if len(built) > 4 and built[4] is not None:
-        opts["hess_lag"] = built[4]
-    if len(built) > 5 and built[5] is not None:
-        opts["jac_g"] = built[5]
+    for i, name in ((4, "hess_lag"), (5, "jac_g")):
+        if len(built) > i and built[i] is not None:
+            f = built[i]
+            opts[name] = f.expand() if (expand and isinstance(x, ca.MX)) else f
     for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
     return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
