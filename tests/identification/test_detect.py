@@ -221,3 +221,24 @@ def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
     F = ((ru - rc - rv) / 2) / ((rc + rv) / (nc + nv - 4))
     assert t.lr == pytest.approx(F, rel=1e-6)
     assert t.alpha_lr == pytest.approx(stats.f.sf(F, 2, nc + nv - 4), rel=1e-6)
+
+
+def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
+    """The likelihood ratio's pooled minimum (reduced Newton from p_bar) is the full-space fit's."""
+    from identification.detect import _pooled_newton
+    from identification.montecarlo import ModelCampaign
+    from models.press import Q_PAPER, press_model
+    model = press_model()
+    sigma = np.array([1.518e-02, 4.895e-03, 3.904e-03])
+    w = np.array([1.0, 1.0, 0.0])
+    gen = ModelCampaign(model, model.p_nominal, np.array(Q_PAPER)[:, None], sigma, 2)
+    for r in range(2):
+        data = gen(np.random.default_rng(100 + r))
+        for sp in press_scenarios():
+            ec = identify(model, sp.calibration(data), [450.0, 550.0], w)
+            ev = identify(model, sp.validation(data), [450.0, 550.0], w)
+            pm = _pooled_newton(model, sp.pooled(data), sp, ec, ev, w)
+            eu = identify(model, sp.pooled(data), [450.0, 550.0], w)
+            assert pm is not None
+            np.testing.assert_allclose(pm.p, eu.p, rtol=1e-7)
+            assert pm.objective == pytest.approx(eu.objective, rel=1e-9)
