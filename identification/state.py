@@ -15,9 +15,31 @@ import scipy.sparse.linalg as spla
 
 from .errors import StateSolveError
 
-__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics"]
+__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit"]
 
 _DENSE_LIMIT = 60
+
+#: just-in-time compilation of the per-model CasADi functions (C code through the system
+#: compiler).  Off by default: compiling the press functions takes about 1.5 s, which pays
+#: off only for many repeated fits (the Monte Carlo workers switch it on).
+_JIT = {"enabled": False, "failed": False}
+
+
+def set_jit(enabled: bool) -> bool:
+    """Switch JIT compilation of small (dense) models' functions on or off; returns the previous state.
+
+    Only models stated in SX with at most 60 states are compiled, and only when a C compiler
+    (``cc``/``gcc``) is on the PATH; otherwise the CasADi virtual machine evaluates them as
+    usual (same numbers, slower).
+    """
+    prev = _JIT["enabled"]
+    _JIT["enabled"] = bool(enabled)
+    return prev
+
+
+def _compiler_available() -> bool:
+    import shutil
+    return shutil.which("gcc") is not None or shutil.which("cc") is not None
 
 
 def _to_scipy(dm: ca.DM):
@@ -57,6 +79,27 @@ class Numerics:
         self.dense = model.n_y <= _DENSE_LIMIT
         self._maps = {}
 
+    def compiled(self, name: str) -> ca.Function:
+        """``getattr(self, name)``, JIT-compiled when :func:`set_jit` is on and the model qualifies."""
+        f = getattr(self, name)
+        if not (_JIT["enabled"] and not _JIT["failed"] and self.dense and self.model.symbolic == "SX"):
+            return f
+        key = ("jit", name)
+        g = self._maps.get(key)
+        if g is None:
+            if not _compiler_available():
+                _JIT["failed"] = True
+                return f
+            try:
+                g = ca.Function(f"{name}_jit", f.sx_in(), f.call(f.sx_in()),
+                                {"jit": True, "compiler": "shell",
+                                 "jit_options": {"flags": ["-O1"], "verbose": False}})
+            except RuntimeError:
+                _JIT["failed"] = True          # no working compiler: keep the virtual machine
+                return f
+            self._maps[key] = g
+        return g
+
     def mapped(self, name: str, n: int):
         """``getattr(self, name).map(n)``, cached (one call evaluates all inputs)."""
         key = (name, n)
@@ -72,10 +115,11 @@ class Numerics:
         (dense) models and as SciPy CSC matrices otherwise, read straight from CasADi's
         nonzero buffer (no DM conversion).
         """
-        key = ("point", name)
+        base = self.compiled(name)
+        key = ("point", name, base is not getattr(self, name))
         f = self._maps.get(key)
         if f is None:
-            f = self._maps[key] = _Point(getattr(self, name), self.dense)
+            f = self._maps[key] = _Point(base, self.dense)
         return f
 
     def batched(self, name: str, n: int) -> "_Batched":
@@ -87,10 +131,11 @@ class Numerics:
         function through a ``FunctionBuffer`` (no DM conversion: about 5x less overhead
         than ``Function.__call__`` plus ``DM.full`` for the press model).
         """
-        key = ("batched", name, n)
+        base = self.compiled(name)
+        key = ("batched", name, n, base is not getattr(self, name))
         f = self._maps.get(key)
         if f is None:
-            f = self._maps[key] = _Batched(getattr(self, name), n)
+            f = self._maps[key] = _Batched(base, n)
         return f
 
     @staticmethod

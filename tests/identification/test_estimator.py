@@ -289,3 +289,25 @@ def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
             rng.uniform(0, 1, n_S), rng.uniform(0, 1, n_S), 0.7, rng.uniform(-1, 1, n_y)]
     a, b = (np.array(v) for v in F(*args))
     assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
+
+
+def test_jit_compiled_functions_give_the_same_numbers():
+    """set_jit(True) compiles the press model's functions to C: identical estimates (to round-off)."""
+    import shutil
+    from identification.state import set_jit
+    from models.press import press_model
+    if shutil.which("gcc") is None and shutil.which("cc") is None:
+        pytest.skip("no C compiler on the PATH")
+    model = press_model()
+    q = np.linspace(100.0, 1600.0, 6)[:, None]
+    H = simulate(model, [520.0, 480.0], q)
+    sig = np.array([0.015, 0.005, 0.004])
+    data = Measurements(q, H[None] + sig * np.random.default_rng(9).standard_normal((2,) + H.shape), sig)
+    ref = identify(model, data, p0=[450.0, 550.0])
+    prev = set_jit(True)
+    try:
+        est = identify(model, data, p0=[450.0, 550.0])
+    finally:
+        set_jit(prev)
+    np.testing.assert_allclose(est.p, ref.p, rtol=1e-12)
+    np.testing.assert_allclose(est.cov, ref.cov, rtol=1e-9)
