@@ -20,7 +20,8 @@ maximum a closed-form "top-r" sum.  The same linear form gives reduced-cost vari
 fixing.  :math:`X` (resp. :math:`Z`) comes from a few spectral-projected-gradient steps on
 the continuous relaxation (for E a soft-min smoothing of :math:`\lambda_{\min}`), warm
 started from the parent node.  Incumbents come from greedy + Fedorov exchange and from
-rounding node relaxations.  Branching: most fractional variable; node selection:
+rounding node relaxations.  Branching: the free variable whose relaxed value is closest to
+``branch_target`` (0.65); node selection:
 best bound first.  Monotonicity (adding a sensor never increases a GN criterion) reduces
 ``sum w <= m`` to ``sum w = m``.
 """
@@ -60,6 +61,14 @@ class BnBSettings:
     batch_size : int
         Number of best-bound nodes branched together; their children's relaxations are
         solved simultaneously (vectorised over the batch).
+    e_refine_iters : int
+        E only: exponentiated-subgradient iterations that re-optimise the eigenvalue weights of
+        the bound matrix ``Z = U diag(pi) U^T`` (``U``: eigenvectors of the relaxed FIM) at the
+        end of a node's relaxation (0 = off).  See :func:`_e_bound_refine`.
+    branch_target : float
+        Branch on the free variable whose relaxed value is closest to this (0.5 = most
+        fractional; values above 0.5 favour sensors the relaxation nearly selects, which made
+        A and E trees smaller on the benchmark instances).
     early_branch : bool
         At non-root nodes stop the relaxation (after ``early_branch_min_iters`` iterations)
         once the criterion at the relaxed point is below incumbent - tol: the relaxation
@@ -76,6 +85,8 @@ class BnBSettings:
     early_branch_min_iters: int = 3
     batch_size: int = 128
     nonmonotone: int = 5
+    e_refine_iters: int = 30
+    branch_target: float = 0.65
 
 
 @dataclass(frozen=True)
@@ -319,6 +330,66 @@ def _rowwise_top(Q, free, r):
     return order, Qs, cs[ar, r - 1]
 
 
+def _e_bound_refine(Fflat, X, free, on, r, tE, iters):
+    r"""Best E bound over ``Z = U diag(pi) U^T``, ``pi`` in the simplex, for a batch of nodes.
+
+    With ``U`` the eigenvectors of :math:`M(x)` and :math:`c_{ki} = (u_i^Ta_k)^2`, every ``pi``
+    gives the rigorous bound :math:`\lambda_{\min}(M(v)) \le s(\pi) = \max_{v\in P}\sum_k v_k
+    \sum_i \pi_i c_{ki}` (a fixed-in sum plus a top-r sum over the free sensors).  ``s`` is convex
+    and piecewise linear in ``pi``; a subgradient is :math:`\sum_{k\in\text{top}} c_{k\cdot}`.
+    Minimised by exponentiated subgradient steps (the minimum equals the eigenvector-cut LP
+    :math:`\max t\ \text{s.t.}\ t\le\sum_k v_kc_{ki}\ \forall i,\ v\in P`).
+
+    Parameters
+    ----------
+    Fflat : ndarray, shape (n, p*p)
+        The flattened :math:`F_k`.
+    X : ndarray, shape (B, n)
+        Relaxed points (only used to build ``U``).
+    free, on : ndarray of bool, shape (B, n)
+    r : ndarray of int, shape (B,)
+        Number of free sensors still to choose (``1 <= r < free.sum()``).
+    tE : ndarray, shape (B,)
+        Soft-min sharpness: the start is the soft-min weighting ``pi_i ~ exp(-tE (lam_i - lam_1))``.
+    iters : int
+
+    Returns
+    -------
+    ndarray, shape (B,)
+        The smallest ``s(pi)`` seen (an upper bound on :math:`\lambda_{\min}` over the node).
+    """
+    B, n = X.shape
+    p = int(round(np.sqrt(Fflat.shape[1])))
+    lam, U = np.linalg.eigh((X @ Fflat).reshape(B, p, p))
+    UU = np.einsum("bai,bci->biac", U, U).reshape(B, p, p * p)
+    C = (UU @ Fflat.T).transpose(0, 2, 1)  # (B, n, p): u_i^T F_k u_i
+    Con = np.einsum("bk,bki->bi", on.astype(float), C)
+    pi = np.exp(-tE[:, None] * (lam - lam[:, :1]))
+    pi = pi / pi.sum(axis=1, keepdims=True)
+    pi = 0.9 * pi + 0.1 / p  # keep every direction alive for the multiplicative updates
+    best = np.full(B, np.inf)
+    ar = np.arange(B)
+    rmax = int(r.max())
+    for t in range(max(iters, 1)):
+        c = np.einsum("bki,bi->bk", C, pi)
+        c = np.where(free, c, -np.inf)
+        idx = np.argpartition(-c, rmax - 1, axis=1)[:, :rmax] if rmax < n else np.argsort(-c, axis=1)
+        cv = np.take_along_axis(c, idx, axis=1)
+        o = np.argsort(-cv, axis=1, kind="stable")
+        idx = np.take_along_axis(idx, o, axis=1)
+        sel = np.arange(idx.shape[1])[None, :] < r[:, None]
+        Ct = C[ar[:, None], idx]  # (B, rmax, p)
+        g = Con + np.einsum("bk,bki->bi", sel.astype(float), Ct)
+        s = np.einsum("bi,bi->b", g, pi)
+        best = np.minimum(best, s)
+        gs = g / np.maximum(s, 1e-300)[:, None]
+        eta = 2.0 / np.sqrt(t + 1.0)
+        z = -eta * (gs - gs.min(axis=1, keepdims=True))
+        pi = pi * np.exp(z)
+        pi /= pi.sum(axis=1, keepdims=True)
+    return best
+
+
 def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSettings = BnBSettings(),
                      criteria_settings: CriteriaSettings = DEFAULT_SETTINGS) -> BnBResult:
     r"""Proven-optimal GN design :math:`\min \Psi((\sum_k w_kF_k)^{-1})` by branch and bound.
@@ -549,6 +620,13 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     fin = end_idx[stage[end_idx] + 1 >= len(betas)]
                     stage[nxt] += 1
                     start(nxt, X[nxt], keep_alpha=True)
+                    R = fin[keep[fin]]
+                    if settings.e_refine_iters > 0 and R.size:
+                        onR = S[R] == 1
+                        sR = _e_bound_refine(prob.Fflat, X[R], S[R] == -1, onR, m - onR.sum(axis=1), tE[R],
+                                             settings.e_refine_iters)
+                        best[R] = np.maximum(best[R], prob.bound_from_s(None, sR))
+                        keep[R[best[R] >= thr()]] = False
                 else:
                     fin = end_idx
                 act[fin] = False
@@ -597,7 +675,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
         S_c, X_c, lb_p = [], [], []
         for plb, _, pst, px in parents:
             free = np.flatnonzero(pst == -1)
-            k = free[int(np.argmin(np.abs(px[free] - 0.5)))]
+            k = free[int(np.argmin(np.abs(px[free] - settings.branch_target)))]
             for val in (1, 0):
                 child = pst.copy()
                 child[k] = val
