@@ -243,12 +243,64 @@ def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f, st
     return H * ca.DM(sp, d[row] * d[col])
 
 
+def _stage_functions(model):
+    r"""Per-model CasADi functions of one stage (load case) of the scaled NLP, built once.
+
+    Inputs (ỹ, p̃, q, zbar, c, s_y, s_p, e[, s_f, l_g]) with the scalings as arguments, so the
+    same functions (JIT-compiled when :func:`identification.state.set_jit` is on) serve every
+    data set, input set and scaling of the model:
+
+    * ``stage``: (e ⊙ E(s_y ⊙ ỹ, s_p ⊙ p̃, q),  f = 1/2 sum_k c_k (h_k - zbar_k)^2)
+    * ``jac``:   (diag(e) E_p diag(s_p), diag(e) E_y diag(s_y))
+    * ``hess``:  D [s_f J^T diag(c) J + lag_hess(s_f r, e ⊙ l_g)] D in the order (p, y)
+
+    all from the model's cached ``sens`` and ``lag_hess`` (no further symbolic derivatives).
+    Returns a dict of Functions.
+    """
+    num = numerics(model)
+    key = ("nlp_stage", num.jit_active())
+    got = num._maps.get(key)
+    if got is not None:
+        return got
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    y, p, q = ca.SX.sym("y", n_y), ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
+    zb, c = ca.SX.sym("zbar", n_S), ca.SX.sym("c", n_S)
+    sy, sp, e = ca.SX.sym("s_y", n_y), ca.SX.sym("s_p", n_p), ca.SX.sym("e", n_y)
+    sf, lg = ca.SX.sym("sigma_f"), ca.SX.sym("lam_g", n_y)
+    y_un, p_un = y * sy, p * sp
+    h, Ey, Ep, hy, hp = num.sens(y_un, p_un, q)
+    E = num.E_y(y_un, p_un, q)[0] * e
+    r = c * (h - zb)
+    f = 0.5 * ca.dot(r, h - zb)
+    Dy, Dp, De = ca.diag(sy), ca.diag(sp), ca.diag(e)
+    Jp = ca.mtimes(De, ca.mtimes(Ep, Dp))
+    Jy = ca.mtimes(De, ca.mtimes(Ey, Dy))
+    Hl = num.lag_hess(y_un, p_un, q, sf * r, e * lg)             # order (y, p)
+    perm = list(range(n_y, n_y + n_p)) + list(range(n_y))
+    J = ca.horzcat(hp, hy)
+    H = sf * ca.mtimes(J.T, c * J) + Hl[perm, perm]
+    D = ca.diag(ca.vertcat(sp, sy))
+    H = ca.mtimes(D, ca.mtimes(H, D))
+    base = [y, p, q, zb, c, sy, sp, e]
+    fns = {"stage": ca.Function("nlp_stage", base, [E, f]),
+           "jac": ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp, Jy]),
+           "hess": ca.Function("nlp_stage_hess", base + [sf, lg], [H])}
+    fns = {k: num.compiled(f"nlp_stage_{k}", fn) for k, fn in fns.items()}
+    num._maps[key] = fns
+    return fns
+
+
 def _build_nlp(model, inputs, s_p, s_y, e_scale):
     """CasADi expressions of the scaled full-space problem.
 
     The data enter as NLP parameters (zbar, c / sigma^2 per input and sensor) so that one
-    compiled solver serves many data sets with the same inputs and scaling.
+    compiled solver serves many data sets with the same inputs and scaling.  Models with a
+    state stated in SX use the per-model stage functions of :func:`_stage_functions` (the
+    objective gradient, constraint Jacobian and Lagrangian Hessian are handed to Ipopt
+    assembled from them); others build the stage symbolically here.
     """
+    if model.n_y and model.symbolic == "SX":
+        return _build_nlp_staged(model, inputs, s_p, s_y, e_scale)
     n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
     y = ca.SX.sym("y", n_y)
     p = ca.SX.sym("p", n_p)
@@ -309,6 +361,43 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
                            ca.MX(n_y, (n_q - 1 - j) * n_y)) for j in range(n_q)]
         jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
     return x, ca.sum2(f_all), g, par, hess_lag, jac_g
+
+
+def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
+    """:func:`_build_nlp` from the per-model stage functions (see :func:`_stage_functions`)."""
+    fns = _stage_functions(model)
+    n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
+    pt = ca.MX.sym("p_scaled", n_p)
+    yt = ca.MX.sym("y_scaled", n_y, n_q)
+    Zb = ca.MX.sym("zbar", n_S, n_q)
+    Cw = ca.MX.sym("c", n_S, n_q)
+    Q = ca.DM(inputs.T)
+    scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
+    x = ca.vertcat(pt, ca.vec(yt))
+    par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
+    E_all, f_all = fns["stage"].map(n_q)(yt, pt, Q, Zb, Cw, *scal)
+    g = ca.vec(E_all)
+    f = ca.sum2(f_all)
+    Jp_all, Jy_all = fns["jac"].map(n_q)(yt, pt, Q, *scal)
+    rows = [ca.horzcat(Jp_all[:, j * n_p:(j + 1) * n_p], ca.MX(n_y, j * n_y), Jy_all[:, j * n_y:(j + 1) * n_y],
+                       ca.MX(n_y, (n_q - 1 - j) * n_y)) for j in range(n_q)]
+    jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", n_y * n_q)
+    H_all = fns["hess"].map(n_q)(yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
+    nv = n_p + n_y
+    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]
+    H_pp = blocks[0][:n_p, :n_p]
+    for b in blocks[1:]:
+        H_pp = H_pp + b[:n_p, :n_p]
+    hrows = [ca.horzcat(H_pp, *[b[:n_p, n_p:] for b in blocks])]
+    for j, b in enumerate(blocks):
+        hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[n_p:, n_p:], ca.MX(n_y, (n_q - 1 - j) * n_y)))
+    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    # (the objective gradient is left to CasADi's reverse mode: handing Ipopt an assembled
+    # gradient made it converge linearly on the spring chain although the values agree)
+    return x, f, g, par, hess_lag, jac_g, None, numerics(model).jit_active()
 
 
 def _objective_terms(data, w, sig):

@@ -102,10 +102,13 @@ def _make_solver(build, settings: IpoptSettings):
         opts["expand"] = bool(expand)
     if settings.linear_solver == "mumps" and settings.mumps_pivot_order is not None:
         opts["ipopt.mumps_pivot_order"] = int(settings.mumps_pivot_order)
-    for i, name in ((4, "hess_lag"), (5, "jac_g")):
+    if len(built) > 7 and built[7]:
+        expand = False                      # JIT-compiled stage functions: keep them compiled
+        opts["expand"] = False
+    for i, name in ((4, "hess_lag"), (5, "jac_g"), (6, "grad_f")):
         if len(built) > i and built[i] is not None:
-            f = built[i]
-            opts[name] = f.expand() if (expand and isinstance(x, ca.MX)) else f
+            fn = built[i]
+            opts[name] = fn.expand() if (expand and isinstance(x, ca.MX)) else fn
     for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
     return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
@@ -115,8 +118,10 @@ def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings 
               what: str = "problem", key=None) -> IpoptResult:
     """Solve  min f(x; par)  s.t.  lbg <= g(x; par) <= ubg,  lbx <= x <= ubx  with Ipopt.
 
-    ``build()`` returns the CasADi expressions ``(x, f, g, par)`` and optionally a Function
-    ``(x, par, lam_f, lam_g) -> triu(Hessian of the Lagrangian)``; it is called only when no
+    ``build()`` returns the CasADi expressions ``(x, f, g, par)`` and optionally Functions
+    ``hess_lag (x, par, lam_f, lam_g) -> triu(Hessian of the Lagrangian)``, ``jac_g (x, par) ->
+    (g, dg/dx)``, ``grad_f (x, par) -> (f, df/dx)`` and a flag "stage functions are compiled"
+    (then the NLP is not expanded to SX, which would drop the compiled code); it is called only when no
     solver with the same ``key`` is cached (repeated identifications with new data reuse
     the compiled derivatives).
 

@@ -42,6 +42,19 @@ def _compiler_available() -> bool:
     return shutil.which("gcc") is not None or shutil.which("cc") is not None
 
 
+def _jit(f: ca.Function) -> ca.Function | None:
+    """A C-compiled copy of an SX function, or None (no compiler: JIT is then switched off)."""
+    if not _compiler_available():
+        _JIT["failed"] = True
+        return None
+    try:
+        return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
+                           {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False}})
+    except RuntimeError:
+        _JIT["failed"] = True          # no working compiler: keep the virtual machine
+        return None
+
+
 def _to_scipy(dm: ca.DM):
     """CasADi sparse DM -> scipy CSC matrix (keeps structural zeros out)."""
     sp = dm.sparsity()
@@ -79,23 +92,20 @@ class Numerics:
         self.dense = model.n_y <= _DENSE_LIMIT
         self._maps = {}
 
-    def compiled(self, name: str) -> ca.Function:
-        """``getattr(self, name)``, JIT-compiled when :func:`set_jit` is on and the model qualifies."""
-        f = getattr(self, name)
-        if not (_JIT["enabled"] and not _JIT["failed"] and self.dense and self.model.symbolic == "SX"):
+    def jit_active(self) -> bool:
+        """True when :func:`set_jit` is on and this model qualifies (SX, at most 60 states)."""
+        return _JIT["enabled"] and not _JIT["failed"] and self.dense and self.model.symbolic == "SX"
+
+    def compiled(self, name: str, f: ca.Function | None = None) -> ca.Function:
+        """``getattr(self, name)`` (or ``f``), JIT-compiled when :meth:`jit_active`; cached per name."""
+        f = getattr(self, name) if f is None else f
+        if not self.jit_active():
             return f
         key = ("jit", name)
         g = self._maps.get(key)
         if g is None:
-            if not _compiler_available():
-                _JIT["failed"] = True
-                return f
-            try:
-                g = ca.Function(f"{name}_jit", f.sx_in(), f.call(f.sx_in()),
-                                {"jit": True, "compiler": "shell",
-                                 "jit_options": {"flags": ["-O1"], "verbose": False}})
-            except RuntimeError:
-                _JIT["failed"] = True          # no working compiler: keep the virtual machine
+            g = _jit(f)
+            if g is None:
                 return f
             self._maps[key] = g
         return g
