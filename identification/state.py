@@ -6,6 +6,7 @@ algebra is done in NumPy/SciPy (dense for small states, sparse LU for large ones
 """
 from __future__ import annotations
 
+import os
 import weakref
 
 import casadi as ca
@@ -42,14 +43,30 @@ def _compiler_available() -> bool:
     return shutil.which("gcc") is not None or shutil.which("cc") is not None
 
 
+def _jit_dir() -> str:
+    """A private temporary directory for this process's generated C code and libraries
+    (removed at exit), so that nothing is written to the working directory."""
+    d = _JIT.get("dir")
+    if d is None or not os.path.isdir(d):
+        import atexit
+        import shutil
+        import tempfile
+        d = tempfile.mkdtemp(prefix="mudoe_jit_")
+        atexit.register(shutil.rmtree, d, ignore_errors=True)
+        _JIT["dir"] = d
+    return d
+
+
 def _jit(f: ca.Function) -> ca.Function | None:
     """A C-compiled copy of an SX function, or None (no compiler: JIT is then switched off)."""
     if not _compiler_available():
         _JIT["failed"] = True
         return None
+    d = _jit_dir()
     try:
         return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
-                           {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False}})
+                           {"jit": True, "compiler": "shell", "jit_name": os.path.join(d, "jit_tmp"),
+                            "jit_options": {"flags": ["-O1"], "verbose": False, "directory": d + os.sep}})
     except RuntimeError:
         _JIT["failed"] = True          # no working compiler: keep the virtual machine
         return None
