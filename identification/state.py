@@ -65,7 +65,7 @@ def _jit(f: ca.Function) -> ca.Function | None:
     d = _jit_dir()
     try:
         return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
-                           {"jit": True, "compiler": "shell", "jit_name": os.path.join(d, "jit_tmp"),
+                           {"jit": True, "compiler": "shell", "jit_name": "jit_tmp",
                             "jit_options": {"flags": ["-O1"], "verbose": False, "directory": d + os.sep}})
     except RuntimeError:
         _JIT["failed"] = True          # no working compiler: keep the virtual machine
