@@ -65,8 +65,9 @@ def _jit(f: ca.Function) -> ca.Function | None:
     d = _jit_dir()
     try:
         return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
-                           {"jit": True, "compiler": "shell", "jit_name": "jit_tmp",
-                            "jit_options": {"flags": ["-O1"], "verbose": False, "directory": d + os.sep}})
+                           {"jit": True, "compiler": "shell", "jit_name": "jit_tmp", "jit_cleanup": False,
+                            "jit_options": {"flags": ["-O1"], "verbose": False, "cleanup": False,
+                                            "directory": d + os.sep}})
     except RuntimeError:
         _JIT["failed"] = True          # no working compiler: keep the virtual machine
         return None
