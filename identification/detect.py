@@ -215,7 +215,7 @@ class SplitTest:
     ----------
     model, split : str
     cal_label, val_label : str     1-based input labels (as the paper's table)
-    ok : bool                      both fits and both statistics were computed
+    ok : bool                      both fits and the Wald statistics were computed (alpha_lr may still be NaN)
     stage, error : str             where and why it failed ("" when ok)
     p_cal, p_val : ndarray (n_p,)  estimates (NaN if the fit failed)
     C_cal, C_val : ndarray         covariances (NaN if the fit failed)
@@ -586,7 +586,7 @@ class DetectionResult:
         return np.array([t.alpha(st) if t.ok else np.nan for t in self.tests_of(model)])
 
     def summary(self) -> str:
-        """Per model: a table of both statistics per split, the verdicts, numbered notes."""
+        """Per model: a table of the three statistics per split, the verdicts, numbered notes."""
         s = self.settings
         n = len(self.splits)
         notes = list(self.notes)

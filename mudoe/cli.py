@@ -23,7 +23,7 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_MISSING = 0, 1, 2, 3
 _COMMANDS = {
     "identify": "identify the parameters of every model variant on the study's data",
     "oed": "optimal sensor selection: criteria of every sensor combination and the chosen design",
-    "detect": "Algorithm 1: calibration/validation tests, alpha_min for both statistics, verdict per model",
+    "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
     "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
     "simulate": "generate a campaign on the virtual prototype and write it as CSV (both layouts)",
