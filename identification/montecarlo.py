@@ -691,8 +691,10 @@ def power_study(models, generator: Callable, splits: Sequence[Split], p0, weight
 def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=None, sigma=None, n_M: int = 2,
              generator: Callable | None = None, weights=None, n_rep: int = 2000, tol: float = 0.05,
              seed: int = 20261121, workers: int | None = None, scheduler=None, progress: bool = True,
-             settings: MonteCarloSettings | None = None) -> MonteCarloResult:
+             settings: MonteCarloSettings | None = None, name: str | None = None) -> MonteCarloResult:
     """Front door (``mudoe validate``): a size study without ``generator``, a power study with one.
+
+    ``name`` labels the model in tables (size study; default the model's own name).
 
     Size: data from ``model`` at ``p_true`` with noise ``sigma`` at ``inputs`` (n_M series);
     the rejection rate at TOL should not exceed TOL for a calibrated statistic.  Power: data
@@ -708,7 +710,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
             raise DataError("model: a size study takes one model (the data generator itself)")
         if p_true is None or inputs is None or sigma is None:
             raise DataError("p_true, inputs, sigma: a size study needs the truth, the inputs and the noise level")
-        return size_study(model, p_true, inputs, sigma, splits, p0, n_M, weights, settings)
+        return size_study(model, p_true, inputs, sigma, splits, p0, n_M, weights, settings, name=name)
     if p0 is None:
         raise DataError("p0: a power study needs start values for the fits")
     return power_study(model, generator, splits, p0, weights, settings)

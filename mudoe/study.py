@@ -419,5 +419,5 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p, inputs=data.inputs,
                                       sigma=sigma, n_M=data.n_M, weights=w, n_rep=vc.n_runs,
                                       tol=study.cfg.detect.tol, seed=vc.seed, workers=workers,
-                                      progress=progress.enabled)
+                                      progress=progress.enabled, name=v)
     return results
