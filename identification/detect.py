@@ -348,14 +348,13 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
 
     Starts at the precision-weighted mean p_bar = (F_c + F_v)^{-1} (F_c p_c + F_v p_v) of the
     two estimates (within O(|p_v - p_c|^2) of the pooled optimum) with the states of the two
-    fits, and takes Newton steps with the exact Hessian J^T W J + S (the estimator's own
-    refinement) until the Newton decrement g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6
-    standard errors of the optimum), with step halving when the objective does not decrease.
-    It replaces the pooled full-space Ipopt fit only when it converges; otherwise (None)
-    the caller runs :func:`identify` on the pooled data.
+    fits, and takes the estimator's own exact Newton steps (J^T W J + S, see
+    ``estimator._refine``).  The result is used only when the Newton decrement
+    g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6 standard errors of the optimum); otherwise
+    (None) the caller runs the full-space :func:`identify` on the pooled data.
     """
-    from .estimator import _gn_information, _reduced
     from .errors import StateSolveError
+    from .estimator import _gn_information, _newton_decrement, _reduced, _refine
     w = data_u._weights(weights)
     sig = (np.asarray(data_u.sigma, float) if data_u.sigma is not None
            else np.full(model.n_S, float(np.sqrt(est_c.rss / max(est_c.n_data, 1))) or 1.0))
@@ -375,31 +374,17 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
         for r, j in enumerate(j_list):
             Y[qs.index(j)] = est.states[r]
     s_p = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    cw = data_u.counts().astype(float) * w[None, :]
     try:
         Y, sens, f, g, lam = _reduced(model, p, data_u, w, sig, Y)
-        for step in range(max_steps):
-            H = _gn_information(sens.G, data_u.counts() * w[None, :], sig) + sens.hessians(lam[None])[0]
-            L = np.linalg.cholesky(H * np.outer(s_p, s_p))
-            v = np.linalg.solve(L, g * s_p)
-            if float(v @ v) < 1e-12:
-                resid = data_u.z - sens.h[None]
-                rss = float(np.nansum(resid[:, :, w > 0] ** 2))
-                return _PooledMinimum(p, f, rss, step)
-            dp = -s_p * np.linalg.solve(L.T, v)
-            t = 1.0
-            while True:
-                p_new = p + t * dp
-                if np.all(p_new > model.lower) and np.all(p_new < model.upper):
-                    Y_new, sens_new, f_new, g_new, lam_new = _reduced(model, p_new, data_u, w, sig, Y)
-                    if f_new <= f:
-                        break
-                t *= 0.5
-                if t < 1e-3:
-                    return None
-            p, Y, sens, f, g, lam = p_new, Y_new, sens_new, f_new, g_new, lam_new
-    except (StateSolveError, np.linalg.LinAlgError, IdentificationError):
+        p, Y, sens, f, g, lam, S, steps = _refine(model, data_u, w, sig, cw, s_p, p, Y, sens, f, g, lam, max_steps,
+                                                  stop_decrement=1e-12)
+    except (StateSolveError, IdentificationError):
         return None
-    return None
+    if not _newton_decrement(_gn_information(sens.G, cw, sig) + S, g, s_p) < 1e-12:
+        return None
+    resid = data_u.z - sens.h[None]
+    return _PooledMinimum(p, f, float(np.nansum(resid[:, :, w > 0] ** 2)), steps)
 
 
 def _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c, est_v, pooled):

@@ -208,39 +208,36 @@ def _equation_scale(model, p0, inputs, Y, s_y):
 
 
 # ---------------------------------------------------------------------------- the NLP
-def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f, stage_E):
+def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=None, stage_E=None):
     r"""Hessian of  sf f_j + lg^T E_j  w.r.t. the scaled (p, y) of one stage (symbolic SX).
 
-    With D = diag(s_p, s_y), J = [dh/dp, dh/dy] and f = 1/2 sum_k c_k (h_k - zbar_k)^2:
+    With D = diag(s_p, s_y), J = [dh/dp, dh/dy], r = c ⊙ (h - zbar) and
+    f = 1/2 sum_k c_k (h_k - zbar_k)^2:
 
     .. math::  \tilde H = D\,[\,s_f J^T \mathrm{diag}(c) J
                + \nabla^2_{(p,y)} (\lambda^T h + \mu^T E)\,]\,D,\quad
-               \lambda = s_f\, c \odot (h - \bar z),\ \mu = e \odot l_g,
+               \lambda = s_f\, r,\ \mu = e \odot l_g,
 
     where the second term is the model's cached ``lag_hess`` (built once per model for the
     sensitivities), so no second symbolic Hessian is formed (0.3 s for the spring chain with
-    d_y = 3000).  Models stated in MX fall back to ``casadi.hessian`` of the stage Lagrangian.
+    d_y = 3000).  The scalings may be numbers or SX symbols.  Models stated in MX fall back to
+    ``casadi.hessian`` of the stage Lagrangian (``stage_f``, ``stage_E``).
     """
     n_y, n_p = model.n_y, model.n_p
     if model.symbolic != "SX":
         L_stage = sf * stage_f + (ca.dot(lg, stage_E) if n_y else 0)
         return ca.hessian(L_stage, ca.vertcat(p, y))[0]
+    sp, sy, e = (v if isinstance(v, ca.SX) else ca.DM(np.asarray(v, float).reshape(-1, 1))
+                 for v in (s_p, s_y, e_scale))
     num = numerics(model)
-    y_un, p_un = y * ca.DM(s_y), p * ca.DM(s_p)
+    y_un, p_un = y * sy, p * sp
     h, _, _, hy, hp = num.sens(y_un, p_un, q)
-    lam_h = sf * c * (h - zb)
-    mu = lg * ca.DM(e_scale) if n_y else ca.SX(0, 1)
-    Hl = num.lag_hess(y_un, p_un, q, lam_h, mu)          # order (y, p)
+    Hl = num.lag_hess(y_un, p_un, q, sf * c * (h - zb), e * lg if n_y else ca.SX(0, 1))   # order (y, p)
     perm = list(range(n_y, n_y + n_p)) + list(range(n_y))
-    Hl = Hl[perm, perm]                                    # order (p, y)
     J = ca.horzcat(hp, hy)
-    H = sf * ca.mtimes(J.T, c * J) + Hl
-    # D H D on the nonzeros only (an elementwise product with D_i D_j on H's own sparsity)
-    d = np.concatenate([s_p, s_y])
-    sp = H.sparsity()
-    colind, row = (np.asarray(a) for a in sp.get_ccs())
-    col = np.repeat(np.arange(sp.size2()), np.diff(colind))
-    return H * ca.DM(sp, d[row] * d[col])
+    H = sf * ca.mtimes(J.T, c * J) + Hl[perm, perm]                                       # order (p, y)
+    D = ca.diag(ca.vertcat(sp, sy))
+    return ca.mtimes(D, ca.mtimes(H, D))
 
 
 def _stage_functions(model):
@@ -275,12 +272,7 @@ def _stage_functions(model):
     Dy, Dp, De = ca.diag(sy), ca.diag(sp), ca.diag(e)
     Jp = ca.mtimes(De, ca.mtimes(Ep, Dp))
     Jy = ca.mtimes(De, ca.mtimes(Ey, Dy))
-    Hl = num.lag_hess(y_un, p_un, q, sf * r, e * lg)             # order (y, p)
-    perm = list(range(n_y, n_y + n_p)) + list(range(n_y))
-    J = ca.horzcat(hp, hy)
-    H = sf * ca.mtimes(J.T, c * J) + Hl[perm, perm]
-    D = ca.diag(ca.vertcat(sp, sy))
-    H = ca.mtimes(D, ca.mtimes(H, D))
+    H = _stage_hessian(model, y, p, q, zb, c, sf, lg, sp, sy, e)
     base = [y, p, q, zb, c, sy, sp, e]
     fns = {"stage": ca.Function("nlp_stage", base, [E, f]),
            "jac": ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp, Jy]),
@@ -420,6 +412,48 @@ def _reduced(model, p, data, w, sig, Y0):
     lam = -cw * dev / sig ** 2                      # d f / d h_jk
     grad = np.einsum("jk,jkp->p", lam, sens.G)
     return Y, sens, f, grad, lam
+
+
+def _refine(model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam, max_steps, stop_decrement=0.0):
+    """Exact reduced Newton steps p <- p - (J^T W J + S)^{-1} g from a point and its reduced terms.
+
+    A step is taken while the Hessian is positive definite, the state solves succeed and the
+    objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
+    1e-12 s_p, or when the Newton decrement g^T H^{-1} g is below ``stop_decrement``.  Returns
+    (p, Y, sens, fval, grad, lam, S, steps) with S the second-order term at the returned p.
+    """
+    lo, up = model.lower, model.upper
+    steps = 0
+    S_terms = None
+    for _ in range(max_steps):
+        F = _gn_information(sens.G, cw, sig)
+        S_terms = sens.hessians(lam[None])[0]
+        try:
+            L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
+        except np.linalg.LinAlgError:
+            break
+        v = np.linalg.solve(L, grad * s_p)
+        if float(v @ v) < stop_decrement:
+            break
+        dp = -s_p * np.linalg.solve(L.T, v)
+        if np.max(np.abs(dp / s_p)) < 1e-13:
+            break                          # converged to round-off: keep p and its terms
+        small = np.max(np.abs(dp / s_p)) < 1e-12
+        p_new = np.clip(p + dp, lo, up)
+        try:
+            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y)
+        except StateSolveError:
+            break
+        if not (f_new <= fval * (1 + 1e-14) + 1e-300):
+            break
+        p, Y, sens, fval, grad, lam = p_new, Y_new, sens_new, f_new, grad_new, lam_new
+        S_terms = None
+        steps += 1
+        if small:
+            break
+    if S_terms is None:
+        S_terms = sens.hessians(lam[None])[0]
+    return p, Y, sens, fval, grad, lam, S_terms, steps
 
 
 def _gn_information(G, cw, sig):
@@ -584,37 +618,12 @@ def identify(model: Model, data: Measurements, p0, weights=None,
                                   status=res.status) from None
     lo, up = model.lower, model.upper
     at_bound = (np.abs(p - lo) <= 1e-7 * s_p) | (np.abs(p - up) <= 1e-7 * s_p)
-    steps = 0
-    S_terms = None
-    for _ in range(settings.refine_steps if not np.any(at_bound) else 0):
-        F = _gn_information(sens.G, cw, sig)
-        S_terms = sens.hessians(lam[None])[0]
-        Hm = F + S_terms
-        try:
-            L = np.linalg.cholesky(Hm * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
-            break
-        dp = -s_p * np.linalg.solve(L.T, np.linalg.solve(L, grad * s_p))
-        if np.max(np.abs(dp / s_p)) < 1e-13:
-            break                          # converged to round-off: keep p and its terms
-        small = np.max(np.abs(dp / s_p)) < 1e-12
-        p_new = np.clip(p + dp, lo, up)
-        try:
-            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y)
-        except StateSolveError:
-            break
-        if not (f_new <= fval * (1 + 1e-14) + 1e-300):
-            break
-        p, Y, sens, fval, grad, lam = p_new, Y_new, sens_new, f_new, grad_new, lam_new
-        S_terms = None
-        steps += 1
-        if small:
-            break
+    p, Y, sens, fval, grad, lam, S_terms, steps = _refine(
+        model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam,
+        settings.refine_steps if not np.any(at_bound) else 0)
 
     # ---- Newton decrement g^T H^-1 g: the squared distance to the optimum in standard errors
     F = _gn_information(sens.G, cw, sig)
-    if S_terms is None:
-        S_terms = sens.hessians(lam[None])[0]
     decrement = _newton_decrement(F + S_terms, grad, s_p)
     if res.accepted is None and not (decrement <= settings.decrement_tol):
         raise IdentificationError(
