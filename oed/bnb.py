@@ -19,8 +19,10 @@ so each bound is :math:`h(\max_{v\in P} q^Tv)` with :math:`h` decreasing and the
 maximum a closed-form "top-r" sum.  The same linear form gives reduced-cost variable
 fixing.  :math:`X` (resp. :math:`Z`) comes from a few spectral-projected-gradient steps on
 the continuous relaxation (for E a soft-min smoothing of :math:`\lambda_{\min}`), warm
-started from the parent node.  Incumbents come from greedy + Fedorov exchange and from
-rounding node relaxations.  Branching: the free variable whose relaxed value is closest to
+started from the parent node; the children of up to ``batch_size`` best-bound parents are
+solved together (batched linear algebra), and for E the bound of a node that ends unpruned
+is re-optimised over the eigenbasis weights of Z.  Incumbents come from greedy + Fedorov
+exchange and from rounding node relaxations.  Branching: the free variable whose relaxed value is closest to
 ``branch_target`` (0.65); node selection:
 best bound first.  Monotonicity (adding a sensor never increases a GN criterion) reduces
 ``sum w <= m`` to ``sum w = m``.
@@ -109,7 +111,7 @@ class BnBResult:
 
 
 def _proj_capped_simplex(y, r):
-    """Euclidean projection of y onto {0 <= x <= 1, sum x = r}."""
+    """Euclidean projection of y onto {0 <= x <= 1, sum x = r} (reference for the batched version)."""
     n = y.size
     if r <= 0:
         return np.zeros(n)
@@ -218,12 +220,6 @@ class _Problem:
             return 1.0 / s if s > 0 else np.inf
         pos = s > 0
         return np.where(pos, 1.0 / np.where(pos, s, 1.0), np.inf)
-
-
-def _top_r(qf, r):
-    """Indices (descending) ordering of qf, and sum of top r."""
-    order = np.argsort(-qf, kind="stable")
-    return order, float(qf[order[:r]].sum())
 
 
 def greedy_exchange(prob: _Problem, state, m, W0=None):
