@@ -128,14 +128,6 @@ class Numerics:
             self._maps[key] = g
         return g
 
-    def mapped(self, name: str, n: int):
-        """``getattr(self, name).map(n)``, cached (one call evaluates all inputs)."""
-        key = (name, n)
-        f = self._maps.get(key)
-        if f is None:
-            f = self._maps[key] = getattr(self, name).map(n)
-        return f
-
     def point(self, name: str) -> "_Point":
         """Evaluator of ``getattr(self, name)`` at one point, NumPy in, NumPy/SciPy out.
 
@@ -165,13 +157,6 @@ class Numerics:
         if f is None:
             f = self._maps[key] = _Batched(base, n)
         return f
-
-    @staticmethod
-    def blocks(dm, n: int) -> np.ndarray:
-        """Split a horizontally concatenated mapped output (r, c*n) into an array (n, r, c)."""
-        a = np.asarray(dm.full()) if hasattr(dm, "full") else np.asarray(dm)
-        r = a.shape[0]
-        return a.reshape(r, n, -1).transpose(1, 0, 2)
 
     def factor(self, Ey_dm):
         """A solver x = Ey^{-1} b (and its transpose) for the state Jacobian.
