@@ -64,6 +64,15 @@ __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDec
 STATISTICS = ("likelihood_ratio", "two_sample", "paper")
 #: the statistic that decides unless the user chooses another (all are always reported)
 DEFAULT_STATISTIC = "likelihood_ratio"
+_ALPHA_FIELDS = {"likelihood_ratio": "alpha_lr", "two_sample": "alpha_two_sample", "paper": "alpha_paper"}
+
+
+def alpha_field(statistic: str) -> str:
+    """Name of the attribute holding a statistic's alpha_min (SplitTest, MonteCarloResult)."""
+    try:
+        return _ALPHA_FIELDS[statistic]
+    except (KeyError, TypeError):
+        raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}") from None
 CORRECTIONS = ("bonferroni", "holm")
 
 
@@ -259,13 +268,7 @@ class SplitTest:
 
     def alpha(self, statistic: str) -> float:
         """alpha_min of one statistic (NaN when it could not be computed)."""
-        if statistic == "likelihood_ratio":
-            return self.alpha_lr
-        if statistic == "two_sample":
-            return self.alpha_two_sample
-        if statistic == "paper":
-            return self.alpha_paper
-        raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}")
+        return getattr(self, alpha_field(statistic))
 
 
 def _failed(model_name, split, stage, msg, n_p, p_cal=None, C_cal=None, n_cal=0, notes=()):

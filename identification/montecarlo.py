@@ -33,7 +33,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from .detect import DEFAULT_STATISTIC, STATISTICS, DetectSettings, run_split_tests
+from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
 from .splits import Split, SplitError
@@ -425,13 +425,7 @@ class MonteCarloResult:
         return self.models.index(model)
 
     def _alpha(self, statistic):
-        if statistic == "likelihood_ratio":
-            return self.alpha_lr
-        if statistic == "two_sample":
-            return self.alpha_two_sample
-        if statistic == "paper":
-            return self.alpha_paper
-        raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}")
+        return getattr(self, alpha_field(statistic))
 
     def decisions(self, model=None, statistic: str = DEFAULT_STATISTIC) -> np.ndarray:
         """Per replication: 1 reject, 0 accept, NaN undecided (Bonferroni at TOL / n_tests).
