@@ -21,6 +21,25 @@ def _chain_data(n_y=5, n_M=2, seed=0, rel_sigma=0.01, p_true=(2.0, 0.5)):
     return model, Measurements(Q, z, sig, sensors=model.sensors)
 
 
+def _line_with_bounded_slope():
+    """y = a x + b with a in [0, 1] and data of slope 2: the bound on a is active."""
+    model = Model.explicit(params=[Parameter("a", 0.0, 1.0), "b"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] + p[1])
+    x = np.arange(1.0, 8.0)
+    return model, Measurements(x, (2.0 * x + 1.0).reshape(1, -1, 1), [0.1])
+
+
+def _press_data(n_q, seed):
+    """Press model and two noisy series at n_q loads (truth k5 = 520, k7 = 480 N/mm)."""
+    from models.press import press_model
+    model = press_model()
+    q = np.linspace(100.0, 1600.0, n_q)[:, None]
+    H = simulate(model, [520.0, 480.0], q)
+    sig = np.array([0.015, 0.005, 0.004])
+    rng = np.random.default_rng(seed)
+    return model, Measurements(q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig)
+
+
 # ------------------------------------------------------------------ evidence 1: exactness
 def test_linear_model_covariance_is_exact():
     X = np.array([[1.0, 0.5], [0.3, -1.0], [2.0, -1.0]])
@@ -166,10 +185,7 @@ def test_summary_has_table_and_numbered_notes():
 
 
 def test_parameter_at_bound_is_noted():
-    model = Model.explicit(params=[Parameter("a", 0.0, 1.0), "b"], inputs=["x"], sensors=["y"],
-                           h=lambda p, q: p[0] * q[0] + p[1])
-    x = np.arange(1.0, 8.0)
-    data = Measurements(x, (2.0 * x + 1.0).reshape(1, -1, 1), [0.1])
+    model, data = _line_with_bounded_slope()
     est = identify(model, data, p0=[0.5, 0.0])
     assert est.p[0] == pytest.approx(1.0)
     assert any("at a bound" in n for n in est.notes)
@@ -241,10 +257,7 @@ def test_lazy_bounds_interior_solution_equals_bounded_solve():
 
 
 def test_lazy_bounds_falls_back_to_the_bounded_problem_when_a_bound_is_active():
-    model = Model.explicit(params=[Parameter("a", 0.0, 1.0), "b"], inputs=["x"], sensors=["y"],
-                           h=lambda p, q: p[0] * q[0] + p[1])
-    x = np.arange(1.0, 8.0)
-    data = Measurements(x, (2.0 * x + 1.0).reshape(1, -1, 1), [0.1])
+    model, data = _line_with_bounded_slope()
     lazy = identify(model, data, p0=[0.5, 0.0])
     strict = identify(model, data, p0=[0.5, 0.0], settings=IdentifySettings(lazy_bounds=False))
     assert lazy.extra["ipopt_passes"] == 2
@@ -253,14 +266,7 @@ def test_lazy_bounds_falls_back_to_the_bounded_problem_when_a_bound_is_active():
 
 
 def test_predictor_changes_only_the_start_point():
-    from models.press import press_model
-    model = press_model()
-    q = np.linspace(100.0, 1600.0, 8)[:, None]
-    Y = solve_states(model, [520.0, 480.0], q)
-    H = simulate(model, [520.0, 480.0], q, Y=Y)
-    sig = np.array([0.015, 0.005, 0.004])
-    rng = np.random.default_rng(4)
-    data = Measurements(q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig)
+    model, data = _press_data(8, 4)
     a = identify(model, data, p0=[450.0, 550.0])
     b = identify(model, data, p0=[450.0, 550.0], settings=IdentifySettings(predictor_step=0.0))
     np.testing.assert_allclose(a.p, b.p, rtol=1e-10)
@@ -295,14 +301,9 @@ def test_jit_compiled_functions_give_the_same_numbers():
     """set_jit(True) compiles the press model's functions to C: identical estimates (to round-off)."""
     import shutil
     from identification.state import set_jit
-    from models.press import press_model
     if shutil.which("gcc") is None and shutil.which("cc") is None:
         pytest.skip("no C compiler on the PATH")
-    model = press_model()
-    q = np.linspace(100.0, 1600.0, 6)[:, None]
-    H = simulate(model, [520.0, 480.0], q)
-    sig = np.array([0.015, 0.005, 0.004])
-    data = Measurements(q, H[None] + sig * np.random.default_rng(9).standard_normal((2,) + H.shape), sig)
+    model, data = _press_data(6, 9)
     ref = identify(model, data, p0=[450.0, 550.0])
     prev = set_jit(True)
     try:
