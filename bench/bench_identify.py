@@ -1,19 +1,29 @@
 """Benchmark (issue 2): full-space Ipopt identification vs reduced-space scipy least_squares.
 
 Model: the hardening spring chain (models.library.spring_chain) with d_y states, n_q load
-cases, 4 displacement sensors, 2 series, 1 % noise.  Both methods start from the same p0 and
-must reach the same optimum; time includes the covariance (second-order for mudoe, Gauss-Newton
-from the final Jacobian for the peer).
+cases, 4 or 12 displacement sensors, 2 series, 1 % noise.  All methods start from the same p0
+and must reach the same optimum; time includes the covariance (second-order for mudoe,
+Gauss-Newton from the final Jacobian for the peers).  The model's own CasADi functions (E and
+its derivatives, built by ``simulate`` when the data are generated) exist before any timing, for
+mudoe and the peers alike.
 
-Peer ("reduced"): scipy.optimize.least_squares(method="trf", x_scale="jac") on p, each residual
-evaluation solving E(y, p, q_j) = 0 by the same sparse exact-Jacobian Newton as mudoe; its
-Jacobian by scipy's default 2-point finite differences (what a typical user writes).
-A second peer variant ("reduced+IFT") gets the exact Jacobian from the implicit function theorem.
+Peers: scipy.optimize.least_squares(method="trf", x_scale="jac", tolerances 1e-12) on p, each
+residual evaluation solving E(y, p, q_j) = 0 by mudoe's own sparse exact-Jacobian Newton:
+
+* "FD": Jacobian by scipy's default 2-point finite differences, the inner Newton started from
+  the model's guess at every evaluation (what a typical residual function does);
+* "FD+ws": the same with the inner Newton warm-started from the previous evaluation's states
+  (what a careful user does: about half the inner iterations);
+* "IFT+ws": the exact Jacobian by the implicit function theorem (mudoe's sensitivities, a peer a
+  typical user does not have), warm-started inner Newton.
 
 Sizes: d_y = 30, 300, 3000 with n_p = 2 (k, c) and n_p = 11 (ten stiffness groups and c).
-"cold" is the first identification of a problem (building and compiling the NLP included),
-"warm" a second one with new noise (cached solver: the Monte Carlo / split use case).
-Run: ``python -m bench identify`` (or ``make bench``); options ``--quick`` (skip d_y = 3000).
+"cold" is the first identification of a problem (building mudoe's NLP stage functions and the
+Ipopt solver included; a fresh model each repetition), "warm" a second one with new noise
+(cached solver: the Monte Carlo and split use case).  Every time is the median of ``--rep``
+repetitions (default 3).
+Run: ``python -m bench identify`` (or ``make bench``); options ``--quick`` (skip d_y = 3000),
+``--rep=K``.
 """
 from __future__ import annotations
 
@@ -40,15 +50,16 @@ def _problem(n_y, n_q, seed=0, n_groups=1):
     return model, Measurements(Q, z, sig, sensors=model.sensors)
 
 
-def _reduced(model, data, p0, exact_jac):
+def _reduced(model, data, p0, exact_jac, warm_inner):
     mask = data.mask()
     cache = {}
 
     def states(p):
         key = tuple(p)
         if key not in cache:
+            last = cache.get("last") if warm_inner else None
             cache.clear()
-            cache[key] = solve_states(model, p, data.inputs, Y0=cache.get("last"))
+            cache[key] = cache["last"] = solve_states(model, p, data.inputs, Y0=last)
         return cache[key]
 
     def fun(p):
@@ -69,33 +80,57 @@ def _reduced(model, data, p0, exact_jac):
     return time.perf_counter() - t, res.x, cov, res.nfev
 
 
+def _median_time(fn, rep):
+    times, out = [], None
+    for _ in range(rep):
+        t, out = fn()
+        times.append(t)
+    return float(np.median(times)), out
+
+
 def main(argv=None):
     argv = argv or []
+    rep = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--rep=")), 3)
     sizes = [(30, 5, 1), (300, 5, 1), (3000, 5, 1), (300, 10, 1), (300, 20, 1),
              (30, 5, 10), (300, 5, 10), (3000, 5, 10)]
     if "--quick" in argv:
         sizes = [s for s in sizes if s[0] < 3000]
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {sys.version.split()[0]}")
-    print(f"{'d_y':>5} {'n_q':>4} {'n_p':>4} {'full cold s':>11} {'full warm s':>11} {'reduced FD s':>12} "
-          f"{'reduced IFT s':>13} {'FD/cold':>8} {'FD/warm':>8} {'IFT/cold':>8} {'IFT/warm':>8} {'max rel dp':>10}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"python {sys.version.split()[0]}, median of {rep}")
+    print("| d_y | n_q | n_p | full cold s | full warm s | FD s | FD+ws s | IFT+ws s | FD/cold | FD/warm "
+          "| FD+ws/cold | FD+ws/warm | IFT+ws/cold | IFT+ws/warm | max rel dp |")
+    print("|" + "---|" * 15)
     rows = []
     for n_y, n_q, n_groups in sizes:
-        model, data = _problem(n_y, n_q, n_groups=n_groups)
         p0 = np.concatenate([np.ones(n_groups), [0.1]])
-        t = time.perf_counter()
-        est = identify(model, data, p0)
-        t_cold = time.perf_counter() - t
-        _, data_new = _problem(n_y, n_q, seed=1, n_groups=n_groups)   # new noise: the warm case
-        t = time.perf_counter()
-        identify(model, data_new, p0)
-        t_warm = time.perf_counter() - t
-        t_fd, p_fd, _, _ = _reduced(model, data, p0, exact_jac=False)
-        t_ift, p_ift, _, _ = _reduced(model, data, p0, exact_jac=True)
-        dp = max(np.max(np.abs(p_fd - est.p) / np.abs(est.p)), np.max(np.abs(p_ift - est.p) / np.abs(est.p)))
-        rows.append((n_y, n_q, model.n_p, t_cold, t_warm, t_fd, t_ift))
-        print(f"{n_y:>5} {n_q:>4} {model.n_p:>4} {t_cold:>11.3f} {t_warm:>11.3f} {t_fd:>12.3f} {t_ift:>13.3f} "
-              f"{t_fd / t_cold:>8.1f} {t_fd / t_warm:>8.1f} {t_ift / t_cold:>8.1f} {t_ift / t_warm:>8.1f} "
-              f"{dp:>10.1e}", flush=True)
+
+        def cold():
+            model, data = _problem(n_y, n_q, n_groups=n_groups)      # a fresh model: nothing cached
+            t = time.perf_counter()
+            est = identify(model, data, p0)
+            return time.perf_counter() - t, (model, data, est)
+
+        t_cold, (model, data, est) = _median_time(cold, rep)
+        seeds = iter(range(1, rep + 1))
+
+        def warm():
+            _, data_new = _problem(n_y, n_q, seed=next(seeds), n_groups=n_groups)   # new noise
+            t = time.perf_counter()
+            identify(model, data_new, p0)
+            return time.perf_counter() - t, None
+
+        t_warm, _ = _median_time(warm, rep)
+        peers = {}
+        for name, exact, ws in (("fd", False, False), ("fdws", False, True), ("iftws", True, True)):
+            t_peer, (p_peer, *_rest) = _median_time(
+                lambda: (lambda r: (r[0], r[1:]))(_reduced(model, data, p0, exact_jac=exact, warm_inner=ws)), rep)
+            peers[name] = (t_peer, p_peer)
+        dp = max(np.max(np.abs(pp - est.p) / np.abs(est.p)) for _, pp in peers.values())
+        t_fd, t_fdws, t_ift = (peers[k][0] for k in ("fd", "fdws", "iftws"))
+        rows.append((n_y, n_q, model.n_p, t_cold, t_warm, t_fd, t_fdws, t_ift))
+        print(f"| {n_y} | {n_q} | {model.n_p} | {t_cold:.3f} | {t_warm:.3f} | {t_fd:.3f} | {t_fdws:.3f} | "
+              f"{t_ift:.3f} | {t_fd / t_cold:.1f} | {t_fd / t_warm:.1f} | {t_fdws / t_cold:.1f} | "
+              f"{t_fdws / t_warm:.1f} | {t_ift / t_cold:.1f} | {t_ift / t_warm:.1f} | {dp:.1e} |", flush=True)
     return rows
 
 

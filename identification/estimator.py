@@ -56,6 +56,9 @@ class IdentifySettings:
                               predictor that sets Ipopt's start point (0 disables it)
     lazy_bounds : bool        first solve without the parameter bounds and keep that solution
                               when it lies strictly inside them (else solve with the bounds)
+    refine_decrement : float  no refinement step is taken once the Newton decrement g^T H^-1 g
+                              (chi^2 units) is below this (1e-18: p within 1e-9 standard errors
+                              of the optimum; Ipopt's solutions are typically at 1e-20)
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -66,6 +69,7 @@ class IdentifySettings:
     decrement_tol: float = 1e-10
     predictor_step: float = 0.25
     lazy_bounds: bool = True
+    refine_decrement: float = 1e-18
 
 
 # ---------------------------------------------------------------------------- validation
@@ -208,7 +212,7 @@ def _equation_scale(model, p0, inputs, Y, s_y):
 
 
 # ---------------------------------------------------------------------------- the NLP
-def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=None, stage_E=None):
+def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=None, stage_E=None, terms=None):
     r"""Hessian of  sf f_j + lg^T E_j  w.r.t. the scaled (p, y) of one stage (symbolic SX).
 
     With D = diag(s_p, s_y), J = [dh/dp, dh/dy], r = c ⊙ (h - zbar) and
@@ -220,8 +224,10 @@ def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=Non
 
     where the second term is the model's cached ``lag_hess`` (built once per model for the
     sensitivities), so no second symbolic Hessian is formed (0.3 s for the spring chain with
-    d_y = 3000).  The scalings may be numbers or SX symbols.  Models stated in MX fall back to
-    ``casadi.hessian`` of the stage Lagrangian (``stage_f``, ``stage_E``).
+    d_y = 3000).  The scalings may be numbers or SX symbols.  ``terms`` = (h, dh/dy, dh/dp) at the
+    unscaled point when the caller has them already (saves inlining ``sens`` a second time).
+    Models stated in MX fall back to ``casadi.hessian`` of the stage Lagrangian (``stage_f``,
+    ``stage_E``).
     """
     n_y, n_p = model.n_y, model.n_p
     if model.symbolic != "SX":
@@ -231,13 +237,22 @@ def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=Non
                  for v in (s_p, s_y, e_scale))
     num = numerics(model)
     y_un, p_un = y * sy, p * sp
-    h, _, _, hy, hp = num.sens(y_un, p_un, q)
+    if terms is None:
+        h, _, _, hy, hp = num.sens(y_un, p_un, q)
+    else:
+        h, hy, hp = terms
     Hl = num.lag_hess(y_un, p_un, q, sf * c * (h - zb), e * lg if n_y else ca.SX(0, 1))   # order (y, p)
     perm = list(range(n_y, n_y + n_p)) + list(range(n_y))
     J = ca.horzcat(hp, hy)
     H = sf * ca.mtimes(J.T, c * J) + Hl[perm, perm]                                       # order (p, y)
-    D = ca.diag(ca.vertcat(sp, sy))
-    return ca.mtimes(D, ca.mtimes(H, D))
+    d = ca.vertcat(sp, sy)
+    return _scale_nz(H, d, d)
+
+
+def _scale_nz(M, r, c):
+    """diag(r) M diag(c) for a sparse SX matrix M, computed on its nonzeros (same sparsity)."""
+    sp = M.sparsity()
+    return ca.SX(sp, M.nz[:] * r[sp.row()] * c[sp.get_col()])
 
 
 def _stage_functions(model):
@@ -266,13 +281,12 @@ def _stage_functions(model):
     sf, lg = ca.SX.sym("sigma_f"), ca.SX.sym("lam_g", n_y)
     y_un, p_un = y * sy, p * sp
     h, Ey, Ep, hy, hp = num.sens(y_un, p_un, q)
-    E = num.E_y(y_un, p_un, q)[0] * e
+    E = model.E_fun(y_un, p_un, q) * e
     r = c * (h - zb)
     f = 0.5 * ca.dot(r, h - zb)
-    Dy, Dp, De = ca.diag(sy), ca.diag(sp), ca.diag(e)
-    Jp = ca.mtimes(De, ca.mtimes(Ep, Dp))
-    Jy = ca.mtimes(De, ca.mtimes(Ey, Dy))
-    H = _stage_hessian(model, y, p, q, zb, c, sf, lg, sp, sy, e)
+    Jp = _scale_nz(ca.SX(Ep), e, sp)
+    Jy = _scale_nz(ca.SX(Ey), e, sy)
+    H = _stage_hessian(model, y, p, q, zb, c, sf, lg, sp, sy, e, terms=(h, hy, hp))
     base = [y, p, q, zb, c, sy, sp, e]
     fns = {"stage": ca.Function("nlp_stage", base, [E, f]),
            "jac": ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp, Jy]),
@@ -620,7 +634,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     at_bound = (np.abs(p - lo) <= 1e-7 * s_p) | (np.abs(p - up) <= 1e-7 * s_p)
     p, Y, sens, fval, grad, lam, S_terms, steps = _refine(
         model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam,
-        settings.refine_steps if not np.any(at_bound) else 0)
+        settings.refine_steps if not np.any(at_bound) else 0, stop_decrement=settings.refine_decrement)
 
     # ---- Newton decrement g^T H^-1 g: the squared distance to the optimum in standard errors
     F = _gn_information(sens.G, cw, sig)
