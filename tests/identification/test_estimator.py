@@ -297,6 +297,47 @@ def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
     assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
 
 
+@pytest.mark.parametrize("builder", ["_build_nlp_glued", "_build_nlp_staged"])
+def test_assembled_nlp_derivatives_equal_casadi_ad(builder):
+    """The constraint Jacobian and Lagrangian Hessian handed to Ipopt equal CasADi's AD of (f, g)."""
+    import identification.estimator as est_mod
+    model = spring_chain(9, n_sensors=4, n_groups=3)
+    rng = np.random.default_rng(3)
+    n_q = 4
+    inputs = np.column_stack([rng.uniform(0.5, 2.0, n_q), rng.uniform(0.1, 0.6, n_q)])
+    s_p, s_y, e = rng.uniform(0.5, 2, model.n_p), rng.uniform(0.5, 2, model.n_y), rng.uniform(0.5, 2, model.n_y)
+    x, f, g, par, hess_lag, jac_g = getattr(est_mod, builder)(model, inputs, s_p, s_y, e)[:6]
+    lam_f, lam_g = ca.MX.sym("lf"), ca.MX.sym("lg", g.size1())
+    L = lam_f * f + ca.dot(lam_g, g)
+    ref = ca.Function("ref", [x, par, lam_f, lam_g], [ca.jacobian(g, x), ca.triu(ca.hessian(L, x)[0])])
+    xv, pv = rng.uniform(0.2, 1.5, x.size1()), rng.uniform(0, 1, par.size1())
+    lf, lg = 0.8, rng.uniform(-1, 1, g.size1())
+    J_ref, H_ref = (np.array(ca.densify(v)) for v in ref(xv, pv, lf, lg))
+    J = np.array(ca.densify(jac_g(xv, pv)[1]))
+    H = np.array(ca.densify(hess_lag(xv, pv, lf, lg)))
+    np.testing.assert_allclose(J, J_ref, rtol=0, atol=1e-12 * np.abs(J_ref).max())
+    np.testing.assert_allclose(H, H_ref, rtol=0, atol=1e-12 * np.abs(H_ref).max())
+
+
+def test_large_state_model_uses_the_glued_nlp_and_agrees_with_the_reduced_fit(monkeypatch):
+    """Models with more than 60 states take the MX-glued NLP; the estimate matches the reduced space."""
+    import identification.estimator as est_mod
+    calls = []
+    orig = est_mod._build_nlp_glued
+    monkeypatch.setattr(est_mod, "_build_nlp_glued", lambda *a: calls.append(1) or orig(*a))
+    model = spring_chain(80, n_sensors=4, n_groups=2)
+    q = np.array([[f, 0.3 * f] for f in np.linspace(0.2, 3.0, 4)])
+    p_true = np.array([2.0, 2.2, 0.5])
+    H = simulate(model, p_true, q)
+    sig = 0.01 * np.abs(H).max(axis=0)
+    data = Measurements(q, H[None] + sig * np.random.default_rng(5).standard_normal((2,) + H.shape), sig)
+    est = identify(model, data, p0=[1.0, 1.0, 0.1])
+    assert calls, "the glued NLP was not used for an 80-state model"
+    ref = least_squares(lambda p: ((data.z - simulate(model, p, q)[None]) / sig).ravel(), [1.0, 1.0, 0.1],
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    np.testing.assert_allclose(est.p, ref.x, rtol=1e-8)
+
+
 def test_jit_compiled_functions_give_the_same_numbers():
     """set_jit(True) compiles the press model's functions to C: identical estimates (to round-off)."""
     import shutil
