@@ -71,6 +71,21 @@ class IdentifySettings:
     lazy_bounds: bool = True
     refine_decrement: float = 1e-18
 
+    def __post_init__(self):
+        if not isinstance(self.ipopt, IpoptSettings):
+            raise TypeError(f"ipopt: expected IpoptSettings, got {type(self.ipopt).__name__}")
+        if not (isinstance(self.refine_steps, (int, np.integer)) and self.refine_steps >= 0):
+            raise ValueError(f"refine_steps: expected an integer >= 0, got {self.refine_steps!r}")
+        for name in ("rank_rtol", "decrement_tol", "refine_decrement", "s_ratio_note"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+        if not (isinstance(self.ill_conditioned, (int, float, np.floating)) and self.ill_conditioned > 1):
+            raise ValueError(f"ill_conditioned: expected a condition number > 1, got {self.ill_conditioned!r}")
+        if not (isinstance(self.predictor_step, (int, float, np.floating)) and 0 <= self.predictor_step < np.inf):
+            raise ValueError(f"predictor_step: expected a finite number >= 0 (0 disables the predictor), "
+                             f"got {self.predictor_step!r}")
+
 
 # ---------------------------------------------------------------------------- validation
 def _validate(model, data, p0, weights):

@@ -62,6 +62,24 @@ class IpoptSettings:
     expand: bool | None = None  # None: expand MX to SX when the problem is small (<= 1000 variables)
     extra: tuple = ()  # extra (option, value) pairs passed to nlpsol, e.g. (("ipopt.mu_init", 1e-3),)
 
+    def __post_init__(self):
+        for name in ("tol", "constr_viol_tol", "acceptable_tol"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float, np.floating)) and 0 < v < np.inf):
+                raise ValueError(f"{name}: expected a positive tolerance, got {v!r}")
+        if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
+            raise ValueError(f"max_iter: expected an integer >= 1, got {self.max_iter!r}")
+        if not (isinstance(self.print_level, (int, np.integer)) and 0 <= self.print_level <= 12):
+            raise ValueError(f"print_level: expected an integer in 0..12 (Ipopt's range), got {self.print_level!r}")
+        if not isinstance(self.linear_solver, str) or not self.linear_solver:
+            raise ValueError(f"linear_solver: expected an Ipopt linear solver name such as 'mumps', "
+                             f"got {self.linear_solver!r}")
+        if self.mumps_pivot_order is not None and self.mumps_pivot_order not in range(8):
+            raise ValueError(f"mumps_pivot_order: expected None or an integer in 0..7 (MUMPS ICNTL(7)), "
+                             f"got {self.mumps_pivot_order!r}")
+        if not isinstance(self.extra, tuple) or not all(isinstance(e, tuple) and len(e) == 2 for e in self.extra):
+            raise ValueError(f"extra: expected a tuple of (option, value) pairs, got {self.extra!r}")
+
 
 @dataclass(frozen=True)
 class IpoptResult:

@@ -90,6 +90,23 @@ class BnBSettings:
     e_refine_iters: int = 30
     branch_target: float = 0.65
 
+    def __post_init__(self):
+        if not (isinstance(self.time_limit, (int, float, np.floating)) and self.time_limit > 0):
+            raise ValueError(f"time_limit: expected seconds > 0, got {self.time_limit!r}")
+        if not (isinstance(self.gap_tol, (int, float, np.floating)) and 0 <= self.gap_tol < np.inf):
+            raise ValueError(f"gap_tol: expected a finite number >= 0, got {self.gap_tol!r}")
+        for name, low in (("root_iters", 1), ("node_iters", 1), ("early_branch_min_iters", 0), ("batch_size", 1),
+                          ("nonmonotone", 1), ("e_refine_iters", 0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= low):
+                raise ValueError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if self.node_limit is not None and not (isinstance(self.node_limit, (int, np.integer)) and self.node_limit >= 1):
+            raise ValueError(f"node_limit: expected None or an integer >= 1, got {self.node_limit!r}")
+        if not (len(self.e_betas) >= 1 and all(float(b) > 0 for b in self.e_betas)):
+            raise ValueError(f"e_betas: expected one or more positive sharpness values, got {self.e_betas!r}")
+        if not (0.0 <= float(self.branch_target) <= 1.0):
+            raise ValueError(f"branch_target: expected a value in [0, 1], got {self.branch_target!r}")
+
 
 @dataclass(frozen=True)
 class BnBResult:

@@ -56,6 +56,19 @@ class DesignSettings:
     criteria: CriteriaSettings = DEFAULT_SETTINGS
     scip_formulation: str = "auto"
 
+    def __post_init__(self):
+        for name in ("enumeration_limit", "enumeration_fallback_limit"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= 0):
+                raise ValueError(f"{name}: expected an integer >= 0, got {v!r}")
+        if not (isinstance(self.gap_tol, (int, float, np.floating)) and 0 <= self.gap_tol < np.inf):
+            raise ValueError(f"gap_tol: expected a finite number >= 0, got {self.gap_tol!r}")
+        if not isinstance(self.criteria, CriteriaSettings):
+            raise TypeError(f"criteria: expected CriteriaSettings, got {type(self.criteria).__name__}")
+        formulations = ("auto", "cuts", "naive", "second_order")
+        if self.scip_formulation not in formulations:
+            raise ValueError(f"scip_formulation: expected one of {formulations}, got {self.scip_formulation!r}")
+
 
 @dataclass(frozen=True)
 class DesignResult:

@@ -35,6 +35,15 @@ class EnumerationSettings:
     max_designs: int = 20_000_000
     time_limit: float | None = None
 
+    def __post_init__(self):
+        for name in ("batch_size", "max_designs"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= 1):
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        if self.time_limit is not None and not (isinstance(self.time_limit, (int, float, np.floating))
+                                                and self.time_limit > 0):
+            raise ValueError(f"time_limit: expected None or seconds > 0, got {self.time_limit!r}")
+
 
 @dataclass(frozen=True)
 class EnumerationResult:
