@@ -4,7 +4,10 @@ Solves min_w Psi((sum_k w_k F_k)^{-1}), sum w = m, for seeded random instances
 F_k = a_k a_k^T, a_k ~ N(0, I_p), Psi in {A (trace), D (log det), E (lambda_max)}.
 
 Usage: ``python -m bench oed [--quick] [--time-limit=60] [--scip-limit=20] [--scip-max-n=20] [--scip-form=naive|cuts]
-[--enum-max=2000000] [--sizes=20x5,50x10] [--ms=10,20] [--crits=ADE] [--seed=0] [--out=FILE] [--press]``
+[--enum-max=2000000] [--sizes=20x5,50x10] [--ms=10,20] [--crits=ADE] [--seed=0] [--out=FILE] [--press]
+[--budget=FRACTION]``
+(``--budget=0.8``: per-sensor costs c_k ~ U[0.5, 3] (seeded) and c^T w <= 0.8 m mean(c) with
+sum w <= m instead of sum w = m, so the optimum may use fewer than m sensors)
 (``--press``: the press with all 20 joint directions as candidates, e.g. ``--press --ms=2,3,4,6``)
 (use the ``--opt=value`` form: ``python -m bench`` treats bare words as benchmark names).
 
@@ -54,6 +57,8 @@ def main(argv=None):
     ap.add_argument("--crits", default="ADE")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="also write the markdown table to this file")
+    ap.add_argument("--budget", type=float, default=None,
+                    help="costs U[0.5, 3] and budget FRACTION x m x mean cost, with sum w <= m")
     ap.add_argument("--press", action="store_true",
                     help="the press with every joint direction as a candidate sensor instead of random instances")
     args = ap.parse_args(argv)
@@ -83,12 +88,16 @@ def main(argv=None):
         for m in ms:
             if m < p or m > n:
                 continue
-            cons = make_constraints(n, p, n_sensors=m)
+            if args.budget is None:
+                cons = make_constraints(n, p, n_sensors=m)
+            else:
+                costs = np.random.default_rng([args.seed, n, p, 7]).uniform(0.5, 3.0, n)
+                cons = make_constraints(n, p, max_sensors=m, costs=costs, budget=args.budget * m * costs.mean())
             for crit in args.crits:
                 b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=args.time_limit))
                 rel = (lambda x: x) if crit == "D" else (lambda x: x / abs(b.value))
                 e_t = e_v = None
-                if comb(n, m) <= args.enum_max:
+                if cons.count_designs() <= args.enum_max:
                     e = enumerate_designs(F, None, cons, crit, settings=EnumerationSettings(max_designs=args.enum_max))
                     e_t, e_v = e.wall_time, e.value
                 s_t = s_v = None

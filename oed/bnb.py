@@ -5,7 +5,9 @@ Solves
 .. math::  \min_{w\in\{0,1\}^{n_S}} \Psi\Big(\big(\textstyle\sum_k w_kF_k\big)^{-1}\Big)
            \quad\text{s.t.}\quad \sum_k w_k = m,\ w_k=1\ (k\in I),\ w_k=0\ (k\in O),
 
-with :math:`\Psi\in\{\mathrm{tr},\ \log\det,\ \lambda_{\max}\}`.
+with :math:`\Psi\in\{\mathrm{tr},\ \log\det,\ \lambda_{\max}\}`, optionally with per-sensor
+costs and a budget :math:`c^Tw\le b` (then :math:`lo\le\sum_k w_k\le m`: the budget may stop the
+best design short of m sensors).
 
 Bounds are rigorous for *any* relaxation iterate (they need not be optimal): with
 :math:`M(v)=\sum_k v_kF_k` and node polytope :math:`P=\{v\in[0,1]^{n_S}: \sum v=m,\ \text{fixings}\}`,
@@ -26,6 +28,14 @@ exchange and from rounding node relaxations.  Branching: the free variable whose
 ``branch_target`` (0.65); node selection:
 best bound first.  Monotonicity (adding a sensor never increases a GN criterion) reduces
 ``sum w <= m`` to ``sum w = m``.
+
+With a budget the node polytope is :math:`\{v: \sum v\le r,\ c^Tv\le b_{node}\}`.  The relaxation
+point still comes from the count-only polytope (any point gives valid bounds); the budget enters
+the bound through the linear maximum, bounded by its Lagrangian dual over the budget multiplier
+(:func:`_budget_top`).  Free sensors that no longer fit the node's budget are fixed out, a node
+whose free sensors all fit is a leaf (take them all), and the greedy/exchange and rounding
+heuristics keep to the budget.  Reduced-cost fixing and the E eigenbasis refinement assume an
+exact count and are switched off.
 """
 from __future__ import annotations
 
@@ -239,19 +249,28 @@ class _Problem:
         return np.where(pos, 1.0 / np.where(pos, s, 1.0), np.inf)
 
 
-def greedy_exchange(prob: _Problem, state, m, W0=None):
-    r"""Heuristic for :math:`\min_w \Psi((\sum_k w_kF_k)^{-1})`, :math:`\sum w = m`: greedy forward
-    selection (regularised D-ranking until regular) then best-improvement Fedorov exchange.  ``state``: -1 free, 0 out, 1 in.  Returns (boolean w, value)."""
+def greedy_exchange(prob: _Problem, state, m, W0=None, costs=None, budget=np.inf, lo=0):
+    r"""Heuristic for :math:`\min_w \Psi((\sum_k w_kF_k)^{-1})`, :math:`\sum w = m` (with ``costs``:
+    :math:`lo \le \sum w \le m,\ c^Tw \le` ``budget``): greedy forward selection (regularised
+    D-ranking until regular) then best-improvement Fedorov exchange; with a budget, additions
+    and exchanges are restricted to what the budget allows and the design is filled up again
+    after every exchange.  ``state``: -1 free, 0 out, 1 in.  Returns (boolean w, value); the value
+    is inf when no admissible design was found."""
     n = prob.n
     Fflat = prob.Fflat
     p = prob.p
     free = np.flatnonzero(state == -1)
-    if W0 is None:
-        w = state == 1
-        scale = float(np.trace((np.ones(n) @ Fflat).reshape(p, p))) / max(n * p, 1)
-        eps = 1e-9 * max(scale, np.finfo(float).tiny)
+    c = np.zeros(n) if costs is None else np.asarray(costs, float)
+    scale = float(np.trace((np.ones(n) @ Fflat).reshape(p, p))) / max(n * p, 1)
+    eps = 1e-9 * max(scale, np.finfo(float).tiny)
+
+    def fill(w):
+        """Add the best affordable free sensor while the count allows (in place)."""
         while w.sum() < m:
             cand = free[~w[free]]
+            cand = cand[c[cand] <= budget - c @ w]
+            if cand.size == 0:
+                break
             Mc = (w @ Fflat).reshape(p, p)
             Ms = Mc[None] + prob.F[cand] + eps * prob.eye[None]
             if prob.crit is Criterion.D or w.sum() < p:
@@ -261,8 +280,11 @@ def greedy_exchange(prob: _Problem, state, m, W0=None):
                 lam = np.linalg.eigvalsh(Ms)
                 score = np.sum(1.0 / lam, axis=1) if prob.crit is Criterion.A else 1.0 / lam[:, 0]
             w[cand[int(np.argmin(score))]] = True
-    else:
-        w = W0.copy()
+        return w
+
+    w = fill(state == 1) if W0 is None else fill(W0.copy())
+    if w.sum() < lo or c @ w > budget:
+        return w, np.inf
     val = float(prob.exact(w[None])[0])
     # Fedorov exchange over free variables
     while True:
@@ -282,6 +304,9 @@ def greedy_exchange(prob: _Problem, state, m, W0=None):
                 sc = np.where(pos, -np.sum(np.log(lsafe), axis=1), np.inf)
             else:
                 sc = np.where(pos, 1.0 / lsafe[:, 0], np.inf)
+        if costs is not None:
+            swap_cost = c @ w - c[ins][:, None] + c[outs][None, :]
+            sc = np.where((swap_cost <= budget).ravel(), sc, np.inf)
         j = int(np.argmin(sc))
         if not sc[j] < val - prob.tol(val) * 0.5 - 1e-15 * abs(val):
             break
@@ -289,6 +314,8 @@ def greedy_exchange(prob: _Problem, state, m, W0=None):
         w2 = w.copy()
         w2[ins[i_out]] = False
         w2[outs[j_in]] = True
+        if costs is not None:
+            w2 = fill(w2)
         v2 = float(prob.exact(w2[None])[0])
         if not v2 < val:
             break
@@ -341,6 +368,56 @@ def _rowwise_top(Q, free, r):
     cs = np.cumsum(np.where(np.isfinite(Qs), Qs, 0.0), axis=1)
     ar = np.arange(Q.shape[0])
     return order, Qs, cs[ar, r - 1]
+
+
+def _budget_top(Q, free, r, costs, left, iters=40):
+    r"""Upper bound on :math:`\max\{q^Tv:\ v\in[0,1]^{free},\ \sum v\le r,\ c^Tv\le b\}` per row.
+
+    Lagrangian relaxation of the budget: for every :math:`\mu\ge0`
+
+    .. math::  \max_{v} q^Tv \le \mu b + \textstyle\sum_{\text{top } r} (q_k - \mu c_k)_+ =: s(\mu),
+
+    a convex piecewise-linear function of :math:`\mu` whose minimum is the LP value.  It is
+    minimised by bisection on its slope :math:`b - \sum_{k\in\text{top}} c_k` over
+    :math:`[0, \max_k q_k/c_k]`; every evaluated :math:`s(\mu)` is a valid bound and the
+    smallest is returned.
+
+    Parameters
+    ----------
+    Q : ndarray (B, n)
+    free : ndarray of bool (B, n)
+    r : ndarray of int (B,)      count still allowed (>= 1)
+    costs : ndarray (n,)
+    left : ndarray (B,)          budget still available (>= 0)
+    """
+    B, n = Q.shape
+    ar = np.arange(B)[:, None]
+    rr = np.minimum(r, free.sum(axis=1))
+
+    def s_of(mu):
+        d = np.where(free, np.maximum(Q - mu[:, None] * costs[None, :], 0.0), 0.0)
+        ordd = np.argsort(-d, axis=1, kind="stable")
+        ds = d[ar, ordd]
+        sel = np.arange(n)[None, :] < rr[:, None]
+        val = mu * left + np.where(sel, ds, 0.0).sum(axis=1)
+        used = np.where(sel & (ds > 0), costs[ordd], 0.0).sum(axis=1)
+        return val, left - used                       # s(mu) and its slope
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(free & (costs[None, :] > 0), Q / costs[None, :], 0.0)
+    lo = np.zeros(B)
+    hi = np.maximum(ratio.max(axis=1), 0.0)
+    best, _ = s_of(lo)
+    val, _ = s_of(hi)
+    best = np.minimum(best, val)
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        val, slope = s_of(mid)
+        best = np.minimum(best, val)
+        up = slope < 0                                # s still decreasing: the minimum lies right
+        lo = np.where(up, mid, lo)
+        hi = np.where(up, hi, mid)
+    return best
 
 
 def _e_bound_refine(Fflat, X, free, on, r, tE, iters):
@@ -408,21 +485,14 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
     r"""Proven-optimal GN design :math:`\min \Psi((\sum_k w_kF_k)^{-1})` by branch and bound.
 
     Supports cardinality constraints (``n_sensors`` or ``max_sensors``, reduced to an exact
-    count by monotonicity) and forced-in/out sensors.  Costs/budget are not supported
-    (use SCIP or enumeration).  ``F`` must already be validated.
+    count by monotonicity when there is no budget), forced-in/out sensors and per-sensor costs
+    with a budget.  ``F`` must already be validated.
 
     Nodes are processed in batches (``settings.batch_size`` best-bound parents, i.e. twice
     as many children); the relaxations of a batch are solved simultaneously with batched
     linear algebra.
-
-    Raises
-    ------
-    ValueError
-        ``costs``: if ``cons`` has costs/budget.
     """
     crit = Criterion.parse(criterion)
-    if cons.costs is not None:
-        raise ValueError("costs: branch_and_bound does not support costs/budget; use method='scip' or 'enumerate'")
     t0 = time.perf_counter()
     prob = _Problem(F, crit, settings, criteria_settings)
     n, p = prob.n, prob.p
@@ -430,6 +500,15 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
     state0 = np.full(n, -1, dtype=np.int8)
     state0[list(cons.include)] = 1
     state0[list(cons.exclude)] = 0
+    bud = cons.costs is not None
+    if bud:
+        # with a budget the count is lo <= sum w <= m (the budget may stop a design short of m)
+        costs = np.asarray(cons.costs, float)
+        budget = cons.budget * (1 + 1e-12) + 1e-12          # the tolerance of DesignConstraints
+        lo = cons.min_size
+        state0[(state0 == -1) & (costs > budget - costs @ (state0 == 1))] = 0
+    else:
+        costs, budget, lo = None, np.inf, 0
 
     # feasibility: all available sensors must give a regular information matrix
     avail = state0 != 0
@@ -437,7 +516,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
         return BnBResult(None, np.inf, np.inf, np.inf, "infeasible", 0, time.perf_counter() - t0, np.inf, np.inf)
 
     inc = {}
-    inc["w"], inc["v"] = greedy_exchange(prob, state0, m)
+    inc["w"], inc["v"] = greedy_exchange(prob, state0, m, costs=costs, budget=budget, lo=lo)
     init_inc = inc["v"]
     isE = crit is Criterion.E
     betas = tuple(settings.e_betas) if isE else (None,)
@@ -453,6 +532,12 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
         if v[j] < inc["v"]:
             inc["w"], inc["v"] = W[j].copy(), float(v[j])
         return v
+
+    def rsel(on, fr):
+        """Free sensors the relaxation selects: m - |on| (with a budget at most |free| - 1; any
+        relaxed point gives valid bounds, the budget enters through :func:`_budget_top`)."""
+        r = m - on.sum(axis=1)
+        return np.minimum(r, fr.sum(axis=1) - 1) if bud else r
 
     def relax(S, X0, iters, root, lb0):
         """Solve the relaxations of the nodes S (B, n) (-1 free, 0 out, 1 in) together.
@@ -477,6 +562,8 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
 
         def screen(I):
             """Drop infeasible rows, evaluate leaves; returns the rows of I still to be solved."""
+            if bud:
+                return screen_budget(I)
             fr = S[I] == -1
             on = S[I] == 1
             r = m - on.sum(axis=1)
@@ -490,13 +577,41 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
             act[I[gone]] = False
             return I[~gone]
 
+        def screen_budget(I):
+            """:func:`screen` with a budget: free sensors that no longer fit are fixed out; a node
+            is infeasible when its count or budget is exceeded or ``lo`` is out of reach, and a
+            leaf when nothing is free, the count is full, or all free sensors fit (then taking all
+            of them is best, by monotonicity)."""
+            on = S[I] == 1
+            left = budget - on @ costs
+            SI = S[I]
+            SI[(SI == -1) & (costs[None, :] > left[:, None])] = 0
+            S[I] = SI
+            fr = SI == -1
+            n_on = on.sum(axis=1)
+            r = m - n_on
+            nf = fr.sum(axis=1)
+            need = np.maximum(lo - n_on, 0)
+            cheap = np.sort(np.where(fr, costs[None, :], np.inf), axis=1)
+            cum = np.concatenate([np.zeros((I.size, 1)), np.cumsum(cheap, axis=1)], axis=1)
+            reach = cum[np.arange(I.size), np.minimum(need, n)]
+            bad = (r < 0) | (left < 0) | (need > nf) | ~(reach <= left)
+            allfit = (nf <= r) & ((fr * costs[None, :]).sum(axis=1) <= left)
+            leaf = ~bad & ((nf == 0) | (r == 0) | allfit)
+            if leaf.any():
+                offer(on[leaf] | (fr[leaf] & allfit[leaf][:, None]))
+            gone = bad | leaf
+            keep[I[gone]] = False
+            act[I[gone]] = False
+            return I[~gone]
+
         def start(I, Xs, keep_alpha=False):
             """(Re)initialise rows I from warm starts Xs (projected onto the node polytope)."""
             if I.size == 0:
                 return
             fr = S[I] == -1
             on = S[I] == 1
-            r = m - on.sum(axis=1)
+            r = rsel(on, fr)
             nf = fr.sum(axis=1)
             uni = np.where(fr, (r / nf)[:, None], 0.0) + on
             Xi = uni if Xs is None else _proj_capped_simplex_batch(Xs, fr, r) + on
@@ -536,9 +651,12 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                 break
             fr = S[I] == -1
             on = S[I] == 1
-            r = m - on.sum(axis=1)
+            r = rsel(on, fr)
             QI = Q[I]
-            order, Qs, top = _rowwise_top(QI, fr, r)
+            if bud:
+                top = _budget_top(QI, fr, m - on.sum(axis=1), costs, budget - on @ costs)
+            else:
+                order, Qs, top = _rowwise_top(QI, fr, r)
             s = np.where(on, QI, 0.0).sum(axis=1) + top
             fI = f[I]
             lb = prob.bound_from_s(fI, s)
@@ -548,7 +666,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
             keep[I[pruned]] = False
             act[I[pruned]] = False
             fixed = np.zeros(I.size, dtype=bool)
-            if np.isfinite(inc["v"]):
+            if np.isfinite(inc["v"]) and not bud:
                 ar = np.arange(I.size)
                 q_r = Qs[ar, r - 1]
                 q_r1 = Qs[ar, r]
@@ -580,7 +698,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
             if J.size:
                 frJ = S[J] == -1
                 onJ = (S[J] == 1).astype(float)
-                rJ = m - onJ.sum(axis=1).astype(int)
+                rJ = rsel(onJ, frJ)
                 Y = _proj_capped_simplex_batch(X[J] + alpha[J, None] * Q[J], frJ, rJ) + onJ
                 Dd = Y - X[J]
                 dn = np.einsum("ij,ij->i", Dd, Dd)
@@ -634,7 +752,7 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
                     stage[nxt] += 1
                     start(nxt, X[nxt], keep_alpha=True)
                     R = fin[keep[fin]]
-                    if settings.e_refine_iters > 0 and R.size:
+                    if settings.e_refine_iters > 0 and R.size and not bud:
                         onR = S[R] == 1
                         sR = _e_bound_refine(prob.Fflat, X[R], S[R] == -1, onR, m - onR.sum(axis=1), tE[R],
                                              settings.e_refine_iters)
@@ -650,13 +768,26 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
             r = m - (S[K] == 1).sum(axis=1)
             order = np.argsort(-np.where(fr, X[K], -np.inf), axis=1, kind="stable")
             W = S[K] == 1
-            sel = np.arange(n)[None, :] < r[:, None]
-            np.put_along_axis(W, order, np.take_along_axis(W, order, axis=1) | sel, axis=1)
+            if bud:
+                # take free sensors by decreasing relaxed value while the count and budget allow
+                left = budget - W @ costs
+                cnt = r.copy()
+                ar = np.arange(K.size)
+                for col in range(n):
+                    k = order[:, col]
+                    add = fr[ar, k] & (cnt > 0) & (costs[k] <= left)
+                    W[ar[add], k[add]] = True
+                    left[add] -= costs[k[add]]
+                    cnt[add] -= 1
+                W = W[W.sum(axis=1) >= lo]
+            else:
+                sel = np.arange(n)[None, :] < r[:, None]
+                np.put_along_axis(W, order, np.take_along_axis(W, order, axis=1) | sel, axis=1)
             old = inc["v"]
-            v = prob.exact(W)
+            v = prob.exact(W) if len(W) else np.full(1, np.inf)
             j = int(np.argmin(v))
             if v[j] < old:
-                w2, v2 = greedy_exchange(prob, state0, m, W0=W[j])
+                w2, v2 = greedy_exchange(prob, state0, m, W0=W[j], costs=costs, budget=budget, lo=lo)
                 inc["w"], inc["v"] = (w2, v2) if v2 < v[j] else (W[j].copy(), float(v[j]))
         return best[K], X[K], S[K]
 

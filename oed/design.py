@@ -11,7 +11,7 @@ log det (D) or lambda_max (E).
 
 ``method="auto"``: exact enumeration when the number of admissible designs is at most
 ``DesignSettings.enumeration_limit`` (2e5); otherwise our branch-and-bound for
-Gauss-Newton criteria without costs; otherwise SCIP via Pyomo.  If SCIP is unavailable or
+Gauss-Newton criteria (with or without costs and budget); otherwise SCIP via Pyomo.  If SCIP is unavailable or
 fails, enumeration is used when it is affordable (``enumeration_fallback_limit``) and the
 fallback is recorded in :attr:`DesignResult.notes`.
 """
@@ -215,7 +215,7 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
     if method == "auto":
         if count <= settings.enumeration_limit:
             chosen = "enumerate"
-        elif kind_e is Kind.GAUSS_NEWTON and cons.costs is None:
+        elif kind_e is Kind.GAUSS_NEWTON:
             chosen = "bnb"
         else:
             chosen = "scip"
@@ -223,8 +223,6 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
         if kind_e is not Kind.GAUSS_NEWTON:
             raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
                              "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
-        if cons.costs is not None:
-            raise ValueError("method: 'bnb' does not support costs/budget; use 'scip' or 'enumerate'")
 
     w = None
     value = lb = np.inf
@@ -235,7 +233,7 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
                              criteria_settings=settings.criteria)
         w, value, lb, status = r.w, r.value, r.lower_bound, r.status
         message = f"{r.nodes} nodes, root bound {r.root_bound:.6g}, initial incumbent {r.initial_incumbent:.6g}"
-        if cons.max_sensors is not None and cons.n_sensors is None:
+        if cons.max_sensors is not None and cons.n_sensors is None and cons.costs is None:
             notes.append(f"sum w <= {cons.max_sensors} solved as sum w = {cons.max_size} (GN criteria are monotone)")
     elif chosen == "scip":
         from . import scip_solver  # the only module importing Pyomo's SolverFactory

@@ -53,7 +53,7 @@ def test_constraints_include_exclude(method):
     assert r.value == pytest.approx(best, rel=1e-8)
 
 
-@pytest.mark.parametrize("method", ["enumerate", "scip"])
+@pytest.mark.parametrize("method", ["enumerate", "scip", "bnb"])
 def test_costs_budget_and_max_sensors(method):
     F = rank_one(2, 8, 2)
     costs = np.array([5, 1, 1, 4, 2, 3, 1, 6.0])
