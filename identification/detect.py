@@ -47,7 +47,7 @@ from types import MappingProxyType
 from typing import Sequence
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from models.contract import Model
 from .errors import DataError, IdentificationError
@@ -333,7 +333,7 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
         lr, a_lr, lr_err = _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c, est_v,
                                              pooled)
         out.append(SplitTest(name, split.name, c, v, True, "", "", est_c.p, est_v.p, C_c, C_v, d2p, d2t,
-                             float(stats.chi2.sf(d2p, n_p)), float(stats.chi2.sf(d2t, n_p)),
+                             float(special.chdtrc(n_p, d2p)), float(special.chdtrc(n_p, d2t)),
                              est_c.n_data, est_v.n_data, notes, lr, a_lr, lr_err))
     return tuple(out)
 
@@ -433,7 +433,7 @@ def _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c,
     stat = max(stat, 0.0)
     if est_c.sigma_estimated:
         return float(stat), float(stats.f.sf(stat, n_p, dof)), ""
-    return float(stat), float(stats.chi2.sf(stat, n_p)), ""
+    return float(stat), float(special.chdtrc(n_p, stat)), ""
 
 
 # ---------------------------------------------------------------------------- decision (lines 09-17)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import scipy.sparse as sps
-from scipy import stats
+from scipy import special, stats
 
 from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
@@ -147,6 +147,24 @@ def _initial_states(model, p0, inputs, Y0):
 
 
 _SENS_INIT: "OrderedDict[tuple, tuple]" = OrderedDict()
+_SCALINGS: "OrderedDict[tuple, tuple]" = OrderedDict()
+
+
+def _scalings(model, p0, inputs, Y_init, cacheable):
+    """(s_y, e_scale) at the start; cached per (model, p0, inputs) when Y_init is the cached
+    state solve at p0 (repeated fits of new data, as in Monte Carlo studies and splits)."""
+    key = (model, p0.tobytes(), inputs.tobytes()) if cacheable else None
+    hit = _SCALINGS.get(key) if key is not None else None
+    if hit is None:
+        s_y = _state_scale(Y_init)
+        hit = (s_y, _equation_scale(model, p0, inputs, Y_init, s_y))
+        for a in hit:
+            a.setflags(write=False)
+        if key is not None:
+            _SCALINGS[key] = hit
+            while len(_SCALINGS) > 32:
+                _SCALINGS.popitem(last=False)
+    return hit
 
 
 def _predictor(model, p0, inputs, Y0, zbar, cw, sig, s_p, max_step):
@@ -499,11 +517,14 @@ def _objective_terms(data, w, sig):
     return zbar, cw, const
 
 
-def _reduced(model, p, data, w, sig, Y0):
-    """States, sensitivities, objective and gradient at p (reduced space)."""
+def _reduced(model, p, data, w, sig, Y0, terms=None):
+    """States, sensitivities, objective and gradient at p (reduced space).
+
+    ``terms``: the data's (zbar, cw, const) from :func:`_objective_terms` when already computed.
+    """
     Y = solve_states(model, p, data.inputs, Y0=Y0)
     sens = sensitivities(model, p, data.inputs, Y)
-    zbar, cw, const = _objective_terms(data, w, sig)
+    zbar, cw, const = _objective_terms(data, w, sig) if terms is None else terms
     dev = zbar - sens.h
     f = 0.5 * float(np.sum(cw * dev ** 2 / sig ** 2)) + const
     lam = -cw * dev / sig ** 2                      # d f / d h_jk
@@ -511,7 +532,8 @@ def _reduced(model, p, data, w, sig, Y0):
     return Y, sens, f, grad, lam
 
 
-def _refine(model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam, max_steps, stop_decrement=0.0):
+def _refine(model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam, max_steps, stop_decrement=0.0,
+            terms=None):
     """Exact reduced Newton steps p <- p - (J^T W J + S)^{-1} g from a point and its reduced terms.
 
     A step is taken while the Hessian is positive definite, the state solves succeed and the
@@ -538,7 +560,7 @@ def _refine(model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam, max_steps
         small = np.max(np.abs(dp / s_p)) < 1e-12
         p_new = np.clip(p + dp, lo, up)
         try:
-            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y)
+            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y, terms)
         except StateSolveError:
             break
         if not (f_new <= fval * (1 + 1e-14) + 1e-300):
@@ -668,8 +690,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
                                   status="state solve failed") from None
 
     s_p = _param_scale(model, p0)
-    s_y = _state_scale(Y_init)
-    e_scale = _equation_scale(model, p0, data.inputs, Y_init, s_y)
+    s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
 
     zbar, cw, const = _objective_terms(data, w, sig)
     key = (model, data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), e_scale.tobytes())
@@ -709,7 +730,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
 
     # ---- states consistent with p, then exact reduced Newton refinement
     try:
-        Y, sens, fval, grad, lam = _reduced(model, p, data, w, sig, Y_ipopt)
+        Y, sens, fval, grad, lam = _reduced(model, p, data, w, sig, Y_ipopt, (zbar, cw, const))
     except StateSolveError as exc:
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
@@ -717,7 +738,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     at_bound = (np.abs(p - lo) <= 1e-7 * s_p) | (np.abs(p - up) <= 1e-7 * s_p)
     p, Y, sens, fval, grad, lam, S_terms, steps = _refine(
         model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam,
-        settings.refine_steps if not np.any(at_bound) else 0, stop_decrement=settings.refine_decrement)
+        settings.refine_steps if not np.any(at_bound) else 0, stop_decrement=settings.refine_decrement,
+        terms=(zbar, cw, const))
 
     # ---- Newton decrement g^T H^-1 g: the squared distance to the optimum in standard errors
     F = _gn_information(sens.G, cw, sig)
@@ -776,7 +798,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
                          "minimum in the reduced space; treat cov with caution")
     if data.sigma is not None and dof > 0:
         chi2 = 2.0 * objective
-        pval = float(stats.chi2.sf(chi2, dof))
+        pval = float(special.chdtrc(dof, chi2))           # = stats.chi2.sf(chi2, dof), without its overhead
         if pval < 1e-3:
             notes.append(f"residuals exceed the sensor sigmas: reduced chi2 = {chi2 / dof:.3g} "
                          f"(chi2 test p = {pval:.2g}); the model or the sigmas are inadequate and cov "
