@@ -404,6 +404,33 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
     return x, ca.sum2(f_all), g, par, hess_lag, jac_g
 
 
+def _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y):
+    r"""Constraint Jacobian and upper-triangular Lagrangian Hessian Functions of the full-space NLP
+    from per-input blocks (the inputs couple only through p).
+
+    ``J_stages``: per input j, (dg_j/dp̃, dg_j/dỹ_j); ``H_stages``: per input j,
+    (H_pp^j, H_py^j, H_yy^j).  With x = (p̃, ỹ_1, .., ỹ_nq):
+
+    .. math::  J = \begin{bmatrix} J_p^1 & J_y^1 & & \\ \vdots & & \ddots & \\ J_p^{n_q} & & & J_y^{n_q}
+               \end{bmatrix},\qquad
+               \mathrm{triu}\,H = \begin{bmatrix} \sum_j H_{pp}^j & H_{py}^1 & \cdots & H_{py}^{n_q} \\
+               & H_{yy}^1 & & \\ & & \ddots & \\ & & & H_{yy}^{n_q} \end{bmatrix}.
+    """
+    n_q = len(J_stages)
+    rows = [ca.horzcat(Jp, ca.MX(n_y, j * n_y), Jy, ca.MX(n_y, (n_q - 1 - j) * n_y))
+            for j, (Jp, Jy) in enumerate(J_stages)]
+    jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    H_pp = H_stages[0][0]
+    for b in H_stages[1:]:
+        H_pp = H_pp + b[0]
+    hrows = [ca.horzcat(H_pp, *[b[1] for b in H_stages])]
+    for j, b in enumerate(H_stages):
+        hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[2], ca.MX(n_y, (n_q - 1 - j) * n_y)))
+    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    return jac_g, hess_lag
+
+
 def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     """:func:`_build_nlp` from the per-model stage functions (see :func:`_stage_functions`)."""
     fns = _stage_functions(model)
@@ -420,22 +447,14 @@ def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     g = ca.vec(E_all)
     f = ca.sum2(f_all)
     Jp_all, Jy_all = fns["jac"].map(n_q)(yt, pt, Q, *scal)
-    rows = [ca.horzcat(Jp_all[:, j * n_p:(j + 1) * n_p], ca.MX(n_y, j * n_y), Jy_all[:, j * n_y:(j + 1) * n_y],
-                       ca.MX(n_y, (n_q - 1 - j) * n_y)) for j in range(n_q)]
-    jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    J_stages = [(Jp_all[:, j * n_p:(j + 1) * n_p], Jy_all[:, j * n_y:(j + 1) * n_y]) for j in range(n_q)]
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", n_y * n_q)
     H_all = fns["hess"].map(n_q)(yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
     nv = n_p + n_y
-    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]
-    H_pp = blocks[0][:n_p, :n_p]
-    for b in blocks[1:]:
-        H_pp = H_pp + b[:n_p, :n_p]
-    hrows = [ca.horzcat(H_pp, *[b[:n_p, n_p:] for b in blocks])]
-    for j, b in enumerate(blocks):
-        hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[n_p:, n_p:], ca.MX(n_y, (n_q - 1 - j) * n_y)))
-    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
-                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]                 # order (p, y)
+    H_stages = [(b[:n_p, :n_p], b[:n_p, n_p:], b[n_p:, n_p:]) for b in blocks]
+    jac_g, hess_lag = _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y)
     # (the objective gradient is left to CasADi's reverse mode.  An assembled gradient must be
     # densified: with a sparse output Ipopt received misplaced entries and crawled.  Densified
     # it is correct, but measured no faster cold or warm (spring chain d_y = 3000, 10 runs))
@@ -480,30 +499,20 @@ def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
     f = 0.5 * ca.sum1(ca.sum2(Cw * R * R))
     _, Ey_all, Ep_all, hy_all, hp_all = num.sens.map(n_q)(Yu, pu, Q)
     De, Dy, Dp = ca.diag(Es), ca.diag(Sy), ca.diag(Sp)
-    rows = []
-    for j in range(n_q):
-        Jp = ca.mtimes(De, ca.mtimes(Ep_all[:, j * n_p:(j + 1) * n_p], Dp))
-        Jy = ca.mtimes(De, ca.mtimes(Ey_all[:, j * n_y:(j + 1) * n_y], Dy))
-        rows.append(ca.horzcat(Jp, ca.MX(n_y, j * n_y), Jy, ca.MX(n_y, (n_q - 1 - j) * n_y)))
-    jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    J_stages = [(ca.mtimes(De, ca.mtimes(Ep_all[:, j * n_p:(j + 1) * n_p], Dp)),
+                 ca.mtimes(De, ca.mtimes(Ey_all[:, j * n_y:(j + 1) * n_y], Dy))) for j in range(n_q)]
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", n_y * n_q)
     Mu = ca.reshape(lam_g, n_y, n_q) * ca.repmat(Es, 1, n_q)
     Hl_all = num.lag_hess.map(n_q)(Yu, pu, Q, lam_f * Cw * R, Mu)        # order (y, p), unscaled
     D = ca.diag(ca.vertcat(Sy, Sp))
-    blocks = []
+    H_stages = []
     for j in range(n_q):
         J = ca.horzcat(hy_all[:, j * n_y:(j + 1) * n_y], hp_all[:, j * n_p:(j + 1) * n_p])
         Hj = Hl_all[:, j * nv:(j + 1) * nv] + lam_f * ca.mtimes(J.T, ca.mtimes(ca.diag(Cw[:, j]), J))
-        blocks.append(ca.mtimes(D, ca.mtimes(Hj, D)))
-    H_pp = blocks[0][n_y:, n_y:]
-    for b in blocks[1:]:
-        H_pp = H_pp + b[n_y:, n_y:]
-    hrows = [ca.horzcat(H_pp, *[b[n_y:, :n_y] for b in blocks])]        # NLP order (p, y_1, .., y_nq)
-    for j, b in enumerate(blocks):
-        hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[:n_y, :n_y], ca.MX(n_y, (n_q - 1 - j) * n_y)))
-    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
-                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        b = ca.mtimes(D, ca.mtimes(Hj, D))                                     # order (y, p)
+        H_stages.append((b[n_y:, n_y:], b[n_y:, :n_y], b[:n_y, :n_y]))
+    jac_g, hess_lag = _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y)
     return x, f, g, par, hess_lag, jac_g, None, False
 
 
