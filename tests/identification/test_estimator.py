@@ -297,11 +297,23 @@ def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
     assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
 
 
+def _coupled_model():
+    """A small implicit model whose outputs depend on p directly (dh/dp != 0) and nonlinearly on y."""
+    def E(y, p, q):
+        return ca.vertcat(p[0] * y[0] + y[0] ** 3 - q[0], y[1] - p[1] * ca.sin(y[0]) - q[1], y[2] * p[0] - y[1] ** 2)
+
+    def h(y, p, q):
+        return ca.vertcat(y[0] * p[1], y[1] + p[0] ** 2, ca.exp(0.1 * y[2]) * p[0])
+
+    return Model(["a", "b"], ["u", "v"], ["s1", "s2", "s3"], n_y=3, E=E, h=h)
+
+
 @pytest.mark.parametrize("builder", ["_build_nlp_glued", "_build_nlp_staged"])
-def test_assembled_nlp_derivatives_equal_casadi_ad(builder):
+@pytest.mark.parametrize("which", ["chain", "coupled"])
+def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
     """The constraint Jacobian and Lagrangian Hessian handed to Ipopt equal CasADi's AD of (f, g)."""
     import identification.estimator as est_mod
-    model = spring_chain(9, n_sensors=4, n_groups=3)
+    model = spring_chain(9, n_sensors=4, n_groups=3) if which == "chain" else _coupled_model()
     rng = np.random.default_rng(3)
     n_q = 4
     inputs = np.column_stack([rng.uniform(0.5, 2.0, n_q), rng.uniform(0.1, 0.6, n_q)])
