@@ -190,3 +190,36 @@ def test_bnb_with_costs_and_budget_matches_enumeration(block, steer):
         if not close(crit, e.value, b.value):
             mism.append((seed, crit, n, p, m, e.value, b.value))
     assert not mism, mism
+
+
+def test_bnb_budget_edge_cases_match_enumeration():
+    """Zero costs, integer costs with ties, a budget equal to the count or to the cheapest
+    n_p sensors, a budget that never binds (then the same value as without costs)."""
+    rng = np.random.default_rng(5)
+    checked = 0
+    for t in range(24):
+        n, p = int(rng.integers(5, 11)), int(rng.integers(2, 4))
+        F, _ = validate_information(rank_one(rng, n, p))
+        kind = t % 5
+        costs = [np.zeros(n), rng.integers(0, 3, n).astype(float), np.ones(n), rng.uniform(0.5, 2, n),
+                 rng.uniform(0, 2, n)][kind]
+        budget = [0.0, float(rng.integers(p, 2 * p)), float(p), float(np.sort(costs)[:p].sum()), 1e6][kind]
+        m = int(rng.integers(p, n + 1))
+        crit = "ADE"[t % 3]
+        for kw in (dict(n_sensors=m), dict(max_sensors=m)):
+            try:
+                cons = make_constraints(n, p, costs=costs, budget=budget, **kw)
+            except ValueError:
+                continue                    # no design meets the budget: rejected up front
+            e = enumerate_designs(F, None, cons, crit)
+            b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30))
+            if not np.isfinite(e.value):
+                assert not np.isfinite(b.value)
+                continue
+            assert b.status == "optimal" and close(crit, e.value, b.value), (t, kind, crit, kw, e.value, b.value)
+            assert cons.is_admissible(b.w)
+            if kind == 4:
+                b0 = branch_and_bound(F, make_constraints(n, p, **kw), crit, settings=BnBSettings(time_limit=30))
+                assert close(crit, b0.value, b.value)
+            checked += 1
+    assert checked >= 30, checked
