@@ -334,9 +334,11 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
 
     The data enter as NLP parameters (zbar, c / sigma^2 per input and sensor) so that one
     compiled solver serves many data sets with the same inputs and scaling.  Models with a
-    state stated in SX use the per-model stage functions of :func:`_stage_functions` (the
-    objective gradient, constraint Jacobian and Lagrangian Hessian are handed to Ipopt
-    assembled from them); others build the stage symbolically here.
+    state stated in SX get the constraint Jacobian and Lagrangian Hessian assembled for Ipopt:
+    small (dense) ones from the per-model stage functions of :func:`_stage_functions`
+    (:func:`_build_nlp_staged`), large ones from the model's own Functions
+    (:func:`_build_nlp_glued`).  Explicit models and models stated in MX build the stage
+    symbolically here.
     """
     if model.n_y and model.symbolic == "SX":
         if numerics(model).dense:
@@ -377,55 +379,38 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
     H_all = H_stage(yt if n_y else ca.MX(0, n_q), pt, Q, Zb, Cw, lam_f,
                     ca.reshape(lam_g, n_y, n_q) if n_y else ca.MX(0, n_q))
     nv = n_p + n_y
-    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]
-    H_pp = sum(b[:n_p, :n_p] for b in blocks[1:]) + blocks[0][:n_p, :n_p]
-    if n_y:
-        rows = [ca.horzcat(H_pp, *[b[:n_p, n_p:] for b in blocks])]
-        for j, b in enumerate(blocks):
-            rows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[n_p:, n_p:], ca.MX(n_y, (n_q - 1 - j) * n_y)))
-        H = ca.vertcat(*rows)
-    else:
-        H = H_pp
-    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(H)],
-                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-    jac_g = None
-    if n_y and model.symbolic == "SX":
-        # constraint Jacobian from the model's cached first derivatives (no symbolic Jacobian
-        # of the mapped graph): rows of stage j = e * [dE/dp diag(s_p), 0 .. dE/dy diag(s_y) .. 0]
-        num = numerics(model)
-        _, Ey, Ep, _, _ = num.sens(y_un, p_un, q)
-        es = ca.diag(ca.DM(e_scale))
-        J_stage = ca.Function("J_stage", [y, p, q], [ca.mtimes(es, ca.mtimes(Ep, ca.diag(ca.DM(s_p)))),
-                                                     ca.mtimes(es, ca.mtimes(Ey, ca.diag(ca.DM(s_y))))]).map(n_q)
-        Jp_all, Jy_all = J_stage(yt, pt, Q)
-        rows = [ca.horzcat(Jp_all[:, j * n_p:(j + 1) * n_p], ca.MX(n_y, j * n_y), Jy_all[:, j * n_y:(j + 1) * n_y],
-                           ca.MX(n_y, (n_q - 1 - j) * n_y)) for j in range(n_q)]
-        jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
-    return x, ca.sum2(f_all), g, par, hess_lag, jac_g
+    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]                 # order (p, y)
+    H_stages = [(b[:n_p, :n_p], b[:n_p, n_p:], b[n_p:, n_p:]) for b in blocks]
+    # the constraint Jacobian is left to CasADi (MX models and explicit models only come here)
+    _, hess_lag = _assemble_kkt(x, par, g, None, H_stages, lam_f, lam_g, n_p, n_y)
+    return x, ca.sum2(f_all), g, par, hess_lag, None
 
 
 def _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y):
     r"""Constraint Jacobian and upper-triangular Lagrangian Hessian Functions of the full-space NLP
     from per-input blocks (the inputs couple only through p).
 
-    ``J_stages``: per input j, (dg_j/dp̃, dg_j/dỹ_j); ``H_stages``: per input j,
-    (H_pp^j, H_py^j, H_yy^j).  With x = (p̃, ỹ_1, .., ỹ_nq):
+    ``J_stages``: per input j, (dg_j/dp̃, dg_j/dỹ_j), or None (no Jacobian Function is built);
+    ``H_stages``: per input j, (H_pp^j, H_py^j, H_yy^j).  With x = (p̃, ỹ_1, .., ỹ_nq):
 
     .. math::  J = \begin{bmatrix} J_p^1 & J_y^1 & & \\ \vdots & & \ddots & \\ J_p^{n_q} & & & J_y^{n_q}
                \end{bmatrix},\qquad
                \mathrm{triu}\,H = \begin{bmatrix} \sum_j H_{pp}^j & H_{py}^1 & \cdots & H_{py}^{n_q} \\
                & H_{yy}^1 & & \\ & & \ddots & \\ & & & H_{yy}^{n_q} \end{bmatrix}.
     """
-    n_q = len(J_stages)
-    rows = [ca.horzcat(Jp, ca.MX(n_y, j * n_y), Jy, ca.MX(n_y, (n_q - 1 - j) * n_y))
-            for j, (Jp, Jy) in enumerate(J_stages)]
-    jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
+    n_q = len(H_stages)
+    jac_g = None
+    if J_stages is not None:
+        rows = [ca.horzcat(Jp, ca.MX(n_y, j * n_y), Jy, ca.MX(n_y, (n_q - 1 - j) * n_y))
+                for j, (Jp, Jy) in enumerate(J_stages)]
+        jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
     H_pp = H_stages[0][0]
     for b in H_stages[1:]:
         H_pp = H_pp + b[0]
     hrows = [ca.horzcat(H_pp, *[b[1] for b in H_stages])]
-    for j, b in enumerate(H_stages):
-        hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[2], ca.MX(n_y, (n_q - 1 - j) * n_y)))
+    if n_y:
+        for j, b in enumerate(H_stages):
+            hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[2], ca.MX(n_y, (n_q - 1 - j) * n_y)))
     hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
     return jac_g, hess_lag

@@ -554,8 +554,8 @@ def branch_and_bound(F, cons: DesignConstraints, criterion, *, settings: BnBSett
     def relax(S, X0, iters, root, lb0, mu0=None):
         """Solve the relaxations of the nodes S (B, n) (-1 free, 0 out, 1 in) together.
 
-        ``lb0``: bounds known beforehand (the parents').  Returns (lb, X, S) for the nodes
-        that are neither pruned nor leaves."""
+        ``lb0``: bounds known beforehand (the parents'); ``mu0``: the parents' budget prices.
+        Returns (lb, X, S, mu) for the nodes that are neither pruned nor leaves."""
         S = S.copy()
         B = S.shape[0]
         best = np.array(lb0, dtype=float)
