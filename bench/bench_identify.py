@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from identification import Measurements, identify, simulate, solve_states
-from identification.sensitivity import sensitivities
+from models.sensitivity import sensitivities
 from models.library import spring_chain
 
 

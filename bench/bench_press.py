@@ -8,7 +8,7 @@ Newton solve started from the previous state.  Two solvers are timed:
   "csparse" linear solver) wrapped in ``mapaccum`` so the whole continuation is one
   CasADi call (setup excluded from the timing);
 * ``python``: :func:`models.mechanism.solve_path`, the project's state solver
-  (:func:`identification.state.solve_state`: damped Newton in Python with a CasADi
+  (:func:`models.state.solve_state`: damped Newton in Python with a CasADi
   function for (E, dE/dy) and a dense LU) row by row.
 
 Run ``python -m bench press`` (``--repeat=N`` sets the number of timed repetitions).

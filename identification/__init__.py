@@ -5,7 +5,7 @@ from .estimator import IdentifySettings, identify, information_contributions, co
 from .ipopt_solver import IpoptSettings
 from .regions import Ellipsoid, alpha_min, alpha_min_two_sample, in_region, mahalanobis2, CovarianceError
 from .results import Estimate
-from .state import simulate, solve_state, solve_states
+from models.state import simulate, solve_state, solve_states
 from .splits import Split, SplitError, input_range_split, press_scenarios, random_splits, series_split
 from .detect import DetectionResult, DetectSettings, NormalityError, detect, normality_check
 from .montecarlo import (MonteCarloResult, MonteCarloSettings, clopper_pearson, linearized_size, power_study,

@@ -55,7 +55,7 @@ from .estimator import IdentifySettings, identify, information_contributions
 from .measurements import Measurements
 from .regions import CovarianceError, mahalanobis2
 from .splits import Split, SplitError
-from .state import solve_states
+from models.state import solve_states
 
 __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
            "NormalityError", "normality_check", "run_split_tests", "decide", "STATISTICS", "CORRECTIONS",

@@ -1,11 +1,14 @@
 """Exceptions of the identification package (all subclass ValueError or RuntimeError)."""
+from models.errors import NumericsError, StateSolveError
+
+__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "StateSolveError"]
 
 
 class DataError(ValueError):
     """Measurements are malformed (shape, NaN-only sensor, non-positive sigma, ...)."""
 
 
-class IdentificationError(RuntimeError):
+class IdentificationError(NumericsError):
     """The estimator could not produce a trustworthy result (solver failure).
 
     Attributes
@@ -13,10 +16,6 @@ class IdentificationError(RuntimeError):
     status : str
         The solver's return status (e.g. Ipopt's ``return_status``).
     """
-
-    def __init__(self, message: str, status: str = ""):
-        super().__init__(message)
-        self.status = status
 
 
 class IdentifiabilityError(IdentificationError):
@@ -34,7 +33,3 @@ class IdentifiabilityError(IdentificationError):
         super().__init__(message, status="not identifiable")
         self.params = tuple(params)
         self.sensors = tuple(sensors)
-
-
-class StateSolveError(IdentificationError):
-    """Newton's method on E(y, p, q) = 0 did not converge."""

@@ -31,8 +31,8 @@ from .errors import DataError, IdentifiabilityError, IdentificationError, StateS
 from .ipopt_solver import IpoptSettings, solve_nlp
 from .measurements import Measurements
 from .results import Estimate
-from .sensitivity import sensitivities
-from .state import numerics, solve_states
+from models.sensitivity import sensitivities
+from models.state import numerics, solve_states
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms"]
@@ -292,7 +292,7 @@ def _stage_functions(model):
     r"""Per-model CasADi functions of one stage (load case) of the scaled NLP, built once.
 
     Inputs (ỹ, p̃, q, zbar, c, s_y, s_p, e[, s_f, l_g]) with the scalings as arguments, so the
-    same functions (JIT-compiled when :func:`identification.state.set_jit` is on) serve every
+    same functions (JIT-compiled when :func:`models.state.set_jit` is on) serve every
     data set, input set and scaling of the model:
 
     * ``stage``: (e ⊙ E(s_y ⊙ ỹ, s_p ⊙ p̃, q),  f = 1/2 sum_k c_k (h_k - zbar_k)^2)

@@ -37,7 +37,7 @@ from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, run_split_te
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
 from .splits import Split, SplitError
-from .state import set_jit, simulate, solve_states
+from models.state import set_jit, simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
            "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize"]
@@ -96,7 +96,7 @@ class MonteCarloSettings:
     ci_level : float         level of the Clopper-Pearson intervals
     detect : DetectSettings  tol, covariance kind, identify settings (normality is not gated here)
     jit : bool               compile small models' CasADi functions to C in every worker
-                             (identification.state.set_jit; same numbers, about 25 % faster
+                             (models.state.set_jit; same numbers, about 25 % faster
                              per replication after a one-off ~1 s compilation per worker)
     """
 
@@ -544,7 +544,7 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
     compared with chi2_{n_p}(1 - TOL / n_tests).  Agreement with :func:`size_study` checks that
     the linearisation (and the chi^2 law) hold for a nonlinear model.
     """
-    from .sensitivity import sensitivities
+    from models.sensitivity import sensitivities
     p_true = np.asarray(p_true, float).ravel()
     q = np.atleast_2d(np.asarray(inputs, float))
     sig = np.broadcast_to(np.asarray(sigma, float), (model.n_S,)).copy()

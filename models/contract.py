@@ -272,14 +272,14 @@ class Model:
     def solve_state(self, p, q, y0=None, tol: float = 1e-12, max_iter: int = 100) -> np.ndarray:
         """Solve E(y, p, q) = 0 for y by damped Newton (exact Jacobian).
 
-        Raises :class:`identification.errors.StateSolveError` when it does not converge.
+        Raises :class:`models.errors.StateSolveError` when it does not converge.
         """
-        from identification.state import solve_state  # local import: identification depends on models
+        from .state import solve_state
         return solve_state(self, p, q, y0=y0, tol=tol, max_iter=max_iter)
 
     def simulate(self, p, inputs) -> np.ndarray:
         """Model outputs h(y_j(p), p, q_j) for every input row, shape (n_q, n_S)."""
-        from identification.state import simulate
+        from .state import simulate
         return simulate(self, p, inputs)
 
     def __repr__(self):

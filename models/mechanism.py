@@ -79,6 +79,8 @@ import casadi as ca
 import numpy as np
 
 from .contract import Model, Parameter
+from .errors import StateSolveError
+from .state import solve_state
 
 __all__ = [
     "MechanismError", "Joint", "MechParameter", "Bar", "Beam", "RigidBody", "Support",
@@ -742,7 +744,7 @@ def build_model(mech: Mechanism, sensors: Sequence[str] | None = None, unknowns:
 def solve_path(model: Model, p, inputs, y0=None, tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
     """States y_j with E(y_j, p, q_j) = 0 along the rows of ``inputs`` (Newton, continuation).
 
-    Each row is solved by the project's state solver (:func:`identification.state.solve_state`:
+    Each row is solved by the project's state solver (:func:`models.state.solve_state`:
     damped Newton with the exact AD Jacobian, converged when ||dy||_inf <= tol (1 + ||y||_inf),
     mm and rad), started from the previous row's solution (``y0`` or the model's guess for the
     first row).  Returns shape (n_q, n_y).
@@ -752,8 +754,6 @@ def solve_path(model: Model, p, inputs, y0=None, tol: float = 1e-12, max_iter: i
     MechanismError
         Naming the input row where Newton failed or dE/dy was singular.
     """
-    from identification.errors import StateSolveError   # identification builds on models: import late
-    from identification.state import solve_state
 
     p = np.asarray(p, float)
     inputs = np.atleast_2d(np.asarray(inputs, float))

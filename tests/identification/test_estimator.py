@@ -353,7 +353,7 @@ def test_large_state_model_uses_the_glued_nlp_and_agrees_with_the_reduced_fit(mo
 def test_jit_compiled_functions_give_the_same_numbers():
     """set_jit(True) compiles the press model's functions to C: identical estimates (to round-off)."""
     import shutil
-    from identification.state import set_jit
+    from models.state import set_jit
     if shutil.which("gcc") is None and shutil.which("cc") is None:
         pytest.skip("no C compiler on the PATH")
     model, data = _press_data(6, 9)

@@ -1,0 +1,19 @@
+"""Exceptions of the model layer's numerics (the state solve)."""
+
+
+class NumericsError(RuntimeError):
+    """A numerical solve failed (base of the state-solve and the estimator's solver errors).
+
+    Attributes
+    ----------
+    status : str
+        The solver's return status (e.g. Ipopt's ``return_status``), or "" if it has none.
+    """
+
+    def __init__(self, message: str, status: str = ""):
+        super().__init__(message)
+        self.status = status
+
+
+class StateSolveError(NumericsError):
+    """Newton's method on E(y, p, q) = 0 did not converge, or dE/dy could not be factorised."""
