@@ -186,7 +186,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None) -> No
     """
     if not isinstance(data, Measurements):
         raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
-    w = data._weights(weights)
+    w = data.sensor_weights(weights)
     n_pairs = data.n_M // 2
     pairs = tuple((2 * m, 2 * m + 1) for m in range(n_pairs))
     gated = tuple(s for s, wk in zip(data.sensors, w) if wk > 0)
@@ -297,7 +297,7 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     """
     settings = settings or DetectSettings()
     name = model_name or model.name
-    n_sel = int(np.count_nonzero(data._weights(weights) > 0))
+    n_sel = int(np.count_nonzero(data.sensor_weights(weights) > 0))
     out = []
     pooled = {}
     for split in splits:
@@ -358,7 +358,7 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
     """
     from .errors import StateSolveError
     from .estimator import _gn_information, _newton_decrement, _reduced, _refine
-    w = data_u._weights(weights)
+    w = data_u.sensor_weights(weights)
     sig = (np.asarray(data_u.sigma, float) if data_u.sigma is not None
            else np.full(model.n_S, float(np.sqrt(est_c.rss / max(est_c.n_data, 1))) or 1.0))
     Fc, Fv = est_c.information, est_v.information
@@ -804,8 +804,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
             sp.check(data.n_q, data.n_M)
         w, how = _design_weights(m, data, p0s[name], design, settings, notes)
         if w is None and weights is not None:
-            w, how = data._weights(weights), "sensor weights given"
-        n_sel = int(np.count_nonzero(data._weights(w) > 0))
+            w, how = data.sensor_weights(weights), "sensor weights given"
+        n_sel = int(np.count_nonzero(data.sensor_weights(w) > 0))
         for sp in splits:
             sp.check(data.n_q, data.n_M, m.n_p, n_sel)
         used = tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0)
@@ -814,7 +814,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
         chk = None
         for (z, wk, c) in checks:
             if z is data.z or (z.shape == data.z.shape and np.array_equal(z, data.z, equal_nan=True)):
-                if np.array_equal(wk, data._weights(w)):
+                if np.array_equal(wk, data.sensor_weights(w)):
                     chk = c
         if chk is None:
             chk = normality_check(data, settings.normality_level, w)
@@ -830,7 +830,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
                 chk = NormalityCheck(chk.sensors, chk.pvalue, chk.sigma_rep, chk.n_diff, chk.level, chk.gated,
                                      False, True, chk.pairs, chk.note)
                 notes.append(f"override: {msg}")
-            checks.append((data.z, data._weights(w), chk))
+            checks.append((data.z, data.sensor_weights(w), chk))
         normal.append((name, chk))
         if data.sigma is None:
             notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "

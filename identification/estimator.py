@@ -115,7 +115,7 @@ def _validate(model, data, p0, weights):
         if p0[i] < par.lower or p0[i] > par.upper:
             raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
                             f"[{par.lower:g}, {par.upper:g}]")
-    w = data._weights(weights)
+    w = data.sensor_weights(weights)
     if not np.any(w > 0):
         raise DataError("weights: no sensor is selected (all weights are zero)")
     n = data.n_data(w)

@@ -173,10 +173,11 @@ class Measurements:
 
     def n_data(self, weights=None) -> int:
         """Number of present values in the sensors with nonzero weight."""
-        w = self._weights(weights)
+        w = self.sensor_weights(weights)
         return int(self.counts()[:, w > 0].sum())
 
-    def _weights(self, weights) -> np.ndarray:
+    def sensor_weights(self, weights=None) -> np.ndarray:
+        """Validated sensor weights omega (n_S,), dimensionless: ones for None, else finite and >= 0."""
         if weights is None:
             return np.ones(self.n_S)
         w = np.asarray(weights, dtype=float)
