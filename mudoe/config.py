@@ -20,18 +20,20 @@ settings dataclass validates their values, and the section hands the workflow a 
 object (``cfg.detect.settings()``, ``cfg.validate.settings(...)``).  The keys backed by a
 settings field (:func:`settings_keys`):
 
-==================  ===============================  =====================================
-TOML key            settings field                   default
-==================  ===============================  =====================================
-[detect] tol        ``DetectSettings.tol``            DetectSettings'
-[detect] statistic  ``DetectSettings.statistic``      DetectSettings'
-[detect] correction ``DetectSettings.correction``     DetectSettings'
-[detect] normality  ``DetectSettings.normality``      DetectSettings'
-[detect] covariance ``DetectSettings.covariance``     DetectSettings'
-[validate] n_runs   ``MonteCarloSettings.n_rep``      the study's, :data:`STUDY_DEFAULTS`
-[validate] seed     ``MonteCarloSettings.seed``       the study's, :data:`STUDY_DEFAULTS`
-==================  ===============================  =====================================
+===================  ===============================
+TOML key             settings field
+===================  ===============================
+[detect] tol         ``DetectSettings.tol``
+[detect] statistic   ``DetectSettings.statistic``
+[detect] correction  ``DetectSettings.correction``
+[detect] normality   ``DetectSettings.normality``
+[detect] covariance  ``DetectSettings.covariance``
+[validate] n_runs    ``MonteCarloSettings.n_rep``
+[validate] seed      ``MonteCarloSettings.seed``
+===================  ===============================
 
+Their defaults are the settings dataclasses' except where the study has always used its own,
+listed in the one table :data:`STUDY_DEFAULTS` ([validate] n_runs = 200, seed = 1).
 ``n_runs`` keeps its name in the file (documented, and ``mudoe validate --runs`` speaks of
 runs); it is mapped to ``n_rep`` in its field declaration only.  The remaining keys (which
 sensors, data files, units, variants, the design's criterion and size) are the study's own
@@ -142,7 +144,8 @@ def setting(settings: type, name: str, bounds: Bounds | None = None) -> Field:
     """
     f = _field_of(settings, name)
     if f.default is MISSING:
-        raise TypeError(f"{settings.__name__}.{name}: a config key needs a field with a plain default")
+        raise TypeError(f"name: {settings.__name__}.{name} has no plain default; back the key by a field "
+                        "with one")
     default = STUDY_DEFAULTS.get((settings, name), f.default)
     return field(default=default, metadata={"settings": settings, "field": name, "bounds": bounds})
 
