@@ -557,7 +557,7 @@ def _str_table(ctx, section, key, v):
     return dict(v)
 
 
-#: readers of the other annotations of schema fields (a None default: the key is optional)
+#: readers of the other annotations of schema fields (``X | None`` is read as X: TOML has no null)
 _READERS = {"bool": _bool, "tuple[str, ...]": _str_list, "tuple[int, ...]": _int_list, "dict[str, str]": _str_table}
 
 
