@@ -9,37 +9,166 @@ spells them out for the press study); an unknown key is an error naming the key,
 and the line.  Units are declared once and converted once, to the model's units (mm, N).
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
+
+One schema
+----------
+The section dataclasses below *are* the schema: a section's allowed keys are its fields, a
+key's default is the field's default, and the field's annotation and metadata say how the
+TOML value is checked (:func:`_read`).  Keys that drive a library function are declared with
+:func:`setting`: their default is the default of the library's settings dataclass, the
+settings dataclass validates their values, and the section hands the workflow a settings
+object (``cfg.detect.settings()``, ``cfg.validate.settings(...)``).  The keys backed by a
+settings field (:func:`settings_keys`):
+
+===================  ===============================
+TOML key             settings field
+===================  ===============================
+[detect] tol         ``DetectSettings.tol``
+[detect] statistic   ``DetectSettings.statistic``
+[detect] correction  ``DetectSettings.correction``
+[detect] normality   ``DetectSettings.normality``
+[detect] covariance  ``DetectSettings.covariance``
+[validate] n_runs    ``MonteCarloSettings.n_rep``
+[validate] seed      ``MonteCarloSettings.seed``
+===================  ===============================
+
+Their defaults are the settings dataclasses' except where the study has always used its own,
+listed in the one table :data:`STUDY_DEFAULTS` ([validate] n_runs = 200, seed = 1).
+``n_runs`` keeps its name in the file (documented, and ``mudoe validate --runs`` speaks of
+runs); it is mapped to ``n_rep`` in its field declaration only.  The remaining keys (which
+sensors, data files, units, variants, the design's criterion and size) are the study's own
+and have no settings dataclass: ``[oed]`` holds the arguments of
+:func:`oed.design.select_sensors_from_information`, not fields of ``DesignSettings`` /
+``BnBSettings`` (the solver's knobs, which the config does not expose).
 """
 from __future__ import annotations
 
 import math
 import re
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, Field, dataclass, field, fields
 from pathlib import Path
 from typing import Any
+
+from identification.detect import DetectSettings
+from identification.montecarlo import MonteCarloSettings
+from identification.splits import PRESS_SCENARIO_NAMES
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
            "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
-           "DEFAULT_CONFIG"]
+           "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
+           "settings_values"]
 
 #: factor converting a declared length unit to the model's mm
 LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "m": 1e3}
 #: factor converting a declared force unit to the model's N
 FORCE_UNITS = {"N": 1.0, "kN": 1e3}
-#: known models and their variants (friction models of the paper)
+#: known models and their variants (friction models of the paper); read through :func:`known_variants`
 MODEL_VARIANTS = {"press": ("M1", "M2", "M3")}
+
+#: The study's own defaults where they differ from the settings dataclass's, keyed by
+#: (settings dataclass, field); every other settings-backed key takes the dataclass's default.
+#: ``mudoe validate`` has always run a quick size study, 200 replications from seed 1, while
+#: :class:`identification.montecarlo.MonteCarloSettings` defaults to 2000 replications from
+#: seed 20261121; a config without these keys keeps giving the numbers it gave before.
+STUDY_DEFAULTS = {(MonteCarloSettings, "n_rep"): 200, (MonteCarloSettings, "seed"): 1}
 
 #: the default study shipped with the repository
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
+
+#: an own model factory, "package.module:function"
+_FACTORY = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*")
+
+
+def known_variants() -> dict:
+    """Built-in models and their variants, ``{model name: (variant, ...)}``.
+
+    The one place the config reads them (the press: friction variants M1, M2, M3).
+    """
+    return dict(MODEL_VARIANTS)
+
+
+def known_scenarios() -> tuple:
+    """Names of the paper's press scenarios (``[splits] scenarios``); the one place the config reads them."""
+    return PRESS_SCENARIO_NAMES
 
 
 class ConfigError(ValueError):
     """The study configuration is invalid; the message names the file, the key and (if known) the line."""
 
 
+# ---------------------------------------------------------------------------- schema helpers
+@dataclass(frozen=True)
+class Bounds:
+    """Allowed numbers: ``v >= low`` (``v > low`` if ``strict``) and, if ``high`` is given, ``v < high``."""
+
+    low: float
+    strict: bool = False
+    high: float | None = None
+
+    def admits(self, v) -> bool:
+        above = v > self.low if self.strict else v >= self.low
+        return above and (self.high is None or v < self.high)
+
+    def __str__(self) -> str:
+        if self.high is not None:
+            return f"lie in ({self.low}, {self.high})"
+        if self.low == 0:
+            return "be positive" if self.strict else "be non-negative"
+        return f"be {'greater than' if self.strict else 'at least'} {self.low}"
+
+
+POSITIVE = Bounds(0, strict=True)
+NON_NEGATIVE = Bounds(0)
+OPEN_UNIT = Bounds(0, strict=True, high=1)
+
+
+def _key(default, *, choices=None, bounds=None, allow_inf=False) -> Field:
+    """A config key: its default and how its value is checked (choices, bounds, infinite allowed)."""
+    return field(default=default, metadata={"choices": choices, "bounds": bounds, "allow_inf": allow_inf})
+
+
+def _field_of(cls, name: str) -> Field:
+    for f in fields(cls):
+        if f.name == name:
+            return f
+    raise AttributeError(f"{cls.__name__} has no field {name!r}")
+
+
+def setting(settings: type, name: str, bounds: Bounds | None = None) -> Field:
+    """A config key backed by field ``name`` of the settings dataclass ``settings``.
+
+    Its default is that field's default (or the study's own, :data:`STUDY_DEFAULTS`); its value is
+    validated by ``settings`` itself; ``bounds`` only for what ``settings`` does not check.
+    """
+    f = _field_of(settings, name)
+    if f.default is MISSING:
+        raise TypeError(f"name: {settings.__name__}.{name} has no plain default; back the key by a field "
+                        "with one")
+    default = STUDY_DEFAULTS.get((settings, name), f.default)
+    return field(default=default, metadata={"settings": settings, "field": name, "bounds": bounds})
+
+
+def settings_keys(section) -> dict:
+    """``{TOML key: settings field}`` of a section (class or instance): its keys backed by a settings field."""
+    return {f.name: f.metadata["field"] for f in fields(section) if "field" in f.metadata}
+
+
+def settings_values(section) -> dict:
+    """``{settings field: value}`` of a section instance: its settings-backed keys under the fields' names."""
+    return {fld: getattr(section, key) for key, fld in settings_keys(section).items()}
+
+
+def _settings_class(section) -> type:
+    return next(f.metadata["settings"] for f in fields(section) if "settings" in f.metadata)
+
+
 # ---------------------------------------------------------------------------- dataclasses
+def _default_variants() -> tuple:
+    return known_variants()[ModelConfig.name]
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Which model and which of its variants to study.
@@ -61,7 +190,7 @@ class ModelConfig:
     """
 
     name: str = "press"
-    variants: tuple = ("M1", "M2", "M3")
+    variants: tuple[str, ...] = field(default_factory=_default_variants)
     extra_sensors: bool = False
     friction_file: str = ""
 
@@ -96,22 +225,22 @@ class DataConfig:
         0-based series used by the study (e.g. the paper's two held-out series); None = all.
         The repeatability sigma and the normality table always use every series.
     seed, n_series : int
-        Prototype source: random seed and number of series.
+        Prototype source: random seed and number of series (at least 2).
     """
 
-    source: str = "csv"
-    layout: str = "paper"
+    source: str = _key("csv", choices=("csv", "prototype"))
+    layout: str = _key("paper", choices=("paper", "tidy"))
     directory: str = "../data/press_campaign"
-    files: dict = field(default_factory=dict)
+    files: dict[str, str] = field(default_factory=dict)
     file: str = "campaign_long.csv"
     actual_forces_file: str = ""
-    value_column: str = "value"
-    displacement_unit: str = "um"
-    force_unit: str = "N"
+    value_column: str = _key("value", choices=("value", "raw"))
+    displacement_unit: str = _key("um", choices=tuple(LENGTH_UNITS))
+    force_unit: str = _key("N", choices=tuple(FORCE_UNITS))
     force_correction: bool = False
-    series: tuple | None = None
-    seed: int = 20190731
-    n_series: int = 6
+    series: tuple[int, ...] | None = None
+    seed: int = _key(20190731, bounds=NON_NEGATIVE)
+    n_series: int = _key(6, bounds=Bounds(2))
 
 
 @dataclass(frozen=True)
@@ -124,8 +253,8 @@ class SensorConfig:
     """
 
     name: str
-    sigma: float | None = None
-    sigma_man: float | None = None
+    sigma: float | None = _key(None, bounds=POSITIVE)
+    sigma_man: float | None = _key(None, bounds=NON_NEGATIVE)
 
 
 @dataclass(frozen=True)
@@ -134,8 +263,8 @@ class ParameterConfig:
 
     name: str
     start: float
-    lower: float = -math.inf
-    upper: float = math.inf
+    lower: float = _key(-math.inf, allow_inf=True)
+    upper: float = _key(math.inf, allow_inf=True)
 
 
 @dataclass(frozen=True)
@@ -143,19 +272,19 @@ class CustomSplitConfig:
     """A user split: 0-based input (and optionally series) indices of both sets."""
 
     name: str
-    cal_inputs: tuple
-    val_inputs: tuple
-    cal_series: tuple | None = None
-    val_series: tuple | None = None
+    cal_inputs: tuple[int, ...]
+    val_inputs: tuple[int, ...]
+    cal_series: tuple[int, ...] | None = None
+    val_series: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)
 class RandomSplitConfig:
     """Monte Carlo cross-validation splits (``n = 0``: none)."""
 
-    n: int = 0
-    cal_fraction: float = 0.5
-    seed: int = 1
+    n: int = _key(0, bounds=NON_NEGATIVE)
+    cal_fraction: float = _key(0.5, bounds=OPEN_UNIT)
+    seed: int = _key(1, bounds=NON_NEGATIVE)
     exclude_zero_force: bool = True
 
 
@@ -163,28 +292,33 @@ class RandomSplitConfig:
 class SplitsConfig:
     """Calibration / validation splits (Algorithm 1, line 06).
 
-    ``scenarios``: names of the paper's scenarios (:data:`identification.splits.PRESS_SCENARIO_NAMES`),
-    or ``["paper"]`` for all four.
+    ``scenarios``: names of the paper's scenarios (:func:`known_scenarios`), or ``["paper"]`` for all four.
     """
 
-    scenarios: tuple = ("paper",)
+    scenarios: tuple[str, ...] = ("paper",)
     random: RandomSplitConfig = field(default_factory=RandomSplitConfig)
     custom: tuple = ()
 
 
 @dataclass(frozen=True)
 class DetectConfig:
-    """Algorithm 1: test level, statistic, correction, normality gate, sensors used.
+    """Algorithm 1: test level, statistic, correction, normality gate, covariance, sensors used.
 
-    ``sensors``: ``"oed"`` (the design chosen by the [oed] section), ``"all"``, or a list of names.
+    The first five keys are fields of :class:`identification.detect.DetectSettings` (same
+    names, same defaults, validated there).  ``sensors`` (study only): ``"oed"`` (the design
+    chosen by the [oed] section), ``"all"``, or a list of names.
     """
 
-    tol: float = 0.05
-    statistic: str = "likelihood_ratio"
-    correction: str = "bonferroni"
-    normality: str = "check"
-    covariance: str = "second_order"
+    tol: float = setting(DetectSettings, "tol")
+    statistic: str = setting(DetectSettings, "statistic")
+    correction: str = setting(DetectSettings, "correction")
+    normality: str = setting(DetectSettings, "normality")
+    covariance: str = setting(DetectSettings, "covariance")
     sensors: Any = "oed"
+
+    def settings(self) -> DetectSettings:
+        """The :class:`DetectSettings` of Algorithm 1: this section's keys, every other field its default."""
+        return DetectSettings(**settings_values(self))
 
 
 @dataclass(frozen=True)
@@ -201,12 +335,12 @@ class OEDConfig:
     variant : str                  the model variant whose information is used ("" = the last listed)
     """
 
-    criterion: str = "E"
-    kind: str = "second_order"
-    n_sensors: int | None = None
-    min_sensors: int | None = None
-    include: tuple = ()
-    exclude: tuple = ()
+    criterion: str = _key("E", choices=("A", "D", "E"))
+    kind: str = _key("second_order", choices=("second_order", "gauss_newton"))
+    n_sensors: int | None = _key(None, bounds=POSITIVE)
+    min_sensors: int | None = _key(None, bounds=POSITIVE)
+    include: tuple[str, ...] = ()
+    exclude: tuple[str, ...] = ()
     variant: str = ""
 
 
@@ -214,12 +348,24 @@ class OEDConfig:
 class ValidateConfig:
     """Monte Carlo check of covariance and test size (:mod:`identification.montecarlo`).
 
-    ``variant``: the model variant simulated and tested ("" = the first listed).
+    ``n_runs`` and ``seed`` are ``MonteCarloSettings.n_rep`` and ``.seed`` (defaults:
+    :data:`STUDY_DEFAULTS`).  ``variant`` (study only): the model variant simulated and tested
+    ("" = the first listed).
     """
 
-    n_runs: int = 200
-    seed: int = 1
+    n_runs: int = setting(MonteCarloSettings, "n_rep")
+    seed: int = setting(MonteCarloSettings, "seed", bounds=NON_NEGATIVE)
     variant: str = ""
+
+    def settings(self, tol: float, workers: int | None = None, progress: bool = True) -> MonteCarloSettings:
+        """The :class:`MonteCarloSettings` of the size study: ``n_rep`` and ``seed`` from this section.
+
+        The tests run at level ``tol`` with the normality gate recorded, not enforced, and every
+        other field at its default: the settings :func:`identification.montecarlo.validate`
+        builds from its keyword arguments.
+        """
+        return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress,
+                                  detect=DetectSettings(tol=tol, normality="override"))
 
 
 @dataclass(frozen=True)
@@ -227,7 +373,7 @@ class ReportConfig:
     """Report options."""
 
     title: str = "Model uncertainty study"
-    dpi: int = 150
+    dpi: int = _key(150, bounds=POSITIVE)
 
 
 @dataclass(frozen=True)
@@ -268,17 +414,20 @@ class StudyConfig:
 
     def as_dict(self) -> dict:
         """A plain-dict view (for results.json)."""
-        def conv(v):
-            if hasattr(v, "__dataclass_fields__"):
-                return {f.name: conv(getattr(v, f.name)) for f in fields(v) if f.name != "text"}
-            if isinstance(v, (list, tuple)):
-                return [conv(x) for x in v]
-            if isinstance(v, dict):
-                return {k: conv(x) for k, x in v.items()}
-            if isinstance(v, float) and not math.isfinite(v):
-                return str(v)
-            return v
-        return conv(self)
+        return _plain(self)
+
+
+def _plain(v):
+    """A JSON-ready view of a config value (dataclasses as dicts, non-finite floats as strings)."""
+    if hasattr(v, "__dataclass_fields__"):
+        return {f.name: _plain(getattr(v, f.name)) for f in fields(v) if f.name != "text"}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    return v
 
 
 # ---------------------------------------------------------------------------- parsing
@@ -289,22 +438,20 @@ class _Ctx:
         self.path = path
         self.lines = text.splitlines()
 
+    def _section_start(self, section: str) -> int:
+        """0-based line of the header of ``[section]`` (0 if not found)."""
+        last = section.split(".")[-1].split("[")[0]
+        hdr = re.compile(r"^\s*\[\[?\s*" + re.escape(section.split("[")[0]) + r"\s*\]\]?\s*(#.*)?$")
+        hdr2 = re.compile(r"^\s*\[\[?.*\b" + re.escape(last) + r"\s*\]\]?")
+        for pattern in (hdr, hdr2):
+            for i, ln in enumerate(self.lines):
+                if pattern.match(ln):
+                    return i
+        return 0
+
     def line_of(self, section: str, key: str) -> int | None:
         """Best-effort 1-based line of ``key`` inside ``[section]`` (None if not found)."""
-        start = 0
-        if section:
-            last = section.split(".")[-1].split("[")[0]
-            hdr = re.compile(r"^\s*\[\[?\s*" + re.escape(section.split("[")[0]) + r"\s*\]\]?\s*(#.*)?$")
-            for i, ln in enumerate(self.lines):
-                if hdr.match(ln):
-                    start = i
-                    break
-            else:
-                hdr2 = re.compile(r"^\s*\[\[?.*\b" + re.escape(last) + r"\s*\]\]?")
-                for i, ln in enumerate(self.lines):
-                    if hdr2.match(ln):
-                        start = i
-                        break
+        start = self._section_start(section) if section else 0
         pat = re.compile(r'^\s*["\']?' + re.escape(key) + r'["\']?\s*=|^\s*\[\[?[^\]]*\b' + re.escape(key)
                          + r'\s*\]\]?|[{,]\s*["\']?' + re.escape(key) + r'["\']?\s*=')
         for i in range(start, len(self.lines)):
@@ -319,33 +466,66 @@ class _Ctx:
         return ConfigError(f"{loc}: {where}{key + ': ' if key else ''}{msg}")
 
 
-def _check_keys(ctx: _Ctx, section: str, table: dict, allowed) -> None:
+# ------------------------------------------------------------------ one validator each
+def _check_keys(ctx: _Ctx, section: str, table, schema) -> None:
+    """``table`` is a TOML table whose keys are fields of the dataclass ``schema``."""
     if not isinstance(table, dict):
         raise ctx.error("", section, f"expected a table, got {type(table).__name__}")
+    allowed = {f.name for f in fields(schema)}
     for k in table:
         if k not in allowed:
             raise ctx.error(section, k, f"unknown key {k!r}; allowed keys: {', '.join(sorted(allowed))}")
 
 
-def _num(ctx, section, key, v, positive=False, allow_inf=False, integer=False, nonneg=False):
+def _require(ctx: _Ctx, section: str, table: dict, schema, what: str) -> None:
+    """Every field of ``schema`` without a default is a key of ``table``."""
+    need = [f.name for f in fields(schema) if f.default is MISSING and f.default_factory is MISSING]
+    for k in need:
+        if k not in table:
+            raise ctx.error(section, next(iter(table), ""), f"{what} needs {', '.join(need)}; add {k}")
+
+
+def _tables(ctx: _Ctx, section: str, key: str, arr) -> list:
+    """An array of tables (``[[section.key]]``)."""
+    if not isinstance(arr, list) or not all(isinstance(x, dict) for x in arr):
+        raise ctx.error(section, key, f"expected [[{section + '.' if section else ''}{key}]] tables")
+    return arr
+
+
+def _names(values) -> str:
+    return ", ".join(repr(v) if " " in str(v) else str(v) for v in values)
+
+
+def _one_of(ctx: _Ctx, section: str, key: str, value, known, what: str = "value", note: str = "") -> None:
+    """``value`` is one of ``known``; the message lists them (and ``note`` says what they are)."""
+    if value not in known:
+        raise ctx.error(section, key, f"unknown {what} {value!r}; use one of: {_names(known)}"
+                        + (f" ({note})" if note else ""))
+
+
+def _unique(ctx: _Ctx, section: str, key: str, names, what: str) -> None:
+    if len(set(names)) != len(names):
+        raise ctx.error(section, key, f"a {what} is listed twice: {list(names)}")
+
+
+def _num(ctx, section, key, v, *, integer=False, bounds=None, allow_inf=False, what=""):
+    """A TOML number (an integer if ``integer``), finite unless ``allow_inf``, within ``bounds``."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ctx.error(section, key, f"expected a number, got {v!r}")
     if integer and not isinstance(v, int):
         raise ctx.error(section, key, f"expected an integer, got {v!r}")
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
         raise ctx.error(section, key, f"expected a finite number, got {v!r}")
-    if positive and not v > 0:
-        raise ctx.error(section, key, f"must be positive, got {v!r}")
-    if nonneg and v < 0:
-        raise ctx.error(section, key, f"must be non-negative, got {v!r}")
+    if bounds is not None and not bounds.admits(v):
+        raise ctx.error(section, key, f"{what}must {bounds}, got {v!r}")
     return v
 
 
 def _str(ctx, section, key, v, choices=None):
     if not isinstance(v, str):
         raise ctx.error(section, key, f"expected a string, got {v!r}")
-    if choices is not None and v not in choices:
-        raise ctx.error(section, key, f"{v!r} is not one of {', '.join(map(str, choices))}")
+    if choices is not None:
+        _one_of(ctx, section, key, v, choices)
     return v
 
 
@@ -355,9 +535,7 @@ def _bool(ctx, section, key, v):
     return v
 
 
-def _int_list(ctx, section, key, v, allow_none=False):
-    if v is None and allow_none:
-        return None
+def _int_list(ctx, section, key, v):
     if not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
         raise ctx.error(section, key, f"expected a list of integer indices (0-based), got {v!r}")
     if any(x < 0 for x in v):
@@ -373,167 +551,124 @@ def _str_list(ctx, section, key, v):
     return tuple(v)
 
 
+def _str_table(ctx, section, key, v):
+    if not isinstance(v, dict) or not all(isinstance(x, str) for x in v.values()):
+        raise ctx.error(section, key, f"expected a table {{sensor = \"file.csv\"}}, got {v!r}")
+    return dict(v)
+
+
+#: readers of the other annotations of schema fields (``X | None`` is read as X: TOML has no null)
+_READERS = {"bool": _bool, "tuple[str, ...]": _str_list, "tuple[int, ...]": _int_list, "dict[str, str]": _str_table}
+
+
+def _read(ctx: _Ctx, section: str, f: Field, v, what: str = ""):
+    """The TOML value ``v`` of the key ``f`` (a schema field), checked by its annotation and metadata.
+
+    Numbers keep their TOML type (an integer ``sigma = 5`` stays 5); ``what`` prefixes a bounds message.
+    """
+    kind, meta = f.type.removesuffix(" | None"), f.metadata
+    if kind in ("int", "float"):
+        return _num(ctx, section, f.name, v, integer=kind == "int", bounds=meta.get("bounds"),
+                    allow_inf=meta.get("allow_inf", False), what=what)
+    if kind == "str":
+        return _str(ctx, section, f.name, v, meta.get("choices"))
+    if kind not in _READERS:
+        raise TypeError(f"{section}.{f.name}: no reader for a {f.type!r} key")
+    return _READERS[kind](ctx, section, f.name, v)
+
+
+def _read_table(ctx: _Ctx, section: str, schema, table, skip=()) -> dict:
+    """The keys of ``table`` (fields of ``schema``), each read by :func:`_read`; ``skip``: read by the caller."""
+    _check_keys(ctx, section, table, schema)
+    return {f.name: _read(ctx, section, f, table[f.name]) for f in fields(schema)
+            if f.name in table and f.name not in skip}
+
+
+def _validated(ctx: _Ctx, section: str, cfg):
+    """``cfg`` once its settings dataclass accepts the values of the keys it backs."""
+    try:
+        _settings_class(cfg)(**settings_values(cfg))
+    except (TypeError, ValueError) as exc:
+        name, _, msg = str(exc).partition(": ")
+        key = next((k for k, fld in settings_keys(cfg).items() if fld == name), "")
+        raise ctx.error(section, key, msg if key else str(exc)) from None
+    return cfg
+
+
+# ------------------------------------------------------------------ sections
 def _parse_model(ctx, t):
-    _check_keys(ctx, "model", t, {"name", "variants", "extra_sensors", "friction_file"})
-    kw = {}
-    if "name" in t:
-        kw["name"] = _str(ctx, "model", "name", t["name"])
-        if kw["name"] not in MODEL_VARIANTS and not re.fullmatch(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*", kw["name"]):
-            raise ctx.error("model", "name", f"unknown model {kw['name']!r}; known models: "
-                            f"{', '.join(MODEL_VARIANTS)}, or your own factory as \"package.module:function\"")
+    kw = _read_table(ctx, "model", ModelConfig, t)
     name = kw.get("name", ModelConfig.name)
-    custom = name not in MODEL_VARIANTS
-    if custom and "variants" not in t:
-        kw["variants"] = ("default",)
-    if "variants" in t:
-        v = _str_list(ctx, "model", "variants", t["variants"])
-        if not v:
-            raise ctx.error("model", "variants", "list at least one variant")
-        for x in v:
-            if not custom and x not in MODEL_VARIANTS[name]:
-                raise ctx.error("model", "variants", f"unknown variant {x!r} of model {name!r}; known: "
-                                f"{', '.join(MODEL_VARIANTS[name])}")
-        if len(set(v)) != len(v):
-            raise ctx.error("model", "variants", f"a variant is listed twice: {list(v)}")
-        kw["variants"] = v
-    if "extra_sensors" in t:
-        kw["extra_sensors"] = _bool(ctx, "model", "extra_sensors", t["extra_sensors"])
-    if "friction_file" in t:
-        kw["friction_file"] = _str(ctx, "model", "friction_file", t["friction_file"])
+    known = known_variants().get(name)
+    if known is None and not _FACTORY.fullmatch(name):
+        raise ctx.error("model", "name", f"unknown model {name!r}; known models: {', '.join(known_variants())}, "
+                        "or your own factory as \"package.module:function\"")
+    variants = kw.setdefault("variants", known or ("default",))
+    if not variants:
+        raise ctx.error("model", "variants", "list at least one variant")
+    if known:
+        for v in variants:
+            _one_of(ctx, "model", "variants", v, known, "variant", f"the variants of model {name!r}")
+    _unique(ctx, "model", "variants", variants, "variant")
     return ModelConfig(**kw)
 
 
 def _parse_data(ctx, t):
-    allowed = {"source", "layout", "directory", "files", "file", "actual_forces_file", "value_column",
-               "displacement_unit", "force_unit", "force_correction", "series", "seed", "n_series"}
-    _check_keys(ctx, "data", t, allowed)
-    kw = {}
-    choices = {"source": ("csv", "prototype"), "layout": ("paper", "tidy"), "value_column": ("value", "raw"),
-               "displacement_unit": tuple(LENGTH_UNITS), "force_unit": tuple(FORCE_UNITS)}
-    for k, ch in choices.items():
-        if k in t:
-            kw[k] = _str(ctx, "data", k, t[k], ch)
-    for k in ("directory", "file", "actual_forces_file"):
-        if k in t:
-            kw[k] = _str(ctx, "data", k, t[k])
-    if "files" in t:
-        f = t["files"]
-        if not isinstance(f, dict) or not all(isinstance(v, str) for v in f.values()):
-            raise ctx.error("data", "files", f"expected a table {{sensor = \"file.csv\"}}, got {f!r}")
-        kw["files"] = dict(f)
-    if "force_correction" in t:
-        kw["force_correction"] = _bool(ctx, "data", "force_correction", t["force_correction"])
-    if "series" in t:
-        s = _int_list(ctx, "data", "series", t["series"])
-        if not s:
-            raise ctx.error("data", "series", "list at least one series (0-based), or drop the key for all")
-        kw["series"] = s
-    if "seed" in t:
-        kw["seed"] = _num(ctx, "data", "seed", t["seed"], integer=True, nonneg=True)
-    if "n_series" in t:
-        kw["n_series"] = _num(ctx, "data", "n_series", t["n_series"], integer=True)
-        if kw["n_series"] < 2:
-            raise ctx.error("data", "n_series", f"the prototype needs at least 2 series, got {kw['n_series']}")
+    kw = _read_table(ctx, "data", DataConfig, t)
+    if kw.get("series") == ():
+        raise ctx.error("data", "series", "list at least one series (0-based), or drop the key for all")
     return DataConfig(**kw)
 
 
+def _parse_sensor(ctx, t):
+    _check_keys(ctx, "sensors", t, SensorConfig)
+    _require(ctx, "sensors", t, SensorConfig, "every sensor")
+    name = _str(ctx, "sensors", "name", t["name"])
+    kw = {f.name: _read(ctx, "sensors", f, t[f.name], what=f"sensor {name!r}: {f.name} ")
+          for f in fields(SensorConfig) if f.name in t and f.name != "name"}
+    if len(kw) == 2:
+        raise ctx.error("sensors", "sigma_man", f"sensor {name!r}: give sigma or sigma_man, not both")
+    return SensorConfig(name, **kw)
+
+
 def _parse_sensors(ctx, arr):
-    if not isinstance(arr, list) or not all(isinstance(x, dict) for x in arr):
-        raise ctx.error("", "sensors", "expected [[sensors]] tables")
-    out = []
-    for i, t in enumerate(arr):
-        sec = f"sensors[{i}]"
-        _check_keys(ctx, "sensors", t, {"name", "sigma", "sigma_man"})
-        if "name" not in t:
-            raise ctx.error("sensors", "sigma" if "sigma" in t else "", f"{sec}: every sensor needs a name")
-        name = _str(ctx, "sensors", "name", t["name"])
-        sig = t.get("sigma")
-        man = t.get("sigma_man")
-        if sig is not None:
-            sig = _num(ctx, "sensors", "sigma", sig)
-            if sig <= 0:
-                raise ctx.error("sensors", "sigma", f"sensor {name!r}: sigma must be positive, got {sig!r}")
-        if man is not None:
-            man = _num(ctx, "sensors", "sigma_man", man)
-            if man < 0:
-                raise ctx.error("sensors", "sigma_man", f"sensor {name!r}: sigma_man must be non-negative, "
-                                f"got {man!r}")
-        if sig is not None and man is not None:
-            raise ctx.error("sensors", "sigma_man", f"sensor {name!r}: give sigma or sigma_man, not both")
-        out.append(SensorConfig(name, sig, man))
-    names = [s.name for s in out]
-    if len(set(names)) != len(names):
-        raise ctx.error("", "sensors", f"a sensor is listed twice: {names}")
-    return tuple(out)
+    out = tuple(_parse_sensor(ctx, t) for t in _tables(ctx, "", "sensors", arr))
+    _unique(ctx, "", "sensors", [s.name for s in out], "sensor")
+    return out
+
+
+def _parse_parameter(ctx, t):
+    _check_keys(ctx, "parameters", t, ParameterConfig)
+    _require(ctx, "parameters", t, ParameterConfig, "every parameter")
+    kw = _read_table(ctx, "parameters", ParameterConfig, t)
+    p = ParameterConfig(**{k: v if k == "name" else float(v) for k, v in kw.items()})
+    if not p.lower <= p.start <= p.upper:
+        raise ctx.error("parameters", "start", f"parameter {p.name!r}: start {p.start} lies outside "
+                        f"[{p.lower}, {p.upper}]")
+    return p
 
 
 def _parse_parameters(ctx, arr):
-    if not isinstance(arr, list) or not all(isinstance(x, dict) for x in arr):
-        raise ctx.error("", "parameters", "expected [[parameters]] tables")
-    out = []
-    for t in arr:
-        _check_keys(ctx, "parameters", t, {"name", "start", "lower", "upper"})
-        if "name" not in t or "start" not in t:
-            raise ctx.error("parameters", "start" if "name" in t else "name",
-                            "every parameter needs a name and a start value")
-        name = _str(ctx, "parameters", "name", t["name"])
-        start = _num(ctx, "parameters", "start", t["start"])
-        lo = _num(ctx, "parameters", "lower", t.get("lower", -math.inf), allow_inf=True)
-        up = _num(ctx, "parameters", "upper", t.get("upper", math.inf), allow_inf=True)
-        if not lo <= start <= up:
-            raise ctx.error("parameters", "start", f"parameter {name!r}: start {start} lies outside "
-                            f"[{lo}, {up}]")
-        out.append(ParameterConfig(name, float(start), float(lo), float(up)))
-    names = [p.name for p in out]
-    if len(set(names)) != len(names):
-        raise ctx.error("", "parameters", f"a parameter is listed twice: {names}")
-    return tuple(out)
+    out = tuple(_parse_parameter(ctx, t) for t in _tables(ctx, "", "parameters", arr))
+    _unique(ctx, "", "parameters", [p.name for p in out], "parameter")
+    return out
+
+
+def _parse_custom_split(ctx, t):
+    _check_keys(ctx, "splits.custom", t, CustomSplitConfig)
+    _require(ctx, "splits.custom", t, CustomSplitConfig, "a custom split")
+    return CustomSplitConfig(**_read_table(ctx, "splits.custom", CustomSplitConfig, t))
 
 
 def _parse_splits(ctx, t):
-    _check_keys(ctx, "splits", t, {"scenarios", "random", "custom"})
-    kw = {}
-    if "scenarios" in t:
-        from identification.splits import PRESS_SCENARIO_NAMES
-        sc = _str_list(ctx, "splits", "scenarios", t["scenarios"])
-        for s in sc:
-            if s != "paper" and s not in PRESS_SCENARIO_NAMES:
-                raise ctx.error("splits", "scenarios", f"unknown scenario {s!r}; use \"paper\" (all four) or "
-                                f"one of: {', '.join(repr(n) for n in PRESS_SCENARIO_NAMES)}")
-        kw["scenarios"] = sc
+    kw = _read_table(ctx, "splits", SplitsConfig, t, skip=("random", "custom"))
+    for s in kw.get("scenarios", ()):
+        _one_of(ctx, "splits", "scenarios", s, ("paper",) + tuple(known_scenarios()), "scenario",
+                "\"paper\": all four")
     if "random" in t:
-        r = t["random"]
-        _check_keys(ctx, "splits.random", r, {"n", "cal_fraction", "seed", "exclude_zero_force"})
-        rk = {}
-        if "n" in r:
-            rk["n"] = _num(ctx, "splits.random", "n", r["n"], integer=True, nonneg=True)
-        if "cal_fraction" in r:
-            rk["cal_fraction"] = _num(ctx, "splits.random", "cal_fraction", r["cal_fraction"])
-            if not 0 < rk["cal_fraction"] < 1:
-                raise ctx.error("splits.random", "cal_fraction", f"must lie in (0, 1), got {rk['cal_fraction']}")
-        if "seed" in r:
-            rk["seed"] = _num(ctx, "splits.random", "seed", r["seed"], integer=True, nonneg=True)
-        if "exclude_zero_force" in r:
-            rk["exclude_zero_force"] = _bool(ctx, "splits.random", "exclude_zero_force", r["exclude_zero_force"])
-        kw["random"] = RandomSplitConfig(**rk)
+        kw["random"] = RandomSplitConfig(**_read_table(ctx, "splits.random", RandomSplitConfig, t["random"]))
     if "custom" in t:
-        arr = t["custom"]
-        if not isinstance(arr, list) or not all(isinstance(x, dict) for x in arr):
-            raise ctx.error("splits", "custom", "expected [[splits.custom]] tables")
-        out = []
-        for c in arr:
-            _check_keys(ctx, "splits.custom", c, {"name", "cal_inputs", "val_inputs", "cal_series", "val_series"})
-            for k in ("name", "cal_inputs", "val_inputs"):
-                if k not in c:
-                    raise ctx.error("splits.custom", "name" if "name" in c else "",
-                                    f"a custom split needs name, cal_inputs and val_inputs (missing {k})")
-            out.append(CustomSplitConfig(
-                _str(ctx, "splits.custom", "name", c["name"]),
-                _int_list(ctx, "splits.custom", "cal_inputs", c["cal_inputs"]),
-                _int_list(ctx, "splits.custom", "val_inputs", c["val_inputs"]),
-                _int_list(ctx, "splits.custom", "cal_series", c.get("cal_series"), allow_none=True),
-                _int_list(ctx, "splits.custom", "val_series", c.get("val_series"), allow_none=True)))
-        kw["custom"] = tuple(out)
+        kw["custom"] = tuple(_parse_custom_split(ctx, c) for c in _tables(ctx, "splits", "custom", t["custom"]))
     cfg = SplitsConfig(**kw)
     if not cfg.scenarios and not cfg.custom and cfg.random.n == 0:
         raise ctx.error("splits", "scenarios", "no split defined: give scenarios, [splits.random] n > 0 or "
@@ -542,64 +677,25 @@ def _parse_splits(ctx, t):
 
 
 def _parse_detect(ctx, t):
-    _check_keys(ctx, "detect", t, {"tol", "statistic", "correction", "normality", "covariance", "sensors"})
-    kw = {}
-    if "tol" in t:
-        kw["tol"] = float(_num(ctx, "detect", "tol", t["tol"]))
-        if not 0 < kw["tol"] < 1:
-            raise ctx.error("detect", "tol", f"TOL must lie in (0, 1), got {kw['tol']}")
-    ch = {"statistic": ("likelihood_ratio", "two_sample", "paper"), "correction": ("bonferroni", "holm"),
-          "normality": ("check", "override"), "covariance": ("second_order", "gauss_newton")}
-    for k, c in ch.items():
-        if k in t:
-            kw[k] = _str(ctx, "detect", k, t[k], c)
-    if "sensors" in t:
-        s = t["sensors"]
-        if isinstance(s, str):
-            kw["sensors"] = _str(ctx, "detect", "sensors", s, ("oed", "all"))
-        else:
-            kw["sensors"] = _str_list(ctx, "detect", "sensors", s)
-    return DetectConfig(**kw)
+    kw = _read_table(ctx, "detect", DetectConfig, t, skip=("sensors",))
+    s = t.get("sensors")
+    if isinstance(s, str):
+        kw["sensors"] = _str(ctx, "detect", "sensors", s, ("oed", "all"))
+    elif s is not None:
+        kw["sensors"] = _str_list(ctx, "detect", "sensors", s)
+    return _validated(ctx, "detect", DetectConfig(**kw))
 
 
 def _parse_oed(ctx, t):
-    _check_keys(ctx, "oed", t, {"criterion", "kind", "n_sensors", "min_sensors", "include", "exclude", "variant"})
-    kw = {}
-    if "criterion" in t:
-        kw["criterion"] = _str(ctx, "oed", "criterion", t["criterion"], ("A", "D", "E"))
-    if "kind" in t:
-        kw["kind"] = _str(ctx, "oed", "kind", t["kind"], ("second_order", "gauss_newton"))
-    for k in ("n_sensors", "min_sensors"):
-        if k in t:
-            kw[k] = _num(ctx, "oed", k, t[k], integer=True, positive=True)
-    for k in ("include", "exclude"):
-        if k in t:
-            kw[k] = _str_list(ctx, "oed", k, t[k])
-    if "variant" in t:
-        kw["variant"] = _str(ctx, "oed", "variant", t["variant"])
-    return OEDConfig(**kw)
+    return OEDConfig(**_read_table(ctx, "oed", OEDConfig, t))
 
 
 def _parse_validate(ctx, t):
-    _check_keys(ctx, "validate", t, {"n_runs", "seed", "variant"})
-    kw = {}
-    if "n_runs" in t:
-        kw["n_runs"] = _num(ctx, "validate", "n_runs", t["n_runs"], integer=True, positive=True)
-    if "seed" in t:
-        kw["seed"] = _num(ctx, "validate", "seed", t["seed"], integer=True, nonneg=True)
-    if "variant" in t:
-        kw["variant"] = _str(ctx, "validate", "variant", t["variant"])
-    return ValidateConfig(**kw)
+    return _validated(ctx, "validate", ValidateConfig(**_read_table(ctx, "validate", ValidateConfig, t)))
 
 
 def _parse_report(ctx, t):
-    _check_keys(ctx, "report", t, {"title", "dpi"})
-    kw = {}
-    if "title" in t:
-        kw["title"] = _str(ctx, "report", "title", t["title"])
-    if "dpi" in t:
-        kw["dpi"] = _num(ctx, "report", "dpi", t["dpi"], integer=True, positive=True)
-    return ReportConfig(**kw)
+    return ReportConfig(**_read_table(ctx, "report", ReportConfig, t))
 
 
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,
@@ -636,11 +732,13 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     if base_dir is None:
         base_dir = Path(path).resolve().parent if path != "<string>" else Path.cwd()
     cfg = StudyConfig(**kw, path=str(path), base_dir=str(base_dir), text=text)
-    _cross_checks(ctx, cfg)
+    _check_data(ctx, cfg)
+    _check_names(ctx, cfg)
     return cfg
 
 
-def _cross_checks(ctx, cfg: StudyConfig) -> None:
+def _check_data(ctx, cfg: StudyConfig) -> None:
+    """The [data] options agree with each other and with [[sensors]]."""
     d = cfg.data
     if d.force_correction and d.source == "prototype":
         raise ctx.error("data", "force_correction", "the prototype's readings are already corrected; "
@@ -649,25 +747,23 @@ def _cross_checks(ctx, cfg: StudyConfig) -> None:
         raise ctx.error("data", "force_correction", "the tidy column 'value' is the corrected reading; set "
                         "value_column = \"raw\" to apply the correction yourself")
     names = cfg.sensor_names()
-    for sname in d.files:
-        if names and sname not in names:
-            raise ctx.error("data.files", sname, f"file given for sensor {sname!r}, which is not listed in "
-                            f"[[sensors]] ({', '.join(names)})")
-    o = cfg.oed
-    for k in ("include", "exclude"):
-        for s in getattr(o, k):
-            if names and s not in names:
-                raise ctx.error("oed", k, f"unknown sensor {s!r}; sensors: {', '.join(names)}")
-    if o.variant and o.variant not in cfg.model.variants:
-        raise ctx.error("oed", "variant", f"variant {o.variant!r} is not among [model] variants "
-                        f"{list(cfg.model.variants)}")
-    if cfg.validate.variant and cfg.validate.variant not in cfg.model.variants:
-        raise ctx.error("validate", "variant", f"variant {cfg.validate.variant!r} is not among [model] variants "
-                        f"{list(cfg.model.variants)}")
+    if names:
+        for sname in d.files:
+            _one_of(ctx, "data.files", sname, sname, names, "sensor", "listed in [[sensors]]")
+
+
+def _check_names(ctx, cfg: StudyConfig) -> None:
+    """Sensors named in [oed] / [detect] are listed in [[sensors]]; variants in [model] variants."""
+    names = cfg.sensor_names()
+    named = [("oed", k, s) for k in ("include", "exclude") for s in getattr(cfg.oed, k)]
     if isinstance(cfg.detect.sensors, tuple):
-        for s in cfg.detect.sensors:
-            if names and s not in names:
-                raise ctx.error("detect", "sensors", f"unknown sensor {s!r}; sensors: {', '.join(names)}")
+        named += [("detect", "sensors", s) for s in cfg.detect.sensors]
+    if names:
+        for section, key, s in named:
+            _one_of(ctx, section, key, s, names, "sensor", "listed in [[sensors]]")
+    for section, variant in (("oed", cfg.oed.variant), ("validate", cfg.validate.variant)):
+        if variant:
+            _one_of(ctx, section, "variant", variant, cfg.model.variants, "variant", "the [model] variants")
 
 
 def load_config(path: str | Path) -> StudyConfig:

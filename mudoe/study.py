@@ -384,12 +384,10 @@ def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> 
 
 def run_detect(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Algorithm 1 (lines 05-17) on every variant with the chosen sensors."""
-    from identification.detect import DetectSettings, detect
+    from identification.detect import detect
     progress = progress or Progress(False)
-    d = study.cfg.detect
     design = list(_design_sensors(study, results, progress))
-    settings = DetectSettings(tol=d.tol, statistic=d.statistic, correction=d.correction, normality=d.normality,
-                              covariance=d.covariance)
+    settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
         results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
                                    design=design, settings=settings)
@@ -417,7 +415,6 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
     with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications"):
         results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p, inputs=data.inputs,
-                                      sigma=sigma, n_M=data.n_M, weights=w, n_rep=vc.n_runs,
-                                      tol=study.cfg.detect.tol, seed=vc.seed, workers=workers,
-                                      progress=progress.enabled, name=v)
+                                      sigma=sigma, n_M=data.n_M, weights=w, name=v,
+                                      settings=vc.settings(study.cfg.detect.tol, workers, progress.enabled))
     return results
