@@ -6,9 +6,7 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 """
 from __future__ import annotations
 
-import importlib.metadata
 import math
-import platform
 import sys
 import time
 from contextlib import contextmanager
@@ -26,7 +24,7 @@ from .config import ConfigError, StudyConfig
 from .data_io import Campaign, DataFileError, load_campaign
 
 __all__ = ["Study", "StudyResults", "prepare", "run_identify", "run_oed", "run_detect", "run_validate",
-           "Progress", "MissingPieceError", "package_versions"]
+           "Progress", "MissingPieceError"]
 
 
 class MissingPieceError(RuntimeError):
@@ -120,17 +118,6 @@ class StudyResults:
     validation: object = None
     timing: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
-
-
-def package_versions() -> dict:
-    """Versions of Python and the packages the results depend on."""
-    out = {"python": platform.python_version()}
-    for pkg in ("mudoe", "numpy", "scipy", "casadi", "matplotlib", "pyscipopt", "pyomo"):
-        try:
-            out[pkg] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
 
 
 # ---------------------------------------------------------------------------- models
