@@ -24,14 +24,16 @@ import csv
 import hashlib
 import io
 import math
-from dataclasses import dataclass, field
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
+from models.campaign import Campaign
 from models.fileio import atomic_write_text
+
+from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
 
 __all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
@@ -41,41 +43,6 @@ _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 
 class DataFileError(ValueError):
     """A data file is missing or malformed; the message names the file and the line."""
-
-
-@dataclass(frozen=True, eq=False)
-class Campaign:
-    """A campaign in the model's units.
-
-    Attributes
-    ----------
-    q_set : ndarray (n_q,)            set-point forces (N)
-    q_actual : ndarray (n_M, n_q) or None   actual forces (N) when the data carry them
-    z : ndarray (n_M, n_q, n_S)       readings (mm), NaN = missing, force-corrected if asked
-    sensors : tuple of str
-    series : tuple of str             series labels (from the header / the series column)
-    files : tuple of str              files read (empty for the prototype)
-    source : str                      one-line description
-    sha256 : str                      hash of the files (or of the arrays for the prototype)
-    """
-
-    q_set: np.ndarray
-    q_actual: np.ndarray | None
-    z: np.ndarray
-    sensors: tuple
-    series: tuple
-    files: tuple = ()
-    source: str = ""
-    sha256: str = ""
-    notes: tuple = field(default_factory=tuple)
-
-    @property
-    def n_M(self) -> int:
-        return self.z.shape[0]
-
-    @property
-    def n_q(self) -> int:
-        return self.z.shape[1]
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -424,8 +391,7 @@ def _force_correct(c: Campaign, where: str) -> Campaign:
         raise DataFileError(f"{where}: actual force {qa[i, j]:g} N of series {c.series[i]!r} at set point "
                             f"{j + 1} is not positive; cannot apply z * q_set / q_actual")
     factor = np.where(qd > 0, qd / np.where(qa > 0, qa, 1.0), 1.0)
-    return Campaign(c.q_set, c.q_actual, c.z * factor[:, :, None], c.sensors, c.series, c.files, c.source,
-                    c.sha256, c.notes + ("force correction z * q_set / q_actual applied",))
+    return replace(c, z=c.z * factor[:, :, None], notes=c.notes + ("force correction z * q_set / q_actual applied",))
 
 
 def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
@@ -447,8 +413,10 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
                                 f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
         z = pc.z[:, :, idx]
         h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
-        return Campaign(pc.q_set, pc.q_actual, z, tuple(sensors), tuple(f"series_{i + 1}" for i in range(pc.n_M)),
-                        (), f"virtual prototype (seed {d.seed}, {d.n_series} series)", h.hexdigest())
+        return Campaign(q_set=pc.q_set, q_actual=pc.q_actual, z=z, sensors=tuple(sensors),
+                        series=tuple(f"series_{i + 1}" for i in range(pc.n_M)),
+                        source=f"virtual prototype (seed {d.seed}, {d.n_series} series)", sha256=h.hexdigest(),
+                        z_raw=pc.z_raw[:, :, idx], seed=pc.seed, config=pc.config)
     base = cfg.resolve(d.directory)
     if d.layout == "paper":
         files = {}
