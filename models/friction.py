@@ -240,6 +240,36 @@ def _inverse_functions(model):
     return ca.Function("inv", [y, p, q], [E, ca.jacobian(E, y), ca.jacobian(E, q)[:, 0], h, ca.jacobian(h, y)])
 
 
+def _state_newton(fun, p, q, y):
+    """The state y with E(y, p, q) = 0 by Newton's method from y (at most 50 steps)."""
+    for _ in range(50):
+        E, Ey, _, _, _ = fun(y, p, [q])
+        dy = np.linalg.solve(np.asarray(Ey), -np.asarray(E).ravel())
+        y = y + dy
+        if np.max(np.abs(dy)) <= 1e-13 * max(1.0, np.max(np.abs(y))):
+            break
+    return y
+
+
+def _inverse_point(fun, p, z_sel, idx, w, q, y, tol, max_iter):
+    r"""Gauss-Newton on the scalar force q (N) for one reading vector z_sel (mm) of the sensors ``idx``.
+
+    q <- q + sum_k w_k s_k r_k / sum_k w_k s_k^2 with r = z - h(y(q)), s = dh/dq = h_y dy/dq,
+    dy/dq = -E_y^{-1} E_q (exact AD derivatives); y is warm started.  Returns (q, y, converged).
+    """
+    for _ in range(max_iter):
+        y = _state_newton(fun, p, q, y)
+        E, Ey, Eq, h, hy = fun(y, p, [q])
+        dydq = np.linalg.solve(np.asarray(Ey), -np.asarray(Eq).ravel())
+        s = (np.asarray(hy) @ dydq)[idx]
+        r = z_sel - np.asarray(h).ravel()[idx]
+        dq = float(np.sum(w * s * r) / np.sum(w * s * s))
+        q += dq
+        if abs(dq) <= tol * max(1.0, abs(q)):
+            return q, y, True
+    return q, y, False
+
+
 def inverse_forces(model, p, z, sensors: Sequence[str], sigma, q_start, tol: float = 1e-9,
                    max_iter: int = 30) -> np.ndarray:
     r"""Inverse frictionless model: the force q (N) whose M1 outputs best match readings z.
@@ -289,23 +319,8 @@ def inverse_forces(model, p, z, sensors: Sequence[str], sigma, q_start, tol: flo
     for i in range(z.shape[0]):
         y = np.zeros(model.n_y)
         for j in range(z.shape[1]):
-            q = q0[j]
-            for _ in range(max_iter):
-                for _ in range(50):                               # state Newton at fixed q
-                    E, Ey, Eq, h, hy = fun(y, p, [q])
-                    dy = np.linalg.solve(np.asarray(Ey), -np.asarray(E).ravel())
-                    y = y + dy
-                    if np.max(np.abs(dy)) <= 1e-13 * max(1.0, np.max(np.abs(y))):
-                        break
-                E, Ey, Eq, h, hy = fun(y, p, [q])
-                dydq = np.linalg.solve(np.asarray(Ey), -np.asarray(Eq).ravel())
-                s = (np.asarray(hy) @ dydq)[idx]
-                r = z[i, j, idx] - np.asarray(h).ravel()[idx]
-                dq = float(np.sum(w * s * r) / np.sum(w * s * s))
-                q += dq
-                if abs(dq) <= tol * max(1.0, abs(q)):
-                    break
-            else:
+            q, y, converged = _inverse_point(fun, p, z[i, j, idx], idx, w, q0[j], y, tol, max_iter)
+            if not converged:
                 raise FrictionError(f"inverse model did not converge at series {i}, input {j}")
             out[i, j] = q
     return out

@@ -24,7 +24,7 @@ import csv
 import hashlib
 import io
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -237,29 +237,22 @@ def write_paper_layout(directory, q_set, z, sensors: Sequence[str], displacement
 
 
 # ---------------------------------------------------------------------------- tidy layout
-def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
-                     sensors: Sequence[str] | None = None) -> Campaign:
-    """Read the tidy long table (one row per series, set point and sensor).
+@dataclass(frozen=True)
+class _TidyRow:
+    """One data row of the tidy table: file line, series label, 1-based set-point index, sensor,
+    set force, actual force (NaN when absent) and reading, in the file's units."""
 
-    Parameters
-    ----------
-    path : path
-    displacement_unit, force_unit : str
-        Declared units (a unit suffix in a column name must agree).
-    value_column : {"value", "raw"}
-        Which reading column to use.
-    sensors : sequence of str, optional
-        Expected sensors (order of the result); a sensor in the file outside this list is an error.
+    line: int
+    series: str
+    index: int
+    sensor: str
+    set_force: float
+    actual_force: float
+    value: float
 
-    Raises
-    ------
-    DataFileError
-        Missing file or column, ragged row, text in a numeric column (file and line), duplicate
-        rows, unknown sensor, set forces that differ between series.
-    """
-    path = Path(path)
-    rows = _read_rows(path)
-    header = [h.strip() for h in rows[0]]
+
+def _tidy_columns(path: Path, header: list, value_column: str, displacement_unit: str, force_unit: str) -> dict:
+    """{base name: (column index, header text, unit)} of the tidy header; units must agree with the declared ones."""
     cols = {}
     for i, h in enumerate(header):
         units = FORCE_UNITS if "force" in h.lower() else LENGTH_UNITS
@@ -277,12 +270,12 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         raise DataFileError(f"{path}:1: wrong header: missing column(s) {', '.join(missing)}; expected "
                             f"series, [index,] set_force_<unit>, [actual_force_<unit>,] sensor, "
                             f"{value_column}_<unit>; got {','.join(header)}")
-    body = _body(rows)
-    if not body:
-        raise DataFileError(f"{path}: no data rows after the header")
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    return cols
+
+
+def _tidy_rows(path: Path, header: list, cols: dict, body: list, value_column: str, sensors) -> list:
+    """The data rows as :class:`_TidyRow` (errors name the file and line)."""
     recs = []
-    order_series, order_sensors = [], []
     counter = {}
     for line, r in body:
         if len(r) != len(header):
@@ -310,35 +303,73 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         qa = (_number(path, line, cols["actual_force"][1], r[cols["actual_force"][0]], allow_missing=False)
               if "actual_force" in cols else math.nan)
         v = _number(path, line, cols[value_column][1], r[cols[value_column][0]])
-        if ser not in order_series:
-            order_series.append(ser)
-        if sen not in order_sensors:
-            order_sensors.append(sen)
-        recs.append((line, ser, idx, sen, qs, qa, v))
-    sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
-    absent = [s for s in sens if s not in order_sensors]
-    if absent:
-        raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
-    n_M, n_q = len(order_series), max(rec[2] for rec in recs)
+        recs.append(_TidyRow(line=line, series=ser, index=idx, sensor=sen, set_force=qs, actual_force=qa, value=v))
+    return recs
+
+
+def _tidy_arrays(path: Path, recs: list, order_series: list, sens: tuple):
+    """(q_set (n_q,), q_actual (n_M, n_q), z (n_M, n_q, n_S)) in the file's units; NaN where absent."""
+    n_M, n_q = len(order_series), max(rec.index for rec in recs)
     z = np.full((n_M, n_q, len(sens)), np.nan)
     seen = np.zeros(z.shape, bool)
     q_set = np.full(n_q, np.nan)
     q_act = np.full((n_M, n_q), np.nan)
-    for line, ser, idx, sen, qs, qa, v in recs:
-        i, j, k = order_series.index(ser), idx - 1, sens.index(sen)
+    for rec in recs:
+        i, j, k = order_series.index(rec.series), rec.index - 1, sens.index(rec.sensor)
         if seen[i, j, k]:
-            raise DataFileError(f"{path}:{line}: duplicate row for series {ser!r}, index {idx}, sensor {sen!r}")
+            raise DataFileError(f"{path}:{rec.line}: duplicate row for series {rec.series!r}, index {rec.index}, "
+                                f"sensor {rec.sensor!r}")
         seen[i, j, k] = True
         if np.isnan(q_set[j]):
-            q_set[j] = qs
-        elif not math.isclose(q_set[j], qs, rel_tol=1e-9, abs_tol=1e-9):
-            raise DataFileError(f"{path}:{line}: set force {qs:g} of index {idx} differs from {q_set[j]:g} "
-                                "given earlier for the same index")
-        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], qa, rel_tol=1e-9, abs_tol=1e-9):
-            raise DataFileError(f"{path}:{line}: actual force {qa:g} differs from {q_act[i, j]:g} given for "
-                                f"another sensor of series {ser!r}, index {idx}")
-        q_act[i, j] = qa
-        z[i, j, k] = v
+            q_set[j] = rec.set_force
+        elif not math.isclose(q_set[j], rec.set_force, rel_tol=1e-9, abs_tol=1e-9):
+            raise DataFileError(f"{path}:{rec.line}: set force {rec.set_force:g} of index {rec.index} differs from "
+                                f"{q_set[j]:g} given earlier for the same index")
+        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], rec.actual_force, rel_tol=1e-9,
+                                                          abs_tol=1e-9):
+            raise DataFileError(f"{path}:{rec.line}: actual force {rec.actual_force:g} differs from {q_act[i, j]:g} "
+                                f"given for another sensor of series {rec.series!r}, index {rec.index}")
+        q_act[i, j] = rec.actual_force
+        z[i, j, k] = rec.value
+    return q_set, q_act, z
+
+
+def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
+                     sensors: Sequence[str] | None = None) -> Campaign:
+    """Read the tidy long table (one row per series, set point and sensor).
+
+    Parameters
+    ----------
+    path : path
+    displacement_unit, force_unit : str
+        Declared units (a unit suffix in a column name must agree).
+    value_column : {"value", "raw"}
+        Which reading column to use.
+    sensors : sequence of str, optional
+        Expected sensors (order of the result); a sensor in the file outside this list is an error.
+
+    Raises
+    ------
+    DataFileError
+        Missing file or column, ragged row, text in a numeric column (file and line), duplicate
+        rows, unknown sensor, set forces that differ between series.
+    """
+    path = Path(path)
+    rows = _read_rows(path)
+    header = [h.strip() for h in rows[0]]
+    cols = _tidy_columns(path, header, value_column, displacement_unit, force_unit)
+    body = _body(rows)
+    if not body:
+        raise DataFileError(f"{path}: no data rows after the header")
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    recs = _tidy_rows(path, header, cols, body, value_column, sensors)
+    order_series = list(dict.fromkeys(rec.series for rec in recs))
+    order_sensors = list(dict.fromkeys(rec.sensor for rec in recs))
+    sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
+    absent = [s for s in sens if s not in order_sensors]
+    if absent:
+        raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
+    q_set, q_act, z = _tidy_arrays(path, recs, order_series, sens)
     if np.isnan(q_set).any():
         j = int(np.flatnonzero(np.isnan(q_set))[0])
         raise DataFileError(f"{path}: no row for set-point index {j + 1}")

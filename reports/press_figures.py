@@ -2,8 +2,9 @@
 
 Every function takes ``ax``/``axes=None`` (then it makes its own figure, without pyplot)
 and returns the matplotlib figure.  The figures only draw: the fits and the friction samples
-they show are computed by the press study (:mod:`mudoe.press`) and passed in.  Displacements are plotted in um, forces in N, like
-the paper's Figure "Repeated measurements of the force-displacement curve".
+they show are computed by the press study (:mod:`mudoe.press`) and passed in.
+Displacements are plotted in um, forces in N, like the paper's Figure "Repeated
+measurements of the force-displacement curve".
 """
 from __future__ import annotations
 
