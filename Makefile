@@ -13,7 +13,9 @@ setup:
 	$(BIN)/python -m pip install --upgrade pip
 	$(BIN)/python -m pip install -e ".[test]"
 
+# the layer contract in pyproject.toml ([tool.importlinter]) first, then the tests
 test:
+	$(BIN)/lint-imports --no-cache
 	$(BIN)/python -m pytest -q
 
 bench:

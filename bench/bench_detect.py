@@ -138,10 +138,11 @@ class PrototypeCampaign:
         if self._proto is None:
             self._proto = VirtualPrototype(PrototypeConfig())
         c = generate_campaign(seed=int(rng.integers(2 ** 32)), n_series=self.n_series, prototype=self._proto)
+        from mudoe.press import campaign_measurements
         if self.names == ("M1",):
-            return c.measurements(sigma=self.sigma)
+            return campaign_measurements(c, sigma=self.sigma)
         from models.friction import model_inputs
-        return {n: c.measurements(inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
+        return {n: campaign_measurements(c, inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
 
 
 def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
@@ -171,7 +172,8 @@ def run_press():
         origin = (f"{pt.CAMPAIGN_DIR} not shipped yet: regenerated in memory by generate_campaign(seed="
                   f"{pt.CAMPAIGN_SEED}), the campaign ship_campaign() would write")
     print(f"campaign: {origin}; {camp.n_M} series")
-    full = camp.measurements(sigma="composed")
+    from mudoe.press import campaign_measurements
+    full = campaign_measurements(camp, sigma="composed")
     print("normality gate on all series (pairs 2-1, 4-3, 6-5), as the paper's table 'Analysis of the measurement "
           "data':")
     print(normality_check(full).table())
@@ -183,7 +185,8 @@ def run_press():
         print(f"models.friction not available ({exc}): M2 and M3 not tested")
         models = {"M1": press_model()}
         inputs = {"M1": camp.q_set[:, None]}
-    datas = {n: camp.measurements(series=pt.TEST_SERIES, inputs=inputs[n], sigma="composed") for n in models}
+    datas = {n: campaign_measurements(camp, series=pt.TEST_SERIES, inputs=inputs[n], sigma="composed")
+             for n in models}
     d1 = next(iter(datas.values()))
     print(f"held-out series {[i + 1 for i in pt.TEST_SERIES]}, composed sigma (mm): {np.round(d1.sigma, 6).tolist()}")
     res = detect(models, datas, press_scenarios(), P0, design=["D_y", "F_x"], normality="check")

@@ -17,12 +17,13 @@ with q_fric (N) a function of the input vector only:
   q_fric = mu(q_P(t_i), q_P(t_{i-1}), q_P,min(t_i), q_P,max(t_i)) (inputs from
   :func:`memory_inputs`), mu an adapted Preisach network of arctan units
   mu(u) = F_s (c_0 + sum_k c_k arctan(w_k . u / Q_s + b_k)) (:class:`PreisachNetwork`),
-  trained by Ipopt on the friction force that the inverse frictionless model attributes
-  to four training series (:func:`friction_samples`, :func:`train_preisach`).
+  trained by Ipopt on the friction force that the inverse frictionless model
+  (:func:`inverse_forces`) attributes to four training series.
 
 The trained constants (q_c, the network, and the frictionless (k5, k7) they rest on) are
-stored in ``data/press_friction.json`` (:func:`retrain` rewrites it, :func:`load_friction`
-reads it); they are fixed constants of M2/M3, not identified parameters.
+stored in ``data/press_friction.json`` (:func:`load_friction` reads it); they are fixed
+constants of M2/M3, not identified parameters.  Training them is an identification task
+and lives in the press study (:func:`mudoe.press.retrain` rewrites the file).
 """
 from __future__ import annotations
 
@@ -33,14 +34,15 @@ from typing import Sequence
 
 import casadi as ca
 import numpy as np
-from .fileio import atomic_write_text
 
 __all__ = ["Coulomb", "PreisachNetwork", "direction_inputs", "memory_inputs", "model_inputs",
-           "inverse_forces", "friction_samples", "fit_coulomb", "train_preisach", "retrain",
-           "load_friction", "candidate_models", "fit_candidates", "FRICTION_JSON", "FrictionError",
-           "TRAINING_DEFAULTS"]
+           "inverse_forces", "fit_coulomb", "load_friction", "candidate_models", "FRICTION_JSON", "FrictionError",
+           "VARIANTS", "Q_SCALE", "F_SCALE"]
 
 FRICTION_JSON = Path(__file__).resolve().parent.parent / "data" / "press_friction.json"
+
+#: the candidate press models: M1 without friction, M2 Coulomb, M3 the Preisach network
+VARIANTS = ("M1", "M2", "M3")
 
 #: force scale Q_s (N) of the network inputs and output scale F_s (N)
 Q_SCALE = 1600.0
@@ -230,15 +232,42 @@ class PreisachNetwork:
 
 # ---------------------------------------------------------------------------- inverse model
 def _inverse_functions(model):
-    f = getattr(model, "_inverse_funs", None)
-    if f is None:
-        y = ca.SX.sym("y", model.n_y)
-        p = ca.SX.sym("p", model.n_p)
-        q = ca.SX.sym("q", model.n_q_dim)
-        E, h = model.E_fun(y, p, q), model.h_fun(y, p, q)
-        f = ca.Function("inv", [y, p, q], [E, ca.jacobian(E, y), ca.jacobian(E, q)[:, 0], h, ca.jacobian(h, y)])
-        model._inverse_funs = f
-    return f
+    """CasADi Function (y, p, q) -> (E, E_y, E_q, h, h_y) of a single-input model (built per call, not cached)."""
+    y = ca.SX.sym("y", model.n_y)
+    p = ca.SX.sym("p", model.n_p)
+    q = ca.SX.sym("q", model.n_q_dim)
+    E, h = model.E_fun(y, p, q), model.h_fun(y, p, q)
+    return ca.Function("inv", [y, p, q], [E, ca.jacobian(E, y), ca.jacobian(E, q)[:, 0], h, ca.jacobian(h, y)])
+
+
+def _state_newton(fun, p, q, y):
+    """The state y with E(y, p, q) = 0 by Newton's method from y (at most 50 steps)."""
+    for _ in range(50):
+        E, Ey, _, _, _ = fun(y, p, [q])
+        dy = np.linalg.solve(np.asarray(Ey), -np.asarray(E).ravel())
+        y = y + dy
+        if np.max(np.abs(dy)) <= 1e-13 * max(1.0, np.max(np.abs(y))):
+            break
+    return y
+
+
+def _inverse_point(fun, p, z_sel, idx, w, q, y, tol, max_iter):
+    r"""Gauss-Newton on the scalar force q (N) for one reading vector z_sel (mm) of the sensors ``idx``.
+
+    q <- q + sum_k w_k s_k r_k / sum_k w_k s_k^2 with r = z - h(y(q)), s = dh/dq = h_y dy/dq,
+    dy/dq = -E_y^{-1} E_q (exact AD derivatives); y is warm started.  Returns (q, y, converged).
+    """
+    for _ in range(max_iter):
+        y = _state_newton(fun, p, q, y)
+        E, Ey, Eq, h, hy = fun(y, p, [q])
+        dydq = np.linalg.solve(np.asarray(Ey), -np.asarray(Eq).ravel())
+        s = (np.asarray(hy) @ dydq)[idx]
+        r = z_sel - np.asarray(h).ravel()[idx]
+        dq = float(np.sum(w * s * r) / np.sum(w * s * s))
+        q += dq
+        if abs(dq) <= tol * max(1.0, abs(q)):
+            return q, y, True
+    return q, y, False
 
 
 def inverse_forces(model, p, z, sensors: Sequence[str], sigma, q_start, tol: float = 1e-9,
@@ -290,72 +319,14 @@ def inverse_forces(model, p, z, sensors: Sequence[str], sigma, q_start, tol: flo
     for i in range(z.shape[0]):
         y = np.zeros(model.n_y)
         for j in range(z.shape[1]):
-            q = q0[j]
-            for _ in range(max_iter):
-                for _ in range(50):                               # state Newton at fixed q
-                    E, Ey, Eq, h, hy = fun(y, p, [q])
-                    dy = np.linalg.solve(np.asarray(Ey), -np.asarray(E).ravel())
-                    y = y + dy
-                    if np.max(np.abs(dy)) <= 1e-13 * max(1.0, np.max(np.abs(y))):
-                        break
-                E, Ey, Eq, h, hy = fun(y, p, [q])
-                dydq = np.linalg.solve(np.asarray(Ey), -np.asarray(Eq).ravel())
-                s = (np.asarray(hy) @ dydq)[idx]
-                r = z[i, j, idx] - np.asarray(h).ravel()[idx]
-                dq = float(np.sum(w * s * r) / np.sum(w * s * s))
-                q += dq
-                if abs(dq) <= tol * max(1.0, abs(q)):
-                    break
-            else:
+            q, y, converged = _inverse_point(fun, p, z[i, j, idx], idx, w, q0[j], y, tol, max_iter)
+            if not converged:
                 raise FrictionError(f"inverse model did not converge at series {i}, input {j}")
             out[i, j] = q
     return out
 
 
-def friction_samples(campaign=None, series: Sequence[int] | None = None, sensors: Sequence[str] = ("D_y", "F_x"),
-                     model=None) -> dict:
-    r"""Friction forces attributed to training series by the inverse frictionless model.
-
-    .. math::
-
-        f_{ij} = q^d_j - \hat q_{ij}   \qquad [\mathrm{N}],
-
-    where (k5, k7) are first identified with M1 (no friction) on the training series
-    (sensors ``sensors``, the paper's composed sigmas of the campaign), and \hat q_ij is
-    :func:`inverse_forces` of series i at set point j.
-
-    Parameters
-    ----------
-    campaign : models.prototype.Campaign, optional
-        Default: the shipped campaign (``data/press_campaign``).
-    series : sequence of int, optional
-        0-based training series (default ``models.prototype.TRAIN_SERIES``, the first four).
-    sensors : sequence of str
-        Sensors for the M1 fit and the inverse model.
-    model : models.Model, optional
-        The frictionless press model (built if not given).
-
-    Returns
-    -------
-    dict with ``q_set`` (n_q,), ``f`` (n_train, n_q) N, ``q_inv`` (n_train, n_q) N,
-    ``p_M1`` (2,) N/mm, ``estimate`` (the M1 Estimate), ``sigma`` (sensors,) mm,
-    ``series``, ``sensors``.
-    """
-    from identification import identify
-    from .press import K_NOMINAL, press_model
-    from .prototype import TRAIN_SERIES, read_campaign
-    campaign = read_campaign() if campaign is None else campaign
-    series = tuple(TRAIN_SERIES if series is None else series)
-    model = press_model() if model is None else model
-    data = campaign.measurements(series=series)
-    est = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
-    sig = np.asarray(data.sigma)[model.sensor_index(sensors)]
-    q_inv = inverse_forces(model, est.p, data.z, sensors, sig, campaign.q_set)
-    return dict(q_set=campaign.q_set.copy(), f=campaign.q_set[None, :] - q_inv, q_inv=q_inv, p_M1=est.p.copy(),
-                estimate=est, sigma=sig, series=series, sensors=tuple(sensors))
-
-
-# ---------------------------------------------------------------------------- training
+# ---------------------------------------------------------------------------- Coulomb force of samples
 def fit_coulomb(q_set, f) -> float:
     r"""Least-squares Coulomb force q_c = sum_ij d_j f_ij / sum_ij d_j^2 (N).
 
@@ -374,124 +345,13 @@ def fit_coulomb(q_set, f) -> float:
     return max(0.0, float(np.sum(f * d[None, :]) / den))
 
 
-def train_preisach(U, f, n_hidden: int = 4, reg: float = 1e-2, sigma_f: float = 20.0, n_starts: int = 8,
-                   seed: int = 0) -> tuple[PreisachNetwork, dict]:
-    r"""Train the arctan network mu on friction samples with Ipopt (exact AD derivatives).
-
-    .. math::
-
-        \min_{W, b, c, c_0}\ \frac12 \sum_{i,j} \Bigl(\frac{\mu(u_j) - f_{ij}}{\sigma_f}\Bigr)^2
-            + \frac{\lambda}{2} \bigl(\|W\|_F^2 + \|c\|^2\bigr)
-
-    (mu and f in N, sigma_f in N, lambda = ``reg`` dimensionless; biases are not
-    regularised).  ``n_starts`` seeded random starts; the best local optimum is kept.
-
-    Parameters
-    ----------
-    U : array_like (n_q, 4)
-        Memory inputs (N), :func:`memory_inputs`.
-    f : array_like (n_series, n_q) or (n_q,)
-        Friction force samples (N).
-
-    Returns
-    -------
-    (PreisachNetwork, info dict with ``objective``, ``rms`` (N), ``starts`` objectives, ``status``)
-    """
-    from identification.ipopt_solver import IpoptSettings, solve_nlp
-    from identification.errors import IdentificationError
-    U = np.asarray(U, float)
-    f = np.atleast_2d(np.asarray(f, float))
-    if U.ndim != 2 or U.shape[1] != 4:
-        raise FrictionError(f"U: expected shape (n_q, 4), got {U.shape}")
-    if f.shape[1] != U.shape[0] or not np.isfinite(f).all():
-        raise FrictionError(f"f: expected finite (n_series, {U.shape[0]}) forces, got {f.shape}")
-    if isinstance(n_hidden, bool) or int(n_hidden) < 1:
-        raise FrictionError(f"n_hidden: must be a positive integer, got {n_hidden!r}")
-    if not (reg >= 0 and sigma_f > 0):
-        raise FrictionError(f"reg >= 0 and sigma_f > 0 required, got reg={reg!r}, sigma_f={sigma_f!r}")
-    nh, n_M, n_q = int(n_hidden), f.shape[0], U.shape[0]
-    nx = 4 * nh + 2 * nh + 1
-
-    def unpack(x):
-        return (ca.reshape(x[:4 * nh], nh, 4), x[4 * nh:5 * nh], x[5 * nh:6 * nh], x[6 * nh])
-
-    def build():
-        x = ca.SX.sym("x", nx)
-        fbar = ca.SX.sym("fbar", n_q)
-        W, b, c, c0 = unpack(x)
-        A = ca.atan(ca.mtimes(ca.DM(U / Q_SCALE), W.T) + ca.repmat(b.T, n_q, 1))   # (n_q, nh)
-        mu = F_SCALE * (c0 + ca.mtimes(A, c))
-        obj = 0.5 * n_M * ca.sumsqr((mu - fbar) / sigma_f) + 0.5 * reg * (ca.sumsqr(W) + ca.sumsqr(c))
-        return x, obj, ca.SX(0, 1), fbar
-
-    fbar = f.mean(axis=0)
-    const = 0.5 * float(np.sum((f - fbar) ** 2)) / sigma_f ** 2     # within-series scatter (not fitted)
-    rng = np.random.default_rng(seed)
-    settings = IpoptSettings(tol=1e-10, max_iter=3000)
-    best, objs, status = None, [], None
-    for _ in range(int(n_starts)):
-        x0 = np.concatenate([rng.normal(0, 2.0, 4 * nh), rng.normal(0, 1.0, nh), rng.normal(0, 0.3, nh), [0.0]])
-        try:
-            res = solve_nlp(build, x0, -np.inf, np.inf, np.zeros(0), np.zeros(0), fbar, settings,
-                            what="training of the Preisach network", key=("preisach", nh, n_M, reg, sigma_f,
-                                                                          U.tobytes()))
-        except IdentificationError:
-            objs.append(float("nan"))
-            continue
-        objs.append(res.f + const)
-        if best is None or res.f < best.f:
-            best, status = res, res.status
-    if best is None:
-        raise FrictionError("train_preisach: Ipopt failed from every start")
-    x = best.x
-    W = x[:4 * nh].reshape(4, nh).T      # CasADi reshape is column-major
-    net = PreisachNetwork(W, x[4 * nh:5 * nh], x[5 * nh:6 * nh], float(x[6 * nh]))
-    rms = float(np.sqrt(np.mean((net(U)[None, :] - f) ** 2)))
-    return net, dict(objective=best.f + const, rms=rms, starts=objs, status=status, n_hidden=nh, reg=reg,
-                     sigma_f=sigma_f, n_params=nx)
-
-
 # ---------------------------------------------------------------------------- storage
-TRAINING_DEFAULTS = dict(n_hidden=4, reg=1e-2, sigma_f=20.0, n_starts=8, seed=0)
-
-
-def retrain(campaign=None, path=FRICTION_JSON, write: bool = True, **training) -> dict:
-    """Recompute q_c (M2) and the network (M3) from the training series; optionally write ``path``.
-
-    Steps: :func:`friction_samples` (M1 fit on the four training series, inverse model),
-    :func:`fit_coulomb`, :func:`train_preisach` on :func:`memory_inputs` of the set points
-    (``training`` overrides :data:`TRAINING_DEFAULTS`).  Returns the stored dict.
-    """
-    opts = dict(TRAINING_DEFAULTS)
-    unknown = set(training) - set(opts)
-    if unknown:
-        raise FrictionError(f"training: unknown option(s) {sorted(unknown)}; known: {sorted(opts)}")
-    opts.update(training)
-    s = friction_samples(campaign)
-    q_c = fit_coulomb(s["q_set"], s["f"])
-    U = memory_inputs(s["q_set"])
-    net, info = train_preisach(U, s["f"], **opts)
-    out = dict(
-        description="Trained friction constants of the press candidate models M2 (Coulomb) and M3 "
-                    "(Preisach network); generated by models.friction.retrain()",
-        training_series=[int(i) + 1 for i in s["series"]], sensors=list(s["sensors"]),
-        k_M1_N_per_mm=s["p_M1"].tolist(), q_c_N=q_c, network=net.to_dict(), training=opts,
-        training_result=dict(objective=info["objective"], rms_N=info["rms"], status=info["status"],
-                             n_params=info["n_params"],
-                             rms_coulomb_N=float(np.sqrt(np.mean((q_c * direction_inputs(s["q_set"])[None, :]
-                                                                  - s["f"]) ** 2)))),
-    )
-    if write:
-        atomic_write_text(Path(path), json.dumps(out, indent=1) + "\n")
-    return out
-
-
 def load_friction(path=FRICTION_JSON) -> dict:
     """The stored friction constants: dict with ``coulomb`` (:class:`Coulomb`), ``network``
     (:class:`PreisachNetwork`) and ``raw`` (the JSON content)."""
     path = Path(path)
     if not path.is_file():
-        raise FrictionError(f"path: {path} does not exist; run models.friction.retrain()")
+        raise FrictionError(f"path: {path} does not exist; run mudoe.press.retrain()")
     raw = json.loads(path.read_text())
     return dict(coulomb=Coulomb(raw["q_c_N"]), network=PreisachNetwork.from_dict(raw["network"]), raw=raw)
 
@@ -502,45 +362,3 @@ def candidate_models(path=FRICTION_JSON) -> dict:
     fr = load_friction(path)
     return {"M1": press_model(), "M2": press_model(friction=fr["coulomb"]),
             "M3": press_model(friction=fr["network"])}
-
-
-def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: Sequence[str] = ("D_y", "F_x"),
-                   models: dict | None = None, inputs: Sequence[int] | None = None) -> dict:
-    r"""Identify (k5, k7) with M1, M2 and M3 on (held-out) series of a campaign.
-
-    .. math::
-
-        \min_{k_5, k_7} \sum_{i, j, k \in \text{sensors}} \bigl((z_{ijk} - h_k(y_j, k_5, k_7, \bar q_j))
-        / \sigma_k\bigr)^2,\quad E(y_j, k_5, k_7, \bar q_j) = 0,
-
-    sigma_k = the campaign's composed sigma sqrt(sigma_rep^2 + sigma_man^2) (mm), \bar q_j
-    the model's inputs from :func:`model_inputs` of the set points.
-
-    Parameters
-    ----------
-    campaign : Campaign, optional      default: the shipped campaign
-    series : sequence of int, optional default: ``models.prototype.TEST_SERIES`` (the held-out two)
-    sensors : sequence of str          sensors with weight 1 (the others weight 0)
-    models : dict, optional            {name: Model}, default :func:`candidate_models`
-    inputs : sequence of int, optional 0-based set points to use (default all 29)
-
-    Returns
-    -------
-    dict {name: Estimate}
-    """
-    from identification import identify
-    from .press import K_NOMINAL
-    from .prototype import TEST_SERIES, read_campaign
-    campaign = read_campaign() if campaign is None else campaign
-    models = candidate_models() if models is None else models
-    out = {}
-    for name, model in models.items():
-        data = campaign.measurements(series=TEST_SERIES if series is None else series,
-                                     inputs=model_inputs(name, campaign.q_set))
-        if inputs is not None:
-            data = data.subset(inputs=list(inputs))
-        unknown = set(sensors) - set(model.sensors)
-        if unknown:
-            raise FrictionError(f"sensors: {sorted(unknown)} are not sensors of {model.name!r}")
-        out[name] = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
-    return out

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -45,6 +45,7 @@ import casadi as ca
 import numpy as np
 from scipy import stats
 
+from .campaign import Campaign
 from .mechanism import MechanismError, RigidBody, Support, build_model
 from .press import PRESS_SENSORS, Q_PAPER, press_mechanism
 from .fileio import atomic_write_text
@@ -294,59 +295,6 @@ class VirtualPrototype:
 
 
 # ---------------------------------------------------------------------------- campaign
-@dataclass(frozen=True, eq=False)
-class Campaign:
-    """A measurement campaign of the prototype (paper layout).
-
-    Attributes
-    ----------
-    q_set : ndarray (n_q,)          set-point forces (N)
-    q_actual : ndarray (n_M, n_q)   actual forces applied by the pneumatic supply (N)
-    z_raw : ndarray (n_M, n_q, 3)   readings before the correction (mm)
-    z : ndarray (n_M, n_q, 3)       corrected readings z_raw * q_set / q_actual (mm)
-    sensors : tuple of str
-    seed : int or None
-    config : dict                   the PrototypeConfig used (for the record)
-    """
-
-    q_set: np.ndarray
-    q_actual: np.ndarray
-    z_raw: np.ndarray
-    z: np.ndarray
-    sensors: tuple = PRESS_SENSORS
-    seed: int | None = None
-    config: dict = field(default_factory=dict)
-
-    @property
-    def n_M(self) -> int:
-        return self.z.shape[0]
-
-    def measurements(self, series=None, sensors=None, inputs=None, input_names=None, sigma="composed"):
-        """The campaign as :class:`identification.Measurements` (mm).
-
-        Parameters
-        ----------
-        series : sequence of int, optional   series to keep (default all)
-        sensors : sequence of str, optional  sensors to keep (default all three)
-        inputs : array (n_q, d_q), optional  input matrix (default the set points as one column)
-        input_names : sequence of str, optional
-        sigma : "composed", None or array    "composed": :func:`composed_sigma` of this campaign (mm)
-        """
-        from identification import Measurements
-        if isinstance(sigma, str):
-            if sigma != "composed":
-                raise PrototypeError(f"sigma: expected 'composed', None or an array, got {sigma!r}")
-            sigma = composed_sigma(self.z) * 1e-3
-        q = self.q_set[:, None] if inputs is None else np.asarray(inputs, float)
-        m = Measurements(q, self.z, sigma, sensors=self.sensors,
-                         input_names=input_names or (["q_P"] if inputs is None else None))
-        if series is not None:
-            m = m.subset(series=list(series))
-        if sensors is not None:
-            m = m.select(list(sensors))
-        return m
-
-
 def _linearity_error(rng, n_modes, sigma_mm, span_mm):
     """A smooth random function e(z) = sigma sqrt(2/m) sum_l a_l cos(w_l z + phi_l) (mm), Var e = sigma^2."""
     a = rng.standard_normal(n_modes)
@@ -415,7 +363,8 @@ def generate_campaign(seed: int = CAMPAIGN_SEED, config: PrototypeConfig = Proto
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(q_act > 0, qd[None, :] / np.where(q_act > 0, q_act, 1.0), 1.0)
     z = z_raw * factor[:, :, None]
-    return Campaign(q_set=qd, q_actual=q_act, z_raw=z_raw, z=z, seed=seed, config=asdict(config))
+    return Campaign(q_set=qd, q_actual=q_act, z=z, sensors=PRESS_SENSORS, z_raw=z_raw, seed=seed,
+                    config=asdict(config))
 
 
 # ---------------------------------------------------------------------------- statistics
@@ -482,6 +431,9 @@ def write_campaign(campaign: Campaign, directory=CAMPAIGN_DIR) -> list[Path]:
     """
     if not isinstance(campaign, Campaign):
         raise PrototypeError(f"campaign: expected a Campaign, got {type(campaign).__name__}")
+    if campaign.z_raw is None or campaign.q_actual is None:
+        raise PrototypeError("campaign: the prototype layout needs actual forces and raw readings (a simulated "
+                             "campaign); write measured data with mudoe.data_io")
     d = Path(directory)
     written = []
     for k, sname in enumerate(campaign.sensors):

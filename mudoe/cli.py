@@ -138,7 +138,7 @@ def _run(args) -> int:
 
 
 def _emit(args, text: str, obj) -> None:
-    from .serialize import dumps
+    from reports.serialize import dumps
     sys.stdout.write(dumps(obj) if args.json else text.rstrip() + "\n")
     sys.stdout.flush()
 
@@ -149,7 +149,7 @@ def _write(out: Path, name: str, text: str) -> Path:
 
 
 def _identify(study, results, args, progress, out) -> int:
-    from .serialize import dumps, estimate_dict
+    from reports.serialize import dumps, estimate_dict
     from .study import run_identify
     run_identify(study, results, progress)
     obj = {v: estimate_dict(e) for v, e in results.estimates.items()}
@@ -168,7 +168,7 @@ def _oed_text(results) -> str:
 
 
 def _oed(study, results, args, progress, out) -> int:
-    from .serialize import dumps, oed_dict
+    from reports.serialize import dumps, oed_dict
     from .study import run_oed
     run_oed(study, results, progress)
     obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
@@ -180,7 +180,7 @@ def _oed(study, results, args, progress, out) -> int:
 
 
 def _detect(study, results, args, progress, out) -> int:
-    from .serialize import detection_dict, dumps
+    from reports.serialize import detection_dict, dumps
     from .study import run_detect
     run_detect(study, results, progress)
     obj = detection_dict(results.detection)
@@ -193,7 +193,7 @@ def _detect(study, results, args, progress, out) -> int:
 
 def _validate(study, results, args, progress, out) -> int:
     import dataclasses
-    from .serialize import dumps, validation_dict
+    from reports.serialize import dumps, validation_dict
     from .study import run_validate
     if args.runs is not None:
         if args.runs < 1:

@@ -24,14 +24,16 @@ import csv
 import hashlib
 import io
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
+from models.campaign import Campaign
 from models.fileio import atomic_write_text
+
+from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
 
 __all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
@@ -41,41 +43,6 @@ _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 
 class DataFileError(ValueError):
     """A data file is missing or malformed; the message names the file and the line."""
-
-
-@dataclass(frozen=True, eq=False)
-class Campaign:
-    """A campaign in the model's units.
-
-    Attributes
-    ----------
-    q_set : ndarray (n_q,)            set-point forces (N)
-    q_actual : ndarray (n_M, n_q) or None   actual forces (N) when the data carry them
-    z : ndarray (n_M, n_q, n_S)       readings (mm), NaN = missing, force-corrected if asked
-    sensors : tuple of str
-    series : tuple of str             series labels (from the header / the series column)
-    files : tuple of str              files read (empty for the prototype)
-    source : str                      one-line description
-    sha256 : str                      hash of the files (or of the arrays for the prototype)
-    """
-
-    q_set: np.ndarray
-    q_actual: np.ndarray | None
-    z: np.ndarray
-    sensors: tuple
-    series: tuple
-    files: tuple = ()
-    source: str = ""
-    sha256: str = ""
-    notes: tuple = field(default_factory=tuple)
-
-    @property
-    def n_M(self) -> int:
-        return self.z.shape[0]
-
-    @property
-    def n_q(self) -> int:
-        return self.z.shape[1]
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -270,29 +237,22 @@ def write_paper_layout(directory, q_set, z, sensors: Sequence[str], displacement
 
 
 # ---------------------------------------------------------------------------- tidy layout
-def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
-                     sensors: Sequence[str] | None = None) -> Campaign:
-    """Read the tidy long table (one row per series, set point and sensor).
+@dataclass(frozen=True)
+class _TidyRow:
+    """One data row of the tidy table: file line, series label, 1-based set-point index, sensor,
+    set force, actual force (NaN when absent) and reading, in the file's units."""
 
-    Parameters
-    ----------
-    path : path
-    displacement_unit, force_unit : str
-        Declared units (a unit suffix in a column name must agree).
-    value_column : {"value", "raw"}
-        Which reading column to use.
-    sensors : sequence of str, optional
-        Expected sensors (order of the result); a sensor in the file outside this list is an error.
+    line: int
+    series: str
+    index: int
+    sensor: str
+    set_force: float
+    actual_force: float
+    value: float
 
-    Raises
-    ------
-    DataFileError
-        Missing file or column, ragged row, text in a numeric column (file and line), duplicate
-        rows, unknown sensor, set forces that differ between series.
-    """
-    path = Path(path)
-    rows = _read_rows(path)
-    header = [h.strip() for h in rows[0]]
+
+def _tidy_columns(path: Path, header: list, value_column: str, displacement_unit: str, force_unit: str) -> dict:
+    """{base name: (column index, header text, unit)} of the tidy header; units must agree with the declared ones."""
     cols = {}
     for i, h in enumerate(header):
         units = FORCE_UNITS if "force" in h.lower() else LENGTH_UNITS
@@ -310,12 +270,12 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         raise DataFileError(f"{path}:1: wrong header: missing column(s) {', '.join(missing)}; expected "
                             f"series, [index,] set_force_<unit>, [actual_force_<unit>,] sensor, "
                             f"{value_column}_<unit>; got {','.join(header)}")
-    body = _body(rows)
-    if not body:
-        raise DataFileError(f"{path}: no data rows after the header")
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    return cols
+
+
+def _tidy_rows(path: Path, header: list, cols: dict, body: list, value_column: str, sensors) -> list:
+    """The data rows as :class:`_TidyRow` (errors name the file and line)."""
     recs = []
-    order_series, order_sensors = [], []
     counter = {}
     for line, r in body:
         if len(r) != len(header):
@@ -343,35 +303,73 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         qa = (_number(path, line, cols["actual_force"][1], r[cols["actual_force"][0]], allow_missing=False)
               if "actual_force" in cols else math.nan)
         v = _number(path, line, cols[value_column][1], r[cols[value_column][0]])
-        if ser not in order_series:
-            order_series.append(ser)
-        if sen not in order_sensors:
-            order_sensors.append(sen)
-        recs.append((line, ser, idx, sen, qs, qa, v))
-    sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
-    absent = [s for s in sens if s not in order_sensors]
-    if absent:
-        raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
-    n_M, n_q = len(order_series), max(rec[2] for rec in recs)
+        recs.append(_TidyRow(line=line, series=ser, index=idx, sensor=sen, set_force=qs, actual_force=qa, value=v))
+    return recs
+
+
+def _tidy_arrays(path: Path, recs: list, order_series: list, sens: tuple):
+    """(q_set (n_q,), q_actual (n_M, n_q), z (n_M, n_q, n_S)) in the file's units; NaN where absent."""
+    n_M, n_q = len(order_series), max(rec.index for rec in recs)
     z = np.full((n_M, n_q, len(sens)), np.nan)
     seen = np.zeros(z.shape, bool)
     q_set = np.full(n_q, np.nan)
     q_act = np.full((n_M, n_q), np.nan)
-    for line, ser, idx, sen, qs, qa, v in recs:
-        i, j, k = order_series.index(ser), idx - 1, sens.index(sen)
+    for rec in recs:
+        i, j, k = order_series.index(rec.series), rec.index - 1, sens.index(rec.sensor)
         if seen[i, j, k]:
-            raise DataFileError(f"{path}:{line}: duplicate row for series {ser!r}, index {idx}, sensor {sen!r}")
+            raise DataFileError(f"{path}:{rec.line}: duplicate row for series {rec.series!r}, index {rec.index}, "
+                                f"sensor {rec.sensor!r}")
         seen[i, j, k] = True
         if np.isnan(q_set[j]):
-            q_set[j] = qs
-        elif not math.isclose(q_set[j], qs, rel_tol=1e-9, abs_tol=1e-9):
-            raise DataFileError(f"{path}:{line}: set force {qs:g} of index {idx} differs from {q_set[j]:g} "
-                                "given earlier for the same index")
-        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], qa, rel_tol=1e-9, abs_tol=1e-9):
-            raise DataFileError(f"{path}:{line}: actual force {qa:g} differs from {q_act[i, j]:g} given for "
-                                f"another sensor of series {ser!r}, index {idx}")
-        q_act[i, j] = qa
-        z[i, j, k] = v
+            q_set[j] = rec.set_force
+        elif not math.isclose(q_set[j], rec.set_force, rel_tol=1e-9, abs_tol=1e-9):
+            raise DataFileError(f"{path}:{rec.line}: set force {rec.set_force:g} of index {rec.index} differs from "
+                                f"{q_set[j]:g} given earlier for the same index")
+        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], rec.actual_force, rel_tol=1e-9,
+                                                          abs_tol=1e-9):
+            raise DataFileError(f"{path}:{rec.line}: actual force {rec.actual_force:g} differs from {q_act[i, j]:g} "
+                                f"given for another sensor of series {rec.series!r}, index {rec.index}")
+        q_act[i, j] = rec.actual_force
+        z[i, j, k] = rec.value
+    return q_set, q_act, z
+
+
+def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
+                     sensors: Sequence[str] | None = None) -> Campaign:
+    """Read the tidy long table (one row per series, set point and sensor).
+
+    Parameters
+    ----------
+    path : path
+    displacement_unit, force_unit : str
+        Declared units (a unit suffix in a column name must agree).
+    value_column : {"value", "raw"}
+        Which reading column to use.
+    sensors : sequence of str, optional
+        Expected sensors (order of the result); a sensor in the file outside this list is an error.
+
+    Raises
+    ------
+    DataFileError
+        Missing file or column, ragged row, text in a numeric column (file and line), duplicate
+        rows, unknown sensor, set forces that differ between series.
+    """
+    path = Path(path)
+    rows = _read_rows(path)
+    header = [h.strip() for h in rows[0]]
+    cols = _tidy_columns(path, header, value_column, displacement_unit, force_unit)
+    body = _body(rows)
+    if not body:
+        raise DataFileError(f"{path}: no data rows after the header")
+    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    recs = _tidy_rows(path, header, cols, body, value_column, sensors)
+    order_series = list(dict.fromkeys(rec.series for rec in recs))
+    order_sensors = list(dict.fromkeys(rec.sensor for rec in recs))
+    sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
+    absent = [s for s in sens if s not in order_sensors]
+    if absent:
+        raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
+    q_set, q_act, z = _tidy_arrays(path, recs, order_series, sens)
     if np.isnan(q_set).any():
         j = int(np.flatnonzero(np.isnan(q_set))[0])
         raise DataFileError(f"{path}: no row for set-point index {j + 1}")
@@ -424,8 +422,7 @@ def _force_correct(c: Campaign, where: str) -> Campaign:
         raise DataFileError(f"{where}: actual force {qa[i, j]:g} N of series {c.series[i]!r} at set point "
                             f"{j + 1} is not positive; cannot apply z * q_set / q_actual")
     factor = np.where(qd > 0, qd / np.where(qa > 0, qa, 1.0), 1.0)
-    return Campaign(c.q_set, c.q_actual, c.z * factor[:, :, None], c.sensors, c.series, c.files, c.source,
-                    c.sha256, c.notes + ("force correction z * q_set / q_actual applied",))
+    return replace(c, z=c.z * factor[:, :, None], notes=c.notes + ("force correction z * q_set / q_actual applied",))
 
 
 def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
@@ -447,8 +444,10 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
                                 f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
         z = pc.z[:, :, idx]
         h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
-        return Campaign(pc.q_set, pc.q_actual, z, tuple(sensors), tuple(f"series_{i + 1}" for i in range(pc.n_M)),
-                        (), f"virtual prototype (seed {d.seed}, {d.n_series} series)", h.hexdigest())
+        return Campaign(q_set=pc.q_set, q_actual=pc.q_actual, z=z, sensors=tuple(sensors),
+                        series=tuple(f"series_{i + 1}" for i in range(pc.n_M)),
+                        source=f"virtual prototype (seed {d.seed}, {d.n_series} series)", sha256=h.hexdigest(),
+                        z_raw=pc.z_raw[:, :, idx], seed=pc.seed, config=pc.config)
     base = cfg.resolve(d.directory)
     if d.layout == "paper":
         files = {}

@@ -6,9 +6,7 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 """
 from __future__ import annotations
 
-import importlib.metadata
 import math
-import platform
 import sys
 import time
 from contextlib import contextmanager
@@ -20,13 +18,15 @@ import numpy as np
 from identification import Measurements, identify, information_contributions
 from identification.detect import NormalityCheck, normality_check
 from identification.splits import PRESS_SCENARIO_NAMES, Split, press_scenarios, random_splits
+from models.campaign import Campaign
 from models.contract import Model, ModelError
 
 from .config import ConfigError, StudyConfig
-from .data_io import Campaign, DataFileError, load_campaign
+from .data_io import DataFileError, load_campaign
+from .press import press_variant
 
 __all__ = ["Study", "StudyResults", "prepare", "run_identify", "run_oed", "run_detect", "run_validate",
-           "Progress", "MissingPieceError", "package_versions"]
+           "Progress", "MissingPieceError"]
 
 
 class MissingPieceError(RuntimeError):
@@ -122,46 +122,13 @@ class StudyResults:
     notes: list = field(default_factory=list)
 
 
-def package_versions() -> dict:
-    """Versions of Python and the packages the results depend on."""
-    out = {"python": platform.python_version()}
-    for pkg in ("mudoe", "numpy", "scipy", "casadi", "matplotlib", "pyscipopt", "pyomo"):
-        try:
-            out[pkg] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
-
-
 # ---------------------------------------------------------------------------- models
-def _friction_variant(variant: str, cfg: StudyConfig):
-    """(friction object, inputs_fn) of M2 / M3 from :mod:`models.friction` (stored, trained constants)."""
-    try:
-        import models.friction as fr
-    except ImportError as exc:
-        raise MissingPieceError(f"[model] variants: {variant} needs models.friction, which is not available "
-                                f"({exc}); use variants = [\"M1\"]") from None
-    path = cfg.resolve(cfg.model.friction_file) if cfg.model.friction_file else fr.FRICTION_JSON
-    try:
-        consts = fr.load_friction(path)
-    except fr.FrictionError as exc:
-        raise ConfigError(f"{cfg.path}: [model] friction_file: {exc}") from None
-    fric = consts["coulomb"] if variant == "M2" else consts["network"]
-    return fric, (lambda q_set: fr.model_inputs(variant, q_set))
-
-
 def _build_models(cfg: StudyConfig) -> dict:
     """{variant: (Model, inputs_fn)} with inputs_fn(q_set) -> input matrix (n_q, d_q)."""
     out = {}
     if cfg.model.name == "press":
-        from models.press import press_model
         for v in cfg.model.variants:
-            if v == "M1":
-                m = press_model(extra_sensors=cfg.model.extra_sensors)
-                fn = None
-            else:
-                fric, fn = _friction_variant(v, cfg)
-                m = press_model(extra_sensors=cfg.model.extra_sensors, friction=fric)
+            m, fn = press_variant(v, cfg)
             out[v] = (_apply_parameters(cfg, m), fn)
         return out
     factory = _factory(cfg)

@@ -287,8 +287,7 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from mudoe.serialize import dumps, results_dict
-    from mudoe.study import package_versions
+    from .serialize import dumps, package_versions, results_dict
 
     t0 = time.perf_counter()
     cfg = results.study.cfg

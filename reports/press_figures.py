@@ -1,8 +1,10 @@
 """Force-displacement figures of the press campaign and the candidate models M1, M2, M3.
 
 Every function takes ``ax``/``axes=None`` (then it makes its own figure, without pyplot)
-and returns the matplotlib figure.  Displacements are plotted in um, forces in N, like
-the paper's Figure "Repeated measurements of the force-displacement curve".
+and returns the matplotlib figure.  The figures only draw: the fits and the friction samples
+they show are computed by the press study (:mod:`mudoe.press`) and passed in.
+Displacements are plotted in um, forces in N, like the paper's Figure "Repeated
+measurements of the force-displacement curve".
 """
 from __future__ import annotations
 
@@ -10,6 +12,10 @@ from typing import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
+
+from identification import simulate
+from models.friction import direction_inputs, memory_inputs, model_inputs
+from models.prototype import TEST_SERIES, read_campaign
 
 __all__ = ["plot_campaign", "plot_models", "plot_friction"]
 
@@ -31,7 +37,6 @@ def _axes(ax, nrows=1, ncols=1, size=(5.0, 3.6)):
 
 def plot_campaign(ax=None, sensor: str = "D_y", campaign=None):
     """The six measured series of one sensor: corrected reading (um) over the set force (N)."""
-    from models.prototype import read_campaign
     c = read_campaign() if campaign is None else campaign
     if sensor not in c.sensors:
         raise ValueError(f"sensor: {sensor!r} is not one of {c.sensors}")
@@ -47,26 +52,23 @@ def plot_campaign(ax=None, sensor: str = "D_y", campaign=None):
     return fig
 
 
-def plot_models(axes=None, campaign=None, estimates: dict | None = None, sensors: Sequence[str] = ("D_y", "F_x", "B0_y"),
-                series: Sequence[int] | None = None):
-    """Measured series and the outputs of M1, M2, M3 (identified on ``series``), one panel per sensor.
+def plot_models(campaign, estimates: dict, models: dict, axes=None,
+                sensors: Sequence[str] = ("D_y", "F_x", "B0_y"), series: Sequence[int] | None = None):
+    """Measured series and the outputs of M1, M2, M3 at their estimates, one panel per sensor.
 
     Parameters
     ----------
+    campaign : Campaign
+    estimates : dict {name: Estimate}
+        The fits to draw, e.g. :func:`mudoe.press.fit_candidates` on the held-out series.
+    models : dict {name: Model}
+        The models of the estimates (e.g. :func:`models.friction.candidate_models`).
     axes : array of Axes (len(sensors),), optional
-    campaign : Campaign, optional          default: the shipped campaign
-    estimates : dict {name: Estimate}, optional
-        Default: :func:`models.friction.fit_candidates` on the held-out series with D_y, F_x.
     sensors : sensors to plot
     series : 0-based series shown as data (default the held-out ones)
     """
-    from models.friction import candidate_models, fit_candidates, model_inputs
-    from models.prototype import TEST_SERIES, read_campaign
-    from identification import simulate
-    c = read_campaign() if campaign is None else campaign
+    c = campaign
     series = TEST_SERIES if series is None else tuple(series)
-    models = candidate_models()
-    est = fit_candidates(c, series=series, models=models) if estimates is None else estimates
     fig, axs = _axes(axes, 1, len(sensors))
     for col, sensor in enumerate(sensors):
         a = axs[0, col]
@@ -74,7 +76,7 @@ def plot_models(axes=None, campaign=None, estimates: dict | None = None, sensors
         for n, i in enumerate(series):
             a.plot(c.q_set, 1e3 * c.z[i, :, k], ls="none", marker=_SERIES_MARKERS[n % 6], ms=3.5, mfc="none",
                    color="0.45", label=f"series {i + 1}")
-        for name, e in est.items():
+        for name, e in estimates.items():
             m = models[name]
             h = simulate(m, e.p, model_inputs(name, c.q_set))
             a.plot(c.q_set, 1e3 * h[:, m.sensors.index(sensor)], lw=1.2, label=f"{name} ($\\chi^2_r$ = "
@@ -86,13 +88,18 @@ def plot_models(axes=None, campaign=None, estimates: dict | None = None, sensors
     return fig
 
 
-def plot_friction(ax=None, campaign=None):
-    """Friction forces attributed by the inverse model to the training series, with M2 and M3 (N over N)."""
-    from models.friction import direction_inputs, friction_samples, load_friction, memory_inputs
-    from models.prototype import read_campaign
-    c = read_campaign() if campaign is None else campaign
-    s = friction_samples(c)
-    fr = load_friction()
+def plot_friction(samples: dict, constants: dict, ax=None):
+    """Friction forces attributed by the inverse model to the training series, with M2 and M3 (N over N).
+
+    Parameters
+    ----------
+    samples : dict
+        :func:`mudoe.press.friction_samples` (keys ``q_set``, ``f``, ``series``).
+    constants : dict
+        :func:`models.friction.load_friction` (keys ``coulomb``, ``network``).
+    ax : Axes, optional
+    """
+    s, fr = samples, constants
     fig, axs = _axes(ax)
     a = axs[0, 0]
     for n, i in enumerate(s["series"]):

@@ -1,32 +1,14 @@
-"""Friction models M1/M2/M3: memory inputs, Coulomb, Preisach network, inverse model, training, identification."""
+"""Friction models M1/M2/M3: memory inputs, Coulomb, Preisach network, inverse model (training: tests/mudoe/test_press.py)."""
 import casadi as ca
 import numpy as np
 import pytest
 
 from identification import solve_states
-from models.friction import (Coulomb, FrictionError, PreisachNetwork, candidate_models, direction_inputs,
-                             fit_candidates, fit_coulomb, inverse_forces, load_friction, memory_inputs,
-                             model_inputs, retrain, train_preisach)
+from models.friction import (Coulomb, FrictionError, PreisachNetwork, direction_inputs, fit_coulomb, inverse_forces,
+                             memory_inputs, model_inputs)
 from models.press import K_NOMINAL, Q_PAPER, press_model
-from models.prototype import read_campaign
 
 Q = np.array(Q_PAPER)
-
-
-@pytest.fixture(scope="module")
-def campaign():
-    return read_campaign()
-
-
-@pytest.fixture(scope="module")
-def models():
-    return candidate_models()
-
-
-@pytest.fixture(scope="module")
-def fits(campaign, models):
-    return {sens: fit_candidates(campaign, sensors=sens, models=models)
-            for sens in (("D_y", "F_x"), ("D_y", "F_x", "B0_y"))}
 
 
 # ---------------------------------------------------------------------------- inputs
@@ -99,7 +81,7 @@ def test_preisach_network_symbolic_equals_numeric_and_round_trips():
     assert m3.inputs == ("q_P", "q_prev", "q_min", "q_max")
 
 
-# ---------------------------------------------------------------------------- inverse model and training
+# ---------------------------------------------------------------------------- inverse model and Coulomb force
 def test_inverse_model_recovers_the_applied_force():
     m = press_model()
     p = np.array([520.0, 460.0])
@@ -122,44 +104,3 @@ def test_fit_coulomb_is_the_least_squares_force():
     best = grid[np.argmin([np.sum((g * d[None, :] - f) ** 2) for g in grid])]
     assert abs(qc - best) <= 0.01
     assert fit_coulomb(Q, 55.0 * d) == pytest.approx(55.0, rel=1e-14)
-
-
-def test_train_preisach_reproduces_a_hysteresis_it_can_represent():
-    U = memory_inputs(np.r_[Q, Q[1:]])
-    truth = PreisachNetwork(np.array([[0.0, -3.0, 0.0, 0.0], [3.0, -3.0, 0.0, 0.0]]) * 4, np.array([0.0, 0.0]),
-                            np.array([0.4, 0.4]), 0.0)
-    f = truth(U)
-    net, info = train_preisach(U, f[None], n_hidden=2, reg=1e-8, n_starts=3, seed=2)
-    assert info["status"] == "Solve_Succeeded"
-    assert info["rms"] < 0.5                       # N, against a friction of about +-60 N
-    assert np.ptp(f) > 50
-
-
-def test_shipped_friction_constants_are_reproduced_by_retraining(campaign):
-    stored = load_friction()
-    again = retrain(campaign, write=False, **stored["raw"]["training"])
-    assert again["q_c_N"] == pytest.approx(stored["raw"]["q_c_N"], rel=1e-6)
-    np.testing.assert_allclose(again["k_M1_N_per_mm"], stored["raw"]["k_M1_N_per_mm"], rtol=1e-6)
-    U = memory_inputs(campaign.q_set)
-    net = PreisachNetwork.from_dict(again["network"])
-    np.testing.assert_allclose(net(U), stored["network"](U), atol=1e-3)
-    # the learned friction is a hysteresis: positive on loading, negative on unloading
-    mu = stored["network"](U)
-    assert np.all(mu[3:15] > 20) and np.all(mu[17:28] < -20)
-    assert 30.0 < stored["coulomb"].q_c < 150.0
-    assert again["training_result"]["rms_N"] < 0.5 * again["training_result"]["rms_coulomb_N"]
-
-
-# ---------------------------------------------------------------------------- identification on held-out series
-@pytest.mark.parametrize("sensors", [("D_y", "F_x"), ("D_y", "F_x", "B0_y")])
-def test_identification_converges_and_only_M3_fits_the_held_out_series(fits, sensors):
-    est = fits[sensors]
-    for name, e in est.items():
-        assert e.status == "Solve_Succeeded", (name, e.status)
-        assert np.all(np.isfinite(e.stderr)) and np.all(e.stderr > 0)
-        assert np.all((e.p > 300) & (e.p < 800)), (name, e.p)
-    chi2 = {n: e.reduced_chi2 for n, e in est.items()}
-    assert 0.6 < chi2["M3"] < 1.6, chi2             # near 1 with the paper's composed sigmas
-    assert chi2["M1"] > 5.0, chi2                   # frictionless model: reduced chi2 >> 1
-    assert chi2["M1"] > chi2["M2"] > chi2["M3"], chi2
-

@@ -1,14 +1,31 @@
-"""Plain-JSON views of the library's results (NaN/inf become null / strings, arrays lists)."""
+"""Plain-JSON views of the library's results (NaN/inf become null / strings, arrays lists).
+
+The report builder and the CLI write every JSON file through :func:`dumps`; the provenance
+of a results file (Python and package versions) comes from :func:`package_versions`.
+"""
 from __future__ import annotations
 
 import dataclasses
+import importlib.metadata
 import json
 import math
+import platform
 
 import numpy as np
 
 __all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "oed_dict", "validation_dict", "study_dict",
-           "results_dict"]
+           "results_dict", "package_versions"]
+
+
+def package_versions() -> dict:
+    """Versions of Python and the packages the results depend on."""
+    out = {"python": platform.python_version()}
+    for pkg in ("mudoe", "numpy", "scipy", "casadi", "matplotlib", "pyscipopt", "pyomo"):
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
 
 
 def jsonable(obj):

@@ -1,0 +1,310 @@
+r"""The press study: campaign data, the friction constants of M2 / M3 and the candidate fits.
+
+Everything here fits or trains, so it runs identification on the press model of
+:mod:`models` (layers: ``models`` < ``identification`` < ``mudoe``):
+
+* :func:`campaign_measurements`: a :class:`models.campaign.Campaign` as
+  :class:`identification.Measurements` with the paper's composed sigmas;
+* :func:`friction_samples`: the friction force f_ij = q^d_j - \hat q_ij (N) that the inverse
+  frictionless model (:func:`models.friction.inverse_forces`) attributes to the training series;
+* :func:`train_preisach`: M3's arctan network trained by Ipopt on those samples;
+* :func:`retrain`: q_c (M2) and the network (M3) recomputed and stored in
+  ``data/press_friction.json`` (read by :func:`models.friction.load_friction`);
+* :func:`fit_candidates`: (k5, k7) identified with M1, M2, M3 on held-out series;
+* :func:`press_variant`: one candidate model of a study config with its input function.
+"""
+from __future__ import annotations
+
+import json
+from functools import partial
+from pathlib import Path
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from identification import Measurements, identify
+from identification.errors import IdentificationError
+from identification.ipopt_solver import IpoptSettings, solve_nlp
+from models.campaign import Campaign
+from models.contract import Model
+from models.fileio import atomic_write_text
+from models.friction import (F_SCALE, FRICTION_JSON, Q_SCALE, FrictionError, PreisachNetwork, candidate_models,
+                             direction_inputs, fit_coulomb, inverse_forces, load_friction, memory_inputs,
+                             model_inputs)
+from models.press import K_NOMINAL, press_model
+from models.prototype import TEST_SERIES, TRAIN_SERIES, composed_sigma, read_campaign
+
+from .config import ConfigError, StudyConfig
+
+__all__ = ["campaign_measurements", "friction_samples", "train_preisach", "retrain", "fit_candidates",
+           "press_variant", "TRAINING_DEFAULTS", "CampaignError"]
+
+#: training options of the stored network (written into data/press_friction.json)
+TRAINING_DEFAULTS = dict(n_hidden=4, reg=1e-2, sigma_f=20.0, n_starts=8, seed=0)
+
+
+class CampaignError(ValueError):
+    """Bad argument when turning a campaign into measurements (the message names it)."""
+
+
+# ---------------------------------------------------------------------------- data
+def campaign_measurements(campaign: Campaign, series=None, sensors=None, inputs=None, input_names=None,
+                          sigma="composed") -> Measurements:
+    """The campaign's readings z (mm) as :class:`identification.Measurements`.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    series : sequence of int, optional   series to keep (default all)
+    sensors : sequence of str, optional  sensors to keep (default all)
+    inputs : array (n_q, d_q), optional  input matrix (default the set points as one column)
+    input_names : sequence of str, optional
+    sigma : "composed", None or array    "composed": :func:`models.prototype.composed_sigma` of the
+                                         campaign's readings, converted from um to mm
+    """
+    if isinstance(sigma, str):
+        if sigma != "composed":
+            raise CampaignError(f"sigma: expected 'composed', None or an array, got {sigma!r}")
+        sigma = composed_sigma(campaign.z) * 1e-3
+    q = campaign.q_set[:, None] if inputs is None else np.asarray(inputs, float)
+    m = Measurements(q, campaign.z, sigma, sensors=campaign.sensors,
+                     input_names=input_names or (["q_P"] if inputs is None else None))
+    if series is not None:
+        m = m.subset(series=list(series))
+    if sensors is not None:
+        m = m.select(list(sensors))
+    return m
+
+
+# ---------------------------------------------------------------------------- friction samples
+def friction_samples(campaign=None, series: Sequence[int] | None = None, sensors: Sequence[str] = ("D_y", "F_x"),
+                     model=None) -> dict:
+    r"""Friction forces attributed to training series by the inverse frictionless model.
+
+    .. math::
+
+        f_{ij} = q^d_j - \hat q_{ij}   \qquad [\mathrm{N}],
+
+    where (k5, k7) are first identified with M1 (no friction) on the training series
+    (sensors ``sensors``, the paper's composed sigmas of the campaign), and \hat q_ij is
+    :func:`models.friction.inverse_forces` of series i at set point j.
+
+    Parameters
+    ----------
+    campaign : Campaign, optional
+        Default: the shipped campaign (``data/press_campaign``).
+    series : sequence of int, optional
+        0-based training series (default ``models.prototype.TRAIN_SERIES``, the first four).
+    sensors : sequence of str
+        Sensors for the M1 fit and the inverse model.
+    model : models.Model, optional
+        The frictionless press model (built if not given).
+
+    Returns
+    -------
+    dict with ``q_set`` (n_q,), ``f`` (n_train, n_q) N, ``q_inv`` (n_train, n_q) N,
+    ``p_M1`` (2,) N/mm, ``estimate`` (the M1 Estimate), ``sigma`` (sensors,) mm,
+    ``series``, ``sensors``.
+    """
+    campaign = read_campaign() if campaign is None else campaign
+    series = tuple(TRAIN_SERIES if series is None else series)
+    model = press_model() if model is None else model
+    data = campaign_measurements(campaign, series=series)
+    est = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
+    sig = np.asarray(data.sigma)[model.sensor_index(sensors)]
+    q_inv = inverse_forces(model, est.p, data.z, sensors, sig, campaign.q_set)
+    return dict(q_set=campaign.q_set.copy(), f=campaign.q_set[None, :] - q_inv, q_inv=q_inv, p_M1=est.p.copy(),
+                estimate=est, sigma=sig, series=series, sensors=tuple(sensors))
+
+
+# ---------------------------------------------------------------------------- training
+def _check_training(U, f, n_hidden, reg, sigma_f):
+    """The validated (U, f) of :func:`train_preisach` (errors name the argument)."""
+    U = np.asarray(U, float)
+    f = np.atleast_2d(np.asarray(f, float))
+    if U.ndim != 2 or U.shape[1] != 4:
+        raise FrictionError(f"U: expected shape (n_q, 4), got {U.shape}")
+    if f.shape[1] != U.shape[0] or not np.isfinite(f).all():
+        raise FrictionError(f"f: expected finite (n_series, {U.shape[0]}) forces, got {f.shape}")
+    if isinstance(n_hidden, bool) or int(n_hidden) < 1:
+        raise FrictionError(f"n_hidden: must be a positive integer, got {n_hidden!r}")
+    if not (reg >= 0 and sigma_f > 0):
+        raise FrictionError(f"reg >= 0 and sigma_f > 0 required, got reg={reg!r}, sigma_f={sigma_f!r}")
+    return U, f
+
+
+class _PreisachObjective:
+    r"""Builder of the training NLP: x = (vec W, b, c, c_0), parameter fbar (n_q,) N.
+
+    .. math::
+
+        J(x) = \frac{n_M}{2} \sum_j \Bigl(\frac{\mu(u_j) - \bar f_j}{\sigma_f}\Bigr)^2
+            + \frac{\lambda}{2}\bigl(\|W\|_F^2 + \|c\|^2\bigr)
+
+    Called by :func:`identification.ipopt_solver.solve_nlp`; returns (x, objective, no
+    constraints, parameter).
+    """
+
+    def __init__(self, U, n_hidden: int, n_series: int, reg: float, sigma_f: float):
+        self.U, self.nh, self.n_M, self.reg, self.sigma_f = U, n_hidden, n_series, reg, sigma_f
+        self.nx = 4 * n_hidden + 2 * n_hidden + 1
+
+    def __call__(self):
+        nh, n_q = self.nh, self.U.shape[0]
+        x = ca.SX.sym("x", self.nx)
+        fbar = ca.SX.sym("fbar", n_q)
+        W, b, c, c0 = ca.reshape(x[:4 * nh], nh, 4), x[4 * nh:5 * nh], x[5 * nh:6 * nh], x[6 * nh]
+        A = ca.atan(ca.mtimes(ca.DM(self.U / Q_SCALE), W.T) + ca.repmat(b.T, n_q, 1))   # (n_q, nh)
+        mu = F_SCALE * (c0 + ca.mtimes(A, c))
+        obj = (0.5 * self.n_M * ca.sumsqr((mu - fbar) / self.sigma_f)
+               + 0.5 * self.reg * (ca.sumsqr(W) + ca.sumsqr(c)))
+        return x, obj, ca.SX(0, 1), fbar
+
+
+def train_preisach(U, f, n_hidden: int = 4, reg: float = 1e-2, sigma_f: float = 20.0, n_starts: int = 8,
+                   seed: int = 0) -> tuple[PreisachNetwork, dict]:
+    r"""Train the arctan network mu on friction samples with Ipopt (exact AD derivatives).
+
+    .. math::
+
+        \min_{W, b, c, c_0}\ \frac12 \sum_{i,j} \Bigl(\frac{\mu(u_j) - f_{ij}}{\sigma_f}\Bigr)^2
+            + \frac{\lambda}{2} \bigl(\|W\|_F^2 + \|c\|^2\bigr)
+
+    (mu and f in N, sigma_f in N, lambda = ``reg`` dimensionless; biases are not
+    regularised).  ``n_starts`` seeded random starts; the best local optimum is kept.
+
+    Parameters
+    ----------
+    U : array_like (n_q, 4)
+        Memory inputs (N), :func:`models.friction.memory_inputs`.
+    f : array_like (n_series, n_q) or (n_q,)
+        Friction force samples (N).
+
+    Returns
+    -------
+    (PreisachNetwork, info dict with ``objective``, ``rms`` (N), ``starts`` objectives, ``status``)
+    """
+    U, f = _check_training(U, f, n_hidden, reg, sigma_f)
+    nh, n_M = int(n_hidden), f.shape[0]
+    build = _PreisachObjective(U, nh, n_M, reg, sigma_f)
+    fbar = f.mean(axis=0)
+    const = 0.5 * float(np.sum((f - fbar) ** 2)) / sigma_f ** 2     # within-series scatter (not fitted)
+    rng = np.random.default_rng(seed)
+    settings = IpoptSettings(tol=1e-10, max_iter=3000)
+    key = ("preisach", nh, n_M, reg, sigma_f, U.tobytes())
+    best, objs, status = None, [], None
+    for _ in range(int(n_starts)):
+        x0 = np.concatenate([rng.normal(0, 2.0, 4 * nh), rng.normal(0, 1.0, nh), rng.normal(0, 0.3, nh), [0.0]])
+        try:
+            res = solve_nlp(build, x0, -np.inf, np.inf, np.zeros(0), np.zeros(0), fbar, settings,
+                            what="training of the Preisach network", key=key)
+        except IdentificationError:
+            objs.append(float("nan"))
+            continue
+        objs.append(res.f + const)
+        if best is None or res.f < best.f:
+            best, status = res, res.status
+    if best is None:
+        raise FrictionError("train_preisach: Ipopt failed from every start")
+    x = best.x
+    W = x[:4 * nh].reshape(4, nh).T      # CasADi reshape is column-major
+    net = PreisachNetwork(W, x[4 * nh:5 * nh], x[5 * nh:6 * nh], float(x[6 * nh]))
+    rms = float(np.sqrt(np.mean((net(U)[None, :] - f) ** 2)))
+    return net, dict(objective=best.f + const, rms=rms, starts=objs, status=status, n_hidden=nh, reg=reg,
+                     sigma_f=sigma_f, n_params=build.nx)
+
+
+def retrain(campaign=None, path=FRICTION_JSON, write: bool = True, **training) -> dict:
+    """Recompute q_c (M2) and the network (M3) from the training series; optionally write ``path``.
+
+    Steps: :func:`friction_samples` (M1 fit on the four training series, inverse model),
+    :func:`models.friction.fit_coulomb`, :func:`train_preisach` on
+    :func:`models.friction.memory_inputs` of the set points (``training`` overrides
+    :data:`TRAINING_DEFAULTS`).  Returns the stored dict.
+    """
+    opts = dict(TRAINING_DEFAULTS)
+    unknown = set(training) - set(opts)
+    if unknown:
+        raise FrictionError(f"training: unknown option(s) {sorted(unknown)}; known: {sorted(opts)}")
+    opts.update(training)
+    s = friction_samples(campaign)
+    q_c = fit_coulomb(s["q_set"], s["f"])
+    U = memory_inputs(s["q_set"])
+    net, info = train_preisach(U, s["f"], **opts)
+    out = dict(
+        description="Trained friction constants of the press candidate models M2 (Coulomb) and M3 "
+                    "(Preisach network); generated by mudoe.press.retrain()",
+        training_series=[int(i) + 1 for i in s["series"]], sensors=list(s["sensors"]),
+        k_M1_N_per_mm=s["p_M1"].tolist(), q_c_N=q_c, network=net.to_dict(), training=opts,
+        training_result=dict(objective=info["objective"], rms_N=info["rms"], status=info["status"],
+                             n_params=info["n_params"],
+                             rms_coulomb_N=float(np.sqrt(np.mean((q_c * direction_inputs(s["q_set"])[None, :]
+                                                                  - s["f"]) ** 2)))),
+    )
+    if write:
+        atomic_write_text(Path(path), json.dumps(out, indent=1) + "\n")
+    return out
+
+
+# ---------------------------------------------------------------------------- candidate fits
+def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: Sequence[str] = ("D_y", "F_x"),
+                   models: dict | None = None, inputs: Sequence[int] | None = None) -> dict:
+    r"""Identify (k5, k7) with M1, M2 and M3 on (held-out) series of a campaign.
+
+    .. math::
+
+        \min_{k_5, k_7} \sum_{i, j, k \in \text{sensors}} \bigl((z_{ijk} - h_k(y_j, k_5, k_7, \bar q_j))
+        / \sigma_k\bigr)^2,\quad E(y_j, k_5, k_7, \bar q_j) = 0,
+
+    sigma_k = the campaign's composed sigma sqrt(sigma_rep^2 + sigma_man^2) (mm), \bar q_j
+    the model's inputs from :func:`models.friction.model_inputs` of the set points.
+
+    Parameters
+    ----------
+    campaign : Campaign, optional      default: the shipped campaign
+    series : sequence of int, optional default: ``models.prototype.TEST_SERIES`` (the held-out two)
+    sensors : sequence of str          sensors with weight 1 (the others weight 0)
+    models : dict, optional            {name: Model}, default :func:`models.friction.candidate_models`
+    inputs : sequence of int, optional 0-based set points to use (default all 29)
+
+    Returns
+    -------
+    dict {name: Estimate}
+    """
+    campaign = read_campaign() if campaign is None else campaign
+    models = candidate_models() if models is None else models
+    out = {}
+    for name, model in models.items():
+        data = campaign_measurements(campaign, series=TEST_SERIES if series is None else series,
+                                     inputs=model_inputs(name, campaign.q_set))
+        if inputs is not None:
+            data = data.subset(inputs=list(inputs))
+        unknown = set(sensors) - set(model.sensors)
+        if unknown:
+            raise FrictionError(f"sensors: {sorted(unknown)} are not sensors of {model.name!r}")
+        out[name] = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
+    return out
+
+
+# ---------------------------------------------------------------------------- study variants
+def press_variant(variant: str, cfg: StudyConfig) -> tuple[Model, object]:
+    """(Model, inputs_fn) of press variant M1 / M2 / M3 of a study (stored, trained friction constants).
+
+    ``inputs_fn(q_set)`` returns the input matrix (n_q, d_q) of the variant
+    (:func:`models.friction.model_inputs`); it is None for M1, whose input is the set force.
+
+    Raises
+    ------
+    ConfigError
+        ``[model] friction_file`` cannot be read.
+    """
+    if variant == "M1":
+        return press_model(extra_sensors=cfg.model.extra_sensors), None
+    path = cfg.resolve(cfg.model.friction_file) if cfg.model.friction_file else FRICTION_JSON
+    try:
+        consts = load_friction(path)
+    except FrictionError as exc:
+        raise ConfigError(f"{cfg.path}: [model] friction_file: {exc}") from None
+    fric = consts["coulomb"] if variant == "M2" else consts["network"]
+    return press_model(extra_sensors=cfg.model.extra_sensors, friction=fric), partial(model_inputs, variant)
