@@ -53,6 +53,7 @@ from typing import Any
 from identification.detect import DetectSettings
 from identification.montecarlo import MonteCarloSettings
 from identification.splits import PRESS_SCENARIO_NAMES
+from models.friction import VARIANTS as FRICTION_VARIANTS
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
@@ -65,7 +66,7 @@ LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "m": 1e3}
 #: factor converting a declared force unit to the model's N
 FORCE_UNITS = {"N": 1.0, "kN": 1e3}
 #: known models and their variants (friction models of the paper); read through :func:`known_variants`
-MODEL_VARIANTS = {"press": ("M1", "M2", "M3")}
+MODEL_VARIANTS = {"press": FRICTION_VARIANTS}
 
 #: The study's own defaults where they differ from the settings dataclass's, keyed by
 #: (settings dataclass, field); every other settings-backed key takes the dataclass's default.
