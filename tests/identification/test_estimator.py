@@ -318,7 +318,8 @@ def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
     n_q = 4
     inputs = np.column_stack([rng.uniform(0.5, 2.0, n_q), rng.uniform(0.1, 0.6, n_q)])
     s_p, s_y, e = rng.uniform(0.5, 2, model.n_p), rng.uniform(0.5, 2, model.n_y), rng.uniform(0.5, 2, model.n_y)
-    x, f, g, par, hess_lag, jac_g = getattr(est_mod, builder)(model, inputs, s_p, s_y, e)[:6]
+    nlp = getattr(est_mod, builder)(model, inputs, s_p, s_y, e)
+    x, f, g, par, hess_lag, jac_g = nlp.x, nlp.f, nlp.g, nlp.par, nlp.hess_lag, nlp.jac_g
     lam_f, lam_g = ca.MX.sym("lf"), ca.MX.sym("lg", g.size1())
     L = lam_f * f + ca.dot(lam_g, g)
     ref = ca.Function("ref", [x, par, lam_f, lam_g], [ca.jacobian(g, x), ca.triu(ca.hessian(L, x)[0])])
