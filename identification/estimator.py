@@ -334,6 +334,12 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
         if numerics(model).dense:
             return _build_nlp_staged(model, inputs, s_p, s_y, e_scale)
         return _build_nlp_glued(model, inputs, s_p, s_y, e_scale)
+    return _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale)
+
+
+def _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
+    """:func:`_build_nlp` for explicit models and models stated in MX: one symbolic stage,
+    mapped over the inputs, with the stage Hessian assembled by :func:`_assemble_kkt`."""
     n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
     y = ca.SX.sym("y", n_y)
     p = ca.SX.sym("p", n_p)
