@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
+from .cache import Cache
 from .errors import StateSolveError
 
 __all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
@@ -127,7 +128,7 @@ class Numerics:
         self.lag_hess = ca.Function("lag_hess", [y, p, q, lam, mu], [ca.hessian(L, v)[0]])
         self.h = model.h_fun
         self.dense = model.n_y <= _DENSE_LIMIT
-        self._maps = {}
+        self._functions = Cache()       # compiled copies and point / batched evaluators
 
     def jit_active(self) -> bool:
         """True when :func:`set_jit` is on and this model qualifies (SX, at most 60 states)."""
@@ -138,13 +139,12 @@ class Numerics:
         f = getattr(self, name) if f is None else f
         if not self.jit_active():
             return f
-        key = ("jit", name)
-        g = self._maps.get(key)
+        g = self._functions.get("jit", name)
         if g is None:
             g = JIT.compile(f)
             if g is None:
                 return f
-            self._maps[key] = g
+            self._functions.put("jit", name, g)
         return g
 
     def point(self, name: str) -> "_Point":
@@ -155,10 +155,10 @@ class Numerics:
         nonzero buffer (no DM conversion).
         """
         base = self.compiled(name)
-        key = ("point", name, base is not getattr(self, name))
-        f = self._maps.get(key)
+        key = (name, base is not getattr(self, name))
+        f = self._functions.get("point", key)
         if f is None:
-            f = self._maps[key] = _Point(base, self.dense)
+            f = self._functions.put("point", key, _Point(base, self.dense))
         return f
 
     def batched(self, name: str, n: int) -> "_Batched":
@@ -171,10 +171,10 @@ class Numerics:
         than ``Function.__call__`` plus ``DM.full`` for the press model).
         """
         base = self.compiled(name)
-        key = ("batched", name, n, base is not getattr(self, name))
-        f = self._maps.get(key)
+        key = (name, n, base is not getattr(self, name))
+        f = self._functions.get("batched", key)
         if f is None:
-            f = self._maps[key] = _Batched(base, n)
+            f = self._functions.put("batched", key, _Batched(base, n))
         return f
 
     def factor(self, Ey_dm):
