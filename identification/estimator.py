@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import scipy.sparse as sps
-from scipy import special, stats
+from scipy import special
 
 from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError

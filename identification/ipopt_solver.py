@@ -83,11 +83,25 @@ class IpoptSettings:
 
 @dataclass(frozen=True)
 class IpoptResult:
+    """Ipopt's solution of an NLP (returned only for accepted or stalled solves).
+
+    Attributes
+    ----------
+    x : ndarray            the solution (scaled variables of the NLP)
+    f : float              objective at x
+    status, message : str  Ipopt's return status and its meaning (:data:`STATUS_MESSAGES`)
+    accepted : bool or None  True: a solution; None: Ipopt stalled and the caller must verify
+                           optimality itself before using x
+    iterations : int       Ipopt iterations
+    wall_time : float      seconds spent in the solver call
+    stats : dict           selected entries of the solver's statistics
+    """
+
     x: np.ndarray
     f: float
     status: str
     message: str
-    accepted: bool | None   # None: stalled, the caller must verify optimality
+    accepted: bool | None
     iterations: int
     wall_time: float
     stats: dict
