@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from models.contract import Model
 from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
@@ -93,7 +94,7 @@ class ReducedProblem:
     const : float               within-group scatter Phi_0
     """
 
-    model: object
+    model: Model
     data: Measurements
     weights: np.ndarray
     sigma: np.ndarray
@@ -103,7 +104,7 @@ class ReducedProblem:
     const: float
 
     @classmethod
-    def of(cls, model, data: Measurements, weights, sigma, p_scale) -> "ReducedProblem":
+    def of(cls, model: Model, data: Measurements, weights, sigma, p_scale) -> "ReducedProblem":
         """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
         w = np.asarray(weights, float)
         sig = np.asarray(sigma, float)
