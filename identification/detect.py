@@ -352,12 +352,12 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
     Starts at the precision-weighted mean p_bar = (F_c + F_v)^{-1} (F_c p_c + F_v p_v) of the
     two estimates (within O(|p_v - p_c|^2) of the pooled optimum) with the states of the two
     fits, and takes the estimator's own exact Newton steps (J^T W J + S, see
-    ``estimator._refine``).  The result is used only when the Newton decrement
+    :func:`identification.refinement.refine`).  The result is used only when the Newton decrement
     g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6 standard errors of the optimum); otherwise
     (None) the caller runs the full-space :func:`identify` on the pooled data.
     """
     from .errors import StateSolveError
-    from .estimator import _gn_information, _newton_decrement, _reduced, _refine
+    from .refinement import ReducedProblem, refine
     w = data_u.sensor_weights(weights)
     sig = (np.asarray(data_u.sigma, float) if data_u.sigma is not None
            else np.full(model.n_S, float(np.sqrt(est_c.rss / max(est_c.n_data, 1))) or 1.0))
@@ -376,18 +376,15 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
             return None
         for r, j in enumerate(j_list):
             Y[qs.index(j)] = est.states[r]
-    s_p = np.where(np.abs(p) > 0, np.abs(p), 1.0)
-    cw = data_u.counts().astype(float) * w[None, :]
+    problem = ReducedProblem.of(model, data_u, w, sig, np.where(np.abs(p) > 0, np.abs(p), 1.0))
     try:
-        Y, sens, f, g, lam = _reduced(model, p, data_u, w, sig, Y)
-        p, Y, sens, f, g, lam, S, steps = _refine(model, data_u, w, sig, cw, s_p, p, Y, sens, f, g, lam, max_steps,
-                                                  stop_decrement=1e-12)
+        ref = refine(problem, problem.evaluate(p, Y), max_steps, stop_decrement=1e-12)
     except (StateSolveError, IdentificationError):
         return None
-    if not _newton_decrement(_gn_information(sens.G, cw, sig) + S, g, s_p) < 1e-12:
+    if not ref.decrement < 1e-12:
         return None
-    resid = data_u.z - sens.h[None]
-    return _PooledMinimum(p, f, float(np.nansum(resid[:, :, w > 0] ** 2)), steps)
+    resid = data_u.z - ref.point.sens.h[None]
+    return _PooledMinimum(ref.point.p, ref.point.objective, float(np.nansum(resid[:, :, w > 0] ** 2)), ref.steps)
 
 
 def _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c, est_v, pooled):

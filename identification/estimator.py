@@ -16,20 +16,21 @@ is evaluated exactly by AD and the implicit function theorem.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sps
-from scipy import special, stats
+from scipy import special
 
 from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
-from .ipopt_solver import IpoptSettings, solve_nlp
+from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
 from .measurements import Measurements
+from .refinement import ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
@@ -128,42 +129,35 @@ def _validate(model, data, p0, weights):
     return p0, w, n
 
 
-_Y_INIT: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+#: entries kept per model of each start-point cache in ``model.cache`` (repeated fits of new data)
+_START_CACHE_SIZE = 32
 
 
 def _initial_states(model, p0, inputs, Y0):
-    """States at the start values (cached per model, p0 and inputs: repeated fits of new data)."""
+    """States at the start values (kept in ``model.cache`` per p0 and inputs: repeated fits of new data)."""
     if Y0 is not None:
         return solve_states(model, p0, inputs, Y0=Y0)
-    key = (model, p0.tobytes(), inputs.tobytes())
-    Y = _Y_INIT.get(key)
+    key = (p0.tobytes(), inputs.tobytes())
+    Y = model.cache.get("identify.initial_states", key)
     if Y is None:
         Y = solve_states(model, p0, inputs)
         Y.setflags(write=False)
-        _Y_INIT[key] = Y
-        while len(_Y_INIT) > 32:
-            _Y_INIT.popitem(last=False)
+        model.cache.put("identify.initial_states", key, Y, maxsize=_START_CACHE_SIZE)
     return Y
 
 
-_SENS_INIT: "OrderedDict[tuple, tuple]" = OrderedDict()
-_SCALINGS: "OrderedDict[tuple, tuple]" = OrderedDict()
-
-
 def _scalings(model, p0, inputs, Y_init, cacheable):
-    """(s_y, e_scale) at the start; cached per (model, p0, inputs) when Y_init is the cached
-    state solve at p0 (repeated fits of new data, as in Monte Carlo studies and splits)."""
-    key = (model, p0.tobytes(), inputs.tobytes()) if cacheable else None
-    hit = _SCALINGS.get(key) if key is not None else None
+    """(s_y, e_scale) at the start; kept in ``model.cache`` per (p0, inputs) when Y_init is the
+    cached state solve at p0 (repeated fits of new data, as in Monte Carlo studies and splits)."""
+    key = (p0.tobytes(), inputs.tobytes()) if cacheable else None
+    hit = model.cache.get("identify.scalings", key) if key is not None else None
     if hit is None:
         s_y = _state_scale(Y_init)
         hit = (s_y, _equation_scale(model, p0, inputs, Y_init, s_y))
         for a in hit:
             a.setflags(write=False)
         if key is not None:
-            _SCALINGS[key] = hit
-            while len(_SCALINGS) > 32:
-                _SCALINGS.popitem(last=False)
+            model.cache.put("identify.scalings", key, hit, maxsize=_START_CACHE_SIZE)
     return hit
 
 
@@ -171,22 +165,19 @@ def _predictor(model, p0, inputs, Y0, zbar, cw, sig, s_p, max_step):
     """Start point of Ipopt: one Gauss-Newton step from p0 on the model linearised at p0.
 
     p1 = p0 + (G^T W G)^{-1} G^T W (zbar - h(p0)) and y_j(p1) ~ y_j(p0) + y_j'(p0)(p1 - p0),
-    with G, h, y' at p0 cached per (model, p0, inputs) (they do not depend on the data, so
-    repeated fits of new data pay one einsum).  The step is taken only when it moves every
-    scaled parameter by at most ``max_step`` and stays inside the bounds; otherwise Ipopt
-    starts at p0 as before.  It only changes where Ipopt starts, not the problem solved.
+    with G, h, y' at p0 kept in ``model.cache`` per (p0, inputs) (they do not depend on the
+    data, so repeated fits of new data pay one einsum).  The step is taken only when it moves
+    every scaled parameter by at most ``max_step`` and stays inside the bounds; otherwise
+    Ipopt starts at p0 as before.  It only changes where Ipopt starts, not the problem solved.
     """
     if max_step <= 0 or not model.n_y or not numerics(model).dense:
         return p0, Y0
-    key = (model, p0.tobytes(), inputs.tobytes(), Y0.tobytes())
-    hit = _SENS_INIT.get(key)
+    key = (p0.tobytes(), inputs.tobytes(), Y0.tobytes())
+    hit = model.cache.get("identify.start_sensitivities", key)
     if hit is None:
         sens = sensitivities(model, p0, inputs, Y0)
-        yp = sens._cache[2][:, :model.n_y, :]
-        hit = (sens.h, sens.G, yp)
-        _SENS_INIT[key] = hit
-        while len(_SENS_INIT) > 32:
-            _SENS_INIT.popitem(last=False)
+        hit = (sens.h, sens.G, sens.state_derivatives)
+        model.cache.put("identify.start_sensitivities", key, hit, maxsize=_START_CACHE_SIZE)
     h0, G, yp = hit
     wts = cw / sig[None, :] ** 2
     A = np.einsum("jk,jkp,jkr->pr", wts, G, G) * np.outer(s_p, s_p)
@@ -300,11 +291,11 @@ def _stage_functions(model):
     * ``hess``:  D [s_f J^T diag(c) J + lag_hess(s_f r, e ⊙ l_g)] D in the order (p, y)
 
     all from the model's cached ``sens`` and ``lag_hess`` (no further symbolic derivatives).
-    Returns a dict of Functions.
+    Returns a dict of Functions, kept in ``model.cache``.
     """
     num = numerics(model)
-    key = ("nlp_stage", num.jit_active())
-    got = num._maps.get(key)
+    compiled = num.jit_active()
+    got = model.cache.get("identify.nlp_stage", compiled)
     if got is not None:
         return got
     n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
@@ -325,12 +316,11 @@ def _stage_functions(model):
            "jac": ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp, Jy]),
            "hess": ca.Function("nlp_stage_hess", base + [sf, lg], [H])}
     fns = {k: num.compiled(f"nlp_stage_{k}", fn) for k, fn in fns.items()}
-    num._maps[key] = fns
-    return fns
+    return model.cache.put("identify.nlp_stage", compiled, fns)
 
 
-def _build_nlp(model, inputs, s_p, s_y, e_scale):
-    """CasADi expressions of the scaled full-space problem.
+def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
+    """The scaled full-space problem as CasADi expressions and derivative Functions.
 
     The data enter as NLP parameters (zbar, c / sigma^2 per input and sensor) so that one
     compiled solver serves many data sets with the same inputs and scaling.  Models with a
@@ -344,6 +334,12 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
         if numerics(model).dense:
             return _build_nlp_staged(model, inputs, s_p, s_y, e_scale)
         return _build_nlp_glued(model, inputs, s_p, s_y, e_scale)
+    return _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale)
+
+
+def _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
+    """:func:`_build_nlp` for explicit models and models stated in MX: one symbolic stage,
+    mapped over the inputs, with the stage Hessian assembled by :func:`_assemble_kkt`."""
     n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
     y = ca.SX.sym("y", n_y)
     p = ca.SX.sym("p", n_p)
@@ -383,7 +379,7 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale):
     H_stages = [(b[:n_p, :n_p], b[:n_p, n_p:], b[n_p:, n_p:]) for b in blocks]
     # the constraint Jacobian is left to CasADi (MX models and explicit models only come here)
     _, hess_lag = _assemble_kkt(x, par, g, None, H_stages, lam_f, lam_g, n_p, n_y)
-    return x, ca.sum2(f_all), g, par, hess_lag, None
+    return NlpProblem(x, ca.sum2(f_all), g, par, hess_lag=hess_lag)
 
 
 def _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y):
@@ -443,7 +439,7 @@ def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     # (the objective gradient is left to CasADi's reverse mode.  An assembled gradient must be
     # densified: with a sparse output Ipopt received misplaced entries and crawled.  Densified
     # it is correct, but measured no faster cold or warm (spring chain d_y = 3000, 10 runs))
-    return x, f, g, par, hess_lag, jac_g, None, numerics(model).jit_active()
+    return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g, compiled=numerics(model).jit_active())
 
 
 def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
@@ -498,90 +494,7 @@ def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
         b = ca.mtimes(D, ca.mtimes(Hj, D))                                     # order (y, p)
         H_stages.append((b[n_y:, n_y:], b[n_y:, :n_y], b[:n_y, :n_y]))
     jac_g, hess_lag = _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y)
-    return x, f, g, par, hess_lag, jac_g, None, False
-
-
-def _objective_terms(data, w, sig):
-    """Per-(input, sensor) means, weighted counts and the constant within-group term."""
-    counts = data.counts().astype(float)
-    zbar = np.nan_to_num(data.means(), nan=0.0)
-    cw = counts * w[None, :]
-    dev = np.where(data.mask(), data.z - zbar[None], 0.0)
-    const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
-    return zbar, cw, const
-
-
-def _reduced(model, p, data, w, sig, Y0, terms=None):
-    """States, sensitivities, objective and gradient at p (reduced space).
-
-    ``terms``: the data's (zbar, cw, const) from :func:`_objective_terms` when already computed.
-    """
-    Y = solve_states(model, p, data.inputs, Y0=Y0)
-    sens = sensitivities(model, p, data.inputs, Y)
-    zbar, cw, const = _objective_terms(data, w, sig) if terms is None else terms
-    dev = zbar - sens.h
-    f = 0.5 * float(np.sum(cw * dev ** 2 / sig ** 2)) + const
-    lam = -cw * dev / sig ** 2                      # d f / d h_jk
-    grad = np.einsum("jk,jkp->p", lam, sens.G)
-    return Y, sens, f, grad, lam
-
-
-def _refine(model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam, max_steps, stop_decrement=0.0,
-            terms=None):
-    """Exact reduced Newton steps p <- p - (J^T W J + S)^{-1} g from a point and its reduced terms.
-
-    A step is taken while the Hessian is positive definite, the state solves succeed and the
-    objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
-    1e-12 s_p, or when the Newton decrement g^T H^{-1} g is below ``stop_decrement``.  Returns
-    (p, Y, sens, fval, grad, lam, S, steps) with S the second-order term at the returned p.
-    """
-    lo, up = model.lower, model.upper
-    steps = 0
-    S_terms = None
-    for _ in range(max_steps):
-        F = _gn_information(sens.G, cw, sig)
-        S_terms = sens.hessians(lam[None])[0]
-        try:
-            L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
-            break
-        v = np.linalg.solve(L, grad * s_p)
-        if float(v @ v) < stop_decrement:
-            break
-        dp = -s_p * np.linalg.solve(L.T, v)
-        if np.max(np.abs(dp / s_p)) < 1e-13:
-            break                          # converged to round-off: keep p and its terms
-        small = np.max(np.abs(dp / s_p)) < 1e-12
-        p_new = np.clip(p + dp, lo, up)
-        try:
-            Y_new, sens_new, f_new, grad_new, lam_new = _reduced(model, p_new, data, w, sig, Y, terms)
-        except StateSolveError:
-            break
-        if not (f_new <= fval * (1 + 1e-14) + 1e-300):
-            break
-        p, Y, sens, fval, grad, lam = p_new, Y_new, sens_new, f_new, grad_new, lam_new
-        S_terms = None
-        steps += 1
-        if small:
-            break
-    if S_terms is None:
-        S_terms = sens.hessians(lam[None])[0]
-    return p, Y, sens, fval, grad, lam, S_terms, steps
-
-
-def _gn_information(G, cw, sig):
-    """J^T Omega J = sum_jk c_jk w_k G_jk^T G_jk / sigma_k^2."""
-    return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
-
-
-def _newton_decrement(H, grad, s_p) -> float:
-    """g^T H^{-1} g (in objective units; inf when H is not positive definite)."""
-    try:
-        L = np.linalg.cholesky(H * np.outer(s_p, s_p))
-    except np.linalg.LinAlgError:
-        return float("inf")
-    v = np.linalg.solve(L, grad * s_p)
-    return float(v @ v)
+    return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g)
 
 
 def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
@@ -635,10 +548,227 @@ def covariance_from_terms(F, F2, S):
     return 0.5 * (cov + cov.T), 0.5 * (cov_gn + cov_gn.T), H, ok
 
 
-# ---------------------------------------------------------------------------- main entry
+# ---------------------------------------------------------------------------- the pipeline of identify
+@dataclass(frozen=True)
+class _Start:
+    """The validated problem of one identification and its start point.
+
+    ``w`` sensor weights, ``n`` usable values, ``selected`` sensors with w > 0, ``sig`` the
+    sigmas used in the objective (a common spread when sigma is unknown), ``Y_init`` the
+    states at p0, ``s_p``/``s_y``/``e_scale`` the scalings of parameters, states and
+    equations, ``problem`` the reduced-space problem (data terms) shared by all steps.
+    """
+
+    model: Model
+    data: Measurements
+    p0: np.ndarray
+    w: np.ndarray
+    n: int
+    selected: np.ndarray
+    sig: np.ndarray
+    Y_init: np.ndarray
+    s_p: np.ndarray
+    s_y: np.ndarray
+    e_scale: np.ndarray
+    problem: ReducedProblem
+
+
+def _start(model, data, p0, weights, Y0) -> _Start:
+    """Step 1 of :func:`identify`: validate, choose the sigmas, solve the start states, scale."""
+    p0, w, n = _validate(model, data, p0, weights)
+    selected = np.flatnonzero(w > 0)
+    if data.sigma is None:
+        zs = data.z[:, :, selected]
+        spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+        sig = np.full(model.n_S, spread)
+    else:
+        sig = np.asarray(data.sigma, float)
+    try:
+        Y_init = _initial_states(model, p0, data.inputs, Y0)
+    except StateSolveError as exc:
+        raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
+                                  status="state solve failed") from None
+    s_p = _param_scale(model, p0)
+    s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
+    return _Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
+                  ReducedProblem.of(model, data, w, sig, s_p))
+
+
+@dataclass(frozen=True)
+class _FullSpaceSolution:
+    """Ipopt's solution of the full-space NLP: its result, the number of passes (1: the
+    unbounded pass was kept, 2: the bounded problem was solved), p clipped to the bounds, the
+    states and the parameters found at a bound."""
+
+    result: IpoptResult
+    passes: int
+    p: np.ndarray
+    states: np.ndarray | None
+    at_bound: np.ndarray
+
+
+def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
+    """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
+
+    With ``lazy_bounds``, pass 1 solves without the parameter bounds: a pure equality-
+    constrained problem, which Ipopt solves by Newton steps without a barrier (3-4 instead of
+    6-8 iterations for the press).  Its solution is kept only when it lies strictly inside the
+    bounds: it is then a KKT point of the bounded problem too (zero bound multipliers).
+    Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
+    """
+    model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
+    zbar, cw = st.problem.zbar, st.problem.cw
+    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
+    par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
+    p_start, Y_start = _predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
+                                  settings.predictor_step)
+    x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
+    free_y = np.full(data.n_q * model.n_y, np.inf)
+
+    def solve(x_start, lbx, ubx):
+        return solve_nlp(functools.partial(_build_nlp, model, data.inputs, s_p, s_y, st.e_scale), x_start, lbx, ubx,
+                         0.0, 0.0, par_value, settings.ipopt, what=f"identification of {model.name}", key=key,
+                         cache=model.cache)
+
+    res = None
+    passes = 1
+    if settings.lazy_bounds and (np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))):
+        free_p = np.full(model.n_p, np.inf)
+        try:
+            r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]))
+        except IdentificationError:
+            r1 = None
+        if r1 is not None and r1.accepted:
+            p1 = r1.x[:model.n_p] * s_p
+            margin = 1e-6 * s_p
+            if np.all(p1 > model.lower + margin) and np.all(p1 < model.upper - margin):
+                res = r1
+        passes = 1 if res is not None else 2
+    if res is None:
+        res = solve(x0 if passes == 1 else np.concatenate([st.p0 / s_p, (st.Y_init / s_y[None, :]).ravel()]),
+                    np.concatenate([model.lower / s_p, -free_y]), np.concatenate([model.upper / s_p, free_y]))
+    p = np.clip(res.x[:model.n_p] * s_p, model.lower, model.upper)  # Ipopt relaxes bounds by ~1e-8
+    Y = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
+    at_bound = (np.abs(p - model.lower) <= 1e-7 * s_p) | (np.abs(p - model.upper) <= 1e-7 * s_p)
+    return _FullSpaceSolution(res, passes, p, Y, at_bound)
+
+
+def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySettings) -> Refinement:
+    """Step 3 of :func:`identify`: states consistent with Ipopt's p, then at most
+    ``refine_steps`` exact reduced Newton steps (none when a parameter is at a bound), and
+    the Newton decrement g^T H^-1 g, the squared distance to the optimum in standard errors.
+
+    Raises IdentificationError when the states cannot be solved at p, or when Ipopt stalled
+    and the refinement did not reach the optimum (decrement above ``decrement_tol``).
+    """
+    res = sol.result
+    try:
+        point = st.problem.evaluate(sol.p, sol.states)
+    except StateSolveError as exc:
+        raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
+                                  status=res.status) from None
+    ref = refine(st.problem, point, settings.refine_steps if not np.any(sol.at_bound) else 0,
+                 stop_decrement=settings.refine_decrement)
+    if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
+        raise IdentificationError(
+            f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "
+            f"refinement did not reach the optimum (Newton decrement {ref.decrement:.2e} > "
+            f"{settings.decrement_tol:.0e}); try other start values", status=res.status)
+    return ref
+
+
+def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
+              t_start: float) -> Estimate:
+    """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
+
+    With sigma unknown the covariance, information and objective are rescaled by
+    s^2 / sigma_0^2 with s^2 = RSS / (n - n_p).
+    """
+    model, data, point = st.model, st.data, ref.point
+    sens = point.sens
+    cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected)
+    F = ref.information
+    F2 = gauss_newton_information(sens.G, st.problem.cw * st.w[None, :], st.sig)
+    resid = data.z - sens.h[None]
+    rss = float(np.nansum(resid[:, :, st.selected] ** 2))
+    dof = st.n - model.n_p
+    if data.sigma is None:
+        s2 = rss / dof
+        factor = s2 / st.sig[0] ** 2
+        sig_used = np.full(model.n_S, math.sqrt(s2))
+    else:
+        factor = 1.0
+        sig_used = st.sig
+    cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, ref.S)
+    cov, cov_gn = cov * factor, cov_gn * factor
+    objective = point.objective / factor if data.sigma is None else point.objective
+    notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
+    res = sol.result
+    return Estimate(
+        p=point.p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
+        sensors=model.sensors, states=point.states, fitted=sens.h, residuals=resid, weights=st.w, sigma=sig_used,
+        sigma_estimated=data.sigma is None, n_data=st.n, dof=dof, rss=rss, objective=objective,
+        information=F / factor, S=ref.S / factor, H=H / factor, cov=cov, cov_gn=cov_gn, G=sens.G,
+        status=res.status, message=res.message, iterations=res.iterations,
+        solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
+        grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
+        extra={"newton_decrement": ref.decrement / factor, "ipopt_iterations": res.iterations,
+               "ipopt_passes": sol.passes})
+
+
+def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
+    """The diagnostic notes of an estimate: solver status, unknown sigma, bounds, conditioning,
+    size of the second-order term, definiteness of H and the chi^2 test of the residuals."""
+    model, data, res = st.model, st.data, sol.result
+    notes = []
+    if res.accepted is None:
+        notes.append(f"Ipopt stalled ({res.status}); the exact Newton refinement verified the optimum "
+                     f"(Newton decrement {ref.decrement:.1e}, i.e. within {math.sqrt(max(ref.decrement, 0)):.1e} "
+                     "standard errors)")
+    elif res.status != "Solve_Succeeded":
+        notes.append(f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
+    if data.sigma is None:
+        s2 = rss / dof
+        notes.append(f"sigma unknown: estimated s = {math.sqrt(s2):.4g} from RSS / (n - n_p) with {dof} dof; "
+                     "intervals use Student t, the ellipsoid n_p F(n_p, dof) quantiles")
+    for i in np.flatnonzero(sol.at_bound):
+        notes.append(f"parameter {model.param_names[i]} is at a bound ({ref.point.p[i]:g}): the covariance assumes "
+                     "an interior optimum and is not valid for it")
+    F, S = ref.information, ref.S
+    Dn = 1.0 / np.sqrt(np.diag(F))
+    Fn = F * np.outer(Dn, Dn)
+    Sn = S * np.outer(Dn, Dn)
+    if cond ** 2 > settings.ill_conditioned:
+        notes.append(f"ill-conditioned: the normalised information J^T Omega J has condition number "
+                     f"{cond ** 2:.2e}; parameters are strongly correlated and their errors large")
+    s_ratio = np.linalg.norm(Sn, 2) / np.linalg.norm(Fn, 2)
+    if s_ratio > settings.s_ratio_note:
+        notes.append(f"second-order term large: ||S|| is {100 * s_ratio:.3g} % of ||J^T Omega J|| (normalised); "
+                     "the model fits poorly or is strongly nonlinear, so cov and cov_gn differ")
+    if not H_ok:
+        notes.append("H = J^T Omega J + S is singular: the second-order covariance is undefined (NaN); "
+                     "use cov_gn")
+    elif np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
+        notes.append("H = J^T Omega J + S is not positive definite: the estimate is not a strict local "
+                     "minimum in the reduced space; treat cov with caution")
+    if data.sigma is not None and dof > 0:
+        chi2 = 2.0 * objective
+        pval = float(special.chdtrc(dof, chi2))           # = stats.chi2.sf(chi2, dof), without its overhead
+        if pval < 1e-3:
+            notes.append(f"residuals exceed the sensor sigmas: reduced chi2 = {chi2 / dof:.3g} "
+                         f"(chi2 test p = {pval:.2g}); the model or the sigmas are inadequate and cov "
+                         "understates the uncertainty")
+    return tuple(notes)
+
+
 def identify(model: Model, data: Measurements, p0, weights=None,
              settings: IdentifySettings | None = None, Y0=None) -> Estimate:
     """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7).
+
+    The pipeline: validate and start (:func:`_start`), solve the scaled full-space NLP with
+    Ipopt (:func:`_solve_full_space`), refine by exact reduced Newton steps
+    (:func:`identification.refinement.refine`), then identifiability, covariance and the
+    result (:func:`_estimate`).
 
     Parameters
     ----------
@@ -668,145 +798,10 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
-    p0, w, n = _validate(model, data, p0, weights)
-    selected = np.flatnonzero(w > 0)
-    if data.sigma is None:
-        zs = data.z[:, :, selected]
-        spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
-        sig = np.full(model.n_S, spread)
-    else:
-        sig = np.asarray(data.sigma, float)
-
-    try:
-        Y_init = _initial_states(model, p0, data.inputs, Y0)
-    except StateSolveError as exc:
-        raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
-                                  status="state solve failed") from None
-
-    s_p = _param_scale(model, p0)
-    s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
-
-    zbar, cw, const = _objective_terms(data, w, sig)
-    key = (model, data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), e_scale.tobytes())
-    par_value = np.concatenate([zbar.ravel(), (cw / sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
-    p_start, Y_start = _predictor(model, p0, data.inputs, Y_init, zbar, cw, sig, s_p, settings.predictor_step)
-    x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
-    free_y = np.full(data.n_q * model.n_y, np.inf)
-    lbx = np.concatenate([model.lower / s_p, -free_y])
-    ubx = np.concatenate([model.upper / s_p, free_y])
-    build = lambda: _build_nlp(model, data.inputs, s_p, s_y, e_scale)  # noqa: E731
-    what = f"identification of {model.name}"
-    res = None
-    passes = 1
-    if settings.lazy_bounds and (np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))):
-        # pass 1 without the parameter bounds: a pure equality-constrained problem, which Ipopt
-        # solves by Newton steps without a barrier (3-4 instead of 6-8 iterations for the
-        # press).  Its solution is kept only when it lies strictly inside the bounds: it is then
-        # a KKT point of the bounded problem too (zero bound multipliers).  Otherwise, and on
-        # any failure, pass 2 solves the bounded problem from the same start.
-        free_p = np.full(model.n_p, np.inf)
-        try:
-            r1 = solve_nlp(build, x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]),
-                           0.0, 0.0, par_value, settings.ipopt, what=what, key=key)
-        except IdentificationError:
-            r1 = None
-        if r1 is not None and r1.accepted:
-            p1 = r1.x[:model.n_p] * s_p
-            margin = 1e-6 * s_p
-            if np.all(p1 > model.lower + margin) and np.all(p1 < model.upper - margin):
-                res = r1
-        passes = 1 if res is not None else 2
-    if res is None:
-        res = solve_nlp(build, x0 if passes == 1 else np.concatenate([p0 / s_p, (Y_init / s_y[None, :]).ravel()]),
-                        lbx, ubx, 0.0, 0.0, par_value, settings.ipopt, what=what, key=key)
-    p = np.clip(res.x[:model.n_p] * s_p, model.lower, model.upper)  # Ipopt relaxes bounds by ~1e-8
-    Y_ipopt = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
-
-    # ---- states consistent with p, then exact reduced Newton refinement
-    try:
-        Y, sens, fval, grad, lam = _reduced(model, p, data, w, sig, Y_ipopt, (zbar, cw, const))
-    except StateSolveError as exc:
-        raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
-                                  status=res.status) from None
-    lo, up = model.lower, model.upper
-    at_bound = (np.abs(p - lo) <= 1e-7 * s_p) | (np.abs(p - up) <= 1e-7 * s_p)
-    p, Y, sens, fval, grad, lam, S_terms, steps = _refine(
-        model, data, w, sig, cw, s_p, p, Y, sens, fval, grad, lam,
-        settings.refine_steps if not np.any(at_bound) else 0, stop_decrement=settings.refine_decrement,
-        terms=(zbar, cw, const))
-
-    # ---- Newton decrement g^T H^-1 g: the squared distance to the optimum in standard errors
-    F = _gn_information(sens.G, cw, sig)
-    decrement = _newton_decrement(F + S_terms, grad, s_p)
-    if res.accepted is None and not (decrement <= settings.decrement_tol):
-        raise IdentificationError(
-            f"Ipopt stalled on the identification of {model.name} ({res.status}) and the exact Newton "
-            f"refinement did not reach the optimum (Newton decrement {decrement:.2e} > "
-            f"{settings.decrement_tol:.0e}); try other start values", status=res.status)
-
-    # ---- identifiability, covariance, diagnostics
-    cond = check_identifiability(model, sens.G, cw, sig, s_p, settings.rank_rtol, selected)
-    F2 = _gn_information(sens.G, cw * w[None, :], sig)
-    S = S_terms
-    resid = data.z - sens.h[None]
-    rss = float(np.nansum(resid[:, :, selected] ** 2))
-    dof = n - model.n_p
-    notes = []
-    if data.sigma is None:
-        s2 = rss / dof
-        factor = s2 / sig[0] ** 2
-        sig_used = np.full(model.n_S, math.sqrt(s2))
-        notes.append(f"sigma unknown: estimated s = {math.sqrt(s2):.4g} from RSS / (n - n_p) with {dof} dof; "
-                     "intervals use Student t, the ellipsoid n_p F(n_p, dof) quantiles")
-    else:
-        factor = 1.0
-        sig_used = sig
-    cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, S)
-    cov, cov_gn = cov * factor, cov_gn * factor
-    objective = (fval) / factor if data.sigma is None else fval
-    if res.accepted is None:
-        notes.insert(0, f"Ipopt stalled ({res.status}); the exact Newton refinement verified the optimum "
-                        f"(Newton decrement {decrement:.1e}, i.e. within {math.sqrt(max(decrement, 0)):.1e} "
-                        "standard errors)")
-    elif res.status != "Solve_Succeeded":
-        notes.insert(0, f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
-    for i in np.flatnonzero(at_bound):
-        notes.append(f"parameter {model.param_names[i]} is at a bound ({p[i]:g}): the covariance assumes an "
-                     "interior optimum and is not valid for it")
-    Dn = 1.0 / np.sqrt(np.diag(F))
-    Fn = F * np.outer(Dn, Dn)
-    Sn = S * np.outer(Dn, Dn)
-    if cond ** 2 > settings.ill_conditioned:
-        notes.append(f"ill-conditioned: the normalised information J^T Omega J has condition number "
-                     f"{cond ** 2:.2e}; parameters are strongly correlated and their errors large")
-    s_ratio = np.linalg.norm(Sn, 2) / np.linalg.norm(Fn, 2)
-    if s_ratio > settings.s_ratio_note:
-        notes.append(f"second-order term large: ||S|| is {100 * s_ratio:.3g} % of ||J^T Omega J|| (normalised); "
-                     "the model fits poorly or is strongly nonlinear, so cov and cov_gn differ")
-    if not H_ok:
-        notes.append("H = J^T Omega J + S is singular: the second-order covariance is undefined (NaN); "
-                     "use cov_gn")
-    else:
-        if np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
-            notes.append("H = J^T Omega J + S is not positive definite: the estimate is not a strict local "
-                         "minimum in the reduced space; treat cov with caution")
-    if data.sigma is not None and dof > 0:
-        chi2 = 2.0 * objective
-        pval = float(special.chdtrc(dof, chi2))           # = stats.chi2.sf(chi2, dof), without its overhead
-        if pval < 1e-3:
-            notes.append(f"residuals exceed the sensor sigmas: reduced chi2 = {chi2 / dof:.3g} "
-                         f"(chi2 test p = {pval:.2g}); the model or the sigmas are inadequate and cov "
-                         "understates the uncertainty")
-    grad_norm = float(np.linalg.norm(grad * s_p))
-    return Estimate(
-        p=p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
-        sensors=model.sensors, states=Y, fitted=sens.h, residuals=resid, weights=w, sigma=sig_used,
-        sigma_estimated=data.sigma is None, n_data=n, dof=dof, rss=rss, objective=objective,
-        information=F / factor, S=S / factor, H=H / factor, cov=cov, cov_gn=cov_gn, G=sens.G,
-        status=res.status, message=res.message, iterations=res.iterations,
-        solve_time=time.perf_counter() - t_start, refinement_steps=steps, grad_norm=grad_norm,
-        notes=tuple(notes), model_name=model.name,
-        extra={"newton_decrement": decrement / factor, "ipopt_iterations": res.iterations, "ipopt_passes": passes})
+    st = _start(model, data, p0, weights, Y0)
+    sol = _solve_full_space(st, settings)
+    ref = _refine_solution(st, sol, settings)
+    return _estimate(st, sol, ref, settings, t_start)
 
 
 def information_contributions(model: Model, data: Measurements, p, states=None):
@@ -831,7 +826,8 @@ def information_contributions(model: Model, data: Measurements, p, states=None):
     w = np.ones(model.n_S)
     Y = solve_states(model, p, data.inputs, Y0=states)
     sens = sensitivities(model, p, data.inputs, Y)
-    zbar, cw, _ = _objective_terms(data, w, sig)
+    terms = ReducedProblem.of(model, data, w, sig, np.ones(model.n_p))
+    zbar, cw = terms.zbar, terms.cw
     F = np.einsum("jk,jkp,jkr->kpr", cw / sig ** 2, sens.G, sens.G)
     lam = -cw * (zbar - sens.h) / sig ** 2
     lam_k = np.zeros((model.n_S, data.n_q, model.n_S))

@@ -9,15 +9,15 @@ returns a solution.
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
+from models.cache import Cache
 from .errors import IdentificationError
 
-__all__ = ["IpoptSettings", "IpoptResult", "solve_nlp", "STATUS_MESSAGES"]
+__all__ = ["IpoptSettings", "IpoptResult", "NlpProblem", "solve_nlp", "STATUS_MESSAGES", "SOLVER_CACHE"]
 
 #: Ipopt return status -> (accepted as a solution?, message for the user).  ``None`` means
 #: "stalled": returned to the caller, who must verify optimality itself before using x.
@@ -83,24 +83,76 @@ class IpoptSettings:
 
 @dataclass(frozen=True)
 class IpoptResult:
+    """Ipopt's solution of an NLP (returned only for accepted or stalled solves).
+
+    Attributes
+    ----------
+    x : ndarray            the solution (scaled variables of the NLP)
+    f : float              objective at x
+    status, message : str  Ipopt's return status and its meaning (:data:`STATUS_MESSAGES`)
+    accepted : bool or None  True: a solution; None: Ipopt stalled and the caller must verify
+                           optimality itself before using x
+    iterations : int       Ipopt iterations
+    wall_time : float      seconds spent in the solver call
+    stats : dict           selected entries of the solver's statistics
+    """
+
     x: np.ndarray
     f: float
     status: str
     message: str
-    accepted: bool | None   # None: stalled, the caller must verify optimality
+    accepted: bool | None
     iterations: int
     wall_time: float
     stats: dict
 
 
-_SOLVERS: "OrderedDict[tuple, ca.Function]" = OrderedDict()
+@dataclass(frozen=True)
+class NlpProblem:
+    """CasADi statement of  min_x f(x; par)  s.t.  g(x; par) = 0  and its optional exact derivatives.
+
+    Attributes
+    ----------
+    x, f, g, par : casadi.SX or casadi.MX
+        Variables, objective, constraints and parameters (the data) of the NLP.
+    hess_lag : casadi.Function or None
+        ``(x, par, lam_f, lam_g) -> triu(Hessian of lam_f f + lam_g^T g)``; None: CasADi's AD.
+    jac_g : casadi.Function or None
+        ``(x, par) -> (g, dg/dx)``; None: CasADi's AD.
+    grad_f : casadi.Function or None
+        ``(x, par) -> (f, df/dx)``; None: CasADi's AD.
+    compiled : bool
+        The derivative Functions call JIT-compiled code: the NLP is then not expanded to SX,
+        which would drop the compiled code.
+    """
+
+    x: object
+    f: object
+    g: object
+    par: object
+    hess_lag: ca.Function | None = None
+    jac_g: ca.Function | None = None
+    grad_f: ca.Function | None = None
+    compiled: bool = False
+
+
+#: compiled solvers of problems that no owner object keeps (callers that pass no ``cache``)
+SOLVER_CACHE = Cache()
 _CACHE_SIZE = 16
 
 
+def _as_problem(built) -> NlpProblem:
+    if isinstance(built, NlpProblem):
+        return built
+    if isinstance(built, tuple) and len(built) == 4:
+        return NlpProblem(*built)
+    raise TypeError(f"build: expected it to return an NlpProblem or a tuple (x, f, g, par), "
+                    f"got {type(built).__name__}")
+
+
 def _make_solver(build, settings: IpoptSettings):
-    built = build()
-    x, f, g, par = built[:4]
-    nlp = {"x": x, "f": f, "g": g, "p": par}
+    nlp = _as_problem(build())
+    x = nlp.x
     n = x.size1()
     # expanding the MX graph to SX pays for small problems (press: 18 vs 22 ms per fit) and costs
     # more than it saves for large ones (spring chain d_y = 3000, n_q = 5: nlpsol set-up 1.4 s)
@@ -120,44 +172,40 @@ def _make_solver(build, settings: IpoptSettings):
         opts["expand"] = bool(expand)
     if settings.linear_solver == "mumps" and settings.mumps_pivot_order is not None:
         opts["ipopt.mumps_pivot_order"] = int(settings.mumps_pivot_order)
-    if len(built) > 7 and built[7]:
+    if nlp.compiled:
         expand = False                      # JIT-compiled stage functions: keep them compiled
         opts["expand"] = False
-    for i, name in ((4, "hess_lag"), (5, "jac_g"), (6, "grad_f")):
-        if len(built) > i and built[i] is not None:
-            fn = built[i]
+    for name, fn in (("hess_lag", nlp.hess_lag), ("jac_g", nlp.jac_g), ("grad_f", nlp.grad_f)):
+        if fn is not None:
             opts[name] = fn.expand() if (expand and isinstance(x, ca.MX)) else fn
     for k, v in settings.extra:
         opts[k if "." in k or k in ("expand", "print_time") else f"ipopt.{k}"] = v
-    return ca.nlpsol("mudoe_nlp", "ipopt", nlp, opts)
+    return ca.nlpsol("mudoe_nlp", "ipopt", {"x": x, "f": nlp.f, "g": nlp.g, "p": nlp.par}, opts)
 
 
 def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings = IpoptSettings(),
-              what: str = "problem", key=None) -> IpoptResult:
+              what: str = "problem", key=None, cache: Cache | None = None) -> IpoptResult:
     """Solve  min f(x; par)  s.t.  lbg <= g(x; par) <= ubg,  lbx <= x <= ubx  with Ipopt.
 
-    ``build()`` returns the CasADi expressions ``(x, f, g, par)`` and optionally Functions
-    ``hess_lag (x, par, lam_f, lam_g) -> triu(Hessian of the Lagrangian)``, ``jac_g (x, par) ->
-    (g, dg/dx)``, ``grad_f (x, par) -> (f, df/dx)`` and a flag "stage functions are compiled"
-    (then the NLP is not expanded to SX, which would drop the compiled code); it is called only when no
-    solver with the same ``key`` is cached (repeated identifications with new data reuse
-    the compiled derivatives).
+    ``build()`` returns an :class:`NlpProblem` (or, for a problem without derivative
+    Functions, the tuple ``(x, f, g, par)``); it is called only when no solver with the same
+    ``key`` is cached (repeated identifications with new data reuse the compiled derivatives).
+    ``cache`` is where the solvers are kept (the owner's :class:`models.cache.Cache`, e.g.
+    ``model.cache``, at most 16 per owner); without it they are kept in :data:`SOLVER_CACHE`.
+    Without a ``key`` nothing is cached.
 
     Raises
     ------
     IdentificationError
         When Ipopt's status is not an accepted one (see :data:`STATUS_MESSAGES`).
     """
+    store = SOLVER_CACHE if cache is None else cache
     full_key = None if key is None else (key, settings)
-    solver = _SOLVERS.get(full_key) if full_key is not None else None
+    solver = store.get("ipopt_solvers", full_key) if full_key is not None else None
     if solver is None:
         solver = _make_solver(build, settings)
         if full_key is not None:
-            _SOLVERS[full_key] = solver
-            while len(_SOLVERS) > _CACHE_SIZE:
-                _SOLVERS.popitem(last=False)
-    else:
-        _SOLVERS.move_to_end(full_key)
+            store.put("ipopt_solvers", full_key, solver, maxsize=_CACHE_SIZE)
     t0 = time.perf_counter()
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=par_value)
     wall = time.perf_counter() - t0

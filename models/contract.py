@@ -21,6 +21,8 @@ from typing import Callable, Iterable, Sequence
 import casadi as ca
 import numpy as np
 
+from .cache import Cache
+
 __all__ = ["Parameter", "Model", "ModelError"]
 
 
@@ -140,6 +142,12 @@ class Model:
     ----------
     E_fun, h_fun : casadi.Function
         ``(y, p, q) -> E`` and ``(y, p, q) -> h``.
+    cache : models.cache.Cache
+        Values computed from this model and kept with it (its numerics, compiled NLP
+        functions and solvers, start states of repeated fits).  Code that derives further
+        objects from a model stores them here under its own namespace, e.g.
+        ``model.cache.get_or_make("inverse_functions", None, build)``, instead of setting
+        attributes on the model or keeping module-level tables keyed on it.
     """
 
     def __init__(self, params, inputs, sensors, n_y: int, E: Callable | None, h: Callable,
@@ -190,6 +198,7 @@ class Model:
         self.E_fun = ca.Function("E", [y, p, q], [e_expr], ["y", "p", "q"], ["E"])
         self.h_fun = ca.Function("h", [y, p, q], [h_expr], ["y", "p", "q"], ["h"])
         self._y_guess = y_guess
+        self.cache = Cache()
         self._check_finite_structure()
 
     # ------------------------------------------------------------------ constructors
@@ -235,6 +244,7 @@ class Model:
             raise ModelError(f"bounds: unknown parameter(s) {', '.join(unknown)}; the model has "
                              f"{', '.join(self.param_names)}")
         new = copy.copy(self)
+        new.cache = Cache()
         new.params = tuple(Parameter(p.name, *bounds[p.name], scale=p.scale, unit=p.unit) if p.name in bounds
                            else p for p in self.params)
         return new

@@ -38,6 +38,13 @@ class Sensitivities:
         self.h, self.G = h, G
         self._num, self._p, self._inputs, self._Y, self._cache = num, p, inputs, Y, cache
 
+    @property
+    def state_derivatives(self) -> np.ndarray:
+        """y'(p) = -(dE/dy)^{-1} dE/dp at every input, shape (n_q, n_y, n_p) (state units per
+        parameter unit).  For dense states it is a view of the stored array: do not modify it."""
+        n_p = self.G.shape[2]
+        return np.stack([Z[:Z.shape[0] - n_p] for _, _, Z in self._cache])
+
     def hessians(self, lam: np.ndarray) -> np.ndarray:
         """Sum over inputs of d^2/dp^2 [lam_j^T h(y_j(p), p, q_j)] for several weight sets.
 
@@ -72,6 +79,11 @@ class _BatchedSensitivities(Sensitivities):
     """Dense-state variant: all inputs in one mapped call, batched linear algebra."""
 
     __slots__ = ()
+
+    @property
+    def state_derivatives(self) -> np.ndarray:
+        Z = self._cache[2]
+        return Z[:, :Z.shape[1] - Z.shape[2], :]
 
     def hessians(self, lam: np.ndarray) -> np.ndarray:
         lam = np.asarray(lam, float)

@@ -6,71 +6,91 @@ algebra is done in NumPy/SciPy (dense for small states, sparse LU for large ones
 """
 from __future__ import annotations
 
+import atexit
 import os
-import weakref
+import shutil
+import tempfile
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
+from .cache import Cache
 from .errors import StateSolveError
 
-__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit"]
+__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
 
 _DENSE_LIMIT = 60
 
-#: just-in-time compilation of the per-model CasADi functions (C code through the system
-#: compiler).  Off by default: compiling the press functions takes about 1.5 s, which pays
-#: off only for many repeated fits (the Monte Carlo workers switch it on).
-_JIT = {"enabled": False, "failed": False}
+@dataclass
+class JitConfig:
+    """Just-in-time compilation of the per-model CasADi functions (C code through the system compiler).
+
+    One process-wide instance, :data:`JIT`, is read by :meth:`Numerics.jit_active`; switch it
+    with :func:`set_jit`.  Off by default: compiling the press functions takes about 1.5 s,
+    which pays off only for many repeated fits (the Monte Carlo workers switch it on).  Only
+    models stated in SX with at most 60 states are compiled, and only when a C compiler
+    (``cc``/``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as
+    usual (same numbers, slower).
+
+    Attributes
+    ----------
+    enabled : bool          compile when a model qualifies
+    failed : bool           set when no working compiler was found (compilation stays off)
+    directory : str or None this process's temporary directory for the generated C code and
+                            libraries (created on first use, removed at exit)
+    """
+
+    enabled: bool = False
+    failed: bool = False
+    directory: str | None = None
+
+    def active(self) -> bool:
+        """True when compilation is switched on and a compiler has not failed."""
+        return self.enabled and not self.failed
+
+    def workdir(self) -> str:
+        """The temporary directory for generated code (created on first use, removed at exit),
+        so that nothing is written to the working directory."""
+        d = self.directory
+        if d is None or not os.path.isdir(d):
+            d = tempfile.mkdtemp(prefix="mudoe_jit_")
+            atexit.register(shutil.rmtree, d, ignore_errors=True)
+            self.directory = d
+        return d
+
+    def compile(self, f: ca.Function) -> ca.Function | None:
+        """A C-compiled copy of an SX function, or None (no compiler: ``failed`` is then set)."""
+        if shutil.which("gcc") is None and shutil.which("cc") is None:
+            self.failed = True
+            return None
+        d = self.workdir()
+        try:
+            return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
+                               {"jit": True, "compiler": "shell", "jit_name": "jit_tmp", "jit_cleanup": False,
+                                "jit_options": {"flags": ["-O1"], "verbose": False, "cleanup": False,
+                                                "directory": d + os.sep}})
+        except RuntimeError:
+            self.failed = True          # no working compiler: keep the virtual machine
+            return None
+
+
+#: the process-wide JIT configuration (see :class:`JitConfig` and :func:`set_jit`)
+JIT = JitConfig()
 
 
 def set_jit(enabled: bool) -> bool:
     """Switch JIT compilation of small (dense) models' functions on or off; returns the previous state.
 
-    Only models stated in SX with at most 60 states are compiled, and only when a C compiler
-    (``cc``/``gcc``) is on the PATH; otherwise the CasADi virtual machine evaluates them as
-    usual (same numbers, slower).
+    Sets :attr:`JitConfig.enabled` of :data:`JIT`.  Only models stated in SX with at most 60
+    states are compiled, and only when a C compiler (``cc``/``gcc``) is on the PATH; otherwise
+    the CasADi virtual machine evaluates them as usual (same numbers, slower).
     """
-    prev = _JIT["enabled"]
-    _JIT["enabled"] = bool(enabled)
+    prev = JIT.enabled
+    JIT.enabled = bool(enabled)
     return prev
-
-
-def _compiler_available() -> bool:
-    import shutil
-    return shutil.which("gcc") is not None or shutil.which("cc") is not None
-
-
-def _jit_dir() -> str:
-    """A private temporary directory for this process's generated C code and libraries
-    (removed at exit), so that nothing is written to the working directory."""
-    d = _JIT.get("dir")
-    if d is None or not os.path.isdir(d):
-        import atexit
-        import shutil
-        import tempfile
-        d = tempfile.mkdtemp(prefix="mudoe_jit_")
-        atexit.register(shutil.rmtree, d, ignore_errors=True)
-        _JIT["dir"] = d
-    return d
-
-
-def _jit(f: ca.Function) -> ca.Function | None:
-    """A C-compiled copy of an SX function, or None (no compiler: JIT is then switched off)."""
-    if not _compiler_available():
-        _JIT["failed"] = True
-        return None
-    d = _jit_dir()
-    try:
-        return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
-                           {"jit": True, "compiler": "shell", "jit_name": "jit_tmp", "jit_cleanup": False,
-                            "jit_options": {"flags": ["-O1"], "verbose": False, "cleanup": False,
-                                            "directory": d + os.sep}})
-    except RuntimeError:
-        _JIT["failed"] = True          # no working compiler: keep the virtual machine
-        return None
 
 
 def _to_scipy(dm: ca.DM):
@@ -108,24 +128,23 @@ class Numerics:
         self.lag_hess = ca.Function("lag_hess", [y, p, q, lam, mu], [ca.hessian(L, v)[0]])
         self.h = model.h_fun
         self.dense = model.n_y <= _DENSE_LIMIT
-        self._maps = {}
+        self._functions = Cache()       # compiled copies and point / batched evaluators
 
     def jit_active(self) -> bool:
         """True when :func:`set_jit` is on and this model qualifies (SX, at most 60 states)."""
-        return _JIT["enabled"] and not _JIT["failed"] and self.dense and self.model.symbolic == "SX"
+        return JIT.active() and self.dense and self.model.symbolic == "SX"
 
     def compiled(self, name: str, f: ca.Function | None = None) -> ca.Function:
         """``getattr(self, name)`` (or ``f``), JIT-compiled when :meth:`jit_active`; cached per name."""
         f = getattr(self, name) if f is None else f
         if not self.jit_active():
             return f
-        key = ("jit", name)
-        g = self._maps.get(key)
+        g = self._functions.get("jit", name)
         if g is None:
-            g = _jit(f)
+            g = JIT.compile(f)
             if g is None:
                 return f
-            self._maps[key] = g
+            self._functions.put("jit", name, g)
         return g
 
     def point(self, name: str) -> "_Point":
@@ -136,10 +155,10 @@ class Numerics:
         nonzero buffer (no DM conversion).
         """
         base = self.compiled(name)
-        key = ("point", name, base is not getattr(self, name))
-        f = self._maps.get(key)
+        key = (name, base is not getattr(self, name))
+        f = self._functions.get("point", key)
         if f is None:
-            f = self._maps[key] = _Point(base, self.dense)
+            f = self._functions.put("point", key, _Point(base, self.dense))
         return f
 
     def batched(self, name: str, n: int) -> "_Batched":
@@ -152,10 +171,10 @@ class Numerics:
         than ``Function.__call__`` plus ``DM.full`` for the press model).
         """
         base = self.compiled(name)
-        key = ("batched", name, n, base is not getattr(self, name))
-        f = self._maps.get(key)
+        key = (name, n, base is not getattr(self, name))
+        f = self._functions.get("batched", key)
         if f is None:
-            f = self._maps[key] = _Batched(base, n)
+            f = self._functions.put("batched", key, _Batched(base, n))
         return f
 
     def factor(self, Ey_dm):
@@ -271,15 +290,11 @@ class _Batched:
         return [o.transpose(0, 2, 1) for o in outs]
 
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def numerics(model) -> Numerics:
-    """The cached :class:`Numerics` of a model."""
-    num = _CACHE.get(model)
+    """The :class:`Numerics` of a model, built once and kept in ``model.cache``."""
+    num = model.cache.get("numerics", None)
     if num is None:
-        num = Numerics(model)
-        _CACHE[model] = num
+        num = model.cache.put("numerics", None, Numerics(model))
     return num
 
 

@@ -318,7 +318,8 @@ def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
     n_q = 4
     inputs = np.column_stack([rng.uniform(0.5, 2.0, n_q), rng.uniform(0.1, 0.6, n_q)])
     s_p, s_y, e = rng.uniform(0.5, 2, model.n_p), rng.uniform(0.5, 2, model.n_y), rng.uniform(0.5, 2, model.n_y)
-    x, f, g, par, hess_lag, jac_g = getattr(est_mod, builder)(model, inputs, s_p, s_y, e)[:6]
+    nlp = getattr(est_mod, builder)(model, inputs, s_p, s_y, e)
+    x, f, g, par, hess_lag, jac_g = nlp.x, nlp.f, nlp.g, nlp.par, nlp.hess_lag, nlp.jac_g
     lam_f, lam_g = ca.MX.sym("lf"), ca.MX.sym("lg", g.size1())
     L = lam_f * f + ca.dot(lam_g, g)
     ref = ca.Function("ref", [x, par, lam_f, lam_g], [ca.jacobian(g, x), ca.triu(ca.hessian(L, x)[0])])
@@ -386,3 +387,57 @@ def test_model_stated_in_mx_gives_the_same_estimate_as_in_sx():
         est[sym] = identify(m, data, [1.5, 0.5])
     np.testing.assert_allclose(est["MX"].p, est["SX"].p, rtol=1e-10)
     np.testing.assert_allclose(est["MX"].cov, est["SX"].cov, rtol=1e-8)
+
+
+def test_public_refinement_reproduces_the_estimate_and_converges_from_a_nearby_point():
+    """identification.refinement: at the estimate no step is taken and the terms are the
+    estimate's; from a perturbed point the exact Newton steps return to it."""
+    from identification.refinement import ReducedProblem, refine
+    model, data = _press_data(8, 4)
+    est = identify(model, data, p0=[450.0, 550.0])
+    problem = ReducedProblem.of(model, data, est.weights, est.sigma, np.abs(est.p))
+    at = refine(problem, problem.evaluate(est.p, est.states), 5, stop_decrement=1e-18)
+    assert at.steps == 0
+    assert at.point.objective == pytest.approx(est.objective, rel=1e-12)
+    np.testing.assert_allclose(at.information, est.information, rtol=1e-12)
+    np.testing.assert_allclose(at.S, est.S, rtol=1e-9, atol=1e-12 * np.abs(est.S).max())
+    far = refine(problem, problem.evaluate(est.p * 1.02, est.states), 10)
+    assert far.steps >= 1 and far.decrement < 1e-12
+    np.testing.assert_allclose(far.point.p, est.p, rtol=1e-8)
+
+
+def test_model_cache_holds_the_fits_caches_and_is_empty_in_copies():
+    """Numerics, stage functions, start states and Ipopt solvers live in model.cache; a
+    pickled or re-bounded copy starts empty and gives the same estimate."""
+    import pickle
+    from models.cache import Cache
+    model, data = _press_data(6, 2)
+    est = identify(model, data, p0=[450.0, 550.0])
+    assert isinstance(model.cache, Cache)
+    for name in ("numerics", "identify.initial_states", "identify.scalings", "ipopt_solvers"):
+        assert model.cache.size(name) == 1, name
+    identify(model, data, p0=[450.0, 550.0])
+    assert model.cache.size("ipopt_solvers") == 1            # the compiled solver is reused
+    for copy in (pickle.loads(pickle.dumps(model)), model.with_bounds({"k5": (100.0, 1000.0)})):
+        assert copy.cache is not model.cache and copy.cache.size("numerics") == 0
+        np.testing.assert_array_equal(identify(copy, data, p0=[450.0, 550.0]).p, est.p)
+
+
+def test_cache_is_bounded_per_namespace():
+    from models.cache import Cache
+    c = Cache()
+    for i in range(5):
+        c.put("lru", i, i * i, maxsize=3)
+    assert c.size("lru") == 3 and c.get("lru", 0) is None and c.get("lru", 4) == 16
+    assert c.get_or_make("once", "k", lambda: [1]) is c.get_or_make("once", "k", lambda: [2])
+    with pytest.raises(ValueError, match="maxsize"):
+        c.put("bad", 0, 0, maxsize=0)
+
+
+def test_set_jit_switches_the_documented_configuration():
+    from models.state import JIT, set_jit
+    prev = set_jit(True)
+    try:
+        assert JIT.enabled and set_jit(False) is True and not JIT.enabled
+    finally:
+        set_jit(prev)

@@ -1,0 +1,202 @@
+r"""Exact reduced-space Newton refinement of a weighted least-squares estimate.
+
+In the reduced space the states are eliminated through E(y_j, p, q_j) = 0 and the
+objective of paper eq. 3 is a function of p alone,
+
+.. math::
+
+    \Phi(p) = \tfrac12 \sum_{j,k} c_{jk}\,(\bar z_{jk} - h_k(y_j(p), p, q_j))^2 / \sigma_k^2 + \Phi_0,
+
+with c_jk = (number of series) w_k per input and sensor, zbar the per-(input, sensor)
+means and Phi_0 the constant within-group scatter.  Its gradient is g = J^T lambda with
+lambda_jk = dPhi/dh_jk = -c_jk (zbar_jk - h_jk) / sigma_k^2, and its exact Hessian is
+H = J^T Omega J + S with S the second-order term (by AD and the implicit function theorem,
+:meth:`models.sensitivity.Sensitivities.hessians`).  :func:`refine` takes Newton steps
+p <- p - H^{-1} g while they decrease Phi.
+
+The estimator (:func:`identification.identify`) refines Ipopt's solution with it, and the
+likelihood-ratio test of :mod:`identification.detect` finds the pooled minimum with it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from models.contract import Model
+from models.errors import StateSolveError
+from models.sensitivity import Sensitivities, sensitivities
+from models.state import solve_states
+from .measurements import Measurements
+
+__all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
+           "newton_decrement"]
+
+
+def gauss_newton_information(G: np.ndarray, cw: np.ndarray, sig: np.ndarray) -> np.ndarray:
+    """J^T Omega J = sum_jk c_jk G_jk^T G_jk / sigma_k^2, shape (n_p, n_p).
+
+    ``G`` (n_q, n_S, n_p) sensitivities, ``cw`` (n_q, n_S) weighted counts, ``sig`` (n_S,).
+    """
+    return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
+
+
+def newton_decrement(H: np.ndarray, grad: np.ndarray, s_p: np.ndarray) -> float:
+    """g^T H^{-1} g in objective (chi^2 / 2) units; inf when H is not positive definite.
+
+    ``s_p``: parameter scales (the Cholesky factorisation is of diag(s_p) H diag(s_p)).
+    """
+    try:
+        L = np.linalg.cholesky(H * np.outer(s_p, s_p))
+    except np.linalg.LinAlgError:
+        return float("inf")
+    v = np.linalg.solve(L, grad * s_p)
+    return float(v @ v)
+
+
+@dataclass(frozen=True)
+class ReducedPoint:
+    """The reduced-space objective at one parameter vector.
+
+    Attributes
+    ----------
+    p : ndarray (n_p,)            parameters
+    states : ndarray (n_q, n_y)   states y_j(p)
+    sens : Sensitivities          outputs h and sensitivities G at p
+    objective : float             Phi(p) (chi^2 / 2 units when sigma is the sensors' sigma)
+    gradient : ndarray (n_p,)     dPhi/dp
+    lam : ndarray (n_q, n_S)      dPhi/dh_jk = -c_jk (zbar_jk - h_jk) / sigma_k^2
+    """
+
+    p: np.ndarray
+    states: np.ndarray
+    sens: Sensitivities
+    objective: float
+    gradient: np.ndarray
+    lam: np.ndarray
+
+
+@dataclass(frozen=True)
+class ReducedProblem:
+    """A weighted least-squares problem in the reduced space (see the module docstring).
+
+    Build it with :meth:`of`, which computes the data terms once.
+
+    Attributes
+    ----------
+    model : models.Model
+    data : Measurements
+    weights : ndarray (n_S,)    sensor weights w_k
+    sigma : ndarray (n_S,)      sensor standard deviations (same unit as z)
+    p_scale : ndarray (n_p,)    parameter scales s_p (same unit as p) of the Newton steps
+    zbar : ndarray (n_q, n_S)   per-(input, sensor) means (0 where no value)
+    cw : ndarray (n_q, n_S)     weighted counts c_jk = n_jk w_k
+    const : float               within-group scatter Phi_0
+    """
+
+    model: Model
+    data: Measurements
+    weights: np.ndarray
+    sigma: np.ndarray
+    p_scale: np.ndarray
+    zbar: np.ndarray
+    cw: np.ndarray
+    const: float
+
+    @classmethod
+    def of(cls, model: Model, data: Measurements, weights, sigma, p_scale) -> "ReducedProblem":
+        """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
+        w = np.asarray(weights, float)
+        sig = np.asarray(sigma, float)
+        counts = data.counts().astype(float)
+        zbar = np.nan_to_num(data.means(), nan=0.0)
+        cw = counts * w[None, :]
+        dev = np.where(data.mask(), data.z - zbar[None], 0.0)
+        const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
+        return cls(model, data, w, sig, np.asarray(p_scale, float), zbar, cw, const)
+
+    def evaluate(self, p: np.ndarray, states0=None) -> ReducedPoint:
+        """States (solved from the guess ``states0``), sensitivities, Phi and dPhi/dp at p.
+
+        Raises
+        ------
+        StateSolveError
+            When the state equation cannot be solved at p.
+        """
+        Y = solve_states(self.model, p, self.data.inputs, Y0=states0)
+        sens = sensitivities(self.model, p, self.data.inputs, Y)
+        dev = self.zbar - sens.h
+        f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const
+        lam = -self.cw * dev / self.sigma ** 2                      # d f / d h_jk
+        grad = np.einsum("jk,jkp->p", lam, sens.G)
+        return ReducedPoint(p, Y, sens, f, grad, lam)
+
+    def information(self, point: ReducedPoint) -> np.ndarray:
+        """J^T Omega J at a point (see :func:`gauss_newton_information`)."""
+        return gauss_newton_information(point.sens.G, self.cw, self.sigma)
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """The result of :func:`refine`.
+
+    Attributes
+    ----------
+    point : ReducedPoint          the refined point
+    S : ndarray (n_p, n_p)        second-order term of the Hessian at ``point.p``
+    information : ndarray         J^T Omega J at ``point.p``
+    decrement : float             Newton decrement g^T (J^T Omega J + S)^{-1} g (objective units;
+                                  inf when the Hessian is not positive definite)
+    steps : int                   Newton steps taken
+    """
+
+    point: ReducedPoint
+    S: np.ndarray
+    information: np.ndarray
+    decrement: float
+    steps: int
+
+
+def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0) -> Refinement:
+    """Exact reduced Newton steps p <- p - (J^T Omega J + S)^{-1} g from ``start``.
+
+    A step is taken while the Hessian is positive definite, the state solves succeed and the
+    objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
+    1e-12 s_p, after ``max_steps`` steps, or when the Newton decrement g^T H^{-1} g is below
+    ``stop_decrement``.  Steps are clipped to the model's parameter bounds.
+    """
+    model, s_p = problem.model, problem.p_scale
+    lo, up = model.lower, model.upper
+    point = start
+    steps = 0
+    S_terms = None
+    for _ in range(max_steps):
+        F = problem.information(point)
+        S_terms = point.sens.hessians(point.lam[None])[0]
+        try:
+            L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
+        except np.linalg.LinAlgError:
+            break
+        v = np.linalg.solve(L, point.gradient * s_p)
+        if float(v @ v) < stop_decrement:
+            break
+        dp = -s_p * np.linalg.solve(L.T, v)
+        if np.max(np.abs(dp / s_p)) < 1e-13:
+            break                          # converged to round-off: keep p and its terms
+        small = np.max(np.abs(dp / s_p)) < 1e-12
+        p_new = np.clip(point.p + dp, lo, up)
+        try:
+            new = problem.evaluate(p_new, point.states)
+        except StateSolveError:
+            break
+        if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
+            break
+        point = new
+        S_terms = None
+        steps += 1
+        if small:
+            break
+    if S_terms is None:
+        S_terms = point.sens.hessians(point.lam[None])[0]
+    F = problem.information(point)
+    return Refinement(point, S_terms, F, newton_decrement(F + S_terms, point.gradient, s_p), steps)
