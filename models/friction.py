@@ -232,7 +232,7 @@ class PreisachNetwork:
 
 # ---------------------------------------------------------------------------- inverse model
 def _inverse_functions(model):
-    """CasADi Function (y, p, q) -> (E, E_y, E_q, h, h_y) of a single-input model (built per call, not cached)."""
+    """CasADi Function (y, p, q) -> (E, E_y, E_q, h, h_y) of a single-input model (inverse_forces keeps it in model.cache)."""
     y = ca.SX.sym("y", model.n_y)
     p = ca.SX.sym("p", model.n_p)
     q = ca.SX.sym("q", model.n_q_dim)
@@ -314,7 +314,7 @@ def inverse_forces(model, p, z, sensors: Sequence[str], sigma, q_start, tol: flo
     if q0.shape != (z.shape[1],):
         raise FrictionError(f"q_start: expected {z.shape[1]} forces, got {q0.size}")
     p = np.asarray(p, float)
-    fun = _inverse_functions(model)
+    fun = model.cache.get_or_make("friction.inverse", None, lambda: _inverse_functions(model))
     out = np.empty(z.shape[:2])
     for i in range(z.shape[0]):
         y = np.zeros(model.n_y)
