@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from identification import Measurements, alpha_min, alpha_min_two_sample, identify, simulate
+from identification import DataError, Measurements, alpha_min, alpha_min_two_sample, identify, simulate
 from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check)
 from identification.splits import Split, input_range_split, splits_from_scenarios
 from models.contract import Model
@@ -196,10 +196,36 @@ def test_design_from_the_oed_front_door():
     H = simulate(m3, P_TRUE, Q)
     sig = np.array([0.01, 0.02, 0.01])
     data = Measurements(Q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig, sensors=m3.sensors)
-    res = detect(m3, data, PAPER_SPLITS, p0=[0.5, 1.5], design="E")
+    # lines 02-03 first (the OED at the fit on all sensors), then detect on the chosen sensors
+    from oed import select_sensors
+    est = identify(m3, data, [0.5, 1.5])
+    des = select_sensors(m3, data, est.p, criterion="E", n_sensors=m3.n_p, sensor_names=list(m3.sensors))
+    res = detect(m3, data, PAPER_SPLITS, p0=[0.5, 1.5], design=des.sensors,
+                 design_how=f"{des.criterion}-optimal design of {len(des.sensors)} sensors")
     used = res.design[0][1]
     assert len(used) == 2 and "E-optimal" in res.design[0][2]
     assert res.verdicts[m3.name] == "accept"
+
+
+def test_a_criterion_as_design_asks_for_the_oed_first(model):
+    data = campaign(model, 9)
+    for crit in ("E", "D", "s1"):
+        with pytest.raises(DataError, match=r"oed\.select_sensors\(model, data, p, criterion="):
+            detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], design=crit)
+
+
+def test_keywords_and_settings_together_are_an_error(model):
+    data = campaign(model, 10)
+    s = DetectSettings(tol=0.1)
+    with pytest.raises(TypeError, match="settings and tol"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], tol=0.05, settings=s)
+    with pytest.raises(TypeError, match="settings and statistic, normality"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], statistic="paper", normality="override", settings=s)
+    with pytest.raises(TypeError, match="settings: expected DetectSettings"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], settings={"tol": 0.1})
+    res = detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], settings=s)
+    assert res.settings is s and res.decision().tol == 0.1
+    assert detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], tol=0.1).settings == s
 
 
 def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
