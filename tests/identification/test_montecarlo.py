@@ -117,3 +117,38 @@ def test_power_against_a_wrong_model_and_errors(model):
         ModelCampaign(model, [1.0], Q, SIGMA)
     with pytest.raises(ValueError, match="tol"):
         DetectSettings(tol=0.0)
+
+
+def test_validate_keywords_and_settings_together_are_an_error(model):
+    s = MonteCarloSettings(n_rep=2, workers=1, progress=False)
+    common = dict(p_true=P_TRUE, inputs=Q, sigma=SIGMA)
+    with pytest.raises(TypeError, match="settings and n_rep, seed"):
+        validate(model, PAPER_SPLITS[2:3], n_rep=5, seed=3, settings=s, **common)
+    with pytest.raises(TypeError, match="settings and tol"):
+        validate(model, PAPER_SPLITS[2:3], tol=0.1, settings=s, **common)
+    res = validate(model, PAPER_SPLITS[2:3], n_rep=2, workers=1, progress=False, tol=0.1, **common)
+    assert res.n_rep == 2 and res.tol == 0.1
+    assert validate(model, PAPER_SPLITS[2:3], settings=s, **common).tol == 0.05
+
+
+def test_progress_bar_and_timed_steps():
+    import io
+    from identification.progress import Progress
+    out = io.StringIO()
+    p = Progress(True, stream=out, prefix="run: ")
+    with p.step("fit"):
+        pass
+    bar = p.bar(3, "size study")
+    bar.update(3)
+    bar.close()
+    text = out.getvalue()
+    assert "run: fit ...\n" in text and "run: fit done in" in text and "3/3" in text
+    assert set(p.timing) == {"fit"}
+    quiet = io.StringIO()
+    q = Progress(False, stream=quiet)
+    with q.step("fit"):
+        pass
+    b = q.bar(2, "x")
+    b.update(2)
+    b.close()
+    assert quiet.getvalue() == "" and "fit" in q.timing
