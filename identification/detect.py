@@ -518,6 +518,24 @@ def decide(tests: Sequence[SplitTest], tol: float, statistic: str = DEFAULT_STAT
 
 
 # ---------------------------------------------------------------------------- result
+class _Notes:
+    """Numbered notes of a summary: ``add(text)`` appends and returns its marker "[k]"."""
+
+    def __init__(self, texts=()):
+        self.texts = list(texts)
+
+    def add(self, text: str) -> str:
+        self.texts.append(text)
+        return f"[{len(self.texts)}]"
+
+
+def _alpha_mark(a: float, threshold: float) -> str:
+    """alpha_min in % for the summary table, "*" when below the per-test level ("n/a" when NaN)."""
+    if not np.isfinite(a):
+        return "n/a"
+    return f"{100 * a:.3g}" + ("*" if a < threshold else "") if a >= 1e-4 else "<0.01*"
+
+
 @dataclass(frozen=True, eq=False)
 class DetectionResult:
     """Immutable result of :func:`detect`.
@@ -576,12 +594,7 @@ class DetectionResult:
         """Per model: a table of the three statistics per split, the verdicts, numbered notes."""
         s = self.settings
         n = len(self.splits)
-        notes = list(self.notes)
-
-        def note(text):
-            notes.append(text)
-            return f"[{len(notes)}]"
-
+        notes = _Notes(self.notes)
         explain = {"likelihood_ratio": "(likelihood ratio: pooled fit vs separate calibration and validation fits)",
                    "two_sample": "(Wald on p_val - p_cal with C_cal + C_val)",
                    "paper": "(paper: p_val in G(alpha, p_cal, C_cal))"}
@@ -589,7 +602,24 @@ class DetectionResult:
                  f"per-test level TOL/n_tests = {100 * s.tol / n:.4g} %",
                  f"decision statistic: {s.statistic} {explain[s.statistic]}, correction: {s.correction}",
                  ""]
-        seen = []
+        lines += self._normality_lines(notes)
+        lines += [f"sensors for {mname}: {', '.join(used)} ({how})" for mname, used, how in self.design]
+        if self.design:
+            lines.append("")
+        for mname in self.models:
+            lines += self._model_lines(mname, notes)
+        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected (LR, 2-sample, paper); "
+                     ">> = the decision")
+        if s.statistic == "paper":
+            notes.add("the paper's statistic ignores the validation estimate's covariance C_val; under a correct "
+                      "model its size exceeds TOL (see identification.montecarlo)")
+        if notes.texts:
+            lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes.texts, 1)]
+        return "\n".join(lines)
+
+    def _normality_lines(self, notes: "_Notes") -> list:
+        """The summary's normality-gate blocks, one per distinct check."""
+        lines, seen = [], []
         for mname, chk in self.normality:
             if any(chk is c for c in seen):
                 continue
@@ -598,57 +628,46 @@ class DetectionResult:
                     f"{', '.join(f'z{b + 1}-z{a + 1}' for a, b in chk.pairs) or '(none)'} at {100 * chk.level:g} %"
                     + (f" [data of {mname}]" if len(self.models) > 1 else ""))
             status = "passed" if chk.passed else ("FAILED, overridden by the user "
-                                                  + note("normality='override': the Gaussian error assumption "
-                                                         "failed its check; the p-values below rely on it")
+                                                  + notes.add("normality='override': the Gaussian error assumption "
+                                                              "failed its check; the p-values below rely on it")
                                                   if chk.overridden else "FAILED")
             lines += [head + f": {status}", chk.table()]
             if chk.note:
-                lines[-1] += " " + note(chk.note)
+                lines[-1] += " " + notes.add(chk.note)
             lines.append("")
-        for mname, used, how in self.design:
-            lines.append(f"sensors for {mname}: {', '.join(used)} ({how})")
-        if self.design:
-            lines.append("")
-        thr = s.tol / n
-        for mname in self.models:
-            lines.append(f"Model {mname}")
-            w = max(10, max(len(sp.name) for sp in self.splits))
-            lines.append(f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha LR %':>10} "
-                         f"{'alpha 2-sample %':>16} {'alpha paper %':>13}  Bonf. LR/2s/paper  Holm LR/2s/paper")
-            dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
-            for t in self.tests_of(mname):
-                if t.ok:
-                    def mark(stat):
-                        a = t.alpha(stat)
-                        if not np.isfinite(a):
-                            return "n/a"
-                        return f"{100 * a:.3g}" + ("*" if a < thr else "") if a >= 1e-4 else "<0.01*"
-                    fl = ["".join("R" if t.split in dec[(st, co)].flagged else "-" for st in STATISTICS)
-                          for co in CORRECTIONS]
-                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {mark('likelihood_ratio'):>10} "
-                                 f"{mark('two_sample'):>16} {mark('paper'):>13}  {fl[0]:>17}  {fl[1]:>16}")
-                    if t.lr_error:
-                        lines[-1] += " " + note(f"{mname}, {t.split}: likelihood ratio not computed: {t.lr_error}")
-                    for nt in t.notes:
-                        lines[-1] += " " + note(f"{mname}, {t.split}: {nt}")
-                else:
-                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>10} {'failed':>16} "
-                                 f"{'failed':>13}  " + note(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
-            for st in STATISTICS:
-                for co in CORRECTIONS:
-                    d = dec[(st, co)]
-                    primary = st == s.statistic and co == s.correction
-                    tag = f"{d.decision.upper()}" if primary else d.decision
-                    lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({d.reason})")
-            lines.append("")
-        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected (LR, 2-sample, paper); "
-                     ">> = the decision")
-        if s.statistic == "paper":
-            note("the paper's statistic ignores the validation estimate's covariance C_val; under a correct model "
-                 "its size exceeds TOL (see identification.montecarlo)")
-        if notes:
-            lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return lines
+
+    def _model_lines(self, mname: str, notes: "_Notes") -> list:
+        """The summary's block of one model: a row per split, then every decision."""
+        s = self.settings
+        thr = s.tol / len(self.splits)
+        w = max(10, max(len(sp.name) for sp in self.splits))
+        lines = [f"Model {mname}",
+                 f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha LR %':>10} "
+                 f"{'alpha 2-sample %':>16} {'alpha paper %':>13}  Bonf. LR/2s/paper  Holm LR/2s/paper"]
+        dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
+        for t in self.tests_of(mname):
+            if not t.ok:
+                lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>10} {'failed':>16} "
+                             f"{'failed':>13}  " + notes.add(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
+                continue
+            m = {st: _alpha_mark(t.alpha(st), thr) for st in STATISTICS}
+            fl = ["".join("R" if t.split in dec[(st, co)].flagged else "-" for st in STATISTICS)
+                  for co in CORRECTIONS]
+            lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {m['likelihood_ratio']:>10} "
+                         f"{m['two_sample']:>16} {m['paper']:>13}  {fl[0]:>17}  {fl[1]:>16}")
+            if t.lr_error:
+                lines[-1] += " " + notes.add(f"{mname}, {t.split}: likelihood ratio not computed: {t.lr_error}")
+            for nt in t.notes:
+                lines[-1] += " " + notes.add(f"{mname}, {t.split}: {nt}")
+        for st in STATISTICS:
+            for co in CORRECTIONS:
+                d = dec[(st, co)]
+                primary = st == s.statistic and co == s.correction
+                tag = f"{d.decision.upper()}" if primary else d.decision
+                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({d.reason})")
+        lines.append("")
+        return lines
 
     def __repr__(self):
         v = ", ".join(f"{m}: {d}" for m, d in self.verdicts.items())
