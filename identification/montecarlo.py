@@ -296,59 +296,80 @@ def _chunks(n_rep, seed, n_workers, chunk_size):
     return [items[i:i + size] for i in range(0, n_rep, size)]
 
 
-def _execute(task: _Task, settings: MonteCarloSettings, desc: str):
+class _Collector:
+    """Replication results by index; every chunk advances the progress bar."""
+
+    def __init__(self, n_rep: int, bar):
+        self.out = [None] * n_rep
+        self.bar = bar
+
+    def add(self, res: list) -> None:
+        for i, r in res:
+            self.out[i] = r
+        self.bar.update(len(res))
+
+
+def _run_dask(task: _Task, settings: MonteCarloSettings, got: _Collector) -> tuple:
+    """Chunks on a Dask cluster (the task scattered once to every worker); returns (backend text, workers)."""
+    from dask.distributed import Client, as_completed
+    client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
+    try:
+        n_w = max(1, len(client.scheduler_info().get("workers", {})))
+        chunks = _chunks(len(got.out), settings.seed, n_w, settings.chunk_size)
+        tf = client.scatter(task, broadcast=True)
+        futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
+        for fut in as_completed(futs):
+            got.add(fut.result())
+        return f"dask ({client.scheduler.address}, {n_w} workers)", n_w
+    finally:
+        if client is not settings.scheduler:
+            client.close()
+
+
+def _run_serial(task: _Task, chunks: list, got: _Collector) -> str:
+    """Chunks in this process (worker state installed for the run, JIT restored after)."""
+    prev = set_jit(task.jit)
+    try:
+        WORKER.install(task)
+        for ch in chunks:
+            got.add(_run_chunk(None, ch))
+    finally:
+        set_jit(prev)
+        WORKER.clear()
+    return "serial (this process)"
+
+
+def _run_processes(task: _Task, chunks: list, n_w: int, got: _Collector) -> str:
+    """Chunks on ``n_w`` spawned local processes (each installs the task once, :func:`_init_worker`)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
+                             initializer=_init_worker, initargs=(task,)) as ex:
+        futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
+        for fut in as_completed(futs):
+            got.add(fut.result())
+    return f"local processes ({n_w} workers, spawn)"
+
+
+def _execute(task: _Task, settings: MonteCarloSettings, desc: str) -> tuple:
     """Run every replication; returns (results ordered by index, backend text, workers)."""
     n_rep = int(settings.n_rep)
-    out = [None] * n_rep
-    prog = Progress(settings.progress).bar(n_rep, desc)
+    bar = Progress(settings.progress).bar(n_rep, desc)
+    got = _Collector(n_rep, bar)
     try:
         if settings.scheduler is not None:
-            from dask.distributed import Client, as_completed
-            client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
-            try:
-                n_w = max(1, len(client.scheduler_info().get("workers", {})))
-                chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
-                tf = client.scatter(task, broadcast=True)
-                futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
-                for fut in as_completed(futs):
-                    res = fut.result()
-                    for i, r in res:
-                        out[i] = r
-                    prog.update(len(res))
-                backend = f"dask ({client.scheduler.address}, {n_w} workers)"
-            finally:
-                if client is not settings.scheduler:
-                    client.close()
-            return out, backend, n_w
-        n_w = int(settings.workers or os.cpu_count() or 1)
-        chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
-        if n_w == 1:
-            prev = set_jit(task.jit)
-            try:
-                WORKER.install(task)
-                for ch in chunks:
-                    res = _run_chunk(None, ch)
-                    for i, r in res:
-                        out[i] = r
-                    prog.update(len(res))
-            finally:
-                set_jit(prev)
-                WORKER.clear()
-            return out, "serial (this process)", 1
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed as f_completed
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-        with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
-                                 initializer=_init_worker, initargs=(task,)) as ex:
-            futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
-            for fut in f_completed(futs):
-                res = fut.result()
-                for i, r in res:
-                    out[i] = r
-                prog.update(len(res))
-        return out, f"local processes ({n_w} workers, spawn)", n_w
+            backend, n_w = _run_dask(task, settings, got)
+        else:
+            n_w = int(settings.workers or os.cpu_count() or 1)
+            chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
+            if n_w == 1:
+                backend = _run_serial(task, chunks, got)
+            else:
+                backend = _run_processes(task, chunks, n_w, got)
     finally:
-        prog.close()
+        bar.close()
+    return got.out, backend, n_w
 
 
 # ---------------------------------------------------------------------------- result
@@ -570,6 +591,16 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
 
 
 # ---------------------------------------------------------------------------- drivers
+def _per_model(what: str, value, names: tuple) -> tuple:
+    """One value per model name: ``value[name]`` from a mapping (DataError when one is missing), else ``value``."""
+    if isinstance(value, Mapping):
+        missing = [n for n in names if n not in value]
+        if missing:
+            raise DataError(f"{what}: no entry for model(s) {missing}")
+        return tuple(value[n] for n in names)
+    return tuple(value for _ in names)
+
+
 def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, weights=None, truth=None,
                     kind: str = "power", settings: MonteCarloSettings | None = None,
                     description: str = "") -> MonteCarloResult:
@@ -599,22 +630,13 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     splits = tuple(splits)
     if not splits:
         raise SplitError("splits: at least one split is needed")
-
-    def per(what, v):
-        if isinstance(v, Mapping):
-            missing = [n for n in names if n not in v]
-            if missing:
-                raise DataError(f"{what}: no entry for model(s) {missing}")
-            return tuple(v[n] for n in names)
-        return tuple(v for _ in names)
-
-    p0s = tuple(np.asarray(v, float).ravel() for v in per("p0", p0))
+    p0s = tuple(np.asarray(v, float).ravel() for v in _per_model("p0", p0, names))
     for n, m, v in zip(names, models.values(), p0s):
         if v.shape != (m.n_p,):
             raise DataError(f"p0[{n!r}]: expected {m.n_p} values, got {v.size}")
-    tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in per("truth", truth))
+    tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
     task = _Task(token=uuid.uuid4().hex, names=names, models=tuple(models.values()), p0s=p0s,
-                 weights=per("weights", weights), splits=splits, generator=generator, truth=tr,
+                 weights=_per_model("weights", weights, names), splits=splits, generator=generator, truth=tr,
                  detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit))
     # fail early (in this process) on a generator or split that does not fit the models
     probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
