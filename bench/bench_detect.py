@@ -31,13 +31,14 @@ import numpy as np  # noqa: E402
 
 from identification.detect import DetectSettings  # noqa: E402
 from identification.montecarlo import MonteCarloSettings, size_study  # noqa: E402
-from identification.splits import press_scenarios  # noqa: E402
-from models.press import Q_PAPER, press_model  # noqa: E402
+from identification.splits import splits_from_scenarios  # noqa: E402
+from models.press import PRESS_SCENARIOS, Q_PAPER, press_model  # noqa: E402
 
 #: the paper's sensor sigmas (section 5), m -> mm
 SIGMA_PAPER_MM = np.array([1.518e-05, 4.895e-06, 3.904e-06]) * 1e3
 WEIGHTS_110 = np.array([1.0, 1.0, 0.0])      # D_y, F_x (the paper's E-optimal pair)
 P0 = np.array([450.0, 550.0])                 # start values of every fit (N/mm)
+PAPER_SPLITS = splits_from_scenarios(PRESS_SCENARIOS, len(Q_PAPER))   # the paper's four scenarios
 
 
 def _machine() -> str:
@@ -53,7 +54,7 @@ def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progres
     model = press_model()
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
                                   detect=DetectSettings(tol=0.05, normality="override"))
-    return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, press_scenarios(),
+    return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, PAPER_SPLITS,
                       p0=P0, n_M=2, weights=WEIGHTS_110, settings=settings, name="M1")
 
 
@@ -154,7 +155,7 @@ def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
         models = {"M1": press_model()}
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
                                   detect=DetectSettings(tol=0.05, normality="override"))
-    return power_study(models, PrototypeCampaign(names=tuple(models)), press_scenarios(), P0, WEIGHTS_110, settings,
+    return power_study(models, PrototypeCampaign(names=tuple(models)), PAPER_SPLITS, P0, WEIGHTS_110, settings,
                        description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
                                    "after a run-in cycle, seed per replication), sigma = the paper's fixed values")
 
@@ -189,7 +190,7 @@ def run_press():
              for n in models}
     d1 = next(iter(datas.values()))
     print(f"held-out series {[i + 1 for i in pt.TEST_SERIES]}, composed sigma (mm): {np.round(d1.sigma, 6).tolist()}")
-    res = detect(models, datas, press_scenarios(), P0, design=["D_y", "F_x"], normality="check")
+    res = detect(models, datas, PAPER_SPLITS, P0, design=["D_y", "F_x"], normality="check")
     print(res.summary())
 
 

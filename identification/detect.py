@@ -40,6 +40,7 @@ of a sensor is std(differences) / sqrt(2) (same unit as z).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -51,7 +52,7 @@ from scipy import special, stats
 
 from models.contract import Model
 from .errors import DataError, IdentificationError
-from .estimator import IdentifySettings, identify, information_contributions
+from .estimator import IdentifySettings, identify
 from .measurements import Measurements
 from .regions import CovarianceError, mahalanobis2
 from .splits import Split, SplitError
@@ -102,7 +103,6 @@ class DetectSettings:
     normality : str            "check" (raise NormalityError on failure) or "override" (record only)
     normality_level : float    level of each per-sensor Shapiro-Wilk test (paper: 5 %)
     covariance : str           "second_order" (paper eq. 7) or "gauss_newton"
-    n_design_sensors : int | None  sensors chosen by the OED when design is a criterion (default n_p)
     identify : IdentifySettings | None  passed to identify()
     """
 
@@ -112,7 +112,6 @@ class DetectSettings:
     normality: str = "check"
     normality_level: float = 0.05
     covariance: str = "second_order"
-    n_design_sensors: int | None = None
     identify: IdentifySettings | None = None
 
     def __post_init__(self):
@@ -516,6 +515,24 @@ def decide(tests: Sequence[SplitTest], tol: float, statistic: str = DEFAULT_STAT
 
 
 # ---------------------------------------------------------------------------- result
+class _Notes:
+    """Numbered notes of a summary: ``add(text)`` appends and returns its marker "[k]"."""
+
+    def __init__(self, texts=()):
+        self.texts = list(texts)
+
+    def add(self, text: str) -> str:
+        self.texts.append(text)
+        return f"[{len(self.texts)}]"
+
+
+def _alpha_mark(a: float, threshold: float) -> str:
+    """alpha_min in % for the summary table, "*" when below the per-test level ("n/a" when NaN)."""
+    if not np.isfinite(a):
+        return "n/a"
+    return f"{100 * a:.3g}" + ("*" if a < threshold else "") if a >= 1e-4 else "<0.01*"
+
+
 @dataclass(frozen=True, eq=False)
 class DetectionResult:
     """Immutable result of :func:`detect`.
@@ -574,12 +591,7 @@ class DetectionResult:
         """Per model: a table of the three statistics per split, the verdicts, numbered notes."""
         s = self.settings
         n = len(self.splits)
-        notes = list(self.notes)
-
-        def note(text):
-            notes.append(text)
-            return f"[{len(notes)}]"
-
+        notes = _Notes(self.notes)
         explain = {"likelihood_ratio": "(likelihood ratio: pooled fit vs separate calibration and validation fits)",
                    "two_sample": "(Wald on p_val - p_cal with C_cal + C_val)",
                    "paper": "(paper: p_val in G(alpha, p_cal, C_cal))"}
@@ -587,7 +599,24 @@ class DetectionResult:
                  f"per-test level TOL/n_tests = {100 * s.tol / n:.4g} %",
                  f"decision statistic: {s.statistic} {explain[s.statistic]}, correction: {s.correction}",
                  ""]
-        seen = []
+        lines += self._normality_lines(notes)
+        lines += [f"sensors for {mname}: {', '.join(used)} ({how})" for mname, used, how in self.design]
+        if self.design:
+            lines.append("")
+        for mname in self.models:
+            lines += self._model_lines(mname, notes)
+        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected (LR, 2-sample, paper); "
+                     ">> = the decision")
+        if s.statistic == "paper":
+            notes.add("the paper's statistic ignores the validation estimate's covariance C_val; under a correct "
+                      "model its size exceeds TOL (see identification.montecarlo)")
+        if notes.texts:
+            lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes.texts, 1)]
+        return "\n".join(lines)
+
+    def _normality_lines(self, notes: "_Notes") -> list:
+        """The summary's normality-gate blocks, one per distinct check."""
+        lines, seen = [], []
         for mname, chk in self.normality:
             if any(chk is c for c in seen):
                 continue
@@ -596,104 +625,99 @@ class DetectionResult:
                     f"{', '.join(f'z{b + 1}-z{a + 1}' for a, b in chk.pairs) or '(none)'} at {100 * chk.level:g} %"
                     + (f" [data of {mname}]" if len(self.models) > 1 else ""))
             status = "passed" if chk.passed else ("FAILED, overridden by the user "
-                                                  + note("normality='override': the Gaussian error assumption "
-                                                         "failed its check; the p-values below rely on it")
+                                                  + notes.add("normality='override': the Gaussian error assumption "
+                                                              "failed its check; the p-values below rely on it")
                                                   if chk.overridden else "FAILED")
             lines += [head + f": {status}", chk.table()]
             if chk.note:
-                lines[-1] += " " + note(chk.note)
+                lines[-1] += " " + notes.add(chk.note)
             lines.append("")
-        for mname, used, how in self.design:
-            lines.append(f"sensors for {mname}: {', '.join(used)} ({how})")
-        if self.design:
-            lines.append("")
-        thr = s.tol / n
-        for mname in self.models:
-            lines.append(f"Model {mname}")
-            w = max(10, max(len(sp.name) for sp in self.splits))
-            lines.append(f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha LR %':>10} "
-                         f"{'alpha 2-sample %':>16} {'alpha paper %':>13}  Bonf. LR/2s/paper  Holm LR/2s/paper")
-            dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
-            for t in self.tests_of(mname):
-                if t.ok:
-                    def mark(stat):
-                        a = t.alpha(stat)
-                        if not np.isfinite(a):
-                            return "n/a"
-                        return f"{100 * a:.3g}" + ("*" if a < thr else "") if a >= 1e-4 else "<0.01*"
-                    fl = ["".join("R" if t.split in dec[(st, co)].flagged else "-" for st in STATISTICS)
-                          for co in CORRECTIONS]
-                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {mark('likelihood_ratio'):>10} "
-                                 f"{mark('two_sample'):>16} {mark('paper'):>13}  {fl[0]:>17}  {fl[1]:>16}")
-                    if t.lr_error:
-                        lines[-1] += " " + note(f"{mname}, {t.split}: likelihood ratio not computed: {t.lr_error}")
-                    for nt in t.notes:
-                        lines[-1] += " " + note(f"{mname}, {t.split}: {nt}")
-                else:
-                    lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>10} {'failed':>16} "
-                                 f"{'failed':>13}  " + note(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
-            for st in STATISTICS:
-                for co in CORRECTIONS:
-                    d = dec[(st, co)]
-                    primary = st == s.statistic and co == s.correction
-                    tag = f"{d.decision.upper()}" if primary else d.decision
-                    lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({d.reason})")
-            lines.append("")
-        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected (LR, 2-sample, paper); "
-                     ">> = the decision")
-        if s.statistic == "paper":
-            note("the paper's statistic ignores the validation estimate's covariance C_val; under a correct model "
-                 "its size exceeds TOL (see identification.montecarlo)")
-        if notes:
-            lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return lines
+
+    def _model_lines(self, mname: str, notes: "_Notes") -> list:
+        """The summary's block of one model: a row per split, then every decision."""
+        s = self.settings
+        thr = s.tol / len(self.splits)
+        w = max(10, max(len(sp.name) for sp in self.splits))
+        lines = [f"Model {mname}",
+                 f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha LR %':>10} "
+                 f"{'alpha 2-sample %':>16} {'alpha paper %':>13}  Bonf. LR/2s/paper  Holm LR/2s/paper"]
+        dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
+        for t in self.tests_of(mname):
+            if not t.ok:
+                lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>10} {'failed':>16} "
+                             f"{'failed':>13}  " + notes.add(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
+                continue
+            m = {st: _alpha_mark(t.alpha(st), thr) for st in STATISTICS}
+            fl = ["".join("R" if t.split in dec[(st, co)].flagged else "-" for st in STATISTICS)
+                  for co in CORRECTIONS]
+            lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {m['likelihood_ratio']:>10} "
+                         f"{m['two_sample']:>16} {m['paper']:>13}  {fl[0]:>17}  {fl[1]:>16}")
+            if t.lr_error:
+                lines[-1] += " " + notes.add(f"{mname}, {t.split}: likelihood ratio not computed: {t.lr_error}")
+            for nt in t.notes:
+                lines[-1] += " " + notes.add(f"{mname}, {t.split}: {nt}")
+        for st in STATISTICS:
+            for co in CORRECTIONS:
+                d = dec[(st, co)]
+                primary = st == s.statistic and co == s.correction
+                tag = f"{d.decision.upper()}" if primary else d.decision
+                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({d.reason})")
+        lines.append("")
+        return lines
 
     def __repr__(self):
         v = ", ".join(f"{m}: {d}" for m, d in self.verdicts.items())
         return f"DetectionResult({v}; {len(self.splits)} splits, statistic={self.settings.statistic})"
 
 
-# ---------------------------------------------------------------------------- design (lines 02-03)
-def _design_weights(model, data, p0, design, settings, notes):
-    """Sensor weights from design: None, weights, sensor names, or an OED criterion ("A", "D", "E")."""
-    if design is None:
-        return None, "all sensors given"
-    if isinstance(design, str):
-        try:
-            from oed.design import select_sensors_from_information  # lazy: oed is optional here
-        except ImportError as exc:
-            raise DataError(f"design={design!r}: the OED front door oed.design.select_sensors_from_information "
-                            f"is not available ({exc}); pass sensor names or weights instead") from None
-        from .estimator import identify as _identify
-        est = _identify(model, data, p0, settings=settings.identify)
-        F, S = information_contributions(model, data, est.p, states=est.states)
-        n_sel = settings.n_design_sensors or model.n_p
-        ret = select_sensors_from_information(F, S, criterion=design, n_sensors=n_sel, sensor_names=list(model.sensors))
-        w = None
-        for attr in ("w", "weights", "design"):
-            if hasattr(ret, attr):
-                w = getattr(ret, attr)
-                break
-        w = np.asarray(ret if w is None else w, float).ravel()
-        if w.shape != (model.n_S,):
-            raise DataError(f"design={design!r}: the OED returned {w.size} weights for {model.n_S} sensors")
-        return w, f"{design}-optimal design of {n_sel} sensors from the initial fit on all sensors (lines 02-03)"
-    items = list(design)
-    if items and all(isinstance(x, str) for x in items):
-        unknown = [x for x in items if x not in model.sensors]
-        if unknown:
-            raise DataError(f"design: unknown sensor(s) {unknown}; the model has {list(model.sensors)}")
-        return np.array([1.0 if s in items else 0.0 for s in model.sensors]), "sensor names given"
-    try:
-        w = np.asarray(items, float)
-    except (TypeError, ValueError):
-        raise DataError(f"design: expected None, a criterion name, sensor names or weights, got {design!r}") from None
-    if w.shape != (model.n_S,):
-        raise DataError(f"design: expected {model.n_S} sensor weights, got {w.size}")
-    return w, "sensor weights given"
+# ---------------------------------------------------------------------------- detect: validation
+def _detect_settings(settings: DetectSettings | None, **given) -> DetectSettings:
+    """The settings of a run: ``settings``, or the keywords given (None = the DetectSettings default).
+
+    Raises TypeError when ``settings`` and a keyword it holds are both given.
+    """
+    given = {k: v for k, v in given.items() if v is not None}
+    if settings is None:
+        return DetectSettings(**given)
+    if not isinstance(settings, DetectSettings):
+        raise TypeError(f"settings: expected DetectSettings, got {type(settings).__name__}")
+    if given:
+        raise TypeError(f"settings and {', '.join(given)}: give the keyword(s) inside settings "
+                        f"(dataclasses.replace(settings, {', '.join(f'{k}=...' for k in given)})), not both")
+    return settings
 
 
-# ---------------------------------------------------------------------------- main entry
+def _checked_splits(splits) -> tuple:
+    """The splits as a non-empty tuple of Split objects with unique names (SplitError, TypeError)."""
+    splits = (splits,) if isinstance(splits, Split) else tuple(splits)
+    if not splits:
+        raise SplitError("splits: at least one split (test scenario) is needed")
+    for sp in splits:
+        if not isinstance(sp, Split):
+            raise TypeError(f"splits: expected Split objects, got {type(sp).__name__}")
+    names = [sp.name for sp in splits]
+    if len(set(names)) != len(names):
+        raise SplitError(f"splits: names must be unique, got {names}")
+    return splits
+
+
+def _checked_models(model) -> dict:
+    """{name: Model} from one Model or a non-empty mapping of them (TypeError, DataError)."""
+    if isinstance(model, Mapping):
+        models = dict(model)
+        if not models:
+            raise DataError("model: the mapping of models is empty")
+    elif isinstance(model, Model):
+        models = {model.name: model}
+    else:
+        raise TypeError(f"model: expected a models.Model or a mapping of them, got {type(model).__name__}")
+    for name, m in models.items():
+        if not isinstance(m, Model):
+            raise TypeError(f"model[{name!r}]: expected a models.Model, got {type(m).__name__}")
+    return models
+
+
 def _as_mapping(what, value, names):
     if isinstance(value, Mapping):
         missing = [n for n in names if n not in value]
@@ -703,9 +727,131 @@ def _as_mapping(what, value, names):
     return {n: value for n in names}
 
 
-def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, statistic: str = DEFAULT_STATISTIC,
-           correction: str = "bonferroni", weights=None, design=None, normality: str = "check",
-           settings: DetectSettings | None = None) -> DetectionResult:
+def _checked_design(design, weights) -> None:
+    """``design`` is None, sensor names or weights, exclusive with ``weights`` (DataError)."""
+    if weights is not None and design is not None:
+        raise DataError("weights, design: give one of them, not both")
+    if isinstance(design, str):
+        raise DataError(f"design={design!r}: detect takes the design as sensor names or weights, not a criterion "
+                        "or a single string; choose the sensors first with oed.select_sensors(model, data, p, "
+                        f"criterion={design!r}) and pass the result's .sensors (or .weights) as design")
+
+
+def _checked_data(name: str, data, splits: tuple) -> Measurements:
+    """The campaign of one model, checked against every split's indices (TypeError, SplitError)."""
+    if not isinstance(data, Measurements):
+        raise TypeError(f"measurements[{name!r}]: expected an identification.Measurements, got {type(data).__name__}")
+    for sp in splits:
+        sp.check(data.n_q, data.n_M)
+    return data
+
+
+def _start_values(name: str, p0, model: Model) -> np.ndarray:
+    """p0 of one model as a float vector (n_p,) (DataError naming the model)."""
+    try:
+        p0v = np.asarray(p0, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"p0[{name!r}]: not numeric: {p0!r}") from None
+    if p0v.shape != (model.n_p,):
+        raise DataError(f"p0[{name!r}]: expected {model.n_p} start values ({', '.join(model.param_names)}), "
+                        f"got {p0v.size}")
+    return p0v
+
+
+# ---------------------------------------------------------------------------- detect: design (lines 02-03)
+def _design_weights(model: Model, data: Measurements, design, weights, design_how: str | None) -> tuple:
+    """(sensor weights (n_S,) or None for all sensors, how they were chosen) from ``design`` or ``weights``."""
+    if design is None:
+        if weights is None:
+            return None, design_how or "all sensors given"
+        return data.sensor_weights(weights), design_how or "sensor weights given"
+    items = list(design)
+    if items and all(isinstance(x, str) for x in items):
+        unknown = [x for x in items if x not in model.sensors]
+        if unknown:
+            raise DataError(f"design: unknown sensor(s) {unknown}; the model has {list(model.sensors)}")
+        return np.array([1.0 if s in items else 0.0 for s in model.sensors]), design_how or "sensor names given"
+    try:
+        w = np.asarray(items, float)
+    except (TypeError, ValueError):
+        raise DataError(f"design: expected None, sensor names or weights, got {design!r}") from None
+    if w.shape != (model.n_S,):
+        raise DataError(f"design: expected {model.n_S} sensor weights, got {w.size}")
+    return w, design_how or "sensor weights given"
+
+
+def _check_split_sizes(splits: tuple, data: Measurements, model: Model, w) -> None:
+    """Every set of every split holds at least n_p values on the selected sensors (SplitError)."""
+    n_sel = int(np.count_nonzero(data.sensor_weights(w) > 0))
+    for sp in splits:
+        sp.check(data.n_q, data.n_M, model.n_p, n_sel)
+
+
+# ---------------------------------------------------------------------------- detect: normality gate (line 05)
+class _NormalityGate:
+    """Line 05 once per distinct campaign z and sensor selection: :func:`normality_check`, then
+    raise :class:`NormalityError` (normality="check") or record the override in ``notes``."""
+
+    def __init__(self, settings: DetectSettings, notes: list):
+        self.settings = settings
+        self.notes = notes
+        self.seen: list = []          # (z, selection weights, NormalityCheck) already checked
+
+    def check(self, data: Measurements, w) -> NormalityCheck:
+        wk = data.sensor_weights(w)
+        found = None
+        for z, w_seen, chk in self.seen:
+            if z is data.z or (z.shape == data.z.shape and np.array_equal(z, data.z, equal_nan=True)):
+                if np.array_equal(w_seen, wk):
+                    found = chk
+        if found is not None:
+            return found
+        chk = normality_check(data, self.settings.normality_level, w)
+        if not chk.passed:
+            chk = self._failed(chk)
+        self.seen.append((data.z, wk, chk))
+        return chk
+
+    def _failed(self, chk: NormalityCheck) -> NormalityCheck:
+        bad = [s for k, s in enumerate(chk.sensors) if s in chk.gated and not chk.pvalue[k] >= chk.level]
+        msg = (f"normality gate (Algorithm 1, line 05) failed for sensor(s) {', '.join(bad)}: Shapiro-Wilk "
+               f"p-value(s) {', '.join(f'{100 * chk.pvalue[chk.sensors.index(s)]:.3g} %' for s in bad)} "
+               f"< {100 * chk.level:g} % on the differences of repeated series"
+               + (f" ({chk.note})" if chk.note else "")
+               + "; acquire new data, or pass normality='override' to continue on record")
+        if self.settings.normality == "check":
+            raise NormalityError(msg, chk)
+        self.notes.append(f"override: {msg}")
+        return dataclasses.replace(chk, passed=False, overridden=True)
+
+
+# ---------------------------------------------------------------------------- detect: fits and decisions
+def _start_states(model: Model, p0: np.ndarray, data: Measurements):
+    """States (n_q, n_y) at p0 for every input of ``data`` (warm start of the fits), or None."""
+    try:
+        return solve_states(model, p0, data.inputs) if data.d_q == model.n_q_dim else None
+    except IdentificationError:
+        return None          # each fit then reports the failing state solve itself
+
+
+def _decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
+    """(primary decision per model, every model x statistic x correction decision) (lines 09-17)."""
+    all_dec, primary = [], []
+    for name in names:
+        mt = [t for t in tests if t.model == name]
+        for st in STATISTICS:
+            for co in CORRECTIONS:
+                d = decide(mt, settings.tol, st, co)
+                all_dec.append(d)
+                if st == settings.statistic and co == settings.correction:
+                    primary.append(d)
+    return tuple(primary), tuple(all_dec)
+
+
+# ---------------------------------------------------------------------------- main entry
+def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None = None, statistic: str | None = None,
+           correction: str | None = None, weights=None, design=None, normality: str | None = None,
+           settings: DetectSettings | None = None, design_how: str | None = None) -> DetectionResult:
     r"""Algorithm 1: is the model rejected by calibration / validation tests?
 
     For each split: p_cal, C_cal and p_val, C_val by :func:`identify` (eqs. 3, 7), then
@@ -719,6 +865,10 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
     statistic is below TOL / n_tests (Bonferroni; Holm reported as well).  All splits are
     evaluated (the paper stops at the first rejection; the verdict is the same).
 
+    Steps: validate the arguments, the sensor design (lines 02-03, given), the normality gate
+    (line 05), the split fits and statistics (lines 06-08, :func:`run_split_tests`), the
+    decisions (lines 09-17, :func:`decide`), the result.
+
     Parameters
     ----------
     model : models.Model or mapping {name: Model}
@@ -727,23 +877,28 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
         The campaign (per model when their inputs differ).  sigma per sensor should be known
         (the paper fixes it); with sigma=None it is estimated and the chi^2 law is approximate.
     splits : sequence of Split
-        The n_tests scenarios (e.g. :func:`identification.splits.press_scenarios`).
+        The n_tests scenarios (e.g. ``splits_from_scenarios(models.press.PRESS_SCENARIOS, 29)``).
     p0 : array_like (n_p,) or mapping {name: array}
         Start values of every fit.
-    tol : float
-        Family-wise level TOL in (0, 1).
-    statistic : {"likelihood_ratio", "two_sample", "paper"}
-        Which alpha_min decides (all three are always reported).
-    correction : {"bonferroni", "holm"}
+    tol : float, optional
+        Family-wise level TOL in (0, 1) (default :class:`DetectSettings`' 5 %).
+    statistic : {"likelihood_ratio", "two_sample", "paper"}, optional
+        Which alpha_min decides (all three are always reported; default likelihood_ratio).
+    correction : {"bonferroni", "holm"}, optional
     weights : array_like (n_S,), optional
         Sensor weights (0/1) of the fits; exclusive with ``design``.
-    design : None, str, sequence of str or array
-        Lines 02-03: an OED criterion ("A", "D", "E"; needs :mod:`oed`), sensor names, or weights.
-    normality : {"check", "override"}
-        "check" raises :class:`NormalityError` when a selected sensor fails the Shapiro-Wilk gate;
-        "override" records the failure and continues.
+    design : None, sequence of str or array_like (n_S,)
+        Lines 02-03, chosen beforehand: sensor names or weights.  An optimal design is chosen
+        with ``oed.select_sensors(model, data, p, criterion=...)``; pass its ``sensors``.
+    normality : {"check", "override"}, optional
+        "check" (default) raises :class:`NormalityError` when a selected sensor fails the
+        Shapiro-Wilk gate; "override" records the failure and continues.
     settings : DetectSettings, optional
-        Overrides the keyword defaults above (tol, statistic, correction, normality).
+        All settings at once; exclusive with tol, statistic, correction and normality.
+    design_how : str, optional
+        How the design was chosen (e.g. "E-optimal design of 2 sensors"), recorded in
+        ``DetectionResult.design``; default "sensor names given", "sensor weights given" or
+        "all sensors given".
 
     Returns
     -------
@@ -753,106 +908,37 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float = 0.05, 
     ------
     ValueError
         tol outside (0, 1), unknown statistic / correction / normality.
+    TypeError
+        ``settings`` together with tol, statistic, correction or normality; bad argument types.
     NormalityError
         Line 05 failed and normality="check".
-    DataError, TypeError, SplitError
-        Bad arguments (named in the message).  A fit failing on a split does not raise: it is
-        recorded and the model's verdict becomes "undecided" unless another split rejects it.
+    DataError, SplitError
+        Bad arguments (named in the message), e.g. a criterion string as design.  A fit failing
+        on a split does not raise: it is recorded and the model's verdict becomes "undecided"
+        unless another split rejects it.
     """
-    if settings is None:
-        settings = DetectSettings(tol=tol, statistic=statistic, correction=correction, normality=normality)
-    if isinstance(splits, Split):
-        splits = (splits,)
-    splits = tuple(splits)
-    if not splits:
-        raise SplitError("splits: at least one split (test scenario) is needed")
-    for sp in splits:
-        if not isinstance(sp, Split):
-            raise TypeError(f"splits: expected Split objects, got {type(sp).__name__}")
-    names_sp = [sp.name for sp in splits]
-    if len(set(names_sp)) != len(names_sp):
-        raise SplitError(f"splits: names must be unique, got {names_sp}")
-    if isinstance(model, Mapping):
-        models = dict(model)
-        if not models:
-            raise DataError("model: the mapping of models is empty")
-    elif isinstance(model, Model):
-        models = {model.name: model}
-    else:
-        raise TypeError(f"model: expected a models.Model or a mapping of them, got {type(model).__name__}")
+    settings = _detect_settings(settings, tol=tol, statistic=statistic, correction=correction, normality=normality)
+    splits = _checked_splits(splits)
+    models = _checked_models(model)
     names = tuple(models)
-    for n_, m_ in models.items():
-        if not isinstance(m_, Model):
-            raise TypeError(f"model[{n_!r}]: expected a models.Model, got {type(m_).__name__}")
     datas = _as_mapping("measurements", measurements, names)
     p0s = _as_mapping("p0", p0, names)
-    if weights is not None and design is not None:
-        raise DataError("weights, design: give one of them, not both")
-
-    notes = []
-    tests, normal, designs = [], [], []
-    checks = []
+    _checked_design(design, weights)
+    notes, tests, normal, designs = [], [], [], []
+    gate = _NormalityGate(settings, notes)
     for name in names:
-        m, data = models[name], datas[name]
-        if not isinstance(data, Measurements):
-            raise TypeError(f"measurements[{name!r}]: expected an identification.Measurements, "
-                            f"got {type(data).__name__}")
-        for sp in splits:
-            sp.check(data.n_q, data.n_M)
-        w, how = _design_weights(m, data, p0s[name], design, settings, notes)
-        if w is None and weights is not None:
-            w, how = data.sensor_weights(weights), "sensor weights given"
-        n_sel = int(np.count_nonzero(data.sensor_weights(w) > 0))
-        for sp in splits:
-            sp.check(data.n_q, data.n_M, m.n_p, n_sel)
-        used = tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0)
-        designs.append((name, used, how))
-        # normality (line 05): once per distinct z and sensor selection
-        chk = None
-        for (z, wk, c) in checks:
-            if z is data.z or (z.shape == data.z.shape and np.array_equal(z, data.z, equal_nan=True)):
-                if np.array_equal(wk, data.sensor_weights(w)):
-                    chk = c
-        if chk is None:
-            chk = normality_check(data, settings.normality_level, w)
-            if not chk.passed:
-                bad = [s for k, s in enumerate(chk.sensors) if s in chk.gated and not chk.pvalue[k] >= chk.level]
-                msg = (f"normality gate (Algorithm 1, line 05) failed for sensor(s) {', '.join(bad)}: Shapiro-Wilk "
-                       f"p-value(s) {', '.join(f'{100 * chk.pvalue[chk.sensors.index(s)]:.3g} %' for s in bad)} "
-                       f"< {100 * chk.level:g} % on the differences of repeated series"
-                       + (f" ({chk.note})" if chk.note else "")
-                       + "; acquire new data, or pass normality='override' to continue on record")
-                if settings.normality == "check":
-                    raise NormalityError(msg, chk)
-                chk = NormalityCheck(chk.sensors, chk.pvalue, chk.sigma_rep, chk.n_diff, chk.level, chk.gated,
-                                     False, True, chk.pairs, chk.note)
-                notes.append(f"override: {msg}")
-            checks.append((data.z, data.sensor_weights(w), chk))
-        normal.append((name, chk))
+        m = models[name]
+        data = _checked_data(name, datas[name], splits)
+        w, how = _design_weights(m, data, design, weights, design_how)
+        _check_split_sizes(splits, data, m, w)
+        designs.append((name, tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0), how))
+        normal.append((name, gate.check(data, w)))
         if data.sigma is None:
             notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
                          "approximate")
-        try:
-            p0v = np.asarray(p0s[name], dtype=float).ravel()
-        except (TypeError, ValueError):
-            raise DataError(f"p0[{name!r}]: not numeric: {p0s[name]!r}") from None
-        if p0v.shape != (m.n_p,):
-            raise DataError(f"p0[{name!r}]: expected {m.n_p} start values ({', '.join(m.param_names)}), "
-                            f"got {p0v.size}")
-        try:
-            st0 = solve_states(m, p0v, data.inputs) if data.d_q == m.n_q_dim else None
-        except IdentificationError:
-            st0 = None          # each fit then reports the failing state solve itself
-        tests.extend(run_split_tests(m, data, splits, p0v, w, settings, model_name=name, states0=st0))
-
-    all_dec, prim = [], []
-    for name in names:
-        mt = [t for t in tests if t.model == name]
-        for st in STATISTICS:
-            for co in CORRECTIONS:
-                d = decide(mt, settings.tol, st, co)
-                all_dec.append(d)
-                if st == settings.statistic and co == settings.correction:
-                    prim.append(d)
-    return DetectionResult(settings, names, splits, tuple(tests), tuple(prim), tuple(all_dec), tuple(normal),
+        p0v = _start_values(name, p0s[name], m)
+        tests.extend(run_split_tests(m, data, splits, p0v, w, settings, model_name=name,
+                                     states0=_start_states(m, p0v, data)))
+    primary, all_decisions = _decisions(tuple(tests), names, settings)
+    return DetectionResult(settings, names, splits, tuple(tests), primary, all_decisions, tuple(normal),
                            tuple(designs), tuple(notes))

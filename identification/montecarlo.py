@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time
 import uuid
 from collections.abc import Mapping
@@ -33,9 +32,10 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, run_split_tests
+from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
+from .progress import Progress
 from .splits import Split, SplitError
 from models.state import set_jit, simulate, solve_states
 
@@ -91,7 +91,7 @@ class MonteCarloSettings:
     workers : int | None     local processes (None: os.cpu_count(); 1: serial in this process)
     scheduler : object       Dask scheduler address (str) or a distributed.Client; None: local
     chunk_size : int | None  replications per task (None: about 8 tasks per worker, at most 50)
-    progress : bool          progress bar on stderr (tqdm if installed)
+    progress : bool          progress bar on stderr (tqdm)
     coverage_alpha : float   the ellipsoid level checked for coverage (0.05: 95 % ellipsoids)
     ci_level : float         level of the Clopper-Pearson intervals
     detect : DetectSettings  tol, covariance kind, identify settings (normality is not gated here)
@@ -169,6 +169,8 @@ class ModelCampaign:
 # ---------------------------------------------------------------------------- the replication
 @dataclass(frozen=True, eq=False)
 class _Task:
+    """Everything a replication needs (pickled once per worker; ``token`` identifies it)."""
+
     token: str
     names: tuple
     models: tuple
@@ -182,24 +184,59 @@ class _Task:
     jit: bool = False
 
 
-_WORKER: dict = {}
+@dataclass(eq=False)
+class WorkerState:
+    """What one Monte Carlo worker process keeps between the replications it runs.
+
+    Attributes
+    ----------
+    task : _Task or None
+        The worker's copy of the task: its models (and their compiled CasADi functions) are
+        unpickled once per worker and reused by every replication.
+    states : dict {(model name, inputs bytes): ndarray (n_q, n_y) or None}
+        States at p0 per model and campaign inputs (warm start of every fit; None when the
+        state solve failed).
+    """
+
+    task: _Task | None = None
+    states: dict = field(default_factory=dict)
+
+    def install(self, task: _Task) -> None:
+        """Make ``task`` the worker's task (fresh state cache, JIT as the task asks)."""
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        self.task = task
+        self.states = {}
+        set_jit(task.jit)
+
+    def task_for(self, task: _Task | None) -> _Task:
+        """The worker's copy of ``task`` (installed on first sight); None: the installed task."""
+        if task is not None and (self.task is None or self.task.token != task.token):
+            self.install(task)
+        return self.task
+
+    def start_states(self, name: str, model: Model, p0: np.ndarray, inputs: np.ndarray):
+        """States at p0 for ``inputs`` (n_q, n_y), solved once per model and inputs, or None."""
+        key = (name, inputs.tobytes())
+        if key not in self.states:
+            try:
+                self.states[key] = solve_states(model, p0, inputs)
+            except IdentificationError:
+                self.states[key] = None
+        return self.states[key]
+
+    def clear(self) -> None:
+        self.task, self.states = None, {}
 
 
-def _init_worker(task):
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    _WORKER["task"] = task
-    _WORKER["states"] = {}
-    set_jit(task.jit)
+#: this process's worker state.  Module level because a process pool initializer
+#: (:func:`_init_worker`, run once per spawned process) and the chunks it runs can only
+#: reach module-level objects; the serial backend installs and clears it around its run.
+WORKER = WorkerState()
 
 
-def _task_for(task):
-    """The worker's copy of the task (models kept once per worker so compiled NLPs are reused)."""
-    if task is None:
-        return _WORKER["task"]
-    cached = _WORKER.get("task")
-    if cached is None or cached.token != task.token:
-        _init_worker(task)
-    return _WORKER["task"]
+def _init_worker(task: _Task) -> None:
+    """Process pool initializer: install ``task`` in this process's :data:`WORKER`."""
+    WORKER.install(task)
 
 
 def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
@@ -217,15 +254,8 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
         model = task.models[im]
         d = data[name] if isinstance(data, Mapping) else data
         if sw is None:
-            sw = _shapiro_pvalues(d)
-        key = (name, d.inputs.tobytes())
-        st0 = _WORKER.setdefault("states", {}).get(key)
-        if st0 is None:
-            try:
-                st0 = solve_states(model, task.p0s[im], d.inputs)
-            except IdentificationError:
-                st0 = None
-            _WORKER["states"][key] = st0
+            sw = normality_check(d).pvalue
+        st0 = WORKER.start_states(name, model, task.p0s[im], d.inputs)
         tests = run_split_tests(model, d, task.splits, task.p0s[im], task.weights[im], task.detect, name, st0)
         truth = task.truth[im]
         if truth is not None and g2 is None:
@@ -252,63 +282,10 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
             "shapiro": sw}
 
 
-def _shapiro_pvalues(d: Measurements) -> np.ndarray:
-    pairs = d.n_M // 2
-    out = np.full(d.n_S, np.nan)
-    if pairs == 0:
-        return out
-    for k in range(d.n_S):
-        x = np.concatenate([d.z[2 * m + 1, :, k] - d.z[2 * m, :, k] for m in range(pairs)])
-        x = x[np.isfinite(x)]
-        if x.size >= 3 and np.ptp(x) > 0:
-            out[k] = stats.shapiro(x).pvalue
-    return out
-
-
 def _run_chunk(task, chunk):
     """Replications [(index, SeedSequence), ...] -> [(index, result dict), ...]."""
-    t = _task_for(task)
+    t = WORKER.task_for(task)
     return [(i, _replicate(t, s)) for i, s in chunk]
-
-
-# ---------------------------------------------------------------------------- progress
-class _Progress:
-    def __init__(self, total: int, desc: str, enabled: bool):
-        self.total, self.done, self.enabled = total, 0, enabled
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-        self.bar = None
-        if enabled:
-            try:
-                from tqdm import tqdm
-                self.bar = tqdm(total=total, desc=desc, unit="rep", file=sys.stderr, smoothing=0.1)
-            except ImportError:
-                self.bar = None
-        self.desc = desc
-
-    def update(self, n: int):
-        self.done += n
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.update(n)
-            return
-        now = time.perf_counter()
-        if now - self.last >= 0.5 or self.done == self.total:
-            self.last = now
-            el = now - self.t0
-            eta = el / self.done * (self.total - self.done) if self.done else float("nan")
-            sys.stderr.write(f"\r{self.desc}: {self.done}/{self.total} replications, {el:.0f} s elapsed, "
-                             f"ETA {eta:.0f} s")
-            sys.stderr.flush()
-
-    def close(self):
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.close()
-        else:
-            sys.stderr.write("\n")
 
 
 # ---------------------------------------------------------------------------- execution backends
@@ -319,59 +296,80 @@ def _chunks(n_rep, seed, n_workers, chunk_size):
     return [items[i:i + size] for i in range(0, n_rep, size)]
 
 
-def _execute(task: _Task, settings: MonteCarloSettings, desc: str):
+class _Collector:
+    """Replication results by index; every chunk advances the progress bar."""
+
+    def __init__(self, n_rep: int, bar):
+        self.out = [None] * n_rep
+        self.bar = bar
+
+    def add(self, res: list) -> None:
+        for i, r in res:
+            self.out[i] = r
+        self.bar.update(len(res))
+
+
+def _run_dask(task: _Task, settings: MonteCarloSettings, got: _Collector) -> tuple:
+    """Chunks on a Dask cluster (the task scattered once to every worker); returns (backend text, workers)."""
+    from dask.distributed import Client, as_completed
+    client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
+    try:
+        n_w = max(1, len(client.scheduler_info().get("workers", {})))
+        chunks = _chunks(len(got.out), settings.seed, n_w, settings.chunk_size)
+        tf = client.scatter(task, broadcast=True)
+        futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
+        for fut in as_completed(futs):
+            got.add(fut.result())
+        return f"dask ({client.scheduler.address}, {n_w} workers)", n_w
+    finally:
+        if client is not settings.scheduler:
+            client.close()
+
+
+def _run_serial(task: _Task, chunks: list, got: _Collector) -> str:
+    """Chunks in this process (worker state installed for the run, JIT restored after)."""
+    prev = set_jit(task.jit)
+    try:
+        WORKER.install(task)
+        for ch in chunks:
+            got.add(_run_chunk(None, ch))
+    finally:
+        set_jit(prev)
+        WORKER.clear()
+    return "serial (this process)"
+
+
+def _run_processes(task: _Task, chunks: list, n_w: int, got: _Collector) -> str:
+    """Chunks on ``n_w`` spawned local processes (each installs the task once, :func:`_init_worker`)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
+                             initializer=_init_worker, initargs=(task,)) as ex:
+        futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
+        for fut in as_completed(futs):
+            got.add(fut.result())
+    return f"local processes ({n_w} workers, spawn)"
+
+
+def _execute(task: _Task, settings: MonteCarloSettings, desc: str) -> tuple:
     """Run every replication; returns (results ordered by index, backend text, workers)."""
     n_rep = int(settings.n_rep)
-    out = [None] * n_rep
-    prog = _Progress(n_rep, desc, settings.progress)
+    bar = Progress(settings.progress).bar(n_rep, desc)
+    got = _Collector(n_rep, bar)
     try:
         if settings.scheduler is not None:
-            from dask.distributed import Client, as_completed
-            client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
-            try:
-                n_w = max(1, len(client.scheduler_info().get("workers", {})))
-                chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
-                tf = client.scatter(task, broadcast=True)
-                futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
-                for fut in as_completed(futs):
-                    res = fut.result()
-                    for i, r in res:
-                        out[i] = r
-                    prog.update(len(res))
-                backend = f"dask ({client.scheduler.address}, {n_w} workers)"
-            finally:
-                if client is not settings.scheduler:
-                    client.close()
-            return out, backend, n_w
-        n_w = int(settings.workers or os.cpu_count() or 1)
-        chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
-        if n_w == 1:
-            prev = set_jit(task.jit)
-            try:
-                _init_worker(task)
-                for ch in chunks:
-                    res = _run_chunk(None, ch)
-                    for i, r in res:
-                        out[i] = r
-                    prog.update(len(res))
-            finally:
-                set_jit(prev)
-                _WORKER.clear()
-            return out, "serial (this process)", 1
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed as f_completed
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-        with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
-                                 initializer=_init_worker, initargs=(task,)) as ex:
-            futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
-            for fut in f_completed(futs):
-                res = fut.result()
-                for i, r in res:
-                    out[i] = r
-                prog.update(len(res))
-        return out, f"local processes ({n_w} workers, spawn)", n_w
+            backend, n_w = _run_dask(task, settings, got)
+        else:
+            n_w = int(settings.workers or os.cpu_count() or 1)
+            chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
+            if n_w == 1:
+                backend = _run_serial(task, chunks, got)
+            else:
+                backend = _run_processes(task, chunks, n_w, got)
     finally:
-        prog.close()
+        bar.close()
+    return got.out, backend, n_w
 
 
 # ---------------------------------------------------------------------------- result
@@ -593,6 +591,16 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
 
 
 # ---------------------------------------------------------------------------- drivers
+def _per_model(what: str, value, names: tuple) -> tuple:
+    """One value per model name: ``value[name]`` from a mapping (DataError when one is missing), else ``value``."""
+    if isinstance(value, Mapping):
+        missing = [n for n in names if n not in value]
+        if missing:
+            raise DataError(f"{what}: no entry for model(s) {missing}")
+        return tuple(value[n] for n in names)
+    return tuple(value for _ in names)
+
+
 def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, weights=None, truth=None,
                     kind: str = "power", settings: MonteCarloSettings | None = None,
                     description: str = "") -> MonteCarloResult:
@@ -622,22 +630,14 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     splits = tuple(splits)
     if not splits:
         raise SplitError("splits: at least one split is needed")
-
-    def per(what, v):
-        if isinstance(v, Mapping):
-            missing = [n for n in names if n not in v]
-            if missing:
-                raise DataError(f"{what}: no entry for model(s) {missing}")
-            return tuple(v[n] for n in names)
-        return tuple(v for _ in names)
-
-    p0s = tuple(np.asarray(v, float).ravel() for v in per("p0", p0))
+    p0s = tuple(np.asarray(v, float).ravel() for v in _per_model("p0", p0, names))
     for n, m, v in zip(names, models.values(), p0s):
         if v.shape != (m.n_p,):
             raise DataError(f"p0[{n!r}]: expected {m.n_p} values, got {v.size}")
-    tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in per("truth", truth))
-    task = _Task(uuid.uuid4().hex, names, tuple(models.values()), p0s, per("weights", weights), splits, generator,
-                 tr, settings.detect, float(settings.coverage_alpha), bool(settings.jit))
+    tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
+    task = _Task(token=uuid.uuid4().hex, names=names, models=tuple(models.values()), p0s=p0s,
+                 weights=_per_model("weights", weights, names), splits=splits, generator=generator, truth=tr,
+                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit))
     # fail early (in this process) on a generator or split that does not fit the models
     probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
     for n, m in zip(names, models.values()):
@@ -682,9 +682,28 @@ def power_study(models, generator: Callable, splits: Sequence[Split], p0, weight
                            description=description)
 
 
+def _validate_settings(settings: MonteCarloSettings | None, tol: float | None, **given) -> MonteCarloSettings:
+    """The settings of :func:`validate`: ``settings``, or the keywords given (None = the default of
+    :class:`MonteCarloSettings`; ``tol`` goes to its :class:`DetectSettings`, normality "override").
+
+    Raises TypeError when ``settings`` and one of the keywords are both given.
+    """
+    given = {k: v for k, v in given.items() if v is not None}
+    if settings is None:
+        det = DetectSettings(normality="override") if tol is None else DetectSettings(tol=tol, normality="override")
+        return MonteCarloSettings(detect=det, **given)
+    if not isinstance(settings, MonteCarloSettings):
+        raise TypeError(f"settings: expected MonteCarloSettings, got {type(settings).__name__}")
+    clash = list(given) + ([] if tol is None else ["tol"])
+    if clash:
+        raise TypeError(f"settings and {', '.join(clash)}: give the keyword(s) inside settings (tol as "
+                        "settings.detect.tol), not both")
+    return settings
+
+
 def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=None, sigma=None, n_M: int = 2,
-             generator: Callable | None = None, weights=None, n_rep: int = 2000, tol: float = 0.05,
-             seed: int = 20261121, workers: int | None = None, scheduler=None, progress: bool = True,
+             generator: Callable | None = None, weights=None, n_rep: int | None = None, tol: float | None = None,
+             seed: int | None = None, workers: int | None = None, scheduler=None, progress: bool | None = None,
              settings: MonteCarloSettings | None = None, name: str | None = None) -> MonteCarloResult:
     """Front door (``mudoe validate``): a size study without ``generator``, a power study with one.
 
@@ -695,10 +714,13 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     from ``generator(rng)``; the rejection rate of each model in ``model`` (a Model or a
     mapping {name: Model}).  Replications run on local processes (``workers``) or on a Dask
     cluster (``scheduler`` address or Client); the numbers do not depend on either.
+
+    ``n_rep``, ``tol``, ``seed``, ``workers``, ``scheduler`` and ``progress`` (None: the
+    defaults of :class:`MonteCarloSettings`, TOL 5 %) or ``settings`` with all of them; giving
+    ``settings`` and one of those keywords raises TypeError.
     """
-    if settings is None:
-        settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
-                                      progress=progress, detect=DetectSettings(tol=tol, normality="override"))
+    settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
+                                  progress=progress)
     if generator is None:
         if isinstance(model, Mapping):
             raise DataError("model: a size study takes one model (the data generator itself)")

@@ -12,29 +12,28 @@ with Q the input (load) indices and M the series indices; every sensor of a sele
 point belongs to the set.  Indices are **0-based** (the paper's loads q^d_1..q^d_29 are
 indices 0..28 here).  ``series=None`` means "all series of the campaign".
 
-Constructors: :func:`press_scenarios` (the paper's four scenarios, Table "Testsets"),
-:func:`random_splits` (Monte Carlo cross-validation), :func:`input_range_split` (by the
-magnitude of an input), :func:`series_split` (series against series) and :class:`Split`
-itself for user-defined index sets.
+Constructors: :func:`splits_from_scenarios` (a model's named scenario table, e.g. the
+paper's four press scenarios :func:`models.press.press_scenario_rows`), :func:`random_splits`
+(Monte Carlo cross-validation), :func:`input_range_split` (by the magnitude of an input),
+:func:`series_split` (series against series) and :class:`Split` itself for user-defined
+index sets.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Split", "SplitError", "press_scenarios", "random_splits", "input_range_split", "series_split",
-           "PRESS_SCENARIO_NAMES"]
+from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows   # transitional names, see the end
+
+__all__ = ["Split", "SplitError", "splits_from_scenarios", "random_splits", "input_range_split", "series_split"]
 
 
 class SplitError(ValueError):
     """A split is malformed (empty or overlapping sets, bad index, too few points)."""
-
-
-#: names of the paper's four scenarios, in the order of its Table "Testsets"
-PRESS_SCENARIO_NAMES = ("loading: odd vs even", "unloading: odd vs even", "loading vs unloading",
-                        "loading+unloading interleaved")
 
 
 def _indices(split_name: str, what: str, idx, allow_none: bool) -> tuple | None:
@@ -191,51 +190,51 @@ class Split:
 
 
 # ---------------------------------------------------------------------------- constructors
-def press_scenarios(n_q: int = 29, series: Sequence[int] | None = None, peak: int | None = None) -> tuple:
-    """The paper's four press scenarios (Table "Testsets"), 0-based.
+def splits_from_scenarios(scenarios, n_q: int, series: Sequence[int] | None = None) -> tuple:
+    """Split objects from a scenario table {name: (calibration rows, validation rows[, description])}.
 
-    A loading-unloading campaign: loads 0..peak rise, peak+1..n_q-1 fall; the first and the
-    last (unloaded) points are excluded.  For n_q = 29 (peak index 14, q^d_15 = 1600 N):
-
-    ========================= ======================== ========================
-    scenario                  calibration (paper)      validation (paper)
-    ========================= ======================== ========================
-    loading: odd vs even      q2, q4, .., q14          q3, q5, .., q15
-    unloading: odd vs even    q15, q17, .., q27        q16, q18, .., q28
-    loading vs unloading      q2 .. q14                q15 .. q28
-    loading+unloading         q3, q5, .., q27          q2, q4, .., q28
-    ========================= ======================== ========================
+    Rows are 0-based input indices of a campaign of ``n_q`` inputs; the splits keep the
+    table's order.  A model declares its scenarios as such a table (e.g.
+    :data:`models.press.PRESS_SCENARIOS`), or as a function n_q -> table when the rows depend
+    on the campaign length (e.g. :func:`models.press.press_scenario_rows`).
 
     Parameters
     ----------
+    scenarios : mapping or callable
+        The table, or a callable ``scenarios(n_q)`` returning it; a ``ValueError`` of the
+        callable (a campaign the scenarios do not fit) is raised as :class:`SplitError`.
     n_q : int
-        Number of inputs of the campaign (odd; loading has (n_q + 1) / 2 points).
+        Number of inputs of the campaign.
     series : sequence of int, optional
-        Series used by both sets (the paper: the two series not used to train M3); None = all.
-    peak : int, optional
-        0-based index of the largest load (default (n_q - 1) / 2).
+        Series used by both sets of every split (e.g. held-out series); None = all.
+
+    Raises
+    ------
+    SplitError
+        The table does not fit n_q inputs, or a scenario is malformed (see :class:`Split`).
     """
     n_q = int(n_q)
-    if peak is None:
-        if n_q % 2 == 0:
-            raise SplitError(f"n_q: the paper's scenarios need an odd number of loads (rise, peak, fall), got {n_q}; "
-                             "give peak= explicitly")
-        peak = (n_q - 1) // 2
-    peak = int(peak)
-    if n_q < 7 or not (3 <= peak <= n_q - 4):
-        raise SplitError(f"n_q, peak: need at least 3 loading and 3 unloading points besides the unloaded ends, got "
-                         f"n_q = {n_q}, peak = {peak}")
+    if callable(scenarios):
+        try:
+            scenarios = scenarios(n_q)
+        except ValueError as exc:
+            raise SplitError(str(exc)) from None
+    if not isinstance(scenarios, Mapping) or not scenarios:
+        raise SplitError(f"scenarios: expected a non-empty mapping {{name: (cal_rows, val_rows[, description])}}, "
+                         f"got {scenarios!r}")
     s = None if series is None else list(series)
-    return (
-        Split(PRESS_SCENARIO_NAMES[0], range(1, peak, 2), range(2, peak + 1, 2), s, s,
-              "loading branch: calibration on the odd, validation on the even paper indices"),
-        Split(PRESS_SCENARIO_NAMES[1], range(peak, n_q - 2, 2), range(peak + 1, n_q - 1, 2), s, s,
-              "unloading branch (from the peak): alternate points"),
-        Split(PRESS_SCENARIO_NAMES[2], range(1, peak), range(peak, n_q - 1), s, s,
-              "calibrate on loading, validate on unloading (hysteresis)"),
-        Split(PRESS_SCENARIO_NAMES[3], range(2, n_q - 1, 2), range(1, n_q - 1, 2), s, s,
-              "both branches, alternate points"),
-    )
+    out = []
+    for name, rows in scenarios.items():
+        if not isinstance(rows, (tuple, list)) or len(rows) not in (2, 3):
+            raise SplitError(f"scenarios[{name!r}]: expected (cal_rows, val_rows) or (cal_rows, val_rows, "
+                             f"description), got {rows!r}")
+        sp = Split(name, rows[0], rows[1], s, s, rows[2] if len(rows) == 3 else "")
+        top = max(sp.cal_inputs + sp.val_inputs)
+        if top >= n_q:
+            raise SplitError(f"n_q: scenario {name!r} uses input row {top} but the campaign has {n_q} inputs "
+                             "(0-based rows)")
+        out.append(sp)
+    return tuple(out)
 
 
 def random_splits(n_q: int, n_splits: int, cal_fraction: float = 0.5, seed=None,
@@ -296,3 +295,13 @@ def series_split(n_q: int, cal_series: Sequence[int], val_series: Sequence[int],
     qi = list(range(int(n_q))) if inputs is None else list(inputs)
     label = name or f"series {[i + 1 for i in cal_series]} vs {[i + 1 for i in val_series]}"
     return Split(label, qi, qi, list(cal_series), list(val_series), "repeatability: series against series")
+
+
+# ---------------------------------------------------------------------------- transitional names
+# mudoe/study.py and mudoe/config.py still import press_scenarios and PRESS_SCENARIO_NAMES from here;
+# both go (with the models.press import above) once those call sites read models.press and call
+# splits_from_scenarios.
+def press_scenarios(n_q: int = 29, series: Sequence[int] | None = None, peak: int | None = None) -> tuple:
+    """Transitional: the paper's four press scenarios, ``splits_from_scenarios(press_scenario_rows, n_q, series)``
+    (with ``peak`` passed to :func:`models.press.press_scenario_rows`)."""
+    return splits_from_scenarios(partial(press_scenario_rows, peak=peak), n_q, series)

@@ -35,7 +35,8 @@ Details and numbers: docs/press_geometry.md.
 from __future__ import annotations
 
 from itertools import combinations
-from typing import Sequence
+from types import MappingProxyType
+from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
@@ -44,11 +45,16 @@ from .contract import Model
 from .mechanism import (Bar, Beam, Drive, Joint, Load, MechParameter, Mechanism, MechanismError,
                         RigidBody, Support, build_model)
 
-__all__ = ["press_mechanism", "press_model", "press_identifiability", "PRESS_SENSORS", "PRESS_JOINTS",
-           "PRESS_ANCHORS", "K_NOMINAL", "Q_PAPER"]
+__all__ = ["press_mechanism", "press_model", "press_identifiability", "press_cycle_rows", "press_scenario_rows",
+           "PRESS_SENSORS", "PRESS_JOINTS", "PRESS_ANCHORS", "K_NOMINAL", "Q_PAPER", "PRESS_LOADING_ROWS",
+           "PRESS_UNLOADING_ROWS", "PRESS_SCENARIO_NAMES", "PRESS_SCENARIOS"]
 
 #: the paper's 29 set points: 15 loading steps 0..1600 N, 14 unloading steps back to 0 N
 Q_PAPER = tuple(float(v) for v in np.r_[np.linspace(0.0, 1600.0, 15), np.linspace(1600.0, 0.0, 15)[1:]])
+
+#: names of the paper's four test scenarios, in the order of its Table "Testsets"
+PRESS_SCENARIO_NAMES = ("loading: odd vs even", "unloading: odd vs even", "loading vs unloading",
+                        "loading+unloading interleaved")
 
 #: the paper's three candidate sensors, in the paper's order
 PRESS_SENSORS = ("D_y", "F_x", "B0_y")
@@ -182,3 +188,71 @@ def press_identifiability(q_P: float = 1600.0, sensors: Sequence[str] = PRESS_SE
                                               ratio_load=sq[1] / sq[0])
     return dict(sensors=tuple(sensors), compliance=c[idx] * 1e3, S_lin=S_lin, S_load=S_load,
                 h_load=hv.ravel()[idx], pairs=pairs, q_P=q_P)
+
+
+# ---------------------------------------------------------------------------- test scenarios (Algorithm 1, line 06)
+def press_cycle_rows(n_q: int = len(Q_PAPER), peak: int | None = None) -> tuple[tuple, tuple]:
+    """0-based input rows of the loading branch (0..peak, rising force) and of the unloading branch
+    (peak..n_q-1, falling force) of a load cycle of n_q set points; the peak row is in both.
+
+    Raises
+    ------
+    ValueError
+        n_q even without ``peak`` (no middle peak), or fewer than 3 loading and 3 unloading points
+        besides the unloaded ends (the message names n_q and peak).
+    """
+    n_q = int(n_q)
+    if peak is None:
+        if n_q % 2 == 0:
+            raise ValueError(f"n_q: the paper's scenarios need an odd number of loads (rise, peak, fall), got {n_q}; "
+                             "give peak= explicitly")
+        peak = (n_q - 1) // 2
+    peak = int(peak)
+    if n_q < 7 or not (3 <= peak <= n_q - 4):
+        raise ValueError(f"n_q, peak: need at least 3 loading and 3 unloading points besides the unloaded ends, got "
+                         f"n_q = {n_q}, peak = {peak}")
+    return tuple(range(0, peak + 1)), tuple(range(peak, n_q))
+
+
+def press_scenario_rows(n_q: int = len(Q_PAPER), peak: int | None = None) -> Mapping:
+    """The paper's four test scenarios (Table "Testsets") on a load cycle of n_q set points, 0-based.
+
+    Returns {name: (calibration rows, validation rows, description)} in the paper's order
+    (:data:`PRESS_SCENARIO_NAMES`); the unloaded first and last points are never used.  For
+    n_q = 29 (peak row 14, q^d_15 = 1600 N):
+
+    ========================= ======================== ========================
+    scenario                  calibration (paper)      validation (paper)
+    ========================= ======================== ========================
+    loading: odd vs even      q2, q4, .., q14          q3, q5, .., q15
+    unloading: odd vs even    q15, q17, .., q27        q16, q18, .., q28
+    loading vs unloading      q2 .. q14                q15 .. q28
+    loading+unloading         q3, q5, .., q27          q2, q4, .., q28
+    ========================= ======================== ========================
+
+    Build the splits with ``identification.splits.splits_from_scenarios(press_scenario_rows, n_q)``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`press_cycle_rows`.
+    """
+    loading, unloading = press_cycle_rows(n_q, peak)
+    peak, n_q = loading[-1], unloading[-1] + 1
+    rows = (
+        (tuple(range(1, peak, 2)), tuple(range(2, peak + 1, 2)),
+         "loading branch: calibration on the odd, validation on the even paper indices"),
+        (tuple(range(peak, n_q - 2, 2)), tuple(range(peak + 1, n_q - 1, 2)),
+         "unloading branch (from the peak): alternate points"),
+        (tuple(range(1, peak)), tuple(range(peak, n_q - 1)),
+         "calibrate on loading, validate on unloading (hysteresis)"),
+        (tuple(range(2, n_q - 1, 2)), tuple(range(1, n_q - 1, 2)), "both branches, alternate points"),
+    )
+    return MappingProxyType(dict(zip(PRESS_SCENARIO_NAMES, rows)))
+
+
+#: 0-based rows of :data:`Q_PAPER` on the loading branch (0 .. 1600 N) and on the unloading branch (1600 .. 0 N)
+PRESS_LOADING_ROWS, PRESS_UNLOADING_ROWS = press_cycle_rows()
+
+#: the paper's four scenarios on :data:`Q_PAPER`: {name: (calibration rows, validation rows, description)}
+PRESS_SCENARIOS = press_scenario_rows()

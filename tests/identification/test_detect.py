@@ -6,16 +6,18 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from identification import Measurements, alpha_min, alpha_min_two_sample, identify, simulate
+from identification import DataError, Measurements, alpha_min, alpha_min_two_sample, identify, simulate
 from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check)
-from identification.splits import Split, input_range_split, press_scenarios
+from identification.splits import Split, input_range_split, splits_from_scenarios
 from models.contract import Model
 from models.library import linear_model
+from models.press import PRESS_SCENARIOS
 
 Q = np.r_[np.linspace(0.0, 1.6, 15), np.linspace(1.6, 0.0, 15)[1:]][:, None]   # loading-unloading, 29 loads
 X = np.array([[1.0, 0.3], [0.2, 1.0]])
 P_TRUE = np.array([1.0, 2.0])
 SIGMA = np.array([0.01, 0.02])
+PAPER_SPLITS = splits_from_scenarios(PRESS_SCENARIOS, len(Q))   # the paper's four scenarios
 
 
 @pytest.fixture(scope="module")
@@ -33,12 +35,12 @@ def campaign(model, seed, n_M=2, offset_unloading=0.0):
 
 def test_correct_model_is_accepted_and_statistics_match_regions(model):
     data = campaign(model, 1)
-    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5])
+    res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5])
     assert res.verdicts[model.name] == "accept"
     assert res.decision().statistic == "likelihood_ratio" and res.decision().correction == "bonferroni"
     assert len(res.tests) == 4 and all(t.ok for t in res.tests)
     # every number equals the identification API applied by hand
-    for sp, t in zip(press_scenarios(), res.tests):
+    for sp, t in zip(PAPER_SPLITS, res.tests):
         ec = identify(model, sp.calibration(data), [0.5, 1.5])
         ev = identify(model, sp.validation(data), [0.5, 1.5])
         assert t.alpha_paper == pytest.approx(alpha_min(ev.p, ec.p, ec.cov), rel=1e-6, abs=1e-12)
@@ -61,7 +63,7 @@ def test_correct_model_is_accepted_and_statistics_match_regions(model):
 
 def test_hysteresis_is_detected_on_loading_vs_unloading(model):
     data = campaign(model, 2, offset_unloading=0.05)      # 5 sigma offset on the unloading branch
-    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5], statistic="paper")
+    res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], statistic="paper")
     for st in ("paper", "two_sample", "likelihood_ratio"):
         d = res.decision(statistic=st)
         assert d.decision == "reject"
@@ -77,7 +79,7 @@ def test_several_models_and_sensor_design(model):
     rng = np.random.default_rng(3)
     H = simulate(curved, P_TRUE, Q)
     data = Measurements(Q, H[None] + SIGMA * rng.standard_normal((2,) + H.shape), SIGMA, sensors=model.sensors)
-    splits = press_scenarios() + (input_range_split(Q, exclude=(0, 28)),)
+    splits = PAPER_SPLITS + (input_range_split(Q, exclude=(0, 28)),)
     res = detect({"M_true": curved, "M_linear": model}, data, splits, p0=[0.5, 1.5])
     assert res.verdicts["M_true"] == "accept"
     assert res.verdicts["M_linear"] == "reject"
@@ -85,18 +87,18 @@ def test_several_models_and_sensor_design(model):
     # points): only the input-range split sees the curvature
     assert res.decision("M_linear").flagged == (splits[-1].name,)
     assert len(res.normality) == 2 and res.normality[0][1] is res.normality[1][1]   # checked once
-    r1 = detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["s1", "s2"])
+    r1 = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], design=["s1", "s2"])
     assert r1.design[0][1] == ("s1", "s2")
     with pytest.raises(Exception, match="weights, design"):
-        detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["s1"], weights=[1, 0])
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], design=["s1"], weights=[1, 0])
     with pytest.raises(Exception, match="design: unknown sensor"):
-        detect(model, data, press_scenarios(), p0=[0.5, 1.5], design=["nope"])
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], design=["nope"])
 
 
 def test_failed_fit_is_recorded_and_makes_the_verdict_undecided(model):
     data = campaign(model, 4)
     # calibration on the unloaded point q = 0 only: no information on p (not identifiable)
-    splits = (press_scenarios()[0], Split("degenerate", [0, 28], [1, 2, 3]))
+    splits = (PAPER_SPLITS[0], Split("degenerate", [0, 28], [1, 2, 3]))
     res = detect(model, data, splits, p0=[0.5, 1.5])
     bad = res.tests[1]
     assert not bad.ok and bad.stage == "calibration fit" and "Identifiab" in bad.error
@@ -110,15 +112,15 @@ def test_tol_and_option_errors(model):
     data = campaign(model, 5)
     for tol in (0.0, 1.0, -0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="tol"):
-            detect(model, data, press_scenarios(), p0=[1, 2], tol=tol)
+            detect(model, data, PAPER_SPLITS, p0=[1, 2], tol=tol)
     with pytest.raises(ValueError, match="statistic"):
-        detect(model, data, press_scenarios(), p0=[1, 2], statistic="wald")
+        detect(model, data, PAPER_SPLITS, p0=[1, 2], statistic="wald")
     with pytest.raises(ValueError, match="correction"):
-        detect(model, data, press_scenarios(), p0=[1, 2], correction="sidak")
+        detect(model, data, PAPER_SPLITS, p0=[1, 2], correction="sidak")
     with pytest.raises(ValueError, match="normality"):
-        detect(model, data, press_scenarios(), p0=[1, 2], normality="skip")
+        detect(model, data, PAPER_SPLITS, p0=[1, 2], normality="skip")
     with pytest.raises(Exception, match="p0"):
-        detect(model, data, press_scenarios(), p0=[1, 2, 3])
+        detect(model, data, PAPER_SPLITS, p0=[1, 2, 3])
     with pytest.raises(Exception, match="splits"):
         detect(model, data, [], p0=[1, 2])
     with pytest.raises(Exception, match="val_inputs index 40"):
@@ -135,9 +137,9 @@ def test_normality_gate_raises_or_records_the_override(model):
     z = H[None] + SIGMA * (rng.exponential(1.0, (6,) + H.shape) ** 3)
     data = Measurements(Q, z, SIGMA, sensors=model.sensors)
     with pytest.raises(NormalityError, match="line 05.*Shapiro-Wilk") as exc:
-        detect(model, data, press_scenarios(), p0=[0.5, 1.5])
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5])
     assert not exc.value.check.passed
-    res = detect(model, data, press_scenarios(), p0=[0.5, 1.5], normality="override")
+    res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], normality="override")
     assert res.normality[0][1].overridden
     assert "overridden" in res.summary() and "override" in res.summary()
 
@@ -194,10 +196,36 @@ def test_design_from_the_oed_front_door():
     H = simulate(m3, P_TRUE, Q)
     sig = np.array([0.01, 0.02, 0.01])
     data = Measurements(Q, H[None] + sig * rng.standard_normal((2,) + H.shape), sig, sensors=m3.sensors)
-    res = detect(m3, data, press_scenarios(), p0=[0.5, 1.5], design="E")
+    # lines 02-03 first (the OED at the fit on all sensors), then detect on the chosen sensors
+    from oed import select_sensors
+    est = identify(m3, data, [0.5, 1.5])
+    des = select_sensors(m3, data, est.p, criterion="E", n_sensors=m3.n_p, sensor_names=list(m3.sensors))
+    res = detect(m3, data, PAPER_SPLITS, p0=[0.5, 1.5], design=des.sensors,
+                 design_how=f"{des.criterion}-optimal design of {len(des.sensors)} sensors")
     used = res.design[0][1]
     assert len(used) == 2 and "E-optimal" in res.design[0][2]
     assert res.verdicts[m3.name] == "accept"
+
+
+def test_a_criterion_as_design_asks_for_the_oed_first(model):
+    data = campaign(model, 9)
+    for crit in ("E", "D", "s1"):
+        with pytest.raises(DataError, match=r"oed\.select_sensors\(model, data, p, criterion="):
+            detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], design=crit)
+
+
+def test_keywords_and_settings_together_are_an_error(model):
+    data = campaign(model, 10)
+    s = DetectSettings(tol=0.1)
+    with pytest.raises(TypeError, match="settings and tol"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], tol=0.05, settings=s)
+    with pytest.raises(TypeError, match="settings and statistic, normality"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], statistic="paper", normality="override", settings=s)
+    with pytest.raises(TypeError, match="settings: expected DetectSettings"):
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], settings={"tol": 0.1})
+    res = detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], settings=s)
+    assert res.settings is s and res.decision().tol == 0.1
+    assert detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], tol=0.1).settings == s
 
 
 def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
@@ -207,7 +235,7 @@ def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
     H = simulate(model, P_TRUE, Q)
     z = H[None] + 0.01 * rng.standard_normal((2,) + H.shape)
     data = Measurements(Q, z, None, sensors=model.sensors)
-    sp = press_scenarios()[2]
+    sp = PAPER_SPLITS[2]
     t = detect(model, data, [sp], p0=[0.5, 1.5]).tests[0]
 
     def rss(d):
@@ -234,7 +262,7 @@ def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
     gen = ModelCampaign(model, model.p_nominal, np.array(Q_PAPER)[:, None], sigma, 2)
     for r in range(2):
         data = gen(np.random.default_rng(100 + r))
-        for sp in press_scenarios():
+        for sp in PAPER_SPLITS:
             ec = identify(model, sp.calibration(data), [450.0, 550.0], w)
             ev = identify(model, sp.validation(data), [450.0, 550.0], w)
             pm = _pooled_newton(model, sp.pooled(data), sp, ec, ev, w)

@@ -16,14 +16,16 @@ from scipy import stats
 from identification.detect import DetectSettings
 from identification.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
                                        run_monte_carlo, size_study, validate)
-from identification.splits import press_scenarios
+from identification.splits import splits_from_scenarios
 from models.library import linear_model
+from models.press import PRESS_SCENARIOS
 
 Q = np.r_[np.linspace(0.0, 1.6, 15), np.linspace(1.6, 0.0, 15)[1:]][:, None]
 X = np.array([[1.0, 0.3], [0.2, 1.0]])
 P_TRUE = np.array([1.0, 2.0])
 SIGMA = np.array([0.01, 0.02])
 N_REP = 200
+PAPER_SPLITS = splits_from_scenarios(PRESS_SCENARIOS, len(Q))   # the paper's four scenarios
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +57,7 @@ def test_linearized_size_is_exact_for_equal_information(model):
 
 
 def test_size_of_both_statistics_and_coverage(model):
-    splits = press_scenarios()[3:]            # loading+unloading interleaved
+    splits = PAPER_SPLITS[3:]            # loading+unloading interleaved
     settings = MonteCarloSettings(n_rep=N_REP, seed=7, workers=1, progress=False)
     res = size_study(model, P_TRUE, Q, SIGMA, splits, p0=[0.5, 1.5], settings=settings)
     pred = linearized_size(model, P_TRUE, Q, SIGMA, splits, tol=0.05, n_draws=200_000)
@@ -78,7 +80,7 @@ def test_size_of_both_statistics_and_coverage(model):
 
 
 def test_same_seeds_same_numbers_serial_processes_and_dask(model):
-    splits = press_scenarios()[2:3]
+    splits = PAPER_SPLITS[2:3]
     common = dict(n_rep=6, seed=11, progress=False, chunk_size=2)
     serial = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(workers=1, **common))
     local = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(workers=2, **common))
@@ -102,16 +104,51 @@ def test_power_against_a_wrong_model_and_errors(model):
     gen = ModelCampaign(model, P_TRUE, Q, SIGMA, n_M=2)
     gen.H = gen.H.copy()
     gen.H[15:, 0] += 0.02
-    res = run_monte_carlo(model, gen, press_scenarios()[2:3], [0.5, 1.5], kind="power",
+    res = run_monte_carlo(model, gen, PAPER_SPLITS[2:3], [0.5, 1.5], kind="power",
                           settings=MonteCarloSettings(n_rep=20, seed=3, workers=1, progress=False))
     assert res.rejection_rate().rate >= 0.9
     with pytest.raises(ValueError, match="n_rep"):
         MonteCarloSettings(n_rep=0)
     with pytest.raises(TypeError, match="generator"):
-        run_monte_carlo(model, 3, press_scenarios(), [1, 2])
+        run_monte_carlo(model, 3, PAPER_SPLITS, [1, 2])
     with pytest.raises(Exception, match="p_true"):
-        validate(model, press_scenarios(), inputs=Q, sigma=SIGMA)
+        validate(model, PAPER_SPLITS, inputs=Q, sigma=SIGMA)
     with pytest.raises(Exception, match="p_true"):
         ModelCampaign(model, [1.0], Q, SIGMA)
     with pytest.raises(ValueError, match="tol"):
         DetectSettings(tol=0.0)
+
+
+def test_validate_keywords_and_settings_together_are_an_error(model):
+    s = MonteCarloSettings(n_rep=2, workers=1, progress=False)
+    common = dict(p_true=P_TRUE, inputs=Q, sigma=SIGMA)
+    with pytest.raises(TypeError, match="settings and n_rep, seed"):
+        validate(model, PAPER_SPLITS[2:3], n_rep=5, seed=3, settings=s, **common)
+    with pytest.raises(TypeError, match="settings and tol"):
+        validate(model, PAPER_SPLITS[2:3], tol=0.1, settings=s, **common)
+    res = validate(model, PAPER_SPLITS[2:3], n_rep=2, workers=1, progress=False, tol=0.1, **common)
+    assert res.n_rep == 2 and res.tol == 0.1
+    assert validate(model, PAPER_SPLITS[2:3], settings=s, **common).tol == 0.05
+
+
+def test_progress_bar_and_timed_steps():
+    import io
+    from identification.progress import Progress
+    out = io.StringIO()
+    p = Progress(True, stream=out, prefix="run: ")
+    with p.step("fit"):
+        pass
+    bar = p.bar(3, "size study")
+    bar.update(3)
+    bar.close()
+    text = out.getvalue()
+    assert "run: fit ...\n" in text and "run: fit done in" in text and "3/3" in text
+    assert set(p.timing) == {"fit"}
+    quiet = io.StringIO()
+    q = Progress(False, stream=quiet)
+    with q.step("fit"):
+        pass
+    b = q.bar(2, "x")
+    b.update(2)
+    b.close()
+    assert quiet.getvalue() == "" and "fit" in q.timing

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from identification import Measurements
-from identification.splits import (PRESS_SCENARIO_NAMES, Split, SplitError, input_range_split, press_scenarios,
-                                   random_splits, series_split)
-from models.press import Q_PAPER
+from identification.splits import (Split, SplitError, input_range_split, random_splits, series_split,
+                                   splits_from_scenarios)
+from models.press import PRESS_SCENARIO_NAMES, PRESS_SCENARIOS, Q_PAPER, press_scenario_rows
 
 
 def _zero_based(one_based):
@@ -23,7 +23,7 @@ def test_press_scenarios_match_the_papers_table_testsets():
         "loading vs unloading": (range(2, 15), range(15, 29)),
         "loading+unloading interleaved": (range(3, 28, 2), range(2, 29, 2)),
     }
-    sc = press_scenarios(29)
+    sc = splits_from_scenarios(press_scenario_rows, 29)
     assert tuple(s.name for s in sc) == PRESS_SCENARIO_NAMES
     for s in sc:
         cal, val = paper[s.name]
@@ -37,7 +37,7 @@ def test_press_scenarios_match_the_papers_table_testsets():
 
 def test_press_scenarios_on_the_paper_loads():
     q = np.array(Q_PAPER)
-    sc = {s.name: s for s in press_scenarios(29)}
+    sc = {s.name: s for s in splits_from_scenarios(press_scenario_rows, 29)}
     load = sc["loading vs unloading"]
     assert np.all(np.diff(q[list(load.cal_inputs)]) > 0)          # calibration: rising loads
     assert q[load.val_inputs[0]] == 1600.0                         # validation starts at the peak
@@ -47,12 +47,27 @@ def test_press_scenarios_on_the_paper_loads():
 
 
 def test_press_scenarios_with_held_out_series_and_errors():
-    sc = press_scenarios(29, series=[4, 5])
+    sc = splits_from_scenarios(press_scenario_rows, 29, series=[4, 5])
     assert all(s.cal_series == (4, 5) and s.val_series == (4, 5) for s in sc)
     with pytest.raises(SplitError, match="n_q"):
-        press_scenarios(28)
+        splits_from_scenarios(press_scenario_rows, 28)
     with pytest.raises(SplitError, match="n_q"):
-        press_scenarios(5)
+        splits_from_scenarios(press_scenario_rows, 5)
+
+
+def test_splits_from_a_constant_scenario_table_and_its_errors():
+    # the press's constant table for Q_PAPER gives the same splits as its row function at n_q = 29
+    assert splits_from_scenarios(PRESS_SCENARIOS, len(Q_PAPER)) == splits_from_scenarios(press_scenario_rows, 29)
+    sc = splits_from_scenarios({"user": ([1, 2], [3, 4])}, 5)
+    assert sc[0].cal_inputs == (1, 2) and sc[0].val_inputs == (3, 4) and sc[0].description == ""
+    with pytest.raises(SplitError, match="n_q: scenario 'user' uses input row 4"):
+        splits_from_scenarios({"user": ([1, 2], [3, 4])}, 4)
+    with pytest.raises(SplitError, match=r"scenarios\['user'\]"):
+        splits_from_scenarios({"user": ([1, 2],)}, 5)
+    with pytest.raises(SplitError, match="scenarios: expected a non-empty mapping"):
+        splits_from_scenarios({}, 5)
+    with pytest.raises(SplitError, match="overlap"):
+        splits_from_scenarios({"user": ([1, 2], [2, 3])}, 5)
 
 
 def test_split_is_immutable_and_validated():
@@ -129,7 +144,7 @@ def test_input_range_split_by_magnitude():
 def test_series_split_and_labels():
     s = series_split(29, [0, 1], [2])
     assert s.cal_inputs == s.val_inputs == tuple(range(29))
-    cal, val = press_scenarios()[0].label()
+    cal, val = splits_from_scenarios(PRESS_SCENARIOS, 29)[0].label()
     assert cal == "q2,q4..q14" and val == "q3,q5..q15"
     assert s.swapped().cal_series == (2,)
 
