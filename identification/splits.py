@@ -22,12 +22,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import partial
 from typing import Sequence
 
 import numpy as np
 
-from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows   # transitional names, see the end
 
 __all__ = ["Split", "SplitError", "splits_from_scenarios", "random_splits", "input_range_split", "series_split"]
 
@@ -295,13 +293,3 @@ def series_split(n_q: int, cal_series: Sequence[int], val_series: Sequence[int],
     qi = list(range(int(n_q))) if inputs is None else list(inputs)
     label = name or f"series {[i + 1 for i in cal_series]} vs {[i + 1 for i in val_series]}"
     return Split(label, qi, qi, list(cal_series), list(val_series), "repeatability: series against series")
-
-
-# ---------------------------------------------------------------------------- transitional names
-# mudoe/study.py and mudoe/config.py still import press_scenarios and PRESS_SCENARIO_NAMES from here;
-# both go (with the models.press import above) once those call sites read models.press and call
-# splits_from_scenarios.
-def press_scenarios(n_q: int = 29, series: Sequence[int] | None = None, peak: int | None = None) -> tuple:
-    """Transitional: the paper's four press scenarios, ``splits_from_scenarios(press_scenario_rows, n_q, series)``
-    (with ``peak`` passed to :func:`models.press.press_scenario_rows`)."""
-    return splits_from_scenarios(partial(press_scenario_rows, peak=peak), n_q, series)

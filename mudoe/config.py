@@ -52,8 +52,8 @@ from typing import Any
 
 from identification.detect import DetectSettings
 from identification.montecarlo import MonteCarloSettings
-from identification.splits import PRESS_SCENARIO_NAMES
 from models.friction import VARIANTS as FRICTION_VARIANTS
+from models.press import PRESS_SCENARIO_NAMES
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",

@@ -7,9 +7,6 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 from __future__ import annotations
 
 import math
-import sys
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -17,9 +14,11 @@ import numpy as np
 
 from identification import Measurements, identify, information_contributions
 from identification.detect import NormalityCheck, normality_check
-from identification.splits import PRESS_SCENARIO_NAMES, Split, press_scenarios, random_splits
+from identification.progress import Progress as BaseProgress
+from identification.splits import Split, random_splits, splits_from_scenarios
 from models.campaign import Campaign
 from models.contract import Model, ModelError
+from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 
 from .config import ConfigError, StudyConfig
 from .data_io import DataFileError, load_campaign
@@ -34,39 +33,11 @@ class MissingPieceError(RuntimeError):
 
 
 # ---------------------------------------------------------------------------- progress
-class Progress:
-    """Progress lines on a stream (stderr by default) for steps that may take over a second.
-
-    Parameters
-    ----------
-    enabled : bool
-    stream : file-like, optional (default sys.stderr at call time)
-    """
+class Progress(BaseProgress):
+    """The study's progress: :class:`identification.progress.Progress` with the prefix "mudoe: "."""
 
     def __init__(self, enabled: bool = True, stream=None):
-        self.enabled = enabled
-        self.stream = stream
-        self.timing: dict = {}
-
-    def _out(self, text):
-        if self.enabled:
-            print(text, file=self.stream or sys.stderr, flush=True)
-
-    @contextmanager
-    def step(self, label: str, announce: bool = True):
-        """Print ``label ...`` and, when done, the elapsed time; record it in ``timing``.
-
-        With ``announce=False`` (quick steps, e.g. reading the data) nothing is printed unless the
-        step took over a second, so that a bad-input error stays the only line on stderr.
-        """
-        if announce:
-            self._out(f"mudoe: {label} ...")
-        t0 = time.perf_counter()
-        yield
-        dt = time.perf_counter() - t0
-        self.timing[label] = self.timing.get(label, 0.0) + dt
-        if announce or dt > 1.0:
-            self._out(f"mudoe: {label} done in {dt:.1f} s")
+        super().__init__(enabled, stream, prefix="mudoe: ")
 
 
 # ---------------------------------------------------------------------------- the study
@@ -230,7 +201,7 @@ def _splits(cfg: StudyConfig, n_q: int, q_set) -> tuple:
     s = cfg.splits
     out = []
     if s.scenarios:
-        allsc = press_scenarios(n_q)
+        allsc = splits_from_scenarios(press_scenario_rows, n_q)
         wanted = PRESS_SCENARIO_NAMES if "paper" in s.scenarios else s.scenarios
         out += [sp for sp in allsc if sp.name in wanted]
     if s.random.n:
