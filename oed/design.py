@@ -24,7 +24,8 @@ import numpy as np
 
 from .bnb import BnBSettings, branch_and_bound
 from .constraints import DesignConstraints, make_constraints
-from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, validate_information
+from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
+                       validate_information)
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
@@ -146,12 +147,6 @@ def _names(sensor_names, n):
     if len(set(names)) != n:
         raise ValueError("sensor_names: names must be unique")
     return names
-
-
-def _tol(crit, v, gap_tol):
-    if not np.isfinite(v):
-        return 0.0
-    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
 
 
 def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton", n_sensors=None,
@@ -290,7 +285,7 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
             det = float(res.det[0])
     lb = float(min(lb, value)) if np.isfinite(value) else lb
     gap = float(value - lb) if np.isfinite(value) and np.isfinite(lb) else np.inf
-    proven = status == "optimal" and gap <= _tol(crit, value, settings.gap_tol) * 1.000001 + 1e-300
+    proven = status == "optimal" and gap <= gap_tolerance(crit, value, settings.gap_tol) * 1.000001 + 1e-300
     if status == "optimal" and not proven:
         status = "feasible"
     wt = np.zeros(n, dtype=bool) if w is None else np.asarray(w, dtype=bool)

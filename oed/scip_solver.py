@@ -30,8 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bnb import BnBSettings, SelectionProblem, fixings, greedy_exchange
 from .constraints import DesignConstraints
-from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria
+from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance
+from .enumeration import iter_designs
 
 __all__ = ["ScipSettings", "ScipResult", "ScipUnavailableError", "scip_available", "solve_scip",
            "STATUS_MESSAGES"]
@@ -221,12 +223,6 @@ def _exact(F, S, w, crit, kind, cs):
     return float(res.value(crit)[0]), bool(res.singular[0])
 
 
-def _tol(crit, v, gap_tol):
-    if not np.isfinite(v):
-        return 0.0
-    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
-
-
 def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
     n, p, _ = F.shape
     Fflat = F.reshape(n, -1)
@@ -316,7 +312,7 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
             status, msg = "optimal", ("master repeated a design: incumbent optimal up to SCIP's "
                                       "feasibility tolerance on the cuts")
             break
-        if lb >= best_v - _tol(crit, best_v, settings.gap_tol):
+        if lb >= best_v - gap_tolerance(crit, best_v, settings.gap_tol):
             status, msg = "optimal", "master bound meets the incumbent"
             break
         if add_cut(w.astype(float)):
@@ -331,8 +327,6 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
 def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
     """Best design among the first ``max_designs`` admissible designs (lexicographic) and
     the Gauss-Newton greedy/exchange design (if admissible); (w, value) or (None, inf)."""
-    from .enumeration import iter_designs
-    from .bnb import BnBSettings, _Problem, greedy_exchange
     best_w, best_v = None, np.inf
     seen = 0
     for W in iter_designs(cons, 5000):
@@ -344,11 +338,8 @@ def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
         seen += len(W)
         if seen >= max_designs:
             break
-    prob = _Problem(F, crit, BnBSettings(), cs)
-    state = np.full(F.shape[0], -1, dtype=np.int8)
-    state[list(cons.include)] = 1
-    state[list(cons.exclude)] = 0
-    wg, _ = greedy_exchange(prob, state, cons.max_size)
+    prob = SelectionProblem(F, crit, BnBSettings().gap_tol, cs)
+    wg, _ = greedy_exchange(prob, fixings(cons, F.shape[0]), cons.max_size)
     if cons.is_admissible(wg):
         v, _s = _exact(F, S, wg, crit, kind, cs)
         if v < best_v:
@@ -467,7 +458,7 @@ def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs,
     if best_w is None and w_inc is not None and status != "infeasible":
         msg += "; SCIP found no design, returning the heuristic incumbent"
         best_w, best_v = w_inc, U
-    elif best_w is not None and w_inc is not None and U < best_v - _tol(crit, best_v, 1e-9):
+    elif best_w is not None and w_inc is not None and U < best_v - gap_tolerance(crit, best_v, 1e-9):
         if status == "optimal":
             status = "feasible"
             msg += "; a heuristic design beats SCIP's 'optimal' one (numerical tolerance?), proof discarded"
