@@ -29,6 +29,7 @@ __all__ = [
     "validate_information",
     "criterion_value",
     "batch_criteria",
+    "gap_tolerance",
 ]
 
 
@@ -102,6 +103,19 @@ class CriteriaSettings:
 
 
 DEFAULT_SETTINGS = CriteriaSettings()
+
+
+def gap_tolerance(criterion: Criterion, value: float, gap_tol: float) -> float:
+    r"""Optimality tolerance at the criterion value ``value``: ``gap_tol`` for D (absolute on
+    :math:`\log\det C`, i.e. relative on :math:`\det C`), :math:`\text{gap\_tol}\,|value|` for A
+    and E (relative), 0 when ``value`` is not finite (no incumbent yet).
+
+    Shared by every exact method: a design is proven optimal when ``value - lower_bound`` is
+    at most this, and branch-and-bound prunes nodes whose bound is above ``value`` minus this.
+    """
+    if not np.isfinite(value):
+        return 0.0
+    return gap_tol if criterion is Criterion.D else gap_tol * abs(value)
 
 
 def validate_information(F, S=None, *, settings: CriteriaSettings = DEFAULT_SETTINGS):

@@ -24,7 +24,8 @@ import numpy as np
 
 from .bnb import BnBSettings, branch_and_bound
 from .constraints import DesignConstraints, make_constraints
-from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, validate_information
+from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
+                       validate_information)
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
@@ -148,12 +149,6 @@ def _names(sensor_names, n):
     return names
 
 
-def _tol(crit, v, gap_tol):
-    if not np.isfinite(v):
-        return 0.0
-    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
-
-
 def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton", n_sensors=None,
                                     max_sensors=None, costs=None, budget=None, include=(), exclude=(),
                                     method="auto", time_limit=60.0, sensor_names=None, *,
@@ -193,6 +188,43 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
         When no method could produce a design (e.g. SCIP failed and enumeration is too big).
     """
     t0 = time.perf_counter()
+    req = _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget, include, exclude, method,
+                          time_limit, sensor_names, settings)
+    outcome = _run_method(req, _route(req, settings), settings)
+    return _assemble_result(req, outcome, settings, t0)
+
+
+@dataclass(frozen=True)
+class _DesignRequest:
+    """Validated inputs of one selection: information, criterion, constraints and method."""
+
+    F: np.ndarray
+    S: np.ndarray | None          # second-order terms used (None for Gauss-Newton)
+    crit: Criterion
+    kind: Kind
+    cons: DesignConstraints
+    names: tuple
+    count: int                    # number of admissible designs
+    method: str                   # as requested ("auto" allowed)
+    time_limit: float
+
+
+@dataclass(frozen=True)
+class _MethodOutcome:
+    """What a method returned: design, value, bound, status, message, method used, notes."""
+
+    w: np.ndarray | None
+    value: float
+    lower_bound: float
+    status: str
+    message: str
+    method: str
+    notes: tuple = ()
+
+
+def _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget, include, exclude, method,
+                    time_limit, sensor_names, settings) -> _DesignRequest:
+    """Validate the arguments of :func:`select_sensors_from_information` (errors name the argument)."""
     crit = Criterion.parse(criterion)
     kind_e = Kind.parse(kind)
     if method not in _METHODS:
@@ -208,71 +240,97 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
     names = _names(sensor_names, n)
     cons = make_constraints(n, p, n_sensors=n_sensors, max_sensors=max_sensors, costs=costs, budget=budget,
                             include=include, exclude=exclude, sensor_names=names)
-    Suse = S if kind_e is Kind.SECOND_ORDER else None
-    count = cons.count_designs()
-    notes = []
-    chosen = method
-    if method == "auto":
-        if count <= settings.enumeration_limit:
+    return _DesignRequest(F=F, S=S if kind_e is Kind.SECOND_ORDER else None, crit=crit, kind=kind_e, cons=cons,
+                          names=names, count=cons.count_designs(), method=method, time_limit=time_limit)
+
+
+def _route(req: _DesignRequest, settings: DesignSettings) -> str:
+    """Method to run: ``auto`` enumerates small problems, else B&B (Gauss-Newton) or SCIP."""
+    chosen = req.method
+    if chosen == "auto":
+        if req.count <= settings.enumeration_limit:
             chosen = "enumerate"
-        elif kind_e is Kind.GAUSS_NEWTON:
+        elif req.kind is Kind.GAUSS_NEWTON:
             chosen = "bnb"
         else:
             chosen = "scip"
-    if chosen == "bnb":
-        if kind_e is not Kind.GAUSS_NEWTON:
-            raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
-                             "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
+    if chosen == "bnb" and req.kind is not Kind.GAUSS_NEWTON:
+        raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
+                         "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
+    return chosen
 
-    w = None
-    value = lb = np.inf
-    status = message = ""
-    used = chosen
+
+def _run_method(req: _DesignRequest, chosen: str, settings: DesignSettings) -> _MethodOutcome:
+    """Run the chosen method; a failed SCIP run falls back to enumeration when affordable."""
     if chosen == "bnb":
-        r = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=time_limit, gap_tol=settings.gap_tol),
-                             criteria_settings=settings.criteria)
-        w, value, lb, status = r.w, r.value, r.lower_bound, r.status
-        message = f"{r.nodes} nodes, root bound {r.root_bound:.6g}, initial incumbent {r.initial_incumbent:.6g}"
-        if cons.max_sensors is not None and cons.n_sensors is None and cons.costs is None:
-            notes.append(f"sum w <= {cons.max_sensors} solved as sum w = {cons.max_size} (GN criteria are monotone)")
-    elif chosen == "scip":
-        from . import scip_solver  # the only module importing Pyomo's SolverFactory
-        try:
-            r = scip_solver.solve_scip(F, Suse, cons, crit, kind_e,
-                                       settings=scip_solver.ScipSettings(time_limit=time_limit, gap_tol=settings.gap_tol,
-                                                                         formulation=settings.scip_formulation),
-                                       criteria_settings=settings.criteria)
-            w, value, lb, status, message = r.w, r.value, r.lower_bound, r.status, r.message
-            message = f"{r.formulation}: {message} ({r.rounds} SCIP solve(s))"
-            if r.assumption:
-                notes.append("modelling bound: " + r.assumption)
-            failed = r.status in ("error",) or (r.w is None and r.status != "infeasible")
-        except scip_solver.ScipUnavailableError as exc:
-            failed = True
-            status, message = "error", f"SCIP unavailable: {exc}"
-        if failed:
-            if method == "scip" and count > settings.enumeration_fallback_limit:
-                raise RuntimeError(f"method: SCIP failed ({message}) and enumeration of {count} designs is too large")
-            if count <= settings.enumeration_fallback_limit:
-                notes.append(f"SCIP failed ({status}: {message}); fell back to exact enumeration")
-                chosen = "enumerate"
-            else:
-                raise RuntimeError(f"SCIP failed ({status}: {message}) and enumeration of {count} designs exceeds "
-                                   f"enumeration_fallback_limit = {settings.enumeration_fallback_limit}")
-        else:
-            used = "scip"
-    if chosen == "enumerate":
-        if count > settings.enumeration_fallback_limit and method == "enumerate":
-            raise ValueError(f"method: enumeration of {count} admissible designs exceeds "
-                             f"{settings.enumeration_fallback_limit}; use 'bnb' or 'scip'")
-        r = enumerate_designs(F, Suse, cons, crit, kind_e,
-                              settings=EnumerationSettings(max_designs=max(settings.enumeration_fallback_limit, count)),
-                              criteria_settings=settings.criteria)
-        w, value = r.w, r.value
-        lb = value
-        status = "optimal" if np.isfinite(value) else "infeasible"
-        message = f"enumerated {r.n_evaluated} admissible designs ({r.n_singular} singular)"
-        used = "enumerate"
+        return _solve_bnb(req, settings)
+    notes = ()
+    if chosen == "scip":
+        outcome, failed = _solve_scip(req, settings)
+        if not failed:
+            return outcome
+        notes = outcome.notes + (_scip_fallback_note(req, outcome, settings),)
+    return _solve_enumeration(req, settings, notes)
+
+
+def _solve_bnb(req: _DesignRequest, settings: DesignSettings) -> _MethodOutcome:
+    """Our branch-and-bound (Gauss-Newton criteria)."""
+    cons = req.cons
+    r = branch_and_bound(req.F, cons, req.crit, settings=BnBSettings(time_limit=req.time_limit,
+                                                                     gap_tol=settings.gap_tol),
+                         criteria_settings=settings.criteria)
+    notes = ()
+    if cons.max_sensors is not None and cons.n_sensors is None and cons.costs is None:
+        notes = (f"sum w <= {cons.max_sensors} solved as sum w = {cons.max_size} (GN criteria are monotone)",)
+    message = f"{r.nodes} nodes, root bound {r.root_bound:.6g}, initial incumbent {r.initial_incumbent:.6g}"
+    return _MethodOutcome(r.w, r.value, r.lower_bound, r.status, message, "bnb", notes)
+
+
+def _solve_scip(req: _DesignRequest, settings: DesignSettings):
+    """SCIP via Pyomo; returns (outcome, failed)."""
+    from . import scip_solver  # the only module importing Pyomo's SolverFactory
+    try:
+        r = scip_solver.solve_scip(req.F, req.S, req.cons, req.crit, req.kind,
+                                   settings=scip_solver.ScipSettings(time_limit=req.time_limit,
+                                                                     gap_tol=settings.gap_tol,
+                                                                     formulation=settings.scip_formulation),
+                                   criteria_settings=settings.criteria)
+    except scip_solver.ScipUnavailableError as exc:
+        return _MethodOutcome(None, np.inf, np.inf, "error", f"SCIP unavailable: {exc}", "scip"), True
+    notes = ("modelling bound: " + r.assumption,) if r.assumption else ()
+    failed = r.status in ("error",) or (r.w is None and r.status != "infeasible")
+    message = f"{r.formulation}: {r.message} ({r.rounds} SCIP solve(s))"
+    return _MethodOutcome(r.w, r.value, r.lower_bound, r.status, message, "scip", notes), failed
+
+
+def _scip_fallback_note(req: _DesignRequest, failed: _MethodOutcome, settings: DesignSettings) -> str:
+    """Note for the fallback to enumeration after a SCIP failure; raises when enumeration is too large."""
+    limit = settings.enumeration_fallback_limit
+    if req.method == "scip" and req.count > limit:
+        raise RuntimeError(f"method: SCIP failed ({failed.message}) and enumeration of {req.count} designs is too large")
+    if req.count > limit:
+        raise RuntimeError(f"SCIP failed ({failed.status}: {failed.message}) and enumeration of {req.count} designs "
+                           f"exceeds enumeration_fallback_limit = {limit}")
+    return f"SCIP failed ({failed.status}: {failed.message}); fell back to exact enumeration"
+
+
+def _solve_enumeration(req: _DesignRequest, settings: DesignSettings, notes: tuple) -> _MethodOutcome:
+    """Exact enumeration of every admissible design."""
+    if req.count > settings.enumeration_fallback_limit and req.method == "enumerate":
+        raise ValueError(f"method: enumeration of {req.count} admissible designs exceeds "
+                         f"{settings.enumeration_fallback_limit}; use 'bnb' or 'scip'")
+    r = enumerate_designs(req.F, req.S, req.cons, req.crit, req.kind,
+                          settings=EnumerationSettings(max_designs=max(settings.enumeration_fallback_limit, req.count)),
+                          criteria_settings=settings.criteria)
+    status = "optimal" if np.isfinite(r.value) else "infeasible"
+    message = f"enumerated {r.n_evaluated} admissible designs ({r.n_singular} singular)"
+    return _MethodOutcome(r.w, r.value, r.value, status, message, "enumerate", notes)
+
+
+def _assemble_result(req: _DesignRequest, out: _MethodOutcome, settings: DesignSettings, t0: float) -> DesignResult:
+    """Re-evaluate the design exactly, derive gap and proof, and build the :class:`DesignResult`."""
+    crit = req.crit
+    w, value, lb, status, message = out.w, out.value, out.lower_bound, out.status, out.message
     if status == "infeasible" or w is None or not np.isfinite(value):
         status = "infeasible"
         message = (message + "; " if message else "") + "no admissible design has full-rank information"
@@ -280,25 +338,26 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
     near = ""
     det = None
     if w is not None:
-        res = batch_criteria(F, Suse, np.asarray(w, dtype=float)[None], kind_e, settings=settings.criteria,
+        res = batch_criteria(req.F, req.S, np.asarray(w, dtype=float)[None], req.kind, settings=settings.criteria,
                              validated=True)
         if res.singular[0]:  # never return a singular design
-            raise RuntimeError(f"internal error: method {used} returned a singular design")
+            raise RuntimeError(f"internal error: method {out.method} returned a singular design")
         value = float(res.value(crit)[0])
         near = res.reason[0] if res.near_singular[0] else ""
         if crit is Criterion.D:
             det = float(res.det[0])
     lb = float(min(lb, value)) if np.isfinite(value) else lb
     gap = float(value - lb) if np.isfinite(value) and np.isfinite(lb) else np.inf
-    proven = status == "optimal" and gap <= _tol(crit, value, settings.gap_tol) * 1.000001 + 1e-300
+    proven = status == "optimal" and gap <= gap_tolerance(crit, value, settings.gap_tol) * 1.000001 + 1e-300
     if status == "optimal" and not proven:
         status = "feasible"
-    wt = np.zeros(n, dtype=bool) if w is None else np.asarray(w, dtype=bool)
+    wt = np.zeros(req.F.shape[0], dtype=bool) if w is None else np.asarray(w, dtype=bool)
     idx = tuple(int(k) for k in np.flatnonzero(wt))
-    return DesignResult(sensors=tuple(names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
-                        criterion=crit.value, kind=kind_e.value, value=float(value), det=det, lower_bound=float(lb),
-                        gap=gap, proven_optimal=bool(proven), method=used, status=status, message=message,
-                        wall_time=time.perf_counter() - t0, near_singular=near, notes=tuple(notes))
+    return DesignResult(sensors=tuple(req.names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
+                        criterion=crit.value, kind=req.kind.value, value=float(value), det=det,
+                        lower_bound=float(lb), gap=gap, proven_optimal=bool(proven), method=out.method,
+                        status=status, message=message, wall_time=time.perf_counter() - t0, near_singular=near,
+                        notes=out.notes)
 
 
 @dataclass(frozen=True)

@@ -30,8 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bnb import BnBSettings, SelectionProblem, fixings, greedy_exchange
 from .constraints import DesignConstraints
-from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria
+from .criteria import DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance
+from .enumeration import iter_designs
 
 __all__ = ["ScipSettings", "ScipResult", "ScipUnavailableError", "scip_available", "solve_scip",
            "STATUS_MESSAGES"]
@@ -221,15 +223,9 @@ def _exact(F, S, w, crit, kind, cs):
     return float(res.value(crit)[0]), bool(res.singular[0])
 
 
-def _tol(crit, v, gap_tol):
-    if not np.isfinite(v):
-        return 0.0
-    return gap_tol if crit is Criterion.D else gap_tol * abs(v)
-
-
-def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
-    n, p, _ = F.shape
-    Fflat = F.reshape(n, -1)
+def _cut_master(pyo, F, cons, crit):
+    r"""MILP master of the cut loop: :math:`\min t` (A, D) or :math:`\max s` (E, with
+    :math:`0\le s\le\lambda_{\max}(\sum_kF_k)`) over the design constraints; cuts go to ``mdl.cuts``."""
     mdl = _base_model(pyo, cons)
     if crit is Criterion.E:
         mdl.s = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
@@ -237,36 +233,46 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
     else:
         mdl.t = pyo.Var()
         mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
+    return mdl
 
-    def add_cut(x):
-        """Add a tangent/eigen cut at (possibly fractional) x with regular M(x); False if the
-        cut is numerically unusable (non-finite or > 1e15 coefficients) and was not added."""
-        M = (x @ Fflat).reshape(p, p)
-        if crit is Criterion.E:
-            lam, U = np.linalg.eigh(M)
-            for j in range(p):
-                if lam[j] > lam[0] + 1e-9 * max(abs(lam[-1]), 1e-300) and j > 0:
-                    break
-                q = np.einsum("i,kij,j->k", U[:, j], F, U[:, j])
-                if not np.all(np.isfinite(q)) or np.max(np.abs(q)) > 1e15:
-                    return False
-                mdl.cuts.add(mdl.s <= sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
-            return True
-        Minv = np.linalg.inv(M)
-        Minv = 0.5 * (Minv + Minv.T)
-        if crit is Criterion.D:
-            f = -np.linalg.slogdet(M)[1]
-            q = Fflat @ Minv.ravel()
-            c0 = f + p
-        else:
-            f = float(np.trace(Minv))
-            q = Fflat @ (Minv @ Minv).ravel()
-            c0 = 2.0 * f
-        if not (np.all(np.isfinite(q)) and np.isfinite(c0)) or max(np.max(np.abs(q)), abs(c0)) > 1e15:
-            return False
-        mdl.cuts.add(mdl.t >= c0 - sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
+
+def _add_cut(mdl, F, crit, x):
+    """Add a tangent/eigen cut at (possibly fractional) x with regular M(x) to the master ``mdl``;
+    False if the cut is numerically unusable (non-finite or > 1e15 coefficients) and was not added."""
+    n, p, _ = F.shape
+    Fflat = F.reshape(n, -1)
+    M = (x @ Fflat).reshape(p, p)
+    if crit is Criterion.E:
+        lam, U = np.linalg.eigh(M)
+        for j in range(p):
+            if lam[j] > lam[0] + 1e-9 * max(abs(lam[-1]), 1e-300) and j > 0:
+                break
+            q = np.einsum("i,kij,j->k", U[:, j], F, U[:, j])
+            if not np.all(np.isfinite(q)) or np.max(np.abs(q)) > 1e15:
+                return False
+            mdl.cuts.add(mdl.s <= sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
         return True
+    Minv = np.linalg.inv(M)
+    Minv = 0.5 * (Minv + Minv.T)
+    if crit is Criterion.D:
+        f = -np.linalg.slogdet(M)[1]
+        q = Fflat @ Minv.ravel()
+        c0 = f + p
+    else:
+        f = float(np.trace(Minv))
+        q = Fflat @ (Minv @ Minv).ravel()
+        c0 = 2.0 * f
+    if not (np.all(np.isfinite(q)) and np.isfinite(c0)) or max(np.max(np.abs(q)), abs(c0)) > 1e15:
+        return False
+    mdl.cuts.add(mdl.t >= c0 - sum(float(q[k]) * mdl.w[k] for k in range(n) if q[k] != 0.0))
+    return True
 
+
+def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
+    n, p, _ = F.shape
+    Fflat = F.reshape(n, -1)
+    """Outer-approximation cut loop (``"cuts"``): re-solve the MILP master, adding a cut at every new design."""
+    mdl = _cut_master(pyo, F, cons, crit)
     # initial cut at the uniform relaxation point over available sensors
     avail = np.ones(n)
     avail[list(cons.exclude)] = 0.0
@@ -277,7 +283,7 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
         return ScipResult(None, np.inf, np.inf, "infeasible",
                           "no admissible design has full-rank information (all available sensors are singular)",
                           0, time.perf_counter() - t0, "cuts")
-    add_cut(x0)
+    _add_cut(mdl, F, crit, x0)
     best_w, best_v = None, np.inf
     with_cut = set()
     lb = -np.inf
@@ -316,10 +322,10 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
             status, msg = "optimal", ("master repeated a design: incumbent optimal up to SCIP's "
                                       "feasibility tolerance on the cuts")
             break
-        if lb >= best_v - _tol(crit, best_v, settings.gap_tol):
+        if lb >= best_v - gap_tolerance(crit, best_v, settings.gap_tol):
             status, msg = "optimal", "master bound meets the incumbent"
             break
-        if add_cut(w.astype(float)):
+        if _add_cut(mdl, F, crit, w.astype(float)):
             with_cut.add(key)
         else:  # numerically unusable cut: exclude exactly this (evaluated) design
             mdl.cuts.add(sum(1 - mdl.w[k] for k in range(n) if w[k]) + sum(mdl.w[k] for k in range(n) if not w[k]) >= 1)
@@ -331,8 +337,6 @@ def _solve_cuts(pyo, SolverFactory, F, cons, crit, settings, cs, t0):
 def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
     """Best design among the first ``max_designs`` admissible designs (lexicographic) and
     the Gauss-Newton greedy/exchange design (if admissible); (w, value) or (None, inf)."""
-    from .enumeration import iter_designs
-    from .bnb import BnBSettings, _Problem, greedy_exchange
     best_w, best_v = None, np.inf
     seen = 0
     for W in iter_designs(cons, 5000):
@@ -344,11 +348,8 @@ def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
         seen += len(W)
         if seen >= max_designs:
             break
-    prob = _Problem(F, crit, BnBSettings(), cs)
-    state = np.full(F.shape[0], -1, dtype=np.int8)
-    state[list(cons.include)] = 1
-    state[list(cons.exclude)] = 0
-    wg, _ = greedy_exchange(prob, state, cons.max_size)
+    prob = SelectionProblem(F, crit, BnBSettings().gap_tol, cs)
+    wg, _ = greedy_exchange(prob, fixings(cons, F.shape[0]), cons.max_size)
     if cons.is_admissible(wg):
         v, _s = _exact(F, S, wg, crit, kind, cs)
         if v < best_v:
@@ -356,85 +357,107 @@ def _heuristic_incumbent(F, S, cons, crit, kind, cs, max_designs=20000):
     return best_w, best_v
 
 
+def _naive_formulation(pyo, mdl, F, crit, M, U):
+    r"""Single nonconvex MINLP for Gauss-Newton criteria on ``mdl`` (``M``: :math:`\sum_kw_kF_k` as
+    Pyomo expressions, ``U``: a heuristic upper bound, possibly inf): Cholesky of :math:`M-tI` (E),
+    of :math:`M` (D) or :math:`MX=I` (A)."""
+    p = F.shape[1]
+    P = range(p)
+    tri = [(i, j) for i in P for j in P if j <= i]
+    Mdiag_max = float(np.max(np.einsum("kii->i", F)))
+    delta = 1e-6 * np.sqrt(float(np.max(np.abs(F))))
+    lb_ = np.sqrt(Mdiag_max)  # rigorous: M = LL^T (or M - tI = LL^T, t >= 0) => |L_ij| <= sqrt(M_ii)
+    mdl.L = pyo.Var(tri, bounds=(-lb_, lb_))
+    for i in P:
+        mdl.L[i, i].setlb(delta)
+    if crit is Criterion.E:
+        mdl.t = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
+        mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j] - (mdl.t if i == j else 0.0)
+                                == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+        mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.maximize)
+    elif crit is Criterion.D:
+        mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j]
+                                == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+        mdl.obj = pyo.Objective(expr=-2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
+    else:
+        # rigorous: X = M^{-1} is PD, so trace(X) <= U implies |X_ij| <= U
+        xb = U if np.isfinite(U) else None
+        mdl.X = pyo.Var(P, P, bounds=(None if xb is None else -xb, xb))
+        mdl.eq = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(M[i, l] * mdl.X[l, j] for l in P)
+                                == (1.0 if i == j else 0.0))
+        mdl.obj = pyo.Objective(expr=sum(mdl.X[i, i] for i in P), sense=pyo.minimize)
+        if xb is not None:
+            mdl.cutoff = pyo.Constraint(expr=sum(mdl.X[i, i] for i in P) <= U * (1 + 1e-9))
+
+
+def _second_order_formulation(pyo, mdl, F, S, crit, M, U, w_inc, settings):
+    r"""MINLP for the second-order covariance :math:`C = XY`, :math:`H(w)X = I`, :math:`Y = G(w)X` on
+    ``mdl``; the bounds on X come from the heuristic design ``w_inc`` (value ``U``).  Returns the
+    modelling assumption text ('' when ``U`` is inf)."""
+    n, p, _ = F.shape
+    P = range(p)
+    tri = [(i, j) for i in P for j in P if j <= i]
+    Mabs = np.abs(F).sum(axis=0)
+    assumption = ""
+    Sx = np.zeros_like(F) if S is None else S
+    Hm = {(i, j): sum(float(F[k, i, j] + Sx[k, i, j]) * mdl.w[k] for k in range(n)
+                      if F[k, i, j] + Sx[k, i, j] != 0.0) for i in P for j in P}
+    xb = yb = cb = None
+    if np.isfinite(U):
+        Hinc = ((w_inc.astype(float)) @ (F + Sx).reshape(n, -1)).reshape(p, p)
+        xb = settings.inverse_bound_factor * float(np.max(np.abs(np.linalg.inv(Hinc))))
+        yb = float(np.max(Mabs.sum(axis=1))) * xb  # |(G X)_ij| <= sum_l |G_il| xb
+        cb = p * xb * yb
+        if crit in (Criterion.A, Criterion.E):
+            cb = min(cb, U * (1 + 1e-9))  # rigorous: C PSD, trace/lambda_max <= U
+        assumption = (f"|H(w)^-1|_ij <= {xb:.3g} (= {settings.inverse_bound_factor:g} x the largest entry "
+                      "for a heuristic design); designs violating it are excluded")
+    bnd = lambda b: (None if b is None else -b, b)  # noqa: E731
+    mdl.X = pyo.Var(P, P, bounds=bnd(xb))
+    mdl.Y = pyo.Var(P, P, bounds=bnd(yb))
+    mdl.C = pyo.Var(P, P, bounds=bnd(cb))
+    mdl.hx = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(Hm[i, l] * mdl.X[l, j] for l in P)
+                            == (1.0 if i == j else 0.0))
+    mdl.gx = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.Y[i, j] == sum(M[i, l] * mdl.X[l, j] for l in P))
+    mdl.cc = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.C[i, j] == sum(mdl.X[i, l] * mdl.Y[l, j] for l in P))
+    if crit is Criterion.A:
+        mdl.obj = pyo.Objective(expr=sum(mdl.C[i, i] for i in P), sense=pyo.minimize)
+        if np.isfinite(U):
+            mdl.cutoff = pyo.Constraint(expr=sum(mdl.C[i, i] for i in P) <= U * (1 + 1e-9))
+    else:
+        if crit is Criterion.E:
+            lbd = None if cb is None else np.sqrt(2 * cb)  # t - C_ii <= 2 cb
+            mdl.L = pyo.Var(tri, bounds=bnd(lbd))
+            for i in P:
+                mdl.L[i, i].setlb(0.0)
+            mdl.t = pyo.Var(bounds=(0.0, None if not np.isfinite(U) else U * (1 + 1e-9)))
+            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: (mdl.t if i == j else 0.0) - mdl.C[i, j]
+                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+            mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
+        else:
+            lbd = None if cb is None else np.sqrt(cb)  # C = LL^T => |L_ij| <= sqrt(C_ii)
+            mdl.L = pyo.Var(tri, bounds=bnd(lbd))
+            for i in P:
+                mdl.L[i, i].setlb(1e-12)
+            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: mdl.C[i, j]
+                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
+            mdl.obj = pyo.Objective(expr=2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
+    return assumption
+
+
 def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs, t0):
+    """One MINLP (``"naive"`` or ``"second_order"``) solved by SCIP, re-solved after no-good cuts
+    of singular designs; a better heuristic design replaces SCIP's."""
     n, p, _ = F.shape
     mdl = _base_model(pyo, cons)
     P = range(p)
-    fscale = float(np.max(np.abs(F)))
     assumption = ""
     w_inc, U = _heuristic_incumbent(F, S if form == "second_order" else None, cons, crit, kind, cs)
-    Mdiag_max = float(np.max(np.einsum("kii->i", F)))
-    Mabs = np.abs(F).sum(axis=0)
     M = {(i, j): sum(float(F[k, i, j]) * mdl.w[k] for k in range(n) if F[k, i, j] != 0.0) for i in P for j in P}
-    tri = [(i, j) for i in P for j in P if j <= i]
-    delta = 1e-6 * np.sqrt(fscale)
     if form == "naive":
-        lb_ = np.sqrt(Mdiag_max)  # rigorous: M = LL^T (or M - tI = LL^T, t >= 0) => |L_ij| <= sqrt(M_ii)
-        mdl.L = pyo.Var(tri, bounds=(-lb_, lb_))
-        for i in P:
-            mdl.L[i, i].setlb(delta)
-        if crit is Criterion.E:
-            mdl.t = pyo.Var(bounds=(0.0, float(np.max(np.linalg.eigvalsh(F.sum(0))))))
-            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j] - (mdl.t if i == j else 0.0)
-                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
-            mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.maximize)
-        elif crit is Criterion.D:
-            mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: M[i, j]
-                                    == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
-            mdl.obj = pyo.Objective(expr=-2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
-        else:
-            # rigorous: X = M^{-1} is PD, so trace(X) <= U implies |X_ij| <= U
-            xb = U if np.isfinite(U) else None
-            mdl.X = pyo.Var(P, P, bounds=(None if xb is None else -xb, xb))
-            mdl.eq = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(M[i, l] * mdl.X[l, j] for l in P)
-                                    == (1.0 if i == j else 0.0))
-            mdl.obj = pyo.Objective(expr=sum(mdl.X[i, i] for i in P), sense=pyo.minimize)
-            if xb is not None:
-                mdl.cutoff = pyo.Constraint(expr=sum(mdl.X[i, i] for i in P) <= U * (1 + 1e-9))
-    else:  # second_order
-        Sx = np.zeros_like(F) if S is None else S
-        Hm = {(i, j): sum(float(F[k, i, j] + Sx[k, i, j]) * mdl.w[k] for k in range(n)
-                          if F[k, i, j] + Sx[k, i, j] != 0.0) for i in P for j in P}
-        xb = yb = cb = None
-        if np.isfinite(U):
-            Hinc = ((w_inc.astype(float)) @ (F + Sx).reshape(n, -1)).reshape(p, p)
-            xb = settings.inverse_bound_factor * float(np.max(np.abs(np.linalg.inv(Hinc))))
-            yb = float(np.max(Mabs.sum(axis=1))) * xb  # |(G X)_ij| <= sum_l |G_il| xb
-            cb = p * xb * yb
-            if crit in (Criterion.A, Criterion.E):
-                cb = min(cb, U * (1 + 1e-9))  # rigorous: C PSD, trace/lambda_max <= U
-            assumption = (f"|H(w)^-1|_ij <= {xb:.3g} (= {settings.inverse_bound_factor:g} x the largest entry "
-                          "for a heuristic design); designs violating it are excluded")
-        bnd = lambda b: (None if b is None else -b, b)  # noqa: E731
-        mdl.X = pyo.Var(P, P, bounds=bnd(xb))
-        mdl.Y = pyo.Var(P, P, bounds=bnd(yb))
-        mdl.C = pyo.Var(P, P, bounds=bnd(cb))
-        mdl.hx = pyo.Constraint(P, P, rule=lambda m_, i, j: sum(Hm[i, l] * mdl.X[l, j] for l in P)
-                                == (1.0 if i == j else 0.0))
-        mdl.gx = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.Y[i, j] == sum(M[i, l] * mdl.X[l, j] for l in P))
-        mdl.cc = pyo.Constraint(P, P, rule=lambda m_, i, j: mdl.C[i, j] == sum(mdl.X[i, l] * mdl.Y[l, j] for l in P))
-        if crit is Criterion.A:
-            mdl.obj = pyo.Objective(expr=sum(mdl.C[i, i] for i in P), sense=pyo.minimize)
-            if np.isfinite(U):
-                mdl.cutoff = pyo.Constraint(expr=sum(mdl.C[i, i] for i in P) <= U * (1 + 1e-9))
-        else:
-            if crit is Criterion.E:
-                lbd = None if cb is None else np.sqrt(2 * cb)  # t - C_ii <= 2 cb
-                mdl.L = pyo.Var(tri, bounds=bnd(lbd))
-                for i in P:
-                    mdl.L[i, i].setlb(0.0)
-                mdl.t = pyo.Var(bounds=(0.0, None if not np.isfinite(U) else U * (1 + 1e-9)))
-                mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: (mdl.t if i == j else 0.0) - mdl.C[i, j]
-                                        == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
-                mdl.obj = pyo.Objective(expr=mdl.t, sense=pyo.minimize)
-            else:
-                lbd = None if cb is None else np.sqrt(cb)  # C = LL^T => |L_ij| <= sqrt(C_ii)
-                mdl.L = pyo.Var(tri, bounds=bnd(lbd))
-                for i in P:
-                    mdl.L[i, i].setlb(1e-12)
-                mdl.eq = pyo.Constraint(tri, rule=lambda m_, i, j: mdl.C[i, j]
-                                        == sum(mdl.L[i, l] * mdl.L[j, l] for l in range(j + 1)))
-                mdl.obj = pyo.Objective(expr=2.0 * sum(pyo.log(mdl.L[i, i]) for i in P), sense=pyo.minimize)
+        _naive_formulation(pyo, mdl, F, crit, M, U)
+    else:
+        assumption = _second_order_formulation(pyo, mdl, F, S, crit, M, U, w_inc, settings)
     rounds = 0
     status, msg = "error", "no SCIP solve completed"
     best_w, best_v, lb = None, np.inf, -np.inf
@@ -467,7 +490,7 @@ def _solve_minlp(pyo, SolverFactory, F, S, cons, crit, kind, form, settings, cs,
     if best_w is None and w_inc is not None and status != "infeasible":
         msg += "; SCIP found no design, returning the heuristic incumbent"
         best_w, best_v = w_inc, U
-    elif best_w is not None and w_inc is not None and U < best_v - _tol(crit, best_v, 1e-9):
+    elif best_w is not None and w_inc is not None and U < best_v - gap_tolerance(crit, best_v, 1e-9):
         if status == "optimal":
             status = "feasible"
             msg += "; a heuristic design beats SCIP's 'optimal' one (numerical tolerance?), proof discarded"

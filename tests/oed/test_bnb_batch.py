@@ -4,7 +4,8 @@ enumerated optimum of that node."""
 import numpy as np
 import pytest
 
-from oed.bnb import BnBSettings, _proj_capped_simplex, _proj_capped_simplex_batch, branch_and_bound
+from oed.bnb import BnBSettings, branch_and_bound
+from oed.bnb.projection import proj_capped_simplex, proj_capped_simplex_batch
 from oed.constraints import make_constraints
 from oed.criteria import validate_information
 from oed.enumeration import enumerate_designs
@@ -20,9 +21,9 @@ def test_batched_projection_matches_scalar_projection():
         free = rng.random((B, n)) < 0.7
         free[:, :2] = True
         r = np.array([rng.integers(1, k) for k in free.sum(axis=1)])
-        X = _proj_capped_simplex_batch(Y, free, r)
+        X = proj_capped_simplex_batch(Y, free, r)
         for i in range(B):
-            np.testing.assert_allclose(X[i, free[i]], _proj_capped_simplex(Y[i, free[i]], r[i]), atol=1e-9)
+            np.testing.assert_allclose(X[i, free[i]], proj_capped_simplex(Y[i, free[i]], r[i]), atol=1e-9)
             assert np.all(X[i, ~free[i]] == 0)
 
 
@@ -52,11 +53,11 @@ def test_node_bounds_below_node_optimum(crit):
 
 
 def test_e_refined_bound_below_node_optimum():
-    """The re-optimised eigenbasis E bound (``_e_bound_refine``) at arbitrary relaxed points of
+    """The re-optimised eigenbasis E bound (``e_bound_refine``) at arbitrary relaxed points of
     random nodes never exceeds lambda_min of any admissible design (rank-one and rank-two F_k)."""
     from itertools import combinations
 
-    from oed.bnb import _e_bound_refine
+    from oed.bnb.bounds import e_bound_refine
 
     rng = np.random.default_rng(7)
     checked = 0
@@ -81,9 +82,9 @@ def test_e_refined_bound_below_node_optimum():
         if not ok.any():
             continue
         S, free, on, r = S[ok], free[ok], on[ok], r[ok]
-        X = _proj_capped_simplex_batch(rng.random(S.shape), free, r) + on
+        X = proj_capped_simplex_batch(rng.random(S.shape), free, r) + on
         tE = 10.0 ** rng.uniform(-2, 4, size=S.shape[0])
-        s = _e_bound_refine(F.reshape(n, -1), X, free, on, r, tE, int(rng.integers(1, 40)))
+        s = e_bound_refine(F.reshape(n, -1), X, free, on, r, tE, int(rng.integers(1, 40)))
         for b in range(S.shape[0]):
             fr = np.flatnonzero(free[b])
             best = -np.inf
