@@ -8,6 +8,7 @@ import numpy as np
 from scipy import stats
 
 from .curvature import Curvature, estimate_curvature
+from .identifiability import SloppyDirection, sloppy_direction
 from .regions import Ellipsoid
 
 __all__ = ["Estimate"]
@@ -120,6 +121,12 @@ class Estimate:
             raise ValueError("curvature: this Estimate carries no model/data (build it with identify())")
         return estimate_curvature(self, self.model, self.data, 0.05)
 
+    @cached_property
+    def sloppy_direction(self) -> SloppyDirection | None:
+        """The worst and best determined combinations of relative parameter changes and their
+        standard-error ratio, from the information scaled by |p| (None for one parameter)."""
+        return sloppy_direction(self.information, self.p, self.param_names)
+
     def _summary_notes(self) -> tuple:
         """The estimator's notes plus the curvature diagnostics (when model and data are known)."""
         notes = list(self.notes)
@@ -197,6 +204,8 @@ class Estimate:
             lines.append("correlation (second-order covariance):")
             for i, n in enumerate(self.param_names):
                 lines.append(f"  {n:<{w}} " + " ".join(f"{c:>7.3f}" for c in self.correlation[i]))
+            lines.append("")
+            lines.append(str(self.sloppy_direction))
         notes = self._summary_notes()
         if notes:
             lines.append("")

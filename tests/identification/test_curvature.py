@@ -120,3 +120,28 @@ def test_bad_input_names_the_argument():
         relative_curvature(np.eye(3)[:, :2], np.zeros((3, 2, 2)), 1, alpha=1.5)
     with pytest.raises(ValueError, match="V2"):
         relative_curvature(np.eye(3)[:, :2], np.zeros((3, 2, 3)), 1)
+
+
+def test_sloppy_direction_names_the_confounded_combination():
+    from identification.identifiability import sloppy_direction
+    # information of y = a (k1 + k2) measured precisely plus k1 - k2 measured poorly: relative scale 1
+    u, v = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
+    F = 1e6 * np.outer(u, u) + 1.0 * np.outer(v, v)
+    sd = sloppy_direction(F, [1.0, 1.0], ["k1", "k2"])
+    assert sd.ratio == pytest.approx(1000.0)
+    assert sd.combination(sd.sloppy) == "k1 - k2" and sd.combination(sd.stiff) == "k1 + k2"
+    assert "k1 - k2 is determined 1000x worse than k1 + k2" in str(sd)
+    # scaling by |p|: the same information at p = (1, 100) names relative changes
+    sd2 = sloppy_direction(F / np.outer([1, 100], [1, 100]), [1.0, 100.0], ["k1", "k2"])
+    assert sd2.ratio == pytest.approx(1000.0) and sd2.combination(sd2.sloppy) == "k1 - k2"
+    assert sloppy_direction(np.eye(1), [2.0], ["a"]) is None
+    with pytest.raises(ValueError, match="information"):
+        sloppy_direction(np.eye(3), [1.0, 2.0], ["a", "b"])
+
+
+def test_summary_shows_the_weakest_direction():
+    est = _puromycin_fit()
+    sd = est.sloppy_direction
+    lam = np.linalg.eigvalsh(est.information * np.outer(est.p, est.p))
+    assert sd.ratio == pytest.approx(np.sqrt(lam[-1] / lam[0]))
+    assert str(sd) in est.summary()
