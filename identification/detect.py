@@ -658,6 +658,10 @@ class DetectionResult:
                  f"per-test level TOL/n_tests = {100 * s.tol / n:.4g} %",
                  f"decision statistic: {s.statistic} {explain[s.statistic]}, correction: {s.correction}",
                  ""]
+        switched = [d.model for d in self.decisions if d.statistic != s.statistic]
+        if switched:
+            lines[-1:-1] = [f"  for {', '.join(switched)} the likelihood ratio decides instead: a fit's linearisation "
+                            "is not trustworthy (Bates-Watts curvature), the Wald statistics are unreliable"]
         lines += self._normality_lines(notes)
         lines += [f"sensors for {mname}: {', '.join(used)} ({how})" for mname, used, how in self.design]
         if self.design:

@@ -296,6 +296,7 @@ def test_untrustworthy_fits_switch_the_decision_to_the_likelihood_ratio():
     assert res.decision(statistic="two_sample").statistic == "two_sample"     # still reported
     text = res.summary()
     assert "NOT trustworthy" in text and "~" in text and "the likelihood ratio decides" in text
+    assert "the likelihood ratio decides instead" in text.splitlines()[2]
     # the default statistic keeps its decision and says why it is the right one here
     res_lr = detect(mm, data, splits, p0=[1.0, 5.0], normality="override")
     assert res_lr.decision().statistic == "likelihood_ratio"
