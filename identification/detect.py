@@ -34,6 +34,12 @@ reported alongside (its model-level decision coincides with Bonferroni's, since 
 reject the family exactly when the smallest p-value is below TOL / n_tests; they differ
 in which individual splits are flagged).
 
+When a fit of a split is not trustworthy (Bates-Watts curvature, :mod:`identification.curvature`;
+checked by :func:`detect`), its Wald p-values (two-sample, paper) rest on a linearisation that
+fails: they are marked in the summary and the verdict is taken from the likelihood ratio
+(invariant under reparametrisation) whatever ``statistic`` was chosen, saying so.  Statistics
+that disagree by more than a factor 100 across the decision line get a numbered note.
+
 Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
 series z_2 - z_1, z_4 - z_3, ... over all inputs; the repeatability standard deviation
 of a sensor is std(differences) / sqrt(2) (same unit as z).
@@ -235,6 +241,9 @@ class SplitTest:
                                    or the F statistic when sigma is estimated
     alpha_lr : float               its p-value (NaN when the pooled fit failed; see lr_error)
     lr_error : str                 why the likelihood ratio is missing ("" when computed)
+    trustworthy : bool or None     both fits' linearisations trustworthy (Bates-Watts curvature);
+                                   None when not checked (run_split_tests(curvature=False)) or not computable
+    curvature_note : str           which fit is not trustworthy and its curvatures ("" otherwise)
     """
 
     model: str
@@ -258,6 +267,8 @@ class SplitTest:
     lr: float = math.nan
     alpha_lr: float = math.nan
     lr_error: str = ""
+    trustworthy: bool | None = None
+    curvature_note: str = ""
 
     def __post_init__(self):
         for name in ("p_cal", "p_val", "C_cal", "C_val"):
@@ -284,11 +295,36 @@ def _fit(model, data, p0, weights, settings, Y0=None):
     return est, C
 
 
+def _linearisation(est_c, est_v) -> tuple:
+    """(trustworthy, note) of a split from the Bates-Watts curvature of its two fits; trustworthy is
+    None when a curvature cannot be computed (no dof, rank-deficient sensitivities)."""
+    verdicts, bad = [], []
+    for label, est in (("calibration", est_c), ("validation", est_v)):
+        if est.dof < 1:
+            verdicts.append(None)
+            continue
+        try:
+            c = est.curvature
+        except (np.linalg.LinAlgError, ValueError):
+            verdicts.append(None)
+            continue
+        verdicts.append(c.trustworthy)
+        if not c.trustworthy:
+            bad.append(f"{label} fit: intrinsic {c.intrinsic:.3g}, parameter-effects {c.parameter_effects:.3g} "
+                       f"vs critical {c.critical:.3g}")
+    if bad:
+        return False, "; ".join(bad)
+    return (None if None in verdicts else True), ""
+
+
 def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None,
                     settings: DetectSettings | None = None, model_name: str | None = None,
-                    states0=None) -> tuple:
+                    states0=None, curvature: bool = False) -> tuple:
     """Lines 06-08 for every split: fits (p_cal, C_cal), (p_val, C_val), the pooled fit and the
     three alpha_min (likelihood ratio, two-sample Wald, paper).
+
+    With ``curvature`` the Bates-Watts curvature of both fits is checked
+    (:attr:`SplitTest.trustworthy`; :func:`detect` does; Monte Carlo studies skip it for speed).
 
     A failed fit or a singular covariance is recorded in its :class:`SplitTest` (``ok=False``,
     with the stage and the reason), never dropped and never raised.  ``states0`` (n_q, n_y),
@@ -331,9 +367,10 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
         n_p = model.n_p
         lr, a_lr, lr_err = _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c, est_v,
                                              pooled)
+        trust, cnote = _linearisation(est_c, est_v) if curvature else (None, "")
         out.append(SplitTest(name, split.name, c, v, True, "", "", est_c.p, est_v.p, C_c, C_v, d2p, d2t,
                              float(special.chdtrc(n_p, d2p)), float(special.chdtrc(n_p, d2t)),
-                             est_c.n_data, est_v.n_data, notes, lr, a_lr, lr_err))
+                             est_c.n_data, est_v.n_data, notes, lr, a_lr, lr_err, trust, cnote))
     return tuple(out)
 
 
@@ -533,6 +570,25 @@ def _alpha_mark(a: float, threshold: float) -> str:
     return f"{100 * a:.3g}" + ("*" if a < threshold else "") if a >= 1e-4 else "<0.01*"
 
 
+def _disagreement(t: SplitTest, threshold: float, tol: float) -> str:
+    """A warning when the three alpha_min of a split differ by more than a factor 100 and fall on
+    both sides of the per-test level or of TOL ("" otherwise)."""
+    a = {st: t.alpha(st) for st in STATISTICS}
+    fin = {st: v for st, v in a.items() if np.isfinite(v)}
+    if len(fin) < 2:
+        return ""
+    lo, hi = min(fin.values()), max(fin.values())
+    ratio = math.inf if lo <= 0 else hi / lo
+    crosses = any(lo < line <= hi for line in (threshold, tol))
+    if not (ratio > 100 and crosses):
+        return ""
+    vals = ", ".join(f"{st} {100 * v:.3g} %" for st, v in fin.items())
+    return (f"the statistics disagree by orders of magnitude ({vals}; ratio "
+            f"{'inf' if not math.isfinite(ratio) else f'{ratio:.3g}'}) across the decision line: the model is "
+            "far from linear in its parameters on this split or a fit is poorly determined; trust the likelihood "
+            "ratio and check the fits (curvature, conf_int(method=\"profile\"))")
+
+
 @dataclass(frozen=True, eq=False)
 class DetectionResult:
     """Immutable result of :func:`detect`.
@@ -562,10 +618,13 @@ class DetectionResult:
 
     def decision(self, model: str | None = None, statistic: str | None = None,
                  correction: str | None = None) -> ModelDecision:
-        """The verdict for a model (default: the only / first one)."""
+        """The verdict for a model (default: the only / first one); without statistic and correction
+        the primary verdict (the likelihood ratio's when a linearisation is not trustworthy)."""
         model = self.models[0] if model is None else model
         if model not in self.models:
             raise KeyError(f"model: {model!r} not in {list(self.models)}")
+        if statistic is None and correction is None:
+            return next(d for d in self.decisions if d.model == model)
         st = statistic or self.settings.statistic
         co = correction or self.settings.correction
         for d in self.all_decisions:
@@ -599,14 +658,18 @@ class DetectionResult:
                  f"per-test level TOL/n_tests = {100 * s.tol / n:.4g} %",
                  f"decision statistic: {s.statistic} {explain[s.statistic]}, correction: {s.correction}",
                  ""]
+        switched = [d.model for d in self.decisions if d.statistic != s.statistic]
+        if switched:
+            lines[-1:-1] = [f"  for {', '.join(switched)} the likelihood ratio decides instead: a fit's linearisation "
+                            "is not trustworthy (Bates-Watts curvature), the Wald statistics are unreliable"]
         lines += self._normality_lines(notes)
         lines += [f"sensors for {mname}: {', '.join(used)} ({how})" for mname, used, how in self.design]
         if self.design:
             lines.append("")
         for mname in self.models:
             lines += self._model_lines(mname, notes)
-        lines.append("* alpha_min < TOL/n_tests; R = hypothesis of the split rejected (LR, 2-sample, paper); "
-                     ">> = the decision")
+        lines.append("* alpha_min < TOL/n_tests; ~ = Wald p-value unreliable (linearisation not trustworthy); "
+                     "R = hypothesis of the split rejected (LR, 2-sample, paper); >> = the decision")
         if s.statistic == "paper":
             notes.add("the paper's statistic ignores the validation estimate's covariance C_val; under a correct "
                       "model its size exceeds TOL (see identification.montecarlo)")
@@ -643,26 +706,37 @@ class DetectionResult:
                  f"  {'split':<{w}} {'calibration':<22} {'validation':<22} {'alpha LR %':>10} "
                  f"{'alpha 2-sample %':>16} {'alpha paper %':>13}  Bonf. LR/2s/paper  Holm LR/2s/paper"]
         dec = {(d.statistic, d.correction): d for d in self.all_decisions if d.model == mname}
+        prim = self.decision(mname)
         for t in self.tests_of(mname):
             if not t.ok:
                 lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {'failed':>10} {'failed':>16} "
                              f"{'failed':>13}  " + notes.add(f"{mname}, {t.split}: {t.stage} failed: {t.error}"))
                 continue
             m = {st: _alpha_mark(t.alpha(st), thr) for st in STATISTICS}
+            if t.trustworthy is False:
+                m = {st: v + ("~" if st != "likelihood_ratio" else "") for st, v in m.items()}
             fl = ["".join("R" if t.split in dec[(st, co)].flagged else "-" for st in STATISTICS)
                   for co in CORRECTIONS]
             lines.append(f"  {t.split:<{w}} {t.cal_label:<22} {t.val_label:<22} {m['likelihood_ratio']:>10} "
                          f"{m['two_sample']:>16} {m['paper']:>13}  {fl[0]:>17}  {fl[1]:>16}")
             if t.lr_error:
                 lines[-1] += " " + notes.add(f"{mname}, {t.split}: likelihood ratio not computed: {t.lr_error}")
+            if t.trustworthy is False:
+                lines[-1] += " " + notes.add(
+                    f"{mname}, {t.split}: linearisation NOT trustworthy ({t.curvature_note}); the Wald columns "
+                    "(2-sample, paper; marked ~) rest on it and are unreliable: the likelihood ratio decides")
+            disagree = _disagreement(t, thr, s.tol)
+            if disagree:
+                lines[-1] += " " + notes.add(f"{mname}, {t.split}: {disagree}")
             for nt in t.notes:
                 lines[-1] += " " + notes.add(f"{mname}, {t.split}: {nt}")
         for st in STATISTICS:
             for co in CORRECTIONS:
                 d = dec[(st, co)]
-                primary = st == s.statistic and co == s.correction
+                primary = st == prim.statistic and co == prim.correction
                 tag = f"{d.decision.upper()}" if primary else d.decision
-                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({d.reason})")
+                reason = prim.reason if primary else d.reason
+                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({reason})")
         lines.append("")
         return lines
 
@@ -839,13 +913,30 @@ def _decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
     all_dec, primary = [], []
     for name in names:
         mt = [t for t in tests if t.model == name]
+        dec = {}
         for st in STATISTICS:
             for co in CORRECTIONS:
-                d = decide(mt, settings.tol, st, co)
-                all_dec.append(d)
-                if st == settings.statistic and co == settings.correction:
-                    primary.append(d)
+                dec[(st, co)] = decide(mt, settings.tol, st, co)
+                all_dec.append(dec[(st, co)])
+        primary.append(_primary(mt, dec, settings))
     return tuple(primary), tuple(all_dec)
+
+
+def _primary(mt: list, dec: dict, settings: DetectSettings) -> ModelDecision:
+    """The verdict of one model: the chosen statistic's, or the likelihood ratio's when a fit's
+    linearisation is not trustworthy (the Wald statistics then rest on a failed approximation)."""
+    bad = [t.split for t in mt if t.trustworthy is False]
+    d = dec[(settings.statistic, settings.correction)]
+    if not bad:
+        return d
+    why = (f"the linearisation of split(s) {', '.join(repr(b) for b in bad)} is not trustworthy (Bates-Watts "
+           "curvature), so the Wald statistics are unreliable")
+    if settings.statistic == "likelihood_ratio":
+        return dataclasses.replace(d, reason=f"{d.reason}; decided by the likelihood ratio (parametrisation "
+                                             f"invariant): {why}")
+    lr = dec[("likelihood_ratio", settings.correction)]
+    return dataclasses.replace(lr, reason=f"{lr.reason}; decided by the likelihood ratio instead of "
+                                          f"{settings.statistic}: {why}")
 
 
 # ---------------------------------------------------------------------------- main entry
@@ -938,7 +1029,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
                          "approximate")
         p0v = _start_values(name, p0s[name], m)
         tests.extend(run_split_tests(m, data, splits, p0v, w, settings, model_name=name,
-                                     states0=_start_states(m, p0v, data)))
+                                     states0=_start_states(m, p0v, data), curvature=True))
     primary, all_decisions = _decisions(tuple(tests), names, settings)
     return DetectionResult(settings, names, splits, tuple(tests), primary, all_decisions, tuple(normal),
                            tuple(designs), tuple(notes))

@@ -713,7 +713,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
         extra={"newton_decrement": ref.decrement / factor, "ipopt_iterations": res.iterations,
-               "ipopt_passes": sol.passes})
+               "ipopt_passes": sol.passes}, model=model, data=data)
 
 
 def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:

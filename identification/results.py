@@ -7,6 +7,8 @@ from functools import cached_property
 import numpy as np
 from scipy import stats
 
+from .curvature import Curvature, estimate_curvature
+from .identifiability import SloppyDirection, sloppy_direction
 from .regions import Ellipsoid
 
 __all__ = ["Estimate"]
@@ -39,6 +41,8 @@ class Estimate:
     iterations : int ; solve_time : float (s) ; refinement_steps : int
     grad_norm : float             ||J^T Omega r|| at the estimate (scaled by parameter scale)
     notes : tuple of str          numbered notes printed by summary()
+    model, data                   the models.Model and the Measurements of the fit (None when the
+                                  Estimate was built by hand; needed by :attr:`curvature`)
     """
 
     p: np.ndarray
@@ -70,6 +74,8 @@ class Estimate:
     notes: tuple = ()
     model_name: str = ""
     extra: dict = field(default_factory=dict)
+    model: object = field(default=None, repr=False)
+    data: object = field(default=None, repr=False)
 
     def __post_init__(self):
         for name in ("p", "states", "fitted", "residuals", "weights", "sigma", "information", "S", "H",
@@ -106,6 +112,37 @@ class Estimate:
     def reduced_chi2(self) -> float:
         """sum_ijk w_k (r_ijk / sigma_k)^2 / (n - n_p) (1 by construction when sigma was estimated)."""
         return 2.0 * self.objective / self.dof if self.dof > 0 else float("nan")
+
+    @cached_property
+    def curvature(self) -> Curvature:
+        """Bates-Watts maximum relative intrinsic and parameter-effects curvatures at alpha = 0.05,
+        exact from the second derivatives of the model outputs (:mod:`identification.curvature`)."""
+        if self.model is None or self.data is None:
+            raise ValueError("curvature: this Estimate carries no model/data (build it with identify())")
+        return estimate_curvature(self, self.model, self.data, 0.05)
+
+    @cached_property
+    def sloppy_direction(self) -> SloppyDirection | None:
+        """The worst and best determined combinations of relative parameter changes and their
+        standard-error ratio, from the information scaled by |p| (None for one parameter)."""
+        return sloppy_direction(self.information, self.p, self.param_names)
+
+    def _summary_notes(self) -> tuple:
+        """The estimator's notes plus the curvature diagnostics (when model and data are known)."""
+        notes = list(self.notes)
+        if self.model is not None and self.data is not None and self.dof >= 1:
+            try:
+                c = self.curvature
+            except np.linalg.LinAlgError as exc:
+                notes.append(f"curvature not computed: {exc}")
+            else:
+                if not c.trustworthy:
+                    notes.append(f"the linearisation is NOT trustworthy: Bates-Watts relative curvature "
+                                 f"intrinsic {c.intrinsic:.3g}, parameter-effects {c.parameter_effects:.3g} vs "
+                                 f"critical 1/sqrt(F) = {c.critical:.3g} (alpha = 0.05); the ellipsoid and the "
+                                 f"Wald intervals above can be badly wrong: use conf_int(method=\"profile\") "
+                                 f"(likelihood-ratio intervals) instead")
+        return tuple(notes)
 
     def _quantile(self, alpha: float) -> float:
         if not (0 < alpha < 1):
@@ -167,10 +204,13 @@ class Estimate:
             lines.append("correlation (second-order covariance):")
             for i, n in enumerate(self.param_names):
                 lines.append(f"  {n:<{w}} " + " ".join(f"{c:>7.3f}" for c in self.correlation[i]))
-        if self.notes:
+            lines.append("")
+            lines.append(str(self.sloppy_direction))
+        notes = self._summary_notes()
+        if notes:
             lines.append("")
             lines.append("Notes:")
-            for k, note in enumerate(self.notes, 1):
+            for k, note in enumerate(notes, 1):
                 lines.append(f"[{k}] {note}")
         return "\n".join(lines)
 

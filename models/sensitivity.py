@@ -74,6 +74,19 @@ class Sensitivities:
                 out[a] += Z.T @ (Hl @ Z)
         return 0.5 * (out + out.transpose(0, 2, 1))
 
+    def output_hessians(self) -> np.ndarray:
+        """d^2 h_jk / dp^2 of every output k at every input j through the state (exact, one adjoint
+        per output), shape (n_q, n_S, n_p, n_p) in output units per parameter unit squared."""
+        n_q, n_S, n_p = self.G.shape
+        eye = np.eye(n_S)
+        out = np.zeros((n_q, n_S, n_p, n_p))
+        for j, (solve, hy, Z) in enumerate(self._cache):
+            for k in range(n_S):
+                mu = solve(-(hy.T @ eye[k]), trans=1) if solve is not None else np.zeros(0)
+                Hl = self._num.point("lag_hess")(self._Y[j], self._p, self._inputs[j], eye[k], mu)[0]
+                out[j, k] = np.asarray(Z.T @ (Hl @ Z))
+        return 0.5 * (out + out.transpose(0, 1, 3, 2))
+
 
 class _BatchedSensitivities(Sensitivities):
     """Dense-state variant: all inputs in one mapped call, batched linear algebra."""
@@ -97,6 +110,20 @@ class _BatchedSensitivities(Sensitivities):
             Hl = f(self._Y, self._p, self._inputs, lam[a], mu)[0]
             out[a] = np.einsum("jva,jvw,jwb->ab", Z, Hl, Z)
         return 0.5 * (out + out.transpose(0, 2, 1))
+
+    def output_hessians(self) -> np.ndarray:
+        Ey, hy, Z = self._cache
+        n_q, n_S, n_p = self.G.shape
+        f = self._num.batched("lag_hess", n_q)
+        out = np.zeros((n_q, n_S, n_p, n_p))
+        for k in range(n_S):
+            lam = np.zeros((n_q, n_S))
+            lam[:, k] = 1.0
+            rhs = -hy[:, k, :]
+            mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0] if Ey.shape[1] else rhs
+            Hl = f(self._Y, self._p, self._inputs, lam, mu)[0]
+            out[:, k] = np.einsum("jva,jvw,jwb->jab", Z, Hl, Z)
+        return 0.5 * (out + out.transpose(0, 1, 3, 2))
 
 
 def _sensitivities_batched(model, num, p, inputs, Y):

@@ -148,11 +148,30 @@ def _write(out: Path, name: str, text: str) -> Path:
     return atomic_write_text(out / name, text)
 
 
+def _identify_diagnostics(est) -> dict:
+    """Curvature (Bates-Watts) and weakest direction of an estimate for identify's JSON output."""
+    import numpy as np
+    out = {}
+    sd = est.sloppy_direction
+    if sd is not None:
+        out["weakest_direction"] = dict(text=str(sd), sloppy=sd.sloppy.tolist(), stiff=sd.stiff.tolist(),
+                                        stderr_ratio=sd.ratio)
+    if est.model is not None and est.dof >= 1:
+        try:
+            c = est.curvature
+        except np.linalg.LinAlgError as exc:
+            out["curvature"] = dict(error=str(exc))
+        else:
+            out["curvature"] = dict(intrinsic=c.intrinsic, parameter_effects=c.parameter_effects,
+                                    critical=c.critical, alpha=c.alpha, trustworthy=c.trustworthy)
+    return out
+
+
 def _identify(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, estimate_dict
     from .study import run_identify
     run_identify(study, results, progress)
-    obj = {v: estimate_dict(e) for v, e in results.estimates.items()}
+    obj = {v: dict(estimate_dict(e), **_identify_diagnostics(e)) for v, e in results.estimates.items()}
     obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
     text = "\n\n".join([e.summary() for e in results.estimates.values()]
                        + [f"{v}: identification failed: {e}" for v, e in results.estimate_errors.items()])

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from identification import DataError, Measurements, alpha_min, alpha_min_two_sample, identify, simulate
-from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check)
+from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check,
+                                   run_split_tests)
 from identification.splits import Split, input_range_split, splits_from_scenarios
 from models.contract import Model
 from models.library import linear_model
@@ -270,3 +271,55 @@ def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
             assert pm is not None
             np.testing.assert_allclose(pm.p, eu.p, rtol=1e-7)
             assert pm.objective == pytest.approx(eu.objective, rel=1e-9)
+
+
+# ---------------------------------------------------------------- linearisation failures (issue 12, item 5)
+def _weak_campaign(seed):
+    """Michaelis-Menten observed far below saturation (x << K): Vm and K nearly confounded."""
+    mm = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"],
+                        h=lambda p, q: p[0] * q[0] / (p[1] + q[0]))
+    x = np.linspace(0.2, 1.0, 8)[:, None]
+    h = simulate(mm, [1.0, 5.0], x)
+    z = h[None] + 0.01 * np.random.default_rng(seed).standard_normal((2,) + h.shape)
+    return mm, Measurements(x, z, [0.01], sensors=mm.sensors)
+
+
+def test_untrustworthy_fits_switch_the_decision_to_the_likelihood_ratio():
+    mm, data = _weak_campaign(5)
+    splits = (Split("odd vs even", tuple(range(0, 8, 2)), tuple(range(1, 8, 2))),)
+    res = detect(mm, data, splits, p0=[1.0, 5.0], statistic="two_sample", normality="override")
+    t = res.tests[0]
+    assert t.ok and t.trustworthy is False and "parameter-effects" in t.curvature_note
+    d = res.decision()
+    assert d.statistic == "likelihood_ratio" and "instead of two_sample" in d.reason
+    assert res.verdicts[mm.name] == d.decision
+    assert res.decision(statistic="two_sample").statistic == "two_sample"     # still reported
+    text = res.summary()
+    assert "NOT trustworthy" in text and "~" in text and "the likelihood ratio decides" in text
+    assert "the likelihood ratio decides instead" in text.splitlines()[2]
+    # the default statistic keeps its decision and says why it is the right one here
+    res_lr = detect(mm, data, splits, p0=[1.0, 5.0], normality="override")
+    assert res_lr.decision().statistic == "likelihood_ratio"
+    assert "parametrisation invariant" in res_lr.decision().reason
+
+
+def test_split_tests_skip_curvature_unless_asked(model):
+    data = campaign(model, 1)
+    t = run_split_tests(model, data, PAPER_SPLITS[:1], [0.5, 1.5])[0]
+    assert t.trustworthy is None
+    t = run_split_tests(model, data, PAPER_SPLITS[:1], [0.5, 1.5], curvature=True)[0]
+    assert t.trustworthy is True and t.curvature_note == ""      # a linear model has zero curvature
+
+
+def test_statistics_disagreeing_by_orders_of_magnitude_get_a_note(model):
+    data = campaign(model, 1)
+    res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5])
+    assert "disagree" not in res.summary()
+    t = dataclasses.replace(res.tests[0], alpha_lr=0.3, alpha_two_sample=0.2, alpha_paper=1e-4)
+    bad = dataclasses.replace(res, tests=(t,) + res.tests[1:])
+    text = bad.summary()
+    assert "disagree by orders of magnitude" in text and "ratio 3e+03" in text
+    assert re.search(r"\[\d+\] .*loading: odd vs even: the statistics disagree", text)
+    # a factor 1000 on the same side of the line (all reject) is no alarm
+    t2 = dataclasses.replace(res.tests[0], alpha_lr=1e-3, alpha_two_sample=1e-4, alpha_paper=1e-6)
+    assert "disagree" not in dataclasses.replace(res, tests=(t2,) + res.tests[1:]).summary()
