@@ -40,6 +40,10 @@ __all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout",
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 
+#: largest magnitude accepted in a numeric cell; larger values (1e300, ...) are export or unit
+#: errors and would overflow the squared residuals of a fit
+MAX_MAGNITUDE = 1e15
+
 
 class DataFileError(ValueError):
     """A data file is missing or malformed; the message names the file and the line."""
@@ -102,6 +106,9 @@ def _number(path, line, col, cell, allow_missing=True):
                             "(use an empty cell or NaN for a missing reading)") from None
     if math.isinf(v):
         raise DataFileError(f"{path}:{line}: column {col!r}: infinite value {c!r}; use NaN for a missing reading")
+    if abs(v) > MAX_MAGNITUDE:
+        raise DataFileError(f"{path}:{line}: column {col!r}: {c!r} is out of range (|value| > {MAX_MAGNITUDE:g}); "
+                            "check the export and the declared unit")
     if math.isnan(v) and not allow_missing:
         raise DataFileError(f"{path}:{line}: column {col!r} is NaN; set forces must be known")
     return v

@@ -7,6 +7,7 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -21,10 +22,11 @@ from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 
 from .config import ConfigError, StudyConfig
+from .console import INTERRUPT
 from .data_io import DataFileError, load_campaign
 from .press import press_variant
 
-__all__ = ["Study", "StudyResults", "prepare", "run_identify", "run_oed", "run_detect", "run_validate",
+__all__ = ["Study", "StudyResults", "prepare", "load_factory", "run_identify", "run_oed", "run_detect", "run_validate",
            "Progress", "MissingPieceError"]
 
 
@@ -34,10 +36,21 @@ class MissingPieceError(RuntimeError):
 
 # ---------------------------------------------------------------------------- progress
 class Progress(BaseProgress):
-    """The study's progress: :class:`identification.progress.Progress` with the prefix "mudoe: "."""
+    """The study's progress: :class:`identification.progress.Progress` with the prefix "mudoe: ".
+
+    Every step checks for Ctrl-C (:data:`mudoe.console.INTERRUPT`) when it starts and ends, so
+    that an interrupt a solver turned into a failed fit still stops the run.
+    """
 
     def __init__(self, enabled: bool = True, stream=None):
         super().__init__(enabled, stream, prefix="mudoe: ")
+
+    @contextmanager
+    def step(self, label: str, announce: bool = True):
+        INTERRUPT.check()
+        with super().step(label, announce):
+            yield
+        INTERRUPT.check()
 
 
 # ---------------------------------------------------------------------------- the study
@@ -113,16 +126,28 @@ def _build_models(cfg: StudyConfig) -> dict:
 
 
 def _factory(cfg: StudyConfig) -> Callable:
+    return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
+
+
+def load_factory(name: str, where: str) -> Callable:
+    """The model factory ``"package.module:function"`` (``where`` starts the error message).
+
+    Raises
+    ------
+    ConfigError
+        The module cannot be imported or has no such function.
+    """
     import importlib
-    mod_name, _, fn_name = cfg.model.name.partition(":")
+    mod_name, _, fn_name = name.partition(":")
+    if not mod_name or not fn_name:
+        raise ConfigError(f"{where}: expected \"package.module:function\", got {name!r}")
     try:
         mod = importlib.import_module(mod_name)
     except ImportError as exc:
-        raise ConfigError(f"{cfg.path}: [model] name: cannot import {mod_name!r} ({exc}); is its folder on "
-                          "PYTHONPATH?") from None
+        raise ConfigError(f"{where}: cannot import {mod_name!r} ({exc}); is its folder on PYTHONPATH?") from None
     fn = getattr(mod, fn_name, None)
     if not callable(fn):
-        raise ConfigError(f"{cfg.path}: [model] name: {mod_name} has no function {fn_name!r}")
+        raise ConfigError(f"{where}: {mod_name} has no function {fn_name!r}")
     return fn
 
 
