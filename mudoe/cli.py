@@ -290,16 +290,52 @@ def _init(args) -> int:
 
 
 def _simulate(cfg, args, progress, out) -> int:
+    if args.seed is not None and args.seed < 0:
+        from .config import ConfigError
+        raise ConfigError(f"--seed: must be non-negative, got {args.seed}")
+    if cfg.model.name != "press":
+        return _simulate_study(cfg, args, progress, out)
     from models.prototype import generate_campaign, write_campaign
     seed = cfg.data.seed if args.seed is None else args.seed
-    if seed < 0:
-        from .config import ConfigError
-        raise ConfigError(f"--seed: must be non-negative, got {seed}")
     with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
         camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
+    _interrupt_check()
     paths = write_campaign(camp, out)
     text = "\n".join(str(p) for p in paths)
     _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})
+    return EXIT_OK
+
+
+def _interrupt_check() -> None:
+    from .console import INTERRUPT
+    INTERRUPT.check()
+
+
+def _simulate_study(cfg, args, progress, out) -> int:
+    """An own model's campaign in the study's [data] layout, file names and units (plus simulate.json)."""
+    import json
+    from .data_io import atomic_write_text, write_paper_layout, write_tidy_layout
+    from .study import simulate_study
+    with progress.step(f"simulate {cfg.model.name}", announce=False):
+        sim = simulate_study(cfg, args.seed)
+    c, u, d = sim.campaign, sim.units, cfg.data
+    _interrupt_check()
+    if d.layout == "tidy":
+        paths = [write_tidy_layout(out / Path(d.file).name, c.q_set, c.z, c.sensors, units=u)]
+    else:
+        paths = write_paper_layout(out, c.q_set, c.z, c.sensors, units=u)
+        for k, s in enumerate(c.sensors):
+            if s in d.files:                      # the study's own file name of the sensor
+                target = out / Path(d.files[s]).name
+                os.replace(paths[k], target)
+                paths[k] = target
+    record = dict(model=cfg.model.name, variant=sim.variant, seed=sim.seed, n_series=c.n_M,
+                  truth=sim.truth, truth_units={p.name: p.unit for p in cfg.parameters},
+                  sigma_model_units=dict(zip(c.sensors, sim.sigma)), layout=d.layout,
+                  input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
+                  files=[str(p) for p in paths])
+    paths.append(atomic_write_text(out / "simulate.json", json.dumps(record, indent=1) + "\n"))
+    _emit(args, "\n".join(str(p) for p in paths), record)
     return EXIT_OK
 
 
