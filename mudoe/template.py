@@ -15,6 +15,7 @@ from models.contract import Model
 from .config import ConfigError
 from .data_io import atomic_write_text
 from .study import load_factory
+from .units import UNITS
 
 __all__ = ["template_text", "write_template"]
 
@@ -35,6 +36,15 @@ file = "campaign_long.csv"      # tidy layout: the table
 """
 
 _TAIL = """
+[simulate]                      # `mudoe simulate CONFIG --out data`: a campaign from the model itself
+# truth = {{}}                  # true parameters (default: the start values above)
+# inputs = [1.0, 2.0, 3.0]      # set points in the input unit, or a range:
+# input_start = 0.0
+# input_stop = 1.0
+n_inputs = 11
+n_series = 4                    # repeated series; noise from the sensors' sigma
+seed = 1
+
 [splits]
 scenarios = []                  # the paper's press scenarios do not apply to your model
 [splits.random]
@@ -83,19 +93,22 @@ def template_text(model: Model | None = None, name: str = "mypackage.mymodel:bui
         units = "# data units are the model's own unless declared (README \"Data formats\")"
         layout = "tidy"
     else:
-        sensors = list(zip(model.sensors, model.sensor_units))
+        sensors = [(s, u if u in UNITS else "") for s, u in zip(model.sensors, model.sensor_units)]
         params = [(p.name, _start(p.scale, p.lower, p.upper), p.lower, p.upper, p.unit) for p in model.params]
-        units = (f"# the model's inputs: {', '.join(f'{q} [{u}]' if u else q for q, u in zip(model.inputs, model.input_units))}"
-                 f"; sensors: {', '.join(f'{s} [{u}]' if u else s for s, u in sensors)}")
+        q_unit = model.input_units[0] if model.input_units and model.input_units[0] in UNITS else ""
+        units = (f"input_unit = \"{q_unit}\"   # unit of the input column {model.inputs[0]!r} in the files "
+                 "(any unit of mudoe.units.UNITS; converted once to the model's)\n"
+                 "# output_unit = \"\"           # unit of the readings in the files (default: the model's); "
+                 "per sensor: unit = \"...\"")
         layout = "tidy"
     parts = [_HEAD.format(name=name, layout=layout, units=units)]
     for s, u in sensors:
         parts.append(f'[[sensors]]\nname = "{s}"\nsigma = 1.0                     # standard deviation of a reading'
-                     f'{" (" + u + ")" if u else ""}; or sigma_man\n')
+                     f'{" (" + u + ")" if u else ""}; or sigma_man\n' + (f'unit = "{u}"\n' if u else ""))
     for n, start, lo, up, u in params:
         parts.append(f'[[parameters]]\nname = "{n}"\nstart = {_num(start)}               # start value of the fit'
-                     f'{" (" + u + ")" if u else ""}\nlower = {_num(lo)}\nupper = {_num(up)}\n')
-    return "\n".join(parts) + _TAIL
+                     f'\nlower = {_num(lo)}\nupper = {_num(up)}\n' + (f'unit = "{u}"\n' if u else ""))
+    return "\n".join(parts) + _TAIL.format()
 
 
 def write_template(path, model_name: str | None = None) -> Path:

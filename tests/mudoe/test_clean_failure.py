@@ -142,3 +142,14 @@ def test_ctrl_c_stops_with_130_and_writes_nothing(tmp_path, campaign_dirs):
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1] == "mudoe: interrupted"
     assert not (out / "validate.json").exists()
+
+
+def test_init_from_a_model_factory_lists_its_names_and_units(capsys, tmp_path):
+    from mudoe.config import load_config
+    path = tmp_path / "cstr.toml"
+    assert main(["init", str(path), "--model", "mudoe.example_cstr:build"]) == 0
+    cfg = load_config(path)
+    assert cfg.model.name == "mudoe.example_cstr:build" and cfg.data.input_unit == "K"
+    assert [(s.name, s.unit) for s in cfg.sensors] == [("C_A", "mmol/L"), ("C_B", "mmol/L"), ("C_C", "mmol/L"),
+                                                       ("X_A", "%")]
+    assert [(p.name, p.unit) for p in cfg.parameters] == [("k_ref", "1/min"), ("E_a", "kJ/mol"), ("k_2", "1/min")]
