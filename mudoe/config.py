@@ -6,7 +6,8 @@ which units, the sensors and their sigma, the unknown parameters with start valu
 bounds, the calibration / validation splits, the test level and statistic, and the
 optimal-design criterion and constraints.  Every value has a default (``configs/press.toml``
 spells them out for the press study); an unknown key is an error naming the key, the file
-and the line.  Units are declared once and converted once, to the model's units (mm, N).
+and the line.  Units are declared once (any unit of :data:`mudoe.units.UNITS`) and converted once,
+to the model's units (the press: mm, N).  ``[simulate]`` drives ``mudoe simulate`` for an own model.
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
 
