@@ -1,5 +1,4 @@
 """Clean failure of the CLI: --out checked first, extreme data, solver chatter, Ctrl-C, --version, init."""
-import json
 import os
 import signal
 import subprocess
