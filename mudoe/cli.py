@@ -96,6 +96,18 @@ def _print_line(msg: str) -> None:
 
 def main(argv=None) -> int:
     """Run the CLI; returns the exit code (never raises for bad input)."""
+    from .console import EXIT_INTERRUPTED, INTERRUPT
+    INTERRUPT.install()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        _print_line("mudoe: interrupted")
+        return EXIT_INTERRUPTED
+    finally:
+        INTERRUPT.uninstall()
+
+
+def _main(argv) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -109,7 +121,6 @@ def main(argv=None) -> int:
         return EXIT_BAD_INPUT
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from .console import EXIT_INTERRUPTED, INTERRUPT
-    INTERRUPT.install()
     try:
         code = _run(args)
         INTERRUPT.check()
@@ -136,8 +147,6 @@ def main(argv=None) -> int:
             raise
         _print_line(f"mudoe {args.command}: failed: {type(exc).__name__}: {exc} (rerun with --debug for details)")
         return EXIT_FAILED
-    finally:
-        INTERRUPT.uninstall()
 
 
 def _run(args) -> int:

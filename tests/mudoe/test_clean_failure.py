@@ -130,13 +130,19 @@ def test_ctrl_c_stops_with_130_and_writes_nothing(tmp_path, campaign_dirs):
     p = subprocess.Popen([sys.executable, "-m", "mudoe", "validate", str(campaign_dirs["paper_cfg"]), "--runs",
                           "100000", "--out", str(out)], cwd=REPO, env=ENV, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
-    time.sleep(3.0)                        # the Monte Carlo loop runs by then (about 1 s of setup)
+    seen = []
+    for line in p.stderr:                  # wait until the Monte Carlo loop has started
+        seen.append(line)
+        if "Monte Carlo size study" in line:
+            break
+    time.sleep(1.0)
     p.send_signal(signal.SIGINT)
     try:
-        _, err = p.communicate(timeout=30)
+        _, rest = p.communicate(timeout=60)
     except subprocess.TimeoutExpired:
         p.kill()
         raise
+    err = "".join(seen) + rest
     assert p.returncode == 130, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1] == "mudoe: interrupted"
