@@ -26,8 +26,9 @@ _COMMANDS = {
     "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
     "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
-    "simulate": "generate a campaign on the virtual prototype and write it as CSV (both layouts)",
+    "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",
 }
+_INIT_HELP = "write a commented study config template for your own model factory (never overwrites)"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser (``--help`` on every subcommand)."""
     p = _Parser(prog="mudoe", description="Model uncertainty via optimal design of experiments. "
                 "Each command takes a study config (TOML); see README 'Commands' and 'Config reference'.")
+    p.add_argument("--version", action="version", version=f"mudoe {_version()}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, help_ in _COMMANDS.items():
         sp = sub.add_parser(name, help=help_, description=help_ + ".")
@@ -60,8 +62,22 @@ def build_parser() -> argparse.ArgumentParser:
             sp.add_argument("--workers", type=int, default=1, metavar="N",
                             help="local worker processes (default 1)")
         if name == "simulate":
-            sp.add_argument("--seed", type=int, default=None, help="random seed (default: [data] seed)")
+            sp.add_argument("--seed", type=int, default=None,
+                            help="random seed (default: [simulate] seed, the press: [data] seed)")
+    sp = sub.add_parser("init", help=_INIT_HELP, description=_INIT_HELP + ".")
+    sp.add_argument("path", metavar="PATH", help="the config file to write, e.g. my_study.toml")
+    sp.add_argument("--model", metavar="MODULE:FUNCTION", default=None,
+                    help="your model factory; its parameters, inputs and sensors fill the template")
+    sp.add_argument("--debug", action="store_true", help="show the traceback of an unexpected failure")
     return p
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("mudoe")
+    except PackageNotFoundError:
+        return "(not installed)"
 
 
 def _bad_input_types():
@@ -69,8 +85,9 @@ def _bad_input_types():
     from identification.splits import SplitError
     from models.contract import ModelError
     from .config import ConfigError
+    from .console import OutDirError
     from .data_io import DataFileError
-    return (ConfigError, DataFileError, DataError, SplitError, ModelError)
+    return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError)
 
 
 def _print_line(msg: str) -> None:
@@ -79,6 +96,18 @@ def _print_line(msg: str) -> None:
 
 def main(argv=None) -> int:
     """Run the CLI; returns the exit code (never raises for bad input)."""
+    from .console import EXIT_INTERRUPTED, INTERRUPT
+    INTERRUPT.install()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        _print_line("mudoe: interrupted")
+        return EXIT_INTERRUPTED
+    finally:
+        INTERRUPT.uninstall()
+
+
+def _main(argv) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -91,12 +120,18 @@ def main(argv=None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from .console import EXIT_INTERRUPTED, INTERRUPT
     try:
-        return _run(args)
+        code = _run(args)
+        INTERRUPT.check()
+        return code
     except KeyboardInterrupt:
         _print_line("mudoe: interrupted")
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 -- the CLI boundary turns every failure into one line
+        if INTERRUPT.flag:               # e.g. a worker pool broken by Ctrl-C
+            _print_line("mudoe: interrupted")
+            return EXIT_INTERRUPTED
         from .study import MissingPieceError
         bad = _bad_input_types()
         if isinstance(exc, bad):
@@ -116,14 +151,25 @@ def main(argv=None) -> int:
 
 def _run(args) -> int:
     from .config import load_config
+    from .console import Chatter, check_out_dir
+    if args.command == "init":
+        return _init(args)
+    out = check_out_dir(args.out)
+    cfg = load_config(args.config)
+    chatter = Chatter()
+    try:
+        with chatter:
+            args.stdout = chatter.stdout
+            return _run_study(args, cfg, out)
+    finally:
+        if args.debug and chatter.text.strip():
+            sys.stderr.write("mudoe: solver messages captured during the run:\n" + chatter.text)
+
+
+def _run_study(args, cfg, out: Path) -> int:
     from .study import Progress, StudyResults, prepare
     t0 = time.perf_counter()
-    cfg = load_config(args.config)
     progress = Progress(enabled=not args.quiet)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        from .config import ConfigError
-        raise ConfigError(f"--out: {out} exists and is not a folder")
     if args.command == "simulate":
         return _simulate(cfg, args, progress, out)
     study = prepare(cfg, progress)
@@ -139,12 +185,15 @@ def _run(args) -> int:
 
 def _emit(args, text: str, obj) -> None:
     from reports.serialize import dumps
-    sys.stdout.write(dumps(obj) if args.json else text.rstrip() + "\n")
-    sys.stdout.flush()
+    stdout = getattr(args, "stdout", sys.stdout)
+    stdout.write(dumps(obj) if args.json else text.rstrip() + "\n")
+    stdout.flush()
 
 
 def _write(out: Path, name: str, text: str) -> Path:
+    from .console import INTERRUPT
     from .data_io import atomic_write_text
+    INTERRUPT.check()
     return atomic_write_text(out / name, text)
 
 
@@ -261,17 +310,60 @@ def _report(study, results, args, progress, out) -> int:
     return EXIT_OK
 
 
+def _init(args) -> int:
+    from .template import write_template
+    path = write_template(args.path, args.model)
+    print(f"mudoe: wrote {path}; edit it, then run: mudoe identify {path}", file=sys.stderr)
+    return EXIT_OK
+
+
 def _simulate(cfg, args, progress, out) -> int:
+    if args.seed is not None and args.seed < 0:
+        from .config import ConfigError
+        raise ConfigError(f"--seed: must be non-negative, got {args.seed}")
+    if cfg.model.name != "press":
+        return _simulate_study(cfg, args, progress, out)
     from models.prototype import generate_campaign, write_campaign
     seed = cfg.data.seed if args.seed is None else args.seed
-    if seed < 0:
-        from .config import ConfigError
-        raise ConfigError(f"--seed: must be non-negative, got {seed}")
     with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
         camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
+    _interrupt_check()
     paths = write_campaign(camp, out)
     text = "\n".join(str(p) for p in paths)
     _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})
+    return EXIT_OK
+
+
+def _interrupt_check() -> None:
+    from .console import INTERRUPT
+    INTERRUPT.check()
+
+
+def _simulate_study(cfg, args, progress, out) -> int:
+    """An own model's campaign in the study's [data] layout, file names and units (plus simulate.json)."""
+    import json
+    from .data_io import atomic_write_text, write_paper_layout, write_tidy_layout
+    from .study import simulate_study
+    with progress.step(f"simulate {cfg.model.name}", announce=False):
+        sim = simulate_study(cfg, args.seed)
+    c, u, d = sim.campaign, sim.units, cfg.data
+    _interrupt_check()
+    if d.layout == "tidy":
+        paths = [write_tidy_layout(out / Path(d.file).name, c.q_set, c.z, c.sensors, units=u)]
+    else:
+        paths = write_paper_layout(out, c.q_set, c.z, c.sensors, units=u)
+        for k, s in enumerate(c.sensors):
+            if s in d.files:                      # the study's own file name of the sensor
+                target = out / Path(d.files[s]).name
+                os.replace(paths[k], target)
+                paths[k] = target
+    record = dict(model=cfg.model.name, variant=sim.variant, seed=sim.seed, n_series=c.n_M,
+                  truth=sim.truth, truth_units={p.name: p.unit for p in cfg.parameters},
+                  sigma_model_units=dict(zip(c.sensors, sim.sigma)), layout=d.layout,
+                  input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
+                  files=[str(p) for p in paths])
+    paths.append(atomic_write_text(out / "simulate.json", json.dumps(record, indent=1) + "\n"))
+    _emit(args, "\n".join(str(p) for p in paths), record)
     return EXIT_OK
 
 

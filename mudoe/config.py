@@ -6,7 +6,8 @@ which units, the sensors and their sigma, the unknown parameters with start valu
 bounds, the calibration / validation splits, the test level and statistic, and the
 optimal-design criterion and constraints.  Every value has a default (``configs/press.toml``
 spells them out for the press study); an unknown key is an error naming the key, the file
-and the line.  Units are declared once and converted once, to the model's units (mm, N).
+and the line.  Units are declared once (any unit of :data:`mudoe.units.UNITS`) and converted once,
+to the model's units (the press: mm, N).  ``[simulate]`` drives ``mudoe simulate`` for an own model.
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
 
@@ -55,8 +56,10 @@ from identification.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.press import PRESS_SCENARIO_NAMES
 
+from .units import known_units
+
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
-           "RandomSplitConfig", "SplitsConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
+           "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
            "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
            "settings_values"]
@@ -77,6 +80,9 @@ STUDY_DEFAULTS = {(MonteCarloSettings, "n_rep"): 200, (MonteCarloSettings, "seed
 
 #: the default study shipped with the repository
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
+
+#: the units a config may declare (README "Data formats"; "" = not declared)
+UNIT_CHOICES = ("",) + known_units()
 
 #: an own model factory, "package.module:function"
 _FACTORY = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*")
@@ -218,7 +224,13 @@ class DataConfig:
     value_column : {"value", "raw"}
         Tidy layout: which reading column to use (``raw`` = before any force correction).
     displacement_unit : {"mm", "um", "m"}
+        Unit of readings that are lengths (the model's sensor unit is a length or undeclared).
     force_unit : {"N", "kN"}
+        Unit of an input that is a force (the model's input unit is a force or undeclared).
+    input_unit, output_unit : str
+        Any unit of :data:`mudoe.units.UNITS` for the input column and the readings in the files
+        ("" = the model's own unit, or force_unit / displacement_unit as above); a sensor's
+        ``unit`` in [[sensors]] overrides output_unit.  Converted once to the model's units.
     force_correction : bool
         Apply the paper's correction z * q_set / q_actual (needs actual forces; readings at
         q_set = 0 are left unchanged).
@@ -238,6 +250,8 @@ class DataConfig:
     value_column: str = _key("value", choices=("value", "raw"))
     displacement_unit: str = _key("um", choices=tuple(LENGTH_UNITS))
     force_unit: str = _key("N", choices=tuple(FORCE_UNITS))
+    input_unit: str = _key("", choices=UNIT_CHOICES)
+    output_unit: str = _key("", choices=UNIT_CHOICES)
     force_correction: bool = False
     series: tuple[int, ...] | None = None
     seed: int = _key(20190731, bounds=NON_NEGATIVE)
@@ -246,7 +260,10 @@ class DataConfig:
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """One sensor and its standard deviation (in the data's displacement unit).
+    """One sensor, its standard deviation and the unit of its readings and sigma in the files.
+
+    ``unit`` ("" = [data] output_unit, else the model's / displacement_unit rule) is converted once
+    to the model's unit of the sensor.
 
     Give ``sigma`` directly, or ``sigma_man`` (the manufacturer's error): then sigma is
     composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2), with sigma_rep the
@@ -256,16 +273,22 @@ class SensorConfig:
     name: str
     sigma: float | None = _key(None, bounds=POSITIVE)
     sigma_man: float | None = _key(None, bounds=NON_NEGATIVE)
+    unit: str = _key("", choices=UNIT_CHOICES)
 
 
 @dataclass(frozen=True)
 class ParameterConfig:
-    """An unknown parameter: start value and bounds (the model's unit, N/mm for the press)."""
+    """An unknown parameter: start value and bounds in the model's unit (N/mm for the press).
+
+    ``unit`` (free text, e.g. "1/K") names that unit for tables and the report; a model that
+    declares another unit for the parameter is an error (parameters are never converted).
+    """
 
     name: str
     start: float
     lower: float = _key(-math.inf, allow_inf=True)
     upper: float = _key(math.inf, allow_inf=True)
+    unit: str = ""
 
 
 @dataclass(frozen=True)
@@ -299,6 +322,44 @@ class SplitsConfig:
     scenarios: tuple[str, ...] = ("paper",)
     random: RandomSplitConfig = field(default_factory=RandomSplitConfig)
     custom: tuple = ()
+
+
+@dataclass(frozen=True)
+class SimulateConfig:
+    """``mudoe simulate`` for an own model: a campaign simulated from the model itself.
+
+    z_ijk = h_k(y_j, p_true, q_j) + sigma_k e_ijk with e_ijk ~ N(0, 1) (seeded), sigma_k the
+    sensors' sigma ([[sensors]] sigma, the files' unit), written into ``--out`` in the study's
+    [data] layout, file names and units.  The press ignores this section (its virtual prototype).
+
+    Attributes
+    ----------
+    truth : dict {parameter: value}   true parameters (model units; default the [[parameters]] starts)
+    inputs : tuple of float           the set points in the [data] input unit, or instead
+    input_start, input_stop, n_inputs  an even range of ``n_inputs`` set points
+    up_and_down : bool                 then back down again (loading and unloading)
+    n_series : int                     repeated series (at least 2)
+    seed : int
+    variant : str                      the model variant simulated ("" = the first listed)
+    """
+
+    truth: dict[str, float] = field(default_factory=dict)
+    inputs: tuple[float, ...] = ()
+    input_start: float | None = _key(None)
+    input_stop: float | None = _key(None)
+    n_inputs: int = _key(11, bounds=Bounds(2))
+    up_and_down: bool = False
+    n_series: int = _key(4, bounds=Bounds(2))
+    seed: int = _key(1, bounds=NON_NEGATIVE)
+    variant: str = ""
+
+    def input_values(self) -> "np.ndarray":
+        """The set points (the [data] input unit): ``inputs``, or the range (and back down)."""
+        import numpy as np
+        if self.inputs:
+            return np.asarray(self.inputs, float)
+        q = np.linspace(self.input_start, self.input_stop, self.n_inputs)
+        return np.r_[q, q[-2::-1]] if self.up_and_down else q
 
 
 @dataclass(frozen=True)
@@ -386,6 +447,7 @@ class StudyConfig:
     sensors: tuple = ()
     parameters: tuple = ()
     splits: SplitsConfig = field(default_factory=SplitsConfig)
+    simulate: SimulateConfig = field(default_factory=SimulateConfig)
     detect: DetectConfig = field(default_factory=DetectConfig)
     oed: OEDConfig = field(default_factory=OEDConfig)
     validate: ValidateConfig = field(default_factory=ValidateConfig)
@@ -558,8 +620,25 @@ def _str_table(ctx, section, key, v):
     return dict(v)
 
 
+def _float_list(ctx, section, key, v):
+    if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise ctx.error(section, key, f"expected a non-empty list of numbers, got {v!r}")
+    for x in v:
+        _num(ctx, section, key, x)
+    return tuple(float(x) for x in v)
+
+
+def _float_table(ctx, section, key, v):
+    if not isinstance(v, dict):
+        raise ctx.error(section, key, f"expected a table {{name = value}}, got {v!r}")
+    for x in v.values():
+        _num(ctx, section, key, x)
+    return {k: float(x) for k, x in v.items()}
+
+
 #: readers of the other annotations of schema fields (``X | None`` is read as X: TOML has no null)
-_READERS = {"bool": _bool, "tuple[str, ...]": _str_list, "tuple[int, ...]": _int_list, "dict[str, str]": _str_table}
+_READERS = {"bool": _bool, "tuple[str, ...]": _str_list, "tuple[int, ...]": _int_list, "dict[str, str]": _str_table,
+            "tuple[float, ...]": _float_list, "dict[str, float]": _float_table}
 
 
 def _read(ctx: _Ctx, section: str, f: Field, v, what: str = ""):
@@ -627,7 +706,7 @@ def _parse_sensor(ctx, t):
     name = _str(ctx, "sensors", "name", t["name"])
     kw = {f.name: _read(ctx, "sensors", f, t[f.name], what=f"sensor {name!r}: {f.name} ")
           for f in fields(SensorConfig) if f.name in t and f.name != "name"}
-    if len(kw) == 2:
+    if "sigma" in kw and "sigma_man" in kw:
         raise ctx.error("sensors", "sigma_man", f"sensor {name!r}: give sigma or sigma_man, not both")
     return SensorConfig(name, **kw)
 
@@ -642,7 +721,7 @@ def _parse_parameter(ctx, t):
     _check_keys(ctx, "parameters", t, ParameterConfig)
     _require(ctx, "parameters", t, ParameterConfig, "every parameter")
     kw = _read_table(ctx, "parameters", ParameterConfig, t)
-    p = ParameterConfig(**{k: v if k == "name" else float(v) for k, v in kw.items()})
+    p = ParameterConfig(**{k: v if k in ("name", "unit") else float(v) for k, v in kw.items()})
     if not p.lower <= p.start <= p.upper:
         raise ctx.error("parameters", "start", f"parameter {p.name!r}: start {p.start} lies outside "
                         f"[{p.lower}, {p.upper}]")
@@ -691,6 +770,16 @@ def _parse_oed(ctx, t):
     return OEDConfig(**_read_table(ctx, "oed", OEDConfig, t))
 
 
+def _parse_simulate(ctx, t):
+    cfg = SimulateConfig(**_read_table(ctx, "simulate", SimulateConfig, t))
+    ranged = cfg.input_start is not None or cfg.input_stop is not None
+    if cfg.inputs and ranged:
+        raise ctx.error("simulate", "inputs", "give inputs or input_start/input_stop, not both")
+    if ranged and (cfg.input_start is None or cfg.input_stop is None):
+        raise ctx.error("simulate", "input_start", "give both input_start and input_stop (and n_inputs)")
+    return cfg
+
+
 def _parse_validate(ctx, t):
     return _validated(ctx, "validate", ValidateConfig(**_read_table(ctx, "validate", ValidateConfig, t)))
 
@@ -701,7 +790,7 @@ def _parse_report(ctx, t):
 
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,
              "parameters": _parse_parameters, "splits": _parse_splits, "detect": _parse_detect,
-             "oed": _parse_oed, "validate": _parse_validate, "report": _parse_report}
+             "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate, "report": _parse_report}
 
 
 def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None = None) -> StudyConfig:
@@ -762,7 +851,8 @@ def _check_names(ctx, cfg: StudyConfig) -> None:
     if names:
         for section, key, s in named:
             _one_of(ctx, section, key, s, names, "sensor", "listed in [[sensors]]")
-    for section, variant in (("oed", cfg.oed.variant), ("validate", cfg.validate.variant)):
+    for section, variant in (("oed", cfg.oed.variant), ("validate", cfg.validate.variant),
+                             ("simulate", cfg.simulate.variant)):
         if variant:
             _one_of(ctx, section, "variant", variant, cfg.model.variants, "variant", "the [model] variants")
 

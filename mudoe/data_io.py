@@ -34,15 +34,142 @@ from models.campaign import Campaign
 from models.fileio import atomic_write_text
 
 from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
+from .units import UNITS, UnitError, convert, dimension, known_units
 
-__all__ = ["DataFileError", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
+__all__ = ["DataFileError", "DataUnits", "study_units", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 
+#: largest magnitude accepted in a numeric cell; larger values (1e300, ...) are export or unit
+#: errors and would overflow the squared residuals of a fit
+MAX_MAGNITUDE = 1e15
+
 
 class DataFileError(ValueError):
     """A data file is missing or malformed; the message names the file and the line."""
+
+
+@dataclass(frozen=True)
+class DataUnits:
+    """The units of a campaign in its files and in the model: the one conversion of the data.
+
+    Attributes
+    ----------
+    input_file, input_model : str       unit of the input (set point) in the files / in the model
+    output_file, output_model : tuple   per sensor: unit of the readings in the files / in the model
+    input_name : str                    name of the input column ("force" writes ``force_N``)
+    input_key, output_key : str         the config keys that declare the file units (for messages)
+    """
+
+    input_file: str = "N"
+    input_model: str = "N"
+    output_file: tuple = ()
+    output_model: tuple = ()
+    input_name: str = "force"
+    input_key: str = "force_unit"
+    output_key: str = "displacement_unit"
+
+    @classmethod
+    def legacy(cls, displacement_unit: str, force_unit: str, n_sensors: int) -> "DataUnits":
+        """Forces in ``force_unit`` and displacements in ``displacement_unit``, model in N and mm."""
+        if displacement_unit not in LENGTH_UNITS:
+            raise DataFileError(f"displacement_unit: {displacement_unit!r} is not one of {', '.join(LENGTH_UNITS)}")
+        if force_unit not in FORCE_UNITS:
+            raise DataFileError(f"force_unit: {force_unit!r} is not one of {', '.join(FORCE_UNITS)}")
+        return cls(force_unit, "N", (displacement_unit,) * n_sensors, ("mm",) * n_sensors)
+
+    def q_to_model(self, q):
+        return convert(np.asarray(q, float), self.input_file, self.input_model)
+
+    def q_to_file(self, q):
+        return convert(np.asarray(q, float), self.input_model, self.input_file)
+
+    def z_to_model(self, z):
+        z = np.array(z, float)
+        for k, (a, b) in enumerate(zip(self.output_file, self.output_model)):
+            z[..., k] = convert(z[..., k], a, b)
+        return z
+
+    def z_to_file(self, z):
+        z = np.array(z, float)
+        for k, (a, b) in enumerate(zip(self.output_file, self.output_model)):
+            z[..., k] = convert(z[..., k], b, a)
+        return z
+
+    def sigma_to_model(self, k: int, sigma: float) -> float:
+        """A standard deviation of sensor k from the file unit to the model unit (no offset)."""
+        return float(convert(sigma, self.output_file[k], self.output_model[k], difference=True))
+
+    def input_names(self) -> set:
+        """Accepted (lower-case) names of the input column, without a unit suffix."""
+        n = self.input_name.lower()
+        return {"set_force", "input", "set_input", "q", "q_p", "load", n, "set_" + n}
+
+    def actual_names(self) -> set:
+        n = self.input_name.lower()
+        return {"actual_force", "actual_input", "actual_" + n}
+
+
+def _model_unit(declared: str, file_unit: str, legacy: str) -> str:
+    """The model-side unit: the model's own, else ``legacy`` (mm, N) for a length/force, else the file's."""
+    if declared:
+        return declared
+    if file_unit and dimension(file_unit) == dimension(legacy):
+        return legacy
+    return file_unit
+
+
+def study_units(cfg: StudyConfig, model) -> DataUnits:
+    """The :class:`DataUnits` of a study: file units from the config, model units from the model.
+
+    File unit of the input: ``[data] input_unit``, else ``force_unit`` when the model's input is a
+    force or undeclared, else the model's unit.  File unit of sensor k: its [[sensors]] ``unit``,
+    else ``[data] output_unit``, else ``displacement_unit`` when the model's unit is a length or
+    undeclared, else the model's unit.  Model units: the model's declared ones; undeclared ones are
+    mm / N for lengths / forces and the file's unit otherwise.
+
+    Raises
+    ------
+    ConfigError
+        A declared unit cannot be converted to the model's unit (different dimensions).
+    """
+    from .config import ConfigError
+    d = cfg.data
+    sensor_cfg = {s.name: s for s in cfg.sensors}
+    q_model = model.input_units[0] if model.input_units else ""
+    if d.input_unit:
+        q_file, q_key = d.input_unit, "input_unit"
+    elif not q_model or (q_model in UNITS and dimension(q_model) == "force"):
+        q_file, q_key = d.force_unit, "force_unit"
+    else:
+        q_file, q_key = q_model, "input_unit"
+    out_file, out_model = [], []
+    for s, u_model in zip(model.sensors, model.sensor_units):
+        own = sensor_cfg[s].unit if s in sensor_cfg else ""
+        if own or d.output_unit:
+            u = own or d.output_unit
+        elif not u_model or (u_model in UNITS and dimension(u_model) == "length"):
+            u = d.displacement_unit
+        else:
+            u = u_model
+        out_file.append(u)
+        out_model.append(_model_unit(u_model, u, "mm"))
+    units = DataUnits(q_file, _model_unit(q_model, q_file, "N"), tuple(out_file), tuple(out_model),
+                      input_name=model.inputs[0] if d.input_unit or q_key == "input_unit" else "force",
+                      input_key=q_key, output_key="output_unit" if d.output_unit else "displacement_unit")
+    pairs = [(q_file, units.input_model, f"[data] {q_key}", f"input {model.inputs[0]!r}")]
+    pairs += [(a, b, f"[[sensors]] unit / [data] {units.output_key}", f"sensor {s!r}")
+              for s, a, b in zip(model.sensors, out_file, out_model)]
+    for a, b, key, what in pairs:
+        if b not in UNITS:
+            raise ConfigError(f"{cfg.path}: the model declares unit {b!r} for {what}, which is not in the unit "
+                              f"table; known units: {', '.join(known_units())}")
+        try:
+            convert(1.0, a, b)
+        except UnitError as exc:
+            raise ConfigError(f"{cfg.path}: {key}: {what}: {exc}") from None
+    return units
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -70,7 +197,10 @@ def _read_rows(path: Path) -> list[list[str]]:
     return rows
 
 
-def _split_unit(name: str, units: dict) -> tuple[str, str | None]:
+_ALL_UNITS = {u: None for u in UNITS if u}
+
+
+def _split_unit(name: str, units: dict = _ALL_UNITS) -> tuple[str, str | None]:
     """'set_force_kN' -> ('set_force', 'kN'); unit suffixes are matched case-sensitively."""
     n = name.strip()
     for sep in ("_", " "):
@@ -84,7 +214,7 @@ def _split_unit(name: str, units: dict) -> tuple[str, str | None]:
 
 
 def _check_unit(path, col, found, declared, what):
-    if found is not None and found != declared:
+    if found is not None and declared and found != declared:
         raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares "
                             f"{what} = {declared!r}; fix the header or [data] {what}")
 
@@ -102,6 +232,9 @@ def _number(path, line, col, cell, allow_missing=True):
                             "(use an empty cell or NaN for a missing reading)") from None
     if math.isinf(v):
         raise DataFileError(f"{path}:{line}: column {col!r}: infinite value {c!r}; use NaN for a missing reading")
+    if abs(v) > MAX_MAGNITUDE:
+        raise DataFileError(f"{path}:{line}: column {col!r}: {c!r} is out of range (|value| > {MAX_MAGNITUDE:g}); "
+                            "check the export and the declared unit")
     if math.isnan(v) and not allow_missing:
         raise DataFileError(f"{path}:{line}: column {col!r} is NaN; set forces must be known")
     return v
@@ -112,15 +245,20 @@ def _body(rows):
     return [(i + 1, r) for i, r in enumerate(rows) if i > 0 and any(c.strip() for c in r)]
 
 
+def _with_unit(name: str, unit: str) -> str:
+    return f"{name}_{unit}" if unit else name
+
+
 # ---------------------------------------------------------------------------- paper layout
-def _read_paper_file(path: Path, force_unit: str):
+def _read_paper_file(path: Path, units: DataUnits):
     rows = _read_rows(path)
     header = [h.strip() for h in rows[0]]
-    base, unit = _split_unit(header[0], FORCE_UNITS)
-    if not base.startswith("force") and base not in ("q", "q_p", "set_force", "load"):
-        raise DataFileError(f"{path}:1: wrong header: the first column must be the set force (e.g. 'force_N'), "
-                            f"got {header[0]!r}")
-    _check_unit(path, header[0], unit, force_unit, "force_unit")
+    base, unit = _split_unit(header[0])
+    if not base.startswith("force") and base not in units.input_names():
+        example = f"{units.input_name}_{units.input_file}" if units.input_file else units.input_name
+        raise DataFileError(f"{path}:1: wrong header: the first column must be the input {units.input_name!r} "
+                            f"(e.g. {example!r}), got {header[0]!r}")
+    _check_unit(path, header[0], unit, units.input_file, units.input_key)
     if len(header) < 2:
         raise DataFileError(f"{path}:1: wrong header: expected the force column then one column per series, "
                             f"got only {header!r}")
@@ -141,7 +279,7 @@ def _read_paper_file(path: Path, force_unit: str):
 
 
 def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: str = "N",
-                      actual_forces_file=None) -> Campaign:
+                      actual_forces_file=None, units: DataUnits | None = None) -> Campaign:
     """Read one CSV per sensor (force column, then one column per series).
 
     Parameters
@@ -149,13 +287,16 @@ def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: st
     files : dict {sensor: path}
         In the order of the model's sensors.
     displacement_unit, force_unit : str
-        Units of the readings and forces in the files (converted to mm and N).
+        Units of the readings and forces in the files (converted to mm and N); used when
+        ``units`` is not given.
     actual_forces_file : path, optional
         Actual forces in the same layout (set force, then one column per series).
+    units : DataUnits, optional
+        Any units: the input and every sensor in the files and in the model (:func:`study_units`).
 
     Returns
     -------
-    Campaign (z not force-corrected)
+    Campaign in the model's units (z not force-corrected)
 
     Raises
     ------
@@ -163,19 +304,16 @@ def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: st
         Missing file, wrong header, ragged row, text in a numeric column (file and line),
         files that disagree in set forces or series.
     """
-    if displacement_unit not in LENGTH_UNITS:
-        raise DataFileError(f"displacement_unit: {displacement_unit!r} is not one of {', '.join(LENGTH_UNITS)}")
-    if force_unit not in FORCE_UNITS:
-        raise DataFileError(f"force_unit: {force_unit!r} is not one of {', '.join(FORCE_UNITS)}")
     if not files:
         raise DataFileError("files: no sensor files given")
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    if units is None:
+        units = DataUnits.legacy(displacement_unit, force_unit, len(files))
     q_ref = series_ref = None
     zs, paths = [], []
     first = None
     for sensor, f in files.items():
         path = Path(f)
-        q, z, ser = _read_paper_file(path, force_unit)
+        q, z, ser = _read_paper_file(path, units)
         if q_ref is None:
             q_ref, series_ref, first = q, ser, path
         else:
@@ -186,11 +324,11 @@ def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: st
                 raise DataFileError(f"{path}:1: {len(ser)} series columns but {first} has {len(series_ref)}")
         zs.append(z)
         paths.append(path)
-    z = np.stack(zs, axis=2) * fl
+    z = units.z_to_model(np.stack(zs, axis=2))
     q_act = None
     if actual_forces_file:
         path = Path(actual_forces_file)
-        qa_set, qa, ser = _read_paper_file(path, force_unit)
+        qa_set, qa, ser = _read_paper_file(path, units)
         if qa_set.shape != q_ref.shape or not np.allclose(qa_set, q_ref, rtol=1e-9, atol=1e-9):
             raise DataFileError(f"{path}: set forces differ from those of {first}")
         if qa.shape[0] != z.shape[0]:
@@ -198,39 +336,41 @@ def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: st
         if np.isnan(qa).any():
             i, j = np.argwhere(np.isnan(qa))[0]
             raise DataFileError(f"{path}:{j + 2}: actual force of series {ser[i]!r} is missing")
-        q_act = qa * ff
+        q_act = units.q_to_model(qa)
         paths.append(path)
-    return Campaign(q_set=q_ref * ff, q_actual=q_act, z=z, sensors=tuple(files), series=series_ref,
+    return Campaign(q_set=units.q_to_model(q_ref), q_actual=q_act, z=z, sensors=tuple(files), series=series_ref,
                     files=tuple(str(p) for p in paths), source=f"CSV, paper layout ({len(files)} files)",
                     sha256=sha256_files(paths))
 
 
 def write_paper_layout(directory, q_set, z, sensors: Sequence[str], displacement_unit: str = "um",
                        force_unit: str = "N", series: Sequence[str] | None = None, q_actual=None,
-                       stem: str = "measurements_") -> list[Path]:
-    """Write z (mm) and q_set (N) as one CSV per sensor (atomically); returns the paths.
+                       stem: str = "measurements_", units: DataUnits | None = None) -> list[Path]:
+    """Write z and q_set (model units: mm and N, or ``units``) as one CSV per sensor (atomically).
 
+    The files get the units ``displacement_unit`` / ``force_unit`` (or ``units``' file units).
     With ``q_actual`` (n_M, n_q) also writes ``<stem>actual_forces.csv`` in the same layout.
-    Values are written with 17 significant digits (exact round trip).
+    Values are written with 17 significant digits (exact round trip).  Returns the paths.
     """
-    z = np.asarray(z, float)
-    q_set = np.asarray(q_set, float).ravel()
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+    if units is None:
+        units = DataUnits.legacy(displacement_unit, force_unit, len(sensors))
+    z = units.z_to_file(z)
+    q_set = units.q_to_file(np.asarray(q_set, float).ravel())
     n_M = z.shape[0]
     series = list(series) if series is not None else [f"series_{i + 1}" for i in range(n_M)]
-    head = f"force_{force_unit}," + ",".join(series)
+    head = _with_unit(units.input_name, units.input_file) + "," + ",".join(series)
     out = []
 
     def fmt(v):
         return "NaN" if not np.isfinite(v) else repr(float(v))
 
     for k, s in enumerate(sensors):
-        lines = [head] + [",".join([fmt(q_set[j] / ff)] + [fmt(z[i, j, k] / fl) for i in range(n_M)])
+        lines = [head] + [",".join([fmt(q_set[j])] + [fmt(z[i, j, k]) for i in range(n_M)])
                           for j in range(q_set.size)]
         out.append(atomic_write_text(Path(directory) / f"{stem}{s}.csv", "\n".join(lines) + "\n"))
     if q_actual is not None:
-        qa = np.asarray(q_actual, float)
-        lines = [head] + [",".join([fmt(q_set[j] / ff)] + [fmt(qa[i, j] / ff) for i in range(n_M)])
+        qa = units.q_to_file(q_actual)
+        lines = [head] + [",".join([fmt(q_set[j])] + [fmt(qa[i, j]) for i in range(n_M)])
                           for j in range(q_set.size)]
         out.append(atomic_write_text(Path(directory) / f"{stem}actual_forces.csv", "\n".join(lines) + "\n"))
     return out
@@ -251,24 +391,40 @@ class _TidyRow:
     value: float
 
 
-def _tidy_columns(path: Path, header: list, value_column: str, displacement_unit: str, force_unit: str) -> dict:
-    """{base name: (column index, header text, unit)} of the tidy header; units must agree with the declared ones."""
+def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits) -> dict:
+    """{role: (column index, header text, unit)} of the tidy header; units must agree with the declared ones.
+
+    Roles: series, index, sensor, set_force (the input: ``set_force``, ``input`` or the model's input
+    name), actual_force (``actual_<input>``), value, raw; other columns are ignored.
+    """
     cols = {}
+    same = set(units.output_file)
     for i, h in enumerate(header):
-        units = FORCE_UNITS if "force" in h.lower() else LENGTH_UNITS
-        base, unit = _split_unit(h, units)
-        if base in cols:
-            raise DataFileError(f"{path}:1: wrong header: column {base!r} appears twice")
-        cols[base] = (i, h, unit)
-        if base in ("set_force", "actual_force"):
-            _check_unit(path, h, unit, force_unit, "force_unit")
+        base, unit = _split_unit(h)
+        if base in units.input_names():
+            role = "set_force"
+        elif base in units.actual_names():
+            role = "actual_force"
         elif base in ("value", "raw"):
-            _check_unit(path, h, unit, displacement_unit, "displacement_unit")
+            role = base
+        else:
+            role, unit = h.lower(), None
+        if role in cols:
+            raise DataFileError(f"{path}:1: wrong header: column {role!r} appears twice")
+        cols[role] = (i, h, unit)
+        if role in ("set_force", "actual_force"):
+            _check_unit(path, h, unit, units.input_file, units.input_key)
+        elif role in ("value", "raw") and unit is not None:
+            if len(same) > 1:
+                raise DataFileError(f"{path}:1: column {h!r} carries unit {unit} but the sensors are declared in "
+                                    f"different units ({', '.join(sorted(same))}); name the column {role!r}")
+            _check_unit(path, h, unit, next(iter(same), ""), units.output_key)
     need = ["series", "set_force", "sensor", value_column]
     missing = [c for c in need if c not in cols]
     if missing:
+        inp = _with_unit("set_" + units.input_name, units.input_file)
         raise DataFileError(f"{path}:1: wrong header: missing column(s) {', '.join(missing)}; expected "
-                            f"series, [index,] set_force_<unit>, [actual_force_<unit>,] sensor, "
+                            f"series, [index,] {inp}, [actual_...,] sensor, "
                             f"{value_column}_<unit>; got {','.join(header)}")
     return cols
 
@@ -335,7 +491,7 @@ def _tidy_arrays(path: Path, recs: list, order_series: list, sens: tuple):
 
 
 def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
-                     sensors: Sequence[str] | None = None) -> Campaign:
+                     sensors: Sequence[str] | None = None, units: DataUnits | None = None) -> Campaign:
     """Read the tidy long table (one row per series, set point and sensor).
 
     Parameters
@@ -347,6 +503,8 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         Which reading column to use.
     sensors : sequence of str, optional
         Expected sensors (order of the result); a sensor in the file outside this list is an error.
+    units : DataUnits, optional
+        Any units (:func:`study_units`; needs ``sensors``); default force_unit / displacement_unit.
 
     Raises
     ------
@@ -357,15 +515,19 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
     path = Path(path)
     rows = _read_rows(path)
     header = [h.strip() for h in rows[0]]
-    cols = _tidy_columns(path, header, value_column, displacement_unit, force_unit)
+    legacy = units is None
+    if legacy:
+        units = DataUnits.legacy(displacement_unit, force_unit, 1)
+    cols = _tidy_columns(path, header, value_column, units)
     body = _body(rows)
     if not body:
         raise DataFileError(f"{path}: no data rows after the header")
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
     recs = _tidy_rows(path, header, cols, body, value_column, sensors)
     order_series = list(dict.fromkeys(rec.series for rec in recs))
     order_sensors = list(dict.fromkeys(rec.sensor for rec in recs))
     sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
+    if legacy:
+        units = DataUnits.legacy(displacement_unit, force_unit, len(sens))
     absent = [s for s in sens if s not in order_sensors]
     if absent:
         raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
@@ -377,36 +539,44 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
     if has_actual and np.isnan(q_act).any():
         i, j = np.argwhere(np.isnan(q_act))[0]
         raise DataFileError(f"{path}: no actual force for series {order_series[i]!r}, index {j + 1}")
-    return Campaign(q_set=q_set * ff, q_actual=q_act * ff if has_actual else None, z=z * fl, sensors=sens,
+    return Campaign(q_set=units.q_to_model(q_set), q_actual=units.q_to_model(q_act) if has_actual else None,
+                    z=units.z_to_model(z), sensors=sens,
                     series=tuple(order_series), files=(str(path),), source="CSV, tidy layout",
                     sha256=sha256_files([path]))
 
 
 def write_tidy_layout(path, q_set, z, sensors: Sequence[str], displacement_unit: str = "um",
-                      force_unit: str = "N", series: Sequence[str] | None = None, q_actual=None) -> Path:
-    """Write z (mm), q_set (N) as the tidy long table (atomically, 17 significant digits)."""
-    z = np.asarray(z, float)
-    q_set = np.asarray(q_set, float).ravel()
-    fl, ff = LENGTH_UNITS[displacement_unit], FORCE_UNITS[force_unit]
+                      force_unit: str = "N", series: Sequence[str] | None = None, q_actual=None,
+                      units: DataUnits | None = None) -> Path:
+    """Write z, q_set (model units: mm, N, or ``units``) as the tidy long table (atomically, 17 digits).
+
+    The value column carries the unit when every sensor has the same file unit (``value_um``),
+    else it is ``value`` (each sensor in its declared unit).
+    """
+    if units is None:
+        units = DataUnits.legacy(displacement_unit, force_unit, len(sensors))
+    z = units.z_to_file(z)
+    q_set = units.q_to_file(np.asarray(q_set, float).ravel())
     n_M = z.shape[0]
     series = list(series) if series is not None else [str(i + 1) for i in range(n_M)]
 
     def fmt(v):
         return "NaN" if not np.isfinite(v) else repr(float(v))
 
-    head = ["series", "index", f"set_force_{force_unit}"]
+    head = ["series", "index", _with_unit("set_" + units.input_name, units.input_file)]
     if q_actual is not None:
-        head.append(f"actual_force_{force_unit}")
-        qa = np.asarray(q_actual, float)
-    head += ["sensor", f"value_{displacement_unit}"]
+        head.append(_with_unit("actual_" + units.input_name, units.input_file))
+        qa = units.q_to_file(q_actual)
+    same = set(units.output_file)
+    head += ["sensor", _with_unit("value", same.pop() if len(same) == 1 else "")]
     lines = [",".join(head)]
     for i in range(n_M):
         for j in range(q_set.size):
             for k, s in enumerate(sensors):
-                row = [series[i], str(j + 1), fmt(q_set[j] / ff)]
+                row = [series[i], str(j + 1), fmt(q_set[j])]
                 if q_actual is not None:
-                    row.append(fmt(qa[i, j] / ff))
-                row += [s, fmt(z[i, j, k] / fl)]
+                    row.append(fmt(qa[i, j]))
+                row += [s, fmt(z[i, j, k])]
                 lines.append(",".join(row))
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
@@ -425,15 +595,20 @@ def _force_correct(c: Campaign, where: str) -> Campaign:
     return replace(c, z=c.z * factor[:, :, None], notes=c.notes + ("force correction z * q_set / q_actual applied",))
 
 
-def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
-    """The campaign of a study in mm and N, with every series (the study's subset is applied later).
+def load_campaign(cfg: StudyConfig, sensors: Sequence[str], units: DataUnits | None = None) -> Campaign:
+    """The campaign of a study in the model's units, with every series (the study's subset is applied later).
 
     Parameters
     ----------
     cfg : StudyConfig
     sensors : sequence of str
         The model's sensors (order of z).
+    units : DataUnits, optional
+        File and model units (:func:`study_units`); default the press's (force_unit and
+        displacement_unit in the files, N and mm in the model).
     """
+    if units is None:
+        units = DataUnits.legacy(cfg.data.displacement_unit, cfg.data.force_unit, len(sensors))
     d = cfg.data
     if d.source == "prototype":
         from models.prototype import generate_campaign
@@ -457,10 +632,10 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str]) -> Campaign:
         if extra:
             raise DataFileError(f"{cfg.path}: [data.files] names unknown sensor(s) {', '.join(extra)}; the model "
                                 f"has {', '.join(sensors)}")
-        c = read_paper_layout(files, d.displacement_unit, d.force_unit,
-                              base / d.actual_forces_file if d.actual_forces_file else None)
+        c = read_paper_layout(files, actual_forces_file=base / d.actual_forces_file if d.actual_forces_file
+                              else None, units=units)
     else:
-        c = read_tidy_layout(base / d.file, d.displacement_unit, d.force_unit, d.value_column, sensors)
+        c = read_tidy_layout(base / d.file, value_column=d.value_column, sensors=sensors, units=units)
     if d.force_correction:
         c = _force_correct(c, cfg.path)
     return c

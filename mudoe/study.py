@@ -6,7 +6,10 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -21,10 +24,11 @@ from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 
 from .config import ConfigError, StudyConfig
-from .data_io import DataFileError, load_campaign
+from .console import INTERRUPT
+from .data_io import DataFileError, DataUnits, load_campaign, study_units
 from .press import press_variant
 
-__all__ = ["Study", "StudyResults", "prepare", "run_identify", "run_oed", "run_detect", "run_validate",
+__all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
            "Progress", "MissingPieceError"]
 
 
@@ -34,10 +38,21 @@ class MissingPieceError(RuntimeError):
 
 # ---------------------------------------------------------------------------- progress
 class Progress(BaseProgress):
-    """The study's progress: :class:`identification.progress.Progress` with the prefix "mudoe: "."""
+    """The study's progress: :class:`identification.progress.Progress` with the prefix "mudoe: ".
+
+    Every step checks for Ctrl-C (:data:`mudoe.console.INTERRUPT`) when it starts and ends, so
+    that an interrupt a solver turned into a failed fit still stops the run.
+    """
 
     def __init__(self, enabled: bool = True, stream=None):
         super().__init__(enabled, stream, prefix="mudoe: ")
+
+    @contextmanager
+    def step(self, label: str, announce: bool = True):
+        INTERRUPT.check()
+        with super().step(label, announce):
+            yield
+        INTERRUPT.check()
 
 
 # ---------------------------------------------------------------------------- the study
@@ -48,16 +63,18 @@ class Study:
     Attributes
     ----------
     cfg : StudyConfig
-    campaign : Campaign          every series, model units (mm, N)
+    campaign : Campaign          every series, model units (the press: mm, N)
     sensors : tuple of str       the model's sensors (order of z)
-    sigma : ndarray or None      sensor sigma (mm) used by every fit (None: estimated)
-    sigma_table : tuple of dict  per sensor: sigma_rep, sigma_man, sigma (mm) and how obtained
+    sigma : ndarray or None      sensor sigma (model units) used by every fit (None: estimated)
+    sigma_table : tuple of dict  per sensor: sigma_rep, sigma_man, sigma (model units) and how obtained
     normality : NormalityCheck   Shapiro-Wilk on differences of consecutive series (all series)
     models : dict {variant: Model}
     data : dict {variant: Measurements}   the study's series, with each variant's inputs
     data_all : dict {variant: Measurements}  every series
     p0 : ndarray                 start values
     splits : tuple of Split
+    notes : tuple of str         what was done to the data
+    units : DataUnits            units of the data in the files and in the model (the one conversion)
     """
 
     cfg: StudyConfig
@@ -72,6 +89,7 @@ class Study:
     p0: np.ndarray
     splits: tuple
     notes: tuple = ()
+    units: DataUnits | None = None
 
 
 @dataclass
@@ -113,16 +131,28 @@ def _build_models(cfg: StudyConfig) -> dict:
 
 
 def _factory(cfg: StudyConfig) -> Callable:
+    return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
+
+
+def load_factory(name: str, where: str) -> Callable:
+    """The model factory ``"package.module:function"`` (``where`` starts the error message).
+
+    Raises
+    ------
+    ConfigError
+        The module cannot be imported or has no such function.
+    """
     import importlib
-    mod_name, _, fn_name = cfg.model.name.partition(":")
+    mod_name, _, fn_name = name.partition(":")
+    if not mod_name or not fn_name:
+        raise ConfigError(f"{where}: expected \"package.module:function\", got {name!r}")
     try:
         mod = importlib.import_module(mod_name)
     except ImportError as exc:
-        raise ConfigError(f"{cfg.path}: [model] name: cannot import {mod_name!r} ({exc}); is its folder on "
-                          "PYTHONPATH?") from None
+        raise ConfigError(f"{where}: cannot import {mod_name!r} ({exc}); is its folder on PYTHONPATH?") from None
     fn = getattr(mod, fn_name, None)
     if not callable(fn):
-        raise ConfigError(f"{cfg.path}: [model] name: {mod_name} has no function {fn_name!r}")
+        raise ConfigError(f"{where}: {mod_name} has no function {fn_name!r}")
     return fn
 
 
@@ -138,10 +168,30 @@ def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
     missing = [n for n in m.param_names if n not in names]
     if missing:
         raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
+    for pc in cfg.parameters:
+        own = m.params[m.param_names.index(pc.name)].unit
+        if pc.unit and own and pc.unit != own:
+            raise ConfigError(f"{cfg.path}: [[parameters]] {pc.name}: unit {pc.unit!r} but the model declares "
+                              f"{own!r}; parameters are in the model's unit (drop the key or use {own!r})")
     try:
-        return m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
+        new = m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
     except ModelError as exc:
         raise ConfigError(f"{cfg.path}: [[parameters]] {exc}") from None
+    units = {pc.name: pc.unit for pc in cfg.parameters if pc.unit}
+    new.params = tuple(dataclasses.replace(p, unit=p.unit or units.get(p.name, "")) for p in new.params)
+    return new
+
+
+def _declare_units(m: Model, units: DataUnits) -> Model:
+    """The model with the data's model-side units where it declares none (for tables and the report)."""
+    q_units = (units.input_model or m.input_units[0],) + tuple(m.input_units[1:])
+    s_units = tuple(own or u for own, u in zip(m.sensor_units, units.output_model))
+    if q_units == tuple(m.input_units) and s_units == tuple(m.sensor_units):
+        return m
+    new = copy.copy(m)
+    new.input_units = tuple(own or u for own, u in zip(m.input_units, q_units))
+    new.sensor_units = s_units
+    return new
 
 
 def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
@@ -155,7 +205,7 @@ def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- sigma
-def _sigma(cfg: StudyConfig, sensors, norm: NormalityCheck):
+def _sigma(cfg: StudyConfig, sensors, norm: NormalityCheck, units: DataUnits):
     if not cfg.sensors:
         return None, tuple(dict(sensor=s, how="estimated from the residuals (no [[sensors]] given)",
                                 sigma_rep=float(norm.sigma_rep[k]), sigma_man=math.nan, sigma=math.nan)
@@ -169,18 +219,17 @@ def _sigma(cfg: StudyConfig, sensors, norm: NormalityCheck):
     if missing:
         raise ConfigError(f"{cfg.path}: [[sensors]] no entry for sensor(s) {', '.join(missing)} of the model "
                           f"({', '.join(sensors)}); list every sensor with sigma or sigma_man")
-    lf = cfg.length_factor
     sig, rows = [], []
     for k, s in enumerate(sensors):
         sc = cfg.sensors[names.index(s)]
         rep = float(norm.sigma_rep[k])
         if sc.sigma is not None:
-            v, how, man = sc.sigma * lf, "given", math.nan
+            v, how, man = units.sigma_to_model(k, sc.sigma), "given", math.nan
         elif sc.sigma_man is not None:
             if not math.isfinite(rep):
                 raise DataFileError(f"{cfg.path}: sensor {s!r}: sigma_man needs the repeatability of the data, "
                                     "which needs at least two series; give sigma directly")
-            man = sc.sigma_man * lf
+            man = units.sigma_to_model(k, sc.sigma_man)
             v, how = math.sqrt(rep ** 2 + man ** 2), "sqrt(sigma_rep^2 + sigma_man^2)"
         else:
             v, how, man = math.nan, "estimated", math.nan
@@ -229,8 +278,10 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
         built = _build_models(cfg)
     sensors = tuple(next(iter(built.values()))[0].sensors)
+    units = study_units(cfg, next(iter(built.values()))[0])
+    built = {v: (_declare_units(m, units), fn) for v, (m, fn) in built.items()}
     with progress.step(f"load data ({cfg.data.source})", announce=cfg.data.source == "prototype"):
-        campaign = load_campaign(cfg, sensors)
+        campaign = load_campaign(cfg, sensors, units)
     n_M = campaign.n_M
     if cfg.data.series is not None:
         bad = [i for i in cfg.data.series if i >= n_M]
@@ -239,7 +290,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
                               "(0-based indices)")
     m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
     norm = normality_check(m_all)
-    sigma, sig_rows = _sigma(cfg, sensors, norm)
+    sigma, sig_rows = _sigma(cfg, sensors, norm, units)
     models, data, data_all = {}, {}, {}
     for v, (m, fn) in built.items():
         q = campaign.q_set[:, None] if fn is None else np.asarray(fn(campaign.q_set), float)
@@ -256,7 +307,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     for sp in splits:
         sp.check(campaign.n_q, n_study, first.n_p, 1)
     return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
-                 campaign.notes)
+                 campaign.notes, units)
 
 
 # ---------------------------------------------------------------------------- runs
@@ -356,3 +407,82 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
                                       sigma=sigma, n_M=data.n_M, weights=w, name=v,
                                       settings=vc.settings(study.cfg.detect.tol, workers, progress.enabled))
     return results
+
+
+# ---------------------------------------------------------------------------- simulate
+@dataclass(frozen=True, eq=False)
+class SimulatedCampaign:
+    """A campaign simulated from the study's own model (``mudoe simulate``).
+
+    Attributes
+    ----------
+    campaign : Campaign      readings in the model's units
+    units : DataUnits        file and model units (the files are written in the file units)
+    variant : str            the model variant simulated
+    truth : dict             true parameters (model units)
+    sigma : tuple of float   noise standard deviation per sensor (model units)
+    seed : int
+    """
+
+    campaign: Campaign
+    units: DataUnits
+    variant: str
+    truth: dict
+    sigma: tuple
+    seed: int
+
+
+def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampaign:
+    r"""Readings simulated from the study's model: z_ijk = h_k(y_j, p_true, q_j) + sigma_k e_ijk.
+
+    y_j solves E(y_j, p_true, q_j) = 0, e_ijk ~ N(0, 1) from ``numpy.random.default_rng(seed)``,
+    sigma_k is sensor k's [[sensors]] sigma (or sigma_man) converted to the model's unit, q_j the
+    [simulate] set points converted from the [data] input unit; ``[simulate] truth`` (default the
+    [[parameters]] start values) in model units.
+
+    Raises
+    ------
+    ConfigError
+        The press (use its virtual prototype), a sensor without sigma, missing true values.
+    """
+    if cfg.model.name == "press":
+        raise ConfigError(f"{cfg.path}: [simulate] is for own models; the press simulates its virtual prototype")
+    sc = cfg.simulate
+    if not sc.inputs and sc.input_start is None:
+        raise ConfigError(f"{cfg.path}: [simulate] give the set points: inputs = [...] or input_start, input_stop "
+                          "and n_inputs (in the [data] input unit)")
+    built = _build_models(cfg)
+    variant = sc.variant or next(iter(built))
+    m, fn = built[variant]
+    units = study_units(cfg, m)
+    m = _declare_units(m, units)
+    truth = {p.name: p.start for p in cfg.parameters}
+    unknown = [k for k in sc.truth if k not in m.param_names]
+    if unknown:
+        raise ConfigError(f"{cfg.path}: [simulate] truth: unknown parameter(s) {', '.join(unknown)}; the model has "
+                          f"{', '.join(m.param_names)}")
+    truth.update(sc.truth)
+    missing = [n for n in m.param_names if n not in truth]
+    if missing:
+        raise ConfigError(f"{cfg.path}: [simulate] truth: give the true value of {', '.join(missing)}")
+    sens = {s.name: s for s in cfg.sensors}
+    sigma = []
+    for k, s in enumerate(m.sensors):
+        given = sens[s].sigma if s in sens and sens[s].sigma is not None else (
+            sens[s].sigma_man if s in sens else None)
+        if given is None:
+            raise ConfigError(f"{cfg.path}: [[sensors]] {s}: `mudoe simulate` needs the sensor's sigma (the noise)")
+        sigma.append(units.sigma_to_model(k, given))
+    q = units.q_to_model(sc.input_values())
+    inputs = q[:, None] if fn is None else np.asarray(fn(q), float)
+    p = np.array([truth[n] for n in m.param_names], float)
+    seed = sc.seed if seed is None else int(seed)
+    h = m.simulate(p, inputs)
+    if not np.all(np.isfinite(h)):
+        raise ConfigError(f"{cfg.path}: [simulate] the model's output is not finite at the truth {truth} for some "
+                          "set point; check truth and the input range")
+    rng = np.random.default_rng(seed)
+    z = h[None] + np.asarray(sigma) * rng.standard_normal((sc.n_series,) + h.shape)
+    camp = Campaign(q_set=q, q_actual=None, z=z, sensors=tuple(m.sensors),
+                    source=f"simulated from {cfg.model.name} ({variant}, seed {seed})", seed=seed)
+    return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -76,3 +77,23 @@ def campaign_dirs(tmp_path, synthetic):
     ct = tmp_path / "tidy.toml"
     ct.write_text(config_text(tidy, "tidy"))
     return dict(root=tmp_path, paper=paper, tidy=tidy, paper_cfg=cp, tidy_cfg=ct)
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def write_cstr_config(tmp_path, layout="tidy") -> Path:
+    """configs/cstr.toml with its data folder in ``tmp_path/data``, a small report and few runs."""
+    text = (REPO / "configs" / "cstr.toml").read_text()
+    text = text.replace('directory = "../data/cstr"', 'directory = "data"')
+    text = text.replace('layout = "tidy"', f'layout = "{layout}"')
+    text = text.replace("[report]\n", "[report]\ndpi = 30\n")
+    path = tmp_path / "cstr.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture()
+def cstr_config():
+    """The factory :func:`write_cstr_config` (the CSTR study of configs/cstr.toml in a temporary folder)."""
+    return write_cstr_config
