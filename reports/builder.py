@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .view import STATISTIC_WORDS, decision_word, fmt_value, goodness_of_fit
+from .view import STATISTIC_WORDS, decision_word, fmt_pct, fmt_value, goodness_of_fit
 
 __all__ = ["build_report", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
 
@@ -405,6 +405,48 @@ def _residual_pages(results):
     return figs
 
 
+def _misses_pages(results, diagnosis):
+    """'What the model misses': the diagnostic split family, Holm-corrected, and its plain-language findings."""
+    from .diagnosis import MISSES
+    from .tables import draw_table
+    title = "What the model misses (diagnostic splits, Holm-corrected)"
+    if diagnosis is None:
+        fig = _page(title)
+        _text(fig, 0.04, 0.85, "Not available: detection was not run.", size=10)
+        return fig
+    head = ["model", "kind", "split", "alpha_min (%)", "Holm-adjusted (%)", "decision"]
+    rows, flags = [], []
+    for r in diagnosis.rows:
+        rows.append([r.model, r.kind, r.split, fmt_pct(r.alpha) if not r.error else "failed",
+                     fmt_pct(r.holm) if np.isfinite(r.holm) else "-", "rejected" if r.rejected else "not rejected"])
+        flags.append([False, False, False, r.rejected, r.rejected, r.rejected])
+    parts = _chunks(len(rows), ROWS_PER_PAGE)
+    figs = []
+    for n, part in enumerate(parts):
+        fig = _page(title + _part(n, len(parts)))
+        chunk = [rows[k] for k in part]
+        h = 0.027 * (len(chunk) + 1)
+        ax = fig.add_axes([0.04, 0.89 - h, 0.92, h])
+        draw_table(ax, head, chunk, flags=[flags[k] for k in part], fontsize=8,
+                   col_widths=[0.08, 0.12, 0.36, 0.13, 0.15, 0.16])
+        figs.append(fig)
+    findings = [s for m in results.study.models for s in diagnosis.misses(m)]
+    kinds = sorted({r.kind for r in diagnosis.rows if r.kind != "study split"})
+    txt = (f"Splits along one aspect of the data ask what a model misses: {'; '.join(f'{k}: {MISSES[k]}' for k in kinds)}"
+           f". alpha_min of the {STATISTIC_WORDS[diagnosis.statistic]} statistic; Holm's step-down correction over "
+           f"the study's splits and the diagnostic ones together, per model, at TOL = {100 * diagnosis.tol:g} %. "
+           "The decision of page 1 uses the study's splits only.\n\n"
+           + ("Findings: " + " ".join(findings) if findings else "Findings: no diagnostic split rejects a model."))
+    fig = figs[-1]
+    y = 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
+    if y < 0.15:
+        fig = _page(title + " (findings)")
+        figs.append(fig)
+        y = 0.88
+    _text(fig, 0.04, y, txt, width=160, size=9)
+    return figs
+
+
 def page_texts(fig) -> list[str]:
     """Every text drawn on a page in reading order (top to bottom, then left to right).
 
@@ -441,7 +483,7 @@ def _validation_page(results):
     return fig
 
 
-def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
+def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
     Parameters
@@ -451,6 +493,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
         Created if missing.
     dpi : int, optional
         PNG resolution (default: the config's [report] dpi, 150).
+    diagnose : bool
+        Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
+        phases, series; three fits per split and model) for the page "What the model misses".
 
     Returns
     -------
@@ -468,7 +513,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from .serialize import dumps, package_versions, results_dict
+    from .serialize import diagnosis_dict, dumps, package_versions, results_dict
+
+    from .diagnosis import diagnose as run_diagnosis
 
     t0 = time.perf_counter()
     cfg = results.study.cfg
@@ -483,6 +530,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
                  ("estimates", lambda: _estimate_pages(results)), ("ellipses", lambda: _ellipse_pages(results)),
                  ("alpha_min", lambda: _alpha_pages(results)), ("bands", lambda: _band_pages(results)),
                  ("residuals", lambda: _residual_pages(results))]
+        diagnosis = run_diagnosis(results) if diagnose else None
+        if diagnose:
+            pages.append(("misses", lambda: _misses_pages(results, diagnosis)))
         if results.validation is not None:
             pages.append(("validation", lambda: _validation_page(results)))
         names, texts = [], []
@@ -506,7 +556,8 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                     files=["report.pdf"] + names + ["results.json"],
                     verdicts=dict(results.detection.verdicts) if results.detection is not None else {},
-                    results=results_dict(results), pages=texts)
+                    results=results_dict(results), pages=texts,
+                    diagnosis=diagnosis_dict(diagnosis) if diagnosis is not None else None)
         (tmp / "results.json").write_text(dumps(meta), encoding="utf-8")
         for name in ["report.pdf"] + names + ["results.json"]:
             os.replace(tmp / name, out / name)

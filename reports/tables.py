@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .view import (STATISTIC_WORDS, decision_word, fmt_p, fmt_value, goodness_of_fit, linearisation_trust,
+from .view import (STATISTIC_WORDS, decision_word, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
                    output_display, param_units, sensor_unit, unit_suffix)
 
 __all__ = ["fmt_alpha", "normality_rows", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
@@ -161,7 +161,7 @@ def verdict_rows(results) -> tuple[list, list, list]:
             d = det.decision(v)
             word = decision_word(d.decision)
             a, where = smallest_alpha(det, v)
-            a_txt = fmt_p(100 * a) if np.isfinite(a) else "failed"
+            a_txt = fmt_pct(a) if np.isfinite(a) else "failed"
         else:
             word, a_txt, where = "no verdict", "n/a", "-"
         if e is not None:

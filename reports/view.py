@@ -23,7 +23,7 @@ from scipy import stats
 
 __all__ = ["DECISION_WORDS", "decision_word", "unit_suffix", "is_press", "OutputDisplay", "output_display",
            "input_label", "param_units", "phase_labels", "linearisation_trust", "goodness_of_fit", "GoodnessOfFit",
-           "fmt_value", "fmt_p", "STATISTIC_WORDS", "sensor_unit", "output_label"]
+           "fmt_value", "fmt_p", "fmt_pct", "STATISTIC_WORDS", "sensor_unit", "output_label"]
 
 #: the one vocabulary of a model's decision (terminal, JSON, PDF)
 DECISION_WORDS = {"reject": "rejected", "accept": "not rejected", "undecided": "undecided"}
@@ -165,6 +165,13 @@ def fmt_p(p: float) -> str:
     if p is None or not math.isfinite(p):
         return "n/a"
     return f"{p:.2g}" if p >= 1e-3 else f"{p:.1e}"
+
+
+def fmt_pct(a: float) -> str:
+    """A probability a in percent: 3 significant digits, scientific below 0.01 %."""
+    if a is None or not math.isfinite(a):
+        return "n/a"
+    return f"{100 * a:.3g}" if 100 * a >= 0.01 else f"{100 * a:.1e}"
 
 
 def fmt_value(value: float, stderr: float) -> tuple[str, str]:

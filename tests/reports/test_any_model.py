@@ -86,7 +86,7 @@ def toy_results(tmp_path_factory):
             [splits]
             scenarios = []
             [splits.random]
-            n = 8
+            n = 7
             [detect]
             sensors = "all"
             [oed]
@@ -133,7 +133,7 @@ def test_every_parameter_pair_and_every_split_has_an_ellipse(toy_report):
     r, meta, pages = toy_report
     det = r.detection
     ell = {f: t for f, t in pages.items() if "_ellipses" in f}
-    assert len(ell) >= 2                                         # 8 splits > 6 columns: paginated
+    assert len(ell) >= 2                                         # 7 splits > 6 columns: paginated
     labels = [t for texts in ell.values() for t in texts]
     for name in ("A (mol/L)", "E_a (K)", "K (L/mol)"):          # 3 pairs: each parameter on 2 axes per split
         assert labels.count(name) == 2 * len(det.splits), name
@@ -201,3 +201,26 @@ def test_prediction_bands_match_the_delta_method(toy_results):
     assert b.half_new[j, k] == pytest.approx(z * np.sqrt(g @ e.cov @ g + e.sigma[k] ** 2), rel=1e-12)
     with pytest.raises(ValueError, match="level"):
         prediction_bands(e, 0.05)
+
+
+def test_holm_adjusted_p_values():
+    from reports.diagnosis import holm_adjusted
+    p = [0.01, 0.04, 0.03, float("nan"), 0.5]
+    # m = 5 planned tests: sorted 0.01, 0.03, 0.04, 0.5 -> 5*0.01, max(., 4*0.03), max(., 3*0.04), max(., 2*0.5)
+    exp = [0.05, 0.12, 0.12, float("nan"), 1.0]
+    np.testing.assert_allclose(holm_adjusted(p), exp)
+
+
+def test_what_the_model_misses_page(toy_report):
+    r, meta, pages = toy_report
+    diag = meta["diagnosis"]
+    kinds = {row["kind"] for row in diag["rows"]}
+    assert kinds == {"study split", "input range", "phase", "series"}
+    assert len(diag["rows"]) == len(r.detection.splits) + 3
+    for row in diag["rows"]:
+        if row["alpha"] is not None:
+            assert row["holm"] >= row["alpha"]
+            assert row["rejected"] == (row["holm"] < 0.05)
+    misses = [t for f, texts in pages.items() if "_misses" in f for t in texts]
+    assert "heating vs cooling (phase)" in misses and "low vs high input" in misses
+    assert any(t.startswith("Findings:") or "Findings:" in t for t in misses)

@@ -50,7 +50,7 @@ def test_failed_build_leaves_no_partial_file(results, tmp_path, monkeypatch):
 
     monkeypatch.setattr(b, "_alpha_pages", boom)      # a late page: earlier pages are already rendered
     with pytest.raises(RuntimeError, match="page failed"):
-        b.build_report(results, out)
+        b.build_report(results, out, diagnose=False)
     assert sorted(p.name for p in out.iterdir()) == ["report.pdf"]
     assert (out / "report.pdf").read_bytes() == b"old report"
 
