@@ -5,6 +5,14 @@ one PNG per page (150 dpi by default) and ``results.json`` (config, data hash, p
 versions, timing, every number of the report).  Everything is first written into a
 temporary folder inside ``out_dir`` and moved into place with ``os.replace`` only when
 all files are complete: a failure leaves no partial file behind (earlier reports stay).
+
+Pages (:func:`report_pages`): verdict table and verdicts; measured data and model outputs;
+normality and sigma; optimal sensor design; estimates; confidence regions of every parameter
+pair; alpha_min tables; prediction bands; residual diagnostics; what the model misses
+(diagnostic splits); the Monte Carlo size study when run.  Every page names the study's
+own quantities (:mod:`reports.view`); grids hold at most 6 panels a row and 3 rows a page,
+tables at most 25 rows a page (more pages instead of smaller print).  ``results.json``
+holds, besides every number, the texts drawn on each page (``pages``).
 """
 from __future__ import annotations
 
@@ -13,6 +21,7 @@ import shutil
 import tempfile
 import textwrap
 import time
+from functools import partial
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -20,7 +29,7 @@ import numpy as np
 
 from .view import STATISTIC_WORDS, decision_word, fmt_pct, fmt_value, goodness_of_fit
 
-__all__ = ["build_report", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
+__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
 
 #: A4 landscape (inches)
 PAGE_SIZE = (11.69, 8.27)
@@ -483,6 +492,26 @@ def _validation_page(results):
     return fig
 
 
+def report_pages(results, diagnosis=None, with_diagnosis: bool = True) -> list:
+    """The pages of a report in order: (name, function returning a figure or a list of figures).
+
+    The one place where pages are listed.  Pages that need results the study does not hold
+    yet are added here (e.g. the likelihood-ratio region figures of ``reports.region_figures``
+    after the confidence regions: one ``(name, partial(make, results))`` entry).
+    """
+    cfg = results.study.cfg
+    pages = [("title", partial(_title_page, results, cfg)), ("loops", partial(_loops_page, results)),
+             ("normality", partial(_normality_page, results)), ("oed", partial(_oed_page, results)),
+             ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results)),
+             ("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
+             ("residuals", partial(_residual_pages, results))]
+    if with_diagnosis:
+        pages.append(("misses", partial(_misses_pages, results, diagnosis)))
+    if results.validation is not None:
+        pages.append(("validation", partial(_validation_page, results)))
+    return pages
+
+
 def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
@@ -525,16 +554,8 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
     written = []
     try:
-        pages = [("title", lambda: _title_page(results, cfg)), ("loops", lambda: _loops_page(results)),
-                 ("normality", lambda: _normality_page(results)), ("oed", lambda: _oed_page(results)),
-                 ("estimates", lambda: _estimate_pages(results)), ("ellipses", lambda: _ellipse_pages(results)),
-                 ("alpha_min", lambda: _alpha_pages(results)), ("bands", lambda: _band_pages(results)),
-                 ("residuals", lambda: _residual_pages(results))]
         diagnosis = run_diagnosis(results) if diagnose else None
-        if diagnose:
-            pages.append(("misses", lambda: _misses_pages(results, diagnosis)))
-        if results.validation is not None:
-            pages.append(("validation", lambda: _validation_page(results)))
+        pages = report_pages(results, diagnosis, diagnose)
         names, texts = [], []
         with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf:
             k = 0
