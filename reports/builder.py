@@ -141,7 +141,7 @@ def _title_page(results, cfg):
         for k, nt in enumerate(notes, 1):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
     fig.text(0.04, 0.02, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
-             "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics.",
+             "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model misses.",
              fontsize=8, color="0.4")
     return fig
 

@@ -34,7 +34,8 @@ __all__ = ["DiagnosticSplit", "DiagnosisRow", "Diagnosis", "diagnostic_splits", 
 
 #: what a rejection on a split of each kind says the model misses
 MISSES = {"input range": "an input dependence: the parameters fitted on small inputs do not hold for large ones "
-                         "(a nonlinearity, a contact or a stiffening the model lacks)",
+                         "(a nonlinearity, a contact or a stiffening the model lacks, or a systematic sensor error "
+                         "that depends on the reading)",
           "phase": "a history dependence: the parameters differ between phases (friction, hysteresis or another "
                    "direction-dependent effect the model lacks)",
           "series": "a change between series: the system drifted or the series are not repeats of one experiment",
