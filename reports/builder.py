@@ -5,6 +5,14 @@ one PNG per page (150 dpi by default) and ``results.json`` (config, data hash, p
 versions, timing, every number of the report).  Everything is first written into a
 temporary folder inside ``out_dir`` and moved into place with ``os.replace`` only when
 all files are complete: a failure leaves no partial file behind (earlier reports stay).
+
+Pages (:func:`report_pages`): verdict table and verdicts; measured data and model outputs;
+normality and sigma; optimal sensor design; estimates; confidence regions of every parameter
+pair; alpha_min tables; prediction bands; residual diagnostics; what the model misses
+(diagnostic splits); the Monte Carlo size study when run.  Every page names the study's
+own quantities (:mod:`reports.view`); grids hold at most 6 panels a row and 3 rows a page,
+tables at most 25 rows a page (more pages instead of smaller print).  ``results.json``
+holds, besides every number, the texts drawn on each page (``pages``).
 """
 from __future__ import annotations
 
@@ -13,48 +21,58 @@ import shutil
 import tempfile
 import textwrap
 import time
+from functools import partial
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["build_report", "verdict_paragraphs", "PAGE_SIZE"]
+from .view import STATISTIC_WORDS, decision_word, fmt_pct, fmt_value, goodness_of_fit
+
+__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
 
 #: A4 landscape (inches)
 PAGE_SIZE = (11.69, 8.27)
 
 
 def verdict_paragraphs(results) -> list[tuple[str, str]]:
-    """One paragraph per model: the verdict of Algorithm 1 with its numbers (plain text)."""
+    """One paragraph per model: the verdict of Algorithm 1 with its numbers and goodness of fit (plain text)."""
+    from .tables import smallest_alpha
     out = []
     det = results.detection
     for v in results.study.models:
         parts = []
         e = results.estimates.get(v)
         if e is not None:
-            est = ", ".join(f"{n} = {p:.1f} +- {s:.1f} {u}" for n, p, s, u in
-                            zip(e.param_names, e.p, e.stderr, e.param_units))
+            est = ", ".join(f"{n} = {a} +- {b}{(' ' + u) if u else ''}" for n, (a, b), u in
+                            zip(e.param_names, (fmt_value(p, s) for p, s in zip(e.p, e.stderr)), e.param_units))
+            g = goodness_of_fit(e)
             parts.append(f"Fit on all study data (all sensors): {est}; reduced chi2 {e.reduced_chi2:.3g}.")
-            misfit = [n for n in e.notes if n.startswith("residuals exceed the sensor sigmas")]
-            if misfit:
+            if np.isfinite(g.pvalue):
                 rejected = det is not None and v in det.models and det.decision(v).decision == "reject"
-                parts.append(f"Goodness of fit: {misfit[0]}." + ("" if rejected else
-                             " The split tests compare parameter sets, and a misfit that is the same in every "
-                             "split does not move them: read 'not rejected' together with this line."))
+                fails = g.pvalue < 0.05
+                parts.append(f"Goodness of fit (chi2 test with the sensor sigmas): {g.text()}: "
+                             + ("the fit FAILS it at 5 %: the model or the sigmas are inadequate and the covariance "
+                                "understates the uncertainty." if fails else "passes at 5 %.")
+                             + (" The split tests compare parameter sets; a misfit that is the same in every split "
+                                "does not move them: read 'not rejected' together with this test."
+                                if fails and not rejected else ""))
+            else:
+                parts.append(f"Goodness of fit: {g.text()}.")
         elif v in results.estimate_errors:
             parts.append(f"The fit on all study data failed: {results.estimate_errors[v]}.")
         if det is not None and v in det.models:
             d = det.decision(v)
             other = "two_sample" if det.settings.statistic != "two_sample" else "likelihood_ratio"
             d2 = det.decision(v, other)
-            word = {"reject": "REJECTED: model uncertainty detected", "accept": "not rejected",
-                    "undecided": "UNDECIDED"}[d.decision]
-            parts.insert(0, f"{v} is {word} ({d.statistic} statistic, {d.correction}, TOL = {100 * d.tol:g} %, "
-                            f"{d.n_tests} tests): {d.reason}.")
+            parts.insert(0, f"{v}: {decision_word(d.decision)} ({STATISTIC_WORDS[d.statistic]} statistic, "
+                            f"{d.correction}, TOL = {100 * d.tol:g} %, {d.n_tests} tests): {d.reason}.")
             if d2.decision != d.decision:
-                parts.append(f"The {other} statistic would decide '{d2.decision}' ({d2.reason}).")
+                parts.append(f"The {STATISTIC_WORDS[other]} statistic decides '{decision_word(d2.decision)}' "
+                             f"({d2.reason}).")
             else:
-                parts.append(f"The {other} statistic agrees (smallest alpha_min {100 * d2.min_alpha:.3g} %).")
+                a2, _ = smallest_alpha(det, v, other)
+                parts.append(f"The {STATISTIC_WORDS[other]} statistic agrees (smallest alpha_min {100 * a2:.3g} %).")
         else:
             why = results.detection_error or "; ".join(n for n in results.notes if "detection" in n) or "not run"
             parts.insert(0, f"{v}: no verdict ({why}).")
@@ -76,10 +94,37 @@ def _text(fig, x, y, text, width=150, size=9, **kw):
     return wrapped.count("\n") + 1
 
 
+def _chunks(n: int, size: int) -> list[range]:
+    """range(0, n) cut into pieces of at most ``size`` (one empty piece when n = 0)."""
+    return [range(a, min(a + size, n)) for a in range(0, n, size)] or [range(0)]
+
+
+def _part(k: int, n: int) -> str:
+    return f" ({k + 1}/{n})" if n > 1 else ""
+
+
 def _title_page(results, cfg):
+    from .tables import draw_table, verdict_rows
     fig = _page()
     s = results.study
-    fig.text(0.04, 0.93, cfg.report.title, fontsize=18, weight="bold", va="top")
+    fig.text(0.04, 0.95, cfg.report.title, fontsize=18, weight="bold", va="top")
+    head, rows, flags = verdict_rows(results)
+    h = 0.03 * (len(rows) + 1)
+    ax = fig.add_axes([0.04, 0.87 - h, 0.92, h])
+    draw_table(ax, head, rows, flags=flags, fontsize=9, col_widths=[0.10, 0.12, 0.18, 0.24, 0.20, 0.16],
+               title="Verdicts (Algorithm 1)")
+    y = 0.87 - h - 0.01
+    det = results.detection
+    if det is not None:
+        y -= 0.022 * _text(fig, 0.04, y, (
+            f"Decision and alpha_min: {STATISTIC_WORDS[det.settings.statistic]} statistic; rejected when some "
+            f"split's alpha_min is below TOL/n_tests = {100 * det.settings.tol / len(det.splits):.3g} % "
+            f"({det.settings.correction}, TOL = {100 * det.settings.tol:g} %, {len(det.splits)} splits); undecided "
+            "when a split failed and none rejects. Goodness of fit: chi2 test of all residuals with the sensor "
+            "sigmas (fails below 5 %). Linearisation: whether the confidence regions drawn from the "
+            "covariance may be read as likelihood regions."), width=175, size=8, color="0.25") + 0.015
+    for v, par in verdict_paragraphs(results):
+        y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.campaign
     meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
@@ -88,170 +133,357 @@ def _title_page(results, cfg):
             f"{'all' if cfg.data.series is None else ', '.join(str(i + 1) for i in cfg.data.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
-    y = 0.86
-    n = _text(fig, 0.04, y, meta, width=170, size=8, color="0.25")
-    y -= 0.022 * n + 0.03
-    fig.text(0.04, y, "Verdicts (Algorithm 1)", fontsize=12, weight="bold", va="top")
-    y -= 0.04
-    for v, par in verdict_paragraphs(results):
-        n = _text(fig, 0.04, y, par, width=160, size=9.5)
-        y -= 0.024 * n + 0.02
+    y -= 0.02 * _text(fig, 0.04, y, meta, width=175, size=7.5, color="0.35") + 0.015
     notes = list(results.notes) + list(s.notes)
     if notes:
-        fig.text(0.04, y, "Notes", fontsize=11, weight="bold", va="top")
-        y -= 0.035
+        fig.text(0.04, y, "Notes", fontsize=10, weight="bold", va="top")
+        y -= 0.03
         for k, nt in enumerate(notes, 1):
-            n = _text(fig, 0.04, y, f"[{k}] {nt}", width=170, size=8)
-            y -= 0.022 * n + 0.005
-    fig.text(0.04, 0.03, "Contents: measurement loops, normality and sigma, optimal sensor design, estimates, "
-             "confidence ellipses, alpha_min tables, residuals.", fontsize=8, color="0.4")
+            y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
+    fig.text(0.04, 0.02, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
+             "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model misses.",
+             fontsize=8, color="0.4")
     return fig
+
+
+#: panels per row / rows per page of the grid pages (never shrink below readable)
+MAX_COLS, MAX_ROWS = 6, 3
+#: table rows per page
+ROWS_PER_PAGE = 25
+#: lines (title, header, rows, decision) of the alpha_min tables on one page
+ALPHA_LINES = 24
 
 
 def _loops_page(results):
     from .figures import measurement_loops
     s = results.study
-    fig = _page("Measurement loops and model outputs")
-    n = len(s.sensors)
-    axes = fig.subplots(1, n) if n <= 3 else fig.subplots(int(np.ceil(n / 3)), 3).ravel()
-    axes = np.atleast_1d(axes)
-    for k, sname in enumerate(s.sensors):
-        measurement_loops(s, results.estimates, sname, ax=axes[k])
-    for ax in axes[n:]:
-        ax.axis("off")
-    fig.subplots_adjust(left=0.06, right=0.98, top=0.86, bottom=0.12, wspace=0.3)
-    fig.text(0.04, 0.04, "Grey: measured series (dark: used by the study; light: the others). Lines: each model's "
-             "output at its estimate from all study data and all sensors.", fontsize=8)
-    return fig
+    per = MAX_COLS
+    parts = _chunks(len(s.sensors), per)
+    figs = []
+    for n, part in enumerate(parts):
+        fig = _page("Measured data and model outputs" + _part(n, len(parts)))
+        names = [s.sensors[k] for k in part]
+        ncol = min(len(names), 3)
+        axes = np.atleast_1d(fig.subplots(int(np.ceil(len(names) / 3)), ncol, squeeze=False).ravel())
+        for ax, sname in zip(axes, names):
+            measurement_loops(s, results.estimates, sname, ax=ax)
+        for ax in axes[len(names):]:
+            ax.axis("off")
+        fig.subplots_adjust(left=0.06, right=0.98, top=0.88, bottom=0.12, wspace=0.3, hspace=0.4)
+        fig.text(0.04, 0.04, "Grey: measured series (dark: used by the study; light: the others). Lines: each "
+                 "model's output at its estimate from all study data and all sensors.", fontsize=8)
+        figs.append(fig)
+    return figs
 
 
 def _normality_page(results):
     from .tables import draw_table, normality_rows
     s = results.study
-    fig = _page("Analysis of the measurement data (normality gate, sensor sigma)")
     head, rows = normality_rows(s)
-    ax = fig.add_axes([0.04, 0.45, 0.92, 0.42])
-    draw_table(ax, head, rows, fontsize=9, col_widths=[0.08, 0.14, 0.13, 0.13, 0.14, 0.38])
+    figs = []
+    parts = _chunks(len(rows), ROWS_PER_PAGE)
+    for n, part in enumerate(parts):
+        fig = _page("Analysis of the measurement data (normality gate, sensor sigma)" + _part(n, len(parts)))
+        chunk = [rows[k] for k in part]
+        h = min(0.03 * (len(chunk) + 1), 0.75)
+        ax = fig.add_axes([0.04, 0.88 - h, 0.92, h])
+        draw_table(ax, head, chunk, fontsize=9, col_widths=[0.09, 0.15, 0.11, 0.11, 0.11, 0.08, 0.35])
+        figs.append(fig)
     pairs = ", ".join(f"z{b + 1}-z{a + 1}" for a, b in s.normality.pairs)
     txt = (f"Shapiro-Wilk test of the differences of consecutive series ({pairs}) over all set points, per "
-           f"sensor, at level {100 * s.normality.level:g} % (Algorithm 1, line 05): "
-           f"{'passed' if s.normality.passed else 'FAILED'} for every series of the campaign. sigma_rep = "
-           "std(differences)/sqrt(2). The sigma used by every fit is composed as in the paper, "
-           "sqrt(sigma_rep^2 + sigma_man^2), unless given directly in the config.")
+           f"sensor, on ALL series of the campaign, at level {100 * s.normality.level:g} %: "
+           f"{'passed' if s.normality.passed else 'FAILED'}. sigma_rep = std(differences)/sqrt(2). The sigma "
+           "used by every fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2), unless given directly "
+           "in the config.")
     det = results.detection
     if det is not None:
         for m, chk in det.normality[:1]:
-            txt += (f"\nGate on the study series ({', '.join(chk.gated)}): "
-                    f"{'passed' if chk.passed else ('FAILED (overridden)' if chk.overridden else 'FAILED')}.")
+            txt += (f"\nGate of Algorithm 1 (line 05) on the STUDY series only ({', '.join(chk.gated)}): "
+                    f"{'passed' if chk.passed else ('FAILED (overridden)' if chk.overridden else 'FAILED')}; "
+                    "its p-values are the ones the terminal prints.")
     if results.detection_error:
         txt += f"\nDetection stopped: {results.detection_error}"
-    _text(fig, 0.04, 0.40, txt, width=170, size=9)
-    return fig
+    _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 1), 0.75) - 0.05, 0.12), txt, width=170, size=9)
+    return figs
 
 
 def _oed_page(results):
-    from .tables import draw_table, oed_rows
+    from .tables import criteria_units, draw_table, oed_rows
     fig = _page("Optimal sensor design")
     if results.oed is None:
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig
     head, rows = oed_rows(results)
     chosen = [tuple(r.sensors) == tuple(results.oed.sensors) for r in results.oed_table.rows]
-    ax = fig.add_axes([0.04, 0.40, 0.92, 0.47])
-    draw_table(ax, head, rows, fontsize=9, chosen=chosen, col_widths=[0.13, 0.17, 0.15, 0.15, 0.15, 0.25])
+    figs = []
+    parts = _chunks(len(rows), ROWS_PER_PAGE)
+    for n, part in enumerate(parts):
+        fig = fig if n == 0 else _page("Optimal sensor design" + _part(n, len(parts)))
+        chunk = [rows[k] for k in part]
+        h = min(0.03 * (len(chunk) + 1), 0.72)
+        ax = fig.add_axes([0.04, 0.88 - h, 0.92, h])
+        draw_table(ax, head, chunk, fontsize=9, chosen=[chosen[k] for k in part],
+                   col_widths=[0.13, 0.17, 0.15, 0.15, 0.15, 0.25])
+        figs.append(fig)
     r = results.oed
-    txt = (f"Criteria of the {results.oed_table.kind.replace('_', '-')} covariance C(w) of (k5, k7) (N/mm; A: trace "
-           f"(N/mm)^2, D: det (N/mm)^4, E: largest eigenvalue (N/mm)^2) for every sensor combination, from the "
-           f"information of each sensor at the {results.oed_variant} estimate on all study data. Chosen "
-           f"({r.criterion}-criterion, exactly {len(r.sensors)} sensors): {', '.join(r.sensors)} "
-           f"(green), {r.criterion} = {r.value:.4e}, {'proven optimal' if r.proven_optimal else 'not proven optimal'} "
-           f"({r.method}). The detection tests use these sensors.")
+    names = ", ".join(results.study.models[results.oed_variant].param_names)
+    value = f"log det C = {r.value:.4f}" if r.criterion == "D" else f"{r.criterion} = {r.value:.4e}"
+    txt = (f"Criteria of the {results.oed_table.kind.replace('_', '-')} covariance C(w) of ({names}) "
+           f"({criteria_units(results.study)}) for every sensor combination, from the information of each sensor "
+           f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
+           f"{len(r.sensors)} sensors): {', '.join(r.sensors)} (green), {value}, "
+           f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "
+           "The detection tests use these sensors.")
     for nt in r.notes:
         txt += f"\nNote: {nt}"
-    _text(fig, 0.04, 0.35, txt, width=170, size=9)
-    return fig
+    _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 1), 0.72) - 0.05, 0.12), txt, width=170, size=9)
+    return figs
 
 
 def _estimate_pages(results):
-    from .tables import draw_table, estimate_rows
-    head, rows = estimate_rows(results)
-    per = 30
+    from .tables import PARAMS_PER_TABLE, draw_table, estimate_rows
+    n_p = next(iter(results.study.models.values())).n_p
+    pparts = _chunks(n_p, PARAMS_PER_TABLE)
     figs = []
-    for start in range(0, max(len(rows), 1), per):
-        chunk = rows[start:start + per]
-        part = f" ({start // per + 1}/{(len(rows) - 1) // per + 1})" if len(rows) > per else ""
-        fig = _page("Estimates, standard errors (second-order covariance) and correlation" + part)
-        ax = fig.add_axes([0.04, 0.06, 0.92, 0.82])
-        n_rest = len(head) - 3
-        draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.34, 0.12] + [0.48 / n_rest] * n_rest)
+    for pk, pp in enumerate(pparts):
+        head, rows = estimate_rows(results, slice(pp.start, pp.stop))
+        rparts = _chunks(len(rows), ROWS_PER_PAGE)
+        for rk, rp in enumerate(rparts):
+            k, n = pk * len(rparts) + rk, len(pparts) * len(rparts)
+            fig = _page("Estimates +- standard errors (second-order covariance)" + _part(k, n))
+            chunk = [rows[i] for i in rp]
+            h = min(0.03 * (len(chunk) + 1), 0.82)
+            ax = fig.add_axes([0.04, 0.90 - h, 0.92, h])
+            n_rest = len(head) - 4
+            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.30, 0.10] + [0.40 / n_rest] * n_rest + [0.14])
+            fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
+                     "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
+                     fontsize=8)
+            figs.append(fig)
+    return figs
+
+
+def _ellipse_pages(results):
+    """Every parameter pair of every model, one panel per split; at most MAX_ROWS x MAX_COLS panels a page."""
+    from .figures import confidence_ellipses
+    det = results.detection
+    if det is None:
+        fig = _page("Confidence regions: calibration vs validation estimates")
+        _text(fig, 0.04, 0.85, "Detection was not run: " + (results.detection_error or "see the notes"), size=10)
+        return fig
+    ns = len(det.splits)
+    level = 1 - det.settings.tol / ns
+    st = det.settings.statistic
+    second = "two_sample" if st != "two_sample" else "likelihood_ratio"
+    rows = []
+    for m in det.models:
+        model = results.study.models[m]
+        n = model.n_p
+        rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
+    scols = _chunks(ns, MAX_COLS)
+    rparts = _chunks(len(rows), MAX_ROWS)
+    figs = []
+    total = len(scols) * len(rparts)
+    for ci, cols in enumerate(scols):
+        for ri, rr in enumerate(rparts):
+            fig = _page("Confidence regions: calibration vs validation estimates" + _part(len(figs), total))
+            ncol = MAX_COLS if len(scols) > 1 else max(len(cols), 2)
+            axes = fig.subplots(MAX_ROWS if len(rparts) > 1 else len(rr), ncol, squeeze=False)
+            for a, r in enumerate(rr):
+                m, pair = rows[r]
+                model = results.study.models[m]
+                tests = det.tests_of(m)
+                for b, j in enumerate(cols):
+                    confidence_ellipses(tests[j], level, model.param_names, [p.unit for p in model.params],
+                                        ax=axes[a, b], statistic=st, pair=pair, second_statistic=second)
+            for ax in axes.ravel():
+                if not ax.has_data() and not ax.texts:
+                    ax.axis("off")
+            h, lab = axes[0, 0].get_legend_handles_labels()
+            fig.legend(h, lab, loc="upper right", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.98, 0.955))
+            fig.subplots_adjust(left=0.07, right=0.98, top=0.86, bottom=0.12, hspace=0.8, wspace=0.4)
+            _text(fig, 0.04, 0.055, f"Regions at level 1 - TOL/n_tests = {100 * level:.4g} % (Bonferroni), projected "
+                  "on two parameters. Solid: G(TOL/n, p_cal, C_cal) (paper); dashed: region of p_val; dotted: "
+                  "two-sample region around p_cal with C_cal + C_val. Panel titles: alpha_min of the decision "
+                  f"statistic ({STATISTIC_WORDS[st]}) and of the {STATISTIC_WORDS[second]} statistic; red: the "
+                  "split's hypothesis is rejected by the decision statistic. The likelihood-ratio statistic has no "
+                  "drawn region.", width=175, size=8)
+            figs.append(fig)
+    return figs
+
+
+def _alpha_pages(results):
+    from .tables import alpha_rows, draw_table
+    det = results.detection
+    title = "alpha_min (in %) per split and model, three statistics"
+    if det is None:
+        fig = _page(title)
+        _text(fig, 0.04, 0.85, "Detection was not run: " + (results.detection_error or "see the notes"), size=10)
+        return fig
+    stats_ = (("likelihood_ratio", "likelihood ratio: pooled fit vs separate fits"),
+              ("two_sample", "two-sample Wald statistic, C_cal + C_val"),
+              ("paper", "paper's statistic, C_cal only"))
+    ns = len(det.splits)
+    n_m = len(det.models)
+    blocks = []                     # (statistic, label, split range)
+    for st, label in stats_:
+        for part in _chunks(ns, ALPHA_LINES - 3):
+            blocks.append((st, label, part))
+    pages, lines = [[]], 0
+    for blk in blocks:                  # pack whole tables, at most ALPHA_LINES table lines a page
+        size = len(blk[2]) + 3
+        if pages[-1] and lines + size > ALPHA_LINES:
+            pages.append([])
+            lines = 0
+        pages[-1].append(blk)
+        lines += size
+    figs = []
+    for pk, page in enumerate(pages):
+        fig = _page(title + _part(pk, len(pages)))
+        y = 0.88
+        for st, label, part in page:
+            head, rows, flags = alpha_rows(det, st, part.start, part.stop)
+            prim = " (the decision)" if st == det.settings.statistic else ""
+            h = 0.028 * (len(rows) + 1)
+            ax = fig.add_axes([0.04, y - h - 0.03, 0.92, h])
+            draw_table(ax, head, rows, flags=flags, fontsize=8.5, title=f"{label}{prim}",
+                       col_widths=[0.38, 0.22] + [0.36 / n_m] * n_m)
+            y -= h + 0.065
+        _text(fig, 0.04, min(max(y, 0.03), 0.12),
+              f"TOL = {100 * det.settings.tol:g} %, n_tests = {ns}, correction: {det.settings.correction}. "
+              f"Red cells: alpha_min < TOL/n_tests (the split's hypothesis is rejected); a model is rejected when "
+              f"any split is red. '<< 0.01' means alpha_min < 0.01 %. The paper's statistic ignores the validation "
+              f"estimate's covariance and rejects a correct model more often than TOL (shown by the Monte Carlo "
+              f"size study of the test).", width=170, size=8.5)
         figs.append(fig)
     return figs
 
 
-def _ellipse_page(results):
-    from .figures import confidence_ellipses
-    det = results.detection
-    fig = _page("Confidence regions: calibration vs validation estimates")
-    if det is None:
-        _text(fig, 0.04, 0.85, "Detection was not run: " + (results.detection_error or "see the notes"), size=10)
-        return fig
-    nm, ns = len(det.models), len(det.splits)
-    level = 1 - det.settings.tol / ns
-    axes = np.atleast_2d(fig.subplots(nm, ns, squeeze=False))
-    for i, m in enumerate(det.models):
-        names = results.study.models[m].param_names
-        for j, t in enumerate(det.tests_of(m)):
-            confidence_ellipses(t, level, names[:2], "N/mm", ax=axes[i, j], statistic=det.settings.statistic)
-    h, lab = axes[0, 0].get_legend_handles_labels()
-    fig.legend(h, lab, loc="upper right", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.98, 0.955))
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.86, bottom=0.12, hspace=0.75, wspace=0.35)
-    _text(fig, 0.04, 0.055, f"Regions at level 1 - TOL/n_tests = {100 * level:.4g} % (Bonferroni). Solid: "
-             "G(TOL/n, p_cal, C_cal) (paper); dashed: region of p_val; dotted: two-sample region around p_cal "
-             "with C_cal + C_val. A red title / point: the split's hypothesis is rejected "
-             f"({det.settings.statistic} statistic).", width=190, size=8)
-    return fig
+def _band_pages(results, level: float = 0.95):
+    """Prediction bands of every model's fitted outputs, at most 6 sensors a page."""
+    from .figures import prediction_band_plot
+    figs = []
+    for v, e in results.estimates.items():
+        sens = [s for s, w in zip(e.sensors, e.weights) if w > 0]
+        parts = _chunks(len(sens), MAX_COLS)
+        for n, part in enumerate(parts):
+            fig = _page(f"Prediction bands of {v} (delta method, exact sensitivities)" + _part(n, len(parts)))
+            names = [sens[k] for k in part]
+            ncol = min(len(names), 3)
+            axes = fig.subplots(int(np.ceil(len(names) / 3)), ncol, squeeze=False).ravel()
+            for ax, s in zip(axes, names):
+                prediction_band_plot(results.study, e, v, s, level, ax=ax)
+            for ax in axes[len(names):]:
+                ax.axis("off")
+            fig.subplots_adjust(left=0.06, right=0.98, top=0.88, bottom=0.14, wspace=0.3, hspace=0.4)
+            q = "Student t" if e.sigma_estimated else "normal"
+            _text(fig, 0.04, 0.06, f"Bands at {100 * level:g} %: h +- q sqrt(g^T C g) for the mean response (shaded) "
+                  "and h +- q sqrt(g^T C g + sigma^2) for a new observation (dashed), g = dh/dp the exact "
+                  f"sensitivities at each set point, C the second-order covariance, q the {q} quantile. Measured "
+                  "values outside the dashed band more often than 5 % point to what the model misses.",
+                  width=175, size=8)
+            figs.append(fig)
+    return figs
 
 
-def _alpha_page(results):
-    from .tables import alpha_rows, draw_table
-    det = results.detection
-    fig = _page("alpha_min (in %) per split and model, three statistics")
-    if det is None:
-        _text(fig, 0.04, 0.85, "Detection was not run: " + (results.detection_error or "see the notes"), size=10)
-        return fig
-    y = 0.88
-    for st, label in (("likelihood_ratio", "likelihood ratio: pooled fit vs separate fits"),
-                      ("two_sample", "two-sample Wald statistic, C_cal + C_val"),
-                      ("paper", "paper's statistic, C_cal only")):
-        head, rows, flags = alpha_rows(det, st)
-        prim = " (the decision)" if st == det.settings.statistic else ""
-        h = 0.03 * (len(rows) + 1)
-        ax = fig.add_axes([0.04, y - h - 0.03, 0.92, h])
-        n_m = len(det.models)
-        draw_table(ax, head, rows, flags=flags, fontsize=8.5, title=f"{label}{prim}",
-                   col_widths=[0.38, 0.22] + [0.36 / n_m] * n_m)
-        y -= h + 0.065
-    _text(fig, 0.04, min(max(y, 0.03), 0.12),
-          f"TOL = {100 * det.settings.tol:g} %, n_tests = {len(det.splits)}, correction: {det.settings.correction}. "
-          f"Red cells: alpha_min < TOL/n_tests (the split's hypothesis is rejected); a model is rejected when any "
-          f"split is red. '<< 0.01' means alpha_min < 0.01 %. The paper's statistic ignores the validation "
-          f"estimate's covariance and rejects a correct model more often than TOL (identification.montecarlo).",
-          width=170, size=8.5)
-    return fig
-
-
-def _residual_page(results):
-    from .figures import residuals_plot
-    fig = _page("Residuals of the fits on all study data")
-    ests = list(results.estimates.items())
-    if not ests:
+def _residual_pages(results):
+    """Per model: standardized residuals against the input and in measurement order, normal probability plot."""
+    from .figures import normal_probability_plot, residuals_plot, residuals_vs_order
+    from .view import phase_labels
+    if not results.estimates:
+        fig = _page("Residual diagnostics")
         _text(fig, 0.04, 0.85, "No successful fit.", size=10)
         return fig
-    axes = np.atleast_1d(fig.subplots(1, len(ests)))
-    for ax, (v, e) in zip(axes, ests):
-        residuals_plot(results.study, e, v, ax=ax)
-    fig.subplots_adjust(left=0.06, right=0.98, top=0.86, bottom=0.12, wspace=0.3)
-    return fig
+    phases = phase_labels(results.study)
+    ph = ("markers distinguish the phases (" + ", ".join(dict.fromkeys(phases)) + ")"
+          if phases is not None else "no phases declared")
+    figs = []
+    for v, e in results.estimates.items():
+        fig = _page(f"Residual diagnostics of {v} (fit on all study data)")
+        axes = fig.subplots(1, 3)
+        residuals_plot(results.study, e, v, ax=axes[0])
+        residuals_vs_order(results.study, e, v, ax=axes[1])
+        normal_probability_plot(e, v, ax=axes[2])
+        fig.subplots_adjust(left=0.06, right=0.98, top=0.86, bottom=0.22, wspace=0.3)
+        _text(fig, 0.04, 0.1, f"Standardized residuals (z - h)/sigma of the sensors used by the fit; colours: "
+              f"sensors; {ph}. Dashed lines: +-2. Left: a trend over the input shows a missing input dependence. "
+              "Middle: series after series; a drift or a step between series shows a change during the campaign. "
+              "Right: points on the red line are Gaussian with the assumed sigma; a slope above 1 means the "
+              f"residuals are larger than sigma. Goodness of fit: {goodness_of_fit(e).text()}.", width=175, size=8)
+        figs.append(fig)
+    return figs
+
+
+def _misses_pages(results, diagnosis):
+    """'What the model misses': the diagnostic split family, Holm-corrected, and its plain-language findings."""
+    from .diagnosis import MISSES
+    from .tables import draw_table
+    title = "What the model misses (diagnostic splits, Holm-corrected)"
+    if diagnosis is None:
+        fig = _page(title)
+        _text(fig, 0.04, 0.85, "Not available: detection was not run.", size=10)
+        return fig
+    head = ["model", "kind", "split", "alpha_min (%)", "Holm-adjusted (%)", "decision"]
+    rows, flags = [], []
+    for r in diagnosis.rows:
+        rows.append([r.model, r.kind, r.split, fmt_pct(r.alpha) if not r.error else "failed",
+                     fmt_pct(r.holm) if np.isfinite(r.holm) else "-", "rejected" if r.rejected else "not rejected"])
+        flags.append([False, False, False, r.rejected, r.rejected, r.rejected])
+    parts = _chunks(len(rows), ROWS_PER_PAGE)
+    figs = []
+    for n, part in enumerate(parts):
+        fig = _page(title + _part(n, len(parts)))
+        chunk = [rows[k] for k in part]
+        h = 0.027 * (len(chunk) + 1)
+        ax = fig.add_axes([0.04, 0.89 - h, 0.92, h])
+        draw_table(ax, head, chunk, flags=[flags[k] for k in part], fontsize=8,
+                   col_widths=[0.08, 0.12, 0.36, 0.13, 0.15, 0.16])
+        figs.append(fig)
+    findings = [s for m in results.study.models for s in diagnosis.misses(m)]
+    kinds = sorted({r.kind for r in diagnosis.rows if r.kind != "study split"})
+    txt = (f"Splits along one aspect of the data ask what a model misses: {'; '.join(f'{k}: {MISSES[k]}' for k in kinds)}"
+           f". alpha_min of the {STATISTIC_WORDS[diagnosis.statistic]} statistic; Holm's step-down correction over "
+           f"the study's splits and the diagnostic ones together, per model, at TOL = {100 * diagnosis.tol:g} %. "
+           "The decision of page 1 uses the study's splits only.\n\n"
+           + ("Findings: " + " ".join(findings) if findings else "Findings: no diagnostic split rejects a model."))
+    fig = figs[-1]
+    y = 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
+    if y < 0.15:
+        fig = _page(title + " (findings)")
+        figs.append(fig)
+        y = 0.88
+    _text(fig, 0.04, y, txt, width=160, size=9)
+    return figs
+
+
+def page_texts(fig) -> list[str]:
+    """Every text drawn on a page in reading order (top to bottom, then left to right).
+
+    Titles, captions, axis and tick labels, legends and every table cell: what a reader of
+    the page sees, for checks and for results.json.  Call after the page was drawn.
+    """
+    from matplotlib.table import Table
+    from matplotlib.text import Text
+    renderer = fig.canvas.get_renderer()
+    found = []
+
+    def walk(artist):
+        if isinstance(artist, Table):
+            for cell in artist.get_celld().values():
+                t = cell.get_text()
+                if t.get_text().strip():
+                    found.append((cell.get_window_extent(renderer), t.get_text()))
+            return
+        if isinstance(artist, Text):
+            if artist.get_visible() and artist.get_text().strip():
+                found.append((artist.get_window_extent(renderer), artist.get_text()))
+            return
+        for child in artist.get_children():
+            walk(child)
+
+    walk(fig)
+    found.sort(key=lambda bt: (-round(bt[0].y1 / 4), bt[0].x0))
+    return [t for _, t in found]
 
 
 def _validation_page(results):
@@ -260,7 +492,27 @@ def _validation_page(results):
     return fig
 
 
-def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
+def report_pages(results, diagnosis=None, with_diagnosis: bool = True) -> list:
+    """The pages of a report in order: (name, function returning a figure or a list of figures).
+
+    The one place where pages are listed.  Pages that need results the study does not hold
+    yet are added here (e.g. the likelihood-ratio region figures of ``reports.region_figures``
+    after the confidence regions: one ``(name, partial(make, results))`` entry).
+    """
+    cfg = results.study.cfg
+    pages = [("title", partial(_title_page, results, cfg)), ("loops", partial(_loops_page, results)),
+             ("normality", partial(_normality_page, results)), ("oed", partial(_oed_page, results)),
+             ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results)),
+             ("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
+             ("residuals", partial(_residual_pages, results))]
+    if with_diagnosis:
+        pages.append(("misses", partial(_misses_pages, results, diagnosis)))
+    if results.validation is not None:
+        pages.append(("validation", partial(_validation_page, results)))
+    return pages
+
+
+def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
     Parameters
@@ -270,6 +522,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
         Created if missing.
     dpi : int, optional
         PNG resolution (default: the config's [report] dpi, 150).
+    diagnose : bool
+        Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
+        phases, series; three fits per split and model) for the page "What the model misses".
 
     Returns
     -------
@@ -287,7 +542,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from .serialize import dumps, package_versions, results_dict
+    from .serialize import diagnosis_dict, dumps, package_versions, results_dict
+
+    from .diagnosis import diagnose as run_diagnosis
 
     t0 = time.perf_counter()
     cfg = results.study.cfg
@@ -297,13 +554,9 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
     tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
     written = []
     try:
-        pages = [("title", lambda: _title_page(results, cfg)), ("loops", lambda: _loops_page(results)),
-                 ("normality", lambda: _normality_page(results)), ("oed", lambda: _oed_page(results)),
-                 ("estimates", lambda: _estimate_pages(results)), ("ellipses", lambda: _ellipse_page(results)),
-                 ("alpha_min", lambda: _alpha_page(results)), ("residuals", lambda: _residual_page(results))]
-        if results.validation is not None:
-            pages.append(("validation", lambda: _validation_page(results)))
-        names = []
+        diagnosis = run_diagnosis(results) if diagnose else None
+        pages = report_pages(results, diagnosis, diagnose)
+        names, texts = [], []
         with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf:
             k = 0
             for name, make in pages:
@@ -315,6 +568,7 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
                     png = f"page{k:02d}_{name}{'' if len(figs) == 1 else f'_{i + 1}'}.png"
                     fig.savefig(tmp / png, dpi=dpi)
                     names.append(png)
+                    texts.append(dict(file=png, texts=page_texts(fig)))
                     plt.close(fig)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
@@ -323,7 +577,8 @@ def build_report(results, out_dir, dpi: int | None = None) -> list[Path]:
                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                     files=["report.pdf"] + names + ["results.json"],
                     verdicts=dict(results.detection.verdicts) if results.detection is not None else {},
-                    results=results_dict(results))
+                    results=results_dict(results), pages=texts,
+                    diagnosis=diagnosis_dict(diagnosis) if diagnosis is not None else None)
         (tmp / "results.json").write_text(dumps(meta), encoding="utf-8")
         for name in ["report.pdf"] + names + ["results.json"]:
             os.replace(tmp / name, out / name)

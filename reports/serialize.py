@@ -14,7 +14,7 @@ import platform
 import numpy as np
 
 __all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "oed_dict", "validation_dict", "study_dict",
-           "results_dict", "package_versions"]
+           "results_dict", "package_versions", "diagnosis_dict"]
 
 
 def package_versions() -> dict:
@@ -145,3 +145,10 @@ def results_dict(results) -> dict:
         out["validation"] = validation_dict(results.validation)
     out["notes"] = list(results.notes)
     return jsonable(out)
+
+
+def diagnosis_dict(diag) -> dict:
+    """The diagnostic split family (:class:`reports.diagnosis.Diagnosis`) and its findings per model."""
+    models = list(dict.fromkeys(r.model for r in diag.rows))
+    return dict(statistic=diag.statistic, tol=diag.tol, rows=jsonable(diag.rows),
+                misses={m: diag.misses(m) for m in models})

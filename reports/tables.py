@@ -9,8 +9,11 @@ import math
 
 import numpy as np
 
+from .view import (STATISTIC_WORDS, decision_word, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
+                   output_display, param_units, sensor_unit, unit_suffix)
+
 __all__ = ["fmt_alpha", "normality_rows", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
-           "draw_table", "sigma_rows"]
+           "draw_table", "sigma_rows", "verdict_rows", "smallest_alpha", "criteria_units", "PARAMS_PER_TABLE"]
 
 
 def fmt_alpha(a: float) -> str:
@@ -21,16 +24,18 @@ def fmt_alpha(a: float) -> str:
 
 
 def normality_rows(study) -> tuple[list, list]:
-    """Header and rows of the paper's 'Analysis of the measurement data' table (um)."""
+    """Header and rows of the paper's 'Analysis of the measurement data' table (displayed sensor units)."""
     n = study.normality
-    head = ["sensor", "Shapiro-Wilk p (%)", "sigma_rep (um)", "sigma_man (um)", "sigma used (um)", "how sigma was obtained"]
+    f = output_display(study).scale
+    head = ["sensor", "Shapiro-Wilk p %", "sigma_rep", "sigma_man", "sigma used", "unit", "how sigma was obtained"]
     rows = []
     for k, s in enumerate(n.sensors):
         st = study.sigma_table[k]
         rows.append([s, "n/a" if not np.isfinite(n.pvalue[k]) else f"{100 * n.pvalue[k]:.2f}",
-                     f"{1e3 * n.sigma_rep[k]:.4g}",
-                     "-" if not np.isfinite(st["sigma_man"]) else f"{1e3 * st['sigma_man']:.4g}",
-                     "estimated" if not np.isfinite(st["sigma"]) else f"{1e3 * st['sigma']:.4g}", st["how"]])
+                     f"{f * n.sigma_rep[k]:.4g}",
+                     "-" if not np.isfinite(st["sigma_man"]) else f"{f * st['sigma_man']:.4g}",
+                     "estimated" if not np.isfinite(st["sigma"]) else f"{f * st['sigma']:.4g}",
+                     sensor_unit(study, s) or "-", st["how"]])
     return head, rows
 
 
@@ -38,16 +43,28 @@ def sigma_rows(study):
     return normality_rows(study)
 
 
+def criteria_units(study) -> str:
+    """Units of the A, D, E criteria of C(w) from the parameter units ('' when they differ or are undeclared)."""
+    u = set(param_units(study))
+    if len(u) != 1 or "" in u:
+        return "A: trace C, D: log det C, E: largest eigenvalue of C (parameters in their own units)"
+    (unit,) = u
+    return f"C in ({unit})^2; A: trace C, D: log det C, E: largest eigenvalue of C"
+
+
 def oed_rows(results) -> tuple[list, list]:
-    """Header and rows of the OED table (paper Table 'Outcome for the optimal design'), chosen row marked."""
+    """Header and rows of the OED table (paper Table 'Outcome for the optimal design'), chosen row marked.
+
+    The D criterion is shown as log det C (as in the text and the optimiser).
+    """
     t = results.oed_table
     chosen = results.oed.sensors if results.oed is not None else ()
-    head = ["combination", "sensors", "Psi_A", "Psi_D (det)", "Psi_E", "flag"]
+    head = ["combination", "sensors", "Psi_A (trace C)", "Psi_D (log det C)", "Psi_E (max eig C)", "flag"]
     rows = []
     for r in t.rows:
         mark = "  <= chosen" if tuple(r.sensors) == tuple(chosen) else ""
         rows.append([r.mask + (" (all)" if "0" not in r.mask else ""), " ".join(r.sensors), f"{r.A:.4e}",
-                     f"{r.det:.4e}", f"{r.E:.4e}", (r.flag or "") + mark])
+                     f"{r.logdet:.4f}", f"{r.E:.4e}", (r.flag or "") + mark])
     return head, rows
 
 
@@ -55,38 +72,55 @@ def oed_table_text(results) -> str:
     """The OED table as fixed-width text, with the chosen design and how it was found."""
     head, rows = oed_rows(results)
     r = results.oed
+    names = ", ".join(results.study.models[results.oed_variant].param_names)
+    crit = f"{r.criterion} = {r.value:.6g}" + (" (log det C)" if r.criterion == "D" else "")
     lines = [f"Optimal sensor design ({r.criterion}-criterion, {r.kind} covariance) from the {results.oed_variant} "
-             f"estimate; units of the criteria: parameters in N/mm",
+             f"estimate of ({names}); {criteria_units(results.study)}",
              _text_table(head, rows), "",
-             f"chosen: {', '.join(r.sensors)} ({r.criterion} = {r.value:.4e}; method {r.method}, "
+             f"chosen: {', '.join(r.sensors)} ({crit}; method {r.method}, "
              f"{'proven optimal' if r.proven_optimal else 'not proven optimal'})"]
     lines += [f"note: {n}" for n in r.notes]
     return "\n".join(lines)
 
 
-def estimate_rows(results) -> tuple[list, list]:
+def _largest_corr(names, C) -> str:
+    """'0.987 (k5, k7)': the largest |correlation| of a covariance and its pair."""
+    n = len(names)
+    if n < 2 or not np.all(np.isfinite(C)):
+        return "-"
+    se = np.sqrt(np.diag(C))
+    if np.any(se <= 0):
+        return "-"
+    R = C / np.outer(se, se)
+    i, j = max(((a, b) for a in range(n) for b in range(a + 1, n)), key=lambda ab: abs(R[ab]))
+    return f"{R[i, j]:+.3f} ({names[i]}, {names[j]})"
+
+
+#: parameters per estimate table (each column holds "value +- error")
+PARAMS_PER_TABLE = 5
+
+
+def estimate_rows(results, params: slice | None = None) -> tuple[list, list]:
     """One row per fit: the fit on all study data and both fits of every split.
 
-    Columns: model, data, sensors, each parameter's estimate and standard error (second-order
-    covariance, unit of the parameter), and the correlation of the first two parameters.
+    Columns: model, data, sensors, each parameter's "value +- standard error" (second-order
+    covariance; digits from the error, :func:`reports.view.fmt_value`) with its unit in the
+    header (omitted when undeclared), and the largest correlation of the fit with its pair.
+    ``params`` selects the parameter columns (all by default).
     """
     first = next(iter(results.study.models.values()))
-    names, units = first.param_names, [p.unit for p in first.params]
-    head = ["model", "data", "sensors"]
-    for n, u in zip(names, units):
-        head += [f"{n} ({u})", f"std err {n}"]
-    if len(names) >= 2:
-        head.append(f"corr({names[0]},{names[1]})")
+    names, units = first.param_names, param_units(results.study)
+    sel = list(range(len(names)))[params or slice(None)]
+    head = ["model", "data", "sensors"] + [f"{names[i]}{unit_suffix(units[i])}" for i in sel] + ["largest |corr|"]
 
     def row(model, data, sensors, p, C):
         ok = np.all(np.isfinite(C)) and np.all(np.isfinite(p))
-        se = np.sqrt(np.diag(C)) if ok else np.full(len(p), np.nan)
-        r = [model, data, sensors]
-        for i in range(len(names)):
-            r += [f"{p[i]:.2f}" if np.isfinite(p[i]) else "failed", f"{se[i]:.2f}" if np.isfinite(se[i]) else "-"]
-        if len(names) >= 2:
-            r.append(f"{C[0, 1] / (se[0] * se[1]):.3f}" if ok and se[0] > 0 and se[1] > 0 else "-")
-        return r
+        se = np.sqrt(np.clip(np.diag(C), 0, None)) if ok else np.full(len(p), np.nan)
+        cells = []
+        for i in sel:
+            v, s = fmt_value(p[i], se[i])
+            cells.append(v if s == "n/a" else f"{v} +- {s}")
+        return [model, data, sensors] + cells + [_largest_corr(names, np.asarray(C, float))]
 
     rows = []
     for v, e in results.estimates.items():
@@ -101,12 +135,60 @@ def estimate_rows(results) -> tuple[list, list]:
     return head, rows
 
 
-def alpha_rows(det, statistic: str) -> tuple[list, list, list]:
-    """alpha_min (%) per split (rows) and model (columns) for one statistic; flags of rejected cells."""
+def smallest_alpha(det, model: str, statistic: str | None = None):
+    """(alpha_min, split name) of the split with the smallest alpha_min of one model (NaN, '' if none)."""
+    st = statistic or det.settings.statistic
+    best = (math.nan, "")
+    for t in det.tests_of(model):
+        a = t.alpha(st) if t.ok else math.nan
+        if np.isfinite(a) and not (a >= best[0]):
+            best = (a, t.split)
+    return best
+
+
+def verdict_rows(results) -> tuple[list, list, list]:
+    """The verdict table of page 1: model, decision, smallest alpha_min and where, goodness of fit, trust.
+
+    Returns header, rows and flags (rejected decisions / failed goodness-of-fit tests marked).
+    """
+    det = results.detection
+    head = ["model", "decision", "smallest alpha_min (%)", "split of the smallest alpha_min",
+            "goodness of fit (chi2 p)", "linearisation"]
+    rows, flags = [], []
+    for v in results.study.models:
+        e = results.estimates.get(v)
+        if det is not None and v in det.models:
+            d = det.decision(v)
+            word = decision_word(d.decision)
+            a, where = smallest_alpha(det, v)
+            a_txt = fmt_pct(a) if np.isfinite(a) else "failed"
+        else:
+            word, a_txt, where = "no verdict", "n/a", "-"
+        if e is not None:
+            g = goodness_of_fit(e)
+            gof = fmt_p(g.pvalue) + ("" if not np.isfinite(g.pvalue) else
+                                     (" (fails at 5 %)" if g.pvalue < 0.05 else " (passes at 5 %)"))
+            trust = linearisation_trust(e)
+            gof_bad = bool(np.isfinite(g.pvalue) and g.pvalue < 0.05)
+        else:
+            gof, trust, gof_bad = "fit failed", "-", True
+        rows.append([v, word, a_txt, where or "-", gof, trust])
+        flags.append([False, word == "rejected", word == "rejected", False, gof_bad, trust.startswith("NOT")])
+    return head, rows, flags
+
+
+def alpha_rows(det, statistic: str, start: int = 0, stop: int | None = None) -> tuple[list, list, list]:
+    """alpha_min (%) per split (rows) and model (columns) for one statistic; flags of rejected cells.
+
+    ``start``/``stop`` select the splits shown (pagination); the decision row is added after the
+    last split.
+    """
     head = ["calibration", "validation"] + [f"{m}" for m in det.models]
     rows, flags = [], []
     thr = det.settings.tol / len(det.splits)
-    for j, sp in enumerate(det.splits):
+    stop = len(det.splits) if stop is None else min(stop, len(det.splits))
+    for j in range(start, stop):
+        sp = det.splits[j]
         t0 = det.tests_of(det.models[0])[j]
         row = [f"{sp.name}: {t0.cal_label}", t0.val_label]
         fl = [False, False]
@@ -117,14 +199,15 @@ def alpha_rows(det, statistic: str) -> tuple[list, list, list]:
             fl.append(bool(np.isfinite(a) and a < thr))
         rows.append(row)
         flags.append(fl)
-    verdict = ["decision", f"(TOL/n = {100 * thr:.3g} %)"]
-    vf = [False, False]
-    for m in det.models:
-        d = det.decision(m, statistic, det.settings.correction)
-        verdict.append(d.decision.upper())
-        vf.append(d.decision == "reject")
-    rows.append(verdict)
-    flags.append(vf)
+    if stop == len(det.splits):
+        verdict = ["decision", f"(TOL/n = {100 * thr:.3g} %)"]
+        vf = [False, False]
+        for m in det.models:
+            d = det.decision(m, statistic, det.settings.correction)
+            verdict.append(decision_word(d.decision))
+            vf.append(d.decision == "reject")
+        rows.append(verdict)
+        flags.append(vf)
     return head, rows, flags
 
 

@@ -48,9 +48,9 @@ def test_failed_build_leaves_no_partial_file(results, tmp_path, monkeypatch):
     def boom(_results):
         raise RuntimeError("page failed")
 
-    monkeypatch.setattr(b, "_alpha_page", boom)      # a late page: earlier pages are already rendered
+    monkeypatch.setattr(b, "_alpha_pages", boom)      # a late page: earlier pages are already rendered
     with pytest.raises(RuntimeError, match="page failed"):
-        b.build_report(results, out)
+        b.build_report(results, out, diagnose=False)
     assert sorted(p.name for p in out.iterdir()) == ["report.pdf"]
     assert (out / "report.pdf").read_bytes() == b"old report"
 
@@ -58,7 +58,8 @@ def test_failed_build_leaves_no_partial_file(results, tmp_path, monkeypatch):
 def test_verdict_paragraph_names_model_and_numbers(results):
     from reports.builder import verdict_paragraphs
     (v, par), = verdict_paragraphs(results)
-    assert v == "M1" and "TOL = 5 %" in par and "k5 =" in par
+    assert v == "M1" and "TOL = 5 %" in par and "k5 =" in par and par.startswith("M1: rejected")
+    assert "Goodness of fit (chi2 test" in par
 
 
 def test_figures_return_figures_with_units(results):
@@ -69,8 +70,11 @@ def test_figures_return_figures_with_units(results):
     s = results.study
     f1 = measurement_loops(s, results.estimates, "F_x")
     assert "(N)" in f1.axes[0].get_xlabel() and "(um)" in f1.axes[0].get_ylabel()
-    f2 = confidence_ellipses(results.detection.tests[0], 0.9875)
-    assert "N/mm" in f2.axes[0].get_xlabel()
+    m = s.models["M1"]
+    f2 = confidence_ellipses(results.detection.tests[0], 0.9875, m.param_names, [p.unit for p in m.params])
+    assert f2.axes[0].get_xlabel() == "k5 (N/mm)" and f2.axes[0].get_ylabel() == "k7 (N/mm)"
+    f4 = confidence_ellipses(results.detection.tests[0], 0.9875)     # no names: generic, no empty unit
+    assert f4.axes[0].get_xlabel() == "p1"
     f3 = residuals_plot(s, results.estimates["M1"], "M1")
     assert "(-)" in f3.axes[0].get_ylabel()
     plt.close("all")
