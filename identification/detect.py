@@ -477,7 +477,8 @@ class ModelDecision:
     Attributes
     ----------
     model : str
-    decision : str        "reject" (model uncertainty detected), "accept" or "undecided"
+    decision : str        "rejected" (model uncertainty detected), "not rejected" or "undecided"
+                          (the one vocabulary of terminal, JSON and report)
     statistic, correction : str
     tol : float           family-wise level TOL
     n_tests : int         planned number of tests (all splits, failed ones included)
@@ -536,7 +537,7 @@ def decide(tests: Sequence[SplitTest], tol: float, statistic: str = DEFAULT_STAT
     flagged = tuple(tests[i].split for i in np.flatnonzero(flag))
     amin = float(np.nanmin(a)) if np.any(np.isfinite(a)) else math.nan
     if flagged:
-        dec = "reject"
+        dec = "rejected"
         i = int(np.nanargmin(a))
         reason = (f"alpha_min = {100 * a[i]:.3g} % < TOL/n_tests = {100 * tol / n:.3g} % on split "
                   f"{tests[i].split!r}")
@@ -546,7 +547,7 @@ def decide(tests: Sequence[SplitTest], tol: float, statistic: str = DEFAULT_STAT
                             f"split {t.split!r}: {statistic} not computed: {t.lr_error}")
                            for t, ai in zip(tests, a) if not np.isfinite(ai))
     else:
-        dec = "accept"
+        dec = "not rejected"
         reason = f"every alpha_min >= TOL/n_tests = {100 * tol / n:.3g} % (smallest {100 * amin:.3g} %)"
     return ModelDecision(model, dec, statistic, correction, tol, n, tol / n, flagged, failed, amin, reason)
 
@@ -634,7 +635,7 @@ class DetectionResult:
 
     @property
     def verdicts(self) -> Mapping:
-        """{model: "reject" | "accept" | "undecided"} (primary statistic and correction)."""
+        """{model: "rejected" | "not rejected" | "undecided"} (primary statistic and correction)."""
         return MappingProxyType({d.model: d.decision for d in self.decisions})
 
     def tests_of(self, model: str) -> tuple:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .view import STATISTIC_WORDS, decision_word, fmt_pct, fmt_value, goodness_of_fit
+from .view import STATISTIC_WORDS, fmt_pct, fmt_value, goodness_of_fit
 
 __all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
 
@@ -49,7 +49,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
             g = goodness_of_fit(e)
             parts.append(f"Fit on all study data (all sensors): {est}; reduced chi2 {e.reduced_chi2:.3g}.")
             if np.isfinite(g.pvalue):
-                rejected = det is not None and v in det.models and det.decision(v).decision == "reject"
+                rejected = det is not None and v in det.models and det.decision(v).decision == "rejected"
                 fails = g.pvalue < 0.05
                 parts.append(f"Goodness of fit (chi2 test with the sensor sigmas): {g.text()}: "
                              + ("the fit FAILS it at 5 %: the model or the sigmas are inadequate and the covariance "
@@ -65,10 +65,10 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
             d = det.decision(v)
             other = "two_sample" if det.settings.statistic != "two_sample" else "likelihood_ratio"
             d2 = det.decision(v, other)
-            parts.insert(0, f"{v}: {decision_word(d.decision)} ({STATISTIC_WORDS[d.statistic]} statistic, "
+            parts.insert(0, f"{v}: {d.decision} ({STATISTIC_WORDS[d.statistic]} statistic, "
                             f"{d.correction}, TOL = {100 * d.tol:g} %, {d.n_tests} tests): {d.reason}.")
             if d2.decision != d.decision:
-                parts.append(f"The {STATISTIC_WORDS[other]} statistic decides '{decision_word(d2.decision)}' "
+                parts.append(f"The {STATISTIC_WORDS[other]} statistic decides '{d2.decision}' "
                              f"({d2.reason}).")
             else:
                 a2, _ = smallest_alpha(det, v, other)

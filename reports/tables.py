@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .view import (STATISTIC_WORDS, decision_word, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
+from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
                    output_display, param_units, sensor_unit, unit_suffix)
 
 __all__ = ["fmt_alpha", "normality_rows", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
@@ -159,7 +159,7 @@ def verdict_rows(results) -> tuple[list, list, list]:
         e = results.estimates.get(v)
         if det is not None and v in det.models:
             d = det.decision(v)
-            word = decision_word(d.decision)
+            word = d.decision
             a, where = smallest_alpha(det, v)
             a_txt = fmt_pct(a) if np.isfinite(a) else "failed"
         else:
@@ -204,8 +204,8 @@ def alpha_rows(det, statistic: str, start: int = 0, stop: int | None = None) -> 
         vf = [False, False]
         for m in det.models:
             d = det.decision(m, statistic, det.settings.correction)
-            verdict.append(decision_word(d.decision))
-            vf.append(d.decision == "reject")
+            verdict.append(d.decision)
+            vf.append(d.decision == "rejected")
         rows.append(verdict)
         flags.append(vf)
     return head, rows, flags

@@ -21,21 +21,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-__all__ = ["DECISION_WORDS", "decision_word", "unit_suffix", "is_press", "OutputDisplay", "output_display",
+__all__ = ["unit_suffix", "is_press", "OutputDisplay", "output_display",
            "input_label", "param_units", "phase_labels", "linearisation_trust", "goodness_of_fit", "GoodnessOfFit",
            "fmt_value", "fmt_p", "fmt_pct", "STATISTIC_WORDS", "sensor_unit", "output_label"]
-
-#: the one vocabulary of a model's decision (terminal, JSON, PDF)
-DECISION_WORDS = {"reject": "rejected", "accept": "not rejected", "undecided": "undecided"}
 
 #: plain names of the three statistics
 STATISTIC_WORDS = {"likelihood_ratio": "likelihood ratio", "two_sample": "two-sample Wald",
                    "paper": "paper's Wald (calibration covariance only)"}
-
-
-def decision_word(decision: str) -> str:
-    """'rejected' / 'not rejected' / 'undecided' for a decision code of identification.detect."""
-    return DECISION_WORDS.get(decision, decision)
 
 
 def unit_suffix(unit: str) -> str:
@@ -118,16 +110,17 @@ def phase_labels(study):
 
 
 def linearisation_trust(est) -> str:
-    """HOOK: trust of the linearised covariance of one estimate (verdict table column).
+    """Trust of the linearised covariance of one estimate (verdict table column).
 
-    Reads ``est.curvature.trustworthy`` when the estimate carries a curvature assessment;
-    "not assessed" otherwise.  This is the only place the report looks for it.
+    From ``est.curvature`` (Bates-Watts relative curvatures against 1/sqrt(F(p, n-p; 0.05))):
+    "trustworthy", "NOT trustworthy", or "not assessed" when the estimate carries no model/data,
+    has no residual degrees of freedom, or the curvature could not be computed.
     """
-    curv = getattr(est, "curvature", None)
-    if curv is None:
+    if est.model is None or est.data is None or est.dof < 1:
         return "not assessed"
-    ok = getattr(curv, "trustworthy", None)
-    if ok is None:
+    try:
+        ok = est.curvature.trustworthy
+    except (np.linalg.LinAlgError, ValueError):
         return "not assessed"
     return "trustworthy" if ok else "NOT trustworthy"
 

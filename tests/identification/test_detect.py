@@ -37,7 +37,7 @@ def campaign(model, seed, n_M=2, offset_unloading=0.0):
 def test_correct_model_is_accepted_and_statistics_match_regions(model):
     data = campaign(model, 1)
     res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5])
-    assert res.verdicts[model.name] == "accept"
+    assert res.verdicts[model.name] == "not rejected"
     assert res.decision().statistic == "likelihood_ratio" and res.decision().correction == "bonferroni"
     assert len(res.tests) == 4 and all(t.ok for t in res.tests)
     # every number equals the identification API applied by hand
@@ -56,7 +56,7 @@ def test_correct_model_is_accepted_and_statistics_match_regions(model):
         assert t.lr == pytest.approx(2 * (eu.objective - ec.objective - ev.objective), rel=1e-8, abs=1e-10)
     text = res.summary()
     assert "alpha paper %" in text and "alpha 2-sample %" in text and "alpha LR %" in text
-    assert ">> likelihood_ratio bonferroni: ACCEPT" in text
+    assert ">> likelihood_ratio bonferroni: NOT REJECTED" in text
     assert "Normality gate" in text and "sigma_rep" in text
     with pytest.raises(dataclasses.FrozenInstanceError):
         res.tests = ()
@@ -67,10 +67,10 @@ def test_hysteresis_is_detected_on_loading_vs_unloading(model):
     res = detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], statistic="paper")
     for st in ("paper", "two_sample", "likelihood_ratio"):
         d = res.decision(statistic=st)
-        assert d.decision == "reject"
+        assert d.decision == "rejected"
         assert "loading vs unloading" in d.flagged
     assert res.decision().statistic == "paper"
-    assert re.search(r">> paper +bonferroni: REJECT", res.summary())
+    assert re.search(r">> paper +bonferroni: REJECTED", res.summary())
 
 
 def test_several_models_and_sensor_design(model):
@@ -82,8 +82,8 @@ def test_several_models_and_sensor_design(model):
     data = Measurements(Q, H[None] + SIGMA * rng.standard_normal((2,) + H.shape), SIGMA, sensors=model.sensors)
     splits = PAPER_SPLITS + (input_range_split(Q, exclude=(0, 28)),)
     res = detect({"M_true": curved, "M_linear": model}, data, splits, p0=[0.5, 1.5])
-    assert res.verdicts["M_true"] == "accept"
-    assert res.verdicts["M_linear"] == "reject"
+    assert res.verdicts["M_true"] == "not rejected"
+    assert res.verdicts["M_linear"] == "rejected"
     # a consistent misfit is invisible to splits with the same load range (both directions, alternate
     # points): only the input-range split sees the curvature
     assert res.decision("M_linear").flagged == (splits[-1].name,)
@@ -169,10 +169,10 @@ def test_bonferroni_and_holm():
     b = decide(tests, 0.05, "two_sample", "bonferroni")
     h = decide(tests, 0.05, "two_sample", "holm")
     assert b.flagged == ("a",) and h.flagged == ("a", "b")       # 0.015 < 0.05/3 but >= 0.05/4
-    assert b.decision == h.decision == "reject" and b.threshold == pytest.approx(0.0125)
+    assert b.decision == h.decision == "rejected" and b.threshold == pytest.approx(0.0125)
     ok = [_t("a", 0.0126), _t("b", 0.9)]
-    assert decide(ok, 0.05).decision == "reject"                 # 0.0126 < 0.025
-    assert decide([_t("a", 0.0126)] * 4, 0.05).decision == "accept"
+    assert decide(ok, 0.05).decision == "rejected"                 # 0.0126 < 0.025
+    assert decide([_t("a", 0.0126)] * 4, 0.05).decision == "not rejected"
     with pytest.raises(ValueError, match="tol"):
         decide(tests, 1.0)
     with pytest.raises(ValueError, match="correction"):
@@ -186,7 +186,7 @@ def test_bonferroni_and_holm():
     lost = dataclasses.replace(_t("a", 0.5), alpha_lr=float("nan"), lr_error="pooled fit failed: x")
     d = decide([lost, _t("b", 0.4)], 0.05, "likelihood_ratio")
     assert d.decision == "undecided" and d.failed == ("a",) and "pooled fit failed" in d.reason
-    assert decide([lost, _t("b", 0.4)], 0.05, "two_sample").decision == "accept"
+    assert decide([lost, _t("b", 0.4)], 0.05, "two_sample").decision == "not rejected"
 
 
 def test_design_from_the_oed_front_door():
@@ -205,7 +205,7 @@ def test_design_from_the_oed_front_door():
                  design_how=f"{des.criterion}-optimal design of {len(des.sensors)} sensors")
     used = res.design[0][1]
     assert len(used) == 2 and "E-optimal" in res.design[0][2]
-    assert res.verdicts[m3.name] == "accept"
+    assert res.verdicts[m3.name] == "not rejected"
 
 
 def test_a_criterion_as_design_asks_for_the_oed_first(model):

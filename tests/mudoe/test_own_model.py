@@ -75,7 +75,7 @@ def test_own_model_identify_and_detect(truss_study, capsys, tmp_path):
     assert abs(est["p"][0] - 210.0) < 4 * est["stderr"][0] and abs(est["p"][1] - 290.0) < 4 * est["stderr"][1]
     assert main(["detect", str(truss_study), "--out", str(out), "--json", "--quiet"]) == 0
     det = json.loads(capsys.readouterr().out)
-    assert det["verdicts"] == {"linear": "accept"} and len(det["tests"]) == 4
+    assert det["verdicts"] == {"linear": "not rejected"} and len(det["tests"]) == 4
 
 
 def test_own_model_bad_factory_is_one_line(truss_study, capsys):
