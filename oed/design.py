@@ -2,7 +2,7 @@ r"""Front door for optimal sensor selection.
 
 Solves
 
-.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k \ge n_p,\
+.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k \ge 1,\
            \sum_k w_k = m \ (\text{or} \le m_{\max}),\ c^Tw \le B,\ w_I=1,\ w_O=0,
 
 with :math:`C` the second-order covariance :math:`H^{-1}(\sum_k w_k^2F_k)H^{-1}` or the
@@ -18,7 +18,7 @@ fallback is recorded in :attr:`DesignResult.notes`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -406,7 +406,7 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
         min_sensors = p
     if isinstance(min_sensors, bool) or not isinstance(min_sensors, (int, np.integer)) or not 1 <= min_sensors <= n:
         raise ValueError(f"min_sensors: must be an integer in 1..{n}, got {min_sensors!r}")
-    cons = DesignConstraints(n_candidates=n, n_params=int(min_sensors))
+    cons = DesignConstraints(n_candidates=n, n_params=p, min_sensors=int(min_sensors))
     if cons.count_designs() > max_rows:
         raise ValueError(f"min_sensors: {cons.count_designs()} combinations exceed max_rows = {max_rows}")
     rows = []
@@ -422,18 +422,44 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
     return DesignTable(kind=kind_e.value, rows=tuple(rows))
 
 
-def select_sensors(model, data, p, **kw) -> DesignResult:
-    r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model.
+def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, **kw) -> DesignResult:
+    r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model at ``p``.
 
-    Calls ``identification.information_contributions(model, data, p) -> (F, S)`` (shapes
-    ``(n_S, n_p, n_p)`` each; imported lazily here because the identification package is
-    wired separately) and passes ``F``, ``S`` and all keyword arguments to
+    Calls ``identification.information_contributions`` for the per-sensor information
+    (shapes ``(n_S, n_p, n_p)``) and passes ``F``, ``S`` and the other keyword arguments to
     :func:`select_sensors_from_information`.
+
+    Parameters
+    ----------
+    model : models.Model
+    data : identification.Measurements or None
+        Measurements; ``None`` plans the design before measuring, from ``inputs`` and ``sigma``.
+    p : array_like, shape (n_p,)
+        Parameters (the estimate, or the nominal values when ``data`` is None).
+    inputs : array_like, shape (n_q, d_q), optional
+        Input rows that will be applied (only with ``data=None``).
+    sigma : array_like, shape (n_S,), optional
+        Standard deviation of each sensor, in the sensor's unit (only with ``data=None``).
+    n_series : int
+        Repetitions of every input (only with ``data=None``; default 1).
+
+    Notes
+    -----
+    Without data the expected residual at ``p`` is zero, so the second-order term ``S``
+    vanishes: ``kind="second_order"`` then gives the Gauss-Newton covariance at the nominal
+    ``p`` (recorded in :attr:`DesignResult.notes`).
     """
-    try:
-        from identification import information_contributions
-    except ImportError as exc:
-        raise RuntimeError("select_sensors: identification.information_contributions is not available yet "
-                           f"({exc}); call select_sensors_from_information(F, S, ...) directly") from exc
-    F, S = information_contributions(model, data, p)
-    return select_sensors_from_information(F, S, **kw)
+    from identification import information_contributions
+    if data is None:
+        F, S = information_contributions(model, None, p, inputs=inputs, sigma=sigma, n_series=n_series)
+    else:
+        if inputs is not None or sigma is not None:
+            raise ValueError("inputs/sigma: give them only with data=None (measurements carry their own)")
+        F, S = information_contributions(model, data, p)
+    kw.setdefault("sensor_names", model.sensors)
+    res = select_sensors_from_information(F, S, **kw)
+    if data is None:
+        note = (f"designed without data at the nominal parameters ({n_series} series of {np.atleast_1d(inputs).shape[0]} "
+                "inputs): expected residual 0, so S = 0 and the second-order covariance is the Gauss-Newton one")
+        res = replace(res, notes=res.notes + (note,))
+    return res
