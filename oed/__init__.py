@@ -7,7 +7,9 @@ E-criterion.  Front door: :func:`select_sensors_from_information`; see :mod:`oed
 from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
+from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs, select_inputs
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
-           "select_sensors_from_information"]
+           "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
+           "input_information", "refine_inputs", "select_inputs"]
