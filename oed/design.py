@@ -11,7 +11,10 @@ log det (D) or lambda_max (E).
 
 ``method="auto"``: exact enumeration when the number of admissible designs is at most
 ``DesignSettings.enumeration_limit`` (2e5); otherwise our branch-and-bound for
-Gauss-Newton criteria (with or without costs and budget); otherwise SCIP via Pyomo.  If SCIP is unavailable or
+Gauss-Newton criteria (with or without costs and budget); otherwise (second-order criteria,
+for which no valid branch-and-bound bound is derived with indefinite S) enumeration whenever
+its measured cost fits the time limit (designs / second measured on the problem itself, see
+:attr:`DesignSettings.enumeration_rate`), and SCIP via Pyomo beyond.  If SCIP is unavailable or
 fails, enumeration is used when it is affordable (``enumeration_fallback_limit``) and the
 fallback is recorded in :attr:`DesignResult.notes`.
 """
@@ -49,6 +52,10 @@ class DesignSettings:
     criteria : CriteriaSettings
     scip_formulation : str
         Passed to :class:`oed.scip_solver.ScipSettings` (``auto``, ``cuts``, ``naive``, ``second_order``).
+    enumeration_rate : float or None
+        Designs per second that ``auto`` assumes for enumeration; None measures it on the
+        problem (one timed batch of ``calibration_designs`` designs).
+    calibration_designs : int
     """
 
     enumeration_limit: int = 200_000
@@ -56,6 +63,8 @@ class DesignSettings:
     gap_tol: float = 1e-9
     criteria: CriteriaSettings = DEFAULT_SETTINGS
     scip_formulation: str = "auto"
+    enumeration_rate: float | None = None
+    calibration_designs: int = 4096
 
     def __post_init__(self):
         for name in ("enumeration_limit", "enumeration_fallback_limit"):
@@ -66,6 +75,12 @@ class DesignSettings:
             raise ValueError(f"gap_tol: expected a finite number >= 0, got {self.gap_tol!r}")
         if not isinstance(self.criteria, CriteriaSettings):
             raise TypeError(f"criteria: expected CriteriaSettings, got {type(self.criteria).__name__}")
+        if self.enumeration_rate is not None and not (isinstance(self.enumeration_rate, (int, float, np.floating))
+                                                      and 0 < self.enumeration_rate < np.inf):
+            raise ValueError(f"enumeration_rate: expected None or designs/second > 0, got {self.enumeration_rate!r}")
+        if isinstance(self.calibration_designs, bool) or not isinstance(self.calibration_designs, (int, np.integer)) \
+                or self.calibration_designs < 1:
+            raise ValueError(f"calibration_designs: expected an integer >= 1, got {self.calibration_designs!r}")
         formulations = ("auto", "cuts", "naive", "second_order")
         if self.scip_formulation not in formulations:
             raise ValueError(f"scip_formulation: expected one of {formulations}, got {self.scip_formulation!r}")
@@ -190,7 +205,10 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
     t0 = time.perf_counter()
     req = _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget, include, exclude, method,
                           time_limit, sensor_names, settings)
-    outcome = _run_method(req, _route(req, settings), settings)
+    chosen, note = _route(req, settings)
+    outcome = _run_method(req, chosen, settings)
+    if note:
+        outcome = replace(outcome, notes=(note,) + outcome.notes)
     return _assemble_result(req, outcome, settings, t0)
 
 
@@ -244,20 +262,43 @@ def _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget
                           names=names, count=cons.count_designs(), method=method, time_limit=time_limit)
 
 
-def _route(req: _DesignRequest, settings: DesignSettings) -> str:
-    """Method to run: ``auto`` enumerates small problems, else B&B (Gauss-Newton) or SCIP."""
-    chosen = req.method
+def _enumeration_rate(req: _DesignRequest, settings: DesignSettings) -> float:
+    """Designs per second of exact enumeration on this problem (one timed batch after a warm-up)."""
+    if settings.enumeration_rate is not None:
+        return float(settings.enumeration_rate)
+    W = next(iter_designs(req.cons, settings.calibration_designs), None)
+    if W is None:
+        return np.inf
+    batch_criteria(req.F, req.S, W[:16], req.kind, settings=settings.criteria, validated=True)
+    t = time.perf_counter()
+    batch_criteria(req.F, req.S, W, req.kind, settings=settings.criteria, validated=True)
+    return len(W) / max(time.perf_counter() - t, 1e-9)
+
+
+def _route(req: _DesignRequest, settings: DesignSettings) -> tuple:
+    """(method, note): ``auto`` enumerates small problems, else B&B (Gauss-Newton), else enumeration
+    when its measured cost fits the time limit, else SCIP."""
+    chosen, note = req.method, ""
     if chosen == "auto":
         if req.count <= settings.enumeration_limit:
             chosen = "enumerate"
         elif req.kind is Kind.GAUSS_NEWTON:
             chosen = "bnb"
         else:
-            chosen = "scip"
+            rate = _enumeration_rate(req, settings)
+            est = req.count / rate
+            if est <= req.time_limit and req.count <= settings.enumeration_fallback_limit:
+                chosen = "enumerate"
+                note = (f"auto: enumeration of {req.count} designs estimated at {est:.3g} s ({rate:.3g} designs/s "
+                        f"measured) <= time_limit {req.time_limit:g} s")
+            else:
+                chosen = "scip"
+                note = (f"auto: enumeration of {req.count} designs estimated at {est:.3g} s ({rate:.3g} designs/s "
+                        f"measured) > time_limit {req.time_limit:g} s; SCIP")
     if chosen == "bnb" and req.kind is not Kind.GAUSS_NEWTON:
         raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
                          "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
-    return chosen
+    return chosen, note
 
 
 def _run_method(req: _DesignRequest, chosen: str, settings: DesignSettings) -> _MethodOutcome:
