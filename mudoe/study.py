@@ -432,7 +432,10 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
             res = select_sensors(model, None, p, inputs=Q, sigma=sigma, n_series=o.n_series, n_sensors=n,
                                  max_sensors=o.max_sensors, **common)
         else:
-            common.update(include=[int(i) for i in o.include], exclude=[int(i) for i in o.exclude])
+            if o.include or o.exclude:
+                raise ConfigError(f"{cfg.path}: [oed] include/exclude name sensors; mode = {o.mode!r} chooses "
+                                  "input points (leave them out)")
+            common.update(include=(), exclude=())
             res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
                                 sensors="joint" if o.mode == "both" else None, **common)
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)

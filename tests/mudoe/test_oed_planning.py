@@ -115,3 +115,8 @@ def test_input_design_at_the_estimate_with_data(capsys, campaign_dirs):
     assert main(["oed", str(cfg), "--out", str(campaign_dirs["root"] / "r"), "--json", "--quiet"]) == 0
     obj = json.loads(capsys.readouterr().out)
     assert not obj["planned"] and len(obj["indices"]) == 2 and obj["proven_optimal"]
+
+
+def test_sensor_include_with_an_input_design_exit_2(tmp_path, capsys):
+    code, _, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\ninclude = ["D_y"]\n')
+    assert code == 2 and "include/exclude name sensors" in err
