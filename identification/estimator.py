@@ -804,7 +804,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     return _estimate(st, sol, ref, settings, t_start)
 
 
-def information_contributions(model: Model, data: Measurements, p, states=None):
+def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
+                              sigma=None, n_series=1):
     """Per-sensor Gauss-Newton information and second-order terms at p.
 
     F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2,
@@ -813,15 +814,23 @@ def information_contributions(model: Model, data: Measurements, p, states=None):
     so that for sensor weights w:  J^T Omega J = sum_k w_k F_k,  S(Omega) = sum_k w_k S_k and
     J^T Omega^2 J = sum_k w_k^2 F_k.
 
+    Without data (``data=None``; ``inputs``, ``sigma`` and ``n_series`` given) the design is
+    planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
+    nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
+
     Returns
     -------
     F, S : ndarray (n_S, n_p, n_p)
     """
-    if data.sigma is None:
-        raise DataError("data.sigma: information contributions need known sensor sigmas")
     p = np.asarray(p, float).ravel()
     if p.shape != (model.n_p,):
         raise DataError(f"p: expected {model.n_p} values, got {p.size}")
+    if data is None:
+        return _planned_information(model, p, inputs, sigma, n_series, states)
+    if inputs is not None or sigma is not None:
+        raise DataError("inputs/sigma: give them only when data is None (the data carry their own)")
+    if data.sigma is None:
+        raise DataError("data.sigma: information contributions need known sensor sigmas")
     sig = np.asarray(data.sigma, float)
     w = np.ones(model.n_S)
     Y = solve_states(model, p, data.inputs, Y0=states)
@@ -835,3 +844,22 @@ def information_contributions(model: Model, data: Measurements, p, states=None):
         lam_k[k, :, k] = lam[:, k]
     S = sens.hessians(lam_k)
     return F, S
+
+
+def _planned_information(model: Model, p, inputs, sigma, n_series, states):
+    """F_k = n_series sum_j G_jk^T G_jk / sigma_k^2 and S_k = 0 (no data: expected residual 0)."""
+    if inputs is None or sigma is None:
+        raise DataError("data: None needs inputs= (candidate input rows) and sigma= (one per sensor)")
+    q = np.asarray(inputs, float)
+    q = q[:, None] if q.ndim == 1 else q
+    if q.ndim != 2 or q.shape[0] == 0 or not np.all(np.isfinite(q)):
+        raise DataError(f"inputs: expected a finite array (n_q, d_q) with n_q >= 1, got shape {q.shape}")
+    sig = np.broadcast_to(np.asarray(sigma, float), (model.n_S,))
+    if not np.all(np.isfinite(sig) & (sig > 0)):
+        raise DataError(f"sigma: expected {model.n_S} positive finite values, got {np.asarray(sigma)!r}")
+    if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+        raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
+    Y = solve_states(model, p, q, Y0=states)
+    G = sensitivities(model, p, q, Y).G
+    F = float(n_series) * np.einsum("k,jkp,jkr->kpr", 1.0 / sig ** 2, G, G)
+    return F, np.zeros_like(F)

@@ -172,6 +172,8 @@ def _run_study(args, cfg, out: Path) -> int:
     progress = Progress(enabled=not args.quiet)
     if args.command == "simulate":
         return _simulate(cfg, args, progress, out)
+    if args.command == "oed" and cfg.oed.planned:
+        return _oed_planned(cfg, args, progress, out, t0)
     study = prepare(cfg, progress)
     results = StudyResults(study)
     handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
@@ -235,9 +237,37 @@ def _oed_text(results) -> str:
     return oed_table_text(results)
 
 
+def _oed_planned(cfg, args, progress, out, t0) -> int:
+    """``[oed] planned = true``: the design before data (no data read), oed.json / oed.txt."""
+    from reports.serialize import dumps
+    from .study import plan_without_data
+    plan = plan_without_data(cfg, progress)
+    text = plan.summary()
+    _write(out, "oed.json", dumps(plan.to_dict()))
+    _write(out, "oed.txt", text + "\n")
+    _emit(args, text, plan.to_dict())
+    if not args.quiet:
+        print(f"mudoe: oed finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/", file=sys.stderr)
+    return 0
+
+
+def _oed_inputs(study, results, args, progress, out) -> int:
+    """``[oed] mode`` inputs / both / discrimination with data: the design at the estimate of the variant."""
+    from reports.serialize import dumps
+    from .study import plan_at_estimate
+    plan = plan_at_estimate(study, results, progress)
+    text = plan.summary()
+    _write(out, "oed.json", dumps(plan.to_dict()))
+    _write(out, "oed.txt", text + "\n")
+    _emit(args, text, plan.to_dict())
+    return 0
+
+
 def _oed(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, oed_dict
     from .study import run_oed
+    if study.cfg.oed.mode != "sensors":
+        return _oed_inputs(study, results, args, progress, out)
     run_oed(study, results, progress)
     obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
     text = _oed_text(results)

@@ -51,6 +51,8 @@ from dataclasses import MISSING, Field, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from identification.detect import DetectSettings
 from identification.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
@@ -395,6 +397,17 @@ class OEDConfig:
     min_sensors : int or None      smallest design listed in the table (None: n_p)
     include, exclude : tuple of str  sensors forced in / out
     variant : str                  the model variant whose information is used ("" = the last listed)
+    mode : {"sensors", "inputs", "both", "discrimination"}
+                                   what is chosen: sensors, input points (every sensor measured),
+                                   input x sensor pairs, or a discrimination design (oed.discrimination)
+    planned : bool                 design before data, at the [[parameters]] start values (no data read)
+    max_sensors : int or None      upper bound on the number of sensors (mode "sensors")
+    costs : tuple of float         one cost per candidate (sensor, input point or pair), with budget
+    budget : float or None
+    candidates : tuple of float    candidate set points (force unit; modes inputs/both, and planned designs)
+    candidates_range : tuple of float  [start, stop, count]: count evenly spaced set points instead
+    n_points : int or None         input points (mode inputs) or (point, sensor) pairs (mode both) chosen
+    n_series : int                 repetitions of every input in a planned design
     """
 
     criterion: str = _key("E", choices=("A", "D", "E"))
@@ -404,6 +417,22 @@ class OEDConfig:
     include: tuple[str, ...] = ()
     exclude: tuple[str, ...] = ()
     variant: str = ""
+    mode: str = _key("sensors", choices=("sensors", "inputs", "both", "discrimination"))
+    planned: bool = False
+    max_sensors: int | None = _key(None, bounds=POSITIVE)
+    costs: tuple[float, ...] = ()
+    budget: float | None = _key(None, bounds=NON_NEGATIVE)
+    candidates: tuple[float, ...] = ()
+    candidates_range: tuple[float, ...] = ()
+    n_points: int | None = _key(None, bounds=POSITIVE)
+    n_series: int = _key(1, bounds=POSITIVE)
+
+    def candidate_points(self) -> np.ndarray:
+        """The candidate set points: ``candidates``, or ``candidates_range`` = [start, stop, count]."""
+        if self.candidates_range:
+            a, b, n = self.candidates_range
+            return np.linspace(a, b, int(n))
+        return np.asarray(self.candidates, float)
 
 
 @dataclass(frozen=True)
@@ -621,7 +650,8 @@ def _str_table(ctx, section, key, v):
 
 
 def _float_list(ctx, section, key, v):
-    if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+    """A non-empty TOML list of finite numbers (to give none, leave the key out)."""
+    if not isinstance(v, list) or not v:
         raise ctx.error(section, key, f"expected a non-empty list of numbers, got {v!r}")
     for x in v:
         _num(ctx, section, key, x)
@@ -767,7 +797,24 @@ def _parse_detect(ctx, t):
 
 
 def _parse_oed(ctx, t):
-    return OEDConfig(**_read_table(ctx, "oed", OEDConfig, t))
+    o = OEDConfig(**_read_table(ctx, "oed", OEDConfig, t))
+    if o.candidates and o.candidates_range:
+        raise ctx.error("oed", "candidates_range", "give candidates or candidates_range, not both")
+    if o.candidates_range:
+        r = o.candidates_range
+        if len(r) != 3 or r[2] != int(r[2]) or r[2] < 1 or not r[0] <= r[1]:
+            raise ctx.error("oed", "candidates_range", f"expected [start, stop, count] with start <= stop and an "
+                            f"integer count >= 1, got {list(r)}")
+    if (not o.costs) != (o.budget is None):
+        raise ctx.error("oed", "budget" if o.costs else "costs", "give both costs and budget, or neither")
+    if o.mode in ("inputs", "both"):
+        if o.n_points is None:
+            raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs n_points (how many to choose)")
+        if not (o.candidates or o.candidates_range):
+            raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
+    if o.planned and not (o.candidates or o.candidates_range):
+        raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
+    return o
 
 
 def _parse_simulate(ctx, t):

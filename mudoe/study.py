@@ -348,8 +348,10 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
         n_p = study.models[v].n_p
         table = design_table(F, S if o.kind == "second_order" else None, study.sensors,
                              o.min_sensors or n_p, kind=o.kind)
-        res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind,
-                                              n_sensors=o.n_sensors or n_p, include=o.include, exclude=o.exclude,
+        n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else n_p
+        res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind, n_sensors=n,
+                                              max_sensors=o.max_sensors, costs=list(o.costs) if o.costs else None,
+                                              budget=o.budget, include=o.include, exclude=o.exclude,
                                               sensor_names=study.sensors)
     results.oed, results.oed_table, results.oed_variant = res, table, v
     results.design_sensors = tuple(res.sensors)
@@ -486,3 +488,123 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     camp = Campaign(q_set=q, q_actual=None, z=z, sensors=tuple(m.sensors),
                     source=f"simulated from {cfg.model.name} ({variant}, seed {seed})", seed=seed)
     return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed)
+
+
+# ---------------------------------------------------------------------------- designs before data (issue 13)
+@dataclass(frozen=True)
+class PlannedDesign:
+    """A design of ``[oed] mode`` (sensors, inputs or both) at parameters ``p``.
+
+    ``result`` is an :class:`oed.DesignResult` (mode sensors) or an :class:`oed.inputs.InputDesignResult`;
+    ``planned`` is True when no data were used (p = the [[parameters]] start values, S = 0).
+    """
+
+    variant: str
+    mode: str
+    planned: bool
+    p: tuple
+    candidates: tuple
+    result: object
+
+    def summary(self) -> str:
+        """Text of the design (what was chosen, value, proof)."""
+        head = (f"{self.mode} design of variant {self.variant} at p = {list(self.p)} "
+                + ("(planned before data: Gauss-Newton, S = 0)" if self.planned else "(at the estimate)"))
+        return head + "\n" + self.result.summary()
+
+    def to_dict(self) -> dict:
+        """JSON-ready view: the chosen sensors / input points, value, bound and proof."""
+        r = self.result
+        d = dict(variant=self.variant, mode=self.mode, planned=self.planned, p=list(self.p),
+                 candidates=list(self.candidates), criterion=r.criterion, value=r.value,
+                 lower_bound=r.lower_bound, proven_optimal=r.proven_optimal, method=r.method,
+                 notes=list(r.notes))
+        if self.mode == "sensors":
+            d.update(sensors=list(r.sensors), indices=list(r.indices))
+        else:
+            d.update(indices=list(r.indices), set_points=[self.candidates[j] for j in r.indices],
+                     pairs=[[j, s] for j, s in r.pairs])
+        return d
+
+
+def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigma, planned: bool,
+                progress: Progress | None = None) -> PlannedDesign:
+    """The ``[oed]`` design of ``mode`` at ``p`` without data: sensors over the candidate inputs, or inputs.
+
+    Raises
+    ------
+    MissingPieceError
+        ``mode = "discrimination"`` when :mod:`oed.discrimination` is not available.
+    """
+    o = cfg.oed
+    progress = progress or Progress(False)
+    if o.mode == "discrimination":
+        try:
+            import oed.discrimination  # noqa: F401 -- availability check
+        except ImportError as exc:
+            raise MissingPieceError(f"oed: mode = 'discrimination' needs oed.discrimination, which is not "
+                                    f"available ({exc})") from None
+        raise MissingPieceError("oed: mode = 'discrimination' is not wired into `mudoe oed` in this version; "
+                                "call oed.discrimination from Python")
+    from oed import select_sensors
+    from oed.inputs import select_inputs
+    q_set = study_units(cfg, model).q_to_model(o.candidate_points())
+    if q_set.size == 0:
+        raise ConfigError(f"{cfg.path}: [oed] candidates: a design without data needs candidate inputs")
+    Q = q_set[:, None] if inputs_fn is None else np.asarray(inputs_fn(q_set), float)
+    if sigma is None:
+        raise ConfigError(f"{cfg.path}: [[sensors]] a design needs every sensor's sigma (give sigma = ...)")
+    common = dict(criterion=o.criterion, kind=o.kind, include=o.include, exclude=o.exclude,
+                  costs=list(o.costs) if o.costs else None, budget=o.budget)
+    with progress.step(f"{o.mode} design ({o.criterion}, {variant}{', planned' if planned else ''})"):
+        if o.mode == "sensors":
+            n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else model.n_p
+            res = select_sensors(model, None, p, inputs=Q, sigma=sigma, n_series=o.n_series, n_sensors=n,
+                                 max_sensors=o.max_sensors, **common)
+        else:
+            if o.include or o.exclude:
+                raise ConfigError(f"{cfg.path}: [oed] include/exclude name sensors; mode = {o.mode!r} chooses "
+                                  "input points (leave them out)")
+            common.update(include=(), exclude=())
+            res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
+                                sensors="joint" if o.mode == "both" else None, **common)
+    return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
+
+
+def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> PlannedDesign:
+    """``[oed] planned = true``: the design at the [[parameters]] start values, no data read."""
+    built = _build_models(cfg)
+    v = cfg.oed.variant or list(built)[-1]
+    model, fn = built[v]
+    sigma = _planned_sigma(cfg, model)
+    p = _p0(cfg, model)
+    bad = (p < model.lower) | (p > model.upper)
+    if np.any(bad):
+        raise ConfigError(f"{cfg.path}: [[parameters]] start values of {[model.param_names[i] for i in np.flatnonzero(bad)]} "
+                          "lie outside their bounds (a planned design uses the start values as nominal parameters)")
+    return plan_design(cfg, v, model, fn, p, sigma, True, progress)
+
+
+def _planned_sigma(cfg: StudyConfig, model: Model) -> np.ndarray:
+    """Every sensor's ``sigma`` from [[sensors]] (converted to the model's units); without data sigma_man
+    cannot be composed."""
+    given = {sc.name: sc.sigma for sc in cfg.sensors}
+    missing = [s for s in model.sensors if given.get(s) is None]
+    if missing:
+        raise ConfigError(f"{cfg.path}: [[sensors]] a design without data needs sigma for {', '.join(missing)} "
+                          "(sigma_man needs the data's repeatability)")
+    units = study_units(cfg, model)
+    return np.array([units.sigma_to_model(k, given[s]) for k, s in enumerate(model.sensors)], float)
+
+
+def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | None = None) -> PlannedDesign:
+    """``[oed] mode`` inputs / both (/ discrimination) with data: the design at the estimate of the variant."""
+    progress = progress or Progress(False)
+    v = _oed_variant(study)
+    if v not in results.estimates:
+        run_identify(study, results, progress)
+    if v not in results.estimates:
+        raise MissingPieceError(f"oed: the fit of variant {v} failed ({results.estimate_errors.get(v)}); "
+                                "no information matrix to design with")
+    fn = _build_models(study.cfg)[v][1]
+    return plan_design(study.cfg, v, study.models[v], fn, results.estimates[v].p, study.sigma, False, progress)

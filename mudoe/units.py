@@ -77,7 +77,7 @@ def convert(values, from_unit: str, to_unit: str, difference: bool = False):
     _, fa, oa = UNITS[from_unit]
     _, fb, ob = UNITS[to_unit]
     if difference:
-        return np.asarray(values, float) * (fa / fb) if not np.isscalar(values) else values * fa / fb
+        return np.asarray(values, float) * (fa / fb) if not np.isscalar(values) else values * (fa / fb)
     v = np.asarray(values, float) * fa + (oa - ob)
     out = v / fb
     return float(out) if np.isscalar(values) else out

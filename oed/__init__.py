@@ -2,12 +2,17 @@ r"""Optimal sensor selection (optimal design of experiments, paper section 3).
 
 Solves :math:`\min_{w\in\{0,1\}^{n_S}} \Psi(C(w))` subject to design constraints, where
 :math:`C` is the second-order or Gauss-Newton covariance and :math:`\Psi` the A-, D- or
-E-criterion.  Front door: :func:`select_sensors_from_information`; see :mod:`oed.design`.
+E-criterion.  Front doors: :func:`select_sensors_from_information` / :func:`select_sensors`
+(sensors; with ``data=None`` planned before measuring) and :func:`select_inputs` (input points, or
+input x sensor pairs, through the same engine, with a continuous Ipopt refinement); see
+:mod:`oed.design` and :mod:`oed.inputs`.
 """
 from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
+from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs, select_inputs
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
-           "select_sensors_from_information"]
+           "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
+           "input_information", "refine_inputs", "select_inputs"]

@@ -1,7 +1,12 @@
 r"""Design constraints shared by all solvers (paper eq. 9, :math:`g(w)\le 0`).
 
-.. math::  \sum_k w_k \ge n_p,\quad \sum_k w_k = m \text{ or } \le m_{\max},\quad
+.. math::  \sum_k w_k \ge 1,\quad \sum_k w_k = m \text{ or } \le m_{\max},\quad
            c^T w \le B,\quad w_k = 1\ (k\in\text{include}),\quad w_k = 0\ (k\in\text{exclude}).
+
+The sensor count is not compared with the number of parameters: one sensor measured at
+several inputs can identify every parameter.  Whether a design is admissible is decided by
+its own information matrix (a singular design has criterion ``inf`` and is skipped by every
+solver).
 """
 from __future__ import annotations
 
@@ -28,6 +33,8 @@ class DesignConstraints:
     budget : float or None
     include, exclude : tuple of int
         Forced-in / forced-out sensor indices.
+    min_sensors : int
+        Smallest design size considered when ``n_sensors`` is not given (default 1).
     """
 
     n_candidates: int
@@ -38,13 +45,14 @@ class DesignConstraints:
     budget: float | None = None
     include: tuple = ()
     exclude: tuple = ()
+    min_sensors: int = 1
 
     @property
     def min_size(self) -> int:
         """Smallest admissible design size."""
         if self.n_sensors is not None:
             return self.n_sensors
-        return max(self.n_params, len(self.include))
+        return max(self.min_sensors, len(self.include), 1)
 
     @property
     def max_size(self) -> int:
@@ -70,7 +78,7 @@ class DesignConstraints:
         """True when binary ``w`` satisfies every constraint."""
         w = np.asarray(w)
         s = int(np.sum(w))
-        if s < self.min_size or s > self.max_size or s < self.n_params:
+        if s < self.min_size or s > self.max_size:
             return False
         if any(w[k] != 1 for k in self.include) or any(w[k] != 0 for k in self.exclude):
             return False
@@ -95,11 +103,11 @@ def _index_list(name, values, n):
 
 def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None, costs=None,
                      budget=None, include=(), exclude=(), sensor_names=None) -> DesignConstraints:
-    r"""Build :math:`g(w)\le0`: :math:`\sum w\ge n_p`, :math:`\sum w=m` or :math:`\le m_{\max}`, :math:`c^Tw\le B`, fixings.
+    r"""Build :math:`g(w)\le0`: :math:`\sum w\ge1`, :math:`\sum w=m` or :math:`\le m_{\max}`, :math:`c^Tw\le B`, fixings.
 
-    Ensures :math:`n_S \ge n_p`, :math:`n_p \le m \le n_S`, consistency of forced
-    sensors, and that at least one design meets the budget
-    (:math:`\min_{|w| \ge m_{\min}} c^T w \le B`).
+    Ensures :math:`1 \le m \le n_S`, consistency of forced sensors, and that at least one
+    design meets the budget (:math:`\min_{|w| \ge m_{\min}} c^T w \le B`).  Fewer sensors than
+    parameters are allowed: whether a design is regular is decided by its information.
 
     ``include``/``exclude`` may contain indices or names from ``sensor_names``.
 
@@ -108,11 +116,6 @@ def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None
     ValueError
         Naming the offending argument.
     """
-    if n_candidates < n_params:
-        raise ValueError(
-            f"F: fewer candidate sensors ({n_candidates}) than parameters ({n_params}); "
-            "sum w >= n_p cannot be met")
-
     def resolve(name, seq):
         seq = list(seq) if seq is not None else []
         out = []
@@ -135,8 +138,8 @@ def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None
         if isinstance(n_sensors, bool) or not isinstance(n_sensors, (int, np.integer)):
             raise ValueError(f"n_sensors: must be an integer, got {n_sensors!r}")
         n_sensors = int(n_sensors)
-        if n_sensors < n_params:
-            raise ValueError(f"n_sensors: {n_sensors} < number of parameters {n_params}; every design would be singular")
+        if n_sensors < 1:
+            raise ValueError(f"n_sensors: must be at least 1, got {n_sensors}")
         if n_sensors > avail:
             raise ValueError(f"n_sensors: {n_sensors} exceeds the {avail} candidate sensors not excluded")
         if len(inc) > n_sensors:
@@ -145,14 +148,14 @@ def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None
         if isinstance(max_sensors, bool) or not isinstance(max_sensors, (int, np.integer)):
             raise ValueError(f"max_sensors: must be an integer, got {max_sensors!r}")
         max_sensors = int(max_sensors)
-        if max_sensors < n_params:
-            raise ValueError(f"max_sensors: {max_sensors} < number of parameters {n_params}; every design would be singular")
+        if max_sensors < 1:
+            raise ValueError(f"max_sensors: must be at least 1, got {max_sensors}")
         if len(inc) > max_sensors:
             raise ValueError(f"include: {len(inc)} forced sensors exceed max_sensors = {max_sensors}")
         if n_sensors is not None and n_sensors > max_sensors:
             raise ValueError(f"n_sensors: {n_sensors} > max_sensors = {max_sensors}")
-    if avail < n_params:
-        raise ValueError(f"exclude: only {avail} sensors remain, fewer than the {n_params} parameters")
+    if avail < 1:
+        raise ValueError("exclude: every candidate is excluded; no design remains")
     if (costs is None) != (budget is None):
         raise ValueError("costs/budget: give both costs and budget, or neither")
     if costs is not None:
@@ -164,7 +167,7 @@ def make_constraints(n_candidates, n_params, *, n_sensors=None, max_sensors=None
         budget = float(budget)
         if not np.isfinite(budget):
             raise ValueError(f"budget: must be finite, got {budget}")
-        lo = n_sensors if n_sensors is not None else max(n_params, len(inc))
+        lo = n_sensors if n_sensors is not None else max(1, len(inc))
         fixed_cost = float(c[list(inc)].sum()) if inc else 0.0
         free = [k for k in range(n_candidates) if k not in inc and k not in exc]
         cheapest = fixed_cost + float(np.sort(c[free])[: max(lo - len(inc), 0)].sum())

@@ -2,7 +2,7 @@ r"""Front door for optimal sensor selection.
 
 Solves
 
-.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k \ge n_p,\
+.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k \ge 1,\
            \sum_k w_k = m \ (\text{or} \le m_{\max}),\ c^Tw \le B,\ w_I=1,\ w_O=0,
 
 with :math:`C` the second-order covariance :math:`H^{-1}(\sum_k w_k^2F_k)H^{-1}` or the
@@ -11,14 +11,17 @@ log det (D) or lambda_max (E).
 
 ``method="auto"``: exact enumeration when the number of admissible designs is at most
 ``DesignSettings.enumeration_limit`` (2e5); otherwise our branch-and-bound for
-Gauss-Newton criteria (with or without costs and budget); otherwise SCIP via Pyomo.  If SCIP is unavailable or
+Gauss-Newton criteria (with or without costs and budget); otherwise (second-order criteria,
+for which no valid branch-and-bound bound is derived with indefinite S) enumeration whenever
+its measured cost fits the time limit (designs / second measured on the problem itself, see
+:attr:`DesignSettings.enumeration_rate`), and SCIP via Pyomo beyond.  If SCIP is unavailable or
 fails, enumeration is used when it is affordable (``enumeration_fallback_limit``) and the
 fallback is recorded in :attr:`DesignResult.notes`.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -49,6 +52,10 @@ class DesignSettings:
     criteria : CriteriaSettings
     scip_formulation : str
         Passed to :class:`oed.scip_solver.ScipSettings` (``auto``, ``cuts``, ``naive``, ``second_order``).
+    enumeration_rate : float or None
+        Designs per second that ``auto`` assumes for enumeration; None measures it on the
+        problem (one timed batch of ``calibration_designs`` designs).
+    calibration_designs : int
     """
 
     enumeration_limit: int = 200_000
@@ -56,6 +63,8 @@ class DesignSettings:
     gap_tol: float = 1e-9
     criteria: CriteriaSettings = DEFAULT_SETTINGS
     scip_formulation: str = "auto"
+    enumeration_rate: float | None = None
+    calibration_designs: int = 4096
 
     def __post_init__(self):
         for name in ("enumeration_limit", "enumeration_fallback_limit"):
@@ -66,6 +75,12 @@ class DesignSettings:
             raise ValueError(f"gap_tol: expected a finite number >= 0, got {self.gap_tol!r}")
         if not isinstance(self.criteria, CriteriaSettings):
             raise TypeError(f"criteria: expected CriteriaSettings, got {type(self.criteria).__name__}")
+        if self.enumeration_rate is not None and not (isinstance(self.enumeration_rate, (int, float, np.floating))
+                                                      and 0 < self.enumeration_rate < np.inf):
+            raise ValueError(f"enumeration_rate: expected None or designs/second > 0, got {self.enumeration_rate!r}")
+        if isinstance(self.calibration_designs, bool) or not isinstance(self.calibration_designs, (int, np.integer)) \
+                or self.calibration_designs < 1:
+            raise ValueError(f"calibration_designs: expected an integer >= 1, got {self.calibration_designs!r}")
         formulations = ("auto", "cuts", "naive", "second_order")
         if self.scip_formulation not in formulations:
             raise ValueError(f"scip_formulation: expected one of {formulations}, got {self.scip_formulation!r}")
@@ -190,7 +205,10 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
     t0 = time.perf_counter()
     req = _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget, include, exclude, method,
                           time_limit, sensor_names, settings)
-    outcome = _run_method(req, _route(req, settings), settings)
+    chosen, note = _route(req, settings)
+    outcome = _run_method(req, chosen, settings)
+    if note:
+        outcome = replace(outcome, notes=(note,) + outcome.notes)
     return _assemble_result(req, outcome, settings, t0)
 
 
@@ -244,20 +262,43 @@ def _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget
                           names=names, count=cons.count_designs(), method=method, time_limit=time_limit)
 
 
-def _route(req: _DesignRequest, settings: DesignSettings) -> str:
-    """Method to run: ``auto`` enumerates small problems, else B&B (Gauss-Newton) or SCIP."""
-    chosen = req.method
+def _enumeration_rate(req: _DesignRequest, settings: DesignSettings) -> float:
+    """Designs per second of exact enumeration on this problem (one timed batch after a warm-up)."""
+    if settings.enumeration_rate is not None:
+        return float(settings.enumeration_rate)
+    W = next(iter_designs(req.cons, settings.calibration_designs), None)
+    if W is None:
+        return np.inf
+    batch_criteria(req.F, req.S, W[:16], req.kind, settings=settings.criteria, validated=True)
+    t = time.perf_counter()
+    batch_criteria(req.F, req.S, W, req.kind, settings=settings.criteria, validated=True)
+    return len(W) / max(time.perf_counter() - t, 1e-9)
+
+
+def _route(req: _DesignRequest, settings: DesignSettings) -> tuple:
+    """(method, note): ``auto`` enumerates small problems, else B&B (Gauss-Newton), else enumeration
+    when its measured cost fits the time limit, else SCIP."""
+    chosen, note = req.method, ""
     if chosen == "auto":
         if req.count <= settings.enumeration_limit:
             chosen = "enumerate"
         elif req.kind is Kind.GAUSS_NEWTON:
             chosen = "bnb"
         else:
-            chosen = "scip"
+            rate = _enumeration_rate(req, settings)
+            est = req.count / rate
+            if est <= req.time_limit and req.count <= settings.enumeration_fallback_limit:
+                chosen = "enumerate"
+                note = (f"auto: enumeration of {req.count} designs estimated at {est:.3g} s ({rate:.3g} designs/s "
+                        f"measured) <= time_limit {req.time_limit:g} s")
+            else:
+                chosen = "scip"
+                note = (f"auto: enumeration of {req.count} designs estimated at {est:.3g} s ({rate:.3g} designs/s "
+                        f"measured) > time_limit {req.time_limit:g} s; SCIP")
     if chosen == "bnb" and req.kind is not Kind.GAUSS_NEWTON:
         raise ValueError("method: 'bnb' supports only kind='gauss_newton' (no valid bound is derived for the "
                          "second-order covariance with indefinite S); use 'enumerate' or 'scip'")
-    return chosen
+    return chosen, note
 
 
 def _run_method(req: _DesignRequest, chosen: str, settings: DesignSettings) -> _MethodOutcome:
@@ -406,7 +447,7 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
         min_sensors = p
     if isinstance(min_sensors, bool) or not isinstance(min_sensors, (int, np.integer)) or not 1 <= min_sensors <= n:
         raise ValueError(f"min_sensors: must be an integer in 1..{n}, got {min_sensors!r}")
-    cons = DesignConstraints(n_candidates=n, n_params=int(min_sensors))
+    cons = DesignConstraints(n_candidates=n, n_params=p, min_sensors=int(min_sensors))
     if cons.count_designs() > max_rows:
         raise ValueError(f"min_sensors: {cons.count_designs()} combinations exceed max_rows = {max_rows}")
     rows = []
@@ -422,18 +463,44 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
     return DesignTable(kind=kind_e.value, rows=tuple(rows))
 
 
-def select_sensors(model, data, p, **kw) -> DesignResult:
-    r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model.
+def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, **kw) -> DesignResult:
+    r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model at ``p``.
 
-    Calls ``identification.information_contributions(model, data, p) -> (F, S)`` (shapes
-    ``(n_S, n_p, n_p)`` each; imported lazily here because the identification package is
-    wired separately) and passes ``F``, ``S`` and all keyword arguments to
+    Calls ``identification.information_contributions`` for the per-sensor information
+    (shapes ``(n_S, n_p, n_p)``) and passes ``F``, ``S`` and the other keyword arguments to
     :func:`select_sensors_from_information`.
+
+    Parameters
+    ----------
+    model : models.Model
+    data : identification.Measurements or None
+        Measurements; ``None`` plans the design before measuring, from ``inputs`` and ``sigma``.
+    p : array_like, shape (n_p,)
+        Parameters (the estimate, or the nominal values when ``data`` is None).
+    inputs : array_like, shape (n_q, d_q), optional
+        Input rows that will be applied (only with ``data=None``).
+    sigma : array_like, shape (n_S,), optional
+        Standard deviation of each sensor, in the sensor's unit (only with ``data=None``).
+    n_series : int
+        Repetitions of every input (only with ``data=None``; default 1).
+
+    Notes
+    -----
+    Without data the expected residual at ``p`` is zero, so the second-order term ``S``
+    vanishes: ``kind="second_order"`` then gives the Gauss-Newton covariance at the nominal
+    ``p`` (recorded in :attr:`DesignResult.notes`).
     """
-    try:
-        from identification import information_contributions
-    except ImportError as exc:
-        raise RuntimeError("select_sensors: identification.information_contributions is not available yet "
-                           f"({exc}); call select_sensors_from_information(F, S, ...) directly") from exc
-    F, S = information_contributions(model, data, p)
-    return select_sensors_from_information(F, S, **kw)
+    from identification import information_contributions
+    if data is None:
+        F, S = information_contributions(model, None, p, inputs=inputs, sigma=sigma, n_series=n_series)
+    else:
+        if inputs is not None or sigma is not None:
+            raise ValueError("inputs/sigma: give them only with data=None (measurements carry their own)")
+        F, S = information_contributions(model, data, p)
+    kw.setdefault("sensor_names", model.sensors)
+    res = select_sensors_from_information(F, S, **kw)
+    if data is None:
+        note = (f"designed without data at the nominal parameters ({n_series} series of {np.atleast_1d(inputs).shape[0]} "
+                "inputs): expected residual 0, so S = 0 and the second-order covariance is the Gauss-Newton one")
+        res = replace(res, notes=res.notes + (note,))
+    return res

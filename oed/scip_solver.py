@@ -140,7 +140,7 @@ def _base_model(pyo, cons: DesignConstraints):
     mdl.w = pyo.Var(mdl.K, within=pyo.Binary)
     mdl.cuts = pyo.ConstraintList()
     tot = sum(mdl.w[k] for k in mdl.K)
-    mdl.min_np = pyo.Constraint(expr=tot >= cons.n_params)
+    mdl.min_np = pyo.Constraint(expr=tot >= cons.min_size)
     if cons.n_sensors is not None:
         mdl.card = pyo.Constraint(expr=tot == cons.n_sensors)
     elif cons.max_sensors is not None:

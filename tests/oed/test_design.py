@@ -119,7 +119,7 @@ def test_second_order_with_bnb_is_refused():
 
 
 @pytest.mark.parametrize("kw, match", [
-    (dict(n_sensors=1), "n_sensors: 1 < number of parameters"),
+    (dict(n_sensors=0), "n_sensors: must be at least 1"),
     (dict(n_sensors=3, costs=np.ones(6), budget=2.0), "budget: .*no design meets the budget"),
     (dict(n_sensors=3, costs=np.ones(5), budget=2.0), "costs: expected shape"),
     (dict(n_sensors=3, budget=2.0), "costs/budget"),
@@ -139,10 +139,11 @@ def test_bad_arguments(kw, match):
         select_sensors_from_information(F, **kw)
 
 
-def test_fewer_candidates_than_parameters():
-    F = rank_one(9, 2, 3)
-    with pytest.raises(ValueError, match=r"F: fewer candidate sensors \(2\) than parameters \(3\)"):
-        select_sensors_from_information(F)
+def test_fewer_candidates_than_parameters_is_decided_by_the_information():
+    F = rank_one(9, 2, 3)          # two rank-one sensors cannot identify three parameters
+    res = select_sensors_from_information(F)
+    assert res.status == "infeasible" and res.indices == () and res.value == np.inf
+    assert "full-rank" in res.message
 
 
 def test_design_table_press_style():
@@ -176,8 +177,10 @@ def test_select_sensors_passes_through(monkeypatch):
     fake = types.ModuleType("identification")
     fake.information_contributions = info
     monkeypatch.setitem(sys.modules, "identification", fake)
-    r = select_sensors("M", "DATA", [1.0, 2.0], criterion="D", n_sensors=3)
-    assert calls["args"] == ("M", "DATA", [1.0, 2.0]) and len(r.indices) == 3
+    model = types.SimpleNamespace(sensors=tuple("abcdef"))
+    r = select_sensors(model, "DATA", [1.0, 2.0], criterion="D", n_sensors=3)
+    assert calls["args"] == (model, "DATA", [1.0, 2.0]) and len(r.indices) == 3
+    assert set(r.sensors) <= set("abcdef")
 
 
 def test_unfinished_bnb_reports_gap_not_optimality():

@@ -1,0 +1,435 @@
+r"""Which inputs to apply: exact designs over candidate input rows, then a continuous refinement.
+
+Exact design (one engine, two front doors): each candidate c is an input row :math:`q_j`
+(with every chosen sensor measured there) or, jointly, an input-sensor pair :math:`(q_j, k)`;
+its information is
+
+.. math::  F_c = n_\text{series}\sum_{k\in c} G_{jk}^TG_{jk}/\sigma_k^2,\qquad
+           G_{jk} = \partial h_k/\partial p\,(y_j(p), p, q_j)\ \ (\text{1/param unit} \times \text{sensor unit}),
+
+and :func:`oed.design.select_sensors_from_information` chooses ``n_points`` candidates
+minimising :math:`\Psi((\sum_c w_cF_c)^{-1})` by the same enumeration / branch-and-bound /
+SCIP routes as the sensor selection.  Planned before measuring, the expected residual at the
+nominal ``p`` is 0, so the second-order term vanishes and the design is Gauss-Newton.
+
+Refinement: the chosen input levels are then moved continuously within bounds to minimise
+the same criterion, by Ipopt with exact CasADi derivatives of the criterion of the
+information matrix built symbolically from the model's sensitivities (implicit models:
+:math:`y' = -E_y^{-1}E_p`, with the states as NLP variables tied by :math:`E(y, p, q)=0`).
+The E criterion is stated smoothly as :math:`\max t` s.t. :math:`M - tI = LL^T`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import casadi as ca
+import numpy as np
+
+from identification.errors import IdentificationError
+from identification.ipopt_solver import IpoptSettings, solve_nlp
+from models.sensitivity import sensitivities
+from models.state import solve_states
+from .criteria import Criterion, Kind
+from .design import DesignResult, DesignSettings, select_sensors_from_information
+
+__all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "input_information", "select_inputs",
+           "refine_inputs"]
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """Settings of :func:`refine_inputs`.
+
+    Attributes
+    ----------
+    n_starts : int
+        Ipopt starts: the exact design's levels, then random points within the bounds.
+    seed : int
+        Seed of the random starts.
+    ipopt : IpoptSettings
+    """
+
+    n_starts: int = 4
+    seed: int = 0
+    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500)
+
+    def __post_init__(self):
+        if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
+            raise ValueError(f"n_starts: expected an integer >= 1, got {self.n_starts!r}")
+
+
+@dataclass(frozen=True)
+class RefinedInputs:
+    """Continuous refinement of the exact design's input levels.
+
+    Attributes
+    ----------
+    inputs : ndarray, shape (n_points, d_q)
+        Refined input rows (read-only), within ``lower``/``upper``.
+    value : float
+        Criterion value of the refined design (D: log det C), same scale as the exact design's.
+    start_values : tuple of float
+        Criterion value reached from each start (``inf`` for a failed start).
+    n_failed : int
+        Starts whose Ipopt run failed (their messages are in ``messages``).
+    messages : tuple of str
+    lower, upper : ndarray, shape (d_q,)
+        The input bounds used.
+    wall_time : float
+    """
+
+    inputs: np.ndarray
+    value: float
+    start_values: tuple
+    n_failed: int
+    messages: tuple
+    lower: np.ndarray
+    upper: np.ndarray
+    wall_time: float
+
+
+@dataclass(frozen=True)
+class InputDesignResult:
+    """An exact input design (and optionally its continuous refinement).
+
+    Attributes
+    ----------
+    indices : tuple of int
+        Chosen candidate rows (joint designs: the row of each chosen pair, repeated per sensor).
+    pairs : tuple of (int, str)
+        Chosen (row, sensor) pairs; without ``sensors="joint"`` every chosen row with every measured sensor.
+    inputs : ndarray, shape (len(indices), d_q)
+        The chosen input rows (read-only).
+    value, lower_bound, gap : float
+        Criterion value (D: log det C), proven lower bound and gap.
+    proven_optimal : bool
+    criterion, method, status : str
+    design : DesignResult
+        The engine's result over the candidates (names ``q<j>`` or ``q<j>:<sensor>``).
+    refined : RefinedInputs or None
+    notes : tuple of str
+    """
+
+    indices: tuple
+    pairs: tuple
+    inputs: np.ndarray
+    value: float
+    lower_bound: float
+    gap: float
+    proven_optimal: bool
+    criterion: str
+    method: str
+    status: str
+    design: DesignResult
+    refined: RefinedInputs | None
+    notes: tuple = ()
+
+    def summary(self) -> str:
+        """Human-readable multi-line summary (exact design next to its refinement)."""
+        lines = [f"input design ({self.criterion}) via {self.method}: status {self.status}"
+                 + (" (proven optimal)" if self.proven_optimal else ""),
+                 f"  rows: {list(self.indices)}  value {self.value:.10g}  lower bound {self.lower_bound:.10g}"]
+        if self.refined is not None:
+            lines.append(f"  refined levels: {np.array2string(self.refined.inputs.ravel(), precision=6)}  value "
+                         f"{self.refined.value:.10g} ({len(self.refined.start_values)} starts, "
+                         f"{self.refined.n_failed} failed)")
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _readonly(a):
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _check_candidates(model, candidates) -> np.ndarray:
+    try:
+        Q = np.asarray(candidates, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"candidates: not numeric ({exc})") from None
+    if Q.ndim == 1 and model.n_q_dim == 1:
+        Q = Q[:, None]
+    if Q.ndim != 2 or Q.shape[0] == 0 or Q.shape[1] != model.n_q_dim:
+        raise ValueError(f"candidates: expected shape (n_candidates, {model.n_q_dim}) (one row per input point), "
+                         f"got {Q.shape}")
+    bad = np.argwhere(~np.isfinite(Q))
+    if bad.size:
+        raise ValueError(f"candidates: non-finite value at row {bad[0][0]}, column {bad[0][1]}; remove the row")
+    _, first, counts = np.unique(Q, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        dup = sorted(int(i) for i in np.flatnonzero(np.all(Q == Q[first[np.argmax(counts > 1)]], axis=1)))
+        raise ValueError(f"candidates: duplicate rows {dup}; list every input point once (use n_series for repeats)")
+    return Q
+
+
+def _check_p(model, p) -> np.ndarray:
+    p = np.asarray(p, dtype=float).ravel()
+    if p.shape != (model.n_p,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"p: expected {model.n_p} finite nominal parameter values, got {p}")
+    out = (p < model.lower) | (p > model.upper)
+    if np.any(out):
+        names = [model.param_names[i] for i in np.flatnonzero(out)]
+        raise ValueError(f"p: nominal parameters {names} lie outside their bounds "
+                         f"[{model.lower[out]}, {model.upper[out]}]")
+    return p
+
+
+def _check_sigma(model, sigma) -> np.ndarray:
+    sig = np.asarray(sigma, dtype=float).ravel()
+    if sig.size == 1:
+        sig = np.full(model.n_S, float(sig[0]))
+    if sig.shape != (model.n_S,) or not np.all(np.isfinite(sig) & (sig > 0)):
+        raise ValueError(f"sigma: expected {model.n_S} positive finite values (one per sensor), got {sigma!r}")
+    return sig
+
+
+def _measured(model, sensors) -> tuple:
+    """(sensor indices measured, joint?) from ``sensors`` (None, 'joint' or names)."""
+    if sensors is None:
+        return tuple(range(model.n_S)), False
+    if isinstance(sensors, str) and sensors == "joint":
+        return tuple(range(model.n_S)), True
+    names = [sensors] if isinstance(sensors, str) else list(sensors)
+    unknown = [s for s in names if s not in model.sensors]
+    if unknown or not names:
+        raise ValueError(f"sensors: expected None, 'joint' or names of {list(model.sensors)}, got {sensors!r}")
+    return tuple(model.sensors.index(s) for s in names), False
+
+
+def input_information(model, p, candidates, sigma, n_series=1) -> np.ndarray:
+    r"""Per-(input, sensor) information :math:`F_{jk} = n_\text{series}G_{jk}^TG_{jk}/\sigma_k^2`.
+
+    Returns
+    -------
+    ndarray, shape (n_candidates, n_S, n_p, n_p)
+    """
+    Q = _check_candidates(model, candidates)
+    p = _check_p(model, p)
+    sig = _check_sigma(model, sigma)
+    if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+        raise ValueError(f"n_series: expected an integer >= 1, got {n_series!r}")
+    G = sensitivities(model, p, Q, solve_states(model, p, Q)).G           # (n_q, n_S, n_p)
+    return float(n_series) * np.einsum("k,jkp,jkr->jkpr", 1.0 / sig ** 2, G, G)
+
+
+def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criterion="D", kind="gauss_newton",
+                  costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
+                  refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
+                  settings: DesignSettings = DesignSettings()) -> InputDesignResult:
+    r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs), optionally refined.
+
+    Parameters
+    ----------
+    model : models.Model
+    p : array_like, shape (n_p,)
+        Nominal parameters (within the model's bounds).
+    candidates : array_like, shape (n_candidates, d_q)
+        Candidate input rows (finite, no duplicates).
+    sigma : array_like, shape (n_S,) or float
+        Sensor standard deviations (sensor units).
+    n_points : int
+        Number of candidates chosen: input rows, or (row, sensor) pairs with ``sensors="joint"``.
+    sensors : None, "joint" or sequence of str
+        None: every sensor measured at each chosen input; names: those sensors; ``"joint"``:
+        the candidates are all (row, sensor) pairs and the sensors are chosen with the inputs.
+    criterion : {"A", "D", "E"}
+    kind : {"gauss_newton", "second_order"}
+        Without data both are the Gauss-Newton criterion (S = 0 at the nominal p; noted).
+    costs, budget, include, exclude
+        As in :func:`oed.design.select_sensors_from_information`, per candidate (row or pair index).
+    n_series : int
+        Repetitions of every chosen input.
+    method, time_limit, settings
+        Engine route (``auto``, ``enumerate``, ``bnb``, ``scip``) and its limits.
+    refine : bool
+        Also refine the chosen levels continuously (:func:`refine_inputs`, not for joint designs).
+    bounds : (array_like, array_like) or None
+        Input bounds for the refinement, shape (d_q,) each; default the candidates' range.
+
+    Returns
+    -------
+    InputDesignResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (the message names the argument).
+    """
+    Q = _check_candidates(model, candidates)
+    k_idx, joint = _measured(model, sensors)
+    n_cand = Q.shape[0] * (len(k_idx) if joint else 1)
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 1 <= n_points <= n_cand:
+        raise ValueError(f"n_points: expected an integer in 1..{n_cand} (the number of candidate "
+                         f"{'pairs' if joint else 'rows'}), got {n_points!r}")
+    kind_e = Kind.parse(kind)
+    Fjk = input_information(model, p, Q, sigma, n_series)
+    if joint:
+        F = Fjk[:, list(k_idx)].reshape(-1, model.n_p, model.n_p)
+        names = [f"q{j}:{model.sensors[k]}" for j in range(Q.shape[0]) for k in k_idx]
+        pair_of = [(j, model.sensors[k]) for j in range(Q.shape[0]) for k in k_idx]
+    else:
+        F = Fjk[:, list(k_idx)].sum(axis=1)
+        names = [f"q{j}" for j in range(Q.shape[0])]
+        pair_of = None
+    res = select_sensors_from_information(F, None, criterion=criterion, kind="gauss_newton", n_sensors=n_points,
+                                          costs=costs, budget=budget, include=include, exclude=exclude,
+                                          method=method, time_limit=time_limit, sensor_names=names,
+                                          settings=settings)
+    notes = list(res.notes)
+    if kind_e is Kind.SECOND_ORDER:
+        notes.append("kind='second_order' planned without data: expected residual 0, S = 0, so the design is "
+                     "Gauss-Newton at the nominal p")
+    if joint:
+        pairs = tuple(pair_of[c] for c in res.indices)
+        rows = tuple(j for j, _ in pairs)
+    else:
+        rows = tuple(res.indices)
+        pairs = tuple((j, model.sensors[k]) for j in rows for k in k_idx)
+    refined = None
+    if refine and res.indices:
+        if joint:
+            raise ValueError("refine: the continuous refinement is for input designs (sensors=None or names), "
+                             "not for joint input-sensor designs")
+        refined = refine_inputs(model, p, Q[list(rows)], sigma, criterion=criterion, sensors=sensors,
+                                n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
+                                settings=refine_settings)
+    return InputDesignResult(indices=rows, pairs=pairs, inputs=_readonly(Q[list(rows)].reshape(len(rows), -1)),
+                             value=res.value, lower_bound=res.lower_bound, gap=res.gap,
+                             proven_optimal=res.proven_optimal, criterion=res.criterion, method=res.method,
+                             status=res.status, design=res, refined=refined, notes=tuple(notes))
+
+
+# ---------------------------------------------------------------------------- continuous refinement
+def _sym(model):
+    """CasADi symbol class: SX for explicit or small-state SX models, else MX (linear solves stay MX)."""
+    return ca.SX if model.symbolic == "SX" and model.n_y <= 4 else ca.MX
+
+
+def _symbolic_information(model, p, sig, k_idx, n_series, Qs, Ys):
+    """M(q) = n_series sum_i sum_k G_ik^T G_ik / sigma_k^2 with G from CasADi (implicit: y' = -E_y^-1 E_p)."""
+    X = _sym(model)
+    pp = X(ca.DM(p))
+    ysym, psym, qsym = X.sym("y", model.n_y), X.sym("p", model.n_p), X.sym("q", model.n_q_dim)
+    h = model.h_fun(ysym, psym, qsym)
+    Gp = ca.jacobian(h, psym)
+    if model.n_y:
+        E = model.E_fun(ysym, psym, qsym)
+        Gp = Gp + ca.mtimes(ca.jacobian(h, ysym), -ca.solve(ca.jacobian(E, ysym), ca.jacobian(E, psym)))
+    G_fun = ca.Function("G", [ysym, psym, qsym], [Gp])
+    W = ca.DM(np.diag([float(n_series) / sig[k] ** 2 if k in k_idx else 0.0 for k in range(model.n_S)]))
+    M = X.zeros(model.n_p, model.n_p)
+    for q_i, y_i in zip(Qs, Ys):
+        G = G_fun(y_i, pp, q_i)
+        M = M + ca.mtimes([G.T, W, G])
+    return M
+
+
+def _criterion_nlp(X, crit: Criterion, M, n_p):
+    """(objective, extra variables, extra equality constraints) of Psi(M^-1) (D: log det C)."""
+    if crit is Criterion.A:
+        return ca.trace(ca.solve(M, X.eye(n_p))), [], []
+    if crit is Criterion.D:
+        return -ca.log(ca.det(M)), [], []
+    t = X.sym("t")
+    L = X.sym("L", n_p * (n_p + 1) // 2)
+    Lm = X(ca.Sparsity.lower(n_p), L)
+    R = M - t * X.eye(n_p) - ca.mtimes(Lm, Lm.T)
+    cons = [R[i, j] for i in range(n_p) for j in range(i + 1)]
+    return -t, [t, L], cons
+
+
+def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_series=1, bounds,
+                  settings: RefineSettings = RefineSettings()) -> RefinedInputs:
+    r"""Move ``n_points`` input rows continuously within ``bounds`` to minimise :math:`\Psi(M(q)^{-1})`.
+
+    Multi-start Ipopt (the exact design's levels, then random points in the bounds) with exact
+    CasADi derivatives; the best accepted start is returned.  D is reported as log det C
+    (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.
+
+    Raises
+    ------
+    ValueError
+        Bad bounds or start.
+    RuntimeError
+        When every start fails (Ipopt's messages are given).
+    """
+    crit = Criterion.parse(criterion)
+    p = _check_p(model, p)
+    sig = _check_sigma(model, sigma)
+    k_idx, joint = _measured(model, sensors)
+    if joint:
+        raise ValueError("sensors: the refinement takes None or sensor names, not 'joint'")
+    X0 = np.atleast_2d(np.asarray(start, float))
+    lo, hi = (np.broadcast_to(np.asarray(b, float).ravel(), (model.n_q_dim,)) for b in bounds)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+        raise ValueError(f"bounds: expected finite lower <= upper of shape ({model.n_q_dim},), got {bounds!r}")
+    if X0.shape[1] != model.n_q_dim or np.any(X0 < lo - 1e-12) or np.any(X0 > hi + 1e-12):
+        raise ValueError("start: input rows must lie within the bounds")
+    t0 = time.perf_counter()
+    n_pts, d = X0.shape
+    X = _sym(model)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    Us = [X.sym(f"u{i}", d) for i in range(n_pts)]                 # scaled inputs q = lo + span * u
+    Qs = [ca.DM(lo) + ca.DM(span) * u for u in Us]
+    Ys = [X.sym(f"y{i}", model.n_y) for i in range(n_pts)]
+    M = _symbolic_information(model, p, sig, k_idx, n_series, Qs, Ys)
+    f, extra, cons = _criterion_nlp(X, crit, M, model.n_p)
+    pp = ca.DM(p)
+    g = [model.E_fun(y, pp, q) for y, q in zip(Ys, Qs)] if model.n_y else []
+    x = ca.vertcat(*Us, *Ys, *extra)
+    gg = ca.vertcat(*g, *cons) if (g or cons) else X.zeros(0, 1)
+    n_e, n_c = model.n_y * n_pts, len(cons)
+    nlp = (x, f, gg, X.sym("par", 0))
+    ipopt = settings.ipopt if X is ca.SX else replace(settings.ipopt, expand=False)   # MX linear solves stay MX
+    G_val = ca.Function("Mval", [ca.vertcat(*Us, *Ys)], [M])
+    rng = np.random.default_rng(settings.seed)
+    starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
+    best, best_v, values, messages = None, np.inf, [], []
+    lbe = np.zeros(n_e + n_c)
+    for Xs in starts:
+        Y = solve_states(model, p, Xs) if model.n_y else np.zeros((n_pts, 0))
+        Mv = np.array(G_val(np.concatenate([((Xs - lo) / span).ravel(), Y.ravel()])))
+        ex0 = []
+        if crit is Criterion.E:
+            t_init = 0.5 * float(np.linalg.eigvalsh(Mv)[0])
+            Lc = np.linalg.cholesky(Mv - t_init * np.eye(model.n_p) + 1e-14 * np.eye(model.n_p))
+            ex0 = [t_init] + [Lc[i, j] for j in range(model.n_p) for i in range(j, model.n_p)]
+        x0 = np.concatenate([((Xs - lo) / span).ravel(), Y.ravel(), np.asarray(ex0, float)])
+        lbx = np.concatenate([np.zeros(n_pts * d), np.full(Y.size + len(ex0), -np.inf)])
+        ubx = np.concatenate([np.where(hi > lo, 1.0, 0.0).repeat(1)[None].repeat(n_pts, 0).ravel(),
+                              np.full(Y.size + len(ex0), np.inf)])
+        try:
+            r = solve_nlp(lambda: nlp, x0, lbx, ubx, lbe, lbe, [], settings=ipopt, what="input refinement")
+        except IdentificationError as exc:
+            values.append(np.inf)
+            messages.append(str(exc))
+            continue
+        # a stalled run's point is still a design: its value is re-evaluated exactly below
+        Ur = np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0)
+        Xr = lo + span * Ur * (hi > lo)
+        Yr = solve_states(model, p, Xr) if model.n_y else np.zeros((n_pts, 0))
+        Mr = np.array(G_val(np.concatenate([Ur.ravel(), Yr.ravel()])))
+        v = _value(crit, Mr)
+        values.append(v)
+        messages.append(r.status if r.accepted else f"stalled ({r.status}); point re-evaluated")
+        if v < best_v:
+            best, best_v = Xr, v
+    if best is None:
+        raise RuntimeError(f"refine: every Ipopt start failed: {'; '.join(messages)}")
+    return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
+                         n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
+                         lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
+
+
+def _value(crit: Criterion, M) -> float:
+    """Psi(M^-1) evaluated exactly (D: log det C); inf when M is singular."""
+    ev = np.linalg.eigvalsh(0.5 * (M + M.T))
+    if ev[0] <= 0:
+        return np.inf
+    if crit is Criterion.A:
+        return float(np.sum(1.0 / ev))
+    if crit is Criterion.D:
+        return float(-np.sum(np.log(ev)))
+    return float(1.0 / ev[0])

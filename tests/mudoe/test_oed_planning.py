@@ -1,0 +1,124 @@
+"""`mudoe oed` on a study without data, and the [oed] design keys (issue 13 item 6)."""
+import json
+import textwrap
+
+import numpy as np
+import pytest
+
+from mudoe.cli import main
+
+PLAN = textwrap.dedent("""\
+    [model]
+    name = "press"
+    variants = ["M1"]
+
+    [data]
+    source = "csv"
+    directory = "no_such_folder"
+    displacement_unit = "um"
+
+    [[sensors]]
+    name = "D_y"
+    sigma = 15.0
+    [[sensors]]
+    name = "F_x"
+    sigma = 5.0
+    [[sensors]]
+    name = "B0_y"
+    sigma = 4.0
+
+    [[parameters]]
+    name = "k5"
+    start = 530.0
+    lower = 1.0
+    upper = 1.0e5
+    [[parameters]]
+    name = "k7"
+    start = 470.0
+    lower = 1.0
+    upper = 1.0e5
+
+    [oed]
+    planned = true
+    criterion = "D"
+    kind = "gauss_newton"
+    candidates_range = [0.0, 1600.0, 9]
+    """)
+
+
+def _run(tmp_path, capsys, extra):
+    cfg = tmp_path / "plan.toml"
+    cfg.write_text(PLAN + extra)
+    code = main(["oed", str(cfg), "--out", str(tmp_path / "res"), "--json", "--quiet"])
+    out = capsys.readouterr()
+    return code, (json.loads(out.out) if code == 0 else None), out.err
+
+
+def test_planned_sensor_design_without_data_matches_the_library(tmp_path, capsys):
+    from models.press import press_model
+    from oed import select_sensors
+    code, obj, err = _run(tmp_path, capsys, 'mode = "sensors"\nn_sensors = 1\nn_series = 4\n')
+    assert code == 0, err
+    q = np.linspace(0, 1600, 9)[:, None]
+    from mudoe.units import convert
+    sigma = convert(np.array([15.0, 5.0, 4.0]), "um", "mm", difference=True)    # the study's one unit conversion
+    ref = select_sensors(press_model(), None, [530.0, 470.0], inputs=q, sigma=sigma,
+                         n_series=4, criterion="D", kind="gauss_newton", n_sensors=1)
+    assert obj["planned"] and obj["sensors"] == list(ref.sensors) and obj["proven_optimal"]
+    assert obj["value"] == pytest.approx(ref.value, rel=1e-12)
+    assert (tmp_path / "res" / "oed.json").is_file() and (tmp_path / "res" / "oed.txt").is_file()
+
+
+@pytest.mark.parametrize("mode", ["inputs", "both"])
+def test_planned_input_designs(tmp_path, capsys, mode):
+    code, obj, err = _run(tmp_path, capsys, f'mode = "{mode}"\nn_points = 2\n')
+    assert code == 0, err
+    assert obj["proven_optimal"] and obj["mode"] == mode
+    assert len(obj["pairs"]) == (2 if mode == "both" else 2 * 3)       # inputs: every sensor at 2 points
+    assert all(0.0 <= s <= 1600.0 for s in obj["set_points"])
+
+
+def test_costs_budget_and_max_sensors_reach_the_design(tmp_path, capsys):
+    code, obj, err = _run(tmp_path, capsys, 'mode = "sensors"\nmax_sensors = 2\ncosts = [1.0, 5.0, 1.0]\n'
+                                            'budget = 2.0\n')
+    assert code == 0, err
+    assert "F_x" not in obj["sensors"] and 1 <= len(obj["sensors"]) <= 2
+
+
+@pytest.mark.parametrize("extra, match", [
+    ('mode = "inputs"\n', "needs n_points"),
+    ('candidates = [1.0, 2.0]\n', "candidates or candidates_range, not both"),
+    ('budget = 3.0\n', "give both costs and budget"),
+    ('mode = "everything"\n', "mode"),
+])
+def test_bad_oed_keys_exit_2(tmp_path, capsys, extra, match):
+    code, _, err = _run(tmp_path, capsys, extra)
+    assert code == 2 and match in err
+
+
+def test_bad_candidates_range_exit_2(tmp_path, capsys):
+    cfg = tmp_path / "plan.toml"
+    cfg.write_text(PLAN.replace("candidates_range = [0.0, 1600.0, 9]", "candidates_range = [0.0, 1600.0, 2.5]"))
+    assert main(["oed", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    assert "candidates_range" in capsys.readouterr().err
+
+
+def test_discrimination_mode_is_reported_not_available(tmp_path, capsys):
+    code, _, err = _run(tmp_path, capsys, 'mode = "discrimination"\n')
+    assert code == 3 and "discrimination" in err
+
+
+def test_input_design_at_the_estimate_with_data(capsys, campaign_dirs):
+    cfg = campaign_dirs["root"] / "inputs.toml"
+    text = campaign_dirs["paper_cfg"].read_text()          # ends in the [oed] section
+    assert text.rstrip().endswith('variant = "M1"')
+    cfg.write_text(text + 'mode = "inputs"\nn_points = 2\ncandidates = [0.0, 400.0, 800.0, 1600.0]\n'
+                          'kind = "gauss_newton"\n')
+    assert main(["oed", str(cfg), "--out", str(campaign_dirs["root"] / "r"), "--json", "--quiet"]) == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert not obj["planned"] and len(obj["indices"]) == 2 and obj["proven_optimal"]
+
+
+def test_sensor_include_with_an_input_design_exit_2(tmp_path, capsys):
+    code, _, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\ninclude = ["D_y"]\n')
+    assert code == 2 and "include/exclude name sensors" in err
