@@ -1,0 +1,186 @@
+"""Benchmark (issue 15): cost and memory of ``identify`` against the number of data points.
+
+Two problems, each fitted once per size in a fresh subprocess (so the time is a cold fit:
+building the mapped NLP, Ipopt's solver and the model's evaluators included, and the peak
+memory is that fit's alone):
+
+* explicit: y = a (1 - exp(-b x)), 2 parameters, one sensor, sigma known (0.02),
+  x uniform in [0.05, 8], truth (a, b) = (2, 0.7), p0 = (1, 1);
+* implicit: two springs in series under a load F = q, the second one hardening,
+  states (u1, y) = (extension of spring 1, total extension):
+  E = (k1 u1 - F, k2 (y - u1) + k3 (y - u1)^3 - F), sensors u1 and y (sigma 0.002, 0.004),
+  F uniform in [0.1, 3], truth (k1, k2, k3) = (2, 1.5, 0.8), p0 = (1.5, 1, 0.5).
+
+Peer, in its own subprocess on the same data: scipy.optimize.least_squares (method "trf",
+xtol = ftol = gtol = 1e-12) with the exact Jacobian written in NumPy (for the implicit model:
+the states by vectorised Newton in NumPy and the Jacobian by the implicit function theorem,
+what a careful engineer writes by hand), plus the Gauss-Newton covariance (J^T J)^-1.
+Reported: the wall time of the fit (data generation excluded), the peak resident memory of the
+process (``ru_maxrss``) and its increase during the fit, the time and memory per point, the
+ratio mudoe / scipy, and the largest relative difference of the estimates.
+
+Run: ``python -m bench scale`` (sizes 1e2..1e6 explicit, 1e2..1e5 implicit); options
+``--quick`` (up to 1e5 explicit, 1e4 implicit), ``--max-explicit=N``, ``--max-implicit=N``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+SIGMA_EXPLICIT = 0.02
+SIGMA_IMPLICIT = np.array([0.002, 0.004])
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _explicit_data(n):
+    rng = np.random.default_rng(n)
+    x = rng.uniform(0.05, 8.0, n)
+    z = 2.0 * (1 - np.exp(-0.7 * x)) + SIGMA_EXPLICIT * rng.standard_normal(n)
+    return x, z
+
+
+def _cubic_u2(F, k2, k3):
+    """u2 solving k2 u2 + k3 u2^3 = F (vectorised Newton from F / k2, monotone: converges)."""
+    u = F / k2
+    for _ in range(100):
+        r = k2 * u + k3 * u ** 3 - F
+        du = r / (k2 + 3 * k3 * u ** 2)
+        u = u - du
+        if np.max(np.abs(du)) <= 1e-15 * (1 + np.max(np.abs(u))):
+            break
+    return u
+
+
+def _implicit_data(n):
+    rng = np.random.default_rng(n + 1)
+    F = rng.uniform(0.1, 3.0, n)
+    u1 = F / 2.0
+    y = u1 + _cubic_u2(F, 1.5, 0.8)
+    z = np.column_stack([u1, y]) + SIGMA_IMPLICIT * rng.standard_normal((n, 2))
+    return F, z
+
+
+def _run_mudoe(kind, n):
+    import casadi as ca
+    from identification import Measurements, identify
+    from models import Model
+    if kind == "explicit":
+        x, z = _explicit_data(n)
+        model = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+        data = Measurements(x, z.reshape(1, -1, 1), [SIGMA_EXPLICIT])
+        p0 = [1.0, 1.0]
+    else:
+        F, z = _implicit_data(n)
+
+        def E(y, p, q):
+            u2 = y[1] - y[0]
+            return ca.vertcat(p[0] * y[0] - q[0], p[1] * u2 + p[2] * u2 ** 3 - q[0])
+
+        model = Model(["k1", "k2", "k3"], ["F"], ["u1", "y"], n_y=2, E=E, h=lambda y, p, q: y)
+        data = Measurements(F, z.reshape(1, n, 2), SIGMA_IMPLICIT)
+        p0 = [1.5, 1.0, 0.5]
+    base = _rss_mb()
+    t = time.perf_counter()
+    est = identify(model, data, p0=p0)
+    wall = time.perf_counter() - t
+    return {"time": wall, "rss_base": base, "rss_peak": _rss_mb(), "p": est.p.tolist(),
+            "se": est.stderr.tolist(), "status": est.status, "iterations": est.iterations}
+
+
+def _run_scipy(kind, n):
+    from scipy.optimize import least_squares
+    if kind == "explicit":
+        x, z = _explicit_data(n)
+
+        def fun(p):
+            return (p[0] * (1 - np.exp(-p[1] * x)) - z) / SIGMA_EXPLICIT
+
+        def jac(p):
+            e = np.exp(-p[1] * x)
+            return np.column_stack([1 - e, p[0] * x * e]) / SIGMA_EXPLICIT
+
+        p0 = [1.0, 1.0]
+    else:
+        F, z = _implicit_data(n)
+        cache = {}
+
+        def states(p):
+            key = tuple(p)
+            if key not in cache:
+                cache.clear()
+                cache[key] = (F / p[0], _cubic_u2(F, p[1], p[2]))
+            return cache[key]
+
+        def fun(p):
+            u1, u2 = states(p)
+            return ((np.column_stack([u1, u1 + u2]) - z) / SIGMA_IMPLICIT).ravel()
+
+        def jac(p):
+            u1, u2 = states(p)
+            d = p[1] + 3 * p[2] * u2 ** 2
+            J = np.zeros((n, 2, 3))
+            J[:, 0, 0] = J[:, 1, 0] = -F / p[0] ** 2
+            J[:, 1, 1] = -u2 / d
+            J[:, 1, 2] = -u2 ** 3 / d
+            return (J / SIGMA_IMPLICIT[None, :, None]).reshape(2 * n, 3)
+
+        p0 = [1.5, 1.0, 0.5]
+    base = _rss_mb()
+    t = time.perf_counter()
+    res = least_squares(fun, p0, jac=jac, method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    cov = np.linalg.inv(res.jac.T @ res.jac)
+    wall = time.perf_counter() - t
+    return {"time": wall, "rss_base": base, "rss_peak": _rss_mb(), "p": res.x.tolist(),
+            "se": np.sqrt(np.diag(cov)).tolist(), "status": str(res.status), "iterations": int(res.nfev)}
+
+
+def _subprocess(who, kind, n):
+    cmd = [sys.executable, "-m", "bench.bench_scale", "--one", who, kind, str(n)]
+    out = subprocess.run(cmd, capture_output=True, text=True, check=False,
+                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "--one":
+        who, kind, n = argv[1], argv[2], int(argv[3])
+        print(json.dumps((_run_mudoe if who == "mudoe" else _run_scipy)(kind, n)))
+        return
+    quick = "--quick" in argv
+    opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
+    max_exp = int(float(opts.get("max-explicit", 1e5 if quick else 1e6)))
+    max_imp = int(float(opts.get("max-implicit", 1e4 if quick else 1e5)))
+    print(f"# bench scale  {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}  "
+          f"{platform.processor() or platform.machine()}  nproc {os.cpu_count()}  "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '-')}")
+    print("| model | points | mudoe s | scipy exact-J s | ratio | mudoe us/point | mudoe peak MB (+fit) "
+          "| bytes/point | scipy peak MB | max rel diff p |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for kind, top in (("explicit", max_exp), ("implicit", max_imp)):
+        n = 100
+        while n <= top:
+            m = _subprocess("mudoe", kind, n)
+            s = _subprocess("scipy", kind, n)
+            diff = float(np.max(np.abs(np.subtract(m["p"], s["p"])) / np.abs(s["p"])))
+            grow = m["rss_peak"] - m["rss_base"]
+            print(f"| {kind} | {n:.0e} | {m['time']:.3f} | {s['time']:.3f} | {m['time'] / s['time']:.2f} | "
+                  f"{1e6 * m['time'] / n:.2f} | {m['rss_peak']:.0f} (+{grow:.0f}) | {grow * 2 ** 20 / n:.0f} | "
+                  f"{s['rss_peak']:.0f} | {diff:.1e} |", flush=True)
+            n *= 10
+
+
+if __name__ == "__main__":
+    main()
