@@ -21,6 +21,10 @@ ratio mudoe / scipy, and the largest relative difference of the estimates.
 
 Run: ``python -m bench scale`` (sizes 1e2..1e6 explicit, 1e2..1e5 implicit); options
 ``--quick`` (up to 1e5 explicit, 1e4 implicit), ``--max-explicit=N``, ``--max-implicit=N``.
+
+``python -m bench scale --small [--rep=K]``: the small explicit problems instead (Rooney-Biegler,
+NIST Eckerle4 and MGH09 from both certified starts): per-fit time of a warm ``identify``
+against scipy least_squares with the exact Jacobian, medians of K repetitions (default 30).
 """
 from __future__ import annotations
 
@@ -153,11 +157,104 @@ def _subprocess(who, kind, n):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def _nist_module():
+    import importlib.util
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests", "identification",
+                        "nist.py")
+    spec = importlib.util.spec_from_file_location("nist_data", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["nist_data"] = mod              # dataclasses look their module up there
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _small_problems():
+    """(name, casadi h, numpy f, numpy jacobian, x, y, p0) of the small explicit problems."""
+    import casadi as ca
+    rb_x = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 10.0])
+    rb_y = np.array([8.3, 10.3, 19.0, 16.0, 15.6, 19.8])
+
+    def rb_f(b, x):
+        return b[0] * (1 - np.exp(-b[1] * x))
+
+    def rb_j(b, x):
+        e = np.exp(-b[1] * x)
+        return np.column_stack([1 - e, b[0] * x * e])
+
+    def ek_f(b, x):
+        return (b[0] / b[1]) * np.exp(-0.5 * ((x - b[2]) / b[1]) ** 2)
+
+    def ek_j(b, x):
+        u = (x - b[2]) / b[1]
+        e = np.exp(-0.5 * u ** 2)
+        return np.column_stack([e / b[1], -(b[0] / b[1] ** 2) * e + (b[0] / b[1]) * e * u ** 2 / b[1],
+                                (b[0] / b[1]) * e * u / b[1]])
+
+    def mgh_f(b, x):
+        return b[0] * (x ** 2 + x * b[1]) / (x ** 2 + x * b[2] + b[3])
+
+    def mgh_j(b, x):
+        num, den = x ** 2 + x * b[1], x ** 2 + x * b[2] + b[3]
+        return np.column_stack([num / den, b[0] * x / den, -b[0] * num * x / den ** 2, -b[0] * num / den ** 2])
+
+    nist = _nist_module()
+    out = [("Rooney-Biegler", lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])), rb_f, rb_j, rb_x, rb_y,
+            np.array([15.0, 0.5]))]
+    for name, f, j in (("Eckerle4", ek_f, ek_j), ("MGH09", mgh_f, mgh_j)):
+        d = nist.load(name)
+        fun = nist.MODELS[name]
+        for start in ("start2", "start1"):
+            out.append((f"{name} {start}", (lambda fn: lambda p, q: fn(p, q[0]))(fun), f, j, d.x, d.y,
+                        getattr(d, start)))
+    return out
+
+
+def small(rep: int = 30):
+    """Per-fit time of ``identify`` (warm: the model's functions built by a first fit) against
+    scipy least_squares with the exact NumPy Jacobian (trf, tolerances 1e-12, plus the
+    Gauss-Newton covariance), sigma unknown, medians of ``rep`` repetitions in one run."""
+    from scipy.optimize import least_squares
+    from identification import IdentificationError, Measurements, identify
+    from models import Model
+    print(f"# small explicit problems, median of {rep} fits each  "
+          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
+    print("| problem | n | mudoe ms (solver) | scipy exact-J ms | scipy / mudoe | max rel diff p |")
+    print("|---|---|---|---|---|---|")
+    for name, h, f, jac, x, y, p0 in _small_problems():
+        model = Model.explicit([f"b{i + 1}" for i in range(p0.size)], ["x"], ["y"], h=h)
+        data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
+        try:
+            est = identify(model, data, p0=p0.copy())
+        except IdentificationError as exc:
+            print(f"| {name} | {x.size} | failed: {exc} | | | |")
+            continue
+        t_m = []
+        for _ in range(rep):
+            t = time.perf_counter()
+            identify(model, data, p0=p0.copy())
+            t_m.append(time.perf_counter() - t)
+        t_s = []
+        for _ in range(rep):
+            t = time.perf_counter()
+            r = least_squares(lambda b: f(b, x) - y, p0, jac=lambda b: jac(b, x), method="trf",
+                              xtol=1e-12, ftol=1e-12, gtol=1e-12)
+            np.linalg.inv(r.jac.T @ r.jac) * (2 * r.cost / (x.size - p0.size))
+            t_s.append(time.perf_counter() - t)
+        tm, ts = float(np.median(t_m)), float(np.median(t_s))
+        diff = float(np.max(np.abs(est.p - r.x) / np.abs(r.x)))
+        print(f"| {name} | {x.size} | {1e3 * tm:.2f} ({est.extra.get('solver')}) | {1e3 * ts:.2f} | "
+              f"{ts / tm:.2f} | {diff:.1e} |", flush=True)
+
+
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--one":
         who, kind, n = argv[1], argv[2], int(argv[3])
         print(json.dumps((_run_mudoe if who == "mudoe" else _run_scipy)(kind, n)))
+        return
+    if "--small" in argv:
+        opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
+        small(int(opts.get("rep", 30)))
         return
     quick = "--quick" in argv
     opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)

@@ -60,6 +60,9 @@ class IdentifySettings:
     refine_decrement : float  no refinement step is taken once the Newton decrement g^T H^-1 g
                               (chi^2 units) is below this (1e-18: p within 1e-9 standard errors
                               of the optimum; Ipopt's solutions are typically at 1e-20)
+    explicit_newton : bool    explicit models (no state) are first solved by exact reduced-space
+                              Gauss-Newton/Newton steps (:func:`_solve_explicit_newton`); Ipopt is
+                              the fallback and solves the problem when a bound is active
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -71,6 +74,7 @@ class IdentifySettings:
     predictor_step: float = 0.25
     lazy_bounds: bool = True
     refine_decrement: float = 1e-18
+    explicit_newton: bool = True
 
     def __post_init__(self):
         if not isinstance(self.ipopt, IpoptSettings):
@@ -631,6 +635,105 @@ class _FullSpaceSolution:
     at_bound: np.ndarray
 
 
+#: at most this many Gauss-Newton/Newton iterations of :func:`_solve_explicit_newton`
+_NEWTON_MAX_ITER = 200
+
+
+def _solve_explicit_newton(st: _Start, settings: IdentifySettings) -> IpoptResult | None:
+    r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
+
+    Far from the optimum Gauss-Newton steps d = -F^{-1} g (F = J^T Omega J); once a step
+    changes Phi by less than 10 % of the Gauss-Newton decrement's prediction, or that decrement
+    is below 1e-4 (chi^2 units), exact Newton steps d = -(F + S)^{-1} g with the second-order
+    term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
+    (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
+    below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
+    scales.  Every evaluation is one mapped call over the data (:func:`models.sensitivity.sensitivities`),
+    so an iteration costs O(n) with a small constant and no NLP is built.
+
+    Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
+    acceptance as Ipopt's: a stationary point at the tolerance), or None when the iteration
+    fails (singular F, failed line search, no convergence): the caller then solves with Ipopt.
+    The result may lie outside the parameter bounds (the caller checks).
+    """
+    problem, s_p = st.problem, st.s_p
+    t0 = time.perf_counter()
+    try:
+        point = problem.evaluate(st.p0)
+    except StateSolveError:
+        return None
+    newton = False
+    prev_dec = None
+    for it in range(1, _NEWTON_MAX_ITER + 1):
+        if not np.isfinite(point.objective):
+            return None
+        F = problem.information(point)
+        M = F
+        if newton:
+            S = point.sens.hessians(point.lam[None])[0]
+            M = F + S
+        try:
+            L = np.linalg.cholesky(M * np.outer(s_p, s_p))
+        except np.linalg.LinAlgError:
+            if not newton:
+                return None
+            try:
+                L = np.linalg.cholesky(F * np.outer(s_p, s_p))
+            except np.linalg.LinAlgError:
+                return None
+        v = np.linalg.solve(L, point.gradient * s_p)
+        dec = float(v @ v)
+        # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
+        # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
+        unit = 2 * point.objective / (st.n - st.model.n_p) if st.data.sigma is None else 1.0
+        if newton:
+            # the decrement that round-off in the gradient's sum over the data alone produces
+            g_err = 16 * np.finfo(float).eps * np.einsum("jk,jkp->p", np.abs(point.lam), np.abs(point.sens.G)) * s_p
+            u = np.linalg.solve(L, g_err)
+            if dec <= max(settings.refine_decrement * unit, float(u @ u)):
+                break
+            if dec <= settings.decrement_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
+                break                              # no more progress at round-off, within 1e-5 std errors
+        prev_dec = dec if newton else None
+        d = -s_p * np.linalg.solve(L.T, v)
+        if np.max(np.abs(d / s_p)) < 1e-13:
+            break
+        step, new = 1.0, None
+        if newton and dec <= settings.decrement_tol * unit:
+            try:                                   # quadratic region: the objective cannot resolve
+                new = problem.evaluate(point.p + d)   # the decrease any more; take the full step
+            except StateSolveError:
+                new = None
+            if new is not None and not np.isfinite(new.objective):
+                new = None
+        for _ in range(40 if new is None else 0):
+            try:
+                trial = problem.evaluate(point.p + step * d)
+            except StateSolveError:
+                trial = None
+            if trial is not None and trial.objective <= point.objective - 1e-4 * step * dec:
+                new = trial
+                break
+            step *= 0.5
+        if new is None:
+            if newton and dec <= settings.decrement_tol * unit:
+                break                              # at round-off: the decrement certifies the optimum
+            if not newton:
+                newton = True                      # Gauss-Newton cannot descend further: try Newton
+                continue
+            return None
+        gain = point.objective - new.objective
+        if not newton and (dec < 1e-4 * unit or gain < 0.05 * dec):
+            newton = True
+        point = new
+    else:
+        return None
+    return IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
+                       message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
+                               f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
+                       wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
+
+
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
@@ -656,7 +759,17 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
 
     res = None
     passes = 1
-    if settings.lazy_bounds and (np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))):
+    bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
+    if not model.n_y and settings.explicit_newton:
+        r0 = _solve_explicit_newton(st, settings)
+        if r0 is not None:
+            p1 = r0.x * s_p
+            margin = 1e-6 * s_p
+            if np.all(p1 > model.lower + margin) and np.all(p1 < model.upper - margin):
+                res = r0
+            else:
+                passes = 2                      # outside the bounds: solve the bounded problem
+    if res is None and passes == 1 and settings.lazy_bounds and bounded:
         free_p = np.full(model.n_p, np.inf)
         try:
             r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]))
@@ -737,8 +850,8 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         status=res.status, message=res.message, iterations=res.iterations,
         solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
-        extra={"newton_decrement": ref.decrement / factor, "ipopt_iterations": res.iterations,
-               "ipopt_passes": sol.passes})
+        extra={"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
+               "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes})
 
 
 #: an estimate farther than this many parameter scales from zero is a failed fit
