@@ -15,7 +15,8 @@ Peer, in its own subprocess on the same data: scipy.optimize.least_squares (meth
 xtol = ftol = gtol = 1e-12) with the exact Jacobian written in NumPy (for the implicit model:
 the states by vectorised Newton in NumPy and the Jacobian by the implicit function theorem,
 what a careful engineer writes by hand), plus the Gauss-Newton covariance (J^T J)^-1.
-Reported: the wall time of the fit (data generation excluded), the peak resident memory of the
+Reported: the wall and CPU time of the fit (data generation excluded; on a shared machine the
+CPU time is the steadier number), the peak resident memory of the
 process (``ru_maxrss``) and its increase during the fit, the time and memory per point, the
 ratio mudoe / scipy, and the largest relative difference of the estimates.
 
@@ -44,6 +45,11 @@ SIGMA_IMPLICIT = np.array([0.002, 0.004])
 
 def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 def _explicit_data(n):
@@ -94,10 +100,10 @@ def _run_mudoe(kind, n):
         data = Measurements(F, z.reshape(1, n, 2), SIGMA_IMPLICIT)
         p0 = [1.5, 1.0, 0.5]
     base = _rss_mb()
-    t = time.perf_counter()
+    t, c = time.perf_counter(), _cpu()
     est = identify(model, data, p0=p0)
-    wall = time.perf_counter() - t
-    return {"time": wall, "rss_base": base, "rss_peak": _rss_mb(), "p": est.p.tolist(),
+    wall, cpu = time.perf_counter() - t, _cpu() - c
+    return {"time": wall, "cpu": cpu, "rss_base": base, "rss_peak": _rss_mb(), "p": est.p.tolist(),
             "se": est.stderr.tolist(), "status": est.status, "iterations": est.iterations}
 
 
@@ -140,11 +146,11 @@ def _run_scipy(kind, n):
 
         p0 = [1.5, 1.0, 0.5]
     base = _rss_mb()
-    t = time.perf_counter()
+    t, c = time.perf_counter(), _cpu()
     res = least_squares(fun, p0, jac=jac, method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
     cov = np.linalg.inv(res.jac.T @ res.jac)
-    wall = time.perf_counter() - t
-    return {"time": wall, "rss_base": base, "rss_peak": _rss_mb(), "p": res.x.tolist(),
+    wall, cpu = time.perf_counter() - t, _cpu() - c
+    return {"time": wall, "cpu": cpu, "rss_base": base, "rss_peak": _rss_mb(), "p": res.x.tolist(),
             "se": np.sqrt(np.diag(cov)).tolist(), "status": str(res.status), "iterations": int(res.nfev)}
 
 
@@ -263,8 +269,8 @@ def main(argv=None):
     print(f"# bench scale  {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}  "
           f"{platform.processor() or platform.machine()}  nproc {os.cpu_count()}  "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '-')}")
-    print("| model | points | mudoe s | scipy exact-J s | ratio | mudoe us/point | mudoe peak MB (+fit) "
-          "| bytes/point | scipy peak MB | max rel diff p |")
+    print("| model | points | mudoe s (CPU s) | scipy exact-J s (CPU s) | ratio wall (CPU) | mudoe CPU us/point "
+          "| mudoe peak MB (+fit) | bytes/point | scipy peak MB | max rel diff p |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for kind, top in (("explicit", max_exp), ("implicit", max_imp)):
         n = 100
@@ -273,9 +279,10 @@ def main(argv=None):
             s = _subprocess("scipy", kind, n)
             diff = float(np.max(np.abs(np.subtract(m["p"], s["p"])) / np.abs(s["p"])))
             grow = m["rss_peak"] - m["rss_base"]
-            print(f"| {kind} | {n:.0e} | {m['time']:.3f} | {s['time']:.3f} | {m['time'] / s['time']:.2f} | "
-                  f"{1e6 * m['time'] / n:.2f} | {m['rss_peak']:.0f} (+{grow:.0f}) | {grow * 2 ** 20 / n:.0f} | "
-                  f"{s['rss_peak']:.0f} | {diff:.1e} |", flush=True)
+            print(f"| {kind} | {n:.0e} | {m['time']:.3f} ({m['cpu']:.3f}) | {s['time']:.3f} ({s['cpu']:.3f}) | "
+                  f"{m['time'] / s['time']:.2f} ({m['cpu'] / max(s['cpu'], 1e-3):.2f}) | {1e6 * m['cpu'] / n:.2f} | "
+                  f"{m['rss_peak']:.0f} (+{grow:.0f}) | {grow * 2 ** 20 / n:.0f} | {s['rss_peak']:.0f} | {diff:.1e} |",
+                  flush=True)
             n *= 10
 
 

@@ -30,7 +30,7 @@ from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
 from .measurements import Measurements
-from .refinement import ReducedProblem, Refinement, gauss_newton_information, refine
+from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
@@ -626,20 +626,22 @@ def _start(model, data, p0, weights, Y0) -> _Start:
 class _FullSpaceSolution:
     """Ipopt's solution of the full-space NLP: its result, the number of passes (1: the
     unbounded pass was kept, 2: the bounded problem was solved), p clipped to the bounds, the
-    states and the parameters found at a bound."""
+    states, the parameters found at a bound and, when the reduced-space Newton solved it, its
+    reduced point at p."""
 
     result: IpoptResult
     passes: int
     p: np.ndarray
     states: np.ndarray | None
     at_bound: np.ndarray
+    point: ReducedPoint | None = None
 
 
 #: at most this many Gauss-Newton/Newton iterations of :func:`_solve_explicit_newton`
 _NEWTON_MAX_ITER = 200
 
 
-def _solve_explicit_newton(st: _Start, settings: IdentifySettings) -> IpoptResult | None:
+def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
 
     Far from the optimum Gauss-Newton steps d = -F^{-1} g (F = J^T Omega J); once a step
@@ -652,7 +654,7 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings) -> IpoptResul
     so an iteration costs O(n) with a small constant and no NLP is built.
 
     Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
-    acceptance as Ipopt's: a stationary point at the tolerance), or None when the iteration
+    acceptance as Ipopt's: a stationary point at the tolerance) with its reduced point, or None when the iteration
     fails (singular F, failed line search, no convergence): the caller then solves with Ipopt.
     The result may lie outside the parameter bounds (the caller checks).
     """
@@ -728,15 +730,20 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings) -> IpoptResul
         point = new
     else:
         return None
-    return IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
-                       message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
-                               f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
-                       wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
+    res = IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
+                      message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
+                              f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
+                      wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
+    return res, point
 
 
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
+    An explicit model is first solved by exact reduced-space Newton steps
+    (:func:`_solve_explicit_newton`, with ``explicit_newton``); that solution is kept when it lies
+    strictly inside the bounds (no NLP is built), else the bounded problem is solved by Ipopt
+    (pass 2), and Ipopt solves it as below when the Newton iteration fails.
     With ``lazy_bounds``, pass 1 solves without the parameter bounds: a pure equality-
     constrained problem, which Ipopt solves by Newton steps without a barrier (3-4 instead of
     6-8 iterations for the press).  Its solution is kept only when it lies strictly inside the
@@ -744,6 +751,16 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
     """
     model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
+    newton_passes = None
+    if not model.n_y and settings.explicit_newton:
+        got = _solve_explicit_newton(st, settings)
+        if got is not None:
+            r0, point = got
+            margin = 1e-6 * s_p
+            lo, up = model.lower, model.upper
+            if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
+                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point)
+            newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
@@ -758,18 +775,9 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
                          cache=model.cache)
 
     res = None
-    passes = 1
+    passes = 1 if newton_passes is None else newton_passes
     bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
-    if not model.n_y and settings.explicit_newton:
-        r0 = _solve_explicit_newton(st, settings)
-        if r0 is not None:
-            p1 = r0.x * s_p
-            margin = 1e-6 * s_p
-            if np.all(p1 > model.lower + margin) and np.all(p1 < model.upper - margin):
-                res = r0
-            else:
-                passes = 2                      # outside the bounds: solve the bounded problem
-    if res is None and passes == 1 and settings.lazy_bounds and bounded:
+    if passes == 1 and settings.lazy_bounds and bounded:
         free_p = np.full(model.n_p, np.inf)
         try:
             r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]))
@@ -800,7 +808,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
     """
     res = sol.result
     try:
-        point = st.problem.evaluate(sol.p, sol.states)
+        point = sol.point if sol.point is not None else st.problem.evaluate(sol.p, sol.states)
     except StateSolveError as exc:
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
