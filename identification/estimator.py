@@ -637,8 +637,10 @@ class _FullSpaceSolution:
     point: ReducedPoint | None = None
 
 
-#: at most this many Gauss-Newton/Newton iterations of :func:`_solve_explicit_newton`
-_NEWTON_MAX_ITER = 200
+#: at most this many Gauss-Newton/Newton iterations and objective evaluations of
+#: :func:`_solve_explicit_newton` (then Ipopt takes over: a far start should not cost twice)
+_NEWTON_MAX_ITER = 60
+_NEWTON_MAX_EVALS = 50
 
 
 def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
@@ -650,8 +652,9 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
     (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
     below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
-    scales.  Every evaluation is one mapped call over the data (:func:`models.sensitivity.sensitivities`),
-    so an iteration costs O(n) with a small constant and no NLP is built.
+    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one mapped call
+    over the data (:func:`models.sensitivity.sensitivities`), so an iteration costs O(n) with a
+    small constant and no NLP is built.
 
     Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
     acceptance as Ipopt's: a stationary point at the tolerance) with its reduced point, or None when the iteration
@@ -666,6 +669,7 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
         return None
     newton = False
     prev_dec = None
+    evals = 1
     for it in range(1, _NEWTON_MAX_ITER + 1):
         if not np.isfinite(point.objective):
             return None
@@ -709,6 +713,9 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
             if new is not None and not np.isfinite(new.objective):
                 new = None
         for _ in range(40 if new is None else 0):
+            evals += 1
+            if evals > _NEWTON_MAX_EVALS:
+                return None
             try:
                 trial = problem.evaluate(point.p + step * d)
             except StateSolveError:

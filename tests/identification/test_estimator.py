@@ -449,7 +449,8 @@ def test_explicit_nlp_is_over_p_only_and_its_hessian_equals_casadi_ad():
     mapped (reduced) stage Hessian equals CasADi's AD of the mapped objective."""
     import identification.estimator as est_mod
     model = Model.explicit(["a", "b", "c"], ["x", "u"], ["y1", "y2"],
-                           h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]) + p[2] * q[1], p[1] ** 2 * ca.sin(q[0])))
+                           h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]) + p[2] * q[1],
+                                                     p[1] ** 2 * ca.sin(q[0])))
     rng = np.random.default_rng(2)
     inputs = rng.uniform(0.1, 2.0, (37, 2))
     nlp = est_mod._build_nlp(model, inputs, rng.uniform(0.5, 2, 3), np.ones(0), np.ones(0))
@@ -512,3 +513,21 @@ def test_estimate_at_absurd_values_is_a_failed_fit():
     good = Measurements(x, (1.0 + 1 / (1 + 2.0 * x) + 0.001 * np.sin(7 * x)).reshape(1, -1, 1), [0.01])
     est = identify(model, good, p0=[1.0, 1.0])
     assert np.all(np.isfinite(est.stderr)) and abs(est.p[1] - 2.0) < 0.1
+
+
+def test_explicit_model_solved_by_reduced_newton_equals_the_ipopt_path():
+    """The reduced-space Newton path of explicit models gives Ipopt's estimate and covariance;
+    an active bound sends it to the bounded Ipopt solve (pass 2)."""
+    x = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 10.0])
+    y = np.array([8.3, 10.3, 19.0, 16.0, 15.6, 19.8])                  # Rooney-Biegler
+    model = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
+    newton = identify(model, data, p0=[15.0, 0.5])
+    ipopt = identify(model, data, p0=[15.0, 0.5], settings=IdentifySettings(explicit_newton=False))
+    assert newton.extra["solver"] == "reduced Newton" and ipopt.extra["solver"] == "ipopt"
+    assert newton.success and newton.extra["newton_decrement"] < 1e-18
+    np.testing.assert_allclose(newton.p, ipopt.p, rtol=1e-10)
+    np.testing.assert_allclose(newton.cov, ipopt.cov, rtol=1e-8)
+    bounded, bdata = _line_with_bounded_slope()
+    est = identify(bounded, bdata, p0=[0.5, 0.0])
+    assert est.extra["solver"] == "ipopt" and est.extra["ipopt_passes"] == 2 and est.p[0] <= 1.0
