@@ -30,7 +30,7 @@ from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
 from .measurements import Measurements
-from .refinement import ReducedProblem, Refinement, gauss_newton_information, refine
+from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
@@ -60,6 +60,9 @@ class IdentifySettings:
     refine_decrement : float  no refinement step is taken once the Newton decrement g^T H^-1 g
                               (chi^2 units) is below this (1e-18: p within 1e-9 standard errors
                               of the optimum; Ipopt's solutions are typically at 1e-20)
+    explicit_newton : bool    explicit models (no state) are first solved by exact reduced-space
+                              Gauss-Newton/Newton steps (:func:`_solve_explicit_newton`); Ipopt is
+                              the fallback and solves the problem when a bound is active
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -71,6 +74,7 @@ class IdentifySettings:
     predictor_step: float = 0.25
     lazy_bounds: bool = True
     refine_decrement: float = 1e-18
+    explicit_newton: bool = True
 
     def __post_init__(self):
         if not isinstance(self.ipopt, IpoptSettings):
@@ -287,11 +291,14 @@ def _stage_functions(model):
     data set, input set and scaling of the model:
 
     * ``stage``: (e ⊙ E(s_y ⊙ ỹ, s_p ⊙ p̃, q),  f = 1/2 sum_k c_k (h_k - zbar_k)^2)
-    * ``jac``:   (diag(e) E_p diag(s_p), diag(e) E_y diag(s_y))
-    * ``hess``:  D [s_f J^T diag(c) J + lag_hess(s_f r, e ⊙ l_g)] D in the order (p, y)
+    * ``jac``:   ((diag(e) E_p diag(s_p))^T, diag(e) E_y diag(s_y))
+    * ``hess``:  the blocks (H_pp, H_py, H_yy) of
+      D [s_f J^T diag(c) J + lag_hess(s_f r, e ⊙ l_g)] D in the order (p, y)
 
-    all from the model's cached ``sens`` and ``lag_hess`` (no further symbolic derivatives).
-    Returns a dict of Functions, kept in ``model.cache``.
+    for models stated in SX from the model's cached ``sens`` and ``lag_hess`` (no further
+    symbolic derivatives); for models stated in MX the stage Hessian is ``casadi.hessian`` of
+    the stage Lagrangian.  Explicit models (no state) get ``stage`` and ``hess`` with empty
+    state arguments and no ``jac``.  Returns a dict of Functions, kept in ``model.cache``.
     """
     num = numerics(model)
     compiled = num.jit_active()
@@ -299,22 +306,29 @@ def _stage_functions(model):
     if got is not None:
         return got
     n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
-    y, p, q = ca.SX.sym("y", n_y), ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
-    zb, c = ca.SX.sym("zbar", n_S), ca.SX.sym("c", n_S)
-    sy, sp, e = ca.SX.sym("s_y", n_y), ca.SX.sym("s_p", n_p), ca.SX.sym("e", n_y)
-    sf, lg = ca.SX.sym("sigma_f"), ca.SX.sym("lam_g", n_y)
+    S = ca.SX if model.symbolic == "SX" else ca.MX
+    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
+    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
+    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    sf, lg = S.sym("sigma_f"), S.sym("lam_g", n_y)
     y_un, p_un = y * sy, p * sp
-    h, Ey, Ep, hy, hp = num.sens(y_un, p_un, q)
-    E = model.E_fun(y_un, p_un, q) * e
-    r = c * (h - zb)
-    f = 0.5 * ca.dot(r, h - zb)
-    Jp = _scale_nz(ca.SX(Ep), e, sp)
-    Jy = _scale_nz(ca.SX(Ey), e, sy)
-    H = _stage_hessian(model, y, p, q, zb, c, sf, lg, sp, sy, e, terms=(h, hy, hp))
     base = [y, p, q, zb, c, sy, sp, e]
+    if model.symbolic == "SX":
+        h, Ey, Ep, hy, hp = num.sens(y_un, p_un, q)
+        E = model.E_fun(y_un, p_un, q) * e
+        f = 0.5 * ca.dot(c * (h - zb), h - zb)
+        H = _stage_hessian(model, y, p, q, zb, c, sf, lg, sp, sy, e, terms=(h, hy, hp))
+        Jp, Jy = _scale_nz(ca.SX(Ep), e, sp), _scale_nz(ca.SX(Ey), e, sy)
+    else:
+        h = model.h_fun(y_un, p_un, q)
+        E = model.E_fun(y_un, p_un, q) * e
+        f = 0.5 * ca.sum1(c * (h - zb) ** 2)
+        H = ca.hessian(sf * f + (ca.dot(lg, E) if n_y else 0), ca.vertcat(p, y))[0]
+        Jp, Jy = ca.jacobian(E, p), ca.jacobian(E, y)
     fns = {"stage": ca.Function("nlp_stage", base, [E, f]),
-           "jac": ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp, Jy]),
-           "hess": ca.Function("nlp_stage_hess", base + [sf, lg], [H])}
+           "hess": ca.Function("nlp_stage_hess", base + [sf, lg], [H[:n_p, :n_p], H[:n_p, n_p:], H[n_p:, n_p:]])}
+    if n_y:
+        fns["jac"] = ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp.T, Jy])
     fns = {k: num.compiled(f"nlp_stage_{k}", fn) for k, fn in fns.items()}
     return model.cache.put("identify.nlp_stage", compiled, fns)
 
@@ -323,129 +337,128 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
     """The scaled full-space problem as CasADi expressions and derivative Functions.
 
     The data enter as NLP parameters (zbar, c / sigma^2 per input and sensor) so that one
-    compiled solver serves many data sets with the same inputs and scaling.  Models with a
-    state stated in SX get the constraint Jacobian and Lagrangian Hessian assembled for Ipopt:
-    small (dense) ones from the per-model stage functions of :func:`_stage_functions`
-    (:func:`_build_nlp_staged`), large ones from the model's own Functions
-    (:func:`_build_nlp_glued`).  Explicit models and models stated in MX build the stage
-    symbolically here.
+    compiled solver serves many data sets with the same inputs and scaling.  Every term is a
+    per-model stage Function mapped over the inputs (the inputs are the columns), with the sums
+    over inputs done by the map's reduction, so building the NLP costs a few MX nodes whatever
+    the number of inputs:
+
+    * explicit models (no state): the NLP is over p only (:func:`_build_nlp_explicit`);
+    * small (dense) states stated in SX or MX: :func:`_build_nlp_staged`;
+    * large (sparse) states stated in SX: :func:`_build_nlp_glued`, from the model's own
+      cached Functions.
     """
-    if model.n_y and model.symbolic == "SX":
-        if numerics(model).dense:
-            return _build_nlp_staged(model, inputs, s_p, s_y, e_scale)
+    if not model.n_y:
+        return _build_nlp_explicit(model, inputs, s_p)
+    if model.symbolic == "SX" and not numerics(model).dense:
         return _build_nlp_glued(model, inputs, s_p, s_y, e_scale)
-    return _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale)
+    return _build_nlp_staged(model, inputs, s_p, s_y, e_scale)
 
 
-def _build_nlp_symbolic(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
-    """:func:`_build_nlp` for explicit models and models stated in MX: one symbolic stage,
-    mapped over the inputs, with the stage Hessian assembled by :func:`_assemble_kkt`."""
-    n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
-    y = ca.SX.sym("y", n_y)
-    p = ca.SX.sym("p", n_p)
-    q = ca.SX.sym("q", model.n_q_dim)
-    zb = ca.SX.sym("zbar", n_S)
-    c = ca.SX.sym("c", n_S)
-    y_un, p_un = y * ca.DM(s_y), p * ca.DM(s_p)          # scaling inside the stage: y, p are scaled here
-    h = model.h_fun(y_un, p_un, q)
-    stage_f = 0.5 * ca.sum1(c * (h - zb) ** 2)
-    stage_E = model.E_fun(y_un, p_un, q) * ca.DM(e_scale) if n_y else ca.SX(0, 1)
-    stage = ca.Function("stage", [y, p, q, zb, c], [stage_E, stage_f])
-    mapped = stage.map(n_q)
-    pt = ca.MX.sym("p_scaled", n_p)
-    yt = ca.MX.sym("y_scaled", n_y, n_q)
-    Zb = ca.MX.sym("zbar", n_S, n_q)
-    Cw = ca.MX.sym("c", n_S, n_q)
+#: explicit NLPs with at most this many inputs are expanded to SX by nlpsol (fast callbacks,
+#: a set-up that grows with the inputs); larger ones keep the mapped MX graph (flat set-up)
+_EXPAND_EXPLICIT_MAX = 2000
+
+
+def _symbols(model, n_q):
+    """MX symbols of the NLP: scaled p̃ (n_p), scaled states ỹ (n_y, n_q), zbar and c (n_S, n_q),
+    the multipliers lam_f and lam_g (n_y n_q)."""
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    return (ca.MX.sym("p_scaled", n_p), ca.MX.sym("y_scaled", n_y, n_q), ca.MX.sym("zbar", n_S, n_q),
+            ca.MX.sym("c", n_S, n_q), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_y * n_q))
+
+
+def _build_nlp_explicit(model, inputs, s_p) -> NlpProblem:
+    r""":func:`_build_nlp` for an explicit model: min over p̃ of
+    f = sum_j 1/2 sum_k c_jk (h_k(s_p ⊙ p̃, q_j) - zbar_jk)^2, no constraints, no states.
+
+    f and the Hessian lam_f sum_j ∇²f_j are one stage Function each, mapped over the inputs
+    with the sum over j as the map's reduction.
+    """
+    fns = _stage_functions(model)
+    n_q, n_p = inputs.shape[0], model.n_p
+    pt, _, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
     Q = ca.DM(inputs.T)
-    E_all, f_all = mapped(yt if n_y else ca.MX(0, n_q), pt, Q, Zb, Cw)
-    x = ca.vertcat(pt, ca.vec(yt))
-    g = ca.vec(E_all) if n_y else ca.MX(0, 1)
+    e0 = ca.MX(0, 1)
+    scal = (e0, ca.DM(s_p), e0)
     par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
-
-    # Hessian of the Lagrangian, assembled from one symbolic stage Hessian: the stages couple
-    # only through p, so H = [[sum_j H_pp^j, H_py^1 ... H_py^nq], [., blockdiag(H_yy^j)]].
-    # Building it per stage costs one stage Hessian instead of CasADi's global colouring.
-    sf = ca.SX.sym("sigma_f")
-    lg = ca.SX.sym("lam_g", n_y)
-    H_stage = ca.Function("H_stage", [y, p, q, zb, c, sf, lg],
-                          [_stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f, stage_E)]
-                          ).map(n_q)
-    lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", n_y * n_q)
-    H_all = H_stage(yt if n_y else ca.MX(0, n_q), pt, Q, Zb, Cw, lam_f,
-                    ca.reshape(lam_g, n_y, n_q) if n_y else ca.MX(0, n_q))
-    nv = n_p + n_y
-    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]                 # order (p, y)
-    H_stages = [(b[:n_p, :n_p], b[:n_p, n_p:], b[n_p:, n_p:]) for b in blocks]
-    # the constraint Jacobian is left to CasADi (MX models and explicit models only come here)
-    _, hess_lag = _assemble_kkt(x, par, g, None, H_stages, lam_f, lam_g, n_p, n_y)
-    return NlpProblem(x, ca.sum2(f_all), g, par, hess_lag=hess_lag)
+    _, f = fns["stage"].map("nlp_stage_sum", "serial", n_q, [0, 1, 5, 6, 7], [1])(
+        e0, pt, Q, Zb, Cw, *scal)
+    H_pp = fns["hess"].map("nlp_hess_sum", "serial", n_q, [0, 1, 5, 6, 7, 8, 9], [0, 1, 2])(
+        e0, pt, Q, Zb, Cw, *scal, lam_f, e0)[0]
+    hess_lag = ca.Function("nlp_hess_l", [pt, par, lam_f, lam_g], [ca.triu(H_pp)],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    return NlpProblem(pt, f, ca.MX(0, 1), par, hess_lag=hess_lag, compiled=numerics(model).jit_active(),
+                      expand=n_q <= _EXPAND_EXPLICIT_MAX and not numerics(model).jit_active())
 
 
-def _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y):
+def _blockdiag(blocks_h, n_q, block_sparsity):
+    """blockdiag(B_1, .., B_nq) from horzcat(B_1, .., B_nq) when all blocks share one sparsity.
+
+    Column-major, column j n + c of both matrices holds the nonzeros of column c of B_j in
+    the same order, so the block diagonal is the same nonzero vector with another sparsity
+    (one ``sparsity_cast``, no per-block slicing).
+    """
+    return ca.sparsity_cast(blocks_h, ca.kron(ca.Sparsity.diag(n_q), block_sparsity))
+
+
+def _assemble_kkt(x, par, g, Jp_t, Jy_h, H_pp, H_py, H_yy_h, lam_f, lam_g, n_p, n_y, n_q, jac_sp, hyy_sp):
     r"""Constraint Jacobian and upper-triangular Lagrangian Hessian Functions of the full-space NLP
-    from per-input blocks (the inputs couple only through p).
+    from the mapped per-input blocks (the inputs couple only through p).
 
-    ``J_stages``: per input j, (dg_j/dp̃, dg_j/dỹ_j), or None (no Jacobian Function is built);
-    ``H_stages``: per input j, (H_pp^j, H_py^j, H_yy^j).  With x = (p̃, ỹ_1, .., ỹ_nq):
+    With x = (p̃, ỹ_1, .., ỹ_nq), ``Jp_t`` = [J_p^1{}^T .. J_p^{n_q}{}^T] (n_p, n_q n_y) or None (no
+    Jacobian Function is built), ``Jy_h`` = [J_y^1 .. J_y^{n_q}], ``H_pp`` = sum_j H_pp^j,
+    ``H_py`` = [H_py^1 .. H_py^{n_q}], ``H_yy_h`` = [H_yy^1 .. H_yy^{n_q}] and ``jac_sp``, ``hyy_sp``
+    the sparsities of one block J_y^j and H_yy^j:
 
     .. math::  J = \begin{bmatrix} J_p^1 & J_y^1 & & \\ \vdots & & \ddots & \\ J_p^{n_q} & & & J_y^{n_q}
                \end{bmatrix},\qquad
                \mathrm{triu}\,H = \begin{bmatrix} \sum_j H_{pp}^j & H_{py}^1 & \cdots & H_{py}^{n_q} \\
                & H_{yy}^1 & & \\ & & \ddots & \\ & & & H_{yy}^{n_q} \end{bmatrix}.
     """
-    n_q = len(H_stages)
     jac_g = None
-    if J_stages is not None:
-        rows = [ca.horzcat(Jp, ca.MX(n_y, j * n_y), Jy, ca.MX(n_y, (n_q - 1 - j) * n_y))
-                for j, (Jp, Jy) in enumerate(J_stages)]
-        jac_g = ca.Function("nlp_jac_g", [x, par], [g, ca.vertcat(*rows)], ["x", "p"], ["g", "jac_g_x"])
-    H_pp = H_stages[0][0]
-    for b in H_stages[1:]:
-        H_pp = H_pp + b[0]
-    hrows = [ca.horzcat(H_pp, *[b[1] for b in H_stages])]
-    if n_y:
-        for j, b in enumerate(H_stages):
-            hrows.append(ca.horzcat(ca.MX(n_y, n_p + j * n_y), b[2], ca.MX(n_y, (n_q - 1 - j) * n_y)))
-    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [ca.triu(ca.vertcat(*hrows))],
+    if Jp_t is not None:
+        J = ca.horzcat(Jp_t.T, _blockdiag(Jy_h, n_q, jac_sp))
+        jac_g = ca.Function("nlp_jac_g", [x, par], [g, J], ["x", "p"], ["g", "jac_g_x"])
+    H = ca.vertcat(ca.horzcat(ca.triu(H_pp), H_py),
+                   ca.horzcat(ca.MX(n_y * n_q, n_p), ca.triu(_blockdiag(H_yy_h, n_q, hyy_sp))))
+    hess_lag = ca.Function("nlp_hess_l", [x, par, lam_f, lam_g], [H],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
     return jac_g, hess_lag
 
 
 def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
-    """:func:`_build_nlp` from the per-model stage functions (see :func:`_stage_functions`)."""
+    """:func:`_build_nlp` from the per-model stage functions (see :func:`_stage_functions`),
+    mapped over the inputs; the Jacobian and Hessian blocks are assembled by :func:`_assemble_kkt`
+    (for models stated in MX the constraint Jacobian is left to CasADi's AD)."""
     fns = _stage_functions(model)
-    n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
-    pt = ca.MX.sym("p_scaled", n_p)
-    yt = ca.MX.sym("y_scaled", n_y, n_q)
-    Zb = ca.MX.sym("zbar", n_S, n_q)
-    Cw = ca.MX.sym("c", n_S, n_q)
+    n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
+    pt, yt, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
     Q = ca.DM(inputs.T)
     scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
     x = ca.vertcat(pt, ca.vec(yt))
     par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
-    E_all, f_all = fns["stage"].map(n_q)(yt, pt, Q, Zb, Cw, *scal)
+    E_all, f = fns["stage"].map("nlp_stage_map", "serial", n_q, [1, 5, 6, 7], [1])(yt, pt, Q, Zb, Cw, *scal)
     g = ca.vec(E_all)
-    f = ca.sum2(f_all)
-    Jp_all, Jy_all = fns["jac"].map(n_q)(yt, pt, Q, *scal)
-    J_stages = [(Jp_all[:, j * n_p:(j + 1) * n_p], Jy_all[:, j * n_y:(j + 1) * n_y]) for j in range(n_q)]
-    lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", n_y * n_q)
-    H_all = fns["hess"].map(n_q)(yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
-    nv = n_p + n_y
-    blocks = [H_all[:, j * nv:(j + 1) * nv] for j in range(n_q)]                 # order (p, y)
-    H_stages = [(b[:n_p, :n_p], b[:n_p, n_p:], b[n_p:, n_p:]) for b in blocks]
-    jac_g, hess_lag = _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y)
+    H_pp, H_py, H_yy = fns["hess"].map("nlp_hess_map", "serial", n_q, [1, 5, 6, 7, 8], [0])(
+        yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
+    hyy_sp = fns["hess"].sparsity_out(2)
+    if "jac" in fns and model.symbolic == "SX":
+        Jp_t, Jy_h = fns["jac"].map("nlp_jac_map", "serial", n_q, [1, 3, 4, 5], [])(yt, pt, Q, *scal)
+        jac_sp = fns["jac"].sparsity_out(1)
+    else:
+        Jp_t = Jy_h = jac_sp = None
+    jac_g, hess_lag = _assemble_kkt(x, par, g, Jp_t, Jy_h, H_pp, H_py, H_yy, lam_f, lam_g, n_p, n_y, n_q,
+                                    jac_sp, hyy_sp)
     # (the objective gradient is left to CasADi's reverse mode.  An assembled gradient must be
     # densified: with a sparse output Ipopt received misplaced entries and crawled.  Densified
     # it is correct, but measured no faster cold or warm (spring chain d_y = 3000, 10 runs))
     return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g, compiled=numerics(model).jit_active())
 
 
-def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
-    r""":func:`_build_nlp` for large (sparse) states, glued in MX from the model's cached Functions.
-
-    With D_y = diag(s_y), D_p = diag(s_p), e the equation scale, Y = D_y Ỹ and p = D_p p̃:
+def _glued_stage_functions(model):
+    r"""Per-model MX stage functions of :func:`_build_nlp_glued` (large sparse states), kept in
+    ``model.cache``.  With D_y = diag(s_y), D_p = diag(s_p), e the equation scale,
+    y = D_y ỹ and p = D_p p̃:
 
     .. math::  g_j = e \odot E(y_j, p, q_j),\qquad
                \partial g_j / \partial(\tilde p, \tilde y_j)
@@ -454,47 +467,58 @@ def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
     .. math::  \nabla^2 L_j = D\,[\,\mathrm{lag\_hess}(\sigma_f c \odot r_j,\ e \odot \lambda_j)
                + \sigma_f J_j^T \mathrm{diag}(c_j) J_j\,]\,D,\qquad J_j = [h_y, h_p],
 
-    evaluated by calling the model's ``E``, ``h``, ``sens`` and ``lag_hess`` (built once per model
-    for the state solves and sensitivities) mapped over the inputs, with the scalings applied as
-    constant sparse products in the MX graph.  No new SX graph of the model is formed, so the
-    set-up costs a few MX nodes per input instead of inlining the model's Hessian: for the spring
-    chain with d_y = 3000, n_q = 5 the build drops from 0.20 s to 0.05 s and the callbacks get
-    faster too.  For small (dense) models the per-model SX stage functions
+    by calling the model's ``E``, ``h``, ``sens`` and ``lag_hess`` (built once per model for the
+    state solves and sensitivities), with the scalings as constant-sparsity products.
+    """
+    got = model.cache.get("identify.nlp_glued", None)
+    if got is not None:
+        return got
+    num = numerics(model)
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    y, p, q = ca.MX.sym("y", n_y), ca.MX.sym("p", n_p), ca.MX.sym("q", model.n_q_dim)
+    zb, c = ca.MX.sym("zbar", n_S), ca.MX.sym("c", n_S)
+    sy, sp, e = ca.MX.sym("s_y", n_y), ca.MX.sym("s_p", n_p), ca.MX.sym("e", n_y)
+    sf, lg = ca.MX.sym("sigma_f"), ca.MX.sym("lam_g", n_y)
+    yu, pu = y * sy, p * sp
+    r = model.h_fun(yu, pu, q) - zb
+    base = [y, p, q, zb, c, sy, sp, e]
+    stage = ca.Function("nlp_glued_stage", base, [model.E_fun(yu, pu, q) * e, 0.5 * ca.sum1(c * r * r)])
+    _, Ey, Ep, hy, hp = num.sens(yu, pu, q)
+    De, Dy, Dp = ca.diag(e), ca.diag(sy), ca.diag(sp)
+    jac = ca.Function("nlp_glued_jac", [y, p, q, sy, sp, e],
+                      [ca.mtimes(De, ca.mtimes(Ep, Dp)).T, ca.mtimes(De, ca.mtimes(Ey, Dy))])
+    Hl = num.lag_hess(yu, pu, q, sf * c * r, lg * e)                       # order (y, p), unscaled
+    J = ca.horzcat(hy, hp)
+    Hj = Hl + sf * ca.mtimes(J.T, ca.mtimes(ca.diag(c), J))
+    D = ca.diag(ca.vertcat(sy, sp))
+    b = ca.mtimes(D, ca.mtimes(Hj, D))
+    hess = ca.Function("nlp_glued_hess", base + [sf, lg], [b[n_y:, n_y:], b[n_y:, :n_y], b[:n_y, :n_y]])
+    return model.cache.put("identify.nlp_glued", None, {"stage": stage, "jac": jac, "hess": hess})
+
+
+def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
+    r""":func:`_build_nlp` for large (sparse) states: the stage functions of
+    :func:`_glued_stage_functions` mapped over the inputs and assembled by :func:`_assemble_kkt`.
+
+    No new SX graph of the model is formed, so the set-up costs a few MX nodes instead of
+    inlining the model's Hessian (spring chain with d_y = 3000, n_q = 5: build 0.05 s instead
+    of 0.20 s).  For small (dense) models the per-model SX stage functions
     (:func:`_build_nlp_staged`) are faster and are used instead.
     """
-    num = numerics(model)
-    n_q, n_y, n_p, n_S = inputs.shape[0], model.n_y, model.n_p, model.n_S
-    nv = n_p + n_y
-    pt = ca.MX.sym("p_scaled", n_p)
-    yt = ca.MX.sym("y_scaled", n_y, n_q)
-    Zb = ca.MX.sym("zbar", n_S, n_q)
-    Cw = ca.MX.sym("c", n_S, n_q)
+    fns = _glued_stage_functions(model)
+    n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
+    pt, yt, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
     Q = ca.DM(inputs.T)
+    scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
     x = ca.vertcat(pt, ca.vec(yt))
     par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
-    Sy, Sp, Es = ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale)
-    Yu = yt * ca.repmat(Sy, 1, n_q)
-    pu = pt * Sp
-    g = ca.vec(model.E_fun.map(n_q)(Yu, pu, Q) * ca.repmat(Es, 1, n_q))
-    R = model.h_fun.map(n_q)(Yu, pu, Q) - Zb
-    f = 0.5 * ca.sum1(ca.sum2(Cw * R * R))
-    _, Ey_all, Ep_all, hy_all, hp_all = num.sens.map(n_q)(Yu, pu, Q)
-    De, Dy, Dp = ca.diag(Es), ca.diag(Sy), ca.diag(Sp)
-    J_stages = [(ca.mtimes(De, ca.mtimes(Ep_all[:, j * n_p:(j + 1) * n_p], Dp)),
-                 ca.mtimes(De, ca.mtimes(Ey_all[:, j * n_y:(j + 1) * n_y], Dy))) for j in range(n_q)]
-    lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", n_y * n_q)
-    Mu = ca.reshape(lam_g, n_y, n_q) * ca.repmat(Es, 1, n_q)
-    Hl_all = num.lag_hess.map(n_q)(Yu, pu, Q, lam_f * Cw * R, Mu)        # order (y, p), unscaled
-    D = ca.diag(ca.vertcat(Sy, Sp))
-    H_stages = []
-    for j in range(n_q):
-        J = ca.horzcat(hy_all[:, j * n_y:(j + 1) * n_y], hp_all[:, j * n_p:(j + 1) * n_p])
-        Hj = Hl_all[:, j * nv:(j + 1) * nv] + lam_f * ca.mtimes(J.T, ca.mtimes(ca.diag(Cw[:, j]), J))
-        b = ca.mtimes(D, ca.mtimes(Hj, D))                                     # order (y, p)
-        H_stages.append((b[n_y:, n_y:], b[n_y:, :n_y], b[:n_y, :n_y]))
-    jac_g, hess_lag = _assemble_kkt(x, par, g, J_stages, H_stages, lam_f, lam_g, n_p, n_y)
-    return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g)
+    E_all, f = fns["stage"].map("nlp_glued_stage_map", "serial", n_q, [1, 5, 6, 7], [1])(yt, pt, Q, Zb, Cw, *scal)
+    Jp_t, Jy_h = fns["jac"].map("nlp_glued_jac_map", "serial", n_q, [1, 3, 4, 5], [])(yt, pt, Q, *scal)
+    H_pp, H_py, H_yy = fns["hess"].map("nlp_glued_hess_map", "serial", n_q, [1, 5, 6, 7, 8], [0])(
+        yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
+    jac_g, hess_lag = _assemble_kkt(x, par, ca.vec(E_all), Jp_t, Jy_h, H_pp, H_py, H_yy, lam_f, lam_g,
+                                    n_p, n_y, n_q, fns["jac"].sparsity_out(1), fns["hess"].sparsity_out(2))
+    return NlpProblem(x, f, ca.vec(E_all), par, hess_lag=hess_lag, jac_g=jac_g)
 
 
 def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
@@ -530,14 +554,18 @@ def covariance_from_terms(F, F2, S):
     """C = H^{-1} F2 H^{-T} with H = F + S (second order) and (F^{-1} F2 F^{-1}) (Gauss-Newton).
 
     F = J^T Omega J, F2 = J^T Omega^2 J.  Returns (cov, cov_gn, H, H_ok) where H_ok is False when
-    H is singular (cov is then NaN).
+    H is singular (condition number of the normalised D H D above 1e15, D = diag(F)^-1/2; cov
+    is then NaN).
     """
     H = F + S
     n = F.shape[0]
     Finv_F2 = np.linalg.solve(F, F2)
     cov_gn = np.linalg.solve(F, Finv_F2.T).T
     try:
-        cond = np.linalg.cond(H)
+        # singular means singular after normalising the parameters (D H D with D = diag(F)^-1/2):
+        # the condition number of H itself also measures the parameters' units (NIST Hahn1: 1e17)
+        d = 1.0 / np.sqrt(np.diag(F))
+        cond = np.linalg.cond(H * np.outer(d, d))
         if not np.isfinite(cond) or cond > 1e15:
             raise np.linalg.LinAlgError
         A = np.linalg.solve(H, F2)
@@ -598,18 +626,131 @@ def _start(model, data, p0, weights, Y0) -> _Start:
 class _FullSpaceSolution:
     """Ipopt's solution of the full-space NLP: its result, the number of passes (1: the
     unbounded pass was kept, 2: the bounded problem was solved), p clipped to the bounds, the
-    states and the parameters found at a bound."""
+    states, the parameters found at a bound and, when the reduced-space Newton solved it, its
+    reduced point at p."""
 
     result: IpoptResult
     passes: int
     p: np.ndarray
     states: np.ndarray | None
     at_bound: np.ndarray
+    point: ReducedPoint | None = None
+
+
+#: at most this many Gauss-Newton/Newton iterations and objective evaluations of
+#: :func:`_solve_explicit_newton` (then Ipopt takes over: a far start should not cost twice)
+_NEWTON_MAX_ITER = 60
+_NEWTON_MAX_EVALS = 50
+
+
+def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
+    r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
+
+    Far from the optimum Gauss-Newton steps d = -F^{-1} g (F = J^T Omega J); once a step
+    changes Phi by less than 10 % of the Gauss-Newton decrement's prediction, or that decrement
+    is below 1e-4 (chi^2 units), exact Newton steps d = -(F + S)^{-1} g with the second-order
+    term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
+    (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
+    below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
+    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one mapped call
+    over the data (:func:`models.sensitivity.sensitivities`), so an iteration costs O(n) with a
+    small constant and no NLP is built.
+
+    Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
+    acceptance as Ipopt's: a stationary point at the tolerance) with its reduced point, or None when the iteration
+    fails (singular F, failed line search, no convergence): the caller then solves with Ipopt.
+    The result may lie outside the parameter bounds (the caller checks).
+    """
+    problem, s_p = st.problem, st.s_p
+    t0 = time.perf_counter()
+    try:
+        point = problem.evaluate(st.p0)
+    except StateSolveError:
+        return None
+    newton = False
+    prev_dec = None
+    evals = 1
+    for it in range(1, _NEWTON_MAX_ITER + 1):
+        if not np.isfinite(point.objective):
+            return None
+        F = problem.information(point)
+        M = F
+        if newton:
+            S = point.sens.hessians(point.lam[None])[0]
+            M = F + S
+        try:
+            L = np.linalg.cholesky(M * np.outer(s_p, s_p))
+        except np.linalg.LinAlgError:
+            if not newton:
+                return None
+            try:
+                L = np.linalg.cholesky(F * np.outer(s_p, s_p))
+            except np.linalg.LinAlgError:
+                return None
+        v = np.linalg.solve(L, point.gradient * s_p)
+        dec = float(v @ v)
+        # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
+        # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
+        unit = 2 * point.objective / (st.n - st.model.n_p) if st.data.sigma is None else 1.0
+        if newton:
+            # the decrement that round-off in the gradient's sum over the data alone produces
+            g_err = 16 * np.finfo(float).eps * np.einsum("jk,jkp->p", np.abs(point.lam), np.abs(point.sens.G)) * s_p
+            u = np.linalg.solve(L, g_err)
+            if dec <= max(settings.refine_decrement * unit, float(u @ u)):
+                break
+            if dec <= settings.decrement_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
+                break                              # no more progress at round-off, within 1e-5 std errors
+        prev_dec = dec if newton else None
+        d = -s_p * np.linalg.solve(L.T, v)
+        if np.max(np.abs(d / s_p)) < 1e-13:
+            break
+        step, new = 1.0, None
+        if newton and dec <= settings.decrement_tol * unit:
+            try:                                   # quadratic region: the objective cannot resolve
+                new = problem.evaluate(point.p + d)   # the decrease any more; take the full step
+            except StateSolveError:
+                new = None
+            if new is not None and not np.isfinite(new.objective):
+                new = None
+        for _ in range(40 if new is None else 0):
+            evals += 1
+            if evals > _NEWTON_MAX_EVALS:
+                return None
+            try:
+                trial = problem.evaluate(point.p + step * d)
+            except StateSolveError:
+                trial = None
+            if trial is not None and trial.objective <= point.objective - 1e-4 * step * dec:
+                new = trial
+                break
+            step *= 0.5
+        if new is None:
+            if newton and dec <= settings.decrement_tol * unit:
+                break                              # at round-off: the decrement certifies the optimum
+            if not newton:
+                newton = True                      # Gauss-Newton cannot descend further: try Newton
+                continue
+            return None
+        gain = point.objective - new.objective
+        if not newton and (dec < 1e-4 * unit or gain < 0.05 * dec):
+            newton = True
+        point = new
+    else:
+        return None
+    res = IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
+                      message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
+                              f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
+                      wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
+    return res, point
 
 
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
+    An explicit model is first solved by exact reduced-space Newton steps
+    (:func:`_solve_explicit_newton`, with ``explicit_newton``); that solution is kept when it lies
+    strictly inside the bounds (no NLP is built), else the bounded problem is solved by Ipopt
+    (pass 2), and Ipopt solves it as below when the Newton iteration fails.
     With ``lazy_bounds``, pass 1 solves without the parameter bounds: a pure equality-
     constrained problem, which Ipopt solves by Newton steps without a barrier (3-4 instead of
     6-8 iterations for the press).  Its solution is kept only when it lies strictly inside the
@@ -617,6 +758,16 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
     """
     model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
+    newton_passes = None
+    if not model.n_y and settings.explicit_newton:
+        got = _solve_explicit_newton(st, settings)
+        if got is not None:
+            r0, point = got
+            margin = 1e-6 * s_p
+            lo, up = model.lower, model.upper
+            if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
+                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point)
+            newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
@@ -631,8 +782,9 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
                          cache=model.cache)
 
     res = None
-    passes = 1
-    if settings.lazy_bounds and (np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))):
+    passes = 1 if newton_passes is None else newton_passes
+    bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
+    if passes == 1 and settings.lazy_bounds and bounded:
         free_p = np.full(model.n_p, np.inf)
         try:
             r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]))
@@ -663,7 +815,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
     """
     res = sol.result
     try:
-        point = st.problem.evaluate(sol.p, sol.states)
+        point = sol.point if sol.point is not None else st.problem.evaluate(sol.p, sol.states)
     except StateSolveError as exc:
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
@@ -701,6 +853,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         sig_used = st.sig
     cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, ref.S)
     cov, cov_gn = cov * factor, cov_gn * factor
+    _check_plausible(st, point.p, cov, cov_gn, sol.result.status)
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
     res = sol.result
@@ -712,8 +865,41 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         status=res.status, message=res.message, iterations=res.iterations,
         solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
-        extra={"newton_decrement": ref.decrement / factor, "ipopt_iterations": res.iterations,
-               "ipopt_passes": sol.passes}, model=model, data=data)
+        extra={"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
+               "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes},
+        model=model, data=data)
+
+
+#: an estimate farther than this many parameter scales from zero is a failed fit
+ABSURD_SCALES = 1e6
+
+
+def _check_plausible(st: _Start, p: np.ndarray, cov: np.ndarray, cov_gn: np.ndarray, status: str) -> None:
+    """Reject an estimate at absurd values: |p_i| > :data:`ABSURD_SCALES` s_p,i (s_p the
+    parameter's declared scale, else |p0_i|), a non-finite p, or non-finite standard errors
+    (second-order or Gauss-Newton).  Such a point is where the solver stopped while the
+    parameters ran off (the data do not bound them), not an estimate.
+
+    Raises
+    ------
+    IdentificationError
+        Naming the parameters and what to do.
+    """
+    names = st.model.param_names
+    far = [i for i in range(p.size) if not (np.isfinite(p[i]) and abs(p[i]) <= ABSURD_SCALES * st.s_p[i])]
+    if far:
+        what = ", ".join(f"{names[i]} = {p[i]:.3g} (scale {st.s_p[i]:.3g})" for i in far)
+        raise IdentificationError(
+            f"the fit failed: the estimate ran off to absurd values ({what}: more than {ABSURD_SCALES:.0e} "
+            "times the parameter's scale); the data do not bound these parameters from p0. Try other start "
+            "values, bounds on the parameters, or a reparametrisation", status=f"absurd estimate ({status})")
+    bad = [names[i] for i in range(p.size)
+           if not (np.isfinite(cov[i, i]) and cov[i, i] >= 0 and np.isfinite(cov_gn[i, i]) and cov_gn[i, i] >= 0)]
+    if bad:
+        raise IdentificationError(
+            f"the fit failed: the standard errors of {', '.join(bad)} are not finite at p = {np.array2string(p)} "
+            "(the Hessian J^T Omega J + S is singular there); the point is not a strict minimum. Try other "
+            "start values or bounds on the parameters", status=f"non-finite standard errors ({status})")
 
 
 def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
@@ -745,10 +931,7 @@ def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
     if s_ratio > settings.s_ratio_note:
         notes.append(f"second-order term large: ||S|| is {100 * s_ratio:.3g} % of ||J^T Omega J|| (normalised); "
                      "the model fits poorly or is strongly nonlinear, so cov and cov_gn differ")
-    if not H_ok:
-        notes.append("H = J^T Omega J + S is singular: the second-order covariance is undefined (NaN); "
-                     "use cov_gn")
-    elif np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
+    if H_ok and np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
         notes.append("H = J^T Omega J + S is not positive definite: the estimate is not a strict local "
                      "minimum in the reduced space; treat cov with caution")
     if data.sigma is not None and dof > 0:

@@ -124,6 +124,11 @@ class NlpProblem:
     compiled : bool
         The derivative Functions call JIT-compiled code: the NLP is then not expanded to SX,
         which would drop the compiled code.
+    expand : bool or None
+        Expand the MX graph to SX for the solver (unless :attr:`IpoptSettings.expand` says
+        otherwise); None: expand when the problem has at most 1000 variables.  A problem over
+        few variables whose terms are mapped over many data points sets False: expanding would
+        copy the map once per point.
     """
 
     x: object
@@ -134,6 +139,7 @@ class NlpProblem:
     jac_g: ca.Function | None = None
     grad_f: ca.Function | None = None
     compiled: bool = False
+    expand: bool | None = None
 
 
 #: compiled solvers of problems that no owner object keeps (callers that pass no ``cache``)
@@ -156,7 +162,12 @@ def _make_solver(build, settings: IpoptSettings):
     n = x.size1()
     # expanding the MX graph to SX pays for small problems (press: 18 vs 22 ms per fit) and costs
     # more than it saves for large ones (spring chain d_y = 3000, n_q = 5: nlpsol set-up 1.4 s)
-    expand = settings.expand if settings.expand is not None else (isinstance(x, ca.MX) and n <= 1000)
+    if settings.expand is not None:
+        expand = settings.expand
+    elif nlp.expand is not None:
+        expand = nlp.expand
+    else:
+        expand = isinstance(x, ca.MX) and n <= 1000
     opts = {
         "ipopt.tol": settings.tol,
         "ipopt.constr_viol_tol": settings.constr_viol_tol,

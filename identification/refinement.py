@@ -126,7 +126,8 @@ class ReducedProblem:
         Y = solve_states(self.model, p, self.data.inputs, Y0=states0)
         sens = sensitivities(self.model, p, self.data.inputs, Y)
         dev = self.zbar - sens.h
-        f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const
+        with np.errstate(over="ignore"):            # a trial point far off may overflow: f = inf
+            f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const
         lam = -self.cw * dev / self.sigma ** 2                      # d f / d h_jk
         grad = np.einsum("jk,jkp->p", lam, sens.G)
         return ReducedPoint(p, Y, sens, f, grad, lam)

@@ -258,6 +258,11 @@ class Model:
             idx.append(self.sensors.index(n))
         return idx
 
+    @property
+    def has_y_guess(self) -> bool:
+        """True when the model gives its own state guess (else :meth:`y_guess` returns zeros)."""
+        return self._y_guess is not None
+
     def y_guess(self, p, q) -> np.ndarray:
         """Initial guess of the state for input q (zeros unless the model gives one)."""
         if self._y_guess is None:

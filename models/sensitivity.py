@@ -96,19 +96,25 @@ class _BatchedSensitivities(Sensitivities):
     @property
     def state_derivatives(self) -> np.ndarray:
         Z = self._cache[2]
+        if Z is None:
+            return np.zeros((self.G.shape[0], 0, self.G.shape[2]))
         return Z[:, :Z.shape[1] - Z.shape[2], :]
 
     def hessians(self, lam: np.ndarray) -> np.ndarray:
         lam = np.asarray(lam, float)
         Ey, hy, Z = self._cache
-        n_q = Z.shape[0]
+        n_q, n_p = self._inputs.shape[0], self.G.shape[2]
         f = self._num.batched("lag_hess", n_q)
-        out = np.zeros((lam.shape[0], Z.shape[2], Z.shape[2]))
+        out = np.zeros((lam.shape[0], n_p, n_p))
         for a in range(lam.shape[0]):
+            if Z is None:                                   # explicit model: Z = I, no adjoint
+                Hl = f(self._Y, self._p, self._inputs, lam[a], np.zeros((n_q, 0)))[0]
+                out[a] = Hl.sum(axis=0)
+                continue
             rhs = -np.einsum("jsy,js->jy", hy, lam[a])
-            mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0] if Ey.shape[1] else rhs
+            mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
             Hl = f(self._Y, self._p, self._inputs, lam[a], mu)[0]
-            out[a] = np.einsum("jva,jvw,jwb->ab", Z, Hl, Z)
+            out[a] = np.einsum("jva,jvw,jwb->ab", Z, Hl, Z, optimize=True)
         return 0.5 * (out + out.transpose(0, 2, 1))
 
     def output_hessians(self) -> np.ndarray:
@@ -119,6 +125,9 @@ class _BatchedSensitivities(Sensitivities):
         for k in range(n_S):
             lam = np.zeros((n_q, n_S))
             lam[:, k] = 1.0
+            if Z is None:                                   # explicit model: Z = I, no adjoint
+                out[:, k] = f(self._Y, self._p, self._inputs, lam, np.zeros((n_q, 0)))[0]
+                continue
             rhs = -hy[:, k, :]
             mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0] if Ey.shape[1] else rhs
             Hl = f(self._Y, self._p, self._inputs, lam, mu)[0]
@@ -127,9 +136,12 @@ class _BatchedSensitivities(Sensitivities):
 
 
 def _sensitivities_batched(model, num, p, inputs, Y):
+    """All inputs in one mapped call; for an explicit model G = dh/dp and Z = I (stored as None)."""
     n_q = inputs.shape[0]
     h, Ey, Ep, hy, hp = num.batched("sens", n_q)(Y, p, inputs)
     h = h[:, :, 0]
+    if not model.n_y:
+        return _BatchedSensitivities(h, hp, num, p, inputs, Y, (None, None, None))
     yp = -np.linalg.solve(Ey, Ep)
     G = np.einsum("jsy,jyp->jsp", hy, yp) + hp
     eye = np.broadcast_to(np.eye(model.n_p), (n_q, model.n_p, model.n_p))
@@ -147,8 +159,9 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
     p = np.asarray(p, float).ravel()
     inputs = np.atleast_2d(np.asarray(inputs, float))
     n_q = inputs.shape[0]
-    if model.n_y and num.dense:
-        return _sensitivities_batched(model, num, p, inputs, np.asarray(Y, float))
+    if num.dense:
+        Y = np.zeros((n_q, 0)) if not model.n_y else np.asarray(Y, float)
+        return _sensitivities_batched(model, num, p, inputs, Y)
     h = np.zeros((n_q, model.n_S))
     G = np.zeros((n_q, model.n_S, model.n_p))
     cache = []

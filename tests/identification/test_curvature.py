@@ -104,7 +104,9 @@ def test_weak_model_is_flagged_and_summary_names_profile():
     # Michaelis-Menten far below saturation (x << K): Vm and K are nearly confounded
     model = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"],
                            h=lambda p, q: p[0] * q[0] / (p[1] + q[0]))
-    x = np.linspace(0.2, 1.0, 5)
+    # (x in [0.2, 1] instead leaves the least-squares minimum at infinity for some noise draws, seed 3
+    # among them: identify now reports those as failed fits, see test_estimator's absurd-estimate test)
+    x = np.linspace(0.5, 2.0, 5)
     truth = np.array([1.0, 5.0])
     h = truth[0] * x / (truth[1] + x)
     z = h + 0.01 * np.random.default_rng(3).standard_normal((2, x.size))

@@ -441,3 +441,93 @@ def test_set_jit_switches_the_documented_configuration():
         assert JIT.enabled and set_jit(False) is True and not JIT.enabled
     finally:
         set_jit(prev)
+
+
+# ------------------------------------------------------------------ issue 15: mapped NLP, explicit path, absurd fits
+def test_explicit_nlp_is_over_p_only_and_its_hessian_equals_casadi_ad():
+    """An explicit model's NLP has the parameters as its only variables, no constraints, and the
+    mapped (reduced) stage Hessian equals CasADi's AD of the mapped objective."""
+    import identification.estimator as est_mod
+    model = Model.explicit(["a", "b", "c"], ["x", "u"], ["y1", "y2"],
+                           h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]) + p[2] * q[1],
+                                                     p[1] ** 2 * ca.sin(q[0])))
+    rng = np.random.default_rng(2)
+    inputs = rng.uniform(0.1, 2.0, (37, 2))
+    nlp = est_mod._build_nlp(model, inputs, rng.uniform(0.5, 2, 3), np.ones(0), np.ones(0))
+    assert nlp.x.size1() == model.n_p and nlp.g.size1() == 0
+    lam_f = ca.MX.sym("lf")
+    ref = ca.Function("ref", [nlp.x, nlp.par, lam_f], [ca.triu(ca.hessian(lam_f * nlp.f, nlp.x)[0])])
+    xv, pv = rng.uniform(0.2, 1.5, 3), rng.uniform(0, 1, nlp.par.size1())
+    H_ref = np.array(ca.densify(ref(xv, pv, 0.8)))
+    H = np.array(ca.densify(nlp.hess_lag(xv, pv, 0.8, np.zeros(0))))
+    np.testing.assert_allclose(H, H_ref, rtol=0, atol=1e-12 * np.abs(H_ref).max())
+
+
+def test_many_point_explicit_fit_equals_scipy_exact_jacobian():
+    """y = a (1 - exp(-b x)) on 40 000 points (more than one evaluation chunk): the estimate equals
+    scipy least_squares with the exact Jacobian, and the covariance equals (J^T W J)^-1 to the
+    second-order term's size."""
+    n = 40_000
+    model = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    rng = np.random.default_rng(11)
+    x = rng.uniform(0.05, 8.0, n)
+    sig = 0.02
+    z = 2.0 * (1 - np.exp(-0.7 * x)) + sig * rng.standard_normal(n)
+    est = identify(model, Measurements(x, z.reshape(1, -1, 1), [sig]), p0=[1.0, 1.0])
+
+    def res(p):
+        return (p[0] * (1 - np.exp(-p[1] * x)) - z) / sig
+
+    def jac(p):
+        e = np.exp(-p[1] * x)
+        return np.column_stack([1 - e, p[0] * x * e]) / sig
+
+    ref = least_squares(res, [1.0, 1.0], jac=jac, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    np.testing.assert_allclose(est.p, ref.x, rtol=1e-10)
+    J = jac(ref.x)
+    np.testing.assert_allclose(est.cov_gn, np.linalg.inv(J.T @ J), rtol=1e-8)
+    assert est.fitted.shape == (n, 1) and est.G.shape == (n, 1, 2)
+
+
+def test_many_inputs_states_are_solved_at_once_and_equal_the_per_input_solve():
+    """With at least BATCH_START_MIN inputs the states at p are solved together by damped Newton
+    from the model's guesses; they equal the per-input solves to round-off."""
+    from models import state
+    model = spring_chain(4)
+    n = state.BATCH_START_MIN + 13
+    Q = np.column_stack([np.linspace(0.2, 3.0, n), np.linspace(0.0, 0.9, n)])
+    p = np.array([2.0, 0.5])
+    Y = solve_states(model, p, Q)
+    Y_ref = np.array([state.solve_state(model, p, q) for q in Q])
+    np.testing.assert_allclose(Y, Y_ref, rtol=1e-11, atol=1e-12 * np.abs(Y_ref).max())
+
+
+def test_estimate_at_absurd_values_is_a_failed_fit():
+    """Data that do not bound k (y = c + 1/(1 + k x) with constant data: k runs to infinity) used to
+    return an accepted estimate k ~ 1e12 with NaN standard errors; it is now an IdentificationError."""
+    model = Model.explicit(["c", "k"], ["x"], ["y"], h=lambda p, q: p[0] + 1 / (1 + p[1] * q[0]))
+    x = np.linspace(0.5, 5, 20)
+    data = Measurements(x, (1.0 + 0.01 * np.sin(7 * x)).reshape(1, -1, 1), [0.01])
+    with pytest.raises(IdentificationError, match=r"absurd values \(k = .*scale 1\)"):
+        identify(model, data, p0=[1.0, 1.0])
+    good = Measurements(x, (1.0 + 1 / (1 + 2.0 * x) + 0.001 * np.sin(7 * x)).reshape(1, -1, 1), [0.01])
+    est = identify(model, good, p0=[1.0, 1.0])
+    assert np.all(np.isfinite(est.stderr)) and abs(est.p[1] - 2.0) < 0.1
+
+
+def test_explicit_model_solved_by_reduced_newton_equals_the_ipopt_path():
+    """The reduced-space Newton path of explicit models gives Ipopt's estimate and covariance;
+    an active bound sends it to the bounded Ipopt solve (pass 2)."""
+    x = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 10.0])
+    y = np.array([8.3, 10.3, 19.0, 16.0, 15.6, 19.8])                  # Rooney-Biegler
+    model = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
+    newton = identify(model, data, p0=[15.0, 0.5])
+    ipopt = identify(model, data, p0=[15.0, 0.5], settings=IdentifySettings(explicit_newton=False))
+    assert newton.extra["solver"] == "reduced Newton" and ipopt.extra["solver"] == "ipopt"
+    assert newton.success and newton.extra["newton_decrement"] < 1e-18
+    np.testing.assert_allclose(newton.p, ipopt.p, rtol=1e-10)
+    np.testing.assert_allclose(newton.cov, ipopt.cov, rtol=1e-8)
+    bounded, bdata = _line_with_bounded_slope()
+    est = identify(bounded, bdata, p0=[0.5, 0.0])
+    assert est.extra["solver"] == "ipopt" and est.extra["ipopt_passes"] == 2 and est.p[0] <= 1.0
