@@ -10,7 +10,10 @@
 * :class:`Interrupt`: Ctrl-C (SIGINT) sets a flag, terminates the Monte Carlo worker
   processes this process started and raises :class:`KeyboardInterrupt`; a solver that turns
   the interrupt into a failed fit cannot hide it (the flag is checked at every step and
-  before any output is written); a second Ctrl-C exits at once with code 130.
+  before any output is written); a second Ctrl-C exits at once with code 130, and so does the
+  watchdog when the run has not stopped :data:`INTERRUPT_GRACE` seconds after the first one
+  (a loop in a lower layer that counts an interrupted fit as a failed replication and goes on
+  cannot keep the run alive).
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ import os
 import signal
 import sys
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -25,6 +29,8 @@ __all__ = ["OutDirError", "check_out_dir", "Chatter", "Interrupt", "INTERRUPT", 
 
 #: exit code of an interrupted run (128 + SIGINT)
 EXIT_INTERRUPTED = 130
+#: seconds after the first Ctrl-C before the watchdog ends a run that did not stop by itself (s)
+INTERRUPT_GRACE = 10.0
 
 
 class OutDirError(ValueError):
@@ -177,13 +183,20 @@ class Interrupt:
 
     def _handler(self, signum, frame):
         if self.flag:
-            os.write(self.stderr_fd, b"mudoe: interrupted\n")
-            os._exit(EXIT_INTERRUPTED)
+            self._exit_now()
         self.flag = True
         import multiprocessing
         for child in multiprocessing.active_children():
             child.terminate()
+        watchdog = threading.Timer(INTERRUPT_GRACE, self._exit_now)
+        watchdog.daemon = True
+        watchdog.start()
         raise KeyboardInterrupt
+
+    def _exit_now(self) -> None:
+        """End the process with code 130 (second Ctrl-C, or the run ignored the first one)."""
+        os.write(self.stderr_fd, b"mudoe: interrupted\n")
+        os._exit(EXIT_INTERRUPTED)
 
     def check(self) -> None:
         """Raise :class:`KeyboardInterrupt` if Ctrl-C was pressed (e.g. swallowed by a solver)."""

@@ -140,9 +140,9 @@ def _title_page(results, cfg):
         y -= 0.03
         for k, nt in enumerate(notes, 1):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
-    fig.text(0.04, 0.02, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
-             "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model misses.",
-             fontsize=8, color="0.4")
+    _text(fig, 0.04, 0.045, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
+          "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model "
+          "misses.", width=165, size=8, color="0.4")
     return fig
 
 
