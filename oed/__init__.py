@@ -11,3 +11,5 @@ from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, desig
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information"]
+from .discrimination import DiscriminationResult, select_discriminating  # noqa: E402  (issue 13, item 5)
+__all__ += ["DiscriminationResult", "select_discriminating"]
