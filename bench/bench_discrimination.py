@@ -117,8 +117,11 @@ def _chi2(model, inputs, z, mask):
     return 2.0 * est.objective, est.dof
 
 
-def statistics(des, z_of_rep, n_rep, label):
-    """chi2 of M2 and M3 and their dof per design and replication: dict name -> array (n_rep, 4)."""
+def statistics(des, z_of_rep, n_rep, label, path):
+    """chi2 of M2 and M3 and their dof per design and replication: dict name -> array (n_done, 4).
+
+    The replications done so far are saved to ``path`` (.npz) after every fifth one, so that an
+    interrupted study keeps its completed replications."""
     models = {name: candidate_models() for name in des}     # one model per design: each keeps its compiled fit
     inputs = {n: model_inputs(n, np.asarray(Q_PAPER)) for n in ("M2", "M3")}
     out = {name: np.empty((n_rep, 4)) for name in des}
@@ -129,7 +132,8 @@ def statistics(des, z_of_rep, n_rep, label):
             c2, d2 = _chi2(models[name]["M2"], inputs["M2"], z, mask)
             c3, d3 = _chi2(models[name]["M3"], inputs["M3"], z, mask)
             out[name][r] = (c2, d2, c3, d3)
-        if r == 0 or (r + 1) % 25 == 0:
+        if r == 0 or (r + 1) % 5 == 0 or r + 1 == n_rep:
+            np.savez(path, **{name: v[:r + 1] for name, v in out.items()})
             print(f"  {label} {r + 1}/{n_rep}: {time.perf_counter() - t0:.1f} s", flush=True)
     return out
 
@@ -204,13 +208,11 @@ def main(argv=None):
 
     t0 = time.perf_counter()
     if args.study in ("null", "all"):
-        null = statistics(des, null_campaigns(est["M2"], args.seed0), args.null_rep, "null")
-        np.savez(f"{args.out}_null.npz", **null)
+        statistics(des, null_campaigns(est["M2"], args.seed0), args.null_rep, "null", f"{args.out}_null.npz")
         print(f"null study: {time.perf_counter() - t0:.1f} s")
     t0 = time.perf_counter()
     if args.study in ("power", "all"):
-        power = statistics(des, prototype_campaigns(args.seed0), args.n_rep, "prototype")
-        np.savez(f"{args.out}_power.npz", **power)
+        statistics(des, prototype_campaigns(args.seed0), args.n_rep, "prototype", f"{args.out}_power.npz")
         print(f"power study: {time.perf_counter() - t0:.1f} s")
     if args.study in ("report", "all"):
         null, power = np.load(f"{args.out}_null.npz"), np.load(f"{args.out}_power.npz")
