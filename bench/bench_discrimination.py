@@ -174,8 +174,9 @@ def report(des, null, power):
         print(f"{'':<16} {'(chi2 GoF of M3)':<22} {'':>30} {_fmt_rate(gof3, n1):>30}")
         print(f"{'':<16} {'LR M2 vs M3, c=' + format(crit, '.2f'):<22} {_fmt_rate(lr0, n0 - half):>30} "
               f"{_fmt_rate(lr1, n1):>30}")
-        med = np.median(b[:, 0] - b[:, 2])
-        print(f"{'':<16} {'  median Delta':<22} {np.median(a[:, 0] - a[:, 2]):>30.2f} {med:>30.2f}")
+        d0, d1 = a[:, 0] - a[:, 2], b[:, 0] - b[:, 2]
+        print(f"{'':<16} {'  Delta min/med/max':<22} {f'{d0.min():.1f} / {np.median(d0):.1f} / {d0.max():.1f}':>30} "
+              f"{f'{d1.min():.1f} / {np.median(d1):.1f} / {d1.max():.1f}':>30}")
 
 
 def main(argv=None):
