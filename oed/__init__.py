@@ -10,9 +10,10 @@ input x sensor pairs, through the same engine, with a continuous Ipopt refinemen
 from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
+from .discrimination import DiscriminationResult, select_discriminating
 from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs, select_inputs
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
-           "input_information", "refine_inputs", "select_inputs"]
+           "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating"]

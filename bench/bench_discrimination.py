@@ -1,0 +1,224 @@
+r"""Discrimination design M3 against M2 on the press, and its power gain in a Monte Carlo (issue 13, item 5).
+
+1. M2 (Coulomb) and M3 (Preisach) are fitted on the shipped campaign (held-out series,
+   sensors D_y and F_x: :func:`mudoe.press.fit_candidates`).  With M3 assumed true,
+   :func:`oed.select_discriminating` scores every reading (set point j of the paper's load
+   cycle, sensor s) by d_js = ((h_M3 - h_M2) / sigma_s)^2 (local T-optimality) and by the
+   Buzzi-Ferraris divergence, and chooses designs with as many readings per series as the
+   paper's design (29 set points x D_y, F_x = 58):
+
+   * ``paper``: all 29 set points, D_y and F_x;
+   * ``T pair``: 2 sensors read at all 29 set points, chosen by T (exact: top-k of sensor sums);
+   * ``T free``: the 58 best (set point, sensor) readings by T (exact top-k);
+   * ``divergence free``: the 58 best readings by the divergence criterion;
+   * ``paper, 5 points`` against ``T free, 10``: a small budget of 10 readings per series, the
+     paper's sensors at 0, 800, 1600, 800, 0 N against the 10 best readings by T.
+
+2. Power: campaigns of the virtual prototype (:func:`models.prototype.generate_campaign`,
+   2 series, seeds ``--seed0`` ...); each design keeps its readings (the others are
+   missing), M2 (and, for context, M3) is fitted with the paper's known sigmas, and the
+   model is rejected when the goodness-of-fit statistic
+   chi2 = sum ((z - h(p_hat)) / sigma)^2 exceeds the 95 % quantile of chi2(n - 2).
+   That test rejects M3 as well (the prototype is neither model), so the main test is the
+   likelihood ratio of M2 against M3, Delta = chi2_M2 - chi2_M3 (a non-nested comparison,
+   Cox / Williams style), with its critical value calibrated by parametric bootstrap: the
+   95 % quantile of Delta on the first half of ``--null-rep`` campaigns simulated from M2
+   itself (at its estimate, independent normal readings with the paper's sigmas), its size
+   checked on the second half.  Rejection rates with Clopper-Pearson 95 % intervals.
+
+Run ``python -m bench.bench_discrimination --n-rep 150 --null-rep 300`` from the project root.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+from scipy import stats  # noqa: E402
+
+from identification import Measurements, clopper_pearson, identify  # noqa: E402
+from models.friction import candidate_models, model_inputs  # noqa: E402
+from models.press import K_NOMINAL, PRESS_SENSORS, Q_PAPER  # noqa: E402
+from models.prototype import SIGMA_PAPER_UM, PrototypeConfig, VirtualPrototype, generate_campaign, read_campaign  # noqa: E402
+from mudoe.press import fit_candidates  # noqa: E402
+from oed import select_discriminating  # noqa: E402
+
+SIGMA_MM = np.asarray(SIGMA_PAPER_UM) * 1e-3
+N_PAPER_READINGS = 2 * len(Q_PAPER)
+LEVEL = 0.05
+
+
+def designs(est):
+    """{name: (mask (n_q, n_S) bool, DiscriminationResult or None)} and the two score matrices."""
+    q = np.asarray(Q_PAPER)
+    cand = (model_inputs("M3", q), model_inputs("M2", q))
+    models = candidate_models()
+    common = dict(candidates=cand, sensors=PRESS_SENSORS, sigma=SIGMA_MM)
+    out = {}
+    paper = np.zeros((q.size, len(PRESS_SENSORS)), bool)
+    paper[:, :2] = True
+    out["paper"] = (paper, None)
+    pair = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], n_sensors=2, **common)
+    free = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], n_readings=N_PAPER_READINGS,
+                                 **common)
+    div = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], n_readings=N_PAPER_READINGS,
+                                criterion="divergence", **common)
+    thin = np.zeros_like(paper)
+    thin[::7, :2] = True                            # D_y, F_x at 0, 800, 1600 (peak), 800, 0 N: 10 readings
+    out["paper, 5 points"] = (thin, None)
+    small = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], n_readings=int(thin.sum()),
+                                  **common)
+    for name, res in (("T pair", pair), ("T free", free), ("divergence free", div), ("T free, 10", small)):
+        mask = np.zeros_like(paper)
+        for j, s in res.readings:
+            mask[j, PRESS_SENSORS.index(s)] = True
+        out[name] = (mask, res)
+    return out, free.divergences, div.divergences, free.difference
+
+
+def _value(d, mask):
+    return float(d[mask].sum())
+
+
+def print_table(d_t, d_div, diff, des):
+    q = np.asarray(Q_PAPER)
+    dirs = model_inputs("M2", q)[:, 1]
+    head = "  ".join(f"{s:>7}" for s in PRESS_SENSORS)
+    print(f"\nper reading (M3 true, M2 rival): h_M3 - h_M2 (um) | T = ((h_M3 - h_M2)/sigma)^2 | divergence; "
+          "* = in 'T free'")
+    print(f"{'j':>2} {'q (N)':>7} {'dir':>4}  {head}  |  {head}  |  {head}")
+    free = des["T free"][0]
+    for j in range(q.size):
+        a = "  ".join(f"{1e3 * v:7.2f}" for v in diff[j])
+        b = "  ".join(f"{v:6.2f}" + ("*" if free[j, k] else " ") for k, v in enumerate(d_t[j]))
+        c = "  ".join(f"{v:7.2f}" for v in d_div[j])
+        print(f"{j:>2} {q[j]:7.1f} {dirs[j]:4.0f}  {a}  |  {b}  |  {c}")
+    print("\ndesign values per series (sum over the design's readings)")
+    print(f"{'design':<16} {'readings':>8} {'T':>9} {'divergence':>11}  sensors used (readings)")
+    for name, (mask, res) in des.items():
+        used = ", ".join(f"{s} ({int(mask[:, k].sum())})" for k, s in enumerate(PRESS_SENSORS) if mask[:, k].any())
+        extra = f"  [{res.method}, proven {res.proven_optimal}]" if res is not None else ""
+        print(f"{name:<16} {int(mask.sum()):>8} {_value(d_t, mask):9.2f} {_value(d_div, mask):11.2f}  {used}{extra}")
+
+
+def _chi2(model, inputs, z, mask):
+    """Goodness-of-fit statistic sum ((z - h(p_hat)) / sigma)^2 of ``model`` on the readings in ``mask``, and its dof."""
+    used = mask.any(axis=0)
+    zz = np.where(mask[None, :, :] | ~used[None, None, :], z, np.nan)   # unused sensors get weight 0 below
+    data = Measurements(inputs, zz, SIGMA_MM, sensors=PRESS_SENSORS)
+    est = identify(model, data, K_NOMINAL, weights=used.astype(float))
+    if not est.success:
+        raise RuntimeError(f"fit of {model.name} failed: {est.message}")
+    return 2.0 * est.objective, est.dof
+
+
+def statistics(des, z_of_rep, n_rep, label, path):
+    """chi2 of M2 and M3 and their dof per design and replication: dict name -> array (n_done, 4).
+
+    The replications done so far are saved to ``path`` (.npz) after every fifth one, so that an
+    interrupted study keeps its completed replications."""
+    models = {name: candidate_models() for name in des}     # one model per design: each keeps its compiled fit
+    inputs = {n: model_inputs(n, np.asarray(Q_PAPER)) for n in ("M2", "M3")}
+    out = {name: np.empty((n_rep, 4)) for name in des}
+    t0 = time.perf_counter()
+    for r in range(n_rep):
+        z = z_of_rep(r)
+        for name, (mask, _) in des.items():
+            c2, d2 = _chi2(models[name]["M2"], inputs["M2"], z, mask)
+            c3, d3 = _chi2(models[name]["M3"], inputs["M3"], z, mask)
+            out[name][r] = (c2, d2, c3, d3)
+        if r == 0 or (r + 1) % 5 == 0 or r + 1 == n_rep:
+            np.savez(path, **{name: v[:r + 1] for name, v in out.items()})
+            print(f"  {label} {r + 1}/{n_rep}: {time.perf_counter() - t0:.1f} s", flush=True)
+    return out
+
+
+def null_campaigns(est_m2, seed0):
+    """z of replication r: M2 at its estimate plus N(0, sigma^2) readings, 2 series."""
+    h = candidate_models()["M2"].simulate(est_m2.p, model_inputs("M2", np.asarray(Q_PAPER)))
+    return lambda r: h[None] + SIGMA_MM * np.random.default_rng(seed0 + r).standard_normal((2,) + h.shape)
+
+
+def prototype_campaigns(seed0):
+    proto = VirtualPrototype(PrototypeConfig())
+    return lambda r: generate_campaign(seed=seed0 + r, n_series=2, prototype=proto).z
+
+
+def _fmt_rate(k, n):
+    r = clopper_pearson(k, n)
+    return f"{100 * r.rate:5.1f} % [{100 * r.lo:5.1f}, {100 * r.hi:5.1f}] ({k}/{n})"
+
+
+def report(des, null, power):
+    """Size and power of (a) the chi2 goodness-of-fit test of M2 and (b) the M2-vs-M3 likelihood ratio
+    Delta = chi2_M2 - chi2_M3, calibrated on the first half of the null replications, its size checked
+    on the second half."""
+    n0 = next(iter(null.values())).shape[0]
+    half = n0 // 2
+    print(f"\n{'design':<16} {'test':<22} {'size (M2 true)':>30} {'M2 rejected (prototype)':>30}")
+    for name in des:
+        a, b = null[name], power[name]
+        n1 = b.shape[0]
+        gof0 = int(np.sum(stats.chi2.sf(a[:, 0], a[:, 1]) < LEVEL))
+        gof1 = int(np.sum(stats.chi2.sf(b[:, 0], b[:, 1]) < LEVEL))
+        gof3 = int(np.sum(stats.chi2.sf(b[:, 2], b[:, 3]) < LEVEL))
+        crit = float(np.quantile(a[:half, 0] - a[:half, 2], 1 - LEVEL, method="higher"))
+        lr0 = int(np.sum(a[half:, 0] - a[half:, 2] > crit))
+        lr1 = int(np.sum(b[:, 0] - b[:, 2] > crit))
+        print(f"{name:<16} {'chi2 GoF of M2':<22} {_fmt_rate(gof0, n0):>30} {_fmt_rate(gof1, n1):>30}")
+        print(f"{'':<16} {'(chi2 GoF of M3)':<22} {'':>30} {_fmt_rate(gof3, n1):>30}")
+        print(f"{'':<16} {'LR M2 vs M3, c=' + format(crit, '.2f'):<22} {_fmt_rate(lr0, n0 - half):>30} "
+              f"{_fmt_rate(lr1, n1):>30}")
+        d0, d1 = a[:, 0] - a[:, 2], b[:, 0] - b[:, 2]
+        print(f"{'':<16} {'  Delta min/med/max':<22} {f'{d0.min():.1f} / {np.median(d0):.1f} / {d0.max():.1f}':>30} "
+              f"{f'{d1.min():.1f} / {np.median(d1):.1f} / {d1.max():.1f}':>30}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="bench_discrimination", description=__doc__.splitlines()[0])
+    ap.add_argument("--n-rep", type=int, default=150, help="prototype campaigns of the power study")
+    ap.add_argument("--null-rep", type=int, default=300, help="M2 campaigns of the size study")
+    ap.add_argument("--seed0", type=int, default=1000)
+    ap.add_argument("--study", choices=("design", "null", "power", "report", "all"), default="all",
+                    help="null and power can run in two processes; report reads their files")
+    ap.add_argument("--out", default="/tmp/bench_discrimination", help="prefix of the statistics files (.npz)")
+    args = ap.parse_args(argv)
+    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.processor() or platform.machine()}, "
+          f"nproc {os.cpu_count()}")
+    t0 = time.perf_counter()
+    est = fit_candidates(read_campaign(), models={k: v for k, v in candidate_models().items() if k != "M1"})
+    for name, e in est.items():
+        print(f"{name} on the shipped campaign (series 5, 6; D_y, F_x): k5, k7 = {e.p.round(2)} N/mm, "
+              f"stderr {e.stderr.round(2)}")
+    des, d_t, d_div, diff = designs(est)
+    print(f"design time (fits + scores): {time.perf_counter() - t0:.1f} s")
+    print_table(d_t, d_div, diff, des)
+    distinct = {}
+    for name, (mask, res) in des.items():
+        same = [other for other, (m, _) in distinct.items() if np.array_equal(m, mask)]
+        if same:
+            print(f"design {name!r} has the same readings as {same[0]!r}; simulated once")
+        else:
+            distinct[name] = (mask, res)
+    des = distinct
+
+    t0 = time.perf_counter()
+    if args.study in ("null", "all"):
+        statistics(des, null_campaigns(est["M2"], args.seed0), args.null_rep, "null", f"{args.out}_null.npz")
+        print(f"null study: {time.perf_counter() - t0:.1f} s")
+    t0 = time.perf_counter()
+    if args.study in ("power", "all"):
+        statistics(des, prototype_campaigns(args.seed0), args.n_rep, "prototype", f"{args.out}_power.npz")
+        print(f"power study: {time.perf_counter() - t0:.1f} s")
+    if args.study in ("report", "all"):
+        null, power = np.load(f"{args.out}_null.npz"), np.load(f"{args.out}_power.npz")
+        report(des, {n: null[n] for n in des}, {n: power[n] for n in des})
+
+
+if __name__ == "__main__":
+    main()
