@@ -119,7 +119,7 @@ class ProfileSettings:
     max_newton: int = 30
     max_steps: int = 60
     max_width: float = 1e3
-    xtol: float = 1e-7
+    xtol: float = 1e-6
     ipopt_fallback: bool = True
 
     def __post_init__(self):
@@ -391,7 +391,7 @@ class _Side:
         limit = self.theta_hat + d * self.prof.settings.max_width * math.sqrt(c) * self.h0
         stop = min(bound, limit) if d > 0 else max(bound, limit)
         base = prof.best
-        h_prev, tau_prev = 0.0, 0.0
+        h_prev = 0.0
         h = math.sqrt(c) * self.h0              # the Wald crossing
         if abs(stop - self.theta_hat) <= 0:
             return self.theta_hat, f"{self.name}: the estimate is at the bound {bound:g}"
@@ -419,34 +419,71 @@ class _Side:
                 return d * math.inf, (f"{self.name}: the profile statistic stays below the threshold "
                                       f"({D:.3g} < {c:.3g}) up to {what}; the "
                                       f"{'upper' if d > 0 else 'lower'} end is unbounded")
-            # secant on tau towards sqrt(c) (slight overshoot), growth at most 3x the last step
-            slope = (tau - tau_prev) / (h - h_prev) if h > h_prev else 0.0
+            # Newton on tau towards sqrt(c) (slight overshoot), growth at most 3x the last step;
+            # dtau/dh = d g_i / tau exactly (envelope theorem: dD/dtheta = 2 dPhi/dp_i at the constrained minimum)
+            slope = self._slope(s, tau) if tau > 0 else 0.0
             dh_last = h - h_prev
             if slope > 0:
-                dh = (1.05 * math.sqrt(c) - tau) / slope
+                dh = (1.01 * math.sqrt(c) - tau) / slope
                 dh = min(max(dh, 0.1 * dh_last), 3.0 * dh_last)
             else:
                 dh = 3.0 * dh_last
-            h_prev, tau_prev, base = h, tau, s
+            h_prev, base = h, s
             h = h + dh
         return d * math.inf, (f"{self.name}: the profile statistic stays below the threshold after "
                               f"{self.prof.settings.max_steps} continuation steps (last {self.name} = "
                               f"{self.theta_hat + d * h_prev:.6g}); the {'upper' if d > 0 else 'lower'} "
                               "end is treated as unbounded")
 
+    def _slope(self, s: _Solved, tau: float) -> float:
+        """dtau/dh at a solved point: d * dPhi/dp_i / tau (h: distance from the estimate)."""
+        return self.d * float(s.point.gradient[self.i]) / tau
+
     def _crossing(self, h_lo: float, h_hi: float, base: _Solved) -> float:
-        """brentq on tau(h) - sqrt(c) in [h_lo, h_hi], each evaluation warm-started from ``base``."""
+        """The root of tau(h) = sqrt(c) in [h_lo, h_hi] (tau(h_lo) < sqrt(c) <= tau(h_hi)).
+
+        The bracket is first narrowed by safeguarded Newton steps on tau (exact slope, see
+        :meth:`_slope`), each aimed slightly across the root so that the bracket shrinks from both
+        sides; :func:`scipy.optimize.brentq` then finishes on the narrow bracket.  Every
+        evaluation is warm-started from the nearer bracket end.
+        """
         root_c = math.sqrt(self.c)
-        known = {h_lo: math.sqrt(max(self.prof.statistic(base), 0.0)) - root_c,
-                 h_hi: math.sqrt(self.points[-1][1]) - root_c}
+        xtol = self.prof.settings.xtol * self.h0
+        hi_s = self.points[-1][2]
+        lo = [h_lo, math.sqrt(max(self.prof.statistic(base), 0.0)) - root_c, base]
+        hi = [h_hi, math.sqrt(self.points[-1][1]) - root_c, hi_s]
+        known = {lo[0]: lo[1], hi[0]: hi[1]}
+        solved = {lo[0]: lo[2], hi[0]: hi[2]}
 
         def g(h):
             if h not in known:
-                D, _ = self._at(self.theta_hat + self.d * h, base)
+                near = solved[min(solved, key=lambda k: abs(k - h))]
+                D, s = self._at(self.theta_hat + self.d * h, near)
                 known[h] = math.sqrt(D) - root_c
+                solved[h] = s
             return known[h]
 
-        h = optimize.brentq(g, h_lo, h_hi, xtol=self.prof.settings.xtol * self.h0, rtol=1e-12)
+        from_hi = True
+        for _ in range(4):
+            if hi[0] - lo[0] <= xtol:
+                break
+            end = hi if from_hi or lo[0] == 0.0 else lo
+            tau = end[1] + root_c
+            slope = self._slope(end[2], tau) if tau > 0 else 0.0
+            if not slope > 0:
+                break
+            step = -end[1] / slope
+            h_n = end[0] + step + math.copysign(max(xtol, 1e-3 * abs(step)), step)
+            if not lo[0] < h_n < hi[0]:
+                break
+            v = g(h_n)
+            if v < 0:
+                lo = [h_n, v, solved[h_n]]
+                from_hi = False
+            else:
+                hi = [h_n, v, solved[h_n]]
+                from_hi = True
+        h = optimize.brentq(g, lo[0], hi[0], xtol=xtol, rtol=1e-12)
         return self.theta_hat + self.d * h
 
 
