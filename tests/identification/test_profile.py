@@ -214,3 +214,31 @@ def test_region_of_curved_model_against_scipy():
         assert abs(reg.statistic[r, cc] - 2 * (r_min.fun - phi_hat)) < 1e-6 * max(1, reg.statistic[r, cc])
     # curved: the LR statistic differs from the quadratic form somewhere on the grid
     assert np.nanmax(np.abs(reg.statistic - reg.linearised())) > 0.1
+
+
+def test_region_matches_lmfit_conf_interval2d_on_nist():
+    """Rat42 (3 parameters, sigma estimated): sqrt(D) on the grid == lmfit's sqrt((chi2 - chi2_0) / redchi)."""
+    lmfit = pytest.importorskip("lmfit")
+    nist = _nist()
+    d = nist.load("Rat42")
+    fun = nist.MODELS["Rat42"]
+    model = Model.explicit(params=["b1", "b2", "b3"], inputs=["x"], sensors=["y"], h=lambda p, q: fun(p, q[0]))
+    data = Measurements(d.x.reshape(-1, 1), d.y.reshape(1, -1, 1), sigma=None)
+    est = identify(model, data, d.start1.copy())
+    reg = lr_region(model, data, est, ("b1", "b3"), n_grid=5)
+    assert reg.threshold == pytest.approx(2 * stats.f.ppf(0.95, 2, d.n - 3))
+
+    def resid(params):
+        b = np.array([params[f"b{i + 1}"].value for i in range(3)])
+        return np.asarray(fun(b, d.x)).ravel() - d.y
+
+    params = lmfit.Parameters()
+    for i in range(3):
+        params.add(f"b{i + 1}", value=float(d.certified[i]))
+    mini = lmfit.Minimizer(resid, params)
+    res = mini.minimize(method="leastsq", xtol=1e-14, ftol=1e-14)
+    x, y, grid = lmfit.conf_interval2d(mini, res, "b1", "b3", nx=5, ny=5,
+                                       limits=((reg.x[-1], reg.x[0]), (reg.y[-1], reg.y[0])))
+    np.testing.assert_allclose(x, reg.x, rtol=1e-14)
+    np.testing.assert_allclose(y, reg.y, rtol=1e-14)
+    np.testing.assert_allclose(np.sqrt(reg.statistic), grid, rtol=1e-4, atol=1e-4)
