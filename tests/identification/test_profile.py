@@ -242,3 +242,22 @@ def test_region_matches_lmfit_conf_interval2d_on_nist():
     np.testing.assert_allclose(x, reg.x, rtol=1e-14)
     np.testing.assert_allclose(y, reg.y, rtol=1e-14)
     np.testing.assert_allclose(np.sqrt(reg.statistic), grid, rtol=1e-4, atol=1e-4)
+
+
+def test_one_parameter_profile_is_the_likelihood_ratio_interval():
+    """n_p = 1 (nothing to re-optimise): the ends solve 2 (Phi(b) - Phi_hat) = chi2_1(0.9) exactly."""
+    model = Model.explicit(params=["k"], inputs=["t"], sensors=["y"], h=lambda p, q: ca.exp(-p[0] * q[0]))
+    t = np.linspace(0.1, 2.0, 6)
+    z = np.exp(-1.3 * t)[None, :, None] + 0.05 * np.random.default_rng(7).standard_normal((2, 6, 1))
+    data = Measurements(t, z, [0.05])
+    est = identify(model, data, [1.0])
+
+    def D(k):
+        return float(np.sum(((z[:, :, 0] - np.exp(-k * t)) / 0.05) ** 2)) - 2 * est.objective
+
+    ci = est.conf_int(0.1, method="profile", model=model, data=data)
+    c = stats.chi2.ppf(0.9, 1)
+    lo = optimize.brentq(lambda k: D(k) - c, est.p[0] - 1, est.p[0], xtol=1e-12)
+    up = optimize.brentq(lambda k: D(k) - c, est.p[0], est.p[0] + 1, xtol=1e-12)
+    assert abs(ci.lower[0] - lo) < 1e-6 * est.stderr[0] and abs(ci.upper[0] - up) < 1e-6 * est.stderr[0]
+    assert ci["k"] == (ci.lower[0], ci.upper[0]) and "90 % profile intervals" in str(ci)
