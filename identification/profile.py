@@ -575,45 +575,54 @@ class LikelihoodRegion:
     Attributes
     ----------
     names : (str, str)
-    x, y : ndarray (n_x,), (n_y,)   grid values of p_i and p_j
-    statistic : ndarray (n_y, n_x)  D on the grid (NaN where the point could not be solved; see notes)
+    X, Y : ndarray (n, n)           grid values of p_i and p_j (row r, column k); a rectangle
+                                    (``grid="axes"``) or the principal axes of the ellipse
+                                    (``grid="principal"``)
+    statistic : ndarray (n, n)      D on the grid (NaN where the point could not be solved or lies
+                                    outside the bounds; see notes)
     threshold : float               chi2_2(1 - alpha) or 2 F(2, dof; 1 - alpha)
     alpha : float
     estimate : ndarray (2,)         (p_i, p_j) at the estimate
     cov : ndarray (2, 2)            their block of the second-order covariance (the linearised ellipse
                                     is d^T cov^-1 d <= threshold)
-    notes : tuple of str
+    notes : tuple of str            unsolved points, a region reaching the edge of the grid
+    indices : (int, int)            positions of the pair in the parameter vector
     """
 
     names: tuple
-    x: np.ndarray
-    y: np.ndarray
+    X: np.ndarray
+    Y: np.ndarray
     statistic: np.ndarray
     threshold: float
     alpha: float
     estimate: np.ndarray
     cov: np.ndarray
     notes: tuple = ()
+    indices: tuple = (0, 1)
 
     def __post_init__(self):
-        for name in ("x", "y", "statistic", "estimate", "cov"):
+        for name in ("X", "Y", "statistic", "estimate", "cov"):
             object.__setattr__(self, name, _readonly(getattr(self, name)))
 
     def linearised(self) -> np.ndarray:
-        """The quadratic form d^T cov^-1 d on the grid (n_y, n_x): the statistic of a linear model."""
-        X, Y = np.meshgrid(self.x - self.estimate[0], self.y - self.estimate[1])
+        """The quadratic form d^T cov^-1 d on the grid (n, n): the statistic of a linear model."""
+        dx, dy = self.X - self.estimate[0], self.Y - self.estimate[1]
         Ci = np.linalg.inv(self.cov)
-        return Ci[0, 0] * X ** 2 + 2 * Ci[0, 1] * X * Y + Ci[1, 1] * Y ** 2
+        return Ci[0, 0] * dx ** 2 + 2 * Ci[0, 1] * dx * dy + Ci[1, 1] * dy ** 2
 
 
 def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, n_grid: int = 25,
-              span: float = 1.6, settings: ProfileSettings | None = None) -> LikelihoodRegion:
+              span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None
+              ) -> LikelihoodRegion:
     """Likelihood-ratio statistic of the pair ``pair = (i, j)`` on an n_grid x n_grid grid.
 
-    The grid covers span x the half-extent of the linearised (1 - alpha) ellipse of the pair
-    around the estimate (clipped to the bounds); the other parameters are re-optimised at every
-    grid point (exact reduced Newton, Ipopt fallback), warm-started along a serpentine path.
-    A grid point that cannot be solved is NaN and counted in ``notes``.
+    ``grid="principal"`` (default): the grid p = p_hat + V diag(sqrt(w)) (u, v) with C = V diag(w) V^T
+    the pair's covariance block and u, v in [-span sqrt(c), span sqrt(c)], so that the linearised
+    ellipse is the circle of radius sqrt(c) and a thin, strongly correlated region still falls on
+    many grid points; ``grid="axes"``: the rectangle of span x the ellipse's half-extents.  The other
+    parameters are re-optimised at every grid point (exact reduced Newton, Ipopt fallback),
+    warm-started along rows from the grid centre.  A point that cannot be solved or lies outside the
+    bounds is NaN, counted in ``notes``; a region that reaches the edge of the grid is noted too.
     """
     alpha = validate_alpha(alpha)
     idx = resolve_params(list(pair), tuple(est.param_names))
@@ -623,6 +632,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
         raise ValueError(f"n_grid: expected an integer >= 3, got {n_grid!r}")
     if not (span > 0 and math.isfinite(span)):
         raise ValueError(f"span: expected a positive number, got {span!r}")
+    if grid not in ("principal", "axes"):
+        raise ValueError(f"grid: expected 'principal' or 'axes', got {grid!r}")
     _check_pair(model, data, est)
     settings = settings or ProfileSettings()
     prof = _Profiler(model, data, est, settings)
@@ -630,38 +641,52 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     C = np.asarray(est.cov)[np.ix_(idx, idx)]
     if not np.all(np.isfinite(C)):
         C = np.asarray(est.cov_gn)[np.ix_(idx, idx)]
-    half = span * np.sqrt(c * np.diag(C))
     ph = np.asarray(est.p, float)[idx]
-    axes = []
-    for k in range(2):
-        lo = max(ph[k] - half[k], model.lower[idx[k]])
-        up = min(ph[k] + half[k], model.upper[idx[k]])
-        axes.append(np.linspace(lo, up, int(n_grid)))
-    x, y = axes
-    D = np.full((y.size, x.size), np.nan)
+    n = int(n_grid)
+    if grid == "axes":
+        half = span * np.sqrt(c * np.diag(C))
+        x = np.linspace(max(ph[0] - half[0], model.lower[idx[0]]), min(ph[0] + half[0], model.upper[idx[0]]), n)
+        y = np.linspace(max(ph[1] - half[1], model.lower[idx[1]]), min(ph[1] + half[1], model.upper[idx[1]]), n)
+        X, Y = np.meshgrid(x, y)
+    else:
+        w, V = np.linalg.eigh(0.5 * (C + C.T))
+        L = V * np.sqrt(np.clip(w, 0.0, None))[None, :]
+        u = np.linspace(-span * math.sqrt(c), span * math.sqrt(c), n)
+        U, W = np.meshgrid(u, u)
+        X = ph[0] + L[0, 0] * U + L[0, 1] * W
+        Y = ph[1] + L[1, 0] * U + L[1, 1] * W
+    D = np.full((n, n), np.nan)
     failed = []
-    # start at the grid row nearest the estimate, sweep rows outwards, serpentine within a row
-    r0 = int(np.argmin(np.abs(y - ph[1])))
-    c0 = int(np.argmin(np.abs(x - ph[0])))
+    outside = 0
+    lo, up = model.lower[idx], model.upper[idx]
+    r0, c0 = n // 2, n // 2
     row_start = {}
-    for rows in (range(r0, y.size), range(r0 - 1, -1, -1)):
-        base_row = prof.best
+    for rows in (range(r0, n), range(r0 - 1, -1, -1)):
         for r in rows:
-            base = row_start.get(r - 1 if rows.step > 0 else r + 1, base_row)
-            order = list(range(c0, x.size)) + list(range(c0 - 1, -1, -1))
-            for cc in order:
+            base = row_start.get(r - 1 if rows.step > 0 else r + 1, prof.best)
+            for cc in list(range(c0, n)) + list(range(c0 - 1, -1, -1)):
                 if cc == c0 - 1:
                     base = row_start.get(r, base)
+                v = np.array([X[r, cc], Y[r, cc]])
+                if np.any(v < lo) or np.any(v > up):
+                    outside += 1
+                    continue
                 try:
-                    s = prof.solve(idx, [x[cc], y[r]], base)
+                    s = prof.solve(idx, v, base)
                 except ProfileError as exc:
-                    failed.append(f"({x[cc]:.6g}, {y[r]:.6g}): {exc}")
+                    failed.append(f"({v[0]:.6g}, {v[1]:.6g}): {exc}")
                     continue
                 D[r, cc] = max(prof.statistic(s), 0.0)
                 base = s
                 if cc == c0:
                     row_start[r] = s
-    notes = ()
+    notes = []
     if failed:
-        notes = (f"{len(failed)} of {D.size} grid points could not be solved (NaN); first: {failed[0]}",)
-    return LikelihoodRegion((est.param_names[idx[0]], est.param_names[idx[1]]), x, y, D, c, alpha, ph, C, notes)
+        notes.append(f"{len(failed)} of {D.size} grid points could not be solved (NaN); first: {failed[0]}")
+    if outside:
+        notes.append(f"{outside} of {D.size} grid points lie outside the parameter bounds (NaN)")
+    edge = np.concatenate([D[0], D[-1], D[:, 0], D[:, -1]])
+    if np.any(edge[np.isfinite(edge)] <= c):
+        notes.append("the region reaches the edge of the grid: it extends beyond it (use a larger span)")
+    return LikelihoodRegion((est.param_names[idx[0]], est.param_names[idx[1]]), X, Y, D, c, alpha, ph, C,
+                            tuple(notes), tuple(idx))

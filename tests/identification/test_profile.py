@@ -210,7 +210,8 @@ def test_region_of_curved_model_against_scipy():
     reg = lr_region(model, data, est, ("V", "K"), n_grid=7)
     phi_hat = phi(est.p)
     for r, cc in [(0, 0), (3, 5), (6, 6), (2, 1)]:
-        r_min = optimize.minimize_scalar(lambda t: phi([reg.x[cc], reg.y[r], t]), bracket=(0.0, 2.0), tol=1e-12)
+        r_min = optimize.minimize_scalar(lambda t: phi([reg.X[r, cc], reg.Y[r, cc], t]), bracket=(0.0, 2.0),
+                                         tol=1e-12)
         assert abs(reg.statistic[r, cc] - 2 * (r_min.fun - phi_hat)) < 1e-6 * max(1, reg.statistic[r, cc])
     # curved: the LR statistic differs from the quadratic form somewhere on the grid
     assert np.nanmax(np.abs(reg.statistic - reg.linearised())) > 0.1
@@ -225,7 +226,7 @@ def test_region_matches_lmfit_conf_interval2d_on_nist():
     model = Model.explicit(params=["b1", "b2", "b3"], inputs=["x"], sensors=["y"], h=lambda p, q: fun(p, q[0]))
     data = Measurements(d.x.reshape(-1, 1), d.y.reshape(1, -1, 1), sigma=None)
     est = identify(model, data, d.start1.copy())
-    reg = lr_region(model, data, est, ("b1", "b3"), n_grid=5)
+    reg = lr_region(model, data, est, ("b1", "b3"), n_grid=5, grid="axes")
     assert reg.threshold == pytest.approx(2 * stats.f.ppf(0.95, 2, d.n - 3))
 
     def resid(params):
@@ -238,9 +239,8 @@ def test_region_matches_lmfit_conf_interval2d_on_nist():
     mini = lmfit.Minimizer(resid, params)
     res = mini.minimize(method="leastsq", xtol=1e-14, ftol=1e-14)
     x, y, grid = lmfit.conf_interval2d(mini, res, "b1", "b3", nx=5, ny=5,
-                                       limits=((reg.x[-1], reg.x[0]), (reg.y[-1], reg.y[0])))
-    np.testing.assert_allclose(x, reg.x, rtol=1e-14)
-    np.testing.assert_allclose(y, reg.y, rtol=1e-14)
+                                       limits=((reg.X[0, -1], reg.X[0, 0]), (reg.Y[-1, 0], reg.Y[0, 0])))
+    np.testing.assert_allclose(np.meshgrid(x, y), [reg.X, reg.Y], rtol=1e-14)
     np.testing.assert_allclose(np.sqrt(reg.statistic), grid, rtol=1e-4, atol=1e-4)
 
 

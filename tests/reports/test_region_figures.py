@@ -24,19 +24,25 @@ def _linear():
 def test_region_figure_contour_lies_on_the_ellipse_for_a_linear_model():
     import matplotlib.pyplot as plt
     model, data, est = _linear()
-    reg = lr_region(model, data, est, (0, 1), n_grid=15)
-    fig = lr_region_figure(reg, units=("mm", "mm/N"), title="linear")
+    reg = lr_region(model, data, est, (0, 1), n_grid=15, grid="axes")
+    prof = est.conf_int(method="profile", model=model, data=data).profiles
+    fig = lr_region_figure(reg, units=("mm", "mm/N"), profiles=prof, title="linear")
     ax = fig.axes[0]
     contour_xy = np.vstack([p.vertices for c in ax.collections for p in c.get_paths() if len(p.vertices)])
+    # the profile traces of a linear model are the conjugate axes of the ellipse: straight lines through p_hat
+    for line, pr in zip(ax.get_lines()[1:3], prof):
+        np.testing.assert_allclose(line.get_xdata(), pr.params[:, 0])
+        slope = np.diff(line.get_ydata()) / np.diff(line.get_xdata())
+        np.testing.assert_allclose(slope, slope[0], rtol=1e-6)
     d = contour_xy - reg.estimate
     q = np.einsum("ni,ij,nj->n", d, np.linalg.inv(reg.cov), d)
     # contour vertices lie on grid edges, linearly interpolated: D is convex, so they lie inside the
     # ellipse, by at most the interpolation error h^2 / 8 |D''| = h^2 Ci_kk / 4 along an edge
     Ci = np.linalg.inv(reg.cov)
-    err = max((reg.x[1] - reg.x[0]) ** 2 * Ci[0, 0], (reg.y[1] - reg.y[0]) ** 2 * Ci[1, 1]) / 4
+    err = max((reg.X[0, 1] - reg.X[0, 0]) ** 2 * Ci[0, 0], (reg.Y[1, 0] - reg.Y[0, 0]) ** 2 * Ci[1, 1]) / 4
     assert q.size > 20
     assert np.all(q <= reg.threshold + 1e-9) and np.all(q >= reg.threshold - err), (q.min(), q.max(), err)
-    assert ax.get_xlabel() == "a (mm)" and len(ax.get_legend().get_texts()) == 3
+    assert ax.get_xlabel() == "a (mm)" and len(ax.get_legend().get_texts()) == 5
     plt.close(fig)
 
 
