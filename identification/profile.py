@@ -226,7 +226,8 @@ class ConfidenceIntervals:
 # ---------------------------------------------------------------------------- the constrained solver
 @dataclass(frozen=True)
 class _Solved:
-    """A re-optimised point: the reduced point, its exact Hessian and whether Ipopt was needed."""
+    """A re-optimised point: the reduced point, J^T Omega J there (the curvature of the
+    continuation predictor) and whether Ipopt was needed."""
 
     point: ReducedPoint
     H: np.ndarray
@@ -251,11 +252,11 @@ class _Profiler:
         self.best = self._solved(start, False)
 
     def _solved(self, point: ReducedPoint, ipopt: bool) -> _Solved:
-        H = self.problem.information(point) + point.sens.hessians(point.lam[None])[0]
-        return _Solved(point, H, ipopt)
+        return _Solved(point, self.problem.information(point), ipopt)
 
     def predict(self, base: _Solved, fixed: list, values: np.ndarray) -> np.ndarray:
-        """First-order predictor: p_f = p_f(base) - H_ff^{-1} H_fi (theta - theta_base), clipped to bounds."""
+        """First-order predictor: p_f = p_f(base) - H_ff^{-1} H_fi (theta - theta_base), clipped to bounds
+        (H the Gauss-Newton J^T Omega J: a start for the exact Newton, which makes it exact)."""
         p = np.array(base.point.p, float)
         free = [k for k in range(p.size) if k not in fixed]
         d = np.asarray(values, float) - p[fixed]
@@ -304,16 +305,24 @@ class _Profiler:
                                            or (point.p[k] >= self.up[k] and g[k] < 0))]
             if not act:
                 return solved
-            Hs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
             gs = g[act] * s[act]
+            Fs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
+            try:
+                LF = np.linalg.cholesky(Fs)
+            except np.linalg.LinAlgError:
+                LF = None
+            if LF is not None:
+                w = np.linalg.solve(LF, gs)
+                if float(w @ w) < self.settings.newton_tol:
+                    return solved          # converged: g^T (J^T Omega J)^-1 g below the tolerance
+            # the exact Hessian J^T Omega J + S (AD second derivatives) for the Newton step
+            Hs = (solved.H + point.sens.hessians(point.lam[None])[0])[np.ix_(act, act)] * np.outer(s[act], s[act])
             try:
                 L = np.linalg.cholesky(Hs)
             except np.linalg.LinAlgError:
-                F = self.problem.information(point)[np.ix_(act, act)] * np.outer(s[act], s[act])
-                try:
-                    L = np.linalg.cholesky(F)
-                except np.linalg.LinAlgError:
+                if LF is None:
                     return "the Gauss-Newton information of the free parameters is singular"
+                L = LF
             v = np.linalg.solve(L, gs)
             dec = float(v @ v)
             if dec < self.settings.newton_tol:
