@@ -254,6 +254,10 @@ class _Profiler:
     def _solved(self, point: ReducedPoint, ipopt: bool) -> _Solved:
         return _Solved(point, self.problem.information(point), ipopt)
 
+    def minimise(self, start: _Solved):
+        """Exact Newton on all parameters from ``start``: a _Solved, or the reason of failure (str)."""
+        return self._newton([], np.asarray(start.point.p, float), start.point.states)
+
     def predict(self, base: _Solved, fixed: list, values: np.ndarray) -> np.ndarray:
         """First-order predictor: p_f = p_f(base) - H_ff^{-1} H_fi (theta - theta_base), clipped to bounds
         (H the Gauss-Newton J^T Omega J: a start for the exact Newton, which makes it exact)."""
@@ -386,9 +390,11 @@ class _Side:
             raise ProfileError(f"profile of {self.name}: stopped at {self.name} = {theta:.8g}: the objective is "
                                f"not finite there ({s.point.objective})", status="not finite")
         if D < -1e-6 * max(1.0, self.c):
-            raise ProfileError(f"profile of {self.name}: at {self.name} = {theta:.8g} the objective is lower than "
+            err = ProfileError(f"profile of {self.name}: at {self.name} = {theta:.8g} the objective is lower than "
                                f"at the estimate (D = {D:.3g}): the estimate is not the minimum; refit from there",
                                status="not a minimum")
+            err.lower_point = s
+            raise err
         self.ipopt_steps += int(s.ipopt)
         self.points.append((theta, max(D, 0.0), s))
         return max(D, 0.0), s
@@ -548,14 +554,39 @@ def profile_intervals(model: Model, data: Measurements, est, alpha: float = 0.05
     settings = settings or ProfileSettings()
     prof = _Profiler(model, data, est, settings)
     c = profile_threshold(alpha, est.sigma_estimated, est.dof)
-    profiles, notes = [], []
-    for i in idx:
-        pr, nt = _profile_one(prof, i, c)
-        profiles.append(pr)
-        notes += nt
+    restart_notes = []
+    while True:
+        profiles, notes = [], []
+        try:
+            for i in idx:
+                pr, nt = _profile_one(prof, i, c)
+                profiles.append(pr)
+                notes += nt
+            break
+        except ProfileError as exc:
+            lower = getattr(exc, "lower_point", None)
+            if lower is None or len(restart_notes) >= 3:
+                raise
+            restart_notes.append(_restart(prof, lower, exc))
+    notes = restart_notes + notes
     names = tuple(est.param_names[i] for i in idx)
     return ConfidenceIntervals(names, np.asarray(est.p)[idx], [p.lower for p in profiles],
                                [p.upper for p in profiles], "profile", alpha, tuple(notes), tuple(profiles))
+
+
+def _restart(prof: _Profiler, lower: _Solved, exc: ProfileError) -> str:
+    """Re-minimise all parameters from a profile point below the estimate; that minimum becomes the
+    reference of every profile.  Returns the note saying so (raises when the Newton fails)."""
+    old = prof.best
+    new = prof.minimise(lower)
+    if isinstance(new, str):
+        raise ProfileError(f"{exc}; re-minimising from there failed: {new}", status="not a minimum") from None
+    prof.best = new
+    names = prof.model.param_names
+    return (f"the estimate is not the minimum of the objective: a profile step found Phi lower by "
+            f"{old.point.objective - lower.point.objective:.3g} (chi2/2 units); the intervals are those of the "
+            f"refined minimum (" + ", ".join(f"{n} = {v:.7g}" for n, v in zip(names, new.point.p))
+            + f"), Phi lower by {old.point.objective - new.point.objective:.3g} than at the estimate")
 
 
 def _check_pair(model: Model, data: Measurements, est) -> None:

@@ -261,3 +261,16 @@ def test_one_parameter_profile_is_the_likelihood_ratio_interval():
     up = optimize.brentq(lambda k: D(k) - c, est.p[0], est.p[0] + 1, xtol=1e-12)
     assert abs(ci.lower[0] - lo) < 1e-6 * est.stderr[0] and abs(ci.upper[0] - up) < 1e-6 * est.stderr[0]
     assert ci["k"] == (ci.lower[0], ci.upper[0]) and "90 % profile intervals" in str(ci)
+
+
+def test_estimate_short_of_the_minimum_is_refined_and_said():
+    """An estimate moved off the minimum: the profile finds lower objectives, re-minimises, and gives the
+    intervals of the true minimum with a note (never intervals relative to a wrong reference)."""
+    import dataclasses
+    model, data, est = _exp_problem()
+    ref = est.conf_int(0.05, method="profile", model=model, data=data)
+    off = dataclasses.replace(est, p=est.p + np.array([0.0, 0.5]) * est.stderr)
+    ci = off.conf_int(0.05, method="profile", model=model, data=data)
+    assert ci.notes and ci.notes[0].startswith("the estimate is not the minimum of the objective")
+    np.testing.assert_allclose(ci.lower, ref.lower, atol=1e-5 * est.stderr.min())
+    np.testing.assert_allclose(ci.upper, ref.upper, atol=1e-5 * est.stderr.min())
