@@ -875,7 +875,7 @@ ABSURD_SCALES = 1e6
 
 
 def _check_plausible(st: _Start, p: np.ndarray, cov: np.ndarray, cov_gn: np.ndarray, status: str) -> None:
-    """Reject an estimate at absurd values: |p_i| > :data:`ABSURD_SCALES` s_p,i (s_p the
+    """Reject an estimate at absurd values: |p_i| > :data:`ABSURD_SCALES` max(s_p,i, 1) (s_p the
     parameter's declared scale, else |p0_i|), a non-finite p, or non-finite standard errors
     (second-order or Gauss-Newton).  Such a point is where the solver stopped while the
     parameters ran off (the data do not bound them), not an estimate.
@@ -886,9 +886,10 @@ def _check_plausible(st: _Start, p: np.ndarray, cov: np.ndarray, cov_gn: np.ndar
         Naming the parameters and what to do.
     """
     names = st.model.param_names
-    far = [i for i in range(p.size) if not (np.isfinite(p[i]) and abs(p[i]) <= ABSURD_SCALES * st.s_p[i])]
+    ref = np.maximum(st.s_p, 1.0)      # a start value near 0 (e.g. 1e-16) must not make every value absurd
+    far = [i for i in range(p.size) if not (np.isfinite(p[i]) and abs(p[i]) <= ABSURD_SCALES * ref[i])]
     if far:
-        what = ", ".join(f"{names[i]} = {p[i]:.3g} (scale {st.s_p[i]:.3g})" for i in far)
+        what = ", ".join(f"{names[i]} = {p[i]:.3g} (scale {ref[i]:.3g})" for i in far)
         raise IdentificationError(
             f"the fit failed: the estimate ran off to absurd values ({what}: more than {ABSURD_SCALES:.0e} "
             "times the parameter's scale); the data do not bound these parameters from p0. Try other start "

@@ -151,14 +151,62 @@ class Estimate:
             return float(stats.t.ppf(1 - alpha / 2, self.dof))
         return float(stats.norm.ppf(1 - alpha / 2))
 
-    def conf_int(self, alpha: float = 0.05, kind: str = "second_order") -> np.ndarray:
-        """Marginal (1 - alpha) confidence intervals, shape (n_p, 2).
+    #: the interval methods of :meth:`conf_int`
+    CONF_INT_METHODS = ("wald", "profile", "bootstrap")
 
-        Normal quantiles with known sigma; Student t with n - n_p dof when sigma was estimated.
+    def conf_int(self, alpha: float = 0.05, method: str = "wald", params=None, kind: str = "second_order", *,
+                 model=None, data=None, n: int = 200, seed=0, workers: int | None = 1, progress=None,
+                 settings=None):
+        """Marginal (1 - alpha) confidence intervals of the parameters.
+
+        ``method="wald"`` (default): p_i -+ c se_i with c the normal quantile z(1 - alpha/2) (sigma
+        known) or Student t(n - n_p; 1 - alpha/2) (sigma estimated), se from the second-order
+        (``kind="second_order"``) or Gauss-Newton covariance.  Returns an ndarray (m, 2) of
+        [lower, upper] rows, as before this method grew other methods.
+
+        ``method="profile"``: {theta : 2 (min_{p_i = theta} Phi - Phi(p_hat)) <= c} with c =
+        chi2_1(1 - alpha), or F(1, n - n_p; 1 - alpha) when sigma was estimated (Bates-Watts
+        profile-t); see :func:`identification.profile.profile_intervals` (``settings``: a
+        ``ProfileSettings``).
+
+        ``method="bootstrap"``: parametric bootstrap percentile intervals from ``n`` refits of data
+        simulated from the fit (``seed``, ``workers`` local processes, ``progress`` a
+        :class:`identification.progress.Progress`); see
+        :func:`identification.bootstrap.bootstrap_intervals`.
+
+        Both return a frozen :class:`identification.profile.ConfidenceIntervals` (``lower``,
+        ``upper``, ``method``, ``notes``; ``.array`` is the (m, 2) layout of the Wald result); an
+        unbounded side is -inf / +inf with a note.  They use the ``model`` and ``data`` the
+        estimate was fitted to (kept by :func:`identify`; pass them for an estimate built otherwise).
+
+        Parameters
+        ----------
+        alpha : float in (0, 0.5)   the miss probability: 0.05 gives 95 % intervals
+        method : "wald", "profile" or "bootstrap"
+        params : names or 0-based indices, optional (default all, in model order)
+
+        Raises
+        ------
+        ValueError
+            alpha outside (0, 0.5), an unknown method or parameter name (the message names the argument).
         """
-        se = self._se(kind)
-        c = self._quantile(alpha)
-        return np.column_stack([self.p - c * se, self.p + c * se])
+        from . import profile as profile_mod      # deferred: profile imports the estimator, which imports this
+        alpha = profile_mod.validate_alpha(alpha)
+        if method not in self.CONF_INT_METHODS:
+            raise ValueError(f"method: unknown interval method {method!r}; choose one of "
+                             f"{', '.join(repr(m) for m in self.CONF_INT_METHODS)}")
+        idx = profile_mod.resolve_params(params, tuple(self.param_names))
+        if method == "wald":
+            se = self._se(kind)
+            c = self._quantile(alpha)
+            return np.column_stack([self.p - c * se, self.p + c * se])[idx]
+        model = self.model if model is None else model
+        data = self.data if data is None else data
+        if method == "profile":
+            return profile_mod.profile_intervals(model, data, self, alpha, idx, settings=settings)
+        from .bootstrap import bootstrap_intervals
+        return bootstrap_intervals(model, data, self, alpha, idx, n=n, seed=seed, workers=workers,
+                                   progress=progress)
 
     def _se(self, kind):
         if kind == "second_order":

@@ -1,0 +1,268 @@
+"""Monte Carlo coverage of 95 % marginal intervals: Wald, profile likelihood, parametric bootstrap (issue 12).
+
+For every case, ``--reps`` campaigns are simulated from the model at the true parameters
+(z = h(p*) + sigma eps, sigma known), each is fitted with :func:`identification.identify`,
+and the 95 % intervals of every parameter are computed by
+
+* ``wald``: p_i -+ z_0.975 se_i (second-order covariance, the default ``conf_int``);
+* ``profile``: {theta : D_i(theta) <= chi2_1(0.95)} (:mod:`identification.profile`);
+* ``bootstrap`` (``--boot=N`` > 0): percentile interval of N parametric-bootstrap refits.
+
+Coverage = share of campaigns whose interval holds p*_i, with its Clopper-Pearson 95 %
+interval.  A failed fit or a profile that raised is counted (column ``failed``), never
+dropped silently; coverage is over the campaigns where that method produced an interval.
+
+Cases:
+
+* ``mm``: Michaelis-Menten y = V x / (K + x) below saturation (x = 0.5..4, V = 10, K = 10,
+  sigma 0.25): 2 parameters, 5 inputs, 2 series, sigma known; ``mm_deep`` the same further below
+  saturation (K = 20, sigma 0.1);
+* ``truss_Px`` / ``truss_Py``: the README's two-bar truss (k1 = 210, k2 = 290 N/mm) measured
+  with one sensor only (P_x or P_y), 4 series, 21 loads, sigma 4 um;
+* ``press``: the press linkage M1 (k5, k7) at its fit to the shipped campaign, 2 series, the
+  29 set points, sensors D_y and F_x with the campaign's composed sigma.
+
+Run ``python -m bench coverage --reps=300 --boot=0 --workers=2 --cases=mm,mm_deep,truss_Px,truss_Py,press``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+
+from identification import IdentificationError, Measurements, identify
+from identification.montecarlo import clopper_pearson
+from identification.profile import ProfileError
+from models import Model
+
+CASES = ("mm", "mm_deep", "truss_Px", "truss_Py", "press")
+METHODS = ("wald", "profile", "bootstrap")
+
+
+@dataclass(frozen=True, eq=False)
+class Case:
+    """A coverage case: model, truth, design, noise and start values."""
+
+    name: str
+    model: Model
+    p_true: np.ndarray
+    inputs: np.ndarray
+    sigma: np.ndarray
+    n_M: int
+    weights: np.ndarray
+    p0: np.ndarray
+    description: str
+
+
+def _mm(K: float, sigma: float, name: str) -> Case:
+    model = Model.explicit(params=["V", "K"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] / (p[1] + q[0]), name="Michaelis-Menten")
+    model = model.with_bounds({"V": (1e-3, 1e6), "K": (1e-3, 1e6)})
+    x = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
+    return Case(name, model, np.array([10.0, K]), x[:, None], np.array([sigma]), 2, np.ones(1),
+                np.array([10.0, K]), f"V x / (K + x), V = 10, K = {K:g}, x = 0.5..4, 2 series, sigma {sigma:g}")
+
+
+def _truss(sensor: str) -> Case:
+    from models.mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model
+    mech = Mechanism(
+        "two_bar_truss",
+        joints=[Joint("A", 0.0, 0.0), Joint("B", 800.0, 0.0), Joint("P", 300.0, -400.0)],
+        elements=[Bar("1", "A", "P", "k1"), Bar("2", "B", "P", "k2"),
+                  Support("wall_A", "A", kx=1e6, ky=1e6), Support("wall_B", "B", kx=1e6, ky=1e6),
+                  Load("hook", "P", fy=-1.0, input="F")],
+        parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
+                    MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
+        inputs=("F",), sensors=("P_x", "P_y"))
+    model = build_model(mech, unknowns=("k1", "k2"), name="truss linear")
+    q = np.r_[np.linspace(0, 1000, 11), np.linspace(1000, 0, 11)[1:]]
+    w = np.array([1.0 if s == sensor else 0.0 for s in model.sensors])
+    return Case(f"truss_{sensor[-2:]}", model, np.array([210.0, 290.0]), q[:, None], np.array([0.004, 0.004]), 4,
+                w, np.array([200.0, 300.0]), f"README two-bar truss, sensor {sensor} only, 4 series x 21 loads, "
+                "sigma 4 um")
+
+
+def _press() -> Case:
+    from models.friction import candidate_models, model_inputs
+    from models.prototype import TEST_SERIES, composed_sigma, read_campaign
+    from models.press import K_NOMINAL
+    campaign = read_campaign()
+    model = candidate_models()["M1"]
+    inputs = model_inputs("M1", campaign.q_set)
+    sigma = composed_sigma(campaign.z) * 1e-3
+    w = np.array([1.0 if s in ("D_y", "F_x") else 0.0 for s in model.sensors])
+    data = Measurements(inputs, campaign.z[list(TEST_SERIES)], sigma, sensors=campaign.sensors)
+    p_true = identify(model, data, K_NOMINAL, weights=w).p
+    return Case("press", model, np.asarray(p_true), inputs, sigma, 2, w, np.asarray(K_NOMINAL, float),
+                f"press M1 at its fit ({p_true[0]:.1f}, {p_true[1]:.1f}) N/mm, 29 set points, 2 series, "
+                "sensors D_y, F_x, composed sigma")
+
+
+def build_case(name: str) -> Case:
+    if name == "mm":
+        return _mm(10.0, 0.25, name)
+    if name == "mm_deep":
+        return _mm(20.0, 0.1, name)
+    if name in ("truss_Px", "truss_Py"):
+        return _truss("P_" + name[-1].lower())
+    if name == "press":
+        return _press()
+    raise ValueError(f"cases: unknown case {name!r}; choose from {', '.join(CASES)}")
+
+
+class _Cache:
+    """Cases built once per process."""
+
+    cases: dict = {}
+    truth_h: dict = {}
+
+
+def _case(name: str) -> tuple:
+    if name not in _Cache.cases:
+        c = build_case(name)
+        _Cache.cases[name] = c
+        _Cache.truth_h[name] = c.model.simulate(c.p_true, c.inputs)
+    return _Cache.cases[name], _Cache.truth_h[name]
+
+
+def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
+    """One campaign of case ``name``: coverage (1/0, NaN if failed) per method and parameter, and errors."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    c, H = _case(name)
+    rng = np.random.default_rng(seed)
+    z = H[None] + c.sigma * rng.standard_normal((c.n_M,) + H.shape)
+    data = Measurements(c.inputs, z, c.sigma, sensors=c.model.sensors)
+    out = {m: np.full(c.model.n_p, np.nan) for m in METHODS}
+    out["errors"] = []
+    out["inf"] = 0
+    out["t_profile"] = math.nan
+    try:
+        est = identify(c.model, data, c.p0, weights=c.weights)
+    except IdentificationError as exc:
+        out["errors"].append(("fit", str(exc).splitlines()[0][:200]))
+        return out
+    ci = est.conf_int(0.05)
+    out["wald"] = ((ci[:, 0] <= c.p_true) & (c.p_true <= ci[:, 1])).astype(float)
+    t0 = time.perf_counter()
+    try:
+        pr = est.conf_int(0.05, method="profile", model=c.model, data=data)
+        out["profile"] = ((pr.lower <= c.p_true) & (c.p_true <= pr.upper)).astype(float)
+        out["inf"] = int(np.sum(~np.isfinite(pr.lower)) + np.sum(~np.isfinite(pr.upper)))
+    except ProfileError as exc:
+        out["errors"].append(("profile", str(exc).splitlines()[0][:200]))
+    out["t_profile"] = time.perf_counter() - t0
+    if n_boot:
+        try:
+            bs = est.conf_int(0.05, method="bootstrap", model=c.model, data=data, n=n_boot,
+                              seed=int(rng.integers(2 ** 31)))
+            out["bootstrap"] = ((bs.lower <= c.p_true) & (c.p_true <= bs.upper)).astype(float)
+            if bs.n_failed:
+                out["errors"].append(("bootstrap", f"{bs.n_failed} of {n_boot} refits failed"))
+        except IdentificationError as exc:
+            out["errors"].append(("bootstrap", str(exc).splitlines()[0][:200]))
+    return out
+
+
+def _chunk(name, items, n_boot):
+    return [(i, replicate(name, s, n_boot)) for i, s in items]
+
+
+def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int) -> list:
+    children = np.random.SeedSequence([seed, CASES.index(name)]).spawn(reps)
+    items = list(enumerate(children))
+    size = max(1, min(10, reps // (4 * workers) or 1))
+    chunks = [items[k:k + size] for k in range(0, reps, size)]
+    res = [None] * reps
+    if workers == 1:
+        for ch in chunks:
+            for i, r in _chunk(name, ch, n_boot):
+                res[i] = r
+    else:
+        import multiprocessing as mp
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+            for fut in as_completed([pool.submit(_chunk, name, ch, n_boot) for ch in chunks]):
+                for i, r in fut.result():
+                    res[i] = r
+    return res
+
+
+def table(name: str, res: list, n_boot: int) -> list:
+    c, _ = _case(name)
+    rows = []
+    for m in METHODS:
+        if m == "bootstrap" and not n_boot:
+            continue
+        A = np.array([r[m] for r in res])
+        for i, p in enumerate(c.model.param_names):
+            ok = np.isfinite(A[:, i])
+            rate = clopper_pearson(int(A[ok, i].sum()), int(ok.sum()))
+            rows.append((name, m, p, rate, int((~ok).sum())))
+    return rows
+
+
+def press_timing(repeat: int = 5) -> str:
+    """Wall time of both 95 % profile intervals of M1 fitted to the shipped campaign (held-out series)."""
+    from models.friction import candidate_models, model_inputs
+    from models.prototype import TEST_SERIES, composed_sigma, read_campaign
+    from models.press import K_NOMINAL
+    campaign = read_campaign()
+    model = candidate_models()["M1"]
+    data = Measurements(model_inputs("M1", campaign.q_set), campaign.z[list(TEST_SERIES)],
+                        composed_sigma(campaign.z) * 1e-3, sensors=campaign.sensors)
+    w = [1.0 if s in ("D_y", "F_x") else 0.0 for s in model.sensors]
+    est = identify(model, data, K_NOMINAL, weights=w)
+    est.conf_int(0.05, method="profile", model=model, data=data)          # warm the caches
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        ci = est.conf_int(0.05, method="profile", model=model, data=data)
+        times.append(time.perf_counter() - t0)
+    wald = est.conf_int(0.05)
+    return (f"press, shipped campaign (series {TEST_SERIES}), M1: both 95 % profile intervals in "
+            f"median {np.median(times):.3f} s (min {min(times):.3f}, max {max(times):.3f}, {repeat} runs); "
+            f"k5 [{ci.lower[0]:.2f}, {ci.upper[0]:.2f}] (Wald [{wald[0, 0]:.2f}, {wald[0, 1]:.2f}]), "
+            f"k7 [{ci.lower[1]:.2f}, {ci.upper[1]:.2f}] (Wald [{wald[1, 0]:.2f}, {wald[1, 1]:.2f}]) N/mm")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="bench coverage")
+    ap.add_argument("--reps", type=int, default=200)
+    ap.add_argument("--boot", type=int, default=0, help="bootstrap refits per campaign (0: no bootstrap)")
+    ap.add_argument("--boot-cases", default="mm,mm_deep,truss_Px,truss_Py", help="cases that get the bootstrap")
+    ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--cases", default=",".join(CASES))
+    args = ap.parse_args(argv or [])
+    names = [n for n in args.cases.split(",") if n]
+    boot_cases = set(args.boot_cases.split(","))
+    print(f"machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} cpus; "
+          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
+    print(f"reps {args.reps}, seed {args.seed}, bootstrap n {args.boot} on {sorted(boot_cases)}, "
+          f"workers {args.workers}")
+    print(f"{'case':<9} {'method':<9} {'param':<5} {'coverage of 95 % interval [Clopper-Pearson 95 %]':<48} "
+          f"{'failed':>6}")
+    if "press" in names:
+        print(press_timing())
+    for name in names:
+        t0 = time.perf_counter()
+        n_boot = args.boot if name in boot_cases else 0
+        res = run_case(name, args.reps, args.seed, n_boot, args.workers)
+        c, _ = _case(name)
+        for case, m, p, rate, failed in table(name, res, n_boot):
+            print(f"{case:<9} {m:<9} {p:<5} {str(rate):<48} {failed:>6}")
+        errs = [e for r in res for e in r["errors"]]
+        n_inf = sum(r["inf"] > 0 for r in res)
+        tp = np.array([r["t_profile"] for r in res], float)
+        print(f"  {c.description}; {n_inf}/{len(res)} campaigns with an unbounded profile side; "
+              f"profile time median {np.nanmedian(tp):.3f} s, max {np.nanmax(tp):.3f} s; "
+              f"case wall {time.perf_counter() - t0:.0f} s")
+        for kind in ("fit", "profile", "bootstrap"):
+            ek = [e[1] for e in errs if e[0] == kind]
+            if ek:
+                print(f"  {len(ek)} {kind} failures; first: {ek[0]}")

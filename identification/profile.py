@@ -1,0 +1,732 @@
+r"""Profile-likelihood intervals and likelihood-ratio regions of a weighted least-squares estimate.
+
+With the reduced-space objective Phi(p) of :mod:`identification.refinement` (chi^2 / 2 units
+with the sigmas of the estimate) and its minimum Phi(p_hat), the profile of parameter i is
+
+.. math::
+
+    D_i(\theta) = 2\,\bigl(\min_{p:\,p_i = \theta} \Phi(p) - \Phi(\hat p)\bigr),
+
+the likelihood-ratio statistic with the other parameters re-optimised.  The (1 - alpha)
+profile interval is {theta : D_i(theta) <= c} with
+
+* c = chi2_1(1 - alpha) when the sensor sigmas are known;
+* c = F(1, n - n_p; 1 - alpha) when sigma was estimated: then Phi uses s^2 = RSS / (n - n_p), so
+  D_i = (S(theta) - S_hat) / s^2 is the square of Bates and Watts' profile-t statistic
+  tau(theta), and the interval is |tau| <= t(n - n_p; alpha / 2) (lmfit's ``conf_interval``
+  uses the same F test).
+
+Each side is followed from p_hat along a continuation path: at every step the fixed value
+moves, the other parameters start from the first-order predictor -H_ff^{-1} H_fi d theta and
+are re-optimised by exact reduced Newton steps (Hessian J^T Omega J + S from AD, backtracking
+line search, bounds as an active set), falling back to Ipopt (:func:`identification.identify`
+on a model copy with lower = upper for the fixed parameter).  The crossing D_i = c is
+bracketed on the path and found by :func:`scipy.optimize.brentq` on the signed root
+tau = sqrt(D_i) (nearly linear in theta).  A side on which D_i stays below c up to the
+parameter bound or up to ``max_width`` Wald half-widths is reported as -inf / +inf with a
+note.  A step that neither Newton nor Ipopt can solve raises :class:`ProfileError` naming
+the value where the path stopped.
+
+:func:`lr_region` computes D_ij(theta_i, theta_j) on a grid for a pair of parameters
+(the others re-optimised, warm-started from the previous grid point).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from models.contract import Model
+from models.errors import StateSolveError
+from .errors import IdentificationError
+from .estimator import identify
+from .measurements import Measurements
+from .refinement import ReducedPoint, ReducedProblem
+
+__all__ = ["ProfileError", "ProfileSettings", "ParameterProfile", "ConfidenceIntervals", "LikelihoodRegion",
+           "profile_intervals", "lr_region", "profile_threshold", "region_threshold", "resolve_params",
+           "validate_alpha"]
+
+
+class ProfileError(IdentificationError):
+    """A profile could not be followed (the message names the parameter, the value and the reason)."""
+
+
+def validate_alpha(alpha) -> float:
+    """alpha as a float in (0, 0.5); anything else raises ValueError naming the argument."""
+    try:
+        a = float(alpha)
+    except (TypeError, ValueError):
+        raise ValueError(f"alpha: expected a number in (0, 0.5), got {alpha!r}") from None
+    if not (0.0 < a < 0.5):
+        raise ValueError(f"alpha: must lie in (0, 0.5), got {alpha!r}; alpha is the miss probability: "
+                         "0.05 gives a 95 % interval")
+    return a
+
+
+def resolve_params(params, names: tuple) -> list:
+    """Indices of ``params`` (None: all; names or 0-based indices) in ``names``."""
+    if params is None:
+        return list(range(len(names)))
+    if isinstance(params, (str, int, np.integer)):
+        params = [params]
+    idx = []
+    for q in params:
+        if isinstance(q, (int, np.integer)) and not isinstance(q, bool):
+            if not 0 <= int(q) < len(names):
+                raise ValueError(f"params: index {q} out of range; the parameters are {', '.join(names)}")
+            idx.append(int(q))
+        elif isinstance(q, str) and q in names:
+            idx.append(names.index(q))
+        else:
+            raise ValueError(f"params: unknown parameter {q!r}; the parameters are {', '.join(names)}")
+    if len(set(idx)) != len(idx):
+        raise ValueError(f"params: a parameter is named twice in {list(params)}")
+    return idx
+
+
+def profile_threshold(alpha: float, sigma_estimated: bool, dof: int) -> float:
+    """c of a single-parameter profile: chi2_1(1 - alpha), or F(1, dof; 1 - alpha) when sigma was estimated."""
+    if sigma_estimated:
+        return float(stats.f.ppf(1 - alpha, 1, dof))
+    return float(stats.chi2.ppf(1 - alpha, 1))
+
+
+def region_threshold(alpha: float, sigma_estimated: bool, dof: int) -> float:
+    """c of a two-parameter region: chi2_2(1 - alpha), or 2 F(2, dof; 1 - alpha) when sigma was estimated."""
+    if sigma_estimated:
+        return 2.0 * float(stats.f.ppf(1 - alpha, 2, dof))
+    return float(stats.chi2.ppf(1 - alpha, 2))
+
+
+@dataclass(frozen=True)
+class ProfileSettings:
+    """Options of the profile computations.
+
+    Attributes
+    ----------
+    newton_tol : float      stop the inner Newton when g^T H^-1 g (objective units) is below it
+    max_newton : int        inner Newton iterations before the Ipopt fallback
+    max_steps : int         continuation steps per side before the side is declared unbounded
+    max_width : float       a side is unbounded when D stays below c up to max_width Wald half-widths
+    xtol : float            brentq tolerance on theta, in units of the Wald standard error
+    ipopt_fallback : bool   solve a step with Ipopt when the reduced Newton fails
+    """
+
+    newton_tol: float = 1e-12
+    max_newton: int = 30
+    max_steps: int = 60
+    max_width: float = 1e3
+    xtol: float = 1e-6
+    ipopt_fallback: bool = True
+
+    def __post_init__(self):
+        for name in ("newton_tol", "max_width", "xtol"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
+                raise ValueError(f"{name}: must be a positive finite number, got {v!r}")
+        for name in ("max_newton", "max_steps"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"{name}: must be an integer >= 1, got {v!r}")
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class ParameterProfile:
+    """The profile of one parameter: the points computed along both continuation paths.
+
+    Attributes
+    ----------
+    name : str
+    values : ndarray (m,)          fixed values theta (sorted, the estimate included)
+    statistic : ndarray (m,)       D(theta) = 2 (Phi_min(theta) - Phi(p_hat))
+    tau : ndarray (m,)             signed root sign(theta - theta_hat) sqrt(D)
+    params : ndarray (m, n_p)      the re-optimised parameters at each value
+    lower, upper : float           interval ends (-inf / +inf on an unbounded side)
+    threshold : float              c
+    ipopt_steps : int              steps that needed the Ipopt fallback
+    """
+
+    name: str
+    values: np.ndarray
+    statistic: np.ndarray
+    tau: np.ndarray
+    params: np.ndarray
+    lower: float
+    upper: float
+    threshold: float
+    ipopt_steps: int = 0
+
+    def __post_init__(self):
+        for name in ("values", "statistic", "tau", "params"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+
+
+@dataclass(frozen=True)
+class ConfidenceIntervals:
+    """Marginal (1 - alpha) confidence intervals of selected parameters.
+
+    Attributes
+    ----------
+    param_names : tuple of str     the selected parameters
+    estimate : ndarray (m,)        their estimates
+    lower, upper : ndarray (m,)    interval ends (same unit as the parameter; +-inf: unbounded side)
+    method : str                   "profile" or "bootstrap"
+    alpha : float                  miss probability
+    notes : tuple of str           unbounded sides, failed refits, fallbacks
+    profiles : tuple               ParameterProfile per parameter (method "profile")
+    replicates : ndarray (k, n_p)  successful bootstrap estimates (method "bootstrap")
+    n_failed : int                 failed bootstrap refits (counted, excluded from the percentiles)
+    """
+
+    param_names: tuple
+    estimate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    method: str
+    alpha: float
+    notes: tuple = ()
+    profiles: tuple = ()
+    replicates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    n_failed: int = 0
+
+    def __post_init__(self):
+        for name in ("estimate", "lower", "upper", "replicates"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+
+    @property
+    def array(self) -> np.ndarray:
+        """(m, 2) array [lower, upper], the layout of the Wald ``Estimate.conf_int``."""
+        return _readonly(np.column_stack([self.lower, self.upper]))
+
+    def __getitem__(self, name: str) -> tuple:
+        """(lower, upper) of a parameter by name."""
+        if name not in self.param_names:
+            raise KeyError(f"unknown parameter {name!r}; the intervals are of {', '.join(self.param_names)}")
+        i = self.param_names.index(name)
+        return float(self.lower[i]), float(self.upper[i])
+
+    def __str__(self):
+        pct = f"{100 * (1 - self.alpha):g} %"
+        lines = [f"{pct} {self.method} intervals"]
+        for n, e, lo, up in zip(self.param_names, self.estimate, self.lower, self.upper):
+            lines.append(f"  {n}: {e:.7g} in [{lo:.7g}, {up:.7g}]")
+        lines += [f"  [{k}] {note}" for k, note in enumerate(self.notes, 1)]
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- the constrained solver
+@dataclass(frozen=True)
+class _Solved:
+    """A re-optimised point: the reduced point, J^T Omega J there (the curvature of the
+    continuation predictor) and whether Ipopt was needed."""
+
+    point: ReducedPoint
+    H: np.ndarray
+    ipopt: bool
+
+
+class _Profiler:
+    """Minimises Phi over all parameters except a fixed set (exact reduced Newton, Ipopt fallback)."""
+
+    def __init__(self, model: Model, data: Measurements, est, settings: ProfileSettings):
+        self.model, self.data, self.est, self.settings = model, data, est, settings
+        se = np.asarray(est.stderr, float)
+        scale = np.where(np.isfinite(se) & (se > 0), se, np.maximum(np.abs(est.p), 1.0))
+        self.se = scale
+        self.problem = ReducedProblem.of(model, data, est.weights, est.sigma, scale)
+        self.lo, self.up = model.lower, model.upper
+        try:
+            start = self.problem.evaluate(np.asarray(est.p, float), est.states)
+        except StateSolveError as exc:
+            raise ProfileError(f"the state equation cannot be solved at the estimate: {exc}",
+                               status="state solve failed") from None
+        self.best = self._solved(start, False)
+
+    def _solved(self, point: ReducedPoint, ipopt: bool) -> _Solved:
+        return _Solved(point, self.problem.information(point), ipopt)
+
+    def minimise(self, start: _Solved):
+        """Exact Newton on all parameters from ``start``: a _Solved, or the reason of failure (str)."""
+        return self._newton([], np.asarray(start.point.p, float), start.point.states)
+
+    def predict(self, base: _Solved, fixed: list, values: np.ndarray) -> np.ndarray:
+        """First-order predictor: p_f = p_f(base) - H_ff^{-1} H_fi (theta - theta_base), clipped to bounds
+        (H the Gauss-Newton J^T Omega J: a start for the exact Newton, which makes it exact)."""
+        p = np.array(base.point.p, float)
+        free = [k for k in range(p.size) if k not in fixed]
+        d = np.asarray(values, float) - p[fixed]
+        p[fixed] = values
+        if free:
+            Hff = base.H[np.ix_(free, free)]
+            Hfi = base.H[np.ix_(free, fixed)]
+            try:
+                dp = -np.linalg.solve(Hff, Hfi @ d)
+            except np.linalg.LinAlgError:
+                dp = np.zeros(len(free))
+            if np.all(np.isfinite(dp)):
+                p[free] = p[free] + dp
+        return np.clip(p, self.lo, self.up)
+
+    def solve(self, fixed: list, values, base: _Solved) -> _Solved:
+        """min Phi over the free parameters with p[fixed] = values, from the predictor at ``base``.
+
+        Raises ProfileError (with the reason) when neither Newton nor Ipopt converges.
+        """
+        values = np.atleast_1d(np.asarray(values, float))
+        p0 = self.predict(base, fixed, values)
+        reason = self._newton(fixed, p0, base.point.states)
+        if isinstance(reason, _Solved):
+            return reason
+        if not self.settings.ipopt_fallback:
+            raise ProfileError(f"reduced Newton failed ({reason}); the Ipopt fallback is disabled",
+                               status="profile failed")
+        return self._ipopt(fixed, values, p0, base, reason)
+
+    def _newton(self, fixed, p0, states0):
+        """Exact Newton on the free parameters; a _Solved on success, else the reason (str)."""
+        s = self.se
+        free = [k for k in range(p0.size) if k not in fixed]
+        try:
+            point = self.problem.evaluate(p0, states0)
+        except StateSolveError as exc:
+            return f"state equation not solvable at the predicted start: {exc}"
+        for _ in range(self.settings.max_newton + 1):
+            solved = self._solved(point, False)
+            if not free:
+                return solved
+            g = point.gradient
+            # active set: a free parameter at a bound whose gradient pushes it outwards stays there
+            act = [k for k in free if not ((point.p[k] <= self.lo[k] and g[k] > 0)
+                                           or (point.p[k] >= self.up[k] and g[k] < 0))]
+            if not act:
+                return solved
+            gs = g[act] * s[act]
+            Fs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
+            try:
+                LF = np.linalg.cholesky(Fs)
+            except np.linalg.LinAlgError:
+                LF = None
+            if LF is not None:
+                w = np.linalg.solve(LF, gs)
+                if float(w @ w) < self.settings.newton_tol:
+                    return solved          # converged: g^T (J^T Omega J)^-1 g below the tolerance
+            # the exact Hessian J^T Omega J + S (AD second derivatives) for the Newton step
+            Hs = (solved.H + point.sens.hessians(point.lam[None])[0])[np.ix_(act, act)] * np.outer(s[act], s[act])
+            try:
+                L = np.linalg.cholesky(Hs)
+            except np.linalg.LinAlgError:
+                if LF is None:
+                    return "the Gauss-Newton information of the free parameters is singular"
+                L = LF
+            v = np.linalg.solve(L, gs)
+            dec = float(v @ v)
+            if dec < self.settings.newton_tol:
+                return solved
+            step = -s[act] * np.linalg.solve(L.T, v)
+            t = 1.0
+            new = None
+            for _ls in range(40):
+                p_try = np.array(point.p)
+                p_try[act] = np.clip(point.p[act] + t * step, self.lo[act], self.up[act])
+                try:
+                    cand = self.problem.evaluate(p_try, point.states)
+                except StateSolveError:
+                    cand = None
+                if cand is not None and cand.objective <= point.objective - 1e-4 * t * dec:
+                    new = cand
+                    break
+                t *= 0.5
+            if new is None:
+                if dec < 1e3 * self.settings.newton_tol:
+                    return solved            # at round-off: no decrease possible, decrement tiny
+                return f"line search failed (Newton decrement {dec:.2e})"
+            point = new
+        return f"no convergence in {self.settings.max_newton} Newton steps"
+
+    def _ipopt(self, fixed, values, p0, base, reason) -> _Solved:
+        names = self.model.param_names
+        fixed_model = self.model.with_bounds({names[k]: (float(v), float(v)) for k, v in zip(fixed, values)})
+        try:
+            est = identify(fixed_model, self.data, p0, weights=self.est.weights, Y0=base.point.states)
+            point = self.problem.evaluate(np.asarray(est.p, float), est.states)
+        except (IdentificationError, StateSolveError) as exc:
+            raise ProfileError(f"reduced Newton failed ({reason}) and Ipopt failed too: {exc}",
+                               status=getattr(exc, "status", "profile failed")) from None
+        return self._solved(point, True)
+
+    def statistic(self, solved: _Solved) -> float:
+        return 2.0 * (solved.point.objective - self.best.point.objective)
+
+
+# ---------------------------------------------------------------------------- one side of a profile
+class _Side:
+    """The continuation path of one side (direction +1 or -1) of one parameter's profile."""
+
+    def __init__(self, prof: _Profiler, i: int, direction: int, c: float):
+        self.prof, self.i, self.d, self.c = prof, i, direction, c
+        self.name = prof.model.param_names[i]
+        self.theta_hat = float(prof.best.point.p[i])
+        self.h0 = float(prof.se[i])            # Wald standard error (or scale)
+        self.points = []                       # (theta, D, solved)
+        self.ipopt_steps = 0
+
+    def _at(self, theta: float, base: _Solved) -> tuple:
+        try:
+            s = self.prof.solve([self.i], [theta], base)
+        except ProfileError as exc:
+            raise ProfileError(f"profile of {self.name}: stopped at {self.name} = {theta:.8g} "
+                               f"({'upper' if self.d > 0 else 'lower'} side): {exc}", status=exc.status) from None
+        D = self.prof.statistic(s)
+        if not math.isfinite(D):
+            raise ProfileError(f"profile of {self.name}: stopped at {self.name} = {theta:.8g}: the objective is "
+                               f"not finite there ({s.point.objective})", status="not finite")
+        if D < -1e-6 * max(1.0, self.c):
+            err = ProfileError(f"profile of {self.name}: at {self.name} = {theta:.8g} the objective is lower than "
+                               f"at the estimate (D = {D:.3g}): the estimate is not the minimum; refit from there",
+                               status="not a minimum")
+            err.lower_point = s
+            raise err
+        self.ipopt_steps += int(s.ipopt)
+        self.points.append((theta, max(D, 0.0), s))
+        return max(D, 0.0), s
+
+    def run(self) -> tuple:
+        """(end, note): the crossing theta, or +-inf with a note."""
+        prof, i, d, c = self.prof, self.i, self.d, self.c
+        bound = prof.up[i] if d > 0 else prof.lo[i]
+        limit = self.theta_hat + d * self.prof.settings.max_width * math.sqrt(c) * self.h0
+        stop = min(bound, limit) if d > 0 else max(bound, limit)
+        base = prof.best
+        h_prev = 0.0
+        h = math.sqrt(c) * self.h0              # the Wald crossing
+        if abs(stop - self.theta_hat) <= 0:
+            return self.theta_hat, f"{self.name}: the estimate is at the bound {bound:g}"
+        for _ in range(self.prof.settings.max_steps):
+            at_stop = abs(h) >= abs(stop - self.theta_hat)
+            if at_stop:
+                h = abs(stop - self.theta_hat)
+            theta = self.theta_hat + d * h
+            while True:
+                try:
+                    D, s = self._at(theta, base)
+                    break
+                except ProfileError as exc:
+                    h_half = h_prev + 0.5 * (h - h_prev)
+                    if exc.status in ("not a minimum", "not finite") or h_half - h_prev < 1e-6 * self.h0:
+                        raise
+                    h, at_stop = h_half, False
+                    theta = self.theta_hat + d * h
+            tau = math.sqrt(D)
+            if D >= c:
+                return self._crossing(h_prev, h, base), None
+            if at_stop:
+                what = f"the bound {bound:g}" if stop == bound else \
+                    f"{self.prof.settings.max_width:g} Wald half-widths ({stop:.6g})"
+                return d * math.inf, (f"{self.name}: the profile statistic stays below the threshold "
+                                      f"({D:.3g} < {c:.3g}) up to {what}; the "
+                                      f"{'upper' if d > 0 else 'lower'} end is unbounded")
+            # Newton on tau towards sqrt(c) (slight overshoot), growth at most 3x the last step;
+            # dtau/dh = d g_i / tau exactly (envelope theorem: dD/dtheta = 2 dPhi/dp_i at the constrained minimum)
+            slope = self._slope(s, tau) if tau > 0 else 0.0
+            dh_last = h - h_prev
+            if slope > 0:
+                dh = (1.01 * math.sqrt(c) - tau) / slope
+                dh = min(max(dh, 0.1 * dh_last), 3.0 * dh_last)
+            else:
+                dh = 3.0 * dh_last
+            h_prev, base = h, s
+            h = h + dh
+        return d * math.inf, (f"{self.name}: the profile statistic stays below the threshold after "
+                              f"{self.prof.settings.max_steps} continuation steps (last {self.name} = "
+                              f"{self.theta_hat + d * h_prev:.6g}); the {'upper' if d > 0 else 'lower'} "
+                              "end is treated as unbounded")
+
+    def _slope(self, s: _Solved, tau: float) -> float:
+        """dtau/dh at a solved point: d * dPhi/dp_i / tau (h: distance from the estimate)."""
+        return self.d * float(s.point.gradient[self.i]) / tau
+
+    def _crossing(self, h_lo: float, h_hi: float, base: _Solved) -> float:
+        """The root of tau(h) = sqrt(c) in [h_lo, h_hi] (tau(h_lo) < sqrt(c) <= tau(h_hi)).
+
+        The bracket is first narrowed by safeguarded Newton steps on tau (exact slope, see
+        :meth:`_slope`), each aimed slightly across the root so that the bracket shrinks from both
+        sides; :func:`scipy.optimize.brentq` then finishes on the narrow bracket.  Every
+        evaluation is warm-started from the nearer bracket end.
+        """
+        root_c = math.sqrt(self.c)
+        xtol = self.prof.settings.xtol * self.h0
+        hi_s = self.points[-1][2]
+        lo = [h_lo, math.sqrt(max(self.prof.statistic(base), 0.0)) - root_c, base]
+        hi = [h_hi, math.sqrt(self.points[-1][1]) - root_c, hi_s]
+        known = {lo[0]: lo[1], hi[0]: hi[1]}
+        solved = {lo[0]: lo[2], hi[0]: hi[2]}
+
+        def g(h):
+            if h not in known:
+                near = solved[min(solved, key=lambda k: abs(k - h))]
+                D, s = self._at(self.theta_hat + self.d * h, near)
+                known[h] = math.sqrt(D) - root_c
+                solved[h] = s
+            return known[h]
+
+        from_hi = True
+        for _ in range(4):
+            if hi[0] - lo[0] <= xtol:
+                break
+            end = hi if from_hi or lo[0] == 0.0 else lo
+            tau = end[1] + root_c
+            slope = self._slope(end[2], tau) if tau > 0 else 0.0
+            if not slope > 0:
+                break
+            step = -end[1] / slope
+            h_n = end[0] + step + math.copysign(max(xtol, 1e-3 * abs(step)), step)
+            if not lo[0] < h_n < hi[0]:
+                break
+            v = g(h_n)
+            if v < 0:
+                lo = [h_n, v, solved[h_n]]
+                from_hi = False
+            else:
+                hi = [h_n, v, solved[h_n]]
+                from_hi = True
+        h = optimize.brentq(g, lo[0], hi[0], xtol=xtol, rtol=1e-12)
+        return self.theta_hat + self.d * h
+
+
+def _profile_one(prof: _Profiler, i: int, c: float) -> tuple:
+    notes = []
+    ends = []
+    pts = []
+    n_ipopt = 0
+    for d in (-1, +1):
+        side = _Side(prof, i, d, c)
+        end, note = side.run()
+        ends.append(end)
+        if note:
+            notes.append(note)
+        pts += side.points
+        n_ipopt += side.ipopt_steps
+    pts.append((float(prof.best.point.p[i]), 0.0, prof.best))
+    pts.sort(key=lambda t: t[0])
+    th = np.array([t[0] for t in pts])
+    D = np.array([t[1] for t in pts])
+    P = np.array([t[2].point.p for t in pts])
+    tau = np.sign(th - prof.best.point.p[i]) * np.sqrt(D)
+    name = prof.model.param_names[i]
+    if n_ipopt:
+        notes.append(f"{name}: {n_ipopt} profile step(s) were solved by the Ipopt fallback")
+    return ParameterProfile(name, th, D, tau, P, float(ends[0]), float(ends[1]), c, n_ipopt), notes
+
+
+def profile_intervals(model: Model, data: Measurements, est, alpha: float = 0.05, params=None,
+                      settings: ProfileSettings | None = None) -> ConfidenceIntervals:
+    """Profile-likelihood (1 - alpha) intervals {theta : D_i(theta) <= c} (see the module docstring).
+
+    Parameters
+    ----------
+    model, data : the model and measurements ``est`` was fitted to (same weights)
+    est : Estimate
+    alpha : float in (0, 0.5)       miss probability (0.05: 95 % intervals)
+    params : names or indices, optional (default all)
+    settings : ProfileSettings, optional
+
+    Returns
+    -------
+    ConfidenceIntervals (method "profile"), with the profiles computed on the way.
+
+    Raises
+    ------
+    ProfileError
+        A continuation step could not be solved (the message names the parameter value and why).
+    """
+    alpha = validate_alpha(alpha)
+    idx = resolve_params(params, tuple(est.param_names))
+    _check_pair(model, data, est)
+    settings = settings or ProfileSettings()
+    prof = _Profiler(model, data, est, settings)
+    c = profile_threshold(alpha, est.sigma_estimated, est.dof)
+    restart_notes = []
+    while True:
+        profiles, notes = [], []
+        try:
+            for i in idx:
+                pr, nt = _profile_one(prof, i, c)
+                profiles.append(pr)
+                notes += nt
+            break
+        except ProfileError as exc:
+            lower = getattr(exc, "lower_point", None)
+            if lower is None or len(restart_notes) >= 3:
+                raise
+            restart_notes.append(_restart(prof, lower, exc))
+    notes = restart_notes + notes
+    names = tuple(est.param_names[i] for i in idx)
+    return ConfidenceIntervals(names, np.asarray(est.p)[idx], [p.lower for p in profiles],
+                               [p.upper for p in profiles], "profile", alpha, tuple(notes), tuple(profiles))
+
+
+def _restart(prof: _Profiler, lower: _Solved, exc: ProfileError) -> str:
+    """Re-minimise all parameters from a profile point below the estimate; that minimum becomes the
+    reference of every profile.  Returns the note saying so (raises when the Newton fails)."""
+    old = prof.best
+    new = prof.minimise(lower)
+    if isinstance(new, str):
+        raise ProfileError(f"{exc}; re-minimising from there failed: {new}", status="not a minimum") from None
+    prof.best = new
+    names = prof.model.param_names
+    return (f"the estimate is not the minimum of the objective: a profile step found Phi lower by "
+            f"{old.point.objective - lower.point.objective:.3g} (chi2/2 units); the intervals are those of the "
+            f"refined minimum (" + ", ".join(f"{n} = {v:.7g}" for n, v in zip(names, new.point.p))
+            + f"), Phi lower by {old.point.objective - new.point.objective:.3g} than at the estimate")
+
+
+def _check_pair(model: Model, data: Measurements, est) -> None:
+    if model is None or data is None:
+        raise ValueError("model, data: the profile and bootstrap methods need the model and the measurements "
+                         "the estimate was fitted to (conf_int(..., model=model, data=data))")
+    if tuple(model.param_names) != tuple(est.param_names):
+        raise ValueError(f"model: its parameters {model.param_names} are not those of the estimate "
+                         f"{tuple(est.param_names)}")
+    if data.z.shape[2] != np.asarray(est.weights).size or data.n_q != np.asarray(est.fitted).shape[0]:
+        raise ValueError(f"data: shape {data.z.shape} does not match the estimate "
+                         f"({np.asarray(est.fitted).shape[0]} inputs, {np.asarray(est.weights).size} sensors)")
+    if (data.sigma is None) != bool(est.sigma_estimated):
+        raise ValueError("data: its sigma (known or None) differs from the estimate's; pass the measurements "
+                         "the estimate was fitted to")
+
+
+# ---------------------------------------------------------------------------- pair regions
+@dataclass(frozen=True)
+class LikelihoodRegion:
+    """The likelihood-ratio statistic of a parameter pair on a grid.
+
+    D(a, b) = 2 (min over the other parameters of Phi with (p_i, p_j) = (a, b) - Phi(p_hat)),
+    the region {D <= threshold}.
+
+    Attributes
+    ----------
+    names : (str, str)
+    X, Y : ndarray (n, n)           grid values of p_i and p_j (row r, column k); a rectangle
+                                    (``grid="axes"``) or the principal axes of the ellipse
+                                    (``grid="principal"``)
+    statistic : ndarray (n, n)      D on the grid (NaN where the point could not be solved or lies
+                                    outside the bounds; see notes)
+    threshold : float               chi2_2(1 - alpha) or 2 F(2, dof; 1 - alpha)
+    alpha : float
+    estimate : ndarray (2,)         (p_i, p_j) at the estimate
+    cov : ndarray (2, 2)            their block of the second-order covariance (the linearised ellipse
+                                    is d^T cov^-1 d <= threshold)
+    notes : tuple of str            unsolved points, a region reaching the edge of the grid
+    indices : (int, int)            positions of the pair in the parameter vector
+    """
+
+    names: tuple
+    X: np.ndarray
+    Y: np.ndarray
+    statistic: np.ndarray
+    threshold: float
+    alpha: float
+    estimate: np.ndarray
+    cov: np.ndarray
+    notes: tuple = ()
+    indices: tuple = (0, 1)
+
+    def __post_init__(self):
+        for name in ("X", "Y", "statistic", "estimate", "cov"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+
+    def linearised(self) -> np.ndarray:
+        """The quadratic form d^T cov^-1 d on the grid (n, n): the statistic of a linear model."""
+        dx, dy = self.X - self.estimate[0], self.Y - self.estimate[1]
+        Ci = np.linalg.inv(self.cov)
+        return Ci[0, 0] * dx ** 2 + 2 * Ci[0, 1] * dx * dy + Ci[1, 1] * dy ** 2
+
+
+def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, n_grid: int = 25,
+              span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None
+              ) -> LikelihoodRegion:
+    """Likelihood-ratio statistic of the pair ``pair = (i, j)`` on an n_grid x n_grid grid.
+
+    ``grid="principal"`` (default): the grid p = p_hat + V diag(sqrt(w)) (u, v) with C = V diag(w) V^T
+    the pair's covariance block and u, v in [-span sqrt(c), span sqrt(c)], so that the linearised
+    ellipse is the circle of radius sqrt(c) and a thin, strongly correlated region still falls on
+    many grid points; ``grid="axes"``: the rectangle of span x the ellipse's half-extents.  The other
+    parameters are re-optimised at every grid point (exact reduced Newton, Ipopt fallback),
+    warm-started along rows from the grid centre.  A point that cannot be solved or lies outside the
+    bounds is NaN, counted in ``notes``; a region that reaches the edge of the grid is noted too.
+    """
+    alpha = validate_alpha(alpha)
+    idx = resolve_params(list(pair), tuple(est.param_names))
+    if len(idx) != 2:
+        raise ValueError(f"pair: expected two different parameters, got {pair!r}")
+    if not (isinstance(n_grid, (int, np.integer)) and n_grid >= 3):
+        raise ValueError(f"n_grid: expected an integer >= 3, got {n_grid!r}")
+    if not (span > 0 and math.isfinite(span)):
+        raise ValueError(f"span: expected a positive number, got {span!r}")
+    if grid not in ("principal", "axes"):
+        raise ValueError(f"grid: expected 'principal' or 'axes', got {grid!r}")
+    _check_pair(model, data, est)
+    settings = settings or ProfileSettings()
+    prof = _Profiler(model, data, est, settings)
+    c = region_threshold(alpha, est.sigma_estimated, est.dof)
+    C = np.asarray(est.cov)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(C)):
+        C = np.asarray(est.cov_gn)[np.ix_(idx, idx)]
+    ph = np.asarray(est.p, float)[idx]
+    n = int(n_grid)
+    if grid == "axes":
+        half = span * np.sqrt(c * np.diag(C))
+        x = np.linspace(max(ph[0] - half[0], model.lower[idx[0]]), min(ph[0] + half[0], model.upper[idx[0]]), n)
+        y = np.linspace(max(ph[1] - half[1], model.lower[idx[1]]), min(ph[1] + half[1], model.upper[idx[1]]), n)
+        X, Y = np.meshgrid(x, y)
+    else:
+        w, V = np.linalg.eigh(0.5 * (C + C.T))
+        L = V * np.sqrt(np.clip(w, 0.0, None))[None, :]
+        u = np.linspace(-span * math.sqrt(c), span * math.sqrt(c), n)
+        U, W = np.meshgrid(u, u)
+        X = ph[0] + L[0, 0] * U + L[0, 1] * W
+        Y = ph[1] + L[1, 0] * U + L[1, 1] * W
+    D = np.full((n, n), np.nan)
+    failed = []
+    outside = 0
+    lo, up = model.lower[idx], model.upper[idx]
+    r0, c0 = n // 2, n // 2
+    row_start = {}
+    for rows in (range(r0, n), range(r0 - 1, -1, -1)):
+        for r in rows:
+            base = row_start.get(r - 1 if rows.step > 0 else r + 1, prof.best)
+            for cc in list(range(c0, n)) + list(range(c0 - 1, -1, -1)):
+                if cc == c0 - 1:
+                    base = row_start.get(r, base)
+                v = np.array([X[r, cc], Y[r, cc]])
+                if np.any(v < lo) or np.any(v > up):
+                    outside += 1
+                    continue
+                try:
+                    s = prof.solve(idx, v, base)
+                except ProfileError as exc:
+                    failed.append(f"({v[0]:.6g}, {v[1]:.6g}): {exc}")
+                    continue
+                D[r, cc] = max(prof.statistic(s), 0.0)
+                base = s
+                if cc == c0:
+                    row_start[r] = s
+    notes = []
+    if failed:
+        notes.append(f"{len(failed)} of {D.size} grid points could not be solved (NaN); first: {failed[0]}")
+    if outside:
+        notes.append(f"{outside} of {D.size} grid points lie outside the parameter bounds (NaN)")
+    edge = np.concatenate([D[0], D[-1], D[:, 0], D[:, -1]])
+    if np.any(edge[np.isfinite(edge)] <= c):
+        notes.append("the region reaches the edge of the grid: it extends beyond it (use a larger span)")
+    return LikelihoodRegion((est.param_names[idx[0]], est.param_names[idx[1]]), X, Y, D, c, alpha, ph, C,
+                            tuple(notes), tuple(idx))

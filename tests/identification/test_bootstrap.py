@@ -1,0 +1,81 @@
+"""Parametric bootstrap intervals (identification.bootstrap, issue 12)."""
+from __future__ import annotations
+
+import dataclasses
+import io
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy import stats
+
+from identification import Measurements, identify
+from identification.bootstrap import bootstrap_replicates
+from identification.progress import Progress
+from models import Model
+
+
+def _linear(sigma=0.2, known=True):
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] + p[1] * q[0],
+                           name="line")
+    x = np.linspace(0, 2, 6)
+    z = (1 + 2 * x)[None, :, None] + sigma * np.random.default_rng(4).standard_normal((3, 6, 1))
+    z[1, 2, 0] = np.nan                                          # a missing value stays missing
+    data = Measurements(x, z, [sigma] if known else None)
+    return model, data, identify(model, data, [0.0, 0.0])
+
+
+def test_bootstrap_of_linear_model_reproduces_the_covariance():
+    """Linear model, sigma known: the refits are exactly N(p_hat, cov); their sample covariance agrees."""
+    model, data, est = _linear()
+    ci = est.conf_int(0.1, method="bootstrap", model=model, data=data, n=200, seed=3)
+    assert ci.method == "bootstrap" and ci.n_failed == 0 and ci.replicates.shape == (200, 2)
+    S = np.cov(ci.replicates.T)
+    # each variance: (n-1) S_ii / C_ii ~ chi2_{n-1}; 99.9 % acceptance band
+    for i in range(2):
+        ratio = (200 - 1) * S[i, i] / est.cov[i, i]
+        assert stats.chi2.ppf(5e-4, 199) < ratio < stats.chi2.ppf(1 - 5e-4, 199), (i, ratio)
+    # the mean within 4 standard errors of the mean
+    assert np.all(np.abs(ci.replicates.mean(0) - est.p) < 4 * est.stderr / np.sqrt(200))
+    np.testing.assert_allclose([ci.lower, ci.upper], np.quantile(ci.replicates, [0.05, 0.95], axis=0))
+
+
+@pytest.mark.slow
+def test_same_seed_same_numbers_serial_and_processes():
+    """Per-replicate SeedSequence children: identical numbers serially and on 2 spawned processes
+    (slow: most of its time is starting the processes)."""
+    model, data, est = _linear(known=False)
+    P1, e1 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=1)
+    P2, e2 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=2)
+    P3, _ = bootstrap_replicates(model, data, est, n=6, seed=12, workers=1)
+    assert e1 == e2 == []
+    np.testing.assert_array_equal(P1, P2)
+    assert not np.array_equal(P1, P3)
+
+
+def test_failed_refits_are_counted_and_named():
+    """h = sqrt(a) x + b with a true slope near 0: refits whose a goes negative fail (NaN); they are reported."""
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: ca.sqrt(p[0]) * q[0] + p[1], name="sqrt slope")
+    x = np.linspace(0, 1, 4)
+    data = Measurements(x, (0.01 * x)[None, :, None], [0.5])
+    est = identify(model, data, [0.01, 0.0])
+    out = io.StringIO()
+    ci = est.conf_int(method="bootstrap", model=model, data=data, n=16, seed=0, progress=Progress(stream=out))
+    P, errors = bootstrap_replicates(model, data, est, n=16, seed=0)
+    assert "bootstrap refits" in out.getvalue() and "16/16" in out.getvalue()
+    assert 0 < ci.n_failed == len(errors) < 15
+    assert ci.n_failed + ci.replicates.shape[0] == 16
+    assert np.isnan(P[[i for i, _ in errors]]).all()
+    assert any(n.startswith(f"{ci.n_failed} of 16 bootstrap refits failed and are excluded") for n in ci.notes)
+    assert "IdentificationError" in ci.notes[0]
+
+
+def test_bad_arguments():
+    model, data, est = _linear()
+    with pytest.raises(ValueError, match="n: the number of bootstrap replicates"):
+        est.conf_int(method="bootstrap", model=model, data=data, n=1)
+    with pytest.raises(ValueError, match="workers"):
+        est.conf_int(method="bootstrap", model=model, data=data, n=5, workers=0)
+    with pytest.raises(ValueError, match="model, data"):          # an Estimate not made by identify()
+        dataclasses.replace(est, model=None, data=None).conf_int(method="bootstrap", n=5)
