@@ -280,7 +280,8 @@ def _stage_hessian(model, y, p, q, zb, c, sf, lg, s_p, s_y, e_scale, stage_f=Non
 def _scale_nz(M, r, c):
     """diag(r) M diag(c) for a sparse SX matrix M, computed on its nonzeros (same sparsity)."""
     sp = M.sparsity()
-    return ca.SX(sp, M.nz[:] * r[sp.row()] * c[sp.get_col()])
+    # vec(): indexing a 1-element r or c by a list gives a row, not a column (models with one state)
+    return ca.SX(sp, ca.vec(M.nz[:]) * ca.vec(r[sp.row()]) * ca.vec(c[sp.get_col()]))
 
 
 def _stage_functions(model):

@@ -531,3 +531,22 @@ def test_explicit_model_solved_by_reduced_newton_equals_the_ipopt_path():
     bounded, bdata = _line_with_bounded_slope()
     est = identify(bounded, bdata, p0=[0.5, 0.0])
     assert est.extra["solver"] == "ipopt" and est.extra["ipopt_passes"] == 2 and est.p[0] <= 1.0
+
+
+def test_one_state_model_fits_like_its_explicit_twin():
+    """A model with n_y = 1 (a scalar state; the stage scalings index 1-element vectors) gives the
+    estimate and covariance of the same model written explicitly."""
+    import casadi as ca
+    from identification import Measurements, identify
+    from models import Model
+    x = np.linspace(0.1, 2.0, 8)
+    truth = np.array([1.0, 0.3])
+    z = (truth[0] * x / (1 + truth[1] * x))[None, :, None] + 0.001 * np.random.default_rng(0).standard_normal((2, 8, 1))
+    data = Measurements(x, z, [0.001])
+    implicit = Model(["a", "b"], ["x"], ["y"], n_y=1, E=lambda y, p, q: y[0] * (1 + p[1] * q[0]) - p[0] * q[0],
+                     h=lambda y, p, q: y[0])
+    explicit = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"],
+                              h=lambda p, q: p[0] * q[0] / (1 + p[1] * q[0]))
+    ei, ee = identify(implicit, data, [0.8, 0.2]), identify(explicit, data, [0.8, 0.2])
+    np.testing.assert_allclose(ei.p, ee.p, rtol=1e-8)
+    np.testing.assert_allclose(ei.cov, ee.cov, rtol=1e-6)
