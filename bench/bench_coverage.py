@@ -70,17 +70,8 @@ def _mm(K: float, sigma: float, name: str) -> Case:
 
 
 def _truss(sensor: str) -> Case:
-    from models.mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model
-    mech = Mechanism(
-        "two_bar_truss",
-        joints=[Joint("A", 0.0, 0.0), Joint("B", 800.0, 0.0), Joint("P", 300.0, -400.0)],
-        elements=[Bar("1", "A", "P", "k1"), Bar("2", "B", "P", "k2"),
-                  Support("wall_A", "A", kx=1e6, ky=1e6), Support("wall_B", "B", kx=1e6, ky=1e6),
-                  Load("hook", "P", fy=-1.0, input="F")],
-        parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
-                    MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
-        inputs=("F",), sensors=("P_x", "P_y"))
-    model = build_model(mech, unknowns=("k1", "k2"), name="truss linear")
+    from models.library import two_bar_truss
+    model = two_bar_truss("truss linear")
     q = np.r_[np.linspace(0, 1000, 11), np.linspace(1000, 0, 11)[1:]]
     w = np.array([1.0 if s == sensor else 0.0 for s in model.sensors])
     return Case(f"truss_{sensor[-2:]}", model, np.array([210.0, 290.0]), q[:, None], np.array([0.004, 0.004]), 4,

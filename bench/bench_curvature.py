@@ -44,7 +44,7 @@ from identification.detect import run_split_tests  # noqa: E402
 from identification.errors import DataError, IdentificationError  # noqa: E402
 from identification.splits import splits_from_scenarios  # noqa: E402
 from models import Model  # noqa: E402
-from models.mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model  # noqa: E402
+from models.library import two_bar_truss  # noqa: E402
 from models.press import PRESS_SCENARIOS, Q_PAPER, press_model  # noqa: E402
 
 TRUSS_TRUE = np.array([210.0, 290.0])
@@ -55,16 +55,7 @@ PRESS_SIGMA = np.array([1.518e-02, 4.895e-03, 3.904e-03])      # mm (the paper's
 
 def truss_model() -> Model:
     """The README's two-bar truss (mm, N; unknowns k1, k2 in N/mm)."""
-    mech = Mechanism(
-        "two_bar_truss",
-        joints=[Joint("A", 0.0, 0.0), Joint("B", 800.0, 0.0), Joint("P", 300.0, -400.0)],
-        elements=[Bar("1", "A", "P", "k1"), Bar("2", "B", "P", "k2"),
-                  Support("wall_A", "A", kx=1e6, ky=1e6), Support("wall_B", "B", kx=1e6, ky=1e6),
-                  Load("hook", "P", fy=-1.0, input="F")],
-        parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
-                    MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
-        inputs=("F",), sensors=("P_x", "P_y"))
-    return build_model(mech, unknowns=("k1", "k2"), name="two-bar truss")
+    return two_bar_truss()
 
 
 def mm_model() -> Model:

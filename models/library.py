@@ -6,7 +6,7 @@ import numpy as np
 
 from .contract import Model, Parameter
 
-__all__ = ["spring_chain", "linear_model"]
+__all__ = ["spring_chain", "linear_model", "two_bar_truss"]
 
 
 def spring_chain(n_y: int = 30, n_sensors: int = 4, n_groups: int = 1) -> Model:
@@ -63,3 +63,19 @@ def linear_model(X_by_sensor) -> Model:
     n_S, n_p = X.shape
     return Model.explicit([f"b{i + 1}" for i in range(n_p)], ["q"], [f"s{k + 1}" for k in range(n_S)],
                           h=lambda p, q: q[0] * (ca.DM(X) @ p), name="linear")
+
+
+def two_bar_truss(name: str = "two-bar truss") -> Model:
+    """The README's two-bar truss: bars of stiffness k1, k2 (N/mm) from walls A (0, 0) and
+    B (800, 0) mm to the hook P (300, -400) mm, loaded by F (N) downwards; sensors P_x, P_y (mm)."""
+    from .mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model
+    mech = Mechanism(
+        "two_bar_truss",
+        joints=[Joint("A", 0.0, 0.0), Joint("B", 800.0, 0.0), Joint("P", 300.0, -400.0)],
+        elements=[Bar("1", "A", "P", "k1"), Bar("2", "B", "P", "k2"),
+                  Support("wall_A", "A", kx=1e6, ky=1e6), Support("wall_B", "B", kx=1e6, ky=1e6),
+                  Load("hook", "P", fy=-1.0, input="F")],
+        parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
+                    MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
+        inputs=("F",), sensors=("P_x", "P_y"))
+    return build_model(mech, unknowns=("k1", "k2"), name=name)
