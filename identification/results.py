@@ -142,7 +142,19 @@ class Estimate:
                                  f"critical 1/sqrt(F) = {c.critical:.3g} (alpha = 0.05); the ellipsoid and the "
                                  f"Wald intervals above can be badly wrong: use conf_int(method=\"profile\") "
                                  f"(likelihood-ratio intervals) instead")
+                    notes.append(self._profile_note())
         return tuple(notes)
+
+    def _profile_note(self) -> str:
+        """The 95 % profile-likelihood intervals as one note (shown when the linearisation is not trusted)."""
+        from .errors import IdentificationError
+        try:
+            ci = self.conf_int(0.05, method="profile")
+        except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
+            return f"profile-likelihood intervals could not be computed: {exc}"
+        parts = ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, lo, hi in zip(self.param_names, ci.lower, ci.upper))
+        return (f"95 % profile-likelihood intervals (trust these, not the Wald columns): {parts}"
+                + ("; " + "; ".join(ci.notes) if ci.notes else ""))
 
     def _quantile(self, alpha: float) -> float:
         if not (0 < alpha < 1):

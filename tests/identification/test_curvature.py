@@ -147,3 +147,17 @@ def test_summary_shows_the_weakest_direction():
     lam = np.linalg.eigvalsh(est.information * np.outer(est.p, est.p))
     assert sd.ratio == pytest.approx(np.sqrt(lam[-1] / lam[0]))
     assert str(sd) in est.summary()
+
+
+def test_summary_of_an_untrusted_fit_shows_the_profile_intervals():
+    # the same weak Michaelis-Menten fit: the summary states the profile-likelihood intervals themselves
+    model = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] / (p[1] + q[0]))
+    x = np.linspace(0.5, 2.0, 5)
+    truth = np.array([1.0, 5.0])
+    z = truth[0] * x / (truth[1] + x) + 0.01 * np.random.default_rng(3).standard_normal((2, x.size))
+    est = identify(model, Measurements(inputs=x, z=z[:, :, None], sigma=[0.01]), p0=truth)
+    ci = est.conf_int(method="profile")
+    text = est.summary()
+    assert "95 % profile-likelihood intervals" in text
+    assert f"Vm [{ci.lower[0]:.5g}, {ci.upper[0]:.5g}]" in text and f"K [{ci.lower[1]:.5g}, {ci.upper[1]:.5g}]" in text
