@@ -167,50 +167,19 @@ class Interrupt:
         self.flag = False
         self.stderr_fd = 2          # the terminal's stderr (a saved copy while :class:`Chatter` is active)
         self._previous = None
-        self._previous_wakeup = -1
-        self._wake_r = self._wake_w = None
 
     def install(self) -> None:
-        """Install the SIGINT handler (main thread only; elsewhere nothing happens).
-
-        Besides the Python handler (which runs only when the main thread executes bytecode), the
-        signal's wakeup byte is watched by a daemon thread: the watchdog starts even while the main
-        thread is blocked in C code, so a run that does not stop is ended :data:`INTERRUPT_GRACE`
-        seconds after the first Ctrl-C.
-        """
+        """Install the SIGINT handler (main thread only; elsewhere nothing happens)."""
         self.flag = False
         try:
             self._previous = signal.signal(signal.SIGINT, self._handler)
         except ValueError:
             self._previous = None
-            return
-        import socket
-        self._wake_r, self._wake_w = socket.socketpair()
-        self._wake_w.setblocking(False)
-        self._previous_wakeup = signal.set_wakeup_fd(self._wake_w.fileno(), warn_on_full_buffer=False)
-        threading.Thread(target=self._watch, args=(self._wake_r,), daemon=True, name="mudoe-interrupt").start()
-
-    def _watch(self, sock) -> None:
-        """Daemon thread: on the first SIGINT byte, wait INTERRUPT_GRACE s, then end the process."""
-        try:
-            while True:
-                byte = sock.recv(1)
-                if not byte:             # uninstalled: the other end was closed
-                    return
-                if byte == bytes([signal.SIGINT]):
-                    break
-        except OSError:                  # uninstalled: the socket was closed
-            return
-        threading.Event().wait(INTERRUPT_GRACE)
-        self._exit_now()
 
     def uninstall(self) -> None:
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
             self._previous = None
-            signal.set_wakeup_fd(self._previous_wakeup)
-            self._wake_w.close()
-            self._wake_r.close()
 
     def _handler(self, signum, frame):
         if self.flag:
@@ -219,6 +188,9 @@ class Interrupt:
         import multiprocessing
         for child in multiprocessing.active_children():
             child.terminate()
+        watchdog = threading.Timer(INTERRUPT_GRACE, self._exit_now)
+        watchdog.daemon = True
+        watchdog.start()
         raise KeyboardInterrupt
 
     def _exit_now(self) -> None:
