@@ -224,6 +224,11 @@ def solve_nlp(build, x0, lbx, ubx, lbg, ubg, par_value, settings: IpoptSettings 
     status = str(stats.get("return_status", "unknown"))
     accepted, message = STATUS_MESSAGES.get(status, (False, f"unrecognised Ipopt status {status!r}"))
     iters = int(stats.get("iter_count", -1))
+    if status == "User_Requested_Stop":
+        # Ipopt (3.14+) catches SIGINT itself during a solve and stops "on request": that is the user's
+        # Ctrl-C, which Python's own handler never saw.  Re-raise it, or a loop of fits would count a
+        # failed fit and go on.
+        raise KeyboardInterrupt(f"Ipopt stopped on request (Ctrl-C) during the {what}")
     if accepted is False:
         raise IdentificationError(f"Ipopt failed on the {what}: {status}: {message} (after {iters} iterations)",
                                   status=status)

@@ -167,23 +167,55 @@ class Interrupt:
         self.flag = False
         self.stderr_fd = 2          # the terminal's stderr (a saved copy while :class:`Chatter` is active)
         self._previous = None
+        self._waiter = None         # the sigwait thread, started once
 
     def install(self) -> None:
-        """Install the SIGINT handler (main thread only; elsewhere nothing happens)."""
+        """Install the SIGINT handling (main thread only; elsewhere nothing happens).
+
+        Ipopt (3.14+) installs its own SIGINT handler during every solve, so a Ctrl-C that arrives
+        inside a solve never reaches Python's handler (about 3 in 4 presses during a Monte Carlo
+        run).  SIGINT is therefore blocked in this process's threads and taken by a daemon thread
+        with ``sigwait``, which handlers cannot intercept; that thread runs :meth:`_pressed` and
+        interrupts the main thread (``_thread.interrupt_main``).
+        """
         self.flag = False
         try:
             self._previous = signal.signal(signal.SIGINT, self._handler)
         except ValueError:
             self._previous = None
+            return
+        if hasattr(signal, "pthread_sigmask") and hasattr(signal, "sigwait"):
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            if self._waiter is None:         # one waiting thread per process (main() may run many times)
+                self._waiter = threading.Thread(target=self._wait_for_sigint, daemon=True, name="mudoe-sigint")
+                self._waiter.start()
+
+    def _wait_for_sigint(self) -> None:
+        """Daemon thread: every SIGINT is taken here (it is blocked, so no handler sees it)."""
+        import _thread
+        while True:
+            signal.sigwait({signal.SIGINT})
+            if self.flag:
+                self._exit_now()
+            self._pressed()
+            _thread.interrupt_main()
 
     def uninstall(self) -> None:
+        """Restore the previous handler and unblock SIGINT in the main thread."""
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
             self._previous = None
+            if hasattr(signal, "pthread_sigmask"):
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
     def _handler(self, signum, frame):
-        if self.flag:
-            self._exit_now()
+        """Python-level SIGINT handler (also run by ``interrupt_main`` from the sigwait thread)."""
+        if not self.flag:
+            self._pressed()
+        raise KeyboardInterrupt
+
+    def _pressed(self) -> None:
+        """First Ctrl-C: set the flag, terminate the worker processes, start the watchdog."""
         self.flag = True
         import multiprocessing
         for child in multiprocessing.active_children():
@@ -191,7 +223,6 @@ class Interrupt:
         watchdog = threading.Timer(INTERRUPT_GRACE, self._exit_now)
         watchdog.daemon = True
         watchdog.start()
-        raise KeyboardInterrupt
 
     def _exit_now(self) -> None:
         """End the process with code 130 (second Ctrl-C, or the run ignored the first one)."""
