@@ -328,6 +328,15 @@ def _oed_variant(study: Study) -> str:
     return study.cfg.oed.variant or list(study.models)[-1]
 
 
+def _require_fit(study: Study, results: StudyResults, v: str, progress: Progress, command: str,
+                 why: str = "") -> None:
+    """Identify the study's variants if ``v`` has no estimate yet; MissingPieceError if its fit failed."""
+    if v not in results.estimates:
+        run_identify(study, results, progress)
+    if v not in results.estimates:
+        raise MissingPieceError(f"{command}: the fit of variant {v} failed ({results.estimate_errors.get(v)}){why}")
+
+
 def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Lines 02-03 of Algorithm 1: information of every sensor at the estimate, design table, chosen design."""
     try:
@@ -336,11 +345,7 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
         raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
     progress = progress or Progress(False)
     v = _oed_variant(study)
-    if v not in results.estimates:
-        run_identify(study, results, progress)
-    if v not in results.estimates:
-        raise MissingPieceError(f"oed: the fit of variant {v} failed ({results.estimate_errors.get(v)}); "
-                                "no information matrix to design with")
+    _require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     est = results.estimates[v]
     o = study.cfg.oed
     with progress.step(f"optimal sensor design ({o.criterion}, {v})"):
@@ -395,10 +400,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     progress = progress or Progress(False)
     vc = study.cfg.validate
     v = vc.variant or next(iter(study.models))
-    if v not in results.estimates:
-        run_identify(study, results, progress)
-    if v not in results.estimates:
-        raise MissingPieceError(f"validate: the fit of variant {v} failed ({results.estimate_errors.get(v)})")
+    _require_fit(study, results, v, progress, "validate")
     est = results.estimates[v]
     data = study.data[v]
     sigma = est.sigma
@@ -601,10 +603,6 @@ def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | N
     """``[oed] mode`` inputs / both (/ discrimination) with data: the design at the estimate of the variant."""
     progress = progress or Progress(False)
     v = _oed_variant(study)
-    if v not in results.estimates:
-        run_identify(study, results, progress)
-    if v not in results.estimates:
-        raise MissingPieceError(f"oed: the fit of variant {v} failed ({results.estimate_errors.get(v)}); "
-                                "no information matrix to design with")
+    _require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     fn = _build_models(study.cfg)[v][1]
     return plan_design(study.cfg, v, study.models[v], fn, results.estimates[v].p, study.sigma, False, progress)
