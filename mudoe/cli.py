@@ -279,10 +279,12 @@ def _oed(study, results, args, progress, out) -> int:
 
 def _detect(study, results, args, progress, out) -> int:
     from reports.serialize import detection_dict, dumps
+    from reports.tables import normality_labels
     from .study import run_detect
     run_detect(study, results, progress)
-    obj = detection_dict(results.detection)
-    text = results.detection.summary()
+    labels = normality_labels(study)
+    obj = detection_dict(results.detection, **labels)
+    text = results.detection.summary(**labels)
     _write(out, "detect.json", dumps(obj))
     _write(out, "detect.txt", text + "\n")
     _emit(args, text, obj)
@@ -331,7 +333,7 @@ def _report(study, results, args, progress, out) -> int:
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
     with progress.step("build report"):
-        paths = build_report(results, out)
+        paths = build_report(results, out, progress=progress)
     text = "\n".join(str(p) for p in paths)
     if results.detection is not None:
         text = "\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n" + text

@@ -386,7 +386,7 @@ def run_detect(study: Study, results: StudyResults, progress: Progress | None = 
     settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
         results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
-                                   design=design, settings=settings)
+                                   design=design, settings=settings, progress=progress)
     return results
 
 

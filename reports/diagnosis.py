@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.detect import run_split_tests
+from identification.progress import Progress
 from identification.splits import Split, SplitError, input_range_split, series_split
 
 from .view import phase_labels
@@ -136,11 +137,12 @@ class Diagnosis:
         return out
 
 
-def diagnose(results, statistic: str | None = None) -> Diagnosis | None:
+def diagnose(results, statistic: str | None = None, progress: Progress | None = None) -> Diagnosis | None:
     """Run the diagnostic family on every model of a study and Holm-correct it with the study's splits.
 
     Uses the detection's settings, start values and sensors; returns None when detection
-    was not run.  Each split costs a calibration, a validation and a pooled fit per model.
+    was not run.  Each split costs a calibration, a validation and a pooled fit per model;
+    ``progress`` (an :class:`identification.progress.Progress`) shows a bar over them.
     """
     det = results.detection
     if det is None:
@@ -153,8 +155,9 @@ def diagnose(results, statistic: str | None = None) -> Diagnosis | None:
         model = study.models[m]
         w = np.array([1.0 if s in results.design_sensors else 0.0 for s in study.sensors]) \
             if results.design_sensors else None
-        tests = run_split_tests(model, study.data[m], [d.split for d in fam], study.p0, weights=w,
-                                settings=det.settings, model_name=m)
+        with (progress or Progress(False)).bar(len(fam), f"diagnostic splits {m}", unit="split") as bar:
+            tests = run_split_tests(model, study.data[m], [d.split for d in fam], study.p0, weights=w,
+                                    settings=det.settings, model_name=m, bar=bar)
         own = [(t.split, "study split", t) for t in det.tests_of(m)]
         new = [(d.split.name, d.kind, t) for d, t in zip(fam, tests)]
         alphas = np.array([t.alpha(st) if t.ok else math.nan for _, _, t in own + new])
