@@ -525,7 +525,8 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
         PNG resolution (default: the config's [report] dpi, 150).
     diagnose : bool
         Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
-        phases, series; three fits per split and model) for the page "What the model misses".
+        phases, series; three fits per split and model) for the page "What the model misses",
+        unless ``results.diagnosis`` holds it already.
     progress : identification.progress.Progress, optional
         Bars over the diagnostic fits and over the pages (default None: no output).
 
@@ -559,7 +560,9 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
     written = []
     try:
-        diagnosis = run_diagnosis(results, progress=progress) if diagnose else None
+        diagnosis = getattr(results, "diagnosis", None)
+        if diagnosis is None and diagnose:
+            diagnosis = run_diagnosis(results, progress=progress)
         pages = report_pages(results, diagnosis, diagnose)
         names, texts = [], []
         with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf, \
