@@ -118,3 +118,12 @@ def test_terminal_json_and_report_agree_on_units_labels_and_words(tmp_path, caps
     word_report = title_texts[i + 1]
     assert word_terminal == word_json == word_report and word_json in WORDS
     assert not any(w.upper() in terminal for w in ("REJECTED", "ACCEPT"))
+
+
+def test_detect_shows_a_bar_per_model_over_its_splits(tmp_path, capsys):
+    """`mudoe detect` (without --quiet) shows the split fits and the diagnostic fits as tqdm bars."""
+    rc = main(["detect", str(REPO / "configs" / "cstr.toml"), "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 0 and "Traceback" not in err
+    assert "detect arrhenius" in err and "4/4" in err and "split" in err
+    assert "diagnostic splits arrhenius" in err
