@@ -446,7 +446,8 @@ def _misses_pages(results, diagnosis):
            f". alpha_min of the {STATISTIC_WORDS[diagnosis.statistic]} statistic; Holm's step-down correction over "
            f"the study's splits and the diagnostic ones together, per model, at TOL = {100 * diagnosis.tol:g} %. "
            "The decision of page 1 uses the study's splits only.\n\n"
-           + ("Findings: " + " ".join(findings) if findings else "Findings: no diagnostic split rejects a model."))
+           + ("Findings:\n" + "\n".join(f"- {f}" for f in findings) if findings
+              else "Findings: no diagnostic split rejects a model."))
     fig = figs[-1]
     y = 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
     if y < 0.15:

@@ -88,9 +88,9 @@ def normality_rows(study, gate=None) -> tuple[list, list]:
 def normality_widths(head) -> list:
     """Column widths (fractions of the table) of :func:`normality_rows`' table."""
     n_stat = len(head) - 5
-    w_stat = 0.115
-    rest = 1.0 - 0.07 - n_stat * w_stat - 0.09 - 0.09 - 0.07
-    return [0.07] + [w_stat] * n_stat + [0.09, 0.09, 0.07, rest]
+    w_stat = 0.115 if n_stat <= 2 else 0.105
+    rest = 1.0 - 0.07 - n_stat * w_stat - 0.085 - 0.085 - 0.06
+    return [0.07] + [w_stat] * n_stat + [0.085, 0.085, 0.06, rest]
 
 
 def sigma_rows(study):
