@@ -183,7 +183,8 @@ class NormalityCheck:
 
     def pairs_text(self) -> str:
         """The differences formed, in series labels: "z6-z5" ("(none)" with fewer than two series)."""
-        lab = _series_numbers(self.series) or [str(i + 1) for i in range(2 * len(self.pairs))]
+        lab = (_series_numbers(self.series) or [f"({x})" for x in self.series]
+               or [str(i + 1) for i in range(2 * len(self.pairs))])
         return ", ".join(f"z{lab[b]}-z{lab[a]}" for a, b in self.pairs) or "(none)"
 
     def table(self, units: Mapping | None = None, data_name: str = "series") -> str:

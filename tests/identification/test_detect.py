@@ -339,3 +339,19 @@ def test_progress_bar_counts_every_split_and_is_off_by_default(model, capsys):
     assert [t.alpha_lr for t in quiet.tests] == [t.alpha_lr for t in res.tests]
     with pytest.raises(TypeError, match="progress"):
         detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], progress=True)
+
+
+def test_normality_check_names_the_series_it_ran_on(model):
+    """The gate says which series were differenced (labels of the data), so that terminal, JSON and
+    report can label its p-values; sigma_rep is shown in a caller's unit."""
+    data = campaign(model, 4, n_M=6)
+    chk = normality_check(data)
+    assert chk.series_text() == "1-6" and chk.pairs_text() == "z2-z1, z4-z3, z6-z5"
+    held = normality_check(data.subset(series=[4, 5]))
+    assert held.series == ("5", "6") and held.series_text() == "5, 6" and held.pairs_text() == "z6-z5"
+    named = normality_check(Measurements(Q, data.z[:2], SIGMA, sensors=model.sensors, series=["run A", "run B"]))
+    assert named.series_text() == "run A, run B" and named.pairs_text() == "z(run B)-z(run A)"
+    text = held.table(units={s: (1e3, "um") for s in model.sensors}, data_name="study series")
+    head, first = text.splitlines()[:2]
+    assert "SW p % (study series)" in head and "sigma_rep (study series)" in head
+    assert first.split()[2:4] == [f"{1e3 * held.sigma_rep[0]:.4g}", "um"]
