@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -60,6 +61,7 @@ from models.contract import Model
 from .errors import DataError, IdentificationError
 from .estimator import IdentifySettings, identify
 from .measurements import Measurements
+from .progress import Progress
 from .regions import CovarianceError, mahalanobis2
 from .splits import Split, SplitError
 from models.state import solve_states
@@ -154,6 +156,7 @@ class NormalityCheck:
     overridden : bool              the gate failed and normality="override" let the run continue
     pairs : tuple                  0-based series pairs (first, second) differenced
     note : str
+    series : tuple of str          labels of the series the test ran on (``Measurements.series``)
     """
 
     sensors: tuple
@@ -166,6 +169,7 @@ class NormalityCheck:
     overridden: bool = False
     pairs: tuple = ()
     note: str = ""
+    series: tuple = ()
 
     def __post_init__(self):
         for name in ("pvalue", "sigma_rep", "n_diff"):
@@ -173,13 +177,53 @@ class NormalityCheck:
             a.setflags(write=False)
             object.__setattr__(self, name, a)
 
-    def table(self) -> str:
-        lines = [f"{'sensor':<10} {'SW p-value %':>12} {'sigma_rep':>11} {'n':>4}  gate"]
+    def series_text(self) -> str:
+        """The tested series as a reader names them: "5, 6", "1-6" or the labels ("" when unknown)."""
+        return series_text(self.series)
+
+    def pairs_text(self) -> str:
+        """The differences formed, in series labels: "z6-z5" ("(none)" with fewer than two series)."""
+        lab = (_series_numbers(self.series) or [f"({x})" for x in self.series]
+               or [str(i + 1) for i in range(2 * len(self.pairs))])
+        return ", ".join(f"z{lab[b]}-z{lab[a]}" for a, b in self.pairs) or "(none)"
+
+    def table(self, units: Mapping | None = None, data_name: str = "series") -> str:
+        """The per-sensor table: p-value (%), sigma_rep and its unit, number of differences, gate.
+
+        ``units`` {sensor: (factor, unit)} shows sigma_rep as factor * sigma_rep in unit (default:
+        the unit of z, unnamed); ``data_name`` names the data in the column headers (e.g. "study
+        series"), so that the p-values say what they were computed on.
+        """
+        units = units or {}
+        p_head, s_head = f"SW p % ({data_name})", f"sigma_rep ({data_name})"
+        wp, ws = max(12, len(p_head)), max(11, len(s_head))
+        lines = [f"{'sensor':<10} {p_head:>{wp}} {s_head:>{ws}} {'unit':<8} {'n':>4}  gate"]
         for k, s in enumerate(self.sensors):
             pv = self.pvalue[k]
+            factor, unit = units.get(s, (1.0, ""))
             ok = "" if s not in self.gated else ("pass" if pv >= self.level else "FAIL")
-            lines.append(f"{s:<10} {100 * pv:>12.2f} {self.sigma_rep[k]:>11.4g} {int(self.n_diff[k]):>4}  {ok}")
+            lines.append(f"{s:<10} {100 * pv:>{wp}.2f} {factor * self.sigma_rep[k]:>{ws}.4g} {unit or '-':<8} "
+                         f"{int(self.n_diff[k]):>4}  {ok}")
         return "\n".join(lines)
+
+
+def _series_numbers(labels) -> list:
+    """The trailing numbers of series labels sharing one prefix ("series_5" -> "5"), else []."""
+    found = [re.fullmatch(r"(.*?)(\d+)", str(x)) for x in labels]
+    if not found or not all(found) or len({f.group(1) for f in found}) != 1:
+        return []
+    return [f.group(2) for f in found]
+
+
+def series_text(labels) -> str:
+    """Series labels for a reader: consecutive numbers as a range ("1-6"), else a list ("5, 6")."""
+    nums = _series_numbers(labels)
+    if not nums:
+        return ", ".join(str(x) for x in labels)
+    ints = [int(n) for n in nums]
+    if len(ints) > 2 and ints == list(range(ints[0], ints[0] + len(ints))):
+        return f"{ints[0]}-{ints[-1]}"
+    return ", ".join(nums)
 
 
 def normality_check(data: Measurements, level: float = 0.05, weights=None) -> NormalityCheck:
@@ -201,7 +245,8 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None) -> No
     notes = []
     if n_pairs == 0:
         return NormalityCheck(data.sensors, pv, sig, nd, level, gated, False, pairs=pairs,
-                              note="only one series: differences of repeated series cannot be formed")
+                              note="only one series: differences of repeated series cannot be formed",
+                              series=tuple(data.series))
     if data.n_M % 2:
         notes.append(f"series {data.n_M} (odd count) left out of the differences")
     for k in range(data.n_S):
@@ -217,7 +262,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None) -> No
                          + (" all equal" if d.size >= 3 else "") + "; Shapiro-Wilk not computable")
     passed = all(np.isfinite(pv[k]) and pv[k] >= level for k in range(data.n_S) if w[k] > 0)
     return NormalityCheck(data.sensors, pv, sig, nd, float(level), gated, bool(passed), pairs=pairs,
-                          note="; ".join(notes))
+                          note="; ".join(notes), series=tuple(data.series))
 
 
 # ---------------------------------------------------------------------------- one split
@@ -317,9 +362,17 @@ def _linearisation(est_c, est_v) -> tuple:
     return (None if None in verdicts else True), ""
 
 
+def _counted(items, bar):
+    """Yield every item, then advance ``bar`` (a tqdm bar or None) by one when its loop body is done."""
+    for item in items:
+        yield item
+        if bar is not None:
+            bar.update(1)
+
+
 def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None,
                     settings: DetectSettings | None = None, model_name: str | None = None,
-                    states0=None, curvature: bool = False) -> tuple:
+                    states0=None, curvature: bool = False, bar=None) -> tuple:
     """Lines 06-08 for every split: fits (p_cal, C_cal), (p_val, C_val), the pooled fit and the
     three alpha_min (likelihood ratio, two-sample Wald, paper).
 
@@ -329,13 +382,15 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     A failed fit or a singular covariance is recorded in its :class:`SplitTest` (``ok=False``,
     with the stage and the reason), never dropped and never raised.  ``states0`` (n_q, n_y),
     the states at p0 for every input of ``data``, warm-starts the fits (same result, faster).
+    ``bar`` (a tqdm bar, e.g. from :meth:`identification.progress.Progress.bar`) is advanced by
+    one per split done.
     """
     settings = settings or DetectSettings()
     name = model_name or model.name
     n_sel = int(np.count_nonzero(data.sensor_weights(weights) > 0))
     out = []
     pooled = {}
-    for split in splits:
+    for split in _counted(splits, bar):
         try:
             split.check(data.n_q, data.n_M, model.n_p, n_sel)
         except SplitError as exc:
@@ -647,8 +702,13 @@ class DetectionResult:
         st = statistic or self.settings.statistic
         return np.array([t.alpha(st) if t.ok else np.nan for t in self.tests_of(model)])
 
-    def summary(self) -> str:
-        """Per model: a table of the three statistics per split, the verdicts, numbered notes."""
+    def summary(self, units: Mapping | None = None, data_name: str = "series") -> str:
+        """Per model: a table of the three statistics per split, the verdicts, numbered notes.
+
+        ``units`` {sensor: (factor, unit)} and ``data_name`` label the normality table
+        (:meth:`NormalityCheck.table`; e.g. the display unit and "study series").  Decisions use
+        the words "rejected", "not rejected" and "undecided"; ">>" marks the deciding one.
+        """
         s = self.settings
         n = len(self.splits)
         notes = _Notes(self.notes)
@@ -663,7 +723,7 @@ class DetectionResult:
         if switched:
             lines[-1:-1] = [f"  for {', '.join(switched)} the likelihood ratio decides instead: a fit's linearisation "
                             "is not trustworthy (Bates-Watts curvature), the Wald statistics are unreliable"]
-        lines += self._normality_lines(notes)
+        lines += self._normality_lines(notes, units, data_name)
         lines += [f"sensors for {mname}: {', '.join(used)} ({how})" for mname, used, how in self.design]
         if self.design:
             lines.append("")
@@ -678,21 +738,21 @@ class DetectionResult:
             lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes.texts, 1)]
         return "\n".join(lines)
 
-    def _normality_lines(self, notes: "_Notes") -> list:
+    def _normality_lines(self, notes: "_Notes", units: Mapping | None, data_name: str) -> list:
         """The summary's normality-gate blocks, one per distinct check."""
         lines, seen = [], []
         for mname, chk in self.normality:
             if any(chk is c for c in seen):
                 continue
             seen.append(chk)
-            head = (f"Normality gate (line 05), Shapiro-Wilk on differences of series pairs "
-                    f"{', '.join(f'z{b + 1}-z{a + 1}' for a, b in chk.pairs) or '(none)'} at {100 * chk.level:g} %"
+            head = (f"Normality gate (line 05), Shapiro-Wilk at {100 * chk.level:g} % on the differences "
+                    f"{chk.pairs_text()} of the {data_name} {chk.series_text()}"
                     + (f" [data of {mname}]" if len(self.models) > 1 else ""))
             status = "passed" if chk.passed else ("FAILED, overridden by the user "
                                                   + notes.add("normality='override': the Gaussian error assumption "
                                                               "failed its check; the p-values below rely on it")
                                                   if chk.overridden else "FAILED")
-            lines += [head + f": {status}", chk.table()]
+            lines += [head + f": {status}", chk.table(units, data_name)]
             if chk.note:
                 lines[-1] += " " + notes.add(chk.note)
             lines.append("")
@@ -735,9 +795,8 @@ class DetectionResult:
             for co in CORRECTIONS:
                 d = dec[(st, co)]
                 primary = st == prim.statistic and co == prim.correction
-                tag = f"{d.decision.upper()}" if primary else d.decision
                 reason = prim.reason if primary else d.reason
-                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {tag:<9} ({reason})")
+                lines.append(f"  {'>> ' if primary else '   '}{st:<16} {co:<10}: {d.decision:<12} ({reason})")
         lines.append("")
         return lines
 
@@ -909,6 +968,15 @@ def _start_states(model: Model, p0: np.ndarray, data: Measurements):
         return None          # each fit then reports the failing state solve itself
 
 
+def _split_tests_shown(progress: Progress | None, model: Model, data: Measurements, splits: tuple, *args,
+                       model_name: str, **kwargs) -> tuple:
+    """:func:`run_split_tests` with a bar of one model's splits on ``progress`` (none when None)."""
+    if progress is None:
+        return run_split_tests(model, data, splits, *args, model_name=model_name, **kwargs)
+    with progress.bar(len(splits), f"detect {model_name}", unit="split") as bar:
+        return run_split_tests(model, data, splits, *args, model_name=model_name, bar=bar, **kwargs)
+
+
 def _decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
     """(primary decision per model, every model x statistic x correction decision) (lines 09-17)."""
     all_dec, primary = [], []
@@ -943,7 +1011,8 @@ def _primary(mt: list, dec: dict, settings: DetectSettings) -> ModelDecision:
 # ---------------------------------------------------------------------------- main entry
 def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None = None, statistic: str | None = None,
            correction: str | None = None, weights=None, design=None, normality: str | None = None,
-           settings: DetectSettings | None = None, design_how: str | None = None) -> DetectionResult:
+           settings: DetectSettings | None = None, design_how: str | None = None,
+           progress: Progress | None = None) -> DetectionResult:
     r"""Algorithm 1: is the model rejected by calibration / validation tests?
 
     For each split: p_cal, C_cal and p_val, C_val by :func:`identify` (eqs. 3, 7), then
@@ -991,6 +1060,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         How the design was chosen (e.g. "E-optimal design of 2 sensors"), recorded in
         ``DetectionResult.design``; default "sensor names given", "sensor weights given" or
         "all sensors given".
+    progress : identification.progress.Progress, optional
+        A bar advanced per split fitted (models x splits; default None: no output).
 
     Returns
     -------
@@ -1001,7 +1072,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     ValueError
         tol outside (0, 1), unknown statistic / correction / normality.
     TypeError
-        ``settings`` together with tol, statistic, correction or normality; bad argument types.
+        ``settings`` together with tol, statistic, correction or normality; bad argument types
+        (e.g. ``progress`` not a Progress).
     NormalityError
         Line 05 failed and normality="check".
     DataError, SplitError
@@ -1016,6 +1088,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     datas = _as_mapping("measurements", measurements, names)
     p0s = _as_mapping("p0", p0, names)
     _checked_design(design, weights)
+    if progress is not None and not isinstance(progress, Progress):
+        raise TypeError(f"progress: expected an identification.progress.Progress or None, got {type(progress).__name__}")
     notes, tests, normal, designs = [], [], [], []
     gate = _NormalityGate(settings, notes)
     for name in names:
@@ -1029,8 +1103,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
             notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
                          "approximate")
         p0v = _start_values(name, p0s[name], m)
-        tests.extend(run_split_tests(m, data, splits, p0v, w, settings, model_name=name,
-                                     states0=_start_states(m, p0v, data), curvature=True))
+        tests.extend(_split_tests_shown(progress, m, data, splits, p0v, w, settings, model_name=name,
+                                        states0=_start_states(m, p0v, data), curvature=True))
     primary, all_decisions = _decisions(tuple(tests), names, settings)
     return DetectionResult(settings, names, splits, tuple(tests), primary, all_decisions, tuple(normal),
                            tuple(designs), tuple(notes))

@@ -94,10 +94,33 @@ def _check_names(kind: str, names: Sequence[str]) -> tuple[str, ...]:
     return names
 
 
+def _stacked(items, what: str, symbolic):
+    """The column ``vertcat(items)`` of a list or tuple of scalars: numbers, NumPy scalars or 1x1
+    CasADi expressions of the model's symbolic type (``symbolic``: ca.SX or ca.MX).
+
+    Raises ModelError naming the entry that is not a scalar of that type.
+    """
+    parts = []
+    for k, e in enumerate(items):
+        if isinstance(e, (ca.DM, symbolic)) or (isinstance(e, np.ndarray) and e.dtype.kind in "biuf"):
+            if int(np.prod(e.shape)) != 1:
+                raise ModelError(f"{what}: entry {k} of the returned {type(items).__name__} has shape {tuple(e.shape)}; "
+                                 "a list may hold scalars only (return ca.vertcat(...) for vectors)")
+            if isinstance(e, np.ndarray):
+                e = float(e.reshape(-1)[0])
+            parts.append(e if isinstance(e, symbolic) else symbolic(e))
+        elif isinstance(e, (int, float, np.integer, np.floating)) and not isinstance(e, bool):
+            parts.append(symbolic(float(e)))
+        else:
+            raise ModelError(f"{what}: entry {k} of the returned {type(items).__name__} is a {type(e).__name__}; "
+                             f"expected a scalar ca.{symbolic.__name__} expression or a number")
+    return ca.vertcat(*parts) if parts else symbolic(0, 1)
+
+
 def _as_column(expr, what: str, symbolic):
-    """Turn what a user callable returned into a CasADi column vector."""
+    """Turn what a user callable returned into a CasADi column vector (a list of scalars is stacked)."""
     if isinstance(expr, (list, tuple)):
-        expr = symbolic.vertcat(*[symbolic(e) if not isinstance(e, symbolic) else e for e in expr]) if expr else symbolic(0, 1)
+        expr = _stacked(expr, what, symbolic)
     elif isinstance(expr, (int, float, np.ndarray)):
         expr = symbolic(expr)
     elif not isinstance(expr, (ca.SX, ca.MX, ca.DM)):

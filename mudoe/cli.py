@@ -220,8 +220,11 @@ def _identify_diagnostics(est) -> dict:
 
 def _identify(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, estimate_dict
-    from .study import run_identify
+    from .study import FitFailedError, run_identify
     run_identify(study, results, progress)
+    failed = "; ".join(f"the fit of {v} failed ({e})" for v, e in results.estimate_errors.items())
+    if not results.estimates:
+        raise FitFailedError(failed)
     obj = {v: dict(estimate_dict(e), **_identify_diagnostics(e)) for v, e in results.estimates.items()}
     obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
     text = "\n\n".join([e.summary() for e in results.estimates.values()]
@@ -229,7 +232,10 @@ def _identify(study, results, args, progress, out) -> int:
     _write(out, "identify.json", dumps(obj))
     _write(out, "identify.txt", text + "\n")
     _emit(args, text, obj)
-    return EXIT_FAILED if results.estimate_errors else EXIT_OK
+    if failed:
+        _print_line(f"mudoe identify: failed: {failed}; the other fits are in {out}/identify.json")
+        return EXIT_FAILED
+    return EXIT_OK
 
 
 def _oed_text(results) -> str:
@@ -278,11 +284,15 @@ def _oed(study, results, args, progress, out) -> int:
 
 
 def _detect(study, results, args, progress, out) -> int:
-    from reports.serialize import detection_dict, dumps
-    from .study import run_detect
+    from reports.diagnosis import findings_text
+    from reports.serialize import detection_dict, diagnosis_dict, dumps
+    from reports.tables import normality_labels
+    from .study import run_detect, run_diagnosis
     run_detect(study, results, progress)
-    obj = detection_dict(results.detection)
-    text = results.detection.summary()
+    run_diagnosis(study, results, progress)
+    labels = normality_labels(study)
+    obj = dict(detection_dict(results.detection, **labels), diagnosis=diagnosis_dict(results.diagnosis))
+    text = results.detection.summary(**labels) + "\n\n" + findings_text(results.diagnosis, results.detection.models)
     _write(out, "detect.json", dumps(obj))
     _write(out, "detect.txt", text + "\n")
     _emit(args, text, obj)
@@ -314,29 +324,34 @@ def _validate(study, results, args, progress, out) -> int:
 
 def _report(study, results, args, progress, out) -> int:
     from reports.builder import build_report
-    from .study import MissingPieceError, run_detect, run_identify, run_oed
+    from reports.diagnosis import findings_text
+    from .study import FitFailedError, MissingPieceError, run_detect, run_diagnosis, run_identify, run_oed
     t0 = time.perf_counter()
     run_identify(study, results, progress)
     try:
         run_oed(study, results, progress)
-    except MissingPieceError as exc:
+    except (MissingPieceError, FitFailedError) as exc:
         results.notes.append(f"optimal design not available: {exc}")
     try:
         run_detect(study, results, progress)
-    except MissingPieceError as exc:
+    except (MissingPieceError, FitFailedError) as exc:
         results.notes.append(f"detection not available: {exc}")
     except _bad_input_types() as exc:      # e.g. the normality gate failed: report it, do not hide it
         results.detection_error = f"{type(exc).__name__}: {exc}"
         results.notes.append(f"detection stopped: {exc}")
+    run_diagnosis(study, results, progress)
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
     with progress.step("build report"):
-        paths = build_report(results, out)
+        paths = build_report(results, out, progress=progress)
     text = "\n".join(str(p) for p in paths)
+    obj = {"files": [str(p) for p in paths], "verdicts": {}}
     if results.detection is not None:
-        text = "\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n" + text
-    _emit(args, text, {"files": [str(p) for p in paths],
-                       "verdicts": dict(results.detection.verdicts) if results.detection is not None else {}})
+        text = ("\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n\n"
+                + findings_text(results.diagnosis, results.detection.models) + "\n\n" + text)
+        obj.update(verdicts=dict(results.detection.verdicts),
+                   misses={m: results.diagnosis.misses(m) for m in results.detection.models})
+    _emit(args, text, obj)
     return EXIT_OK
 
 

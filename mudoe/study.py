@@ -26,14 +26,18 @@ from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
-from .press import press_variant
+from .press import diagnosis_explanations, press_variant
 
 __all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
-           "Progress", "MissingPieceError"]
+           "run_diagnosis", "Progress", "MissingPieceError", "FitFailedError"]
 
 
 class MissingPieceError(RuntimeError):
     """A library piece this command needs is not available (yet); the message says which."""
+
+
+class FitFailedError(RuntimeError):
+    """A fit the command needs failed (a failed computation, exit 1); the message gives the fit's error."""
 
 
 # ---------------------------------------------------------------------------- progress
@@ -75,6 +79,8 @@ class Study:
     splits : tuple of Split
     notes : tuple of str         what was done to the data
     units : DataUnits            units of the data in the files and in the model (the one conversion)
+    explanations : tuple         what the study knows of its diagnostic rejections
+                                 (:class:`reports.diagnosis.Explanation`; the press: the shipped campaign's)
     """
 
     cfg: StudyConfig
@@ -90,6 +96,7 @@ class Study:
     splits: tuple
     notes: tuple = ()
     units: DataUnits | None = None
+    explanations: tuple = ()
 
 
 @dataclass
@@ -106,6 +113,7 @@ class StudyResults:
     design_how: str = ""
     detection: object = None
     detection_error: str = ""
+    diagnosis: object = None
     validation: object = None
     timing: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
@@ -306,8 +314,9 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     n_study = n_M if cfg.data.series is None else len(cfg.data.series)
     for sp in splits:
         sp.check(campaign.n_q, n_study, first.n_p, 1)
+    explanations = diagnosis_explanations(campaign, tuple(models)) if cfg.model.name == "press" else ()
     return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
-                 campaign.notes, units)
+                 campaign.notes, units, explanations)
 
 
 # ---------------------------------------------------------------------------- runs
@@ -330,11 +339,11 @@ def _oed_variant(study: Study) -> str:
 
 def _require_fit(study: Study, results: StudyResults, v: str, progress: Progress, command: str,
                  why: str = "") -> None:
-    """Identify the study's variants if ``v`` has no estimate yet; MissingPieceError if its fit failed."""
+    """Identify the study's variants if ``v`` has no estimate yet; FitFailedError if its fit failed."""
     if v not in results.estimates:
         run_identify(study, results, progress)
     if v not in results.estimates:
-        raise MissingPieceError(f"{command}: the fit of variant {v} failed ({results.estimate_errors.get(v)}){why}")
+        raise FitFailedError(f"{command}: the fit of variant {v} failed ({results.estimate_errors.get(v)}){why}")
 
 
 def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
@@ -386,7 +395,18 @@ def run_detect(study: Study, results: StudyResults, progress: Progress | None = 
     settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
         results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
-                                   design=design, settings=settings)
+                                   design=design, settings=settings, progress=progress)
+    return results
+
+
+def run_diagnosis(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
+    """The diagnostic split family on every variant (:func:`reports.diagnosis.diagnose`; needs detection)."""
+    from reports.diagnosis import diagnose
+    progress = progress or Progress(False)
+    if results.detection is None:
+        return results
+    with progress.step(f"what the models miss: diagnostic splits of {len(study.models)} model(s)"):
+        results.diagnosis = diagnose(results, progress=progress)
     return results
 
 

@@ -177,33 +177,34 @@ def _loops_page(results):
 
 
 def _normality_page(results):
-    from .tables import draw_table, normality_rows
+    from .tables import ALL_SERIES, draw_table, normality_checks, normality_rows, normality_widths
     s = results.study
-    head, rows = normality_rows(s)
+    det = results.detection
+    gate = det.normality[0][1] if det is not None and det.normality else None
+    head, rows = normality_rows(s, gate)
     figs = []
     parts = _chunks(len(rows), ROWS_PER_PAGE)
     for n, part in enumerate(parts):
         fig = _page("Analysis of the measurement data (normality gate, sensor sigma)" + _part(n, len(parts)))
         chunk = [rows[k] for k in part]
-        h = min(0.03 * (len(chunk) + 1), 0.75)
+        h = min(0.03 * (len(chunk) + 2), 0.75)
         ax = fig.add_axes([0.04, 0.88 - h, 0.92, h])
-        draw_table(ax, head, chunk, fontsize=9, col_widths=[0.09, 0.15, 0.11, 0.11, 0.11, 0.08, 0.35])
+        draw_table(ax, head, chunk, fontsize=9, col_widths=normality_widths(head))
         figs.append(fig)
-    pairs = ", ".join(f"z{b + 1}-z{a + 1}" for a, b in s.normality.pairs)
-    txt = (f"Shapiro-Wilk test of the differences of consecutive series ({pairs}) over all set points, per "
-           f"sensor, on ALL series of the campaign, at level {100 * s.normality.level:g} %: "
-           f"{'passed' if s.normality.passed else 'FAILED'}. sigma_rep = std(differences)/sqrt(2). The sigma "
-           "used by every fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2), unless given directly "
-           "in the config.")
-    det = results.detection
-    if det is not None:
-        for m, chk in det.normality[:1]:
-            txt += (f"\nGate of Algorithm 1 (line 05) on the STUDY series only ({', '.join(chk.gated)}): "
-                    f"{'passed' if chk.passed else ('FAILED (overridden)' if chk.overridden else 'FAILED')}; "
-                    "its p-values are the ones the terminal prints.")
+    said = []
+    for name, chk in normality_checks(s, gate):
+        said.append(f"on {'all series' if name == ALL_SERIES else 'the ' + name} ({chk.series_text()}; "
+                    f"differences {chk.pairs_text()}): "
+                    + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
+                    + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else ""))
+    txt = (f"Shapiro-Wilk test at {100 * s.normality.level:g} % of the differences of consecutive series over all set "
+           f"points, per sensor, {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
+           "fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2) with sigma_rep on all series, unless "
+           "given directly in the config. The terminal (mudoe detect) prints the gate of Algorithm 1 (line 05) on "
+           "the study series, in the same unit.")
     if results.detection_error:
         txt += f"\nDetection stopped: {results.detection_error}"
-    _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 1), 0.75) - 0.05, 0.12), txt, width=170, size=9)
+    _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 2), 0.75) - 0.05, 0.12), txt, width=160, size=9)
     return figs
 
 
@@ -445,7 +446,8 @@ def _misses_pages(results, diagnosis):
            f". alpha_min of the {STATISTIC_WORDS[diagnosis.statistic]} statistic; Holm's step-down correction over "
            f"the study's splits and the diagnostic ones together, per model, at TOL = {100 * diagnosis.tol:g} %. "
            "The decision of page 1 uses the study's splits only.\n\n"
-           + ("Findings: " + " ".join(findings) if findings else "Findings: no diagnostic split rejects a model."))
+           + ("Findings:\n" + "\n".join(f"- {f}" for f in findings) if findings
+              else "Findings: no diagnostic split rejects a model."))
     fig = figs[-1]
     y = 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
     if y < 0.15:
@@ -512,7 +514,7 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True) -> list:
     return pages
 
 
-def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True) -> list[Path]:
+def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True, progress=None) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
     Parameters
@@ -524,7 +526,10 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
         PNG resolution (default: the config's [report] dpi, 150).
     diagnose : bool
         Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
-        phases, series; three fits per split and model) for the page "What the model misses".
+        phases, series; three fits per split and model) for the page "What the model misses",
+        unless ``results.diagnosis`` holds it already.
+    progress : identification.progress.Progress, optional
+        Bars over the diagnostic fits and over the pages (default None: no output).
 
     Returns
     -------
@@ -544,6 +549,8 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
 
     from .serialize import diagnosis_dict, dumps, package_versions, results_dict
 
+    from identification.progress import Progress
+
     from .diagnosis import diagnose as run_diagnosis
 
     t0 = time.perf_counter()
@@ -554,10 +561,13 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
     written = []
     try:
-        diagnosis = run_diagnosis(results) if diagnose else None
+        diagnosis = getattr(results, "diagnosis", None)
+        if diagnosis is None and diagnose:
+            diagnosis = run_diagnosis(results, progress=progress)
         pages = report_pages(results, diagnosis, diagnose)
         names, texts = [], []
-        with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf:
+        with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf, \
+                (progress or Progress(False)).bar(len(pages), "report pages", unit="page") as bar:
             k = 0
             for name, make in pages:
                 figs = make()
@@ -570,6 +580,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
                     names.append(png)
                     texts.append(dict(file=png, texts=page_texts(fig)))
                     plt.close(fig)
+                bar.update(1)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
         meta = dict(config=cfg.as_dict(), config_text=cfg.text, data_sha256=results.study.campaign.sha256,

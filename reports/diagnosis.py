@@ -14,8 +14,12 @@ p-values (alpha_min) of the whole family -- the study's own splits and the diagn
 ones -- with Holm's step-down procedure.  The report shows the result on the page
 "What the model misses".
 
-What the study should pass later: the diagnostic family (``[splits] diagnose = true``)
-and its :class:`Diagnosis` in ``StudyResults`` (then the builder need not run the fits).
+A study may know why a diagnostic split rejects a model on its data (e.g. from a benchmark
+that switched features of a simulator off): it passes :class:`Explanation` s (the study's
+``explanations``), and every finding they match is followed by the explanation's text, in the
+report and in the terminal.  The words are the study's; this module adds none.
+
+What the study should pass later: the diagnostic family (``[splits] diagnose = true``).
 """
 from __future__ import annotations
 
@@ -25,12 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.detect import run_split_tests
+from identification.progress import Progress
 from identification.splits import Split, SplitError, input_range_split, series_split
 
 from .view import phase_labels
 
-__all__ = ["DiagnosticSplit", "DiagnosisRow", "Diagnosis", "diagnostic_splits", "diagnose", "holm_adjusted",
-           "MISSES"]
+__all__ = ["DiagnosticSplit", "DiagnosisRow", "Diagnosis", "Explanation", "diagnostic_splits", "diagnose",
+           "holm_adjusted", "findings_text", "MISSES"]
 
 #: what a rejection on a split of each kind says the model misses
 MISSES = {"input range": "an input dependence: the parameters fitted on small inputs do not hold for large ones "
@@ -40,6 +45,28 @@ MISSES = {"input range": "an input dependence: the parameters fitted on small in
                    "direction-dependent effect the model lacks)",
           "series": "a change between series: the system drifted or the series are not repeats of one experiment",
           "study split": "something the study's own split separates (see its description)"}
+
+
+@dataclass(frozen=True)
+class Explanation:
+    """What a study knows about why a kind of diagnostic split rejects a model on its data.
+
+    Attributes
+    ----------
+    model : str    the model (variant) whose rejection it explains
+    kind : str     the kind of diagnostic split: "input range", "phase" or "series" (:data:`MISSES`)
+    text : str     plain sentences in the study's words, shown after the finding they explain
+    """
+
+    model: str
+    kind: str
+    text: str
+
+    def __post_init__(self):
+        if self.kind not in MISSES:
+            raise ValueError(f"kind: expected one of {sorted(MISSES)}, got {self.kind!r}")
+        if not isinstance(self.text, str) or not self.text.strip():
+            raise ValueError("text: an explanation needs words")
 
 
 @dataclass(frozen=True)
@@ -120,27 +147,48 @@ class DiagnosisRow:
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """The diagnostic family's results for every model (Holm over the study's and the diagnostic splits)."""
+    """The diagnostic family's results for every model (Holm over the study's and the diagnostic splits).
+
+    ``explanations`` (:class:`Explanation`, from the study) follow the findings they match.
+    """
 
     statistic: str
     tol: float
     rows: tuple
+    explanations: tuple = ()
 
     def misses(self, model: str) -> list[str]:
-        """Plain sentences: what the model misses, one per rejected diagnostic split."""
+        """Plain sentences: what the model misses, one per rejected diagnostic split, each followed by
+        the study's explanations of that model and kind of split."""
         out = []
         for r in self.rows:
             if r.model == model and r.rejected and r.kind != "study split":
-                out.append(f"{model} misses {MISSES[r.kind]} (split '{r.split}', Holm-adjusted p = "
-                           f"{100 * r.holm:.3g} %).")
+                why = [e.text.strip() for e in self.explanations if e.model == model and e.kind == r.kind]
+                out.append(" ".join([f"{model} misses {MISSES[r.kind]} (split '{r.split}', Holm-adjusted p = "
+                                     f"{100 * r.holm:.3g} %)."] + why))
         return out
 
 
-def diagnose(results, statistic: str | None = None) -> Diagnosis | None:
+def findings_text(diagnosis: Diagnosis | None, models) -> str:
+    """The findings of :meth:`Diagnosis.misses` for the terminal: a heading and one paragraph each."""
+    if diagnosis is None:
+        return ""
+    found = [s for m in models for s in diagnosis.misses(m)]
+    head = (f"What the models miss (diagnostic splits; Holm over the study's and the diagnostic splits at TOL = "
+            f"{100 * diagnosis.tol:g} %; not part of the decision):")
+    return "\n".join([head] + [f"  - {s}" for s in found] if found else
+                     [head, "  no diagnostic split rejects a model."])
+
+
+def diagnose(results, statistic: str | None = None, progress: Progress | None = None,
+             explanations=None) -> Diagnosis | None:
     """Run the diagnostic family on every model of a study and Holm-correct it with the study's splits.
 
     Uses the detection's settings, start values and sensors; returns None when detection
-    was not run.  Each split costs a calibration, a validation and a pooled fit per model.
+    was not run.  Each split costs a calibration, a validation and a pooled fit per model;
+    ``progress`` (an :class:`identification.progress.Progress`) shows a bar over them.
+    ``explanations`` (:class:`Explanation` s; default the study's ``explanations``) are kept with
+    the result and follow the findings they match.
     """
     det = results.detection
     if det is None:
@@ -153,8 +201,9 @@ def diagnose(results, statistic: str | None = None) -> Diagnosis | None:
         model = study.models[m]
         w = np.array([1.0 if s in results.design_sensors else 0.0 for s in study.sensors]) \
             if results.design_sensors else None
-        tests = run_split_tests(model, study.data[m], [d.split for d in fam], study.p0, weights=w,
-                                settings=det.settings, model_name=m)
+        with (progress or Progress(False)).bar(len(fam), f"diagnostic splits {m}", unit="split") as bar:
+            tests = run_split_tests(model, study.data[m], [d.split for d in fam], study.p0, weights=w,
+                                    settings=det.settings, model_name=m, bar=bar)
         own = [(t.split, "study split", t) for t in det.tests_of(m)]
         new = [(d.split.name, d.kind, t) for d, t in zip(fam, tests)]
         alphas = np.array([t.alpha(st) if t.ok else math.nan for _, _, t in own + new])
@@ -162,4 +211,9 @@ def diagnose(results, statistic: str | None = None) -> Diagnosis | None:
         for (name, kind, t), a, h in zip(own + new, alphas, adj):
             rows.append(DiagnosisRow(m, name, kind, float(a), float(h), bool(np.isfinite(h) and h < det.settings.tol),
                                      "" if t.ok else f"{t.stage}: {t.error}"))
-    return Diagnosis(st, det.settings.tol, tuple(rows))
+    if explanations is None:
+        explanations = getattr(study, "explanations", ())
+    bad = [e for e in explanations if not isinstance(e, Explanation)]
+    if bad:
+        raise TypeError(f"explanations: expected reports.diagnosis.Explanation, got {type(bad[0]).__name__}")
+    return Diagnosis(st, det.settings.tol, tuple(rows), tuple(explanations))

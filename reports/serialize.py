@@ -13,7 +13,9 @@ import platform
 
 import numpy as np
 
-__all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "oed_dict", "validation_dict", "study_dict",
+from .tables import ALL_SERIES, normality_labels, sigma_display
+
+__all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "normality_dict", "oed_dict", "validation_dict", "study_dict",
            "results_dict", "package_versions", "diagnosis_dict"]
 
 
@@ -69,8 +71,21 @@ def estimate_dict(est) -> dict:
                 weights=est.weights, notes=list(est.notes))
 
 
-def detection_dict(det) -> dict:
-    """Every split test and every decision of a :class:`identification.detect.DetectionResult`."""
+def normality_dict(chk, units=None, data_name: str = "series") -> dict:
+    """A normality check: p-values, sigma_rep as factor * value in unit (``units`` {sensor: (factor,
+    unit)}, :func:`reports.tables.sigma_display`), and the series it was computed on."""
+    units = units or {}
+    fu = [units.get(s, (1.0, "")) for s in chk.sensors]
+    return dict(computed_on=f"{data_name} {chk.series_text()}".strip(), series=list(chk.series),
+                sensors=chk.sensors, pvalue=chk.pvalue, sigma_rep=[f * v for (f, _), v in zip(fu, chk.sigma_rep)],
+                sigma_rep_unit=[u for _, u in fu], passed=chk.passed, overridden=chk.overridden, level=chk.level,
+                note=chk.note)
+
+
+def detection_dict(det, units=None, data_name: str = "series") -> dict:
+    """Every split test and every decision of a :class:`identification.detect.DetectionResult`.
+
+    ``units`` and ``data_name`` label the normality gate (:func:`normality_dict`)."""
     tests = []
     for t in det.tests:
         tests.append(dict(model=t.model, split=t.split, calibration=t.cal_label, validation=t.val_label, ok=t.ok,
@@ -81,8 +96,7 @@ def detection_dict(det) -> dict:
     decisions = [jsonable(d) for d in det.all_decisions]
     for d, dd in zip(det.all_decisions, decisions):
         dd["primary"] = (d.statistic == det.settings.statistic and d.correction == det.settings.correction)
-    norm = [dict(model=m, sensors=c.sensors, pvalue=c.pvalue, sigma_rep=c.sigma_rep, passed=c.passed,
-                 overridden=c.overridden, level=c.level, note=c.note) for m, c in det.normality]
+    norm = [dict(model=m, **normality_dict(c, units, data_name)) for m, c in det.normality]
     return dict(settings=jsonable(det.settings), models=list(det.models),
                 splits=[dict(name=s.name, cal_inputs=s.cal_inputs, val_inputs=s.val_inputs, cal_series=s.cal_series,
                              val_series=s.val_series, description=s.description) for s in det.splits],
@@ -120,12 +134,14 @@ def validation_dict(mc) -> dict:
 
 
 def study_dict(study) -> dict:
+    """The study's data, sigma and normality check (all series); sigma in the report's display unit."""
     c = study.campaign
+    disp = sigma_display(study)
+    sigma = None if study.sigma is None else [disp[s][0] * v for s, v in zip(study.sensors, study.sigma)]
     return dict(source=c.source, files=list(c.files), sha256=c.sha256, n_M=c.n_M, n_q=c.n_q,
-                sensors=list(study.sensors), series_used=study.cfg.data.series, sigma_mm=study.sigma,
-                sigma_table=list(study.sigma_table), p0=study.p0, splits=[s.name for s in study.splits],
-                normality=dict(sensors=study.normality.sensors, pvalue=study.normality.pvalue,
-                               sigma_rep_mm=study.normality.sigma_rep, passed=study.normality.passed),
+                sensors=list(study.sensors), series_used=study.cfg.data.series, sigma=sigma,
+                sigma_unit=[disp[s][1] for s in study.sensors], sigma_table=list(study.sigma_table), p0=study.p0,
+                splits=[s.name for s in study.splits], normality=normality_dict(study.normality, disp, ALL_SERIES),
                 notes=list(study.notes))
 
 
@@ -138,7 +154,7 @@ def results_dict(results) -> dict:
     if results.oed is not None:
         out["oed"] = oed_dict(results.oed, results.oed_table, results.oed_variant)
     if results.detection is not None:
-        out["detection"] = detection_dict(results.detection)
+        out["detection"] = detection_dict(results.detection, **normality_labels(results.study))
     if results.detection_error:
         out["detection_error"] = results.detection_error
     if results.validation is not None:

@@ -12,7 +12,8 @@ import numpy as np
 from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
                    output_display, param_units, sensor_unit, unit_suffix)
 
-__all__ = ["fmt_alpha", "normality_rows", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
+__all__ = ["fmt_alpha", "normality_rows", "normality_widths", "normality_checks", "normality_labels",
+           "sigma_display", "STUDY_SERIES", "ALL_SERIES", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
            "draw_table", "sigma_rows", "verdict_rows", "smallest_alpha", "criteria_units", "PARAMS_PER_TABLE"]
 
 
@@ -23,20 +24,73 @@ def fmt_alpha(a: float) -> str:
     return "<< 0.01" if a < 1e-4 else f"{100 * a:.2f}"
 
 
-def normality_rows(study) -> tuple[list, list]:
-    """Header and rows of the paper's 'Analysis of the measurement data' table (displayed sensor units)."""
-    n = study.normality
+#: what the detection's data are called everywhere (terminal, JSON, report): the study's series
+STUDY_SERIES = "study series"
+#: what the study's own normality check (the sigma_rep used to compose sigma) runs on
+ALL_SERIES = "all series"
+
+
+def sigma_display(study) -> dict:
+    """{sensor: (factor, unit)}: sigma_rep and sigma shown as factor * value (model unit) in unit.
+
+    The one display unit of the report (:func:`reports.view.output_display`; the press: um), used
+    by the terminal (``DetectionResult.summary(units=...)``), results.json and the report alike.
+    """
     f = output_display(study).scale
-    head = ["sensor", "Shapiro-Wilk p %", "sigma_rep", "sigma_man", "sigma used", "unit", "how sigma was obtained"]
+    return {s: (f, sensor_unit(study, s)) for s in study.sensors}
+
+
+def normality_labels(study) -> dict:
+    """Keyword arguments of ``DetectionResult.summary`` / ``serialize.detection_dict`` that label the
+    normality gate like the report: sigma in the display unit, p-values "on the study series"."""
+    return dict(units=sigma_display(study), data_name=STUDY_SERIES)
+
+
+def normality_checks(study, gate=None) -> list:
+    """[(name, NormalityCheck)]: the study's check on all series and, when detection ran on other
+    series, the gate of Algorithm 1 on the study series (one entry when both are the same series)."""
+    if gate is None:
+        return [(ALL_SERIES, study.normality)]
+    if tuple(gate.series) == tuple(study.normality.series):
+        return [(f"{STUDY_SERIES} = {ALL_SERIES}", gate)]
+    return [(ALL_SERIES, study.normality), (STUDY_SERIES, gate)]
+
+
+def normality_rows(study, gate=None) -> tuple[list, list]:
+    """Header and rows of the paper's 'Analysis of the measurement data' table (displayed sensor units).
+
+    Shapiro-Wilk p-values (%) and sigma_rep per sensor, each column labelled with the series it
+    was computed on (:func:`normality_checks`: all series, and the study series of the gate
+    ``gate`` when given); then sigma_man, the sigma used, the unit and how sigma was obtained.
+    """
+    checks = normality_checks(study, gate)
+    disp = sigma_display(study)
+    head = ["sensor"]
+    for name, _ in checks:
+        label = name.replace(" = ", "\n= ")
+        head += [f"SW p %\n({label})", f"sigma_rep\n({label})"]
+    head += ["sigma_man", "sigma used", "unit", "how sigma was obtained"]
     rows = []
-    for k, s in enumerate(n.sensors):
+    for k, s in enumerate(study.sensors):
         st = study.sigma_table[k]
-        rows.append([s, "n/a" if not np.isfinite(n.pvalue[k]) else f"{100 * n.pvalue[k]:.2f}",
-                     f"{f * n.sigma_rep[k]:.4g}",
-                     "-" if not np.isfinite(st["sigma_man"]) else f"{f * st['sigma_man']:.4g}",
-                     "estimated" if not np.isfinite(st["sigma"]) else f"{f * st['sigma']:.4g}",
-                     sensor_unit(study, s) or "-", st["how"]])
+        f = disp[s][0]
+        row = [s]
+        for _, chk in checks:
+            row += ["n/a" if not np.isfinite(chk.pvalue[k]) else f"{100 * chk.pvalue[k]:.2f}",
+                    f"{f * chk.sigma_rep[k]:.4g}"]
+        row += ["-" if not np.isfinite(st["sigma_man"]) else f"{f * st['sigma_man']:.4g}",
+                "estimated" if not np.isfinite(st["sigma"]) else f"{f * st['sigma']:.4g}",
+                disp[s][1] or "-", st["how"]]
+        rows.append(row)
     return head, rows
+
+
+def normality_widths(head) -> list:
+    """Column widths (fractions of the table) of :func:`normality_rows`' table."""
+    n_stat = len(head) - 5
+    w_stat = 0.115 if n_stat <= 2 else 0.105
+    rest = 1.0 - 0.07 - n_stat * w_stat - 0.085 - 0.085 - 0.06
+    return [0.07] + [w_stat] * n_stat + [0.085, 0.085, 0.06, rest]
 
 
 def sigma_rows(study):
@@ -234,6 +288,7 @@ def draw_table(ax, head, rows, flags=None, col_widths=None, fontsize=8, title=No
     for (r, c), cell in tab.get_celld().items():
         cell.set_linewidth(0.3)
         if r == 0:
+            cell.set_height(cell.get_height() * max(h.count("\n") + 1 for h in head))
             cell.set_facecolor("#e6e6e6")
             cell.set_text_props(weight="bold")
         elif flags is not None and flags[r - 1][c]:

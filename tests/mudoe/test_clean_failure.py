@@ -158,3 +158,100 @@ def test_init_from_a_model_factory_lists_its_names_and_units(capsys, tmp_path):
     assert [(s.name, s.unit) for s in cfg.sensors] == [("C_A", "mmol/L"), ("C_B", "mmol/L"), ("C_C", "mmol/L"),
                                                        ("X_A", "%")]
     assert [(p.name, p.unit) for p in cfg.parameters] == [("k_ref", "1/min"), ("E_a", "kJ/mol"), ("k_2", "1/min")]
+
+
+# ---------------------------------------------------------------------------- the rest of issue 14's list
+ABSURD = '''
+from models.contract import Model
+
+
+def build(variant):
+    """y = c + 1 / (1 + k x): constant data do not bound k, which runs to absurd values."""
+    return Model.explicit(["c", "k"], ["x"], ["y"], h=lambda p, q: [p[0] + 1 / (1 + p[1] * q[0])],
+                          name=f"saturation {variant}")
+'''
+
+
+@pytest.fixture()
+def absurd_study(tmp_path, monkeypatch):
+    """A user's model whose data leave a parameter unbounded (the issue's p = -8e12 fit)."""
+    import textwrap
+
+    import numpy as np
+
+    from mudoe.data_io import write_paper_layout
+    pkg = tmp_path / "absurd_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sat.py").write_text(ABSURD)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    x = np.linspace(0.5, 5, 20)
+    z = 1.0 + 0.01 * np.sin(7 * x)[None, :, None] + 0.01 * np.random.default_rng(2).standard_normal((2, 20, 1))
+    write_paper_layout(tmp_path / "data", x, z, ["y"])
+    cfg = tmp_path / "absurd.toml"
+    cfg.write_text(textwrap.dedent("""\
+        [model]
+        name = "absurd_pkg.sat:build"
+        variants = ["v"]
+        [data]
+        directory = "data"
+        [[sensors]]
+        name = "y"
+        sigma = 0.01
+        [[parameters]]
+        name = "c"
+        start = 1.0
+        [[parameters]]
+        name = "k"
+        start = 1.0
+        [splits]
+        scenarios = []
+        [splits.random]
+        n = 2
+        """))
+    return cfg
+
+
+@pytest.mark.parametrize("command", ["identify", "detect"])
+def test_absurd_estimate_is_a_failed_computation(capsys, tmp_path, absurd_study, command):
+    """The issue's "Solve_Succeeded with k1 = -8e12 and NaN standard errors": exit 1, one line naming
+    the absurd value, no traceback, no result file that could be read as a success."""
+    out = tmp_path / "out"
+    line = _one_line(capsys, [command, str(absurd_study), "--out", str(out), "--quiet"], 1, "absurd values")
+    assert line.startswith(f"mudoe {command}: failed:"), line
+    assert not (out / f"{command}.json").exists()
+
+
+def test_out_is_an_existing_folder_that_cannot_be_written(capsys, campaign_dirs):
+    # /proc exists and is a folder, but refuses new entries even for root (os.access would say yes)
+    _one_line(capsys, ["detect", str(campaign_dirs["paper_cfg"]), "--out", "/proc"], 2,
+              "--out", "cannot write into folder /proc")
+
+
+def test_simulate_a_user_study_without_a_simulate_section(capsys, tmp_path):
+    """A user's study without [simulate] gets an error, not press data (the issue's D_y, F_x, B0_y)."""
+    text = (REPO / "configs" / "cstr.toml").read_text()
+    text = text[:text.index("[simulate]")] + text[text.index("[splits]"):]
+    text = text.replace('directory = "../data/cstr"', f'directory = "{REPO / "data" / "cstr"}"')
+    cfg = tmp_path / "nosim.toml"
+    cfg.write_text(text)
+    out = tmp_path / "sim"
+    _one_line(capsys, ["simulate", str(cfg), "--out", str(out)], 2, "[simulate]", "give the set points")
+    assert not out.exists()
+
+
+def test_extreme_value_in_a_user_study(capsys, tmp_path):
+    """1e300 in the cstr study's tidy data (degC, mol/L): exit 2, file:line, nothing written."""
+    src = REPO / "data" / "cstr" / "campaign_long.csv"
+    lines = src.read_text().splitlines()
+    parts = lines[9].split(",")
+    parts[-1] = "1e300"
+    lines[9] = ",".join(parts)
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "campaign_long.csv").write_text("\n".join(lines) + "\n")
+    text = (REPO / "configs" / "cstr.toml").read_text().replace('directory = "../data/cstr"', 'directory = "data"')
+    cfg = tmp_path / "cstr.toml"
+    cfg.write_text(text)
+    out = tmp_path / "out"
+    _one_line(capsys, ["detect", str(cfg), "--out", str(out)], 2, "campaign_long.csv:10:")
+    assert not out.exists()

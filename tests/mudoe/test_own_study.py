@@ -46,3 +46,84 @@ def test_cstr_study_through_every_command(tmp_path, capsys, cstr_config):
     res = json.loads((out / "results.json").read_text())
     flat = json.dumps(res)
     assert all(n in flat for n in ("k_ref", "E_a", "k_2", "degC", "mol/L"))
+
+
+REPO = Path(__file__).resolve().parents[2]
+WORDS = ("rejected", "not rejected", "undecided")
+
+
+def _terminal_normality(text: str) -> tuple[str, dict]:
+    """(header line, {sensor: (p %, sigma_rep, unit)}) of the normality table of `mudoe detect`."""
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("Normality gate"))
+    rows = {}
+    for ln in lines[k + 2:]:
+        if not ln.strip():
+            break
+        sensor, p, sig, unit = ln.split()[:4]
+        rows[sensor] = (p, sig, unit)
+    return lines[k] + "\n" + lines[k + 1], rows
+
+
+def test_terminal_json_and_report_agree_on_units_labels_and_words(tmp_path, capsys):
+    """The cstr study: sigma_rep (value and unit), the Shapiro-Wilk p-values and what they were
+    computed on, and the decision word are the same in `mudoe detect`'s terminal text, its JSON and
+    the report's pages (the builder's text model: what the PDF shows)."""
+    from mudoe.config import load_config
+    from mudoe.study import StudyResults, prepare, run_detect, run_identify, run_oed
+    from reports.builder import page_texts, report_pages
+
+    cfg_path = REPO / "configs" / "cstr.toml"
+    rc, terminal = _run(capsys, "detect", str(cfg_path), "--out", str(tmp_path))
+    assert rc == 0
+    det_json = json.loads((tmp_path / "detect.json").read_text())
+
+    results = StudyResults(prepare(load_config(cfg_path)))
+    run_identify(results.study, results)
+    run_oed(results.study, results)
+    run_detect(results.study, results)
+    pages = dict(report_pages(results, None, with_diagnosis=False))
+    title, normality = pages["title"](), pages["normality"]()
+    normality = normality if isinstance(normality, list) else [normality]
+    title_texts = page_texts(title)
+    norm_texts = [t for fig in normality for t in page_texts(fig)]
+
+    # what the p-values were computed on: named in all three
+    head, term_rows = _terminal_normality(terminal)
+    assert "of the study series 1-4" in head and "SW p % (study series)" in head and "sigma_rep (study series)" in head
+    (gate,) = det_json["normality"]
+    assert gate["computed_on"] == "study series 1-4"
+    p_head = next(t for t in norm_texts if t.startswith("SW p %"))
+    s_head = next(t for t in norm_texts if t.startswith("sigma_rep"))
+    assert "study series" in p_head and "study series" in s_head
+
+    # the report's row of each sensor: sensor, p %, sigma_rep, sigma_man, sigma used, unit, how
+    sensors = results.study.sensors
+    assert set(term_rows) == set(sensors) == set(gate["sensors"])
+    for k, s in enumerate(sensors):
+        i = norm_texts.index(s)
+        rep_p, rep_sig, rep_unit = norm_texts[i + 1], norm_texts[i + 2], norm_texts[i + 5]
+        p, sig, unit = term_rows[s]
+        assert (p, sig, unit) == (rep_p, rep_sig, rep_unit)
+        assert (f"{100 * gate['pvalue'][k]:.2f}", f"{gate['sigma_rep'][k]:.4g}", gate["sigma_rep_unit"][k]) == \
+            (p, sig, unit)
+    # concentrations are shown in the model's mmol/L, the conversion in %, nowhere in another unit
+    assert [term_rows[s][2] for s in sensors] == ["mmol/L", "mmol/L", "mmol/L", "%"]
+
+    # the decision word: terminal (the >> line), JSON and page 1's verdict table
+    (primary,) = [ln for ln in terminal.splitlines() if ln.strip().startswith(">>")]
+    word_terminal = primary.split(":", 1)[1].split("(")[0].strip()
+    word_json = det_json["verdicts"]["arrhenius"]
+    i = title_texts.index("arrhenius")
+    word_report = title_texts[i + 1]
+    assert word_terminal == word_json == word_report and word_json in WORDS
+    assert not any(w.upper() in terminal for w in ("REJECTED", "ACCEPT"))
+
+
+def test_detect_shows_a_bar_per_model_over_its_splits(tmp_path, capsys):
+    """`mudoe detect` (without --quiet) shows the split fits and the diagnostic fits as tqdm bars."""
+    rc = main(["detect", str(REPO / "configs" / "cstr.toml"), "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 0 and "Traceback" not in err
+    assert "detect arrhenius" in err and "4/4" in err and "split" in err
+    assert "diagnostic splits arrhenius" in err
