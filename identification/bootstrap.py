@@ -20,7 +20,7 @@ notes say.
 """
 from __future__ import annotations
 
-import math
+import functools
 import os
 from dataclasses import dataclass
 
@@ -34,7 +34,7 @@ from .measurements import Measurements
 from .profile import ConfidenceIntervals, resolve_params, validate_alpha
 from .progress import Progress
 
-__all__ = ["BootstrapError", "bootstrap_intervals", "bootstrap_replicates", "replicate_chunks"]
+__all__ = ["BootstrapError", "bootstrap_intervals", "bootstrap_replicates"]
 
 
 class BootstrapError(IdentificationError):
@@ -88,16 +88,6 @@ def _run_chunk(task: _Task | None, chunk: list) -> list:
     return [(i, *_replicate(t, s)) for i, s in chunk]
 
 
-def replicate_chunks(n: int, seed, n_workers: int, chunk_size: int | None = None) -> list:
-    """The replicates cut into chunks [[(r, SeedSequence(seed).spawn(n)[r]), ...], ...].
-
-    ``chunk_size`` replicates per chunk (None: about 4 chunks per worker, at most 20 each).
-    """
-    items = list(enumerate(np.random.SeedSequence(seed).spawn(int(n))))
-    size = chunk_size or max(1, min(20, math.ceil(n / (4 * max(1, n_workers)))))
-    return [items[k:k + size] for k in range(0, len(items), size)]
-
-
 def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, seed=0, workers: int | None = 1,
                          progress: Progress | None = None, scheduler=None, chunk_size: int | None = None) -> tuple:
     """Refitted parameters of ``n`` campaigns simulated from ``est`` (see the module docstring).
@@ -140,26 +130,9 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
                  np.asarray(est.weights, float), None if est.states is None or est.states.size == 0
                  else np.asarray(est.states, float))
     got = _Collector(int(n), model.n_p, (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits"))
-    collect = got.add
     try:
-        if scheduler is not None:
-            with cluster.connect(scheduler) as client:
-                chunks = replicate_chunks(n, seed, cluster.n_workers(client), chunk_size)
-                cluster.run_chunks(client, _run_chunk, task, chunks, collect)
-        else:
-            n_w = int(workers or os.cpu_count() or 1)
-            chunks = replicate_chunks(n, seed, n_w, chunk_size)
-            if n_w == 1:
-                for ch in chunks:
-                    collect(_run_chunk(task, ch))
-            else:
-                import multiprocessing as mp
-                from concurrent.futures import ProcessPoolExecutor, as_completed
-                with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"), initializer=_install,
-                                         initargs=(task,)) as pool:
-                    futures = [pool.submit(_run_chunk, None, ch) for ch in chunks]
-                    for fut in as_completed(futures):
-                        collect(fut.result())
+        cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size),
+                        got.add, workers, scheduler, _install)
     finally:
         got.bar.close()
     return got.P, sorted(got.errors)

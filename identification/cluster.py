@@ -11,11 +11,15 @@ Seeds travel with the chunks, so the numbers do not depend on how the scheduler 
 """
 from __future__ import annotations
 
+import math
+import os
 import threading
 from contextlib import contextmanager
 from typing import Callable
 
-__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "n_workers", "run_chunks"]
+import numpy as np
+
+__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "execute", "n_workers", "run_chunks", "seed_chunks"]
 
 #: how long :func:`connect` waits for at least one worker to join the scheduler (s)
 WORKER_WAIT_S = 30.0
@@ -113,3 +117,57 @@ def run_chunks(client, fn: Callable, task, chunks: list, on_result: Callable) ->
             on_result(fut.result())
     finally:
         client.cancel(futs)
+
+
+def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, workers: int | None = 1,
+            scheduler=None, install: Callable | None = None) -> str:
+    """Run every chunk ``fn(task, chunk)`` serially, on local processes or on a Dask scheduler.
+
+    Parameters
+    ----------
+    fn : module-level callable (task or None, chunk) -> list
+        ``task`` None means "the task installed in this process" (local processes).
+    task : picklable
+    make_chunks : callable (n_workers) -> list of chunks
+    on_result : callable (list) -> None, called with every chunk's result as it finishes
+    workers : int or None   local processes (1: serial in this process; None: all cores)
+    scheduler : None, a Dask scheduler address or a distributed.Client (then ``workers`` is ignored)
+    install : module-level callable (task) -> None
+        Stores ``task`` in a spawned process (the pool initializer); needed when ``workers`` > 1.
+
+    Returns
+    -------
+    str : the backend used, e.g. "serial", "2 local processes", "dask (tcp://..., 4 workers)".
+    """
+    if scheduler is not None:
+        with connect(scheduler) as client:
+            n_w = n_workers(client)
+            run_chunks(client, fn, task, make_chunks(n_w), on_result)
+            return f"dask ({client.scheduler.address}, {n_w} workers)"
+    n_w = int(workers or os.cpu_count() or 1)
+    if n_w == 1:
+        for ch in make_chunks(1):
+            on_result(fn(task, ch))
+        return "serial"
+    if install is None:
+        raise ValueError("install: local processes need the function that stores the task in a worker")
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"), initializer=install,
+                             initargs=(task,)) as pool:
+        futures = [pool.submit(fn, None, ch) for ch in make_chunks(n_w)]
+        for fut in as_completed(futures):
+            on_result(fut.result())
+    return f"{n_w} local processes"
+
+
+def seed_chunks(n: int, seed, n_workers: int, chunk_size: int | None = None, per_worker: int = 4,
+                max_size: int = 20) -> list:
+    """Replications 0..n-1 with their seeds, cut into chunks [[(r, SeedSequence(seed).spawn(n)[r]), ...], ...].
+
+    ``chunk_size`` replications per chunk (None: about ``per_worker`` chunks per worker, at most
+    ``max_size`` each).  The seeds do not depend on the chunks.
+    """
+    items = list(enumerate(np.random.SeedSequence(seed).spawn(int(n))))
+    size = chunk_size or max(1, min(max_size, math.ceil(n / (per_worker * max(1, n_workers)))))
+    return [items[k:k + size] for k in range(0, len(items), size)]
