@@ -13,19 +13,21 @@ with :func:`identification.identify` warm-started at (p_hat, y_hat), and the (1 
 percentile interval of parameter i is [q_{alpha/2}, q_{1 - alpha/2}] of the refitted p_i.
 
 Replicate r draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(n)[r])``: the
-numbers do not depend on the number of worker processes.  A refit that fails is counted
+numbers do not depend on the backend (serial, local processes, a Dask scheduler), the number
+of workers or the chunks of replicates each task runs.  A refit that fails is counted
 and named in the notes; the percentiles are over the successful refits only, which the
 notes say.
 """
 from __future__ import annotations
 
-import math
+import functools
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from models.contract import Model
+from . import cluster
 from .errors import DataError, IdentificationError, StateSolveError
 from .estimator import identify
 from .measurements import Measurements
@@ -80,70 +82,81 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
     return np.asarray(est.p, float), ""
 
 
-def _run_chunk(chunk: list) -> list:
-    return [(i, *_replicate(_Worker.task, s)) for i, s in chunk]
+def _run_chunk(task: _Task | None, chunk: list) -> list:
+    """Replicates [(index, SeedSequence), ...] -> [(index, p, error), ...] (task None: this process's)."""
+    t = _Worker.task if task is None else task
+    return [(i, *_replicate(t, s)) for i, s in chunk]
 
 
 def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, seed=0, workers: int | None = 1,
-                         progress: Progress | None = None) -> tuple:
+                         progress: Progress | None = None, scheduler=None, chunk_size: int | None = None) -> tuple:
     """Refitted parameters of ``n`` campaigns simulated from ``est`` (see the module docstring).
+
+    Parameters
+    ----------
+    model, data, est : the model, the measurements and the estimate fitted to them
+    n : int >= 2                 replicates
+    seed : int or SeedSequence entropy    root of the per-replicate seeds
+    workers : int or None        local processes (1: serial in this process; None: all cores)
+    progress : Progress, optional    a tqdm bar over the replicates
+    scheduler : str or distributed.Client, optional
+        Run the chunks on this Dask scheduler instead (``workers`` is then ignored); see
+        :mod:`identification.cluster`.
+    chunk_size : int, optional   replicates per task (default: about 4 tasks per worker, at most 20)
+
+    The numbers depend on ``seed`` only, not on the backend, the workers or the chunks.
 
     Returns
     -------
     P : ndarray (n, n_p)         refitted parameters (NaN rows: failed refits)
     errors : list of (int, str)  replicate index and error of every failed refit
+
+    Raises
+    ------
+    identification.cluster.SchedulerError
+        Dask is not installed or the scheduler cannot be reached.
     """
     if not (isinstance(n, (int, np.integer)) and n >= 2):
         raise ValueError(f"n: the number of bootstrap replicates must be an integer >= 2, got {n!r}")
     if workers is not None and not (isinstance(workers, (int, np.integer)) and workers >= 1):
         raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
+    if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
+        raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
+    scheduler = cluster.check_scheduler(scheduler)
     sigma_sim = np.asarray(est.sigma, float)
     task = _Task(model, np.asarray(data.inputs), np.asarray(est.fitted, float), data.mask(), sigma_sim,
                  None if data.sigma is None else np.asarray(data.sigma, float), tuple(data.sensors),
                  None if data.input_names is None else tuple(data.input_names), np.asarray(est.p, float),
                  np.asarray(est.weights, float), None if est.states is None or est.states.size == 0
                  else np.asarray(est.states, float))
-    children = np.random.SeedSequence(seed).spawn(int(n))
-    n_w = int(workers or os.cpu_count() or 1)
-    size = max(1, min(20, math.ceil(n / (4 * n_w))))
-    items = list(enumerate(children))
-    chunks = [items[k:k + size] for k in range(0, len(items), size)]
-    P = np.full((int(n), model.n_p), np.nan)
-    errors = []
-    bar = (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits")
+    got = _Collector(int(n), model.n_p, (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits"))
     try:
-        if n_w == 1:
-            saved = _Worker.task
-            _install(task)
-            try:
-                for ch in chunks:
-                    _collect(_run_chunk(ch), P, errors, bar)
-            finally:
-                _Worker.task = saved
-        else:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-            with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"), initializer=_install,
-                                     initargs=(task,)) as pool:
-                futures = [pool.submit(_run_chunk, ch) for ch in chunks]
-                for fut in as_completed(futures):
-                    _collect(fut.result(), P, errors, bar)
+        cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size),
+                        got.add, workers, scheduler, _install)
     finally:
-        bar.close()
-    errors.sort()
-    return P, errors
+        got.bar.close()
+    return got.P, sorted(got.errors)
 
 
-def _collect(results: list, P: np.ndarray, errors: list, bar) -> None:
-    for i, p, err in results:
-        P[i] = p
-        if err:
-            errors.append((i, err))
-    bar.update(len(results))
+class _Collector:
+    """Refits by replicate index (``P``, NaN rows until filled) and their errors; advances the bar."""
+
+    def __init__(self, n: int, n_p: int, bar):
+        self.P = np.full((n, n_p), np.nan)
+        self.errors = []
+        self.bar = bar
+
+    def add(self, results: list) -> None:
+        for i, p, err in results:
+            self.P[i] = p
+            if err:
+                self.errors.append((i, err))
+        self.bar.update(len(results))
 
 
 def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.05, params=None, n: int = 200,
-                        seed=0, workers: int | None = 1, progress: Progress | None = None) -> ConfidenceIntervals:
+                        seed=0, workers: int | None = 1, progress: Progress | None = None, scheduler=None,
+                        chunk_size: int | None = None) -> ConfidenceIntervals:
     """Parametric bootstrap percentile (1 - alpha) intervals (see the module docstring).
 
     Parameters
@@ -156,6 +169,8 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     seed : int or SeedSequence entropy    root of the per-replicate seeds
     workers : int or None       local processes (1: serial in this process; None: all cores)
     progress : Progress, optional   a tqdm bar over the replicates
+    scheduler : str or distributed.Client, optional   run the refits on a Dask cluster instead
+    chunk_size : int, optional  replicates per task (see :func:`bootstrap_replicates`)
 
     Returns
     -------
@@ -172,7 +187,7 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     if model is None or data is None:
         raise ValueError("model, data: the bootstrap needs the model and the measurements the estimate was "
                          "fitted to (conf_int(..., model=model, data=data))")
-    P, errors = bootstrap_replicates(model, data, est, n, seed, workers, progress)
+    P, errors = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size)
     ok = np.all(np.isfinite(P), axis=1)
     if ok.sum() < 2:
         raise BootstrapError(f"bootstrap: {len(errors)} of {n} refits failed; first: "

@@ -32,6 +32,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
+from . import cluster
 from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
@@ -89,7 +90,8 @@ class MonteCarloSettings:
     n_rep : int              replications
     seed : int               root of numpy.random.SeedSequence (replication r uses spawn(n_rep)[r])
     workers : int | None     local processes (None: os.cpu_count(); 1: serial in this process)
-    scheduler : object       Dask scheduler address (str) or a distributed.Client; None: local
+    scheduler : str | None   Dask scheduler address ("tcp://HOST:8786", ``[validate] scheduler``) or a
+                             distributed.Client; None: local (``workers``)
     chunk_size : int | None  replications per task (None: about 8 tasks per worker, at most 50)
     progress : bool          progress bar on stderr (tqdm)
     coverage_alpha : float   the ellipsoid level checked for coverage (0.05: 95 % ellipsoids)
@@ -103,7 +105,7 @@ class MonteCarloSettings:
     n_rep: int = 2000
     seed: int = 20261121
     workers: int | None = None
-    scheduler: object = None
+    scheduler: str | None = None
     chunk_size: int | None = None
     progress: bool = True
     coverage_alpha: float = 0.05
@@ -124,6 +126,7 @@ class MonteCarloSettings:
             raise ValueError(f"ci_level: must lie in (0, 1), got {self.ci_level}")
         if not isinstance(self.detect, DetectSettings):
             raise TypeError(f"detect: expected DetectSettings, got {type(self.detect).__name__}")
+        object.__setattr__(self, "scheduler", cluster.check_scheduler(self.scheduler))
 
 
 # ---------------------------------------------------------------------------- data generators
@@ -310,20 +313,16 @@ class _Collector:
 
 
 def _run_dask(task: _Task, settings: MonteCarloSettings, got: _Collector) -> tuple:
-    """Chunks on a Dask cluster (the task scattered once to every worker); returns (backend text, workers)."""
-    from dask.distributed import Client, as_completed
-    client = settings.scheduler if hasattr(settings.scheduler, "submit") else Client(settings.scheduler)
-    try:
-        n_w = max(1, len(client.scheduler_info().get("workers", {})))
+    """Chunks on a Dask cluster (the task scattered once to every worker); returns (backend text, workers).
+
+    Raises :class:`identification.cluster.SchedulerError` when Dask is missing or the scheduler
+    cannot be reached.
+    """
+    with cluster.connect(settings.scheduler) as client:
+        n_w = cluster.n_workers(client)
         chunks = _chunks(len(got.out), settings.seed, n_w, settings.chunk_size)
-        tf = client.scatter(task, broadcast=True)
-        futs = client.map(_run_chunk, [tf] * len(chunks), chunks, pure=False)
-        for fut in as_completed(futs):
-            got.add(fut.result())
+        cluster.run_chunks(client, _run_chunk, task, chunks, got.add)
         return f"dask ({client.scheduler.address}, {n_w} workers)", n_w
-    finally:
-        if client is not settings.scheduler:
-            client.close()
 
 
 def _run_serial(task: _Task, chunks: list, got: _Collector) -> str:

@@ -168,7 +168,7 @@ class Estimate:
 
     def conf_int(self, alpha: float = 0.05, method: str = "wald", params=None, kind: str = "second_order", *,
                  model=None, data=None, n: int = 200, seed=0, workers: int | None = 1, progress=None,
-                 settings=None):
+                 settings=None, scheduler=None):
         """Marginal (1 - alpha) confidence intervals of the parameters.
 
         ``method="wald"`` (default): p_i -+ c se_i with c the normal quantile z(1 - alpha/2) (sigma
@@ -182,8 +182,8 @@ class Estimate:
         ``ProfileSettings``).
 
         ``method="bootstrap"``: parametric bootstrap percentile intervals from ``n`` refits of data
-        simulated from the fit (``seed``, ``workers`` local processes, ``progress`` a
-        :class:`identification.progress.Progress`); see
+        simulated from the fit (``seed``, ``workers`` local processes or ``scheduler`` a Dask
+        address or Client, ``progress`` a :class:`identification.progress.Progress`); see
         :func:`identification.bootstrap.bootstrap_intervals`.
 
         Both return a frozen :class:`identification.profile.ConfidenceIntervals` (``lower``,
@@ -218,7 +218,7 @@ class Estimate:
             return profile_mod.profile_intervals(model, data, self, alpha, idx, settings=settings)
         from .bootstrap import bootstrap_intervals
         return bootstrap_intervals(model, data, self, alpha, idx, n=n, seed=seed, workers=workers,
-                                   progress=progress)
+                                   progress=progress, scheduler=scheduler)
 
     def _se(self, kind):
         if kind == "second_order":

@@ -61,6 +61,10 @@ def build_parser() -> argparse.ArgumentParser:
                             help="replications (default: [validate] n_runs of the config)")
             sp.add_argument("--workers", type=int, default=1, metavar="N",
                             help="local worker processes (default 1)")
+            sp.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                            help="run the replications on a Dask cluster: the scheduler address printed "
+                                 "by `dask scheduler`, e.g. tcp://10.0.0.5:8786 (default: [validate] "
+                                 "scheduler of the config, absent: local processes)")
         if name == "simulate":
             sp.add_argument("--seed", type=int, default=None,
                             help="random seed (default: [simulate] seed, the press: [data] seed)")
@@ -313,7 +317,11 @@ def _validate(study, results, args, progress, out) -> int:
     if args.workers < 1:
         from .config import ConfigError
         raise ConfigError(f"--workers: need at least one worker, got {args.workers}")
-    run_validate(study, results, progress, workers=args.workers)
+    if args.scheduler is not None and not args.scheduler.strip():
+        from .config import ConfigError
+        raise ConfigError("--scheduler: give the Dask scheduler address printed by `dask scheduler`, "
+                          "e.g. tcp://10.0.0.5:8786, or leave the option out for local processes")
+    run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
     text = results.validation.table()
     _write(out, "validate.json", dumps(obj))

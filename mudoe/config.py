@@ -31,6 +31,7 @@ TOML key             settings field
 [detect] covariance  ``DetectSettings.covariance``
 [validate] n_runs    ``MonteCarloSettings.n_rep``
 [validate] seed      ``MonteCarloSettings.seed``
+[validate] scheduler ``MonteCarloSettings.scheduler``
 ===================  ===============================
 
 Their defaults are the settings dataclasses' except where the study has always used its own,
@@ -439,13 +440,16 @@ class OEDConfig:
 class ValidateConfig:
     """Monte Carlo check of covariance and test size (:mod:`identification.montecarlo`).
 
-    ``n_runs`` and ``seed`` are ``MonteCarloSettings.n_rep`` and ``.seed`` (defaults:
-    :data:`STUDY_DEFAULTS`).  ``variant`` (study only): the model variant simulated and tested
+    ``n_runs``, ``seed`` and ``scheduler`` are ``MonteCarloSettings.n_rep``, ``.seed`` and
+    ``.scheduler`` (defaults: :data:`STUDY_DEFAULTS`; ``scheduler`` absent: local processes,
+    else a Dask scheduler address "tcp://HOST:8786", README "Running on several machines").
+    ``variant`` (study only): the model variant simulated and tested
     ("" = the first listed).
     """
 
     n_runs: int = setting(MonteCarloSettings, "n_rep")
     seed: int = setting(MonteCarloSettings, "seed", bounds=NON_NEGATIVE)
+    scheduler: str | None = setting(MonteCarloSettings, "scheduler")
     variant: str = ""
 
     def settings(self, tol: float, workers: int | None = None, progress: bool = True) -> MonteCarloSettings:

@@ -6,6 +6,7 @@ their results in :class:`StudyResults` for the CLI and the report builder.
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import math
@@ -411,25 +412,38 @@ def run_diagnosis(study: Study, results: StudyResults, progress: Progress | None
 
 
 def run_validate(study: Study, results: StudyResults, progress: Progress | None = None,
-                 workers: int | None = 1) -> StudyResults:
-    """Monte Carlo size study of Algorithm 1 for one variant (data simulated from its own estimate)."""
+                 workers: int | None = 1, scheduler: str | None = None) -> StudyResults:
+    """Monte Carlo size study of Algorithm 1 for one variant (data simulated from its own estimate).
+
+    The replications run on ``workers`` local processes, or on the Dask scheduler at
+    ``scheduler`` (an address; None: ``[validate] scheduler`` of the config, absent: local).
+    """
     try:
         from identification.montecarlo import validate
     except ImportError as exc:
         raise MissingPieceError(f"validate: identification.montecarlo is not available ({exc})") from None
+    from identification.cluster import connect
     progress = progress or Progress(False)
     vc = study.cfg.validate
     v = vc.variant or next(iter(study.models))
-    _require_fit(study, results, v, progress, "validate")
-    est = results.estimates[v]
-    data = study.data[v]
-    sigma = est.sigma
-    used = _design_sensors(study, results, progress)
-    w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
-    with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications"):
-        results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p, inputs=data.inputs,
-                                      sigma=sigma, n_M=data.n_M, weights=w, name=v,
-                                      settings=vc.settings(study.cfg.detect.tol, workers, progress.enabled))
+    settings = vc.settings(study.cfg.detect.tol, workers, progress.enabled)
+    if scheduler is not None:
+        settings = dataclasses.replace(settings, scheduler=scheduler)
+    address = settings.scheduler
+    # connect before the fits: a scheduler that cannot be reached fails at once
+    with contextlib.nullcontext() if address is None else connect(address) as client:
+        if client is not None:
+            settings = dataclasses.replace(settings, scheduler=client)
+        _require_fit(study, results, v, progress, "validate")
+        est = results.estimates[v]
+        data = study.data[v]
+        used = _design_sensors(study, results, progress)
+        w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
+        where = "" if address is None else f" on the Dask scheduler {address}"
+        with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications{where}"):
+            results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p,
+                                          inputs=data.inputs, sigma=est.sigma, n_M=data.n_M, weights=w, name=v,
+                                          settings=settings)
     return results
 
 

@@ -79,3 +79,33 @@ def test_bad_arguments():
         est.conf_int(method="bootstrap", model=model, data=data, n=5, workers=0)
     with pytest.raises(ValueError, match="model, data"):          # an Estimate not made by identify()
         dataclasses.replace(est, model=None, data=None).conf_int(method="bootstrap", n=5)
+
+
+def test_same_seed_same_numbers_on_a_dask_cluster():
+    """Serial and a Dask LocalCluster (2 in-process workers, chunks of 2 and of 3 replicates): identical refits;
+    the interval from conf_int(..., scheduler=client) equals the serial one."""
+    distributed = pytest.importorskip("distributed", reason="dask[distributed] is in the test extras (make setup)")
+    model, data, est = _linear(known=False)
+    P1, e1 = bootstrap_replicates(model, data, est, n=7, seed=11, workers=1)
+    ci1 = est.conf_int(0.2, method="bootstrap", model=model, data=data, n=7, seed=11)
+    out = io.StringIO()
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cl, \
+            distributed.Client(cl, set_as_default=False) as client:
+        P2, e2 = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=client, chunk_size=2,
+                                      progress=Progress(stream=out))
+        P3, _ = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=cl.scheduler_address, chunk_size=3)
+        ci2 = est.conf_int(0.2, method="bootstrap", model=model, data=data, n=7, seed=11, scheduler=client)
+        assert client.status == "running"                  # a Client passed in is used, not closed
+    assert e1 == e2 == [] and np.all(np.isfinite(P1))
+    np.testing.assert_array_equal(P1, P2)
+    np.testing.assert_array_equal(P1, P3)
+    np.testing.assert_array_equal([ci1.lower, ci1.upper], [ci2.lower, ci2.upper])
+    assert "7/7" in out.getvalue()
+
+
+def test_bad_scheduler_and_chunk_size_name_the_argument():
+    model, data, est = _linear()
+    with pytest.raises(ValueError, match="scheduler: expected a Dask scheduler address"):
+        bootstrap_replicates(model, data, est, n=4, scheduler="")
+    with pytest.raises(ValueError, match="chunk_size"):
+        bootstrap_replicates(model, data, est, n=4, chunk_size=0)

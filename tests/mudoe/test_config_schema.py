@@ -18,7 +18,7 @@ def _settings_field(settings, name):
 def test_key_names_map_to_settings_fields_in_one_place():
     assert settings_keys(DetectConfig) == {k: k for k in ("tol", "statistic", "correction", "normality",
                                                           "covariance")}
-    assert settings_keys(ValidateConfig) == {"n_runs": "n_rep", "seed": "seed"}
+    assert settings_keys(ValidateConfig) == {"n_runs": "n_rep", "seed": "seed", "scheduler": "scheduler"}
 
 
 @pytest.mark.parametrize("section", SECTIONS, ids=lambda c: c.__name__)

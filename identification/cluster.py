@@ -1,0 +1,173 @@
+"""Dask execution of replication chunks: connect to a scheduler, ship one task, collect the chunks.
+
+The Monte Carlo studies (:mod:`identification.montecarlo`) and the bootstrap
+(:mod:`identification.bootstrap`) split their replications into chunks ``[(index,
+SeedSequence), ...]``; every chunk is one Dask task ``fn(task, chunk) -> [(index, ...), ...]``.
+The task (models, data, settings) is scattered once to every worker; ``fn`` must be a
+module-level function that the workers can import (the same ``mudoe`` installed on them, and
+an own model's factory module on their ``sys.path``).
+
+Seeds travel with the chunks, so the numbers do not depend on how the scheduler places them.
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+from contextlib import contextmanager
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "execute", "n_workers", "run_chunks", "seed_chunks"]
+
+#: how long :func:`connect` waits for at least one worker to join the scheduler (s)
+WORKER_WAIT_S = 30.0
+
+
+class SchedulerError(ConnectionError):
+    """The Dask scheduler cannot be used: not installed, unreachable, or without workers."""
+
+
+def check_scheduler(scheduler, name: str = "scheduler"):
+    """``scheduler`` if it is None, a non-empty address string or a ``distributed.Client``; else ValueError."""
+    if scheduler is None or hasattr(scheduler, "submit"):
+        return scheduler
+    if isinstance(scheduler, str) and scheduler.strip():
+        return scheduler.strip()
+    raise ValueError(f"{name}: expected a Dask scheduler address such as 'tcp://10.0.0.5:8786' (printed by "
+                     f"`dask scheduler`), a distributed.Client or None (local), got {scheduler!r}")
+
+
+def _client_class():
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise SchedulerError(f"scheduler: Dask is not installed ({exc}); install it with "
+                             "pip install 'dask[distributed]' (or pip install -e '.[dist]')") from None
+    return Client
+
+
+@contextmanager
+def connect(scheduler, worker_wait: float = WORKER_WAIT_S):
+    """A ``distributed.Client`` for ``scheduler`` (an address, or a Client used as is and not closed).
+
+    The connection timeout is Dask's (``distributed.comm.timeouts.connect``, 30 s by default;
+    environment ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=5s``).
+
+    Raises
+    ------
+    SchedulerError
+        Dask is not installed, the scheduler cannot be reached, or no worker joined it
+        within ``worker_wait`` seconds.
+    """
+    check_scheduler(scheduler)
+    if scheduler is None:
+        raise ValueError("scheduler: None means local processes; connect() needs an address or a Client")
+    if hasattr(scheduler, "submit"):
+        yield scheduler
+        return
+    client_class = _client_class()
+    try:
+        client = client_class(scheduler, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SchedulerError(f"scheduler: cannot reach the Dask scheduler at {scheduler!r} "
+                             f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}); start one with "
+                             "`dask scheduler` and give the address it prints, e.g. tcp://HOST:8786") from None
+    try:
+        try:
+            client.wait_for_workers(1, timeout=worker_wait)
+        except (OSError, TimeoutError) as exc:
+            raise SchedulerError(f"scheduler: no Dask worker joined the scheduler at {scheduler!r} within "
+                                 f"{worker_wait:g} s ({type(exc).__name__}); start workers with "
+                                 f"`dask worker {scheduler} --nworkers N --nthreads 1`") from None
+        yield client
+    finally:
+        client.close()
+
+
+def n_workers(client) -> int:
+    """Workers connected to the scheduler of ``client`` (at least 1)."""
+    return max(1, len(client.scheduler_info().get("workers", {})))
+
+
+#: one chunk at a time per process: CasADi functions and Ipopt solvers are not thread-safe, and a
+#: worker's threads (``dask worker --nthreads 2``, or an in-process LocalCluster) share the
+#: unpickled task.  Workers started with ``--nthreads 1`` never wait on it.
+_PROCESS_LOCK = threading.Lock()
+
+
+def call_locked(fn: Callable, task, chunk):
+    """``fn(task, chunk)`` holding this process's chunk lock (the Dask task of :func:`run_chunks`)."""
+    with _PROCESS_LOCK:
+        return fn(task, chunk)
+
+
+def run_chunks(client, fn: Callable, task, chunks: list, on_result: Callable) -> None:
+    """``on_result(fn(task, chunk))`` for every chunk, as the Dask tasks finish (task scattered once).
+
+    ``fn`` runs under a per-process lock (:func:`call_locked`).  A chunk that raises re-raises
+    here (the remaining futures are cancelled).
+    """
+    from distributed import as_completed
+    tf = client.scatter(task, broadcast=True)
+    futs = client.map(call_locked, [fn] * len(chunks), [tf] * len(chunks), chunks, pure=False)
+    try:
+        for fut in as_completed(futs, loop=client.loop):
+            on_result(fut.result())
+    finally:
+        client.cancel(futs)
+
+
+def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, workers: int | None = 1,
+            scheduler=None, install: Callable | None = None) -> str:
+    """Run every chunk ``fn(task, chunk)`` serially, on local processes or on a Dask scheduler.
+
+    Parameters
+    ----------
+    fn : module-level callable (task or None, chunk) -> list
+        ``task`` None means "the task installed in this process" (local processes).
+    task : picklable
+    make_chunks : callable (n_workers) -> list of chunks
+    on_result : callable (list) -> None, called with every chunk's result as it finishes
+    workers : int or None   local processes (1: serial in this process; None: all cores)
+    scheduler : None, a Dask scheduler address or a distributed.Client (then ``workers`` is ignored)
+    install : module-level callable (task) -> None
+        Stores ``task`` in a spawned process (the pool initializer); needed when ``workers`` > 1.
+
+    Returns
+    -------
+    str : the backend used, e.g. "serial", "2 local processes", "dask (tcp://..., 4 workers)".
+    """
+    if scheduler is not None:
+        with connect(scheduler) as client:
+            n_w = n_workers(client)
+            run_chunks(client, fn, task, make_chunks(n_w), on_result)
+            return f"dask ({client.scheduler.address}, {n_w} workers)"
+    n_w = int(workers or os.cpu_count() or 1)
+    if n_w == 1:
+        for ch in make_chunks(1):
+            on_result(fn(task, ch))
+        return "serial"
+    if install is None:
+        raise ValueError("install: local processes need the function that stores the task in a worker")
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"), initializer=install,
+                             initargs=(task,)) as pool:
+        futures = [pool.submit(fn, None, ch) for ch in make_chunks(n_w)]
+        for fut in as_completed(futures):
+            on_result(fut.result())
+    return f"{n_w} local processes"
+
+
+def seed_chunks(n: int, seed, n_workers: int, chunk_size: int | None = None, per_worker: int = 4,
+                max_size: int = 20) -> list:
+    """Replications 0..n-1 with their seeds, cut into chunks [[(r, SeedSequence(seed).spawn(n)[r]), ...], ...].
+
+    ``chunk_size`` replications per chunk (None: about ``per_worker`` chunks per worker, at most
+    ``max_size`` each).  The seeds do not depend on the chunks.
+    """
+    items = list(enumerate(np.random.SeedSequence(seed).spawn(int(n))))
+    size = chunk_size or max(1, min(max_size, math.ceil(n / (per_worker * max(1, n_workers)))))
+    return [items[k:k + size] for k in range(0, len(items), size)]

@@ -1,0 +1,344 @@
+r"""Parametric-bootstrap p-values of the split tests of Algorithm 1 (:mod:`identification.detect`).
+
+The asymptotic p-values alpha_min of :func:`identification.detect.run_split_tests` compare each
+statistic T (likelihood ratio, two-sample Wald, paper) with its chi^2 (or F) law, which holds
+when the model is linear enough in its parameters.  The bootstrap estimates the law of T under
+the null hypothesis "one parameter vector explains the whole campaign" directly:
+
+1. fit the model to the whole campaign (the null fit): p_0, predictions h_jk = h_k(y_j(p_0), p_0, q_j)
+   and sigma_k (the data's, or the estimate s when sigma is estimated);
+2. for b = 1..B simulate z^{*(b)}_{ijk} = h_jk + sigma_k eps_ijk, eps ~ N(0, 1), with the data's
+   missing-value pattern, and run every split test on it, giving T^{*(b)}_s per split s;
+3. the bootstrap p-value of split s is
+
+.. math::
+
+    p_s = \frac{1 + \#\{b : T^{*(b)}_s \ge T_s\}}{1 + B_s},
+
+with B_s the bootstrap campaigns whose statistic was computed (a failed fit is counted and
+named, never dropped silently).  With the (k + 1) / (B + 1) convention P(p_s <= u) <= u under
+the null for u on the grid k / (B + 1) when T is pivotal, so p_s is never 0 and a test at level
+a needs B >= 1/a - 1 campaigns to be able to reject.
+
+The family-wise p-value of a statistic compares the smallest asymptotic alpha_min over the
+splits with its bootstrap law (min-p; the dependence between splits that share data is
+accounted for, where Bonferroni only bounds it).
+
+Campaign b draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(B)[b])``: serial,
+local processes and a Dask scheduler (:mod:`identification.cluster`) give identical numbers.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import os
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from models.contract import Model
+from . import cluster
+from .detect import STATISTICS, DetectSettings, run_split_tests
+from .errors import DataError, IdentificationError
+from .estimator import identify
+from .measurements import Measurements
+from .progress import Progress
+from .splits import Split, SplitError
+
+__all__ = ["BootstrapDetection", "bootstrap_detect"]
+
+#: the statistic of each column (chi^2 or F units), in the order of :data:`identification.detect.STATISTICS`
+_STAT_FIELDS = {"likelihood_ratio": "lr", "two_sample": "d2_two_sample", "paper": "d2_paper"}
+
+
+def _statistics(tests) -> tuple:
+    """(T (n_splits, 3), asymptotic alpha (n_splits, 3), errors [(split, text)]) of run_split_tests' output."""
+    T = np.full((len(tests), len(STATISTICS)), np.nan)
+    A = np.full_like(T, np.nan)
+    errors = []
+    for s, t in enumerate(tests):
+        if not t.ok:
+            errors.append((t.split, f"{t.stage}: {t.error.splitlines()[0][:200] if t.error else ''}"))
+            continue
+        for k, st in enumerate(STATISTICS):
+            T[s, k] = getattr(t, _STAT_FIELDS[st])
+            A[s, k] = t.alpha(st)
+        if t.lr_error:
+            errors.append((t.split, f"likelihood ratio: {t.lr_error.splitlines()[0][:200]}"))
+    return T, A, errors
+
+
+# ---------------------------------------------------------------------------- one bootstrap campaign
+@dataclass(frozen=True, eq=False)
+class _Task:
+    """Everything a bootstrap campaign needs (pickled once per worker)."""
+
+    model: Model
+    model_name: str
+    splits: tuple
+    inputs: np.ndarray
+    fitted: np.ndarray          # (n_q, n_S) predictions of the null fit
+    mask: np.ndarray            # (n_M, n_q, n_S) values present in the data
+    sigma_sim: np.ndarray       # (n_S,) sigma of the simulated noise
+    sigma_data: object          # the data's sigma (None: estimated)
+    sensors: tuple
+    input_names: object
+    p0: np.ndarray              # start of every fit: the null estimate
+    weights: object
+    settings: DetectSettings
+    states: object              # (n_q, n_y) states of the null fit, or None
+
+
+class _Worker:
+    """The task of this process (set once per spawned worker by the pool initializer)."""
+
+    task: _Task | None = None
+
+
+def _install(task: _Task) -> None:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    _Worker.task = task
+
+
+def _campaign(task: _Task, seed: np.random.SeedSequence) -> tuple:
+    """(T (n_splits, 3), asymptotic alpha (n_splits, 3), errors) of one simulated campaign."""
+    rng = np.random.default_rng(seed)
+    eps = rng.standard_normal(task.mask.shape)
+    z = np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
+    data = Measurements(task.inputs, z, task.sigma_data, sensors=task.sensors, input_names=task.input_names)
+    tests = run_split_tests(task.model, data, task.splits, task.p0, task.weights, task.settings, task.model_name,
+                            task.states)
+    return _statistics(tests)
+
+
+def _run_chunk(task: _Task | None, chunk: list) -> list:
+    """Campaigns [(index, SeedSequence), ...] -> [(index, T, alpha, errors), ...] (task None: this process's)."""
+    t = _Worker.task if task is None else task
+    return [(b, *_campaign(t, s)) for b, s in chunk]
+
+
+class _Collector:
+    """Bootstrap statistics by campaign index (NaN until filled) and their errors; advances the bar."""
+
+    def __init__(self, n: int, n_splits: int, bar):
+        self.T = np.full((n, n_splits, len(STATISTICS)), np.nan)
+        self.A = np.full_like(self.T, np.nan)
+        self.errors = []
+        self.bar = bar
+
+    def add(self, results: list) -> None:
+        for b, T, A, errs in results:
+            self.T[b], self.A[b] = T, A
+            self.errors.extend((b,) + e for e in errs)
+        self.bar.update(len(results))
+
+
+# ---------------------------------------------------------------------------- result
+def _exceedance_pvalue(boot: np.ndarray, observed: float) -> tuple:
+    """((1 + #{boot >= observed}) / (1 + B), B) over the finite bootstrap values; (NaN, B) when observed is NaN."""
+    ok = boot[np.isfinite(boot)]
+    if not np.isfinite(observed) or ok.size == 0:
+        return math.nan, int(ok.size)
+    return (1.0 + np.count_nonzero(ok >= observed)) / (1.0 + ok.size), int(ok.size)
+
+
+@dataclass(frozen=True, eq=False)
+class BootstrapDetection:
+    """Bootstrap and asymptotic p-values of every split test of one model (immutable).
+
+    Columns follow :data:`identification.detect.STATISTICS` ("likelihood_ratio", "two_sample", "paper").
+
+    Attributes
+    ----------
+    model : str
+    splits : tuple of str
+    statistics : tuple of str
+    observed : ndarray (n_splits, 3)      the statistics of the data (chi^2 units; F for the likelihood
+                                          ratio when sigma is estimated); NaN where not computed
+    asymptotic : ndarray (n_splits, 3)    their chi^2 / F p-values alpha_min
+    pvalue : ndarray (n_splits, 3)        bootstrap p-values (1 + #{T* >= T}) / (1 + B_s)
+    n_valid : ndarray (n_splits, 3) int   B_s: bootstrap campaigns whose statistic was computed
+    family_asymptotic : ndarray (3,)      smallest asymptotic alpha_min over the splits
+    family_pvalue : ndarray (3,)          its bootstrap p-value (min-p over the splits)
+    boot_statistics : ndarray (n_boot, n_splits, 3)   T* of every campaign (NaN: not computed)
+    boot_asymptotic : ndarray (n_boot, n_splits, 3)   the asymptotic p-values of the campaigns
+    n_boot : int ; seed : int or None
+    p_null : ndarray (n_p,)               the null fit (whole campaign)
+    sigma : ndarray (n_S,)                the sigma of the simulated noise
+    sigma_estimated : bool
+    errors : tuple of (campaign, split, text)   every failed bootstrap fit or statistic
+    observed_errors : tuple of (split, text)    failed fits of the data itself
+    backend : str ; wall_time : float (s)
+    tests : tuple of SplitTest            the split tests of the data
+    """
+
+    model: str
+    splits: tuple
+    statistics: tuple
+    observed: np.ndarray
+    asymptotic: np.ndarray
+    pvalue: np.ndarray
+    n_valid: np.ndarray
+    family_asymptotic: np.ndarray
+    family_pvalue: np.ndarray
+    boot_statistics: np.ndarray
+    boot_asymptotic: np.ndarray
+    n_boot: int
+    seed: object
+    p_null: np.ndarray
+    sigma: np.ndarray
+    sigma_estimated: bool
+    errors: tuple
+    observed_errors: tuple
+    backend: str
+    wall_time: float
+    tests: tuple
+
+    def __post_init__(self):
+        for name in ("observed", "asymptotic", "pvalue", "n_valid", "family_asymptotic", "family_pvalue",
+                     "boot_statistics", "boot_asymptotic", "p_null", "sigma"):
+            a = np.array(getattr(self, name), copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    def _col(self, statistic: str) -> int:
+        if statistic not in self.statistics:
+            raise ValueError(f"statistic: expected one of {self.statistics}, got {statistic!r}")
+        return self.statistics.index(statistic)
+
+    def pvalues(self, statistic: str = "likelihood_ratio") -> np.ndarray:
+        """Bootstrap p-value of every split for one statistic."""
+        return self.pvalue[:, self._col(statistic)]
+
+    def rejected(self, tol: float = 0.05, statistic: str = "likelihood_ratio") -> bool:
+        """Family-wise decision from the min-p bootstrap p-value: reject when it is <= ``tol``."""
+        if not (0.0 < float(tol) < 1.0):
+            raise ValueError(f"tol: must lie in (0, 1), got {tol!r}")
+        p = self.family_pvalue[self._col(statistic)]
+        return bool(np.isfinite(p) and p <= tol)
+
+    def summary(self) -> str:
+        """A table of asymptotic and bootstrap p-values per split and statistic, with the family-wise row."""
+        lines = [f"Parametric bootstrap of the split tests of {self.model}: {self.n_boot} campaigns simulated from "
+                 f"the null fit (sigma {'estimated' if self.sigma_estimated else 'known'}), seed {self.seed}; "
+                 f"{self.backend}, {self.wall_time:.1f} s",
+                 "p-values in %: asymptotic (chi^2 / F) | bootstrap (1 + #{T* >= T}) / (1 + B)",
+                 "",
+                 "| split | " + " | ".join(f"{st} asympt. | {st} bootstrap" for st in self.statistics) + " |",
+                 "|---|" + "---|---|" * len(self.statistics)]
+
+        def cell(a, p):
+            fa = "n/a" if not np.isfinite(a) else f"{100 * a:.3g}"
+            fp = "n/a" if not np.isfinite(p) else f"{100 * p:.3g}"
+            return f"{fa} | {fp}"
+
+        for s, name in enumerate(self.splits):
+            lines.append(f"| {name} | " + " | ".join(cell(self.asymptotic[s, k], self.pvalue[s, k])
+                                                      for k in range(len(self.statistics))) + " |")
+        lines.append("| family (min-p) | " + " | ".join(cell(self.family_asymptotic[k], self.family_pvalue[k])
+                                                         for k in range(len(self.statistics))) + " |")
+        notes = [f"the smallest attainable bootstrap p-value is 1/(B+1) = {100 / (self.n_boot + 1):.3g} %"]
+        if self.errors:
+            b, sp, text = self.errors[0]
+            notes.append(f"{len(self.errors)} failed fits or statistics in the bootstrap campaigns are excluded "
+                         f"(first: campaign {b}, split {sp!r}: {text})")
+        for sp, text in self.observed_errors:
+            notes.append(f"split {sp!r} of the data: {text}")
+        return "\n".join(lines + [""] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)])
+
+
+# ---------------------------------------------------------------------------- front door
+def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None, *,
+                     n_boot: int = 199, seed=0, settings: DetectSettings | None = None,
+                     workers: int | None = 1, scheduler=None, progress: Progress | None = None,
+                     chunk_size: int | None = None, model_name: str | None = None) -> BootstrapDetection:
+    """Bootstrap p-values of the split tests of ``model`` on ``data`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : Model
+    data : Measurements             the campaign (sigma known per sensor, or None: estimated)
+    splits : sequence of Split
+    p0 : array_like (n_p,)          start of the null fit (then every fit starts at the null estimate)
+    weights : array_like (n_S,), optional   sensor weights (0/1 selects sensors)
+    n_boot : int >= 1               bootstrap campaigns B
+    seed : int or SeedSequence entropy      root of the per-campaign seeds
+    settings : DetectSettings, optional     covariance kind and identify settings of the fits
+    workers : int or None           local processes (1: serial; None: all cores)
+    scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
+    progress : Progress, optional   a tqdm bar over the campaigns
+    chunk_size : int, optional      campaigns per task
+    model_name : str, optional      label (default the model's name)
+
+    Raises
+    ------
+    ValueError, TypeError
+        A bad argument (the message names it).
+    IdentificationError
+        The null fit of the whole campaign failed.
+    identification.cluster.SchedulerError
+        Dask is not installed or the scheduler cannot be reached.
+    """
+    import time
+    if not isinstance(model, Model):
+        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    if not (isinstance(n_boot, (int, np.integer)) and not isinstance(n_boot, bool) and n_boot >= 1):
+        raise ValueError(f"n_boot: the number of bootstrap campaigns must be an integer >= 1, got {n_boot!r}")
+    if workers is not None and not (isinstance(workers, (int, np.integer)) and workers >= 1):
+        raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
+    if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
+        raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
+    scheduler = cluster.check_scheduler(scheduler)
+    settings = settings or DetectSettings()
+    if not isinstance(settings, DetectSettings):
+        raise TypeError(f"settings: expected DetectSettings, got {type(settings).__name__}")
+    splits = tuple(splits)
+    if not splits or not all(isinstance(sp, Split) for sp in splits):
+        raise SplitError("splits: give at least one identification.splits.Split")
+    try:
+        np.random.SeedSequence(seed)
+    except (TypeError, ValueError):
+        raise ValueError(f"seed: expected a non-negative integer (or a sequence of them), got {seed!r}") from None
+    name = model_name or model.name
+    t0 = time.perf_counter()
+    tests = run_split_tests(model, data, splits, p0, weights, settings, name)
+    T_obs, A_obs, obs_err = _statistics(tests)
+    try:
+        null = identify(model, data, p0, weights=weights, settings=settings.identify)
+    except (IdentificationError, DataError) as exc:
+        raise IdentificationError(f"bootstrap_detect: the null fit of the whole campaign failed: {exc}",
+                                  status="null fit failed") from None
+    task = _Task(model, name, splits, np.asarray(data.inputs), np.asarray(null.fitted, float), data.mask(),
+                 np.asarray(null.sigma, float), None if data.sigma is None else np.asarray(data.sigma, float),
+                 tuple(data.sensors), None if data.input_names is None else tuple(data.input_names),
+                 np.asarray(null.p, float), None if weights is None else np.asarray(weights, float), settings,
+                 None if null.states is None or null.states.size == 0 else np.asarray(null.states, float))
+    got = _Collector(int(n_boot), len(splits), (progress or Progress(enabled=False)).bar(int(n_boot),
+                                                                                        "bootstrap campaigns"))
+    try:
+        backend = cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n_boot), seed,
+                                                                      chunk_size=chunk_size),
+                                  got.add, workers, scheduler, _install)
+    finally:
+        got.bar.close()
+    n_s, n_k = T_obs.shape
+    pv = np.full((n_s, n_k), np.nan)
+    nv = np.zeros((n_s, n_k), int)
+    for s in range(n_s):
+        for k in range(n_k):
+            pv[s, k], nv[s, k] = _exceedance_pvalue(got.T[:, s, k], T_obs[s, k])
+    # family-wise min-p: campaigns with every split computed; a smaller min alpha is more extreme
+    fam_obs = np.where(np.all(np.isfinite(A_obs), axis=0), np.min(A_obs, axis=0), np.nan)
+    fam_boot = np.where(np.all(np.isfinite(got.A), axis=1), np.min(got.A, axis=1), np.nan)    # (n_boot, 3)
+    fam_p = np.array([_exceedance_pvalue(-fam_boot[:, k], -fam_obs[k])[0] for k in range(n_k)])
+    return BootstrapDetection(
+        model=name, splits=tuple(sp.name for sp in splits), statistics=STATISTICS, observed=T_obs,
+        asymptotic=A_obs, pvalue=pv, n_valid=nv, family_asymptotic=fam_obs, family_pvalue=fam_p,
+        boot_statistics=got.T, boot_asymptotic=got.A, n_boot=int(n_boot),
+        seed=seed if isinstance(seed, (int, np.integer)) else str(seed), p_null=np.asarray(null.p, float),
+        sigma=np.asarray(null.sigma, float), sigma_estimated=data.sigma is None,
+        errors=tuple(sorted(got.errors, key=lambda e: (e[0], str(e[1])))), observed_errors=tuple(obs_err),
+        backend=backend, wall_time=time.perf_counter() - t0, tests=tests)
