@@ -364,7 +364,8 @@ def _solve_enumeration(req: _DesignRequest, settings: DesignSettings, notes: tup
                           settings=EnumerationSettings(max_designs=max(settings.enumeration_fallback_limit, req.count)),
                           criteria_settings=settings.criteria)
     status = "optimal" if np.isfinite(r.value) else "infeasible"
-    message = f"enumerated {r.n_evaluated} admissible designs ({r.n_singular} singular)"
+    message = (f"enumerated {r.n_evaluated} admissible designs ({r.n_exact} evaluated exactly after screening, "
+               f"{r.n_singular} of them singular)")
     return _MethodOutcome(r.w, r.value, r.value, status, message, "enumerate", notes)
 
 
