@@ -105,7 +105,8 @@ class DesignResult:
     det : float or None
         det C for the D criterion.
     lower_bound : float
-        Proven lower bound on the optimal value (same scale as ``value``).
+        Proven lower bound on the optimal value (same scale as ``value``); at least 0 for A and E
+        (the covariance is positive semidefinite), so their gap is finite whenever a design is found.
     gap : float
         ``value - lower_bound`` (0 when proven optimal).
     proven_optimal : bool
@@ -294,7 +295,7 @@ def _route(req: _DesignRequest, settings: DesignSettings) -> tuple:
         else:
             rate = _enumeration_rate(req, settings)
             est = req.count / rate
-            if est <= req.time_limit and req.count <= settings.enumeration_fallback_limit:
+            if est <= req.time_limit:
                 chosen = "enumerate"
                 note = (f"auto: enumeration of {req.count} designs estimated at {est:.3g} s ({rate:.3g} designs/s "
                         f"measured) <= time_limit {req.time_limit:g} s")
@@ -395,6 +396,8 @@ def _assemble_result(req: _DesignRequest, out: _MethodOutcome, settings: DesignS
         near = res.reason[0] if res.near_singular[0] else ""
         if crit is Criterion.D:
             det = float(res.det[0])
+    if crit is not Criterion.D:
+        lb = max(lb, 0.0)           # C is positive semidefinite: trace and largest eigenvalue are >= 0
     lb = float(min(lb, value)) if np.isfinite(value) else lb
     gap = float(value - lb) if np.isfinite(value) and np.isfinite(lb) else np.inf
     proven = status == "optimal" and gap <= gap_tolerance(crit, value, settings.gap_tol) * 1.000001 + 1e-300
