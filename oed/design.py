@@ -15,8 +15,9 @@ Gauss-Newton criteria (with or without costs and budget); otherwise (second-orde
 screened enumeration whenever its measured cost fits the time limit (designs / second measured
 on the problem itself, see :attr:`DesignSettings.enumeration_rate`), and SCIP via Pyomo beyond.
 A valid node bound for the second-order criteria is derived in :mod:`oed.bnb.second_order`; it is
-finite only once the fixed-in sensors make :math:`\sum_{k\in I}F_k` regular and prunes no node of
-depth 2-3 on the benchmark instances, so it does not route to the branch-and-bound.  If SCIP is unavailable or
+finite only once the fixed-in sensors make :math:`\sum_{k\in I}F_k` regular and, on 30 x 4 choose 6,
+prunes nothing at depth 2 and under 0.05 % of the designs at depth 3 even with exact Gauss-Newton
+node minima, so auto does not route to the branch-and-bound.  If SCIP is unavailable or
 fails, enumeration is used when it is affordable (``enumeration_fallback_limit``) and the
 fallback is recorded in :attr:`DesignResult.notes`.
 """
