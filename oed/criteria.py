@@ -30,6 +30,7 @@ __all__ = [
     "criterion_value",
     "batch_criteria",
     "gap_tolerance",
+    "screening_values",
 ]
 
 
@@ -307,6 +308,47 @@ def _scaled_eigs_any(H, settings):
     with np.errstate(divide="ignore", invalid="ignore"):
         cond = np.where(sing, np.inf, lmax / np.where(lmin > 0, lmin, 1.0))
     return sing, cond
+
+
+def screening_values(F, S, W, criterion, kind="gauss_newton") -> np.ndarray:
+    r"""Cheap values :math:`\tilde\Psi(w)\le\Psi(C(w))` (up to rounding) for screening a batch of designs.
+
+    Without the rank and conditioning checks of :func:`batch_criteria`:
+    A: :math:`\mathrm{tr}\,C` and D: :math:`\log\det C` (the same formulas, so equal up to rounding),
+    E: :math:`\max_i C_{ii}\le\lambda_{\max}(C)`, with :math:`C = X G X^T`, :math:`X = H^{-1}`
+    (second order) or :math:`C = G^{-1}` (Gauss-Newton).  A singular design may get any value
+    (also NaN); only designs whose screening value is not above the incumbent need the exact,
+    checked evaluation, so a design is never wrongly discarded.  ``F``, ``S`` validated, ``W``
+    boolean (b, n_S).
+
+    Returns
+    -------
+    ndarray, shape (b,)
+        Screening values; ``-inf`` (never screened out) where a determinant is not positive, and
+        for the whole batch when a matrix of it is exactly singular.
+    """
+    crit = Criterion.parse(criterion)
+    kind = Kind.parse(kind)
+    n_S, n_p, _ = F.shape
+    Wf = np.asarray(W, dtype=float)
+    G = (Wf @ F.reshape(n_S, -1)).reshape(-1, n_p, n_p)
+    second = kind is Kind.SECOND_ORDER and S is not None
+    with np.errstate(all="ignore"):
+        if crit is Criterion.D:
+            sg, lg = np.linalg.slogdet(G)
+            if not second:
+                return np.where(sg > 0, -lg, -np.inf)
+            sh, lh = np.linalg.slogdet((Wf @ (F + S).reshape(n_S, -1)).reshape(-1, n_p, n_p))
+            return np.where((sg > 0) & (sh != 0), lg - 2.0 * lh, -np.inf)
+        try:
+            if second:
+                X = np.linalg.inv((Wf @ (F + S).reshape(n_S, -1)).reshape(-1, n_p, n_p))
+                diag = np.einsum("bij,bij->bi", X @ G, X)
+            else:
+                diag = np.einsum("bii->bi", np.linalg.inv(G))
+        except np.linalg.LinAlgError:
+            return np.full(len(Wf), -np.inf)
+        return diag.sum(axis=1) if crit is Criterion.A else diag.max(axis=1)
 
 
 def criterion_value(F, S=None, w=None, criterion="E", kind="second_order", *,

@@ -39,3 +39,15 @@ def test_auto_goes_to_scip_when_enumeration_would_exceed_the_time_limit():
 def test_enumeration_rate_setting_is_checked():
     with pytest.raises(ValueError, match="enumeration_rate"):
         DesignSettings(enumeration_rate=0.0)
+
+
+@pytest.mark.skipif(not scip_available(), reason="SCIP not available")
+def test_unproven_a_and_e_designs_report_a_finite_gap():
+    """A and E criteria are >= 0, so a design found without proof has gap <= value, never inf."""
+    F, S = _instance(3, 8, 2)
+    settings = DesignSettings(enumeration_limit=10, enumeration_rate=1.0)
+    for crit in "AE":
+        r = select_sensors_from_information(F, S, criterion=crit, kind="second_order", n_sensors=2,
+                                            time_limit=5.0, settings=settings)
+        assert r.method == "scip" and np.isfinite(r.value)
+        assert r.lower_bound >= 0.0 and np.isfinite(r.gap) and r.gap <= r.value
