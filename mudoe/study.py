@@ -637,7 +637,7 @@ class DiscriminationPlan:
     matrix (h_v - h_rival)^2 / (2 sigma^2 + V_v + V_rival) (both (n_q, n_S), per series);
     ``references`` the readings of the comparison designs: ``"evenly spread"`` (the paper's style at the
     same number of set points: rows round(linspace(0, n_q - 1, k)), the same sensors; for n_readings
-    designs k = max(1, round(n / n_S)) rows x every sensor) and ``"all readings"`` (every candidate set
+    designs k = ceil(n / n_S) rows x every sensor, the first n of these readings) and ``"all readings"`` (every candidate set
     point x every candidate sensor).
     """
 
@@ -755,10 +755,10 @@ def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dic
             raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
     n_q, n_S = len(q_set), len(sensors)
     if o.n_readings is not None:
-        rows, cols = _even_rows(n_q, max(1, round(o.n_readings / n_S))), sensors
+        even = tuple((j, sn) for j in _even_rows(n_q, -(-o.n_readings // n_S)) for sn in sensors)[:o.n_readings]
     else:
-        rows, cols = _even_rows(n_q, o.n_points or n_q), res.sensors
-    references = {"evenly spread": tuple((j, sn) for j in rows for sn in cols),
+        even = tuple((j, sn) for j in _even_rows(n_q, o.n_points or n_q) for sn in res.sensors)
+    references = {"evenly spread": even,
                   "all readings": tuple((j, sn) for j in range(n_q) for sn in sensors)}
     for d in scores.values():
         d.setflags(write=False)

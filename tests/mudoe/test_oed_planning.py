@@ -130,7 +130,8 @@ def test_planned_discrimination_design_matches_the_library(tmp_path, capsys):
     assert obj["value"] == pytest.approx(2 * ref.value, rel=1e-9)          # two series
     assert obj["values"]["T"] == pytest.approx(obj["value"], rel=1e-12) and "divergence" not in obj["values"]
     even = obj["references"]["evenly spread"]
-    assert len(even["readings"]) == 3 and even["values"]["T"] <= obj["value"]    # round(4 / 3) set point x 3
+    assert len(even["readings"]) == 4 and even["values"]["T"] <= obj["value"]    # 2 set points x 3 sensors, first 4
+    assert [r[0] for r in even["readings"]] == [0.0, 0.0, 0.0, 1600.0]
     assert (tmp_path / "res" / "oed.json").is_file() and "rival M2" in (tmp_path / "res" / "oed.txt").read_text()
 
 
