@@ -146,6 +146,11 @@ def small_designs(est):
         mask = np.zeros_like(even)
         mask[list(res.indices), :2] = True
         out[f"T {k}"] = (mask, res)
+        ref = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], candidates=cand,
+                                    sensors=paper_sensors, sigma=sigma, n_points=k, criterion="T_refit")
+        mask = np.zeros_like(even)
+        mask[list(ref.indices), :2] = True
+        out[f"Tr {k}"] = (mask, ref)
     full = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], candidates=cand,
                                  sensors=PRESS_SENSORS, sigma=SIGMA_MM, n_readings=1)
     div = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"], candidates=cand,
@@ -218,9 +223,10 @@ def statistics(des, z_of_rep, n_rep, label, path):
     return out
 
 
-def null_campaigns(est_m2, seed0, n_series=2):
-    """z of replication r: M2 at its estimate plus N(0, sigma^2) readings, ``n_series`` series."""
-    h = candidate_models(SETUP.friction_path)["M2"].simulate(est_m2.p, model_inputs("M2", np.asarray(Q_PAPER)))
+def null_campaigns(est_m2, seed0, n_series=2, name="M2"):
+    """z of replication r: model ``name`` (M2: the null) at its estimate plus N(0, sigma^2) readings,
+    ``n_series`` series."""
+    h = candidate_models(SETUP.friction_path)[name].simulate(est_m2.p, model_inputs(name, np.asarray(Q_PAPER)))
     return lambda r: h[None] + SIGMA_MM * np.random.default_rng(seed0 + r).standard_normal((n_series,) + h.shape)
 
 
@@ -237,19 +243,36 @@ def _fmt_rate(k, n):
     return f"{100 * r.rate:5.1f} % [{100 * r.lo:5.1f}, {100 * r.hi:5.1f}] ({k}/{n})"
 
 
+REFIT = {}
+
+
+def _refit_value(est, mask):
+    """T_refit of the readings in ``mask`` (oed.discrimination's linearised refit of M2, M3 true)."""
+    q = np.asarray(Q_PAPER)
+    models = candidate_models(SETUP.friction_path)
+    used = [s for k, s in enumerate(PRESS_SENSORS) if mask[:, k].any()]
+    rows = np.flatnonzero(mask.any(axis=1))
+    if any(not np.array_equal(mask[rows, PRESS_SENSORS.index(s)], np.ones(rows.size, bool)) for s in used):
+        return float("nan")                          # not a rows x sensors design
+    res = select_discriminating(models["M3"], est["M3"], models["M2"], est["M2"],
+                                candidates=(model_inputs("M3", q)[rows], model_inputs("M2", q)[rows]),
+                                sensors=used, sigma=dict(zip(PRESS_SENSORS, SIGMA_MM)), criterion="T_refit")
+    return res.value
+
+
 def _ok(rows):
     """Rows whose M2 and M3 fits both succeeded."""
     return rows[np.isfinite(rows).all(axis=1)]
 
 
-def report(des, null, power, d_t=None):
+def report(des, null, power, d_t=None, power_m3=None):
     """Size and power of (a) the chi2 goodness-of-fit test of M2 and (b) the M2-vs-M3 likelihood ratio
     Delta = chi2_M2 - chi2_M3, calibrated on the first half of the null replications, its size checked
     on the second half; failed fits are counted and their campaigns left out.  Prints a markdown table."""
-    print("\n| design | readings | T | failed fits (null / prototype) | c (95 % of Delta, null 1st half) "
-          "| size LR (null 2nd half) | power LR: M2 rejected (prototype) | size GoF | M2 rejected, GoF | "
-          "M3 rejected, GoF | Delta prototype min / median / max |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| design | readings | set points | T | T_refit | failed fits (null / prototype) | c (95 % of Delta, "
+          "null 1st half) | size LR (null 2nd half) | power LR, M3 true (simulated) | power LR: M2 rejected "
+          "(prototype) | size GoF | M2 rejected, GoF | M3 rejected, GoF | Delta prototype min / median / max |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, (mask, _) in des.items():
         a_all, b_all = null[name], power[name]
         half = a_all.shape[0] // 2
@@ -263,9 +286,15 @@ def report(des, null, power, d_t=None):
         lr0 = int(np.sum(chk[:, 0] - chk[:, 2] > crit))
         lr1 = int(np.sum(b[:, 0] - b[:, 2] > crit))
         d1 = b[:, 0] - b[:, 2]
-        t = f"{_value(d_t, mask):.1f}" if d_t is not None else "-"
-        print(f"| {name} | {int(mask.sum())} | {t} | {fails[0]} / {fails[1]} | {crit:.2f} | "
-              f"{_fmt_rate(lr0, chk.shape[0])} | {_fmt_rate(lr1, b.shape[0])} | {_fmt_rate(gof0, a.shape[0])} | "
+        t = f"{_value(d_t, mask):.2f}" if d_t is not None else "-"
+        tr = f"{REFIT[name]:.2f}" if name in REFIT else "-"
+        pts = ", ".join(f"{Q_PAPER[j]:.0f}" for j in np.flatnonzero(mask.any(axis=1)))
+        m3 = "-"
+        if power_m3 is not None and name in power_m3:
+            c = _ok(power_m3[name])
+            m3 = _fmt_rate(int(np.sum(c[:, 0] - c[:, 2] > crit)), c.shape[0])
+        print(f"| {name} | {int(mask.sum())} | {pts} | {t} | {tr} | {fails[0]} / {fails[1]} | {crit:.2f} | "
+              f"{_fmt_rate(lr0, chk.shape[0])} | {m3} | {_fmt_rate(lr1, b.shape[0])} | {_fmt_rate(gof0, a.shape[0])} | "
               f"{_fmt_rate(gof1, b.shape[0])} | {_fmt_rate(gof3, b.shape[0])} | "
               f"{d1.min():.1f} / {np.median(d1):.1f} / {d1.max():.1f} |")
 
@@ -275,7 +304,7 @@ def main(argv=None):
     ap.add_argument("--n-rep", type=int, default=150, help="prototype campaigns of the power study")
     ap.add_argument("--null-rep", type=int, default=300, help="M2 campaigns of the size study")
     ap.add_argument("--seed0", type=int, default=1000)
-    ap.add_argument("--study", choices=("design", "null", "power", "report", "all"), default="all",
+    ap.add_argument("--study", choices=("design", "null", "power", "power-m3", "report", "all"), default="all",
                     help="null and power can run in two processes; report reads their files")
     ap.add_argument("--out", default="/tmp/bench_discrimination", help="prefix of the statistics files (.npz)")
     ap.add_argument("--case", choices=("paper", "small"), default="paper",
@@ -283,6 +312,9 @@ def main(argv=None):
     ap.add_argument("--friction-scale", type=float, default=1.0,
                     help="scale of the prototype's guide friction (M2/M3 retrained on its campaign when != 1)")
     ap.add_argument("--n-series", type=int, default=2, help="series per campaign (small case: 1)")
+    ap.add_argument("--designs", default="", help="comma-separated design names to simulate (default all)")
+    ap.add_argument("--merge", action="append", default=[],
+                    help="report: also read the statistics files of this prefix (repeatable; --designs runs)")
     args = ap.parse_args(argv)
     print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.processor() or platform.machine()}, "
           f"nproc {os.cpu_count()}")
@@ -303,18 +335,36 @@ def main(argv=None):
         else:
             distinct[name] = (mask, res)
     des = distinct
+    for name, (mask, res) in des.items():
+        if res is not None and res.criterion == "T_refit":
+            REFIT[name] = res.value
+        else:
+            REFIT[name] = _refit_value(est, mask)
+    print("T_refit (M2 refitted, linearised) per series: " + ", ".join(f"{k} {v:.2f}" for k, v in REFIT.items()))
+    run = des if not args.designs else {n: des[n] for n in args.designs.split(",")}
 
     t0 = time.perf_counter()
     if args.study in ("null", "all"):
-        statistics(des, null_campaigns(est["M2"], args.seed0 + 100_000, args.n_series), args.null_rep, "null", f"{args.out}_null.npz")
+        statistics(run, null_campaigns(est["M2"], args.seed0 + 100_000, args.n_series), args.null_rep, "null",
+                   f"{args.out}_null.npz")
         print(f"null study: {time.perf_counter() - t0:.1f} s")
     t0 = time.perf_counter()
     if args.study in ("power", "all"):
-        statistics(des, prototype_campaigns(args.seed0, args.n_series), args.n_rep, "prototype", f"{args.out}_power.npz")
+        statistics(run, prototype_campaigns(args.seed0, args.n_series), args.n_rep, "prototype",
+                   f"{args.out}_power.npz")
         print(f"power study: {time.perf_counter() - t0:.1f} s")
+    if args.study == "power-m3":
+        statistics(run, null_campaigns(est["M3"], args.seed0 + 200_000, args.n_series, "M3"), args.n_rep, "M3 true",
+                   f"{args.out}_powerM3.npz")
     if args.study in ("report", "all"):
-        null, power = np.load(f"{args.out}_null.npz"), np.load(f"{args.out}_power.npz")
-        report(des, {n: null[n] for n in des}, {n: power[n] for n in des}, d_t)
+        null, power, m3 = {}, {}, {}
+        for prefix in [args.out] + args.merge:
+            for store, suffix in ((null, "null"), (power, "power"), (m3, "powerM3")):
+                if os.path.exists(f"{prefix}_{suffix}.npz"):
+                    f = np.load(f"{prefix}_{suffix}.npz")
+                    store.update({n: f[n] for n in f.files if n in des})
+        done = {n: v for n, v in des.items() if n in null and n in power}
+        report(done, null, power, d_t, m3)
 
 
 if __name__ == "__main__":
