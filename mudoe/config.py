@@ -410,9 +410,11 @@ class OEDConfig:
     n_series : int                 repetitions of every input in a planned design
     rival : str                    mode "discrimination": the rival variant to be refuted (the design
                                    separates it from ``variant``, which is assumed true)
-    discrimination_criterion : {"T", "divergence"}
-                                   mode "discrimination": local T-optimality or the divergence normalised
-                                   by both estimates' prediction variances (needs data)
+    discrimination_criterion : {"T", "divergence", "T_refit"}
+                                   mode "discrimination": local T-optimality (rival held at its
+                                   parameters), the divergence normalised by both estimates' prediction
+                                   variances (needs data), or T with the rival refitted (linearised;
+                                   exact by enumeration of the designs)
     n_readings : int or None       mode "discrimination": number of free (set point, sensor) readings
     refine : bool                  mode "inputs": also refine the chosen set points continuously within the
                                    candidates' range (oed.refine_inputs: Ipopt, multi-start; slow on the press)
@@ -435,7 +437,7 @@ class OEDConfig:
     n_points: int | None = _key(None, bounds=POSITIVE)
     n_series: int = _key(1, bounds=POSITIVE)
     rival: str = ""
-    discrimination_criterion: str = _key("T", choices=("T", "divergence"))
+    discrimination_criterion: str = _key("T", choices=("T", "divergence", "T_refit"))
     n_readings: int | None = _key(None, bounds=POSITIVE)
     refine: bool = False
 

@@ -652,6 +652,7 @@ class DiscriminationPlan:
     scores: dict
     references: dict
     sensor_units: dict = field(default_factory=dict)
+    refit: dict = field(default_factory=dict)
 
     mode = "discrimination"
 
@@ -660,6 +661,16 @@ class DiscriminationPlan:
         cols = self.result.candidate_sensors
         return {name: float(self.n_series * sum(d[j, cols.index(sn)] for j, sn in readings))
                 for name, d in self.scores.items()}
+
+    def design_values(self, name: str) -> dict:
+        """:meth:`values` of design ``name`` ("chosen" or a reference) and its ``T_refit`` (n_series times
+        the rival-refitted T, :func:`oed.discrimination.refit_values`; nan: the rival is not identifiable
+        on those readings)."""
+        readings = self.result.readings if name == "chosen" else self.references[name]
+        out = self.values(readings)
+        if name in self.refit:
+            out["T_refit"] = self.n_series * self.refit[name]
+        return out
 
     def summary(self) -> str:
         """Text of the design: chosen readings, T and divergence against the reference designs."""
@@ -674,9 +685,9 @@ class DiscriminationPlan:
             unit = self.sensor_units.get(sn, "")
             lines.append(f"    {self.candidates[j]:g}  {sn}  {diff[j, k]:+.6g}{' ' + unit if unit else ''}  "
                          f"{self.scores['T'][j, k]:.4g}")
-        lines.append("  design values (" + ", ".join(self.scores) + "):")
+        lines.append("  design values (" + ", ".join(self.design_values("chosen")) + "):")
         for name, readings in (("chosen", r.readings),) + tuple(self.references.items()):
-            vals = ", ".join(f"{k} {v:.4g}" for k, v in self.values(readings).items())
+            vals = ", ".join(f"{k} {v:.4g}" for k, v in self.design_values(name).items())
             lines.append(f"    {name}: {len(readings)} readings/series, {vals}")
         return "\n".join(lines)
 
@@ -690,9 +701,9 @@ class DiscriminationPlan:
                     indices=list(r.indices), sensors=list(r.sensors),
                     set_points=[self.candidates[j] for j in r.indices],
                     readings=[[self.candidates[j], sn] for j, sn in r.readings],
-                    values=self.values(r.readings),
+                    values=self.design_values("chosen"),
                     references={name: dict(readings=[[self.candidates[j], sn] for j, sn in rd],
-                                           values=self.values(rd))
+                                           values=self.design_values(name))
                                 for name, rd in self.references.items()})
 
 
@@ -720,7 +731,7 @@ def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dic
     ConfigError
         No candidates, no sigma, or a bad design argument (the message names the [oed] key).
     """
-    from oed.discrimination import DiscriminationError, reading_divergences, select_discriminating
+    from oed.discrimination import DiscriminationError, reading_divergences, refit_values, select_discriminating
     o = cfg.oed
     progress = progress or Progress(False)
     (m_a, fn_a), (m_b, fn_b) = built[variant], built[o.rival]
@@ -762,6 +773,9 @@ def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dic
                   "all readings": tuple((j, sn) for j in range(n_q) for sn in sensors)}
     for d in scores.values():
         d.setflags(write=False)
+    names = ("chosen",) + tuple(references)
+    refit = dict(zip(names, refit_values(*args, designs=[res.readings] + list(references.values()), sensors=sensors,
+                                         sigma=sig)))
     return DiscriminationPlan(variant, o.rival, planned, _values(params[variant]), _values(params[o.rival]),
                               tuple(float(x) for x in q_set), o.n_series, res, scores, references,
-                              dict(zip(m_a.sensors, m_a.sensor_units)))
+                              dict(zip(m_a.sensors, m_a.sensor_units)), refit)

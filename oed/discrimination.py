@@ -83,7 +83,8 @@ from models.contract import Model
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
-__all__ = ["DiscriminationResult", "DiscriminationError", "select_discriminating", "reading_divergences", "top_k"]
+__all__ = ["DiscriminationResult", "DiscriminationError", "select_discriminating", "reading_divergences", "top_k",
+           "refit_values"]
 
 _CRITERIA = ("T", "divergence", "T_refit")
 
@@ -454,6 +455,51 @@ def _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma):
     return G / _sigma(sigma, names)[None, :, None]
 
 
+def _refit_one(A_e, b_e, d, design):
+    """Phi_refit of one design ((row, col) pairs), or None when the rival's information is singular on it."""
+    ii, ss = zip(*design)
+    A = A_e[ii, ss].sum(axis=0)
+    w = np.linalg.eigvalsh(A)
+    if w[0] <= 1e-10 * max(w[-1], 1e-300) * A.shape[0]:
+        return None
+    b = b_e[ii, ss].sum(axis=0)
+    return float(d[ii, ss].sum() - b @ np.linalg.solve(A, b))
+
+
+def _refit_terms(d, diff, g):
+    r = np.sqrt(d) * np.sign(diff)                                   # (h_a - h_b) / sigma
+    return np.einsum("jsp,jsr->jspr", g, g), g * r[:, :, None]
+
+
+def refit_values(model_a, p_a, model_b, p_b, candidates, designs, sensors=None, sigma=1.0) -> list:
+    r"""The refitted T-criterion :math:`\Phi_\text{refit}(D)` (module docstring) of each design.
+
+    Parameters
+    ----------
+    model_a, model_b, p_a, p_b, candidates, sensors, sigma
+        As in :func:`select_discriminating`.
+    designs : sequence of sequences of (int, str)
+        Each design's readings (candidate row, sensor name).
+
+    Returns
+    -------
+    list of float
+        One value per design; ``nan`` where the rival's parameters are not identifiable on the
+        design's readings (its information singular: no refit exists).
+    """
+    d, diff, names = reading_divergences(model_a, p_a, model_b, p_b, candidates, sensors, sigma, "T")
+    A_e, b_e = _refit_terms(d, diff, _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma))
+    out = []
+    for design in designs:
+        bad = [s for _, s in design if s not in names]
+        if bad or any(not 0 <= int(i) < d.shape[0] for i, _ in design) or not design:
+            raise DiscriminationError(f"designs: readings must name candidate rows 0..{d.shape[0] - 1} and sensors "
+                                      f"{', '.join(names)}; got {list(design)[:3]}...")
+        v = _refit_one(A_e, b_e, d, [(int(i), names.index(s)) for i, s in design])
+        out.append(float("nan") if v is None else v)
+    return out
+
+
 def _designs(n_q, n_S, k, m, n):
     """(reading lists of every admissible design shape, their count): each design a list of (row, col)."""
     if n is not None:
@@ -473,21 +519,11 @@ def _refit_design(d, diff, names, g, k, m, n, limit):
     if count > limit:
         raise DiscriminationError(f"enumeration_limit: criterion 'T_refit' enumerates the designs and there are "
                                   f"{count} > {limit}; raise enumeration_limit or use criterion 'T'")
-    r = np.sqrt(d) * np.sign(diff)                                   # (h_a - h_b) / sigma
-    A_e = np.einsum("jsp,jsr->jspr", g, g)
-    b_e = g * r[:, :, None]
-    n_p = g.shape[2]
-    best, best_value, n_singular = None, -np.inf, 0
+    A_e, b_e = _refit_terms(d, diff, g)
+    best, best_value = None, -np.inf
     for design in designs:
-        ii, ss = zip(*design)
-        A = A_e[ii, ss].sum(axis=0)
-        w = np.linalg.eigvalsh(A)
-        if w[0] <= 1e-10 * max(w[-1], 1e-300) * n_p:
-            n_singular += 1
-            continue
-        b = b_e[ii, ss].sum(axis=0)
-        value = float(d[ii, ss].sum() - b @ np.linalg.solve(A, b))
-        if value > best_value:
+        value = _refit_one(A_e, b_e, d, design)
+        if value is not None and value > best_value:
             best, best_value = design, value
     if best is None:
         raise DiscriminationError(f"n_points/n_readings: no design identifies the rival's parameters (all {count} "

@@ -8,8 +8,8 @@ these pages show the design of the other modes, held by ``results.plan``:
 * both: the chosen (set point, sensor) pairs of the joint design;
 * discrimination: the per-reading T map :math:`((h_\text{true} - h_\text{rival})/\sigma)^2`
   over set points x sensors with the chosen readings marked, the chosen readings, and the
-  design values (T, and with data the divergence) against the evenly spread design of the
-  same budget (the paper's style) and against all candidate readings.
+  design values (T, with data the divergence, and T_refit with the rival refitted) against the
+  evenly spread design of the same budget (the paper's style) and against all candidate readings.
 
 The functions read ``results.plan`` by its attributes only (``mudoe.study.PlannedDesign`` or
 ``mudoe.study.DiscriminationPlan``); they never import the study layer.
@@ -172,12 +172,13 @@ def _discrimination_pages(plan, q_unit: str, s_units: dict) -> list:
     shown = rows[:ROWS_PER_TABLE]
     h = min(0.022 * (len(shown) + 1), 0.46)
     draw_table(fig.add_axes([0.04, 0.49 - h, 0.46, h]), head, shown, fontsize=7)
-    chead = ["design", "readings / series", "T"] + (["divergence"] if has_div else [])
+    keys = list(plan.design_values("chosen"))
+    chead = ["design", "readings / series"] + keys
     crow = []
     for name, readings in (("chosen", r.readings),) + tuple(plan.references.items()):
-        v = plan.values(readings)
-        crow.append([name, len(readings), f"{v['T']:.4g}"] + ([f"{v['divergence']:.4g}"] if has_div else []))
-    draw_table(fig.add_axes([0.54, 0.49 - 0.03 * 4, 0.42, 0.03 * 4]), chead, crow, fontsize=8,
+        v = plan.design_values(name)
+        crow.append([name, len(readings)] + [f"{v[k]:.4g}" for k in keys])
+    draw_table(fig.add_axes([0.54, 0.49 - 0.03 * 4, 0.44, 0.03 * 4]), chead, crow, fontsize=8,
                chosen=[True, False, False])
     budget = (f"{len(r.readings)} free readings" if r.method == "top-k" and len(set(r.sensors)) != len(r.sensors)
               else f"{len(r.readings)} readings")
@@ -190,8 +191,9 @@ def _discrimination_pages(plan, q_unit: str, s_units: dict) -> list:
            f"({'proven optimal' if r.proven_optimal else f'upper bound {r.upper_bound:.4g}'}, {r.method}). "
            f"Design values are per series times {plan.n_series} series. 'evenly spread' is the paper's style at the "
            "same budget (evenly spaced set points, the same sensors); 'all readings' every candidate. "
-           f"Refitting {plan.rival} on the new readings lowers T: it is an upper bound of the test's "
-           "non-centrality.")
+           f"Refitting {plan.rival} on the new readings lowers T (T is an upper bound of the test's "
+           f"non-centrality); T_refit is T with {plan.rival}'s parameters re-estimated on the readings "
+           "(linearised), the non-centrality of the likelihood-ratio test to first order.")
     if len(rows) > len(shown):
         txt += f" The table shows the first {len(shown)} of {len(rows)} readings (all are in oed.json)."
     _text(fig, 0.54, 0.30, txt, width=70, size=8.5)

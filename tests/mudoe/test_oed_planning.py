@@ -144,7 +144,7 @@ def test_discrimination_design_at_the_estimates(capsys, campaign_dirs):
     obj = json.loads(capsys.readouterr().out)
     assert not obj["planned"] and obj["criterion"] == "divergence" and obj["proven_optimal"]
     assert len(obj["set_points"]) == 3 and len(obj["sensors"]) == 1 and len(obj["readings"]) == 3
-    assert set(obj["values"]) == {"T", "divergence"}
+    assert set(obj["values"]) == {"T", "divergence", "T_refit"}
     assert obj["values"]["divergence"] == pytest.approx(obj["value"], rel=1e-12)
     assert obj["values"]["divergence"] >= obj["references"]["evenly spread"]["values"]["divergence"]
 
@@ -179,3 +179,15 @@ def test_input_design_at_the_estimate_with_data(capsys, campaign_dirs):
 def test_sensor_include_with_an_input_design_exit_2(tmp_path, capsys):
     code, _, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\ninclude = ["D_y"]\n')
     assert code == 2 and "include/exclude name sensors" in err
+
+
+def test_refitted_discrimination_design_and_its_enumeration_limit(tmp_path, capsys):
+    code, obj, err = _run_rivals(tmp_path, capsys, RIVALS + 'n_points = 2\ndiscrimination_criterion = "T_refit"\n')
+    assert code == 0, err
+    assert obj["criterion"] == "T_refit" and obj["method"] == "enumerate-refit" and obj["proven_optimal"]
+    assert obj["values"]["T_refit"] == pytest.approx(obj["value"], rel=1e-12)
+    assert obj["values"]["T_refit"] <= obj["values"]["T"] * (1 + 1e-12)        # refitting only lowers T
+    even = obj["references"]["evenly spread"]["values"]["T_refit"]
+    assert np.isnan(even) or even <= obj["value"] * (1 + 1e-12)
+    code, _, err = _run_rivals(tmp_path, capsys, RIVALS + 'n_readings = 12\ndiscrimination_criterion = "T_refit"\n')
+    assert code == 2 and "enumeration_limit" in err and len(err.strip().splitlines()) == 1

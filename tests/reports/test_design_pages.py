@@ -110,7 +110,8 @@ def test_discrimination_page_shows_readings_and_values_against_the_even_design(d
     [text] = _texts(design_pages(_results(plan, candidate_models()["M3"])))
     assert "M3 (assumed true) against M2" in text
     for name, readings in (("chosen", plan.result.readings),) + tuple(plan.references.items()):
-        assert f"{name} | {len(readings)} | {plan.values(readings)['T']:.4g}" in text
+        v = plan.design_values(name)
+        assert f"{name} | {len(readings)} | {v['T']:.4g} | {v['T_refit']:.4g}" in text
     T = plan.scores["T"]
     for j, s in plan.result.readings:
         assert f"{plan.candidates[j]:g} | {s} |" in text and f"{T[j, plan.result.candidate_sensors.index(s)]:.3g}" in text
