@@ -173,7 +173,7 @@ def _discrimination_pages(plan, q_unit: str, s_units: dict) -> list:
     h = min(0.022 * (len(shown) + 1), 0.46)
     draw_table(fig.add_axes([0.04, 0.49 - h, 0.46, h]), head, shown, fontsize=7)
     keys = list(plan.design_values("chosen"))
-    chead = ["design", "readings / series"] + keys
+    chead = ["design", "readings"] + keys
     crow = []
     for name, readings in (("chosen", r.readings),) + tuple(plan.references.items()):
         v = plan.design_values(name)
