@@ -314,7 +314,8 @@ def main(argv=None):
     ap.add_argument("--n-series", type=int, default=2, help="series per campaign (small case: 1)")
     ap.add_argument("--designs", default="", help="comma-separated design names to simulate (default all)")
     ap.add_argument("--merge", action="append", default=[],
-                    help="report: also read the statistics files of this prefix (repeatable; --designs runs)")
+                    help="report: also read the statistics files of this prefix (repeatable; --designs runs); "
+                         "a design found in several files gets their campaigns stacked (runs with other --seed0)")
     args = ap.parse_args(argv)
     print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.processor() or platform.machine()}, "
           f"nproc {os.cpu_count()}")
@@ -362,7 +363,9 @@ def main(argv=None):
             for store, suffix in ((null, "null"), (power, "power"), (m3, "powerM3")):
                 if os.path.exists(f"{prefix}_{suffix}.npz"):
                     f = np.load(f"{prefix}_{suffix}.npz")
-                    store.update({n: f[n] for n in f.files if n in des})
+                    for n in f.files:                # campaigns of several runs (other seeds) are stacked
+                        if n in des:
+                            store[n] = np.vstack([store[n], f[n]]) if n in store else f[n]
         done = {n: v for n, v in des.items() if n in null and n in power}
         report(done, null, power, d_t, m3)
 
