@@ -244,6 +244,26 @@ def _fmt_rate(k, n):
 
 
 REFIT = {}
+CRIT = {}
+
+
+def paired(runs, pairs):
+    """McNemar's exact test of two designs on the same campaigns: {label: {design: (n, 4)}}; prints one
+    markdown row per (label, pair) with the discordant counts and the two-sided binomial p-value."""
+    print("\n| campaigns | design A | design B | both reject | only A | only B | neither | McNemar p (exact) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label, run in runs.items():
+        for a, b in pairs:
+            if a not in run or b not in run or a not in CRIT or b not in CRIT:
+                continue
+            n = min(run[a].shape[0], run[b].shape[0])
+            ok = np.isfinite(run[a][:n]).all(axis=1) & np.isfinite(run[b][:n]).all(axis=1)
+            ra = (run[a][:n, 0] - run[a][:n, 2] > CRIT[a])[ok]
+            rb = (run[b][:n, 0] - run[b][:n, 2] > CRIT[b])[ok]
+            only_a, only_b = int(np.sum(ra & ~rb)), int(np.sum(~ra & rb))
+            p = stats.binomtest(only_a, only_a + only_b).pvalue if only_a + only_b else 1.0
+            print(f"| {label} ({int(ok.sum())}) | {a} | {b} | {int(np.sum(ra & rb))} | {only_a} | {only_b} | "
+                  f"{int(np.sum(~ra & ~rb))} | {p:.3g} |")
 
 
 def _refit_value(est, mask):
@@ -293,6 +313,7 @@ def report(des, null, power, d_t=None, power_m3=None):
         if power_m3 is not None and name in power_m3:
             c = _ok(power_m3[name])
             m3 = _fmt_rate(int(np.sum(c[:, 0] - c[:, 2] > crit)), c.shape[0])
+        CRIT[name] = crit
         print(f"| {name} | {int(mask.sum())} | {pts} | {t} | {tr} | {fails[0]} / {fails[1]} | {crit:.2f} | "
               f"{_fmt_rate(lr0, chk.shape[0])} | {m3} | {_fmt_rate(lr1, b.shape[0])} | {_fmt_rate(gof0, a.shape[0])} | "
               f"{_fmt_rate(gof1, b.shape[0])} | {_fmt_rate(gof3, b.shape[0])} | "
@@ -368,6 +389,12 @@ def main(argv=None):
                             store[n] = np.vstack([store[n], f[n]]) if n in store else f[n]
         done = {n: v for n, v in des.items() if n in null and n in power}
         report(done, null, power, d_t, m3)
+        runs = {"M3 true": m3}
+        for prefix in [args.out] + args.merge:
+            if os.path.exists(f"{prefix}_power.npz"):
+                f = np.load(f"{prefix}_power.npz")
+                runs[f"prototype, {os.path.basename(prefix)}"] = {n: f[n] for n in f.files}
+        paired(runs, [(f"even {k}", f"{t} {k}") for k in (3, 4) for t in ("T", "Tr")])
 
 
 if __name__ == "__main__":
