@@ -32,14 +32,24 @@ r"""Discrimination design M3 against M2 on the press, and its power gain in a Mo
    * ``even 3`` / ``even 4``: evenly spread set points (rows round(linspace(0, 28, k)): 0, 1600,
      0 N and 0, 1029 loading, 1029 unloading, 0 N), the paper's style at a small budget;
    * ``T 3`` / ``T 4``: the k set points chosen by :func:`oed.select_discriminating` (T,
-     ``n_points=k``, sensors D_y and F_x: exact top-k of the row sums).
+     ``n_points=k``, sensors D_y and F_x: exact top-k of the row sums);
+   * ``Tr 3`` / ``Tr 4``: the same with criterion ``T_refit`` (M2 refitted on the design,
+     linearised; exact by enumeration of the C(29, k) designs).
+
+   ``--friction-scale 0.33`` gives the prototype a third of its guide friction (M2 and M3
+   retrained on its own 6-series campaign), so that the paper-style design has power near 50 %.
+   Power is measured on the prototype (``--study power``) and, as the design's own premise, on
+   campaigns simulated from M3 at its estimate (``--study power-m3``); ``--study report`` with
+   ``--merge PREFIX`` collects runs made in parallel processes (or with other ``--seed0``) and adds
+   McNemar's exact paired test of every design against the evenly spread one.
 
    A fit that fails (Ipopt not converged) is recorded as NaN, counted in the table, and the
    campaign is left out of that design's rates (never silently replaced).
 
 Run ``python -m bench.bench_discrimination --n-rep 150 --null-rep 300`` from the project root;
-the small case: ``... --case small --n-series 1 --study null --null-rep 400`` and
-``... --case small --n-series 1 --study power --n-rep 200`` (two processes), then ``--study report``.
+the small case (each a process; ``S = --case small --n-series 1 --friction-scale 0.33``):
+``... S --study null --null-rep 400 --out P``, ``... S --study power --n-rep 200 --out P``,
+``... S --study power-m3 --n-rep 200 --out P``, then ``... S --study report --out P``.
 """
 from __future__ import annotations
 
@@ -344,7 +354,8 @@ def main(argv=None):
     camp = read_campaign() if args.friction_scale == 1.0 else scaled_friction(args.friction_scale, args.out)
     est = fit_candidates(camp, models={k: v for k, v in candidate_models(SETUP.friction_path).items() if k != "M1"})
     for name, e in est.items():
-        print(f"{name} on the shipped campaign (series 5, 6; D_y, F_x): k5, k7 = {e.p.round(2)} N/mm, "
+        which = "shipped" if args.friction_scale == 1.0 else "scaled-friction"
+        print(f"{name} on the {which} campaign (series 5, 6; D_y, F_x): k5, k7 = {e.p.round(2)} N/mm, "
               f"stderr {e.stderr.round(2)}")
     des, d_t, d_div, diff = designs(est) if args.case == "paper" else small_designs(est)
     print(f"design time (fits + scores): {time.perf_counter() - t0:.1f} s")
