@@ -340,6 +340,9 @@ def _report(study, results, args, progress, out) -> int:
         run_oed(study, results, progress)
     except (MissingPieceError, FitFailedError) as exc:
         results.notes.append(f"optimal design not available: {exc}")
+    if study.cfg.oed.mode != "sensors":
+        from .study import plan_at_estimate
+        results.plan = plan_at_estimate(study, results, progress)
     try:
         run_detect(study, results, progress)
     except (MissingPieceError, FitFailedError) as exc:

@@ -409,6 +409,16 @@ class OEDConfig:
     candidates_range : tuple of float  [start, stop, count]: count evenly spaced set points instead
     n_points : int or None         input points (mode inputs) or (point, sensor) pairs (mode both) chosen
     n_series : int                 repetitions of every input in a planned design
+    rival : str                    mode "discrimination": the rival variant to be refuted (the design
+                                   separates it from ``variant``, which is assumed true)
+    discrimination_criterion : {"T", "divergence", "T_refit"}
+                                   mode "discrimination": local T-optimality (rival held at its
+                                   parameters), the divergence normalised by both estimates' prediction
+                                   variances (needs data), or T with the rival refitted (linearised;
+                                   exact by enumeration of the designs)
+    n_readings : int or None       mode "discrimination": number of free (set point, sensor) readings
+    refine : bool                  mode "inputs": also refine the chosen set points continuously within the
+                                   candidates' range (oed.refine_inputs: Ipopt, multi-start; slow on the press)
     """
 
     criterion: str = _key("E", choices=("A", "D", "E"))
@@ -427,6 +437,10 @@ class OEDConfig:
     candidates_range: tuple[float, ...] = ()
     n_points: int | None = _key(None, bounds=POSITIVE)
     n_series: int = _key(1, bounds=POSITIVE)
+    rival: str = ""
+    discrimination_criterion: str = _key("T", choices=("T", "divergence", "T_refit"))
+    n_readings: int | None = _key(None, bounds=POSITIVE)
+    refine: bool = False
 
     def candidate_points(self) -> np.ndarray:
         """The candidate set points: ``candidates``, or ``candidates_range`` = [start, stop, count]."""
@@ -818,7 +832,44 @@ def _parse_oed(ctx, t):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
     if o.planned and not (o.candidates or o.candidates_range):
         raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
+    if o.refine and o.mode != "inputs":
+        raise ctx.error("oed", "refine", f"the continuous refinement is for mode = \"inputs\" (mode is {o.mode!r})")
+    _check_discrimination_keys(ctx, o)
     return o
+
+
+def _check_discrimination_keys(ctx, o: OEDConfig) -> None:
+    """The keys of ``mode = "discrimination"`` and only there: rival, n_readings (not with n_points /
+    n_sensors), discrimination_criterion; no costs, budget or include."""
+    if o.mode != "discrimination":
+        for key in ("rival", "n_readings"):
+            if getattr(o, key):
+                raise ctx.error("oed", key, f"only for mode = \"discrimination\" (mode is {o.mode!r})")
+        return
+    if not o.rival:
+        raise ctx.error("oed", "rival", "mode = \"discrimination\" needs rival = the variant to be refuted "
+                        "(another [model] variant)")
+    if o.n_readings is not None and (o.n_points is not None or o.n_sensors is not None):
+        raise ctx.error("oed", "n_readings", "give n_readings (free readings) or n_points / n_sensors, not both")
+    for key in ("costs", "include", "max_sensors", "min_sensors"):
+        if getattr(o, key):
+            raise ctx.error("oed", key, "not used by mode = \"discrimination\" (use n_readings, n_points, "
+                            "n_sensors and exclude)")
+    if o.planned and o.discrimination_criterion == "divergence":
+        raise ctx.error("oed", "discrimination_criterion", "\"divergence\" needs the estimates' covariances, "
+                        "which a planned design (no data) has not; use \"T\" or planned = false")
+
+
+def _check_rival(ctx, cfg) -> None:
+    """[oed] rival is a [model] variant other than the assumed-true [oed] variant."""
+    o = cfg.oed
+    if o.mode != "discrimination":
+        return
+    _one_of(ctx, "oed", "rival", o.rival, cfg.model.variants, "variant", "the [model] variants")
+    true = o.variant or cfg.model.variants[-1]
+    if o.rival == true:
+        raise ctx.error("oed", "rival", f"the rival {o.rival!r} is the variant assumed true ([oed] variant"
+                        f"{'' if o.variant else ' defaults to the last [model] variant'}); name another variant")
 
 
 def _parse_simulate(ctx, t):
@@ -875,6 +926,7 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     cfg = StudyConfig(**kw, path=str(path), base_dir=str(base_dir), text=text)
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
+    _check_rival(ctx, cfg)
     return cfg
 
 

@@ -30,7 +30,9 @@ from .data_io import DataFileError, DataUnits, load_campaign, study_units
 from .press import diagnosis_explanations, press_variant
 
 __all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
-           "run_diagnosis", "Progress", "MissingPieceError", "FitFailedError"]
+           "run_diagnosis", "Progress", "MissingPieceError", "FitFailedError",
+           "PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate",
+           "plan_discrimination"]
 
 
 class MissingPieceError(RuntimeError):
@@ -110,6 +112,7 @@ class StudyResults:
     oed: object = None
     oed_table: object = None
     oed_variant: str = ""
+    plan: object = None
     design_sensors: tuple = ()
     design_how: str = ""
     detection: object = None
@@ -560,6 +563,11 @@ class PlannedDesign:
         else:
             d.update(indices=list(r.indices), set_points=[self.candidates[j] for j in r.indices],
                      pairs=[[j, s] for j, s in r.pairs])
+            if r.refined is not None:
+                f = r.refined
+                d.update(refined=dict(set_points=f.inputs.ravel().tolist(), value=f.value,
+                                      start_values=list(f.start_values), n_failed=f.n_failed,
+                                      lower=f.lower.tolist(), upper=f.upper.tolist(), wall_time=f.wall_time))
         return d
 
 
@@ -569,19 +577,14 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
 
     Raises
     ------
-    MissingPieceError
-        ``mode = "discrimination"`` when :mod:`oed.discrimination` is not available.
+    ConfigError
+        Missing candidates or sigma; ``mode = "discrimination"`` (see :func:`plan_discrimination`).
     """
     o = cfg.oed
     progress = progress or Progress(False)
     if o.mode == "discrimination":
-        try:
-            import oed.discrimination  # noqa: F401 -- availability check
-        except ImportError as exc:
-            raise MissingPieceError(f"oed: mode = 'discrimination' needs oed.discrimination, which is not "
-                                    f"available ({exc})") from None
-        raise MissingPieceError("oed: mode = 'discrimination' is not wired into `mudoe oed` in this version; "
-                                "call oed.discrimination from Python")
+        raise ConfigError(f"{cfg.path}: [oed] mode = 'discrimination' designs for two variants: "
+                          "use plan_discrimination")
     from oed import select_sensors
     from oed.inputs import select_inputs
     q_set = study_units(cfg, model).q_to_model(o.candidate_points())
@@ -602,8 +605,12 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                 raise ConfigError(f"{cfg.path}: [oed] include/exclude name sensors; mode = {o.mode!r} chooses "
                                   "input points (leave them out)")
             common.update(include=(), exclude=())
+            if o.refine and not (Q.shape[1] == 1 and np.array_equal(Q[:, 0], q_set)):
+                raise ConfigError(f"{cfg.path}: [oed] refine: variant {variant} reads the set points through derived "
+                                  f"inputs ({', '.join(model.inputs)}); the continuous refinement moves the model's "
+                                  "inputs themselves and needs a model whose one input is the set point")
             res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
-                                sensors="joint" if o.mode == "both" else None, **common)
+                                sensors="joint" if o.mode == "both" else None, refine=o.refine, **common)
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
 
 
@@ -618,6 +625,9 @@ def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> Pla
     if np.any(bad):
         raise ConfigError(f"{cfg.path}: [[parameters]] start values of {[model.param_names[i] for i in np.flatnonzero(bad)]} "
                           "lie outside their bounds (a planned design uses the start values as nominal parameters)")
+    if cfg.oed.mode == "discrimination":
+        return plan_discrimination(cfg, v, built, {v: p, cfg.oed.rival: _p0(cfg, built[cfg.oed.rival][0])}, sigma,
+                                   True, progress=progress)
     return plan_design(cfg, v, model, fn, p, sigma, True, progress)
 
 
@@ -638,5 +648,168 @@ def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | N
     progress = progress or Progress(False)
     v = _oed_variant(study)
     _require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
-    fn = _build_models(study.cfg)[v][1]
+    built = _build_models(study.cfg)
+    if study.cfg.oed.mode == "discrimination":
+        rival = study.cfg.oed.rival
+        _require_fit(study, results, rival, progress, "oed", "; the rival's predictions need its estimate")
+        est = results.estimates[v]
+        sigma = study.sigma if study.sigma is not None else est.sigma
+        built = {k: (study.models[k], built[k][1]) for k in (v, rival)}
+        return plan_discrimination(study.cfg, v, built, {k: results.estimates[k] for k in (v, rival)}, sigma,
+                                   False, q_default=study.campaign.q_set, progress=progress)
+    fn = built[v][1]
     return plan_design(study.cfg, v, study.models[v], fn, results.estimates[v].p, study.sigma, False, progress)
+
+
+# ---------------------------------------------------------------------------- discrimination designs (issue 13)
+@dataclass(frozen=True)
+class DiscriminationPlan:
+    r"""A discrimination design (``[oed] mode = "discrimination"``) and its reference designs.
+
+    ``result`` is the :class:`oed.DiscriminationResult` (variant assumed true, rival to be refuted);
+    ``scores`` holds the per-reading T matrix ((h_v - h_rival) / sigma)^2 and, with data, the divergence
+    matrix (h_v - h_rival)^2 / (2 sigma^2 + V_v + V_rival) (both (n_q, n_S), per series);
+    ``references`` the readings of the comparison designs: ``"evenly spread"`` (the paper's style at the
+    same number of set points: rows round(linspace(0, n_q - 1, k)), the same sensors; for n_readings
+    designs k = ceil(n / n_S) rows x every sensor, the first n of these readings) and ``"all readings"`` (every candidate set
+    point x every candidate sensor).
+    """
+
+    variant: str
+    rival: str
+    planned: bool
+    p: tuple
+    p_rival: tuple
+    candidates: tuple
+    n_series: int
+    result: object
+    scores: dict
+    references: dict
+    sensor_units: dict = field(default_factory=dict)
+    refit: dict = field(default_factory=dict)
+
+    mode = "discrimination"
+
+    def values(self, readings) -> dict:
+        """{criterion: n_series * sum of the per-reading scores over ``readings``} ((row, sensor) pairs)."""
+        cols = self.result.candidate_sensors
+        return {name: float(self.n_series * sum(d[j, cols.index(sn)] for j, sn in readings))
+                for name, d in self.scores.items()}
+
+    def design_values(self, name: str) -> dict:
+        """:meth:`values` of design ``name`` ("chosen" or a reference) and its ``T_refit`` (n_series times
+        the rival-refitted T, :func:`oed.discrimination.refit_values`; nan: the rival is not identifiable
+        on those readings)."""
+        readings = self.result.readings if name == "chosen" else self.references[name]
+        out = self.values(readings)
+        if name in self.refit:
+            out["T_refit"] = self.n_series * self.refit[name]
+        return out
+
+    def summary(self) -> str:
+        """Text of the design: chosen readings, T and divergence against the reference designs."""
+        r = self.result
+        head = (f"discrimination design: {self.variant} assumed true, rival {self.rival}, criterion {r.criterion}, "
+                f"{self.n_series} series, " + ("planned before data (start values)" if self.planned
+                                                 else "at the estimates"))
+        lines = [head, r.summary(), "  readings (set point, sensor, h_true - h_rival, T):"]
+        diff = r.difference
+        for j, sn in r.readings:
+            k = r.candidate_sensors.index(sn)
+            unit = self.sensor_units.get(sn, "")
+            lines.append(f"    {self.candidates[j]:g}  {sn}  {diff[j, k]:+.6g}{' ' + unit if unit else ''}  "
+                         f"{self.scores['T'][j, k]:.4g}")
+        lines.append("  design values (" + ", ".join(self.design_values("chosen")) + "):")
+        for name, readings in (("chosen", r.readings),) + tuple(self.references.items()):
+            vals = ", ".join(f"{k} {v:.4g}" for k, v in self.design_values(name).items())
+            lines.append(f"    {name}: {len(readings)} readings/series, {vals}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready view: chosen readings (set point, sensor), values, proof and the references."""
+        r = self.result
+        return dict(variant=self.variant, rival=self.rival, mode=self.mode, planned=self.planned,
+                    p=list(self.p), p_rival=list(self.p_rival), candidates=list(self.candidates),
+                    n_series=self.n_series, criterion=r.criterion, value=self.n_series * r.value,
+                    upper_bound=self.n_series * r.upper_bound, proven_optimal=r.proven_optimal, method=r.method,
+                    indices=list(r.indices), sensors=list(r.sensors),
+                    set_points=[self.candidates[j] for j in r.indices],
+                    readings=[[self.candidates[j], sn] for j, sn in r.readings],
+                    values=self.design_values("chosen"),
+                    references={name: dict(readings=[[self.candidates[j], sn] for j, sn in rd],
+                                           values=self.design_values(name))
+                                for name, rd in self.references.items()})
+
+
+def _values(p) -> tuple:
+    """The parameter values of an array or an Estimate, as a tuple of float."""
+    return tuple(float(v) for v in getattr(p, "p", p))
+
+
+def _even_rows(n_q: int, k: int) -> list:
+    return sorted({int(i) for i in np.round(np.linspace(0, n_q - 1, k))})
+
+
+def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dict, sigma, planned: bool,
+                        q_default=None, progress: Progress | None = None) -> DiscriminationPlan:
+    r"""``[oed] mode = "discrimination"``: the readings that best separate ``variant`` (assumed true) from
+    ``[oed] rival`` (:func:`oed.select_discriminating`), each model at ``params`` (start values or
+    Estimates).
+
+    The candidates are the [oed] set points (or ``q_default``, the study's set points), each model
+    reading them through its own inputs; sigma in model units; the values of a design are per
+    series times ``[oed] n_series``.
+
+    Raises
+    ------
+    ConfigError
+        No candidates, no sigma, or a bad design argument (the message names the [oed] key).
+    """
+    from oed.discrimination import DiscriminationError, reading_divergences, refit_values, select_discriminating
+    o = cfg.oed
+    progress = progress or Progress(False)
+    (m_a, fn_a), (m_b, fn_b) = built[variant], built[o.rival]
+    pts = o.candidate_points()
+    if pts.size:
+        q_set = study_units(cfg, m_a).q_to_model(pts)
+    elif q_default is not None:
+        q_set = np.asarray(q_default, float)
+    else:
+        raise ConfigError(f"{cfg.path}: [oed] candidates: a discrimination design needs candidate set points")
+    if sigma is None:
+        raise ConfigError(f"{cfg.path}: [[sensors]] a discrimination design needs every sensor's sigma")
+    qa = q_set[:, None] if fn_a is None else np.asarray(fn_a(q_set), float)
+    qb = q_set[:, None] if fn_b is None else np.asarray(fn_b(q_set), float)
+    unknown = [s for s in o.exclude if s not in m_a.sensors]
+    if unknown:
+        raise ConfigError(f"{cfg.path}: [oed] exclude: unknown sensor(s) {', '.join(unknown)}")
+    sensors = tuple(s for s in m_a.sensors if s in m_b.sensors and s not in o.exclude)
+    sig = dict(zip(m_a.sensors, np.asarray(sigma, float)))
+    args = (m_a, params[variant], m_b, params[o.rival], (qa, qb))
+    with progress.step(f"discrimination design ({o.discrimination_criterion}, {variant} vs {o.rival}"
+                       f"{', planned' if planned else ''})"):
+        try:
+            res = select_discriminating(*args, sensors=sensors, sigma=sig, n_points=o.n_points,
+                                        n_sensors=o.n_sensors, criterion=o.discrimination_criterion,
+                                        n_readings=o.n_readings)
+            scores = {"T": reading_divergences(*args, sensors=sensors, sigma=sig, criterion="T")[0]}
+            if not planned:
+                scores["divergence"] = reading_divergences(*args, sensors=sensors, sigma=sig,
+                                                           criterion="divergence")[0]
+        except DiscriminationError as exc:
+            raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
+    n_q, n_S = len(q_set), len(sensors)
+    if o.n_readings is not None:
+        even = tuple((j, sn) for j in _even_rows(n_q, -(-o.n_readings // n_S)) for sn in sensors)[:o.n_readings]
+    else:
+        even = tuple((j, sn) for j in _even_rows(n_q, o.n_points or n_q) for sn in res.sensors)
+    references = {"evenly spread": even,
+                  "all readings": tuple((j, sn) for j in range(n_q) for sn in sensors)}
+    for d in scores.values():
+        d.setflags(write=False)
+    names = ("chosen",) + tuple(references)
+    refit = dict(zip(names, refit_values(*args, designs=[res.readings] + list(references.values()), sensors=sensors,
+                                         sigma=sig)))
+    return DiscriminationPlan(variant, o.rival, planned, _values(params[variant]), _values(params[o.rival]),
+                              tuple(float(x) for x in q_set), o.n_series, res, scores, references,
+                              dict(zip(m_a.sensors, m_a.sensor_units)), refit)

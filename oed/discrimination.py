@@ -28,7 +28,25 @@ the implicit state (CasADi AD).  The readings are treated as independent (the sc
 per-reading form; Asprey and Macchietto's matrix form couples readings through
 :math:`C_m`).
 
-Both criteria are sums over the chosen readings, :math:`\Phi(D) = \sum_{(i,s)\in D} d_{is}`
+and the refitted local T-criterion (``"T_refit"``), Atkinson and Fedorov's T with the rival's
+parameters re-estimated on the design, linearised at :math:`\hat p_b`:
+
+.. math::
+
+    \Phi_\text{refit}(D) = \min_\delta \sum_{(i,s)\in D}
+        \Bigl(\frac{h_{a,s} - h_{b,s} - g_{b,is}^\top \delta}{\sigma_s}\Bigr)^2
+      = c_D - b_D^\top A_D^{-1} b_D,
+
+with :math:`A_D = \sum g g^\top/\sigma^2`, :math:`b_D = \sum g (h_a - h_b)/\sigma^2`,
+:math:`c_D = \sum (h_a - h_b)^2/\sigma^2` over D: the non-centrality of the rival's
+goodness-of-fit (or likelihood-ratio) test when a is true and b is refitted, to first order in
+b's parameters (exact when b is linear in them).  Refitting absorbs the part of the difference
+that b can mimic, so the fixed-estimate T overstates designs whose difference lies along
+b's sensitivities.  :math:`\Phi_\text{refit}` is not a sum: it is maximised by enumerating
+the designs (at most ``enumeration_limit``; beyond, an error says so), and designs on which b's
+parameters are not identifiable (:math:`A_D` singular) are inadmissible.
+
+The "T" and "divergence" criteria are sums over the chosen readings, :math:`\Phi(D) = \sum_{(i,s)\in D} d_{is}`
 (larger is better), and the designs are
 
 * ``n_points=k``, ``n_sensors=None``: k input rows, every given sensor read at each;
@@ -65,9 +83,10 @@ from models.contract import Model
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
-__all__ = ["DiscriminationResult", "DiscriminationError", "select_discriminating", "reading_divergences", "top_k"]
+__all__ = ["DiscriminationResult", "DiscriminationError", "select_discriminating", "reading_divergences", "top_k",
+           "refit_values"]
 
-_CRITERIA = ("T", "divergence")
+_CRITERIA = ("T", "divergence", "T_refit")
 
 
 class DiscriminationError(ValueError):
@@ -259,7 +278,7 @@ def reading_divergences(model_a, p_a, model_b, p_b, candidates, sensors=None, si
         Candidate sensors (default: the sensors common to both models).
     sigma : float, array_like (n_S,) or dict
         Reading standard deviations (output units).
-    criterion : {"T", "divergence"}
+    criterion : {"T", "divergence", "T_refit"}
     cov_a, cov_b : array_like (n_p, n_p), optional
         Covariances of the estimates ("divergence" only; default the Estimates' ``cov``).
 
@@ -278,6 +297,8 @@ def reading_divergences(model_a, p_a, model_b, p_b, candidates, sensors=None, si
     names = _common_sensors(model_a, model_b, sensors)
     sig = _sigma(sigma, names)
     div = criterion == "divergence"
+    if criterion == "T_refit":
+        criterion = "T"                      # per reading: the fixed-estimate T (the refit is not a sum)
     if div and (ca_ is None or cb_ is None):
         raise DiscriminationError("cov_a, cov_b: the 'divergence' criterion needs the covariance of both "
                                   "estimates (pass Estimates as p_a, p_b or give cov_a, cov_b)")
@@ -374,7 +395,7 @@ def select_discriminating(model_a, p_a, model_b, p_b, candidates, sensors=None, 
         Number k of input rows to choose (default: all rows).
     n_sensors : int, optional
         Number m of sensors read at every chosen row (default: all candidate sensors).
-    criterion : {"T", "divergence"}
+    criterion : {"T", "divergence", "T_refit"}
     n_readings : int, optional
         Instead of n_points / n_sensors: n free (row, sensor) readings.
     cov_a, cov_b : array_like, optional
@@ -403,6 +424,9 @@ def select_discriminating(model_a, p_a, model_b, p_b, candidates, sensors=None, 
         raise DiscriminationError("n_readings: give either n_readings or n_points / n_sensors, not both")
     if not (isinstance(enumeration_limit, (int, np.integer)) and enumeration_limit >= 0):
         raise DiscriminationError(f"enumeration_limit: expected an integer >= 0, got {enumeration_limit!r}")
+    if criterion == "T_refit":
+        g = _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma)
+        return _refit_design(d, diff, names, g, k, m, n, int(enumeration_limit))
     if n is not None:
         flat = top_k(d, n)
         pairs = [divmod(int(e), n_S) for e in flat]
@@ -421,6 +445,94 @@ def select_discriminating(model_a, p_a, model_b, p_b, candidates, sensors=None, 
         ub, proven, method, count = value, True, "top-k", 1
     readings = tuple((int(i), names[s]) for i in rows for s in cols)
     return _result(rows, cols, readings, value, ub, proven, method, criterion, d, diff, names, count)
+
+
+def _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma):
+    """g_is = (dh_b,s / dp)(q_i, p_b) / sigma_s, shape (n_q, n_S, n_p)."""
+    pb, _ = _params_and_cov(p_b, None, model_b, "p_b")
+    _, qb = _candidate_rows(candidates, model_a, model_b)
+    _, G = _outputs(model_b, pb, qb, model_b.sensor_index(names), True)
+    return G / _sigma(sigma, names)[None, :, None]
+
+
+def _refit_one(A_e, b_e, d, design):
+    """Phi_refit of one design ((row, col) pairs), or None when the rival's information is singular on it."""
+    ii, ss = zip(*design)
+    A = A_e[ii, ss].sum(axis=0)
+    w = np.linalg.eigvalsh(A)
+    if w[0] <= 1e-10 * max(w[-1], 1e-300) * A.shape[0]:
+        return None
+    b = b_e[ii, ss].sum(axis=0)
+    return float(d[ii, ss].sum() - b @ np.linalg.solve(A, b))
+
+
+def _refit_terms(d, diff, g):
+    r = np.sqrt(d) * np.sign(diff)                                   # (h_a - h_b) / sigma
+    return np.einsum("jsp,jsr->jspr", g, g), g * r[:, :, None]
+
+
+def refit_values(model_a, p_a, model_b, p_b, candidates, designs, sensors=None, sigma=1.0) -> list:
+    r"""The refitted T-criterion :math:`\Phi_\text{refit}(D)` (module docstring) of each design.
+
+    Parameters
+    ----------
+    model_a, model_b, p_a, p_b, candidates, sensors, sigma
+        As in :func:`select_discriminating`.
+    designs : sequence of sequences of (int, str)
+        Each design's readings (candidate row, sensor name).
+
+    Returns
+    -------
+    list of float
+        One value per design; ``nan`` where the rival's parameters are not identifiable on the
+        design's readings (its information singular: no refit exists).
+    """
+    d, diff, names = reading_divergences(model_a, p_a, model_b, p_b, candidates, sensors, sigma, "T")
+    A_e, b_e = _refit_terms(d, diff, _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma))
+    out = []
+    for design in designs:
+        bad = [s for _, s in design if s not in names]
+        if bad or any(not 0 <= int(i) < d.shape[0] for i, _ in design) or not design:
+            raise DiscriminationError(f"designs: readings must name candidate rows 0..{d.shape[0] - 1} and sensors "
+                                      f"{', '.join(names)}; got {list(design)[:3]}...")
+        v = _refit_one(A_e, b_e, d, [(int(i), names.index(s)) for i, s in design])
+        out.append(float("nan") if v is None else v)
+    return out
+
+
+def _designs(n_q, n_S, k, m, n):
+    """(reading lists of every admissible design shape, their count): each design a list of (row, col)."""
+    if n is not None:
+        items = [(i, s) for i in range(n_q) for s in range(n_S)]
+        return (([items[e] for e in c] for c in combinations(range(len(items)), n)), math.comb(len(items), n))
+    row_sets = combinations(range(n_q), k) if k is not None else [tuple(range(n_q))]
+    n_rows = math.comb(n_q, k) if k is not None else 1
+    col_sets = list(combinations(range(n_S), m)) if m is not None else [tuple(range(n_S))]
+    return (([(i, s) for i in rows for s in cols] for rows in row_sets for cols in col_sets),
+            n_rows * len(col_sets))
+
+
+def _refit_design(d, diff, names, g, k, m, n, limit):
+    r"""Exact maximiser of :math:`\Phi_\text{refit}` by enumeration (see the module docstring)."""
+    n_q, n_S = d.shape
+    designs, count = _designs(n_q, n_S, k, m, n)
+    if count > limit:
+        raise DiscriminationError(f"enumeration_limit: criterion 'T_refit' enumerates the designs and there are "
+                                  f"{count} > {limit}; raise enumeration_limit or use criterion 'T'")
+    A_e, b_e = _refit_terms(d, diff, g)
+    best, best_value = None, -np.inf
+    for design in designs:
+        value = _refit_one(A_e, b_e, d, design)
+        if value is not None and value > best_value:
+            best, best_value = design, value
+    if best is None:
+        raise DiscriminationError(f"n_points/n_readings: no design identifies the rival's parameters (all {count} "
+                                  "designs leave its information singular); choose more readings")
+    rows = sorted({i for i, _ in best})
+    cols = sorted({s for _, s in best})
+    readings = tuple((int(i), names[s]) for i, s in best)
+    return _result(rows, cols, readings, best_value, best_value, True, "enumerate-refit", "T_refit", d, diff, names,
+                   count)
 
 
 def _result(rows, cols, readings, value, ub, proven, method, criterion, d, diff, names, count):

@@ -507,6 +507,9 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True) -> list:
              ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results)),
              ("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
              ("residuals", partial(_residual_pages, results))]
+    if getattr(results, "plan", None) is not None:       # [oed] mode inputs / both / discrimination
+        from .design_pages import design_pages
+        pages.insert([n for n, _ in pages].index("oed") + 1, ("design", partial(design_pages, results)))
     if with_diagnosis:
         pages.append(("misses", partial(_misses_pages, results, diagnosis)))
     if results.validation is not None:

@@ -103,9 +103,66 @@ def test_bad_candidates_range_exit_2(tmp_path, capsys):
     assert "candidates_range" in capsys.readouterr().err
 
 
-def test_discrimination_mode_is_reported_not_available(tmp_path, capsys):
-    code, _, err = _run(tmp_path, capsys, 'mode = "discrimination"\n')
-    assert code == 3 and "discrimination" in err
+RIVALS = 'mode = "discrimination"\nvariant = "M3"\nrival = "M2"\n'
+
+
+def _run_rivals(tmp_path, capsys, extra, variants='["M2", "M3"]'):
+    cfg = tmp_path / "rivals.toml"
+    cfg.write_text(PLAN.replace('variants = ["M1"]', f"variants = {variants}") + extra)
+    code = main(["oed", str(cfg), "--out", str(tmp_path / "res"), "--json", "--quiet"])
+    out = capsys.readouterr()
+    return code, (json.loads(out.out) if code == 0 else None), out.err
+
+
+def test_planned_discrimination_design_matches_the_library(tmp_path, capsys):
+    from models.friction import candidate_models, model_inputs
+    from mudoe.units import convert
+    from oed import select_discriminating
+    code, obj, err = _run_rivals(tmp_path, capsys, RIVALS + "n_readings = 4\nn_series = 2\n")
+    assert code == 0, err
+    q = np.linspace(0, 1600, 9)
+    sigma = dict(zip(("D_y", "F_x", "B0_y"), convert(np.array([15.0, 5.0, 4.0]), "um", "mm", difference=True)))
+    m = candidate_models()
+    ref = select_discriminating(m["M3"], [530.0, 470.0], m["M2"], [530.0, 470.0],
+                                (model_inputs("M3", q), model_inputs("M2", q)), sigma=sigma, n_readings=4)
+    assert obj["mode"] == "discrimination" and obj["planned"] and obj["rival"] == "M2" and obj["proven_optimal"]
+    assert obj["readings"] == [[float(q[j]), s] for j, s in ref.readings]
+    assert obj["value"] == pytest.approx(2 * ref.value, rel=1e-9)          # two series
+    assert obj["values"]["T"] == pytest.approx(obj["value"], rel=1e-12) and "divergence" not in obj["values"]
+    even = obj["references"]["evenly spread"]
+    assert len(even["readings"]) == 4 and even["values"]["T"] <= obj["value"]    # 2 set points x 3 sensors, first 4
+    assert [r[0] for r in even["readings"]] == [0.0, 0.0, 0.0, 1600.0]
+    assert (tmp_path / "res" / "oed.json").is_file() and "rival M2" in (tmp_path / "res" / "oed.txt").read_text()
+
+
+def test_discrimination_design_at_the_estimates(capsys, campaign_dirs):
+    cfg = campaign_dirs["root"] / "rivals.toml"
+    text = campaign_dirs["paper_cfg"].read_text().replace('variants = ["M1"]', 'variants = ["M1", "M2"]')
+    cfg.write_text(text.replace('variant = "M1"', 'variant = "M2"') + 'mode = "discrimination"\nrival = "M1"\n'
+                   'n_points = 3\nn_sensors = 1\ndiscrimination_criterion = "divergence"\n')
+    assert main(["oed", str(cfg), "--out", str(campaign_dirs["root"] / "r"), "--json", "--quiet"]) == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert not obj["planned"] and obj["criterion"] == "divergence" and obj["proven_optimal"]
+    assert len(obj["set_points"]) == 3 and len(obj["sensors"]) == 1 and len(obj["readings"]) == 3
+    assert set(obj["values"]) == {"T", "divergence", "T_refit"}
+    assert obj["values"]["divergence"] == pytest.approx(obj["value"], rel=1e-12)
+    assert obj["values"]["divergence"] >= obj["references"]["evenly spread"]["values"]["divergence"]
+
+
+@pytest.mark.parametrize("extra, key, match", [
+    ('mode = "discrimination"\nvariant = "M3"\n', "rival", "needs rival"),
+    (RIVALS.replace('"M2"\n', '"M9"\n'), "rival", "unknown variant 'M9'"),
+    (RIVALS.replace('rival = "M2"', 'rival = "M3"'), "rival", "assumed true"),
+    ('mode = "discrimination"\nrival = "M3"\n', "rival", "defaults to the last"),
+    (RIVALS + "n_readings = 4\nn_points = 2\n", "n_readings", "not both"),
+    (RIVALS + 'discrimination_criterion = "divergence"\n', "discrimination_criterion", "covariances"),
+    ('rival = "M2"\n', "rival", "only for mode"),
+    (RIVALS + "n_readings = 1000\n", "n_readings", "at most the 27 candidate readings"),
+])
+def test_bad_discrimination_keys_exit_2_one_line(tmp_path, capsys, extra, key, match):
+    code, _, err = _run_rivals(tmp_path, capsys, extra)
+    assert code == 2 and match in err and key in err, err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_input_design_at_the_estimate_with_data(capsys, campaign_dirs):
@@ -122,3 +179,15 @@ def test_input_design_at_the_estimate_with_data(capsys, campaign_dirs):
 def test_sensor_include_with_an_input_design_exit_2(tmp_path, capsys):
     code, _, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\ninclude = ["D_y"]\n')
     assert code == 2 and "include/exclude name sensors" in err
+
+
+def test_refitted_discrimination_design_and_its_enumeration_limit(tmp_path, capsys):
+    code, obj, err = _run_rivals(tmp_path, capsys, RIVALS + 'n_points = 2\ndiscrimination_criterion = "T_refit"\n')
+    assert code == 0, err
+    assert obj["criterion"] == "T_refit" and obj["method"] == "enumerate-refit" and obj["proven_optimal"]
+    assert obj["values"]["T_refit"] == pytest.approx(obj["value"], rel=1e-12)
+    assert obj["values"]["T_refit"] <= obj["values"]["T"] * (1 + 1e-12)        # refitting only lowers T
+    even = obj["references"]["evenly spread"]["values"]["T_refit"]
+    assert np.isnan(even) or even <= obj["value"] * (1 + 1e-12)
+    code, _, err = _run_rivals(tmp_path, capsys, RIVALS + 'n_readings = 12\ndiscrimination_criterion = "T_refit"\n')
+    assert code == 2 and "enumeration_limit" in err and len(err.strip().splitlines()) == 1

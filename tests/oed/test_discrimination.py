@@ -165,3 +165,44 @@ def test_bad_input_names_the_argument():
         select_discriminating(quad, [0, 0, 1], bounded, [2.0, 0.0], x, n_points=1)
     with pytest.raises(DiscriminationError, match="Q_a has 5 rows"):
         select_discriminating(*args, (x[:, None], x[:4, None]), n_points=1)
+
+
+def _linear_rival():
+    """A rival linear in its parameters: its linearised refit is exact."""
+    return Model.explicit(["c1", "c2"], ["x"], SENSORS,
+                          h=lambda p, q: ca.vertcat(p[0] * q[0], p[1] * ca.cos(q[0]), p[0] + p[1] * q[0],
+                                                     p[1] * q[0] ** 3))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_refit_criterion_equals_the_exact_refit_of_a_linear_rival_by_brute_force(seed):
+    a, pa, _, _, Q, sig = _instance(seed, 7)
+    b, pb = _linear_rival(), np.array([1.0, 1.0])
+    res = select_discriminating(a, pa, b, pb, Q, sigma=sig, n_points=3, criterion="T_refit")
+    ha = a.simulate(pa, Q)
+    Xb = np.stack([b.simulate(e, Q) for e in np.eye(2)], axis=-1)      # h_b = Xb @ p (linear)
+
+    def refit(rows, cols):
+        y = (ha[np.ix_(rows, cols)] / sig[cols]).ravel()
+        X = (Xb[np.ix_(rows, cols)] / sig[cols][None, :, None]).reshape(-1, 2)
+        coef = np.linalg.lstsq(X, y, rcond=None)[0]
+        return float(((y - X @ coef) ** 2).sum())
+
+    cols = list(range(len(SENSORS)))
+    values = {rows: refit(list(rows), cols) for rows in combinations(range(len(Q)), 3)}
+    best = max(values, key=values.get)
+    assert res.indices == best and res.proven_optimal and res.method == "enumerate-refit"
+    assert res.value == pytest.approx(values[best], rel=1e-8)
+    assert res.value <= select_discriminating(a, pa, b, pb, Q, sigma=sig, n_points=3).value * (1 + 1e-12)
+
+
+def test_refit_criterion_free_readings_and_the_enumeration_limit():
+    a, pa, _, _, Q, sig = _instance(11, 5)
+    b = _linear_rival()
+    res = select_discriminating(a, pa, b, [1.0, 1.0], Q, sigma=sig, n_readings=3, criterion="T_refit")
+    assert len(res.readings) == 3 and res.n_designs == 1140                 # C(20, 3)
+    with pytest.raises(DiscriminationError, match="enumeration_limit"):
+        select_discriminating(a, pa, b, [1.0, 1.0], Q, sigma=sig, n_readings=3, criterion="T_refit",
+                              enumeration_limit=1000)
+    with pytest.raises(DiscriminationError, match="no design identifies"):
+        select_discriminating(a, pa, b, [1.0, 1.0], Q, sigma=sig, n_readings=1, criterion="T_refit")
