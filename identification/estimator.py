@@ -25,15 +25,19 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sps
 from scipy import special
+from scipy.linalg import lapack
 
 from models.contract import Model
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
 from .measurements import Measurements
+from .explicit_kernel import ExplicitTerms, explicit_terms
 from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
+
+_potrf, _trtrs = lapack.dpotrf, lapack.dtrtrs
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms"]
@@ -628,7 +632,7 @@ class _FullSpaceSolution:
     """Ipopt's solution of the full-space NLP: its result, the number of passes (1: the
     unbounded pass was kept, 2: the bounded problem was solved), p clipped to the bounds, the
     states, the parameters found at a bound and, when the reduced-space Newton solved it, its
-    reduced point at p."""
+    reduced point at p and the second-order term S there (None when not evaluated)."""
 
     result: IpoptResult
     passes: int
@@ -636,12 +640,51 @@ class _FullSpaceSolution:
     states: np.ndarray | None
     at_bound: np.ndarray
     point: ReducedPoint | None = None
+    S: np.ndarray | None = None
 
 
 #: at most this many Gauss-Newton/Newton iterations and objective evaluations of
 #: :func:`_solve_explicit_newton` (then Ipopt takes over: a far start should not cost twice)
 _NEWTON_MAX_ITER = 60
 _NEWTON_MAX_EVALS = 50
+
+
+class _ExplicitObjective:
+    """Phi(p) of an explicit model with the sums of its derivatives (an
+    :class:`identification.explicit_kernel.ExplicitTerms` with Phi_0 included in ``f``): one
+    evaluation of the least-squares kernel for models stated in SX, else the reduced point of
+    :class:`ReducedProblem` and NumPy sums (models stated in MX)."""
+
+    def __init__(self, st: _Start):
+        problem = st.problem
+        self._problem = problem
+        self._kernel = explicit_terms(st.model, st.data.inputs, problem.zbar, problem.cw / st.sig[None, :] ** 2)
+
+    def __call__(self, p: np.ndarray, second_order: bool) -> ExplicitTerms:
+        """The terms at p (``S`` when ``second_order``); raises StateSolveError when the
+        evaluation fails."""
+        problem = self._problem
+        if self._kernel is not None:
+            t = self._kernel(p, second_order)
+            return ExplicitTerms(t.f + problem.const, t.g, t.F, t.g_abs, t.S)
+        point = problem.evaluate(p)
+        G = point.sens.G.reshape(-1, p.size)
+        S = point.sens.hessians(point.lam[None])[0] if second_order else None
+        return ExplicitTerms(point.objective, point.gradient, problem.information(point),
+                             np.abs(point.lam).reshape(-1) @ np.abs(G), S)
+
+
+def _cholesky(M: np.ndarray):
+    """The lower Cholesky factor of M (LAPACK dpotrf), or None when M is not positive definite."""
+    if not np.all(np.isfinite(M)):
+        return None
+    L, info = _potrf(M, lower=1, clean=1)
+    return L if info == 0 else None
+
+
+def _tri_solve(L: np.ndarray, b: np.ndarray, trans: int = 0) -> np.ndarray:
+    """L^{-1} b (``trans=0``) or L^{-T} b (``trans=1``) for a lower triangular L (LAPACK dtrtrs)."""
+    return _trtrs(L, b, lower=1, trans=trans)[0]
 
 
 def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
@@ -653,75 +696,80 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
     (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
     below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
-    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one mapped call
-    over the data (:func:`models.sensitivity.sensitivities`), so an iteration costs O(n) with a
-    small constant and no NLP is built.
+    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one call of the
+    least-squares kernel over the data (:mod:`identification.explicit_kernel`: Phi, g, F and,
+    in the Newton phase, S together), so an iteration costs O(n) with a small constant and no
+    NLP is built.
 
-    Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
-    acceptance as Ipopt's: a stationary point at the tolerance) with its reduced point, or None when the iteration
-    fails (singular F, failed line search, no convergence): the caller then solves with Ipopt.
-    The result may lie outside the parameter bounds (the caller checks).
+    Returns (result, point, S): the solution as an :class:`IpoptResult` (status
+    ``Solve_Succeeded``, the same acceptance as Ipopt's: a stationary point at the tolerance),
+    its reduced point and the second-order term S there (None when not evaluated), or None
+    when the iteration fails (singular F, failed line search, no convergence): the caller then
+    solves with Ipopt.  The result may lie outside the parameter bounds (the caller checks).
     """
-    problem, s_p = st.problem, st.s_p
+    s_p = st.s_p
     t0 = time.perf_counter()
+    objective = _ExplicitObjective(st)
+    outer = np.outer(s_p, s_p)
+    # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
+    # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
+    dof = st.n - st.model.n_p
+    known = st.data.sigma is not None
+    p = st.p0
     try:
-        point = problem.evaluate(st.p0)
+        cur = objective(p, False)
     except StateSolveError:
         return None
     newton = False
     prev_dec = None
     evals = 1
+    round_off = 16 * np.finfo(float).eps
     for it in range(1, _NEWTON_MAX_ITER + 1):
-        if not np.isfinite(point.objective):
+        if not np.isfinite(cur.f):
             return None
-        F = problem.information(point)
-        M = F
-        if newton:
-            S = point.sens.hessians(point.lam[None])[0]
-            M = F + S
-        try:
-            L = np.linalg.cholesky(M * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
+        if newton and cur.S is None:
+            cur = objective(p, True)
+        M = cur.F + cur.S if newton else cur.F
+        L = _cholesky(M * outer)
+        if L is None:
             if not newton:
                 return None
-            try:
-                L = np.linalg.cholesky(F * np.outer(s_p, s_p))
-            except np.linalg.LinAlgError:
+            L = _cholesky(cur.F * outer)
+            if L is None:
                 return None
-        v = np.linalg.solve(L, point.gradient * s_p)
+        v = _tri_solve(L, cur.g * s_p)
         dec = float(v @ v)
-        # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
-        # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
-        unit = 2 * point.objective / (st.n - st.model.n_p) if st.data.sigma is None else 1.0
+        unit = 1.0 if known else 2 * cur.f / dof
         if newton:
             # the decrement that round-off in the gradient's sum over the data alone produces
-            g_err = 16 * np.finfo(float).eps * np.einsum("jk,jkp->p", np.abs(point.lam), np.abs(point.sens.G)) * s_p
-            u = np.linalg.solve(L, g_err)
+            u = _tri_solve(L, round_off * cur.g_abs * s_p)
             if dec <= max(settings.refine_decrement * unit, float(u @ u)):
                 break
             if dec <= settings.decrement_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
-        d = -s_p * np.linalg.solve(L.T, v)
+        d = -s_p * _tri_solve(L, v, trans=1)
         if np.max(np.abs(d / s_p)) < 1e-13:
             break
         step, new = 1.0, None
         if newton and dec <= settings.decrement_tol * unit:
             try:                                   # quadratic region: the objective cannot resolve
-                new = problem.evaluate(point.p + d)   # the decrease any more; take the full step
+                new = objective(p + d, True)       # the decrease any more; take the full step
             except StateSolveError:
                 new = None
-            if new is not None and not np.isfinite(new.objective):
+            if new is not None and not np.isfinite(new.f):
                 new = None
+            p_new = p + d
         for _ in range(40 if new is None else 0):
             evals += 1
             if evals > _NEWTON_MAX_EVALS:
                 return None
+            p_new = p + step * d
             try:
-                trial = problem.evaluate(point.p + step * d)
+                trial = objective(p_new, newton)
             except StateSolveError:
                 trial = None
-            if trial is not None and trial.objective <= point.objective - 1e-4 * step * dec:
+            if trial is not None and trial.f <= cur.f - 1e-4 * step * dec:
                 new = trial
                 break
             step *= 0.5
@@ -732,17 +780,21 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
                 newton = True                      # Gauss-Newton cannot descend further: try Newton
                 continue
             return None
-        gain = point.objective - new.objective
+        gain = cur.f - new.f
         if not newton and (dec < 1e-4 * unit or gain < 0.05 * dec):
             newton = True
-        point = new
+        p, cur = p_new, new
     else:
         return None
-    res = IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
+    try:
+        point = st.problem.evaluate(p)
+    except StateSolveError:
+        return None
+    res = IpoptResult(x=p / s_p, f=point.objective, status="Solve_Succeeded",
                       message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
                               f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
                       wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
-    return res, point
+    return res, point, cur.S
 
 
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
@@ -763,11 +815,11 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     if not model.n_y and settings.explicit_newton:
         got = _solve_explicit_newton(st, settings)
         if got is not None:
-            r0, point = got
+            r0, point, S = got
             margin = 1e-6 * s_p
             lo, up = model.lower, model.upper
             if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
-                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point)
+                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
@@ -821,7 +873,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
     ref = refine(st.problem, point, settings.refine_steps if not np.any(sol.at_bound) else 0,
-                 stop_decrement=settings.refine_decrement)
+                 stop_decrement=settings.refine_decrement, start_S=sol.S)
     if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
         raise IdentificationError(
             f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "

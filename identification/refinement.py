@@ -37,8 +37,11 @@ def gauss_newton_information(G: np.ndarray, cw: np.ndarray, sig: np.ndarray) -> 
     """J^T Omega J = sum_jk c_jk G_jk^T G_jk / sigma_k^2, shape (n_p, n_p).
 
     ``G`` (n_q, n_S, n_p) sensitivities, ``cw`` (n_q, n_S) weighted counts, ``sig`` (n_S,).
+    One matrix product over the rows (j, k) (BLAS; an einsum of the three factors took 50 ms
+    for 1e6 rows).
     """
-    return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
+    A = G.reshape(-1, G.shape[-1])
+    return (A * (cw / sig ** 2).reshape(-1, 1)).T @ A
 
 
 def newton_decrement(H: np.ndarray, grad: np.ndarray, s_p: np.ndarray) -> float:
@@ -108,11 +111,20 @@ class ReducedProblem:
         """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
         w = np.asarray(weights, float)
         sig = np.asarray(sigma, float)
-        counts = data.counts().astype(float)
-        zbar = np.nan_to_num(data.means(), nan=0.0)
+        z = data.z
+        mask = np.isfinite(z)
+        if z.shape[0] == 1:                 # one series: the means are the values, no scatter
+            counts = mask[0].astype(float)
+            zbar = np.where(mask[0], z[0], 0.0)
+            const = 0.0
+        else:                               # the same numbers as data.counts() and data.means()
+            c = mask.sum(axis=0)
+            counts = c.astype(float)
+            zsum = np.where(mask, z, 0.0).sum(axis=0)
+            zbar = np.where(c > 0, zsum / np.maximum(c, 1), 0.0)
+            dev = np.where(mask, z - zbar[None], 0.0)
+            const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
         cw = counts * w[None, :]
-        dev = np.where(data.mask(), data.z - zbar[None], 0.0)
-        const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
         return cls(model, data, w, sig, np.asarray(p_scale, float), zbar, cw, const)
 
     def evaluate(self, p: np.ndarray, states0=None) -> ReducedPoint:
@@ -129,7 +141,7 @@ class ReducedProblem:
         with np.errstate(over="ignore"):            # a trial point far off may overflow: f = inf
             f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const
         lam = -self.cw * dev / self.sigma ** 2                      # d f / d h_jk
-        grad = np.einsum("jk,jkp->p", lam, sens.G)
+        grad = lam.reshape(-1) @ sens.G.reshape(-1, sens.G.shape[-1])
         return ReducedPoint(p, Y, sens, f, grad, lam)
 
     def information(self, point: ReducedPoint) -> np.ndarray:
@@ -158,8 +170,12 @@ class Refinement:
     steps: int
 
 
-def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0) -> Refinement:
+def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0,
+           start_S: np.ndarray | None = None) -> Refinement:
     """Exact reduced Newton steps p <- p - (J^T Omega J + S)^{-1} g from ``start``.
+
+    ``start_S``: the second-order term S at ``start.p`` when the caller has it already (saves
+    one evaluation of the second derivatives).
 
     A step is taken while the Hessian is positive definite, the state solves succeed and the
     objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
@@ -170,10 +186,11 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     lo, up = model.lower, model.upper
     point = start
     steps = 0
-    S_terms = None
+    S_terms = start_S
     for _ in range(max_steps):
         F = problem.information(point)
-        S_terms = point.sens.hessians(point.lam[None])[0]
+        if S_terms is None:
+            S_terms = point.sens.hessians(point.lam[None])[0]
         try:
             L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
         except np.linalg.LinAlgError:

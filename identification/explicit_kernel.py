@@ -1,0 +1,145 @@
+r"""The weighted least-squares terms of an explicit model in one evaluation over the data.
+
+For a model without states (y = h(p, q)) with per-(input, sensor) means zbar_jk and weights
+wt_jk = c_jk / sigma_k^2 (c_jk the weighted counts), one call returns the sums over the inputs
+
+.. math::
+
+    f = \tfrac12 \sum_{jk} wt_{jk}\, r_{jk}^2,\quad r_{jk} = h_k(p, q_j) - \bar z_{jk},\qquad
+    g = \sum_{jk} wt_{jk} r_{jk}\, \nabla_p h_{jk},\qquad
+    F = \sum_{jk} wt_{jk}\, \nabla_p h_{jk} \nabla_p h_{jk}^T,
+
+    a = \sum_{jk} |wt_{jk} r_{jk}|\, |\nabla_p h_{jk}|,\qquad
+    S = \sum_{jk} wt_{jk} r_{jk}\, \nabla^2_p h_{jk}\quad\text{(second order only)},
+
+i.e. the reduced objective (without the within-group scatter), its gradient, the Gauss-Newton
+information J^T Omega J, the bound of the gradient's round-off and the second-order term of the
+exact Hessian J^T Omega J + S, all exact by CasADi AD (the model's cached ``sens`` and
+``lag_hess``).  These are the terms of :class:`identification.refinement.ReducedProblem` in one
+evaluation instead of a mapped call, four NumPy sums and a second mapped call for S.
+
+Few inputs (below :data:`models.state.VECTORISE_MIN`): the per-input function mapped over the
+inputs with the sums as the map's reduction, expanded to one SX function, evaluated through one
+``FunctionBuffer`` per fit whose data arguments are set once.  Many inputs: the per-input
+function replayed by NumPy over all inputs (:class:`models.vectorised.VectorisedSX`), then
+summed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.contract import Model
+from models.errors import StateSolveError
+from models.state import VECTORISE_MIN, numerics
+from models.vectorised import VectorisedSX, vectorisable
+
+__all__ = ["ExplicitTerms", "explicit_terms"]
+
+#: mapped functions of at most this many inputs are expanded to one SX function (faster calls)
+_EXPAND_MAX = 256
+
+
+@dataclass(frozen=True)
+class ExplicitTerms:
+    """The sums of the module docstring at one p (``S`` is None unless asked for)."""
+
+    f: float
+    g: np.ndarray
+    F: np.ndarray
+    g_abs: np.ndarray
+    S: np.ndarray | None
+
+
+def _point_functions(model: Model):
+    """Per-input SX functions (p, q, zbar, wt) -> (f_j, g_j, F_j, a_j[, S_j]), kept in ``model.cache``."""
+    got = model.cache.get("identify.explicit_kernel", None)
+    if got is not None:
+        return got
+    num = numerics(model)
+    n_p, n_S = model.n_p, model.n_S
+    p, q = ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
+    zb, wt = ca.SX.sym("zbar", n_S), ca.SX.sym("wt", n_S)
+    y = ca.SX(0, 1)
+    h, _, _, _, hp = num.sens(y, p, q)
+    lam = wt * (h - zb)                                 # d f_j / d h_j
+    f = 0.5 * ca.dot(lam, h - zb)
+    g = ca.mtimes(hp.T, lam)
+    F = ca.densify(ca.mtimes(hp.T, ca.mtimes(ca.diag(wt), hp)))
+    a = ca.mtimes(ca.fabs(hp).T, ca.fabs(lam))
+    S = ca.densify(num.lag_hess(y, p, q, lam, ca.SX(0, 1)))
+    args = [p, q, zb, wt]
+    fns = (ca.Function("ls_terms", args, [f, ca.densify(g), F, ca.densify(a)]),
+           ca.Function("ls_terms2", args, [f, ca.densify(g), F, ca.densify(a), S]))
+    return model.cache.put("identify.explicit_kernel", None, fns)
+
+
+def _mapped(model: Model, second: bool, n: int):
+    """The per-input function of ``second`` order mapped over n inputs with summed outputs."""
+    key = (second, n)
+    got = model.cache.get("identify.explicit_kernel_map", key)
+    if got is None:
+        f = _point_functions(model)[int(second)]
+        got = f.map(f"{f.name()}_sum_{n}", "serial", n, [0], list(range(f.n_out())))
+        if n <= _EXPAND_MAX:
+            got = got.expand()
+        got = model.cache.put("identify.explicit_kernel_map", key, got, maxsize=16)
+    return got
+
+
+def explicit_terms(model: Model, inputs: np.ndarray, zbar: np.ndarray, wt: np.ndarray) -> "_Bound | None":
+    """An evaluator ``terms(p, second_order) -> ExplicitTerms`` of the sums of the module docstring
+    for the data (inputs (n_q, d_q), zbar and wt (n_q, n_S)), or None when the model has states
+    or is not stated in SX (the caller then uses the general path)."""
+    if model.n_y or model.symbolic != "SX":
+        return None
+    return _Bound(model, np.asarray(inputs, float), np.asarray(zbar, float), np.asarray(wt, float))
+
+
+class _Bound:
+    """The evaluator returned by :func:`explicit_terms` (one per fit; not shared between threads)."""
+
+    def __init__(self, model, inputs, zbar, wt):
+        self._model = model
+        self._n = n = inputs.shape[0]
+        self._data = (np.ascontiguousarray(inputs), np.ascontiguousarray(zbar), np.ascontiguousarray(wt))
+        self._p = np.zeros(model.n_p)
+        self._vec = None
+        self._buffers = [None, None]
+        if n >= VECTORISE_MIN:
+            fns = _point_functions(model)
+            if vectorisable(fns[1]):
+                self._vec = [VectorisedSX(f) for f in fns]
+
+    def _buffer(self, second: bool):
+        got = self._buffers[second]
+        if got is None:
+            fm = _mapped(self._model, second, self._n)
+            buf, ev = fm.buffer()
+            outs = [np.empty(fm.nnz_out(i)) for i in range(fm.n_out())]
+            buf.set_arg(0, memoryview(self._p))
+            for i, a in enumerate(self._data, 1):
+                buf.set_arg(i, memoryview(a))
+            for i, o in enumerate(outs):
+                buf.set_res(i, memoryview(o))
+            got = self._buffers[second] = (buf, ev, outs)
+        return got
+
+    def __call__(self, p: np.ndarray, second_order: bool) -> ExplicitTerms:
+        n_p = self._p.size
+        if self._vec is not None:
+            outs = [o.sum(axis=0) for o in self._vec[second_order](p, *self._data, n=self._n)]
+        else:
+            buf, ev, outs = self._buffer(second_order)
+            self._p[:] = p
+            ev()
+            if buf.ret() != 0:
+                raise StateSolveError(f"evaluation of the least-squares terms failed (CasADi return code {buf.ret()})")
+        S = None
+        if second_order:
+            S = outs[4].reshape(n_p, n_p)
+            S = 0.5 * (S + S.T)
+        F = outs[2].reshape(n_p, n_p)
+        return ExplicitTerms(float(outs[0][0]), outs[1].copy(), 0.5 * (F + F.T), outs[3].copy(), S)
