@@ -650,33 +650,36 @@ _NEWTON_MAX_EVALS = 50
 
 
 class _ExplicitObjective:
-    """Phi(p) of an explicit model with the sums of its derivatives (an
-    :class:`identification.explicit_kernel.ExplicitTerms` with Phi_0 included in ``f``): one
-    evaluation of the least-squares kernel for models stated in SX, else the reduced point of
-    :class:`ReducedProblem` and NumPy sums (models stated in MX)."""
+    """Phi(s_p ⊙ x) of an explicit model with the sums of its derivatives w.r.t. the scaled
+    parameters x (an :class:`identification.explicit_kernel.ExplicitTerms` with Phi_0 included
+    in ``f``): one evaluation of the least-squares kernel for models stated in SX, else the
+    reduced point of :class:`ReducedProblem` and NumPy sums (models stated in MX)."""
 
     def __init__(self, st: _Start):
         problem = st.problem
-        self._problem = problem
-        self._kernel = explicit_terms(st.model, st.data.inputs, problem.zbar, problem.cw / st.sig[None, :] ** 2)
+        self._problem, self._sp = problem, st.s_p
+        self._outer = np.outer(st.s_p, st.s_p)
+        self._kernel = explicit_terms(st.model, st.data.inputs, problem.zbar, problem.cw / st.sig[None, :] ** 2,
+                                      st.s_p)
 
-    def __call__(self, p: np.ndarray, second_order: bool) -> ExplicitTerms:
-        """The terms at p (``S`` when ``second_order``); raises StateSolveError when the
-        evaluation fails."""
+    def __call__(self, x: np.ndarray, second_order: bool) -> ExplicitTerms:
+        """The terms at p = s_p ⊙ x (``S`` when ``second_order``); raises StateSolveError when
+        the evaluation fails."""
         problem = self._problem
         if self._kernel is not None:
-            t = self._kernel(p, second_order)
-            return ExplicitTerms(t.f + problem.const, t.g, t.F, t.g_abs, t.S)
-        point = problem.evaluate(p)
-        G = point.sens.G.reshape(-1, p.size)
-        S = point.sens.hessians(point.lam[None])[0] if second_order else None
-        return ExplicitTerms(point.objective, point.gradient, problem.information(point),
-                             np.abs(point.lam).reshape(-1) @ np.abs(G), S)
+            t = self._kernel(x, second_order)
+            return t._replace(f=t.f + problem.const)
+        sp = self._sp
+        point = problem.evaluate(x * sp)
+        G = point.sens.G.reshape(-1, sp.size)
+        S = point.sens.hessians(point.lam[None])[0] * self._outer if second_order else None
+        return ExplicitTerms(point.objective, point.gradient * sp, problem.information(point) * self._outer,
+                             (np.abs(point.lam).reshape(-1) @ np.abs(G)) * sp, S)
 
 
 def _cholesky(M: np.ndarray):
     """The lower Cholesky factor of M (LAPACK dpotrf), or None when M is not positive definite."""
-    if not np.all(np.isfinite(M)):
+    if not math.isfinite(M.sum()):
         return None
     L, info = _potrf(M, lower=1, clean=1)
     return L if info == 0 else None
@@ -690,34 +693,34 @@ def _tri_solve(L: np.ndarray, b: np.ndarray, trans: int = 0) -> np.ndarray:
 def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
 
-    Far from the optimum Gauss-Newton steps d = -F^{-1} g (F = J^T Omega J); once a step
-    changes Phi by less than 10 % of the Gauss-Newton decrement's prediction, or that decrement
-    is below 1e-4 (chi^2 units), exact Newton steps d = -(F + S)^{-1} g with the second-order
-    term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
-    (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
-    below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
-    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one call of the
-    least-squares kernel over the data (:mod:`identification.explicit_kernel`: Phi, g, F and,
-    in the Newton phase, S together), so an iteration costs O(n) with a small constant and no
-    NLP is built.
+    In the scaled parameters x = p / s_p: far from the optimum Gauss-Newton steps d = -F^{-1} g
+    (F = J^T Omega J); once a step changes Phi by less than 10 % of the Gauss-Newton
+    decrement's prediction, or that decrement is below 1e-4 (chi^2 units), exact Newton steps
+    d = -(F + S)^{-1} g with the second-order term S by AD (Gauss-Newton again where F + S is
+    not positive definite).  Backtracking (Armijo, halving) on Phi.  Converged when the
+    decrement g^T M^{-1} g of the matrix used is below ``settings.refine_decrement`` after a
+    Newton step, or a step below 1e-13 parameter scales.  At most 60 iterations and 50
+    evaluations.  Every evaluation is one call of the least-squares kernel over the data
+    (:mod:`identification.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
+    an iteration costs O(n) with a small constant and no NLP is built.
 
     Returns (result, point, S): the solution as an :class:`IpoptResult` (status
     ``Solve_Succeeded``, the same acceptance as Ipopt's: a stationary point at the tolerance),
-    its reduced point and the second-order term S there (None when not evaluated), or None
-    when the iteration fails (singular F, failed line search, no convergence): the caller then
-    solves with Ipopt.  The result may lie outside the parameter bounds (the caller checks).
+    its reduced point and the second-order term S there (unscaled; None when not evaluated), or
+    None when the iteration fails (singular F, failed line search, no convergence): the caller
+    then solves with Ipopt.  The result may lie outside the parameter bounds (the caller checks).
     """
     s_p = st.s_p
     t0 = time.perf_counter()
     objective = _ExplicitObjective(st)
-    outer = np.outer(s_p, s_p)
     # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
     # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
     dof = st.n - st.model.n_p
     known = st.data.sigma is not None
-    p = st.p0
+    refine_dec, dec_tol = settings.refine_decrement, settings.decrement_tol
+    x = st.p0 / s_p
     try:
-        cur = objective(p, False)
+        cur = objective(x, False)
     except StateSolveError:
         return None
     newton = False
@@ -725,48 +728,48 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     evals = 1
     round_off = 16 * np.finfo(float).eps
     for it in range(1, _NEWTON_MAX_ITER + 1):
-        if not np.isfinite(cur.f):
+        if not math.isfinite(cur.f):
             return None
         if newton and cur.S is None:
-            cur = objective(p, True)
-        M = cur.F + cur.S if newton else cur.F
-        L = _cholesky(M * outer)
+            cur = objective(x, True)
+        L = _cholesky(cur.F + cur.S if newton else cur.F)
         if L is None:
             if not newton:
                 return None
-            L = _cholesky(cur.F * outer)
+            L = _cholesky(cur.F)
             if L is None:
                 return None
-        v = _tri_solve(L, cur.g * s_p)
+        v = _tri_solve(L, cur.g)
         dec = float(v @ v)
         unit = 1.0 if known else 2 * cur.f / dof
         if newton:
             # the decrement that round-off in the gradient's sum over the data alone produces
-            u = _tri_solve(L, round_off * cur.g_abs * s_p)
-            if dec <= max(settings.refine_decrement * unit, float(u @ u)):
+            u = _tri_solve(L, round_off * cur.g_abs)
+            if dec <= max(refine_dec * unit, float(u @ u)):
                 break
-            if dec <= settings.decrement_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
+            if dec <= dec_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
-        d = -s_p * _tri_solve(L, v, trans=1)
-        if np.max(np.abs(d / s_p)) < 1e-13:
+        d = _tri_solve(L, v, trans=1)
+        d *= -1.0
+        if abs(d).max() < 1e-13:
             break
         step, new = 1.0, None
-        if newton and dec <= settings.decrement_tol * unit:
+        if newton and dec <= dec_tol * unit:
+            x_new = x + d
             try:                                   # quadratic region: the objective cannot resolve
-                new = objective(p + d, True)       # the decrease any more; take the full step
+                new = objective(x_new, True)       # the decrease any more; take the full step
             except StateSolveError:
                 new = None
-            if new is not None and not np.isfinite(new.f):
+            if new is not None and not math.isfinite(new.f):
                 new = None
-            p_new = p + d
         for _ in range(40 if new is None else 0):
             evals += 1
             if evals > _NEWTON_MAX_EVALS:
                 return None
-            p_new = p + step * d
+            x_new = x + step * d
             try:
-                trial = objective(p_new, newton)
+                trial = objective(x_new, newton)
             except StateSolveError:
                 trial = None
             if trial is not None and trial.f <= cur.f - 1e-4 * step * dec:
@@ -774,7 +777,7 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
                 break
             step *= 0.5
         if new is None:
-            if newton and dec <= settings.decrement_tol * unit:
+            if newton and dec <= dec_tol * unit:
                 break                              # at round-off: the decrement certifies the optimum
             if not newton:
                 newton = True                      # Gauss-Newton cannot descend further: try Newton
@@ -783,18 +786,19 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
         gain = cur.f - new.f
         if not newton and (dec < 1e-4 * unit or gain < 0.05 * dec):
             newton = True
-        p, cur = p_new, new
+        x, cur = x_new, new
     else:
         return None
+    p = x * s_p
     try:
         point = st.problem.evaluate(p)
     except StateSolveError:
         return None
-    res = IpoptResult(x=p / s_p, f=point.objective, status="Solve_Succeeded",
+    res = IpoptResult(x=x, f=point.objective, status="Solve_Succeeded",
                       message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
                               f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
                       wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
-    return res, point, cur.S
+    return res, point, None if cur.S is None else cur.S / np.outer(s_p, s_p)
 
 
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:

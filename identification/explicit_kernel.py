@@ -26,7 +26,7 @@ summed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -42,9 +42,10 @@ __all__ = ["ExplicitTerms", "explicit_terms"]
 _EXPAND_MAX = 256
 
 
-@dataclass(frozen=True)
-class ExplicitTerms:
-    """The sums of the module docstring at one p (``S`` is None unless asked for)."""
+class ExplicitTerms(NamedTuple):
+    """The sums of the module docstring at one p, in scaled parameters p = s_p ⊙ x: ``g``, ``F``,
+    ``g_abs`` and ``S`` are those of Phi(s_p ⊙ x) w.r.t. x (g ⊙ s_p, D F D, a ⊙ s_p, D S D with
+    D = diag(s_p)); ``S`` is None unless asked for.  Read-only views of one array."""
 
     f: float
     g: np.ndarray
@@ -54,25 +55,31 @@ class ExplicitTerms:
 
 
 def _point_functions(model: Model):
-    """Per-input SX functions (p, q, zbar, wt) -> (f_j, g_j, F_j, a_j[, S_j]), kept in ``model.cache``."""
+    """Per-input SX functions (x, s_p, q, zbar, wt) -> packed (f_j, g_j, F_j, a_j[, S_j]) (scaled,
+    F and S symmetric by construction), kept in ``model.cache``."""
     got = model.cache.get("identify.explicit_kernel", None)
     if got is not None:
         return got
     num = numerics(model)
     n_p, n_S = model.n_p, model.n_S
-    p, q = ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
+    x, sp, q = ca.SX.sym("x", n_p), ca.SX.sym("s_p", n_p), ca.SX.sym("q", model.n_q_dim)
     zb, wt = ca.SX.sym("zbar", n_S), ca.SX.sym("wt", n_S)
+    p = x * sp
     y = ca.SX(0, 1)
     h, _, _, _, hp = num.sens(y, p, q)
-    lam = wt * (h - zb)                                 # d f_j / d h_j
+    hx = ca.mtimes(ca.densify(hp), ca.diag(sp))              # dh/dx
+    lam = wt * (h - zb)                                      # d f_j / d h_j
     f = 0.5 * ca.dot(lam, h - zb)
-    g = ca.mtimes(hp.T, lam)
-    F = ca.densify(ca.mtimes(hp.T, ca.mtimes(ca.diag(wt), hp)))
-    a = ca.mtimes(ca.fabs(hp).T, ca.fabs(lam))
-    S = ca.densify(num.lag_hess(y, p, q, lam, ca.SX(0, 1)))
-    args = [p, q, zb, wt]
-    fns = (ca.Function("ls_terms", args, [f, ca.densify(g), F, ca.densify(a)]),
-           ca.Function("ls_terms2", args, [f, ca.densify(g), F, ca.densify(a), S]))
+    g = ca.densify(ca.mtimes(hx.T, lam))
+    F = ca.densify(ca.mtimes(hx.T, ca.mtimes(ca.diag(wt), hx)))
+    F = ca.triu(F) + ca.triu(F, False).T                    # exactly symmetric
+    a = ca.densify(ca.mtimes(ca.fabs(hx).T, ca.fabs(lam)))
+    S = ca.densify(num.lag_hess(y, p, q, lam, ca.SX(0, 1))) * ca.mtimes(sp, sp.T)
+    S = 0.5 * (S + S.T)
+    args = [x, sp, q, zb, wt]
+    first = [f, g, ca.vec(F), a]
+    fns = (ca.Function("ls_terms", args, [ca.vertcat(*first)]),
+           ca.Function("ls_terms2", args, [ca.vertcat(*first, ca.vec(S))]))
     return model.cache.put("identify.explicit_kernel", None, fns)
 
 
@@ -82,30 +89,35 @@ def _mapped(model: Model, second: bool, n: int):
     got = model.cache.get("identify.explicit_kernel_map", key)
     if got is None:
         f = _point_functions(model)[int(second)]
-        got = f.map(f"{f.name()}_sum_{n}", "serial", n, [0], list(range(f.n_out())))
+        got = f.map(f"{f.name()}_sum_{n}", "serial", n, [0, 1], [0])
         if n <= _EXPAND_MAX:
             got = got.expand()
         got = model.cache.put("identify.explicit_kernel_map", key, got, maxsize=16)
     return got
 
 
-def explicit_terms(model: Model, inputs: np.ndarray, zbar: np.ndarray, wt: np.ndarray) -> "_Bound | None":
-    """An evaluator ``terms(p, second_order) -> ExplicitTerms`` of the sums of the module docstring
-    for the data (inputs (n_q, d_q), zbar and wt (n_q, n_S)), or None when the model has states
-    or is not stated in SX (the caller then uses the general path)."""
+def explicit_terms(model: Model, inputs: np.ndarray, zbar: np.ndarray, wt: np.ndarray,
+                   s_p: np.ndarray) -> "_Bound | None":
+    """An evaluator ``terms(x, second_order) -> ExplicitTerms`` of the sums of the module docstring
+    at p = s_p ⊙ x for the data (inputs (n_q, d_q), zbar and wt (n_q, n_S)), or None when the
+    model has states or is not stated in SX (the caller then uses the general path)."""
     if model.n_y or model.symbolic != "SX":
         return None
-    return _Bound(model, np.asarray(inputs, float), np.asarray(zbar, float), np.asarray(wt, float))
+    return _Bound(model, np.asarray(inputs, float), np.asarray(zbar, float), np.asarray(wt, float),
+                  np.asarray(s_p, float))
 
 
 class _Bound:
     """The evaluator returned by :func:`explicit_terms` (one per fit; not shared between threads)."""
 
-    def __init__(self, model, inputs, zbar, wt):
+    def __init__(self, model, inputs, zbar, wt, s_p):
         self._model = model
         self._n = n = inputs.shape[0]
+        self._n_p = n_p = model.n_p
+        self._sp = np.ascontiguousarray(s_p)
         self._data = (np.ascontiguousarray(inputs), np.ascontiguousarray(zbar), np.ascontiguousarray(wt))
-        self._p = np.zeros(model.n_p)
+        self._x = np.zeros(n_p)
+        self._cuts = np.cumsum([1, n_p, n_p * n_p, n_p])
         self._vec = None
         self._buffers = [None, None]
         if n >= VECTORISE_MIN:
@@ -118,28 +130,26 @@ class _Bound:
         if got is None:
             fm = _mapped(self._model, second, self._n)
             buf, ev = fm.buffer()
-            outs = [np.empty(fm.nnz_out(i)) for i in range(fm.n_out())]
-            buf.set_arg(0, memoryview(self._p))
-            for i, a in enumerate(self._data, 1):
+            out = np.empty(fm.nnz_out(0))
+            buf.set_arg(0, memoryview(self._x))
+            buf.set_arg(1, memoryview(self._sp))
+            for i, a in enumerate(self._data, 2):
                 buf.set_arg(i, memoryview(a))
-            for i, o in enumerate(outs):
-                buf.set_res(i, memoryview(o))
-            got = self._buffers[second] = (buf, ev, outs)
+            buf.set_res(0, memoryview(out))
+            got = self._buffers[second] = (buf, ev, out)
         return got
 
-    def __call__(self, p: np.ndarray, second_order: bool) -> ExplicitTerms:
-        n_p = self._p.size
+    def __call__(self, x: np.ndarray, second_order: bool) -> ExplicitTerms:
         if self._vec is not None:
-            outs = [o.sum(axis=0) for o in self._vec[second_order](p, *self._data, n=self._n)]
+            v = self._vec[second_order](x, self._sp, *self._data, n=self._n)[0].sum(axis=1)   # pairwise sums
         else:
-            buf, ev, outs = self._buffer(second_order)
-            self._p[:] = p
+            buf, ev, out = self._buffer(second_order)
+            self._x[:] = x
             ev()
             if buf.ret() != 0:
                 raise StateSolveError(f"evaluation of the least-squares terms failed (CasADi return code {buf.ret()})")
-        S = None
-        if second_order:
-            S = outs[4].reshape(n_p, n_p)
-            S = 0.5 * (S + S.T)
-        F = outs[2].reshape(n_p, n_p)
-        return ExplicitTerms(float(outs[0][0]), outs[1].copy(), 0.5 * (F + F.T), outs[3].copy(), S)
+            v = out.copy()
+        v.setflags(write=False)
+        n_p, (c1, c2, c3, c4) = self._n_p, self._cuts
+        return ExplicitTerms(float(v[0]), v[c1:c2], v[c2:c3].reshape(n_p, n_p), v[c3:c4],
+                             v[c4:].reshape(n_p, n_p) if second_order else None)

@@ -326,10 +326,10 @@ class _VectorisedBatched:
         res = []
         for o, (r, c, lin) in zip(self._v(*conv, n=n), self._out):
             if lin is not None:
-                d = np.zeros((n, r * c))
-                d[:, lin] = o
+                d = np.zeros((r * c, n))
+                d[lin] = o
                 o = d
-            res.append(o.reshape(n, c, r).transpose(0, 2, 1))
+            res.append(np.ascontiguousarray(o.T).reshape(n, c, r).transpose(0, 2, 1))
         return res
 
 

@@ -91,8 +91,10 @@ class VectorisedSX:
 
     ``VectorisedSX(f)(a_1, ..., a_k, n=n)`` takes per argument either an array (n, nnz_i) (row j
     = the argument's nonzeros at point j) or a 1-D array of its nnz_i nonzeros shared by all
-    points, and returns per output an array (n, nnz_o) of the output's nonzeros (column-major,
-    as CasADi stores them).
+    points, and returns per output a C-contiguous array (nnz_o, n): row i = the output's i-th
+    nonzero (column-major, as CasADi stores them) at every point, so that a sum over the points
+    (``out.sum(axis=1)``) runs along contiguous memory (NumPy's pairwise summation, round-off
+    O(log n) eps instead of O(n) eps).
 
     Raises
     ------
@@ -123,7 +125,7 @@ class VectorisedSX:
             else:
                 raise ValueError(f"{self.function.name()}: argument {i}: expected shape ({n}, {nnz}) or "
                                  f"{nnz} shared values, got {a.shape}")
-        outs = [np.empty((n, nnz)) for nnz in self._nnz_out]
+        outs = [np.empty((nnz, n)) for nnz in self._nnz_out]
         with np.errstate(all="ignore"):              # as CasADi: inf and NaN propagate silently
             for start in range(0, n, CHUNK):
                 stop = min(start + CHUNK, n)
@@ -144,4 +146,4 @@ class VectorisedSX:
             elif kind == 2:
                 w[ins[1]] = ins[2]
             else:
-                outs[ins[2]][start:stop, ins[3]] = w[ins[1]]
+                outs[ins[2]][ins[3], start:stop] = w[ins[1]]
