@@ -26,6 +26,7 @@ summed.
 """
 from __future__ import annotations
 
+import threading
 from typing import NamedTuple
 
 import casadi as ca
@@ -83,16 +84,37 @@ def _point_functions(model: Model):
     return model.cache.put("identify.explicit_kernel", None, fns)
 
 
-def _mapped(model: Model, second: bool, n: int):
+class _Mapped:
+    """The per-input function mapped over n inputs with summed outputs, and per thread one
+    ``FunctionBuffer`` of it with its output array and the evaluator whose arguments it holds
+    (creating a buffer costs about 20-50 us, as much as five evaluations of a small problem)."""
+
+    def __init__(self, f: ca.Function):
+        self.function = f
+        self._local = threading.local()
+
+    def buffer(self):
+        """[buffer, evaluate, output array, owner] of this thread (owner: the evaluator that set
+        the arguments last, None at first)."""
+        got = getattr(self._local, "state", None)
+        if got is None:
+            buf, ev = self.function.buffer()
+            out = np.empty(self.function.nnz_out(0))
+            buf.set_res(0, memoryview(out))
+            got = self._local.state = [buf, ev, out, None]
+        return got
+
+
+def _mapped(model: Model, second: bool, n: int) -> _Mapped:
     """The per-input function of ``second`` order mapped over n inputs with summed outputs."""
     key = (second, n)
     got = model.cache.get("identify.explicit_kernel_map", key)
     if got is None:
         f = _point_functions(model)[int(second)]
-        got = f.map(f"{f.name()}_sum_{n}", "serial", n, [0, 1], [0])
+        fm = f.map(f"{f.name()}_sum_{n}", "serial", n, [0, 1], [0])
         if n <= _EXPAND_MAX:
-            got = got.expand()
-        got = model.cache.put("identify.explicit_kernel_map", key, got, maxsize=16)
+            fm = fm.expand()
+        got = model.cache.put("identify.explicit_kernel_map", key, _Mapped(fm), maxsize=16)
     return got
 
 
@@ -126,24 +148,24 @@ class _Bound:
                 self._vec = [VectorisedSX(f) for f in fns]
 
     def _buffer(self, second: bool):
-        got = self._buffers[second]
-        if got is None:
-            fm = _mapped(self._model, second, self._n)
-            buf, ev = fm.buffer()
-            out = np.empty(fm.nnz_out(0))
+        mapped = self._buffers[second]
+        if mapped is None:
+            mapped = self._buffers[second] = _mapped(self._model, second, self._n)
+        state = mapped.buffer()
+        buf = state[0]
+        if state[3] is not self:                 # another evaluator used this thread's buffer last
             buf.set_arg(0, memoryview(self._x))
             buf.set_arg(1, memoryview(self._sp))
             for i, a in enumerate(self._data, 2):
                 buf.set_arg(i, memoryview(a))
-            buf.set_res(0, memoryview(out))
-            got = self._buffers[second] = (buf, ev, out)
-        return got
+            state[3] = self
+        return state
 
     def __call__(self, x: np.ndarray, second_order: bool) -> ExplicitTerms:
         if self._vec is not None:
             v = self._vec[second_order](x, self._sp, *self._data, n=self._n)[0].sum(axis=1)   # pairwise sums
         else:
-            buf, ev, out = self._buffer(second_order)
+            buf, ev, out, _ = self._buffer(second_order)
             self._x[:] = x
             ev()
             if buf.ret() != 0:

@@ -27,6 +27,7 @@ from models.contract import Model
 from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
+from . import dense
 from .measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
@@ -49,11 +50,10 @@ def newton_decrement(H: np.ndarray, grad: np.ndarray, s_p: np.ndarray) -> float:
 
     ``s_p``: parameter scales (the Cholesky factorisation is of diag(s_p) H diag(s_p)).
     """
-    try:
-        L = np.linalg.cholesky(H * np.outer(s_p, s_p))
-    except np.linalg.LinAlgError:
+    L = dense.cholesky_lower(H * np.outer(s_p, s_p))
+    if L is None:
         return float("inf")
-    v = np.linalg.solve(L, grad * s_p)
+    v = dense.tri_solve(L, grad * s_p)
     return float(v @ v)
 
 
@@ -187,18 +187,20 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     point = start
     steps = 0
     S_terms = start_S
+    F = dec = None                         # J^T Omega J and the decrement at ``point`` once known
     for _ in range(max_steps):
         F = problem.information(point)
         if S_terms is None:
             S_terms = point.sens.hessians(point.lam[None])[0]
-        try:
-            L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
+        L = dense.cholesky_lower((F + S_terms) * np.outer(s_p, s_p))
+        if L is None:
+            dec = float("inf")
             break
-        v = np.linalg.solve(L, point.gradient * s_p)
-        if float(v @ v) < stop_decrement:
+        v = dense.tri_solve(L, point.gradient * s_p)
+        dec = float(v @ v)
+        if dec < stop_decrement:
             break
-        dp = -s_p * np.linalg.solve(L.T, v)
+        dp = -s_p * dense.tri_solve(L, v, trans=1)
         if np.max(np.abs(dp / s_p)) < 1e-13:
             break                          # converged to round-off: keep p and its terms
         small = np.max(np.abs(dp / s_p)) < 1e-12
@@ -210,11 +212,14 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
         if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
             break
         point = new
-        S_terms = None
+        S_terms = F = dec = None
         steps += 1
         if small:
             break
     if S_terms is None:
         S_terms = point.sens.hessians(point.lam[None])[0]
-    F = problem.information(point)
-    return Refinement(point, S_terms, F, newton_decrement(F + S_terms, point.gradient, s_p), steps)
+    if F is None:
+        F = problem.information(point)
+    if dec is None:
+        dec = newton_decrement(F + S_terms, point.gradient, s_p)
+    return Refinement(point, S_terms, F, dec, steps)
