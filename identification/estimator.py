@@ -683,6 +683,65 @@ class _ExplicitObjective:
                              (np.abs(point.lam).reshape(-1) @ np.abs(G)) * sp, S)
 
 
+#: at most this many evaluations of :func:`_levenberg_marquardt`
+_LM_MAX_EVALS = 200
+
+
+def _levenberg_marquardt(st: _Start, objective: "_ExplicitObjective"):
+    r"""Levenberg-Marquardt iterations on the exact Gauss-Newton model, for starts where the
+    line-searched Gauss-Newton/Newton iteration of :func:`_solve_explicit_newton` fails.
+
+    In the scaled parameters x: d = -(F + mu diag(F))^{-1} g (F = J^T Omega J, g the gradient,
+    both exact by AD), accepted when the objective decreases by at least 1e-4 of the decrease
+    the Gauss-Newton model predicts; mu is updated by Nielsen's rule (mu <- mu max(1/3,
+    1 - (2 rho - 1)^3) on success, mu <- nu mu and nu <- 2 nu on failure; start mu = 1e-3
+    max diag F).  Stops once an undamped-size step (mu < 1e-6) is accepted with the Gauss-Newton
+    decrement g^T F^{-1} g below 1e-2 of the objective, or when the objective stalls (relative
+    decrease below 1e-10); at most :data:`_LM_MAX_EVALS` evaluations.  Returns the point reached
+    (the Newton iteration then finishes from it), or None.
+    """
+    x = st.p0 / st.s_p
+    try:
+        cur = objective(x, False)
+    except StateSolveError:
+        return None
+    if not math.isfinite(cur.f):
+        return None
+    D = np.diag(cur.F).copy()
+    mu, nu = 1e-3 * float(D.max()), 2.0
+    for _ in range(_LM_MAX_EVALS):
+        D = np.maximum(D, np.diag(cur.F))               # Marquardt's scaling, never shrinking
+        L = dense.cholesky_lower(cur.F + mu * np.diag(D))
+        if L is None:
+            mu, nu = mu * nu, 2 * nu
+            continue
+        d = -dense.tri_solve(L, dense.tri_solve(L, cur.g), trans=1)
+        pred = -(cur.g @ d + 0.5 * d @ (cur.F @ d))     # decrease predicted by the Gauss-Newton model
+        try:
+            new = objective(x + d, False)
+        except StateSolveError:
+            new = None
+        rho = (cur.f - new.f) / pred if new is not None and math.isfinite(new.f) and pred > 0 else -1.0
+        if rho > 1e-4:
+            stalled = cur.f - new.f <= 1e-10 * abs(cur.f)
+            x, cur = x + d, new
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            if stalled:
+                return x
+            if mu < 1e-6 * float(D.max()):
+                Lf = dense.cholesky_lower(cur.F)
+                if Lf is not None:
+                    v = dense.tri_solve(Lf, cur.g)
+                    if float(v @ v) < 1e-2 * max(cur.f, 1e-300):
+                        return x
+        else:
+            mu, nu = mu * nu, 2 * nu
+            if not math.isfinite(mu):
+                return None
+    return None
+
+
 def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
 
@@ -693,7 +752,9 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     not positive definite).  Backtracking (Armijo, halving) on Phi.  Converged when the
     decrement g^T M^{-1} g of the matrix used is below ``settings.refine_decrement`` after a
     Newton step, or a step below 1e-13 parameter scales.  At most 60 iterations and 50
-    evaluations.  Every evaluation is one call of the least-squares kernel over the data
+    evaluations; when that fails (far starts), Levenberg-Marquardt steps on the same exact
+    Gauss-Newton model (:func:`_levenberg_marquardt`) bring p closer and the iteration above
+    restarts from there.  Every evaluation is one call of the least-squares kernel over the data
     (:mod:`identification.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
     an iteration costs O(n) with a small constant and no NLP is built.
 
@@ -703,15 +764,23 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     None when the iteration fails (singular F, failed line search, no convergence): the caller
     then solves with Ipopt.  The result may lie outside the parameter bounds (the caller checks).
     """
-    s_p = st.s_p
     t0 = time.perf_counter()
     objective = _ExplicitObjective(st)
-    # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
-    # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
+    got = _newton_from(st, settings, objective, st.p0 / st.s_p, t0)
+    if got is None:
+        x = _levenberg_marquardt(st, objective)
+        if x is not None:
+            got = _newton_from(st, settings, objective, x, t0)
+    return got
+
+
+def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitObjective", x: np.ndarray,
+                 t0: float):
+    """The iteration of :func:`_solve_explicit_newton` from the scaled start x (same returns)."""
+    s_p = st.s_p
     dof = st.n - st.model.n_p
     known = st.data.sigma is not None
     refine_dec, dec_tol = settings.refine_decrement, settings.decrement_tol
-    x = st.p0 / s_p
     try:
         cur = objective(x, False)
     except StateSolveError:
@@ -734,6 +803,8 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
                 return None
         v = dense.tri_solve(L, cur.g)
         dec = float(v @ v)
+        # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
+        # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
         unit = 1.0 if known else 2 * cur.f / dof
         if newton:
             # the decrement that round-off in the gradient's sum over the data alone produces
