@@ -653,6 +653,9 @@ class _FullSpaceSolution:
 #: :func:`_solve_explicit_newton` (then Ipopt takes over: a far start should not cost twice)
 _NEWTON_MAX_ITER = 60
 _NEWTON_MAX_EVALS = 50
+#: a Gauss-Newton step halved more often than this ends the line-searched iteration (the
+#: Gauss-Newton model is poor there: :func:`_levenberg_marquardt` takes over)
+_GN_MAX_HALVINGS = 5
 
 
 class _ExplicitObjective:
@@ -752,9 +755,11 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     not positive definite).  Backtracking (Armijo, halving) on Phi.  Converged when the
     decrement g^T M^{-1} g of the matrix used is below ``settings.refine_decrement`` after a
     Newton step, or a step below 1e-13 parameter scales.  At most 60 iterations and 50
-    evaluations; when that fails (far starts), Levenberg-Marquardt steps on the same exact
-    Gauss-Newton model (:func:`_levenberg_marquardt`) bring p closer and the iteration above
-    restarts from there.  Every evaluation is one call of the least-squares kernel over the data
+    evaluations.  From a far start (a Gauss-Newton step halved more than
+    :data:`_GN_MAX_HALVINGS` times, or no convergence) Levenberg-Marquardt steps on the same
+    exact Gauss-Newton model (:func:`_levenberg_marquardt`) bring p closer and the iteration
+    restarts from there; when that fails too, the iteration runs once more from p0 with the full
+    line search (40 halvings).  Every evaluation is one call of the least-squares kernel over the data
     (:mod:`identification.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
     an iteration costs O(n) with a small constant and no NLP is built.
 
@@ -766,17 +771,21 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     """
     t0 = time.perf_counter()
     objective = _ExplicitObjective(st)
-    got = _newton_from(st, settings, objective, st.p0 / st.s_p, t0)
+    x0 = st.p0 / st.s_p
+    got = _newton_from(st, settings, objective, x0, t0, _GN_MAX_HALVINGS)
     if got is None:
         x = _levenberg_marquardt(st, objective)
         if x is not None:
             got = _newton_from(st, settings, objective, x, t0)
+    if got is None:                                # e.g. BoxBOD start1: LM stalls on a plateau
+        got = _newton_from(st, settings, objective, x0, t0)
     return got
 
 
 def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitObjective", x: np.ndarray,
-                 t0: float):
-    """The iteration of :func:`_solve_explicit_newton` from the scaled start x (same returns)."""
+                 t0: float, max_halvings: int = 40):
+    """The iteration of :func:`_solve_explicit_newton` from the scaled start x (same returns);
+    it gives up when a Gauss-Newton step needs more than ``max_halvings`` halvings."""
     s_p = st.s_p
     dof = st.n - st.model.n_p
     known = st.data.sigma is not None
@@ -827,10 +836,10 @@ def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitOb
                 new = None
             if new is not None and not math.isfinite(new.f):
                 new = None
-        for _ in range(40 if new is None else 0):
+        for k in range(40 if new is None else 0):
             evals += 1
-            if evals > _NEWTON_MAX_EVALS:
-                return None
+            if evals > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
+                return None                        # far from the optimum: Levenberg-Marquardt's turn
             x_new = x + step * d
             try:
                 trial = objective(x_new, newton)
