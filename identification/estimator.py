@@ -712,11 +712,15 @@ def _levenberg_marquardt(st: _Start, objective: "_ExplicitObjective"):
         return None
     D = np.diag(cur.F).copy()
     mu, nu = 1e-3 * float(D.max()), 2.0
+    if not (math.isfinite(mu) and mu > 0):
+        return None
     for _ in range(_LM_MAX_EVALS):
         D = np.maximum(D, np.diag(cur.F))               # Marquardt's scaling, never shrinking
         L = dense.cholesky_lower(cur.F + mu * np.diag(D))
         if L is None:
             mu, nu = mu * nu, 2 * nu
+            if not math.isfinite(mu):
+                return None
             continue
         d = -dense.tri_solve(L, dense.tri_solve(L, cur.g), trans=1)
         pred = -(cur.g @ d + 0.5 * d @ (cur.F @ d))     # decrease predicted by the Gauss-Newton model
