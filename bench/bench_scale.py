@@ -23,9 +23,12 @@ ratio mudoe / scipy, and the largest relative difference of the estimates.
 Run: ``python -m bench scale`` (sizes 1e2..1e6 explicit, 1e2..1e5 implicit); options
 ``--quick`` (up to 1e5 explicit, 1e4 implicit), ``--max-explicit=N``, ``--max-implicit=N``.
 
-``python -m bench scale --small [--rep=K]``: the small explicit problems instead (Rooney-Biegler,
-NIST Eckerle4 and MGH09 from both certified starts): per-fit time of a warm ``identify``
-against scipy least_squares with the exact Jacobian, medians of K repetitions (default 30).
+``python -m bench scale --small [--rep=K] [--rounds=R] [--against=/path/to/other/checkout]``: the
+small explicit problems instead (Rooney-Biegler, NIST Eckerle4 and MGH09 from both certified
+starts): per-fit wall and CPU time of a warm ``identify`` against scipy least_squares with the
+exact Jacobian (timed alternately in the same process), medians of K repetitions (default 30) in
+R fresh processes (default 2); with ``--against`` the other checkout's ``identify`` is timed in
+alternating processes of the same run (e.g. ``--against=/work/main`` for a before/after table).
 """
 from __future__ import annotations
 
@@ -215,41 +218,88 @@ def _small_problems():
     return out
 
 
-def small(rep: int = 30):
-    """Per-fit time of ``identify`` (warm: the model's functions built by a first fit) against
-    scipy least_squares with the exact NumPy Jacobian (trf, tolerances 1e-12, plus the
-    Gauss-Newton covariance), sigma unknown, medians of ``rep`` repetitions in one run."""
+def _small_one(index: int, rep: int) -> dict:
+    """Wall and CPU time per fit (medians of ``rep``) of ``identify`` (warm: the model's functions
+    built by a first fit) and of scipy least_squares with the exact NumPy Jacobian (trf,
+    tolerances 1e-12, plus the Gauss-Newton covariance) on small problem ``index``, sigma unknown."""
     from scipy.optimize import least_squares
     from identification import IdentificationError, Measurements, identify
     from models import Model
-    print(f"# small explicit problems, median of {rep} fits each  "
-          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
-    print("| problem | n | mudoe ms (solver) | scipy exact-J ms | scipy / mudoe | max rel diff p |")
-    print("|---|---|---|---|---|---|")
-    for name, h, f, jac, x, y, p0 in _small_problems():
-        model = Model.explicit([f"b{i + 1}" for i in range(p0.size)], ["x"], ["y"], h=h)
-        data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
-        try:
-            est = identify(model, data, p0=p0.copy())
-        except IdentificationError as exc:
-            print(f"| {name} | {x.size} | failed: {exc} | | | |")
+    name, h, f, jac, x, y, p0 = _small_problems()[index]
+    model = Model.explicit([f"b{i + 1}" for i in range(p0.size)], ["x"], ["y"], h=h)
+    data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
+    out = {"name": name, "n": int(x.size)}
+    try:
+        est = identify(model, data, p0=p0.copy())
+    except IdentificationError as exc:
+        out["error"] = str(exc)
+        return out
+    t_m, c_m, t_s, c_s = [], [], [], []
+    for _ in range(rep):                       # interleaved: both see the same load
+        t, c = time.perf_counter(), time.process_time()
+        identify(model, data, p0=p0.copy())
+        t_m.append(time.perf_counter() - t)
+        c_m.append(time.process_time() - c)
+        t, c = time.perf_counter(), time.process_time()
+        r = least_squares(lambda b: f(b, x) - y, p0, jac=lambda b: jac(b, x), method="trf",
+                          xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        np.linalg.inv(r.jac.T @ r.jac) * (2 * r.cost / (x.size - p0.size))
+        t_s.append(time.perf_counter() - t)
+        c_s.append(time.process_time() - c)
+    out.update(mudoe=float(np.median(t_m)), mudoe_cpu=float(np.median(c_m)), scipy=float(np.median(t_s)),
+               scipy_cpu=float(np.median(c_s)), solver=est.extra.get("solver"),
+               diff=float(np.max(np.abs(est.p - r.x) / np.abs(r.x))), p=est.p.tolist())
+    return out
+
+
+def _small_subprocess(tree: str | None, index: int, rep: int) -> dict:
+    """:func:`_small_one` in a fresh process importing the package from ``tree`` (None: this tree)."""
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = tree or here
+    cmd = [sys.executable, os.path.abspath(__file__), "--small-one", str(index), str(rep)]
+    out = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env, cwd=tree or here)
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def small(rep: int = 30, against: str | None = None, rounds: int = 2):
+    """Per-fit time of a warm ``identify`` against scipy least_squares with the exact Jacobian on
+    the small explicit problems (:func:`_small_one`), medians of ``rep`` fits each, in one run.
+
+    With ``against`` (the root of another checkout, e.g. main) the same fits are timed with that
+    tree's package too, in alternating fresh processes (``rounds`` each; the medians are over
+    all of them), so both see the same machine load."""
+    print(f"# small explicit problems, median of {rep} x {rounds} fits each  "
+          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}  nproc {os.cpu_count()}")
+    head = "| problem | n |" + (" other ms (CPU ms) |" if against else "") + \
+        " mudoe ms (CPU ms) (solver) | scipy exact-J ms (CPU ms) | scipy / mudoe wall (CPU) | max rel diff p |"
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    for index in range(len(_small_problems())):
+        runs = {"this": [], "other": []}
+        for _ in range(rounds):
+            if against:
+                runs["other"].append(_small_subprocess(against, index, rep))
+            runs["this"].append(_small_subprocess(None, index, rep))
+        this = runs["this"]
+        if "error" in this[0]:
+            print(f"| {this[0]['name']} | {this[0]['n']} | failed: {this[0]['error']} |")
             continue
-        t_m = []
-        for _ in range(rep):
-            t = time.perf_counter()
-            identify(model, data, p0=p0.copy())
-            t_m.append(time.perf_counter() - t)
-        t_s = []
-        for _ in range(rep):
-            t = time.perf_counter()
-            r = least_squares(lambda b: f(b, x) - y, p0, jac=lambda b: jac(b, x), method="trf",
-                              xtol=1e-12, ftol=1e-12, gtol=1e-12)
-            np.linalg.inv(r.jac.T @ r.jac) * (2 * r.cost / (x.size - p0.size))
-            t_s.append(time.perf_counter() - t)
-        tm, ts = float(np.median(t_m)), float(np.median(t_s))
-        diff = float(np.max(np.abs(est.p - r.x) / np.abs(r.x)))
-        print(f"| {name} | {x.size} | {1e3 * tm:.2f} ({est.extra.get('solver')}) | {1e3 * ts:.2f} | "
-              f"{ts / tm:.2f} | {diff:.1e} |", flush=True)
+
+        def med(rs, key):
+            return float(np.median([r[key] for r in rs]))
+        m, mc = med(this, "mudoe"), med(this, "mudoe_cpu")
+        s = med(this + runs["other"], "scipy")
+        sc = med(this + runs["other"], "scipy_cpu")
+        other = ""
+        if against:
+            o = runs["other"]
+            other = (f" failed |" if "error" in o[0] else
+                     f" {1e3 * med(o, 'mudoe'):.2f} ({1e3 * med(o, 'mudoe_cpu'):.2f}) |")
+        print(f"| {this[0]['name']} | {this[0]['n']} |{other} {1e3 * m:.2f} ({1e3 * mc:.2f}) ({this[0]['solver']}) | "
+              f"{1e3 * s:.2f} ({1e3 * sc:.2f}) | {s / m:.2f} ({sc / mc:.2f}) | {this[0]['diff']:.1e} |", flush=True)
 
 
 def main(argv=None):
@@ -258,9 +308,12 @@ def main(argv=None):
         who, kind, n = argv[1], argv[2], int(argv[3])
         print(json.dumps((_run_mudoe if who == "mudoe" else _run_scipy)(kind, n)))
         return
+    if argv and argv[0] == "--small-one":
+        print(json.dumps(_small_one(int(argv[1]), int(argv[2]))))
+        return
     if "--small" in argv:
         opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
-        small(int(opts.get("rep", 30)))
+        small(int(opts.get("rep", 30)), opts.get("against"), int(opts.get("rounds", 2)))
         return
     quick = "--quick" in argv
     opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)

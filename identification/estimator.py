@@ -27,9 +27,11 @@ import scipy.sparse as sps
 from scipy import special
 
 from models.contract import Model
+from . import dense
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
 from .measurements import Measurements
+from .explicit_kernel import ExplicitTerms, explicit_terms
 from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
@@ -538,10 +540,10 @@ def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
             f"({', '.join(sens_names)}) at any input (Assumption 3, rank(Omega J) = n_p, fails)",
             params=dead, sensors=sens_names)
     Jn = J / norms
-    sv, Vt = np.linalg.svd(Jn, full_matrices=False)[1:]
+    sv = dense.singular_values(Jn)
     ratio = sv[-1] / sv[0] if sv[0] > 0 else 0.0
     if J.shape[0] < model.n_p or ratio < rtol:
-        v = Vt[-1] if J.shape[0] >= model.n_p else np.ones(model.n_p)
+        v = np.linalg.svd(Jn, full_matrices=False)[2][-1] if J.shape[0] >= model.n_p else np.ones(model.n_p)
         involved = [model.param_names[i] for i in np.flatnonzero(np.abs(v) >= 0.1 * np.abs(v).max())]
         raise IdentifiabilityError(
             f"not identifiable: parameters {', '.join(involved)} cannot be told apart with sensors "
@@ -560,17 +562,19 @@ def covariance_from_terms(F, F2, S):
     """
     H = F + S
     n = F.shape[0]
-    Finv_F2 = np.linalg.solve(F, F2)
-    cov_gn = np.linalg.solve(F, Finv_F2.T).T
+    Finv_F2 = dense.solve(F, F2)
+    cov_gn = dense.solve(F, Finv_F2.T).T
     try:
         # singular means singular after normalising the parameters (D H D with D = diag(F)^-1/2):
         # the condition number of H itself also measures the parameters' units (NIST Hahn1: 1e17)
         d = 1.0 / np.sqrt(np.diag(F))
-        cond = np.linalg.cond(H * np.outer(d, d))
+        sv = dense.singular_values(H * np.outer(d, d))
+        with np.errstate(divide="ignore"):
+            cond = sv[0] / sv[-1]
         if not np.isfinite(cond) or cond > 1e15:
             raise np.linalg.LinAlgError
-        A = np.linalg.solve(H, F2)
-        cov = np.linalg.solve(H, A.T).T
+        A = dense.solve(H, F2)
+        cov = dense.solve(H, A.T).T
         ok = True
     except np.linalg.LinAlgError:
         cov, ok = np.full((n, n), np.nan), False
@@ -608,17 +612,23 @@ def _start(model, data, p0, weights, Y0) -> _Start:
     selected = np.flatnonzero(w > 0)
     if data.sigma is None:
         zs = data.z[:, :, selected]
-        spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+        if math.isfinite(zs.sum()):         # no missing value: np.std is nanstd's number, 10x faster
+            spread = float(np.std(zs)) or float(np.mean(np.abs(zs))) or 1.0
+        else:
+            spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
         sig = np.full(model.n_S, spread)
     else:
         sig = np.asarray(data.sigma, float)
-    try:
-        Y_init = _initial_states(model, p0, data.inputs, Y0)
-    except StateSolveError as exc:
-        raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
-                                  status="state solve failed") from None
     s_p = _param_scale(model, p0)
-    s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
+    if not model.n_y:                       # explicit: no states to solve or scale
+        Y_init, s_y, e_scale = np.zeros((data.n_q, 0)), np.ones(0), np.ones(0)
+    else:
+        try:
+            Y_init = _initial_states(model, p0, data.inputs, Y0)
+        except StateSolveError as exc:
+            raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
+                                      status="state solve failed") from None
+        s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
     return _Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
                   ReducedProblem.of(model, data, w, sig, s_p))
 
@@ -628,7 +638,7 @@ class _FullSpaceSolution:
     """Ipopt's solution of the full-space NLP: its result, the number of passes (1: the
     unbounded pass was kept, 2: the bounded problem was solved), p clipped to the bounds, the
     states, the parameters found at a bound and, when the reduced-space Newton solved it, its
-    reduced point at p."""
+    reduced point at p and the second-order term S there (None when not evaluated)."""
 
     result: IpoptResult
     passes: int
@@ -636,113 +646,236 @@ class _FullSpaceSolution:
     states: np.ndarray | None
     at_bound: np.ndarray
     point: ReducedPoint | None = None
+    S: np.ndarray | None = None
 
 
 #: at most this many Gauss-Newton/Newton iterations and objective evaluations of
 #: :func:`_solve_explicit_newton` (then Ipopt takes over: a far start should not cost twice)
 _NEWTON_MAX_ITER = 60
 _NEWTON_MAX_EVALS = 50
+#: a Gauss-Newton step halved more often than this ends the line-searched iteration (the
+#: Gauss-Newton model is poor there: :func:`_levenberg_marquardt` takes over)
+_GN_MAX_HALVINGS = 5
+
+
+class _ExplicitObjective:
+    """Phi(s_p ⊙ x) of an explicit model with the sums of its derivatives w.r.t. the scaled
+    parameters x (an :class:`identification.explicit_kernel.ExplicitTerms` with Phi_0 included
+    in ``f``): one evaluation of the least-squares kernel for models stated in SX, else the
+    reduced point of :class:`ReducedProblem` and NumPy sums (models stated in MX)."""
+
+    def __init__(self, st: _Start):
+        problem = st.problem
+        self._problem, self._sp = problem, st.s_p
+        self._outer = np.outer(st.s_p, st.s_p)
+        self._kernel = explicit_terms(st.model, st.data.inputs, problem.zbar, problem.cw / st.sig[None, :] ** 2,
+                                      st.s_p)
+
+    def __call__(self, x: np.ndarray, second_order: bool) -> ExplicitTerms:
+        """The terms at p = s_p ⊙ x (``S`` when ``second_order``); raises StateSolveError when
+        the evaluation fails."""
+        problem = self._problem
+        if self._kernel is not None:
+            t = self._kernel(x, second_order)
+            return t._replace(f=t.f + problem.const)
+        sp = self._sp
+        point = problem.evaluate(x * sp)
+        G = point.sens.G.reshape(-1, sp.size)
+        S = point.sens.hessians(point.lam[None])[0] * self._outer if second_order else None
+        return ExplicitTerms(point.objective, point.gradient * sp, problem.information(point) * self._outer,
+                             (np.abs(point.lam).reshape(-1) @ np.abs(G)) * sp, S)
+
+
+#: at most this many evaluations of :func:`_levenberg_marquardt`
+_LM_MAX_EVALS = 200
+
+
+def _levenberg_marquardt(st: _Start, objective: "_ExplicitObjective"):
+    r"""Levenberg-Marquardt iterations on the exact Gauss-Newton model, for starts where the
+    line-searched Gauss-Newton/Newton iteration of :func:`_solve_explicit_newton` fails.
+
+    In the scaled parameters x: d = -(F + mu diag(F))^{-1} g (F = J^T Omega J, g the gradient,
+    both exact by AD), accepted when the objective decreases by at least 1e-4 of the decrease
+    the Gauss-Newton model predicts; mu is updated by Nielsen's rule (mu <- mu max(1/3,
+    1 - (2 rho - 1)^3) on success, mu <- nu mu and nu <- 2 nu on failure; start mu = 1e-3
+    max diag F).  Stops once an undamped-size step (mu < 1e-6) is accepted with the Gauss-Newton
+    decrement g^T F^{-1} g below 1e-2 of the objective, or when the objective stalls (relative
+    decrease below 1e-10); at most :data:`_LM_MAX_EVALS` evaluations.  Returns the point reached
+    (the Newton iteration then finishes from it), or None.
+    """
+    x = st.p0 / st.s_p
+    try:
+        cur = objective(x, False)
+    except StateSolveError:
+        return None
+    if not math.isfinite(cur.f):
+        return None
+    D = np.diag(cur.F).copy()
+    mu, nu = 1e-3 * float(D.max()), 2.0
+    if not (math.isfinite(mu) and mu > 0):
+        return None
+    for _ in range(_LM_MAX_EVALS):
+        D = np.maximum(D, np.diag(cur.F))               # Marquardt's scaling, never shrinking
+        L = dense.cholesky_lower(cur.F + mu * np.diag(D))
+        if L is None:
+            mu, nu = mu * nu, 2 * nu
+            if not math.isfinite(mu):
+                return None
+            continue
+        d = -dense.tri_solve(L, dense.tri_solve(L, cur.g), trans=1)
+        pred = -(cur.g @ d + 0.5 * d @ (cur.F @ d))     # decrease predicted by the Gauss-Newton model
+        try:
+            new = objective(x + d, False)
+        except StateSolveError:
+            new = None
+        rho = (cur.f - new.f) / pred if new is not None and math.isfinite(new.f) and pred > 0 else -1.0
+        if rho > 1e-4:
+            stalled = cur.f - new.f <= 1e-10 * abs(cur.f)
+            x, cur = x + d, new
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            if stalled:
+                return x
+            if mu < 1e-6 * float(D.max()):
+                Lf = dense.cholesky_lower(cur.F)
+                if Lf is not None:
+                    v = dense.tri_solve(Lf, cur.g)
+                    if float(v @ v) < 1e-2 * max(cur.f, 1e-300):
+                        return x
+        else:
+            mu, nu = mu * nu, 2 * nu
+            if not math.isfinite(mu):
+                return None
+    return None
 
 
 def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     r"""Minimise the reduced objective Phi(p) of an explicit model by exact Newton steps.
 
-    Far from the optimum Gauss-Newton steps d = -F^{-1} g (F = J^T Omega J); once a step
-    changes Phi by less than 10 % of the Gauss-Newton decrement's prediction, or that decrement
-    is below 1e-4 (chi^2 units), exact Newton steps d = -(F + S)^{-1} g with the second-order
-    term S by AD (Gauss-Newton again where F + S is not positive definite).  Backtracking
-    (Armijo, halving) on Phi.  Converged when the decrement g^T M^{-1} g of the matrix used is
-    below ``settings.refine_decrement`` after a Newton step, or a step below 1e-13 parameter
-    scales.  At most 60 iterations and 50 evaluations.  Every evaluation is one mapped call
-    over the data (:func:`models.sensitivity.sensitivities`), so an iteration costs O(n) with a
-    small constant and no NLP is built.
+    In the scaled parameters x = p / s_p: far from the optimum Gauss-Newton steps d = -F^{-1} g
+    (F = J^T Omega J); once a step changes Phi by less than 10 % of the Gauss-Newton
+    decrement's prediction, or that decrement is below 1e-4 (chi^2 units), exact Newton steps
+    d = -(F + S)^{-1} g with the second-order term S by AD (Gauss-Newton again where F + S is
+    not positive definite).  Backtracking (Armijo, halving) on Phi.  Converged when the
+    decrement g^T M^{-1} g of the matrix used is below ``settings.refine_decrement`` after a
+    Newton step, or a step below 1e-13 parameter scales.  At most 60 iterations and 50
+    evaluations.  From a far start (a Gauss-Newton step halved more than
+    :data:`_GN_MAX_HALVINGS` times, or no convergence) Levenberg-Marquardt steps on the same
+    exact Gauss-Newton model (:func:`_levenberg_marquardt`) bring p closer and the iteration
+    restarts from there; when that fails too, the iteration runs once more from p0 with the full
+    line search (40 halvings).  Every evaluation is one call of the least-squares kernel over the data
+    (:mod:`identification.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
+    an iteration costs O(n) with a small constant and no NLP is built.
 
-    Returns the solution as an :class:`IpoptResult` (status ``Solve_Succeeded``, the same
-    acceptance as Ipopt's: a stationary point at the tolerance) with its reduced point, or None when the iteration
-    fails (singular F, failed line search, no convergence): the caller then solves with Ipopt.
-    The result may lie outside the parameter bounds (the caller checks).
+    Returns (result, point, S): the solution as an :class:`IpoptResult` (status
+    ``Solve_Succeeded``, the same acceptance as Ipopt's: a stationary point at the tolerance),
+    its reduced point and the second-order term S there (unscaled; None when not evaluated), or
+    None when the iteration fails (singular F, failed line search, no convergence): the caller
+    then solves with Ipopt.  The result may lie outside the parameter bounds (the caller checks).
     """
-    problem, s_p = st.problem, st.s_p
     t0 = time.perf_counter()
+    objective = _ExplicitObjective(st)
+    x0 = st.p0 / st.s_p
+    got = _newton_from(st, settings, objective, x0, t0, _GN_MAX_HALVINGS)
+    if got is None:
+        x = _levenberg_marquardt(st, objective)
+        if x is not None:
+            got = _newton_from(st, settings, objective, x, t0)
+    if got is None:                                # e.g. BoxBOD start1: LM stalls on a plateau
+        got = _newton_from(st, settings, objective, x0, t0)
+    return got
+
+
+def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitObjective", x: np.ndarray,
+                 t0: float, max_halvings: int = 40):
+    """The iteration of :func:`_solve_explicit_newton` from the scaled start x (same returns);
+    it gives up when a Gauss-Newton step needs more than ``max_halvings`` halvings."""
+    s_p = st.s_p
+    dof = st.n - st.model.n_p
+    known = st.data.sigma is not None
+    refine_dec, dec_tol = settings.refine_decrement, settings.decrement_tol
     try:
-        point = problem.evaluate(st.p0)
+        cur = objective(x, False)
     except StateSolveError:
         return None
     newton = False
     prev_dec = None
     evals = 1
+    round_off = 16 * np.finfo(float).eps
     for it in range(1, _NEWTON_MAX_ITER + 1):
-        if not np.isfinite(point.objective):
+        if not math.isfinite(cur.f):
             return None
-        F = problem.information(point)
-        M = F
-        if newton:
-            S = point.sens.hessians(point.lam[None])[0]
-            M = F + S
-        try:
-            L = np.linalg.cholesky(M * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
+        if newton and cur.S is None:
+            cur = objective(x, True)
+        L = dense.cholesky_lower(cur.F + cur.S if newton else cur.F)
+        if L is None:
             if not newton:
                 return None
-            try:
-                L = np.linalg.cholesky(F * np.outer(s_p, s_p))
-            except np.linalg.LinAlgError:
+            L = dense.cholesky_lower(cur.F)
+            if L is None:
                 return None
-        v = np.linalg.solve(L, point.gradient * s_p)
+        v = dense.tri_solve(L, cur.g)
         dec = float(v @ v)
         # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
-        unit = 2 * point.objective / (st.n - st.model.n_p) if st.data.sigma is None else 1.0
+        unit = 1.0 if known else 2 * cur.f / dof
         if newton:
             # the decrement that round-off in the gradient's sum over the data alone produces
-            g_err = 16 * np.finfo(float).eps * np.einsum("jk,jkp->p", np.abs(point.lam), np.abs(point.sens.G)) * s_p
-            u = np.linalg.solve(L, g_err)
-            if dec <= max(settings.refine_decrement * unit, float(u @ u)):
+            u = dense.tri_solve(L, round_off * cur.g_abs)
+            if dec <= max(refine_dec * unit, float(u @ u)):
                 break
-            if dec <= settings.decrement_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
+            if dec <= dec_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
-        d = -s_p * np.linalg.solve(L.T, v)
-        if np.max(np.abs(d / s_p)) < 1e-13:
+        d = dense.tri_solve(L, v, trans=1)
+        d *= -1.0
+        if abs(d).max() < 1e-13:
             break
         step, new = 1.0, None
-        if newton and dec <= settings.decrement_tol * unit:
+        if newton and dec <= dec_tol * unit:
+            x_new = x + d
             try:                                   # quadratic region: the objective cannot resolve
-                new = problem.evaluate(point.p + d)   # the decrease any more; take the full step
+                new = objective(x_new, True)       # the decrease any more; take the full step
             except StateSolveError:
                 new = None
-            if new is not None and not np.isfinite(new.objective):
+            if new is not None and not math.isfinite(new.f):
                 new = None
-        for _ in range(40 if new is None else 0):
+        for k in range(40 if new is None else 0):
             evals += 1
-            if evals > _NEWTON_MAX_EVALS:
-                return None
+            if evals > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
+                return None                        # far from the optimum: Levenberg-Marquardt's turn
+            x_new = x + step * d
             try:
-                trial = problem.evaluate(point.p + step * d)
+                trial = objective(x_new, newton)
             except StateSolveError:
                 trial = None
-            if trial is not None and trial.objective <= point.objective - 1e-4 * step * dec:
+            if trial is not None and trial.f <= cur.f - 1e-4 * step * dec:
                 new = trial
                 break
             step *= 0.5
         if new is None:
-            if newton and dec <= settings.decrement_tol * unit:
+            if newton and dec <= dec_tol * unit:
                 break                              # at round-off: the decrement certifies the optimum
             if not newton:
                 newton = True                      # Gauss-Newton cannot descend further: try Newton
                 continue
             return None
-        gain = point.objective - new.objective
+        gain = cur.f - new.f
         if not newton and (dec < 1e-4 * unit or gain < 0.05 * dec):
             newton = True
-        point = new
+        x, cur = x_new, new
     else:
         return None
-    res = IpoptResult(x=point.p / s_p, f=point.objective, status="Solve_Succeeded",
+    p = x * s_p
+    try:
+        point = st.problem.evaluate(p)
+    except StateSolveError:
+        return None
+    res = IpoptResult(x=x, f=point.objective, status="Solve_Succeeded",
                       message=f"exact reduced-space Newton converged in {it} iterations (Newton decrement "
                               f"{dec:.1e}); Ipopt was not needed", accepted=True, iterations=it,
                       wall_time=time.perf_counter() - t0, stats={"solver": "reduced Newton"})
-    return res, point
+    return res, point, None if cur.S is None else cur.S / np.outer(s_p, s_p)
 
 
 def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
@@ -763,11 +896,11 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     if not model.n_y and settings.explicit_newton:
         got = _solve_explicit_newton(st, settings)
         if got is not None:
-            r0, point = got
+            r0, point, S = got
             margin = 1e-6 * s_p
             lo, up = model.lower, model.upper
             if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
-                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point)
+                return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
@@ -821,7 +954,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
     ref = refine(st.problem, point, settings.refine_steps if not np.any(sol.at_bound) else 0,
-                 stop_decrement=settings.refine_decrement)
+                 stop_decrement=settings.refine_decrement, start_S=sol.S)
     if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
         raise IdentificationError(
             f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "
@@ -841,7 +974,10 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     sens = point.sens
     cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected)
     F = ref.information
-    F2 = gauss_newton_information(sens.G, st.problem.cw * st.w[None, :], st.sig)
+    if np.all((st.w == 0) | (st.w == 1)):    # w^2 = w: J^T Omega^2 J is J^T Omega J (same sums)
+        F2 = F
+    else:
+        F2 = gauss_newton_information(sens.G, st.problem.cw * st.w[None, :], st.sig)
     resid = data.z - sens.h[None]
     rss = float(np.nansum(resid[:, :, st.selected] ** 2))
     dof = st.n - model.n_p
@@ -929,11 +1065,11 @@ def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
     if cond ** 2 > settings.ill_conditioned:
         notes.append(f"ill-conditioned: the normalised information J^T Omega J has condition number "
                      f"{cond ** 2:.2e}; parameters are strongly correlated and their errors large")
-    s_ratio = np.linalg.norm(Sn, 2) / np.linalg.norm(Fn, 2)
+    s_ratio = dense.singular_values(Sn)[0] / dense.singular_values(Fn)[0]     # ||Sn||_2 / ||Fn||_2
     if s_ratio > settings.s_ratio_note:
         notes.append(f"second-order term large: ||S|| is {100 * s_ratio:.3g} % of ||J^T Omega J|| (normalised); "
                      "the model fits poorly or is strongly nonlinear, so cov and cov_gn differ")
-    if H_ok and np.min(np.linalg.eigvalsh(H * np.outer(Dn, Dn))) <= 0:
+    if H_ok and dense.sym_eigenvalues(H * np.outer(Dn, Dn))[0] <= 0:
         notes.append("H = J^T Omega J + S is not positive definite: the estimate is not a strict local "
                      "minimum in the reduced space; treat cov with caution")
     if data.sigma is not None and dof > 0:

@@ -27,6 +27,7 @@ from models.contract import Model
 from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
+from . import dense
 from .measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
@@ -37,8 +38,11 @@ def gauss_newton_information(G: np.ndarray, cw: np.ndarray, sig: np.ndarray) -> 
     """J^T Omega J = sum_jk c_jk G_jk^T G_jk / sigma_k^2, shape (n_p, n_p).
 
     ``G`` (n_q, n_S, n_p) sensitivities, ``cw`` (n_q, n_S) weighted counts, ``sig`` (n_S,).
+    One matrix product over the rows (j, k) (BLAS; an einsum of the three factors took 50 ms
+    for 1e6 rows).
     """
-    return np.einsum("jk,jkp,jkr->pr", cw / sig ** 2, G, G)
+    A = G.reshape(-1, G.shape[-1])
+    return (A * (cw / sig ** 2).reshape(-1, 1)).T @ A
 
 
 def newton_decrement(H: np.ndarray, grad: np.ndarray, s_p: np.ndarray) -> float:
@@ -46,11 +50,10 @@ def newton_decrement(H: np.ndarray, grad: np.ndarray, s_p: np.ndarray) -> float:
 
     ``s_p``: parameter scales (the Cholesky factorisation is of diag(s_p) H diag(s_p)).
     """
-    try:
-        L = np.linalg.cholesky(H * np.outer(s_p, s_p))
-    except np.linalg.LinAlgError:
+    L = dense.cholesky_lower(H * np.outer(s_p, s_p))
+    if L is None:
         return float("inf")
-    v = np.linalg.solve(L, grad * s_p)
+    v = dense.tri_solve(L, grad * s_p)
     return float(v @ v)
 
 
@@ -108,11 +111,20 @@ class ReducedProblem:
         """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
         w = np.asarray(weights, float)
         sig = np.asarray(sigma, float)
-        counts = data.counts().astype(float)
-        zbar = np.nan_to_num(data.means(), nan=0.0)
+        z = data.z
+        mask = np.isfinite(z)
+        if z.shape[0] == 1:                 # one series: the means are the values, no scatter
+            counts = mask[0].astype(float)
+            zbar = np.where(mask[0], z[0], 0.0)
+            const = 0.0
+        else:                               # the same numbers as data.counts() and data.means()
+            c = mask.sum(axis=0)
+            counts = c.astype(float)
+            zsum = np.where(mask, z, 0.0).sum(axis=0)
+            zbar = np.where(c > 0, zsum / np.maximum(c, 1), 0.0)
+            dev = np.where(mask, z - zbar[None], 0.0)
+            const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
         cw = counts * w[None, :]
-        dev = np.where(data.mask(), data.z - zbar[None], 0.0)
-        const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
         return cls(model, data, w, sig, np.asarray(p_scale, float), zbar, cw, const)
 
     def evaluate(self, p: np.ndarray, states0=None) -> ReducedPoint:
@@ -129,7 +141,7 @@ class ReducedProblem:
         with np.errstate(over="ignore"):            # a trial point far off may overflow: f = inf
             f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const
         lam = -self.cw * dev / self.sigma ** 2                      # d f / d h_jk
-        grad = np.einsum("jk,jkp->p", lam, sens.G)
+        grad = lam.reshape(-1) @ sens.G.reshape(-1, sens.G.shape[-1])
         return ReducedPoint(p, Y, sens, f, grad, lam)
 
     def information(self, point: ReducedPoint) -> np.ndarray:
@@ -158,8 +170,12 @@ class Refinement:
     steps: int
 
 
-def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0) -> Refinement:
+def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0,
+           start_S: np.ndarray | None = None) -> Refinement:
     """Exact reduced Newton steps p <- p - (J^T Omega J + S)^{-1} g from ``start``.
+
+    ``start_S``: the second-order term S at ``start.p`` when the caller has it already (saves
+    one evaluation of the second derivatives).
 
     A step is taken while the Hessian is positive definite, the state solves succeed and the
     objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
@@ -170,18 +186,21 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     lo, up = model.lower, model.upper
     point = start
     steps = 0
-    S_terms = None
+    S_terms = start_S
+    F = dec = None                         # J^T Omega J and the decrement at ``point`` once known
     for _ in range(max_steps):
         F = problem.information(point)
-        S_terms = point.sens.hessians(point.lam[None])[0]
-        try:
-            L = np.linalg.cholesky((F + S_terms) * np.outer(s_p, s_p))
-        except np.linalg.LinAlgError:
+        if S_terms is None:
+            S_terms = point.sens.hessians(point.lam[None])[0]
+        L = dense.cholesky_lower((F + S_terms) * np.outer(s_p, s_p))
+        if L is None:
+            dec = float("inf")
             break
-        v = np.linalg.solve(L, point.gradient * s_p)
-        if float(v @ v) < stop_decrement:
+        v = dense.tri_solve(L, point.gradient * s_p)
+        dec = float(v @ v)
+        if dec < stop_decrement:
             break
-        dp = -s_p * np.linalg.solve(L.T, v)
+        dp = -s_p * dense.tri_solve(L, v, trans=1)
         if np.max(np.abs(dp / s_p)) < 1e-13:
             break                          # converged to round-off: keep p and its terms
         small = np.max(np.abs(dp / s_p)) < 1e-12
@@ -193,11 +212,14 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
         if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
             break
         point = new
-        S_terms = None
+        S_terms = F = dec = None
         steps += 1
         if small:
             break
     if S_terms is None:
         S_terms = point.sens.hessians(point.lam[None])[0]
-    F = problem.information(point)
-    return Refinement(point, S_terms, F, newton_decrement(F + S_terms, point.gradient, s_p), steps)
+    if F is None:
+        F = problem.information(point)
+    if dec is None:
+        dec = newton_decrement(F + S_terms, point.gradient, s_p)
+    return Refinement(point, S_terms, F, dec, steps)

@@ -550,3 +550,29 @@ def test_one_state_model_fits_like_its_explicit_twin():
     ei, ee = identify(implicit, data, [0.8, 0.2]), identify(explicit, data, [0.8, 0.2])
     np.testing.assert_allclose(ei.p, ee.p, rtol=1e-8)
     np.testing.assert_allclose(ei.cov, ee.cov, rtol=1e-6)
+
+
+def test_far_start_stays_on_the_reduced_newton_path_and_equals_the_ipopt_fit():
+    """Eckerle4 from NIST's far start1: the Newton iteration alone fails there; Levenberg-Marquardt
+    steps on the exact Gauss-Newton model bring it into reach, and the estimate and covariance
+    equal the full-space Ipopt fit (explicit_newton off) and the certified values."""
+    import importlib.util
+    import pathlib
+    import sys
+    path = pathlib.Path(__file__).with_name("nist.py")
+    spec = importlib.util.spec_from_file_location("nist_data", path)
+    nist = importlib.util.module_from_spec(spec)
+    sys.modules["nist_data"] = nist
+    spec.loader.exec_module(nist)
+    d = nist.load("Eckerle4")
+    fun = nist.MODELS["Eckerle4"]
+    model = Model.explicit(["b1", "b2", "b3"], ["x"], ["y"], h=lambda p, q: fun(p, q[0]))
+    data = Measurements(d.x, d.y.reshape(1, -1, 1), sigma=None)
+    est = identify(model, data, p0=d.start1)
+    ref = identify(model, data, p0=d.start1, settings=IdentifySettings(explicit_newton=False))
+    assert est.extra["solver"] == "reduced Newton"
+    assert ref.extra["solver"] == "ipopt"
+    np.testing.assert_allclose(est.p, d.certified, rtol=1e-9)
+    np.testing.assert_allclose(est.p, ref.p, rtol=1e-10)
+    np.testing.assert_allclose(est.cov, ref.cov, rtol=1e-8)
+    assert est.notes == ref.notes
