@@ -27,6 +27,7 @@ Run ``python -m bench coverage --reps=300 --boot=0 --workers=2 --cases=mm,mm_dee
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -133,11 +134,16 @@ def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
     out["errors"] = []
     out["inf"] = 0
     out["t_profile"] = math.nan
+    out["flagged"] = math.nan
     try:
         est = identify(c.model, data, c.p0, weights=c.weights)
     except IdentificationError as exc:
         out["errors"].append(("fit", str(exc).splitlines()[0][:200]))
         return out
+    try:
+        out["flagged"] = float(not est.curvature.trustworthy)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        out["errors"].append(("curvature", str(exc).splitlines()[0][:200]))
     ci = est.conf_int(0.05)
     out["wald"] = ((ci[:, 0] <= c.p_true) & (c.p_true <= ci[:, 1])).astype(float)
     t0 = time.perf_counter()
@@ -164,7 +170,30 @@ def _chunk(name, items, n_boot):
     return [(i, replicate(name, s, n_boot)) for i, s in items]
 
 
-def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int) -> list:
+def _save(path, name: str, items: list) -> None:
+    """Append replications (index, result) of case ``name`` to a JSON-lines file (partial runs survive)."""
+    if path is None:
+        return
+    with open(path, "a", encoding="utf-8") as f:
+        for i, r in items:
+            row = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
+            f.write(json.dumps(dict(case=name, index=i, **row), allow_nan=True) + "\n")
+
+
+def load(path) -> dict:
+    """Replications saved by ``--jsonl``: {case: [result, ...]} (arrays restored, by index)."""
+    out = {}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            row = json.loads(line)
+            name, i = row.pop("case"), row.pop("index")
+            for m in METHODS:
+                row[m] = np.asarray(row[m], float)
+            out.setdefault(name, {})[i] = row
+    return {name: [rows[i] for i in sorted(rows)] for name, rows in out.items()}
+
+
+def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int, jsonl=None) -> list:
     children = np.random.SeedSequence([seed, CASES.index(name)]).spawn(reps)
     items = list(enumerate(children))
     size = max(1, min(10, reps // (4 * workers) or 1))
@@ -172,13 +201,17 @@ def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int) -> list
     res = [None] * reps
     if workers == 1:
         for ch in chunks:
-            for i, r in _chunk(name, ch, n_boot):
+            done = _chunk(name, ch, n_boot)
+            _save(jsonl, name, done)
+            for i, r in done:
                 res[i] = r
     else:
         import multiprocessing as mp
         with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
             for fut in as_completed([pool.submit(_chunk, name, ch, n_boot) for ch in chunks]):
-                for i, r in fut.result():
+                done = fut.result()
+                _save(jsonl, name, done)
+                for i, r in done:
                     res[i] = r
     return res
 
@@ -221,6 +254,30 @@ def press_timing(repeat: int = 5) -> str:
             f"k7 [{ci.lower[1]:.2f}, {ci.upper[1]:.2f}] (Wald [{wald[1, 0]:.2f}, {wald[1, 1]:.2f}]) N/mm")
 
 
+def report(name: str, res: list, n_boot: int, wall: float = math.nan) -> None:
+    """Print the markdown rows of one case: coverage per method and parameter, the share of fits
+    flagged not trustworthy (Bates-Watts curvature), failures and profile timing."""
+    c, _ = _case(name)
+    fl = np.array([r.get("flagged", math.nan) for r in res], float)
+    ok = np.isfinite(fl)
+    flagged = clopper_pearson(int(fl[ok].sum()), int(ok.sum()))
+    for case, m, p, rate, failed in table(name, res, n_boot):
+        print(f"| {case} | {m} | {p} | {rate} | {failed} | {flagged} |")
+    errs = [e for r in res for e in r["errors"]]
+    n_inf = sum(r["inf"] > 0 for r in res)
+    tp = np.array([r["t_profile"] for r in res], float)
+    print(f"  {c.description}; {len(res)} campaigns, {n_inf} with an unbounded profile side; "
+          f"profile time median {np.nanmedian(tp):.3f} s, max {np.nanmax(tp):.3f} s; case wall {wall:.0f} s")
+    for kind in ("fit", "curvature", "profile", "bootstrap"):
+        ek = [e[1] for e in errs if e[0] == kind]
+        if ek:
+            print(f"  {len(ek)} {kind} failures; first: {ek[0]}")
+
+
+HEADER = ("| case | method | parameter | coverage [CP 95 %] | failed | fits flagged not trustworthy [CP 95 %] |\n"
+          "|---|---|---|---|---|---|")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench coverage")
     ap.add_argument("--reps", type=int, default=200)
@@ -229,31 +286,25 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--jsonl", default=None, help="append every replication to this JSON-lines file as it finishes")
+    ap.add_argument("--tabulate", default=None, help="only print the table of a --jsonl file (partial runs too)")
     args = ap.parse_args(argv or [])
     names = [n for n in args.cases.split(",") if n]
     boot_cases = set(args.boot_cases.split(","))
+    if args.tabulate:
+        print(HEADER)
+        for name, res in load(args.tabulate).items():
+            report(name, res, args.boot if name in boot_cases else 0)
+        return
     print(f"machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} cpus; "
           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(f"reps {args.reps}, seed {args.seed}, bootstrap n {args.boot} on {sorted(boot_cases)}, "
           f"workers {args.workers}")
-    print(f"{'case':<9} {'method':<9} {'param':<5} {'coverage of 95 % interval [Clopper-Pearson 95 %]':<48} "
-          f"{'failed':>6}")
     if "press" in names:
         print(press_timing())
+    print(HEADER)
     for name in names:
         t0 = time.perf_counter()
         n_boot = args.boot if name in boot_cases else 0
-        res = run_case(name, args.reps, args.seed, n_boot, args.workers)
-        c, _ = _case(name)
-        for case, m, p, rate, failed in table(name, res, n_boot):
-            print(f"{case:<9} {m:<9} {p:<5} {str(rate):<48} {failed:>6}")
-        errs = [e for r in res for e in r["errors"]]
-        n_inf = sum(r["inf"] > 0 for r in res)
-        tp = np.array([r["t_profile"] for r in res], float)
-        print(f"  {c.description}; {n_inf}/{len(res)} campaigns with an unbounded profile side; "
-              f"profile time median {np.nanmedian(tp):.3f} s, max {np.nanmax(tp):.3f} s; "
-              f"case wall {time.perf_counter() - t0:.0f} s")
-        for kind in ("fit", "profile", "bootstrap"):
-            ek = [e[1] for e in errs if e[0] == kind]
-            if ek:
-                print(f"  {len(ek)} {kind} failures; first: {ek[0]}")
+        res = run_case(name, args.reps, args.seed, n_boot, args.workers, args.jsonl)
+        report(name, res, n_boot, time.perf_counter() - t0)
