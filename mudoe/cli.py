@@ -331,7 +331,7 @@ def _report(study, results, args, progress, out) -> int:
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
     with progress.step("build report"):
-        paths = build_report(results, out)
+        paths = build_report(results, out, progress=progress)
     text = "\n".join(str(p) for p in paths)
     if results.detection is not None:
         text = "\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n" + text
