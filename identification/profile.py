@@ -111,7 +111,8 @@ class ProfileSettings:
     max_newton : int        inner Newton iterations before the Ipopt fallback
     max_steps : int         continuation steps per side before the side is declared unbounded
     max_width : float       a side is unbounded when D stays below c up to max_width Wald half-widths
-    xtol : float            brentq tolerance on theta, in units of the Wald standard error
+    xtol : float            brentq tolerance on theta, in units of the Wald standard error (of the bracket
+                            when that is smaller)
     ipopt_fallback : bool   solve a step with Ipopt when the reduced Newton fails
     """
 
@@ -471,10 +472,14 @@ class _Side:
         The bracket is first narrowed by safeguarded Newton steps on tau (exact slope, see
         :meth:`_slope`), each aimed slightly across the root so that the bracket shrinks from both
         sides; :func:`scipy.optimize.brentq` then finishes on the narrow bracket.  Every
-        evaluation is warm-started from the nearer bracket end.
+        evaluation is warm-started from the nearest solved point inside it (towards the estimate), so
+        that it stays on the branch of constrained minima the path followed.
         """
         root_c = math.sqrt(self.c)
-        xtol = self.prof.settings.xtol * self.h0
+        # tolerance in Wald standard errors, but never coarser than the bracket itself: when the estimate lies
+        # far out in a flat valley (se huge) a tolerance of xtol * se could exceed the whole bracket, and
+        # brentq would return an end of it unchecked
+        xtol = self.prof.settings.xtol * min(self.h0, h_hi - h_lo)
         hi_s = self.points[-1][2]
         lo = [h_lo, math.sqrt(max(self.prof.statistic(base), 0.0)) - root_c, base]
         hi = [h_hi, math.sqrt(self.points[-1][1]) - root_c, hi_s]
@@ -483,7 +488,9 @@ class _Side:
 
         def g(h):
             if h not in known:
-                near = solved[min(solved, key=lambda k: abs(k - h))]
+                # warm start from the nearest point on the inside of h: the path's branch of the constrained
+                # minimum (a point beyond the crossing, e.g. at a parameter bound, may sit on another branch)
+                near = solved[max(k for k in solved if k <= h)]
                 D, s = self._at(self.theta_hat + self.d * h, near)
                 known[h] = math.sqrt(D) - root_c
                 solved[h] = s
