@@ -22,7 +22,10 @@ Cases:
 * ``press``: the press linkage M1 (k5, k7) at its fit to the shipped campaign, 2 series, the
   29 set points, sensors D_y and F_x with the campaign's composed sigma.
 
-Run ``python -m bench coverage --reps=300 --boot=0 --workers=2 --cases=mm,mm_deep,truss_Px,truss_Py,press``.
+Run ``python -m bench coverage --reps=1000 --workers=2 --cases=mm,mm_deep,truss_Px --jsonl=cov.jsonl``
+(every replication is appended to cov.jsonl as it finishes), then
+``python -m bench coverage --tabulate=cov.jsonl --check-misses`` for the table of a finished or partial run
+and the scipy check of every profile miss of the Michaelis-Menten cases.
 """
 from __future__ import annotations
 
@@ -274,6 +277,42 @@ def report(name: str, res: list, n_boot: int, wall: float = math.nan) -> None:
             print(f"  {len(ek)} {kind} failures; first: {ek[0]}")
 
 
+def check_misses(name: str, res: list, seed: int) -> str:
+    """Independent check of the profile's misses on the Michaelis-Menten cases: for every campaign whose
+    profile interval misses the truth p*_i, D_i(p*_i) = min over the other parameter of S - min S (scipy,
+    several starts, S the chi2 sum) must exceed chi2_1(0.95); a miss with D_i(p*_i) below it is a wrong
+    profile interval."""
+    from scipy import optimize, stats
+    if not name.startswith("mm"):
+        return f"{name}: the miss check is implemented for the Michaelis-Menten cases only"
+    c, H = _case(name)
+    children = np.random.SeedSequence([seed, CASES.index(name)]).spawn(len(res))
+    x, sig, crit = c.inputs[:, 0], float(c.sigma[0]), float(stats.chi2.ppf(0.95, 1))
+    checked, wrong = 0, []
+    for i, r in enumerate(res):
+        prof = np.asarray(r["profile"], float)
+        if not np.any(prof == 0.0):
+            continue
+        z = (H[None] + c.sigma * np.random.default_rng(children[i]).standard_normal((c.n_M,) + H.shape))[:, :, 0]
+
+        def S(V, K):
+            return float(np.sum(((z - V * x / (K + x)) / sig) ** 2))
+
+        best = min(optimize.minimize(lambda q: S(*np.exp(q)), np.log([v0, k0]), method="Nelder-Mead",
+                                     options=dict(xatol=1e-10, fatol=1e-12, maxiter=4000)).fun
+                   for v0 in (5, 10, 30, 100) for k0 in (3, 10, 30, 100))
+        for j in np.flatnonzero(prof == 0.0):
+            t = c.p_true[j]
+            f = (lambda o: S(t, np.exp(o))) if j == 0 else (lambda o: S(np.exp(o), t))
+            m = min(optimize.minimize_scalar(f, bracket=(math.log(b), math.log(b) + 0.1)).fun
+                    for b in (1, 5, 10, 20, 50, 200))
+            checked += 1
+            if m - best <= crit:
+                wrong.append(f"campaign {i} {c.model.param_names[j]}: D = {m - best:.4f}")
+    return (f"{name}: {checked} profile misses checked with scipy, {len(wrong)} wrong (D_i(truth) <= chi2_1(0.95))"
+            + (": " + "; ".join(wrong[:5]) if wrong else ""))
+
+
 HEADER = ("| case | method | parameter | coverage [CP 95 %] | failed | fits flagged not trustworthy [CP 95 %] |\n"
           "|---|---|---|---|---|---|")
 
@@ -288,6 +327,8 @@ def main(argv=None):
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--jsonl", default=None, help="append every replication to this JSON-lines file as it finishes")
     ap.add_argument("--tabulate", default=None, help="only print the table of a --jsonl file (partial runs too)")
+    ap.add_argument("--check-misses", action="store_true",
+                    help="with --tabulate: check every profile miss of the Michaelis-Menten cases with scipy")
     args = ap.parse_args(argv or [])
     names = [n for n in args.cases.split(",") if n]
     boot_cases = set(args.boot_cases.split(","))
@@ -295,6 +336,8 @@ def main(argv=None):
         print(HEADER)
         for name, res in load(args.tabulate).items():
             report(name, res, args.boot if name in boot_cases else 0)
+            if args.check_misses:
+                print("  " + check_misses(name, res, args.seed))
         return
     print(f"machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} cpus; "
           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
