@@ -473,6 +473,7 @@ PROFILE_CAPTION = ("Profile-t curves tau(theta) = sign(theta - theta_hat) sqrt(D
 def _uncertainty_pages(results, variant, progress=None):
     """Profile-likelihood vs Wald intervals, the sloppiest direction, the profile-t curves and the
     likelihood-ratio region of every parameter pair next to its ellipse, for one model."""
+    from matplotlib.ticker import MaxNLocator
     from .region_figures import lr_region_figure, profile_figure
     from .tables import draw_table
     from .uncertainty import model_uncertainty
@@ -515,6 +516,7 @@ def _uncertainty_pages(results, variant, progress=None):
             ax = figs[-1].add_axes([0.06 + k * 0.32, 0.14, 0.25, min(y - 0.22, 0.28)])
             i = list(e.param_names).index(pr.name)
             profile_figure(pr, float(e.stderr[i]), e.param_units[i], ax=ax, title=f"profile of {pr.name}")
+            ax.xaxis.set_major_locator(MaxNLocator(4))
             ax.title.set_fontsize(9)
         _text(figs[-1], 0.04, 0.065, PROFILE_CAPTION.format(pct=mu.pct), width=175, size=8)
         profiles = ()
@@ -528,6 +530,7 @@ def _uncertainty_pages(results, variant, progress=None):
                 pr = profiles[k]
                 i = list(e.param_names).index(pr.name)
                 profile_figure(pr, float(e.stderr[i]), e.param_units[i], ax=ax, title=f"{variant}: {pr.name}")
+                ax.xaxis.set_major_locator(MaxNLocator(4))
             for ax in axes[len(part):]:
                 ax.axis("off")
             fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.14, hspace=0.45, wspace=0.3)
@@ -536,27 +539,40 @@ def _uncertainty_pages(results, variant, progress=None):
     rparts = _chunks(len(mu.regions), per)
     for n, part in enumerate(rparts):
         fig = _page(f"Likelihood-ratio regions of {variant} next to the linearised ellipses" + _part(n, len(rparts)))
-        axes = fig.subplots(*((1, 2) if len(part) <= 2 else (UNC_ROWS, UNC_COLS)), squeeze=False).ravel()
+        shape = (1, max(len(part), 2)) if len(part) <= UNC_COLS else (UNC_ROWS, UNC_COLS)
+        axes = fig.subplots(*shape, squeeze=False).ravel()
+        handles = {}
         for ax, k in zip(axes, part):
             pr = mu.regions[k]
             i, j = pr.pair
             names = (e.param_names[i], e.param_names[j])
             if pr.region is None:
                 ax.axis("off")
-                ax.text(0.0, 0.5, f"{variant}: ({names[0]}, {names[1]})\nnot computed: {pr.error[:200]}",
-                        fontsize=8, va="center", wrap=True)
+                ax.text(0.0, 0.5, "\n".join(textwrap.wrap(f"{variant}: ({names[0]}, {names[1]}) not computed: "
+                                                          f"{pr.error[:300]}", 50)), fontsize=8, va="center")
                 continue
             traced = mu.extent if mu.extent is not None else mu.profile
             profs = [q for q in (traced.profiles if traced is not None else ()) if q.name in names]
             lr_region_figure(pr.region, units=(e.param_units[i], e.param_units[j]), profiles=profs, ax=ax,
                              title=f"{variant}: {names[0]} vs {names[1]}")
             ax.title.set_fontsize(9)
-            ax.legend(fontsize=6.5, loc="best")
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.yaxis.set_major_locator(MaxNLocator(5))
+            for h, lab in zip(*ax.get_legend_handles_labels()):
+                if lab.startswith("profile trace of "):
+                    lab = ("profile trace of the x-axis parameter" if lab.endswith(names[0])
+                           else "profile trace of the y-axis parameter")
+                handles.setdefault(lab, h)
+            ax.get_legend().remove()
         for ax in axes[len(part):]:
             ax.axis("off")
-        fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.14, hspace=0.45, wspace=0.3)
+        fig.legend(list(handles.values()), list(handles), loc="upper right", ncol=3, fontsize=8, frameon=False,
+                   bbox_to_anchor=(0.98, 0.935))
+        fig.subplots_adjust(left=0.07, right=0.98, top=0.84 if shape[0] == 1 else 0.85,
+                            bottom=0.30 if shape[0] == 1 else 0.14, hspace=0.45, wspace=0.3)
         _text(fig, 0.04, 0.07, f"Joint {mu.pct} regions of each parameter pair (fit on all study data). Solid red: "
-              f"the likelihood-ratio region {{D <= {'2 F(2, n - p)' if e.sigma_estimated else 'chi2_2'}}} with every other parameter re-optimised at each grid point; "
+              f"the likelihood-ratio region {{D <= {'2 F(2, n - p)' if e.sigma_estimated else 'chi2_2'}}} with every "
+              "other parameter re-optimised at each grid point; "
               "dashed blue: the ellipse of the covariance at the same level; green: the profile traces (the other "
               "parameters re-optimised along each profile, followed to the level of the region: the extent of the "
               "region along each axis). Where the red contour and the dashed ellipse differ, the "
