@@ -22,11 +22,15 @@ Cases:
 * ``press``: the press linkage M1 (k5, k7) at its fit to the shipped campaign, 2 series, the
   29 set points, sensors D_y and F_x with the campaign's composed sigma.
 
-Run ``python -m bench coverage --reps=300 --boot=0 --workers=2 --cases=mm,mm_deep,truss_Px,truss_Py,press``.
+Run ``python -m bench coverage --reps=1000 --workers=2 --cases=mm,mm_deep,truss_Px --jsonl=cov.jsonl``
+(every replication is appended to cov.jsonl as it finishes), then
+``python -m bench coverage --tabulate=cov.jsonl --check-misses`` for the table of a finished or partial run
+and the scipy check of every profile miss of the Michaelis-Menten cases.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -133,11 +137,16 @@ def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
     out["errors"] = []
     out["inf"] = 0
     out["t_profile"] = math.nan
+    out["flagged"] = math.nan
     try:
         est = identify(c.model, data, c.p0, weights=c.weights)
     except IdentificationError as exc:
         out["errors"].append(("fit", str(exc).splitlines()[0][:200]))
         return out
+    try:
+        out["flagged"] = float(not est.curvature.trustworthy)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        out["errors"].append(("curvature", str(exc).splitlines()[0][:200]))
     ci = est.conf_int(0.05)
     out["wald"] = ((ci[:, 0] <= c.p_true) & (c.p_true <= ci[:, 1])).astype(float)
     t0 = time.perf_counter()
@@ -164,7 +173,30 @@ def _chunk(name, items, n_boot):
     return [(i, replicate(name, s, n_boot)) for i, s in items]
 
 
-def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int) -> list:
+def _save(path, name: str, items: list) -> None:
+    """Append replications (index, result) of case ``name`` to a JSON-lines file (partial runs survive)."""
+    if path is None:
+        return
+    with open(path, "a", encoding="utf-8") as f:
+        for i, r in items:
+            row = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
+            f.write(json.dumps(dict(case=name, index=i, **row), allow_nan=True) + "\n")
+
+
+def load(path) -> dict:
+    """Replications saved by ``--jsonl``: {case: [result, ...]} (arrays restored, by index)."""
+    out = {}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            row = json.loads(line)
+            name, i = row.pop("case"), row.pop("index")
+            for m in METHODS:
+                row[m] = np.asarray(row[m], float)
+            out.setdefault(name, {})[i] = row
+    return {name: [rows[i] for i in sorted(rows)] for name, rows in out.items()}
+
+
+def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int, jsonl=None) -> list:
     children = np.random.SeedSequence([seed, CASES.index(name)]).spawn(reps)
     items = list(enumerate(children))
     size = max(1, min(10, reps // (4 * workers) or 1))
@@ -172,13 +204,17 @@ def run_case(name: str, reps: int, seed: int, n_boot: int, workers: int) -> list
     res = [None] * reps
     if workers == 1:
         for ch in chunks:
-            for i, r in _chunk(name, ch, n_boot):
+            done = _chunk(name, ch, n_boot)
+            _save(jsonl, name, done)
+            for i, r in done:
                 res[i] = r
     else:
         import multiprocessing as mp
         with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
             for fut in as_completed([pool.submit(_chunk, name, ch, n_boot) for ch in chunks]):
-                for i, r in fut.result():
+                done = fut.result()
+                _save(jsonl, name, done)
+                for i, r in done:
                     res[i] = r
     return res
 
@@ -221,6 +257,66 @@ def press_timing(repeat: int = 5) -> str:
             f"k7 [{ci.lower[1]:.2f}, {ci.upper[1]:.2f}] (Wald [{wald[1, 0]:.2f}, {wald[1, 1]:.2f}]) N/mm")
 
 
+def report(name: str, res: list, n_boot: int, wall: float = math.nan) -> None:
+    """Print the markdown rows of one case: coverage per method and parameter, the share of fits
+    flagged not trustworthy (Bates-Watts curvature), failures and profile timing."""
+    c, _ = _case(name)
+    fl = np.array([r.get("flagged", math.nan) for r in res], float)
+    ok = np.isfinite(fl)
+    flagged = clopper_pearson(int(fl[ok].sum()), int(ok.sum()))
+    for case, m, p, rate, failed in table(name, res, n_boot):
+        print(f"| {case} | {m} | {p} | {rate} | {failed} | {flagged} |")
+    errs = [e for r in res for e in r["errors"]]
+    n_inf = sum(r["inf"] > 0 for r in res)
+    tp = np.array([r["t_profile"] for r in res], float)
+    print(f"  {c.description}; {len(res)} campaigns, {n_inf} with an unbounded profile side; "
+          f"profile time median {np.nanmedian(tp):.3f} s, max {np.nanmax(tp):.3f} s; case wall {wall:.0f} s")
+    for kind in ("fit", "curvature", "profile", "bootstrap"):
+        ek = [e[1] for e in errs if e[0] == kind]
+        if ek:
+            print(f"  {len(ek)} {kind} failures; first: {ek[0]}")
+
+
+def check_misses(name: str, res: list, seed: int) -> str:
+    """Independent check of the profile's misses on the Michaelis-Menten cases: for every campaign whose
+    profile interval misses the truth p*_i, D_i(p*_i) = min over the other parameter of S - min S (scipy,
+    several starts, S the chi2 sum) must exceed chi2_1(0.95); a miss with D_i(p*_i) below it is a wrong
+    profile interval."""
+    from scipy import optimize, stats
+    if not name.startswith("mm"):
+        return f"{name}: the miss check is implemented for the Michaelis-Menten cases only"
+    c, H = _case(name)
+    children = np.random.SeedSequence([seed, CASES.index(name)]).spawn(len(res))
+    x, sig, crit = c.inputs[:, 0], float(c.sigma[0]), float(stats.chi2.ppf(0.95, 1))
+    checked, wrong = 0, []
+    for i, r in enumerate(res):
+        prof = np.asarray(r["profile"], float)
+        if not np.any(prof == 0.0):
+            continue
+        z = (H[None] + c.sigma * np.random.default_rng(children[i]).standard_normal((c.n_M,) + H.shape))[:, :, 0]
+
+        def S(V, K):
+            return float(np.sum(((z - V * x / (K + x)) / sig) ** 2))
+
+        best = min(optimize.minimize(lambda q: S(*np.exp(q)), np.log([v0, k0]), method="Nelder-Mead",
+                                     options=dict(xatol=1e-10, fatol=1e-12, maxiter=4000)).fun
+                   for v0 in (5, 10, 30, 100) for k0 in (3, 10, 30, 100))
+        for j in np.flatnonzero(prof == 0.0):
+            t = c.p_true[j]
+            f = (lambda o: S(t, np.exp(o))) if j == 0 else (lambda o: S(np.exp(o), t))
+            m = min(optimize.minimize_scalar(f, bracket=(math.log(b), math.log(b) + 0.1)).fun
+                    for b in (1, 5, 10, 20, 50, 200))
+            checked += 1
+            if m - best <= crit:
+                wrong.append(f"campaign {i} {c.model.param_names[j]}: D = {m - best:.4f}")
+    return (f"{name}: {checked} profile misses checked with scipy, {len(wrong)} wrong (D_i(truth) <= chi2_1(0.95))"
+            + (": " + "; ".join(wrong[:5]) if wrong else ""))
+
+
+HEADER = ("| case | method | parameter | coverage [CP 95 %] | failed | fits flagged not trustworthy [CP 95 %] |\n"
+          "|---|---|---|---|---|---|")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench coverage")
     ap.add_argument("--reps", type=int, default=200)
@@ -229,31 +325,29 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--jsonl", default=None, help="append every replication to this JSON-lines file as it finishes")
+    ap.add_argument("--tabulate", default=None, help="only print the table of a --jsonl file (partial runs too)")
+    ap.add_argument("--check-misses", action="store_true",
+                    help="with --tabulate: check every profile miss of the Michaelis-Menten cases with scipy")
     args = ap.parse_args(argv or [])
     names = [n for n in args.cases.split(",") if n]
     boot_cases = set(args.boot_cases.split(","))
+    if args.tabulate:
+        print(HEADER)
+        for name, res in load(args.tabulate).items():
+            report(name, res, args.boot if name in boot_cases else 0)
+            if args.check_misses:
+                print("  " + check_misses(name, res, args.seed))
+        return
     print(f"machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} cpus; "
           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(f"reps {args.reps}, seed {args.seed}, bootstrap n {args.boot} on {sorted(boot_cases)}, "
           f"workers {args.workers}")
-    print(f"{'case':<9} {'method':<9} {'param':<5} {'coverage of 95 % interval [Clopper-Pearson 95 %]':<48} "
-          f"{'failed':>6}")
     if "press" in names:
         print(press_timing())
+    print(HEADER)
     for name in names:
         t0 = time.perf_counter()
         n_boot = args.boot if name in boot_cases else 0
-        res = run_case(name, args.reps, args.seed, n_boot, args.workers)
-        c, _ = _case(name)
-        for case, m, p, rate, failed in table(name, res, n_boot):
-            print(f"{case:<9} {m:<9} {p:<5} {str(rate):<48} {failed:>6}")
-        errs = [e for r in res for e in r["errors"]]
-        n_inf = sum(r["inf"] > 0 for r in res)
-        tp = np.array([r["t_profile"] for r in res], float)
-        print(f"  {c.description}; {n_inf}/{len(res)} campaigns with an unbounded profile side; "
-              f"profile time median {np.nanmedian(tp):.3f} s, max {np.nanmax(tp):.3f} s; "
-              f"case wall {time.perf_counter() - t0:.0f} s")
-        for kind in ("fit", "profile", "bootstrap"):
-            ek = [e[1] for e in errs if e[0] == kind]
-            if ek:
-                print(f"  {len(ek)} {kind} failures; first: {ek[0]}")
+        res = run_case(name, args.reps, args.seed, n_boot, args.workers, args.jsonl)
+        report(name, res, n_boot, time.perf_counter() - t0)

@@ -111,7 +111,8 @@ class ProfileSettings:
     max_newton : int        inner Newton iterations before the Ipopt fallback
     max_steps : int         continuation steps per side before the side is declared unbounded
     max_width : float       a side is unbounded when D stays below c up to max_width Wald half-widths
-    xtol : float            brentq tolerance on theta, in units of the Wald standard error
+    xtol : float            brentq tolerance on theta, in units of the Wald standard error (of the bracket
+                            when that is smaller)
     ipopt_fallback : bool   solve a step with Ipopt when the reduced Newton fails
     """
 
@@ -279,13 +280,24 @@ class _Profiler:
     def solve(self, fixed: list, values, base: _Solved) -> _Solved:
         """min Phi over the free parameters with p[fixed] = values, from the predictor at ``base``.
 
-        Raises ProfileError (with the reason) when neither Newton nor Ipopt converges.
+        When the Newton from the first-order predictor fails (e.g. a flat valley sends the predictor
+        across the whole box), it is retried from the zero-order start (the free parameters of
+        ``base``) before the Ipopt fallback.  Raises ProfileError (with the reason) when neither
+        Newton nor Ipopt converges.
         """
         values = np.atleast_1d(np.asarray(values, float))
         p0 = self.predict(base, fixed, values)
         reason = self._newton(fixed, p0, base.point.states)
         if isinstance(reason, _Solved):
             return reason
+        p_zero = np.array(base.point.p, float)
+        p_zero[fixed] = values
+        p_zero = np.clip(p_zero, self.lo, self.up)
+        if not np.array_equal(p_zero, p0):
+            retry = self._newton(fixed, p_zero, base.point.states)
+            if isinstance(retry, _Solved):
+                return retry
+            reason = f"{reason}; from the zero-order start: {retry}"
         if not self.settings.ipopt_fallback:
             raise ProfileError(f"reduced Newton failed ({reason}); the Ipopt fallback is disabled",
                                status="profile failed")
@@ -460,10 +472,14 @@ class _Side:
         The bracket is first narrowed by safeguarded Newton steps on tau (exact slope, see
         :meth:`_slope`), each aimed slightly across the root so that the bracket shrinks from both
         sides; :func:`scipy.optimize.brentq` then finishes on the narrow bracket.  Every
-        evaluation is warm-started from the nearer bracket end.
+        evaluation is warm-started from the nearest solved point inside it (towards the estimate), so
+        that it stays on the branch of constrained minima the path followed.
         """
         root_c = math.sqrt(self.c)
-        xtol = self.prof.settings.xtol * self.h0
+        # tolerance in Wald standard errors, but never coarser than the bracket itself: when the estimate lies
+        # far out in a flat valley (se huge) a tolerance of xtol * se could exceed the whole bracket, and
+        # brentq would return an end of it unchecked
+        xtol = self.prof.settings.xtol * min(self.h0, h_hi - h_lo)
         hi_s = self.points[-1][2]
         lo = [h_lo, math.sqrt(max(self.prof.statistic(base), 0.0)) - root_c, base]
         hi = [h_hi, math.sqrt(self.points[-1][1]) - root_c, hi_s]
@@ -472,7 +488,9 @@ class _Side:
 
         def g(h):
             if h not in known:
-                near = solved[min(solved, key=lambda k: abs(k - h))]
+                # warm start from the nearest point on the inside of h: the path's branch of the constrained
+                # minimum (a point beyond the crossing, e.g. at a parameter bound, may sit on another branch)
+                near = solved[max(k for k in solved if k <= h)]
                 D, s = self._at(self.theta_hat + self.d * h, near)
                 known[h] = math.sqrt(D) - root_c
                 solved[h] = s
@@ -605,6 +623,47 @@ def _check_pair(model: Model, data: Measurements, est) -> None:
 
 
 # ---------------------------------------------------------------------------- pair regions
+def _valley_grid(prof: _Profiler, idx: list, C: np.ndarray, ph: np.ndarray, c: float, n: int, span: float,
+                 lim) -> tuple:
+    """X, Y (n, n) of the valley grid of :func:`lr_region` (column k: p_i = a_k) and a note ('' or the
+    values of a where the profile point could not be solved and the linearised valley was used)."""
+    i, j = idx
+    model = prof.model
+    half = span * math.sqrt(c * C[0, 0])
+    a_lo, a_hi = (lim[0] if lim is not None else (ph[0] - half, ph[0] + half))
+    a = np.linspace(max(a_lo, model.lower[i]), min(a_hi, model.upper[i]), n)
+    v = np.linspace(-span * math.sqrt(c), span * math.sqrt(c), n)
+    rest = [k for k in range(model.n_p) if k != i]
+    jr = rest.index(j)
+    centre = np.empty(n)
+    width = np.empty(n)
+    lin_sd = math.sqrt(max(C[1, 1] - C[0, 1] ** 2 / C[0, 0], 0.0))
+    k0 = int(np.argmin(np.abs(a - ph[0])))
+    unsolved = []
+    for ks in (range(k0, n), range(k0 - 1, -1, -1)):
+        base = prof.best
+        for k in ks:
+            try:
+                s = prof.solve([i], [a[k]], base)
+                K = s.H[np.ix_(rest, rest)]
+                sd = math.sqrt(float(np.linalg.inv(K)[jr, jr]))
+                if not (math.isfinite(sd) and sd > 0):
+                    raise np.linalg.LinAlgError("singular")
+                centre[k], width[k] = s.point.p[j], sd
+                base = s
+            except (ProfileError, np.linalg.LinAlgError):
+                unsolved.append(a[k])
+                centre[k] = ph[1] + C[0, 1] / C[0, 0] * (a[k] - ph[0])
+                width[k] = lin_sd
+    X = np.tile(a, (n, 1))
+    Y = centre[None, :] + v[:, None] * width[None, :]
+    note = ""
+    if unsolved:
+        note = (f"valley grid: the profile of {model.param_names[i]} could not be solved at {len(unsolved)} of {n} "
+                "values; the linearised valley was used there")
+    return X, Y, note
+
+
 @dataclass(frozen=True)
 class LikelihoodRegion:
     """The likelihood-ratio statistic of a parameter pair on a grid.
@@ -652,14 +711,20 @@ class LikelihoodRegion:
 
 
 def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, n_grid: int = 25,
-              span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None
-              ) -> LikelihoodRegion:
+              span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None,
+              limits=None) -> LikelihoodRegion:
     """Likelihood-ratio statistic of the pair ``pair = (i, j)`` on an n_grid x n_grid grid.
 
     ``grid="principal"`` (default): the grid p = p_hat + V diag(sqrt(w)) (u, v) with C = V diag(w) V^T
     the pair's covariance block and u, v in [-span sqrt(c), span sqrt(c)], so that the linearised
     ellipse is the circle of radius sqrt(c) and a thin, strongly correlated region still falls on
-    many grid points; ``grid="axes"``: the rectangle of span x the ellipse's half-extents.  The other
+    many grid points; ``grid="valley"``: a curvilinear grid that follows the valley of the objective
+    -- columns at n_grid values a of p_i (``limits[0]``, or span x the ellipse's half-width), rows
+    across it at p_j = b*(a) + v sd_j(a), b*(a) the profile of p_i (p_j and the others re-optimised),
+    sd_j(a) the standard error of p_j there with p_i fixed and v in [-span sqrt(c), span sqrt(c)] --
+    for thin curved regions (strong correlation) that no rectangle resolves; ``grid="axes"``: the rectangle of span x the ellipse's half-extents, or
+    ``limits = ((lo_i, hi_i), (lo_j, hi_j))`` when given (parameter units, clipped to the bounds; e.g.
+    the extent of the profile traces, when the region reaches far beyond the ellipse).  The other
     parameters are re-optimised at every grid point (exact reduced Newton, Ipopt fallback),
     warm-started along rows from the grid centre.  A point that cannot be solved or lies outside the
     bounds is NaN, counted in ``notes``; a region that reaches the edge of the grid is noted too.
@@ -672,8 +737,15 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
         raise ValueError(f"n_grid: expected an integer >= 3, got {n_grid!r}")
     if not (span > 0 and math.isfinite(span)):
         raise ValueError(f"span: expected a positive number, got {span!r}")
-    if grid not in ("principal", "axes"):
-        raise ValueError(f"grid: expected 'principal' or 'axes', got {grid!r}")
+    if grid not in ("principal", "axes", "valley"):
+        raise ValueError(f"grid: expected 'principal', 'axes' or 'valley', got {grid!r}")
+    if limits is not None:
+        lim = np.asarray(limits, float)
+        if lim.shape != (2, 2) or not np.all(np.isfinite(lim)) or np.any(lim[:, 1] <= lim[:, 0]):
+            raise ValueError(f"limits: expected ((lo_i, hi_i), (lo_j, hi_j)) with finite lo < hi, got {limits!r}")
+        if grid == "principal":
+            grid = "axes"
+    valley_note = ""
     _check_pair(model, data, est)
     settings = settings or ProfileSettings()
     prof = _Profiler(model, data, est, settings)
@@ -685,9 +757,12 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     n = int(n_grid)
     if grid == "axes":
         half = span * np.sqrt(c * np.diag(C))
-        x = np.linspace(max(ph[0] - half[0], model.lower[idx[0]]), min(ph[0] + half[0], model.upper[idx[0]]), n)
-        y = np.linspace(max(ph[1] - half[1], model.lower[idx[1]]), min(ph[1] + half[1], model.upper[idx[1]]), n)
+        box = lim if limits is not None else np.column_stack([ph - half, ph + half])
+        x = np.linspace(max(box[0, 0], model.lower[idx[0]]), min(box[0, 1], model.upper[idx[0]]), n)
+        y = np.linspace(max(box[1, 0], model.lower[idx[1]]), min(box[1, 1], model.upper[idx[1]]), n)
         X, Y = np.meshgrid(x, y)
+    elif grid == "valley":
+        X, Y, valley_note = _valley_grid(prof, idx, C, ph, c, n, span, lim if limits is not None else None)
     else:
         w, V = np.linalg.eigh(0.5 * (C + C.T))
         L = V * np.sqrt(np.clip(w, 0.0, None))[None, :]
@@ -699,7 +774,9 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     failed = []
     outside = 0
     lo, up = model.lower[idx], model.upper[idx]
-    r0, c0 = n // 2, n // 2
+    sd = np.sqrt(np.abs(np.diag(C))) + 1e-300
+    near = ((X - ph[0]) / sd[0]) ** 2 + ((Y - ph[1]) / sd[1]) ** 2
+    r0, c0 = (int(k) for k in np.unravel_index(int(np.argmin(near)), near.shape))    # start next to p_hat
     row_start = {}
     for rows in (range(r0, n), range(r0 - 1, -1, -1)):
         for r in rows:
@@ -720,7 +797,7 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
                 base = s
                 if cc == c0:
                     row_start[r] = s
-    notes = []
+    notes = [valley_note] if valley_note else []
     if failed:
         notes.append(f"{len(failed)} of {D.size} grid points could not be solved (NaN); first: {failed[0]}")
     if outside:

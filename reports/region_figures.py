@@ -49,7 +49,7 @@ def lr_region_figure(region, units=("", ""), profiles=(), ax=None, title: str | 
     notes = list(region.notes)
     inside = int(np.sum(D[np.isfinite(D)] <= region.threshold))
     if inside >= 4 and np.nanmax(D) >= region.threshold:
-        ax.contour(X, Y, D, levels=[region.threshold], colors="#d62728", linewidths=1.8)
+        ax.contour(X, Y, D, levels=[region.threshold], colors="#d62728", linewidths=1.8, zorder=4)
         ax.plot([], [], color="#d62728", lw=1.8, label=f"{pct} likelihood-ratio region")
     else:
         notes.append(f"only {inside} grid point(s) inside the likelihood-ratio region: it is thinner than the "
@@ -58,8 +58,8 @@ def lr_region_figure(region, units=("", ""), profiles=(), ax=None, title: str | 
     for pr, style in zip(profiles, ("-", "-.")):
         if pr.name not in region.names:
             raise ValueError(f"profiles: {pr.name!r} is not one of the region's parameters {tuple(region.names)}")
-        ax.plot(pr.params[:, cols[0]], pr.params[:, cols[1]], style, color="#2ca02c", lw=1.0, marker=".", ms=3,
-                label=f"profile trace of {pr.name}")
+        ax.plot(pr.params[:, cols[0]], pr.params[:, cols[1]], style, color="#2ca02c", lw=0.8, marker=".", ms=2.5,
+                label=f"profile trace of {pr.name}", zorder=2)
     ell = Ellipsoid(np.asarray(region.estimate), np.asarray(region.cov), region.alpha, region.threshold,
                     tuple(region.names))
     b = ell.boundary(0, 1)

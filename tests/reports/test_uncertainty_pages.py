@@ -1,0 +1,159 @@
+"""The report's uncertainty pages (issue 12): the README truss measured with one sensor.
+
+configs/truss_one_sensor.toml (data in data/truss_one_sensor, simulated from the model itself):
+the fit's linearisation is NOT trustworthy, so the report gets the pages "Uncertainty of linear"
+(profile-likelihood intervals next to the Wald ones, the weakest direction, the likelihood-ratio
+region next to the ellipse) and summary() says the same.  Checked from the texts drawn on the
+pages (``reports.builder.page_texts``), not pixels.
+"""
+from pathlib import Path
+from types import SimpleNamespace
+
+import matplotlib
+import numpy as np
+import pytest
+from scipy import optimize
+
+matplotlib.use("Agg")
+
+from identification import Measurements, identify  # noqa: E402
+from identification.profile import lr_region  # noqa: E402
+from models import Model  # noqa: E402
+from reports.view import fmt_value  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[2] / "configs" / "truss_one_sensor.toml"
+
+
+@pytest.fixture(scope="module")
+def truss():
+    from mudoe.config import load_config
+    from mudoe.study import StudyResults, prepare, run_identify
+    study = prepare(load_config(CONFIG))
+    r = StudyResults(study)
+    run_identify(study, r)
+    return r
+
+
+@pytest.fixture(scope="module")
+def truss_pages(truss):
+    import matplotlib.pyplot as plt
+    from reports.builder import page_texts, report_pages
+    pages = {}
+    for name, make in report_pages(truss, None, False):
+        if name.startswith("uncertainty"):
+            figs = make()
+            for k, fig in enumerate(figs if isinstance(figs, list) else [figs]):
+                pages[f"{name}_{k}"] = page_texts(fig)
+                plt.close(fig)
+    return pages
+
+
+def _cells(pages):
+    return [t for texts in pages.values() for t in texts]
+
+
+def test_truss_one_sensor_gets_uncertainty_pages_with_profile_intervals(truss, truss_pages):
+    e = truss.estimates["linear"]
+    assert not e.curvature.trustworthy
+    assert len(truss_pages) == 2                     # table + profiles on one page, the k1-k2 region on another
+    first = truss_pages["uncertainty1_0"]
+    assert first[0] == "Uncertainty of linear: profile likelihood vs linearisation"
+    warning = " ".join(first[1].split())
+    assert warning.startswith("Do NOT trust the confidence ellipses and the +- standard errors of linear")
+    assert "NOT trustworthy" in warning and "profile-likelihood intervals" in warning
+    cells = _cells(truss_pages)
+    assert "k1 (N/mm)" in cells and "k2 (N/mm)" in cells
+    ci = e.conf_int(0.05, method="profile")
+    wald = e.conf_int(0.05)
+    for i, se in enumerate(e.stderr):
+        lo, up = (fmt_value(x, se)[0] for x in (ci.lower[i], ci.upper[i]))
+        assert f"[{lo}, {up}]" in cells                                       # the profile interval
+        wl, wu = (fmt_value(x, se)[0] for x in wald[i])
+        assert f"[{wl}, {wu}]" in cells                                       # next to the Wald one
+        v, s = fmt_value(e.p[i], se)
+        assert f"{v} +- {s}" in cells
+    # the two intervals differ: the profile reaches much further up than the Wald interval
+    assert np.all(ci.upper > wald[:, 1] + 2 * e.stderr)
+    text = " ".join(" ".join(cells).split())
+    assert "weakest direction" in text and "k1 + k2 is determined" in text
+    assert "Likelihood-ratio regions of linear next to the linearised ellipses" in cells
+    assert "95 % likelihood-ratio region" in cells and "95 % linearised ellipse" in cells
+    assert "profile of k1" in cells and "profile of k2" in cells
+
+
+def test_truss_one_sensor_region_is_resolved_and_longer_than_the_ellipse(truss):
+    from reports.uncertainty import model_uncertainty
+    mu = model_uncertainty(truss, "linear")
+    (pr,) = mu.regions
+    reg = pr.region
+    inside = reg.statistic <= reg.threshold
+    assert inside.sum() >= 20                       # the valley grid resolves the thin region
+    assert not any("edge of the grid" in n for n in reg.notes)
+    # along k1 the region reaches beyond the ellipse's extent: the ellipse is a poor picture
+    half = np.sqrt(reg.threshold * reg.cov[0, 0])
+    assert reg.X[inside].max() > reg.estimate[0] + 1.5 * half
+
+
+def test_truss_one_sensor_summary_warns_and_gives_profile_intervals(truss):
+    s = truss.estimates["linear"].summary()
+    assert "NOT trustworthy" in s and "conf_int(method=\"profile\")" in s
+    assert "95 % profile-likelihood intervals (trust these, not the Wald columns): k1 [" in s and "k2 [" in s
+    assert "weakest direction" in s
+
+
+def test_verdict_paragraph_points_to_the_uncertainty_pages(truss):
+    from reports.builder import verdict_paragraphs
+    (v, par), = verdict_paragraphs(truss)
+    assert "linearisation is NOT trustworthy" in par and "'Uncertainty of linear'" in par
+
+
+def _linear_results():
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] + p[1] * q[0])
+    x = np.linspace(0, 1, 6)
+    z = (1 + 2 * x)[None, :, None] + 0.1 * np.random.default_rng(0).standard_normal((2, 6, 1))
+    est = identify(model, Measurements(x, z, [0.1]), [0.0, 0.0])
+    return SimpleNamespace(estimates={"lin": est})
+
+
+def test_which_models_get_the_pages():
+    from reports.uncertainty import model_uncertainty, uncertainty_models
+    r = _linear_results()
+    assert uncertainty_models(r) == []                          # trustworthy: no pages by default
+    assert uncertainty_models(r, "all") == ["lin"] and uncertainty_models(r, "none") == []
+    with pytest.raises(ValueError, match="uncertainty: expected one of"):
+        uncertainty_models(r, "some")
+    mu = model_uncertainty(r, "lin", n_grid=7)
+    assert mu.trust == "trustworthy" and mu.warning().startswith("The linearisation of lin is trustworthy")
+    # a linear model with sigma known: the profile interval is the Wald interval (chi2_1 = z^2)
+    np.testing.assert_allclose(mu.profile.array, mu.wald, rtol=1e-6)
+    head, rows, flags = mu.interval_rows()
+    assert rows[0][4] == "lower 1x, upper 1x" and not any(any(f) for f in flags)
+
+
+def test_build_report_rejects_an_unknown_uncertainty_option(tmp_path):
+    from reports.builder import build_report
+    with pytest.raises(ValueError, match="uncertainty"):
+        build_report(None, tmp_path, uncertainty="everything")
+
+
+def test_valley_grid_reoptimises_the_other_parameters_against_scipy():
+    """lr_region(grid="valley"): D at grid points equals 2 (min over c of Phi - Phi_hat) from scipy."""
+    model = Model.explicit(params=["V", "K", "c"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] / (p[1] + q[0]) + p[2], name="mm offset")
+    x = np.array([0.5, 1.0, 2.0, 4.0, 8.0, 16.0])
+    z = (10 * x / (6 + x) + 1)[None, :, None] + 0.15 * np.random.default_rng(5).standard_normal((2, x.size, 1))
+    data = Measurements(x, z, [0.15])
+    est = identify(model, data, [8.0, 5.0, 0.5])
+
+    def phi(p):
+        return 0.5 * float(np.sum(((z[:, :, 0] - (p[0] * x / (p[1] + x) + p[2])) / 0.15) ** 2))
+
+    reg = lr_region(model, data, est, ("V", "K"), n_grid=7, grid="valley")
+    assert reg.notes == () or all("edge" in n for n in reg.notes)
+    assert np.all(reg.X[0] == reg.X[-1]) and np.all(np.diff(reg.X[0]) > 0)      # columns: fixed V
+    for r, cc in [(0, 0), (3, 3), (6, 5), (2, 1)]:
+        m = optimize.minimize_scalar(lambda t: phi([reg.X[r, cc], reg.Y[r, cc], t]), bracket=(0.0, 2.0), tol=1e-12)
+        assert abs(reg.statistic[r, cc] - 2 * (m.fun - phi(est.p))) < 1e-6 * max(1, reg.statistic[r, cc])
+    # the middle row follows the valley: there D is the profile of V (K and c re-optimised), the minimum over K
+    mid = reg.statistic[3]
+    assert np.all(mid <= reg.statistic.min(axis=0) + 1e-6)
