@@ -47,14 +47,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Sequence
 
+import casadi as ca
 import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
-from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
-from .estimator import IdentifySettings, check_identifiability, covariance_from_terms, identify
+from .errors import DataError, IdentificationError, StateSolveError
+from .estimator import IdentifySettings, identify
 from .measurements import Measurements
-from .refinement import ReducedProblem
 
 __all__ = ["fit_batch", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
 
@@ -69,15 +69,15 @@ class BatchSettings:
     Attributes
     ----------
     max_sweeps : int        sweeps (model evaluations at all points) before a member falls back
-    newton_step : float     largest Gauss-Newton step (in parameter scales, inf-norm) from which on
-                            exact Newton steps are taken
+    newton_step : float     after a step shorter than this (parameter scales, inf-norm) a member
+                            takes exact Newton steps (before: Gauss-Newton)
     max_step : float        steps longer than this (parameter scales, inf-norm) are shortened to it
     state_tol : float       state convergence |dy_E|_inf <= state_tol (1 + |y|_inf) at every input
                             (the test of models.state.solve_states)
     """
 
     max_sweeps: int = 30
-    newton_step: float = 0.05
+    newton_step: float = 0.25
     max_step: float = 0.5
     state_tol: float = 1e-12
 
@@ -131,6 +131,7 @@ class BatchMember:
     fitted : ndarray (n_q, n_S)       model outputs at the estimate
     decrement : float                 Newton decrement g^T H^-1 g at the estimate (chi^2 units)
     iterations : int                  sweeps of the batch iteration
+    state_derivatives : ndarray       y'(p) = -E_y^{-1} E_p at the estimate, (n_q, n_y, n_p)
     notes : tuple                     always empty: the batch engine does not write the
                                       estimator's diagnostic notes (identify's summary does)
     """
@@ -151,10 +152,11 @@ class BatchMember:
     fitted: np.ndarray
     decrement: float
     iterations: int
+    state_derivatives: np.ndarray
     notes: tuple = ()
 
     def __post_init__(self):
-        for name in ("p", "cov", "cov_gn", "information", "S", "H", "sigma", "states", "fitted"):
+        for name in ("p", "cov", "cov_gn", "information", "S", "H", "sigma", "states", "fitted", "state_derivatives"):
             object.__setattr__(self, name, _readonly(getattr(self, name)))
 
 
@@ -268,11 +270,70 @@ def _padded(m: int, R: int) -> int:
     return 1 << max(0, (m - 1).bit_length())
 
 
+class _Mapped:
+    """A CasADi function mapped over n points, evaluated through one reused FunctionBuffer.
+
+    Arguments are C-contiguous (n, d_i) arrays (row = point), outputs dense (n, rows, cols) arrays
+    (CasADi's column-major (r, c n) output is the C array (n, c, r), transposed on return).
+    """
+
+    def __init__(self, f, n: int):
+        fm = f.map(n)
+        sym = fm.mx_in()
+        self._f = ca.Function(f"{f.name()}_batch_{n}", sym, [ca.densify(o) for o in fm.call(sym)])
+        self.n = n
+        self._in = [f.size1_in(i) for i in range(f.n_in())]
+        self._out = [(f.size1_out(i), f.size2_out(i)) for i in range(f.n_out())]
+        self._buf, self._ev = self._f.buffer()
+
+    def __call__(self, *args) -> list:
+        keep = []
+        for i, (a, r) in enumerate(zip(args, self._in)):
+            a = np.ascontiguousarray(a, dtype=float)
+            if a.size != self.n * r:
+                raise ValueError(f"argument {i}: expected {self.n} x {r} values, got {a.shape}")
+            keep.append(a)
+            self._buf.set_arg(i, memoryview(a.reshape(-1)))
+        outs = [np.empty((self.n, c, r)) for r, c in self._out]
+        for i, o in enumerate(outs):
+            self._buf.set_res(i, memoryview(o.reshape(-1)))
+        self._ev()
+        if self._buf.ret() != 0:
+            raise StateSolveError(f"evaluation of {self._f.name()} failed (CasADi return code {self._buf.ret()})")
+        return [o.transpose(0, 2, 1) for o in outs]
+
+
+def _point_functions(model) -> dict:
+    """The per-point functions of the batch engine (JIT-compiled as the model's others when
+    models.state.set_jit is on): ``terms`` (y, p, q) -> (E, h, E_y, E_p, h_y, h_p) and ``lag_hess``."""
+    num = numerics(model)
+    compiled = num.jit_active()
+    got = model.cache.get("batch.point_functions", compiled)
+    if got is not None:
+        return got
+    S = ca.SX if model.symbolic == "SX" else ca.MX
+    y, p, q = S.sym("y", model.n_y), S.sym("p", model.n_p), S.sym("q", model.n_q_dim)
+    h, Ey, Ep, hy, hp = num.sens(y, p, q)
+    terms = ca.Function("batch_terms", [y, p, q], [model.E_fun(y, p, q), h, Ey, Ep, hy, hp])
+    fns = {"terms": num.compiled("batch_terms", terms), "lag_hess": num.compiled("lag_hess")}
+    return model.cache.put("batch.point_functions", compiled, fns)
+
+
+def _mapped(model, name: str, n: int) -> _Mapped:
+    """The :class:`_Mapped` evaluator of a point function over n points (kept in ``model.cache``)."""
+    fns = _point_functions(model)
+    key = (name, n, numerics(model).jit_active())
+    f = model.cache.get("batch.mapped", key)
+    if f is None:
+        f = model.cache.put("batch.mapped", key, _Mapped(fns[name], n), maxsize=256)
+    return f
+
+
 class _Points:
     """Mapped evaluation of the model at (member, unique input) points: E, h and derivatives."""
 
     def __init__(self, model: Model, Q_u: np.ndarray, R: int):
-        self.model, self.num, self.Q_u, self.R = model, numerics(model), Q_u, R
+        self.model, self.Q_u, self.R = model, Q_u, R
         self.n_u = Q_u.shape[0]
 
     def _args(self, Y, P):
@@ -288,12 +349,8 @@ class _Points:
     def terms(self, Y: np.ndarray, P: np.ndarray) -> tuple:
         """(E, h, Ey, Ep, hy, hp) at Y (m, n_u, n_y), P (m, n_p), each (m, n_u, ...)."""
         m, n, Yf, Pf, Qf = self._args(Y, P)
-        h, Ey, Ep, hy, hp = self.num.batched("sens", n)(Yf, Pf, Qf)
-        if self.model.n_y:
-            E = self.num.batched("E_y", n)(Yf, Pf, Qf)[0][:, :, 0]
-        else:
-            E = np.zeros((n, 0))
-        out = (E, h[:, :, 0], Ey, Ep, hy, hp)
+        E, h, Ey, Ep, hy, hp = _mapped(self.model, "terms", n)(Yf, Pf, Qf)
+        out = (E[:, :, 0], h[:, :, 0], Ey, Ep, hy, hp)
         k = m * self.n_u
         return tuple(a[:k].reshape((m, self.n_u) + a.shape[1:]) for a in out)
 
@@ -304,7 +361,7 @@ class _Points:
         idx = np.minimum(np.arange(mp), m - 1)
         L = lam[idx].reshape(n, -1)
         Mu = mu[idx].reshape(n, -1)
-        Hl = self.num.batched("lag_hess", n)(Yf, Pf, Qf, L, Mu)[0]
+        Hl = _mapped(self.model, "lag_hess", n)(Yf, Pf, Qf, L, Mu)[0]
         k = m * self.n_u
         return Hl[:k].reshape((m, self.n_u) + Hl.shape[1:])
 
@@ -323,32 +380,51 @@ class _Prepared:
     n_data: np.ndarray         # (R,) used values
     selected: np.ndarray       # sensors with w > 0
     w: np.ndarray              # (n_S,) sensor weights
+    Z: np.ndarray              # (R, n_M, n_q, n_S) the members' data
+
+
+def _stack(data) -> np.ndarray:
+    """The members' z as one array (R, n_M, n_q, n_S); members with fewer series are padded with NaN
+    (missing values)."""
+    n_M = max(d.n_M for d in data)
+    Z = np.full((len(data), n_M) + data[0].z.shape[1:], np.nan)
+    for r, d in enumerate(data):
+        Z[r, :d.n_M] = d.z
+    return Z
 
 
 def _prepare(model, data, w, Y_ref) -> _Prepared:
-    """Data terms c, zbar, Phi_0 of every member (ReducedProblem.of), pooled over identical input rows:
+    """Data terms of every member, as :meth:`identification.refinement.ReducedProblem.of` computes them
+    (c_jk = n_jk w_k, zbar the per-(input, sensor) means, Phi_0 the within-group scatter) and the
+    objective's sigmas as identify chooses them, pooled over identical input rows:
     sum_{j in u} c_j (zbar_j - h)^2 = C_u (zbar_u - h)^2 + sum_{j in u} c_j (zbar_j - zbar_u)^2 with
     C_u = sum_j c_j and zbar_u = sum_j c_j zbar_j / C_u (exact)."""
     first, group = _unique_rows(data[0].inputs, Y_ref)
-    n_u, R, n_S = first.size, len(data), model.n_S
+    n_u, R = first.size, len(data)
     selected = np.flatnonzero(w > 0)
-    zb = np.zeros((R, n_u, n_S))
-    cwu = np.zeros((R, n_u, n_S))
-    const = np.zeros(R)
-    sig = np.zeros((R, n_S))
-    n_data = np.zeros(R, int)
+    Z = _stack(data)
+    mask = np.isfinite(Z)
+    counts = mask.sum(axis=1).astype(float)                                  # (R, n_q, n_S)
+    zsum = np.where(mask, Z, 0.0).sum(axis=1)
+    zbar = np.where(counts > 0, zsum / np.maximum(counts, 1), 0.0)
+    if data[0].sigma is not None:
+        sig = np.stack([np.asarray(d.sigma, float) for d in data])
+    else:
+        sig = np.empty((R, model.n_S))
+        for r, d in enumerate(data):
+            zs = d.z[:, :, selected]
+            sig[r] = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+    cw = counts * w[None, None, :]
+    dev = np.where(mask, Z - zbar[:, None], 0.0)
+    const = 0.5 * np.sum(w[None, None, None, :] * dev ** 2 / sig[:, None, None, :] ** 2, axis=(1, 2, 3))
     onehot = np.zeros((n_u, group.size))
     onehot[group, np.arange(group.size)] = 1.0
-    for r, d in enumerate(data):
-        s = _objective_sigma(model, d, selected)
-        prob = ReducedProblem.of(model, d, w, s, np.ones(model.n_p))
-        C = onehot @ prob.cw
-        S1 = onehot @ (prob.cw * prob.zbar)
-        zu = np.divide(S1, C, out=np.zeros_like(S1), where=C > 0)
-        extra = 0.5 * float(np.sum(prob.cw * (prob.zbar - zu[group]) ** 2 / s ** 2))
-        zb[r], cwu[r], const[r], sig[r] = zu, C, prob.const + extra, s
-        n_data[r] = d.n_data(w)
-    return _Prepared(first, group, zb, cwu / sig[:, None, :] ** 2, const, cwu, sig, n_data, selected, w)
+    C = np.einsum("uj,rjs->rus", onehot, cw)
+    S1 = np.einsum("uj,rjs->rus", onehot, cw * zbar)
+    zu = np.divide(S1, C, out=np.zeros_like(S1), where=C > 0)
+    const = const + 0.5 * np.sum(cw * (zbar - zu[:, group]) ** 2 / sig[:, None, :] ** 2, axis=(1, 2))
+    n_data = counts[:, :, w > 0].sum(axis=(1, 2)).astype(int)
+    return _Prepared(first, group, zu, C / sig[:, None, :] ** 2, const, C, sig, n_data, selected, w, Z)
 
 
 def _chol_solve(M: np.ndarray, b: np.ndarray, s_p: np.ndarray) -> tuple:
@@ -378,7 +454,8 @@ def _chol_solve(M: np.ndarray, b: np.ndarray, s_p: np.ndarray) -> tuple:
 # ---------------------------------------------------------------------------- the iteration
 @dataclass
 class _Iteration:
-    """Per-member state of :func:`_iterate` (mutable, private to it)."""
+    """Per-member state of :func:`_iterate` (mutable, private to it); the ``f*`` arrays hold each
+    member's last exact point (states converged), where it stops when it has converged."""
 
     P: np.ndarray              # (R, n_p) current parameters
     Y: np.ndarray              # (R, n_u, n_y) current states
@@ -386,9 +463,28 @@ class _Iteration:
     active: np.ndarray         # (R,) still iterating
     done: np.ndarray           # (R,) converged
     reason: list               # why a member stopped without converging
-    prev_obj: np.ndarray       # (R,) Phi at the previous exact point (inf before the first)
     sweeps: np.ndarray         # (R,) sweeps taken
-    final: dict                # member -> its last exact point (dict of arrays)
+    has_final: np.ndarray      # (R,) an exact point was reached
+    fp: np.ndarray             # (R, n_p)
+    fY: np.ndarray             # (R, n_u, n_y)
+    fyp: np.ndarray            # (R, n_u, n_y, n_p) state derivatives y'
+    fh: np.ndarray             # (R, n_u, n_S)
+    fG: np.ndarray             # (R, n_u, n_S, n_p)
+    fF: np.ndarray             # (R, n_p, n_p)
+    fS: np.ndarray             # (R, n_p, n_p)
+    fobj: np.ndarray           # (R,) Phi
+    fdec: np.ndarray           # (R,) Newton decrement (inf where H is not positive definite)
+    funit: np.ndarray          # (R,) unit of the decrement (1, or s^2 / sigma_0^2 when sigma is unknown)
+    fsweeps: np.ndarray        # (R,)
+
+    @classmethod
+    def start(cls, P0, Y0, n_S):
+        R, n_p = P0.shape
+        n_u, n_y = Y0.shape[1:]
+        z = np.zeros
+        return cls(P0.copy(), Y0.copy(), z(R, bool), np.ones(R, bool), z(R, bool), [""] * R, z(R, int), z(R, bool),
+                   z((R, n_p)), z((R, n_u, n_y)), z((R, n_u, n_y, n_p)), z((R, n_u, n_S)), z((R, n_u, n_S, n_p)),
+                   z((R, n_p, n_p)), z((R, n_p, n_p)), np.full(R, np.inf), np.full(R, np.inf), np.ones(R), z(R, int))
 
 
 @dataclass(frozen=True)
@@ -410,6 +506,52 @@ class _Sweep:
     lam: np.ndarray
     state_ok: np.ndarray
     finite: np.ndarray
+
+
+def _evaluate_shared(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray) -> _Sweep:
+    """:func:`_evaluate` when every member in ``a`` is at the same (p, states) with the states solved
+    (the common start p0): the model terms are evaluated once and only the data terms differ.
+
+    With K = E_y^{-T} h_y^T the adjoint of member r is mu_r = -K lambda_r, and since the Lagrangian
+    Hessian is linear in (lambda, mu), S_r = sum_jk lambda_r,jk Z_j^T B_jk Z_j with
+    B_jk = lag_hess(e_k, -K_j e_k) (one evaluation per input and sensor).
+    """
+    n_p, n_y, n_S = model.n_p, model.n_y, model.n_S
+    m, n_u = a.size, points.n_u
+    P1, Y1 = it.P[a[:1]], it.Y[a[:1]]
+    E, h, Ey, Ep, hy, hp = (x[0] for x in points.terms(Y1, P1))
+    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(Ey)) and np.all(np.isfinite(Ep))):
+        raise StateSolveError("the model or its derivatives are not finite at the common start")
+    if n_y:
+        try:
+            yp = -np.linalg.solve(Ey, Ep)
+            K = np.linalg.solve(Ey.transpose(0, 2, 1), hy.transpose(0, 2, 1))      # (n_u, n_y, n_S)
+        except np.linalg.LinAlgError:
+            raise StateSolveError("E_y is singular at the common start") from None
+        G = hp + np.einsum("jsy,jyp->jsp", hy, yp)
+        Z = np.concatenate([yp, np.broadcast_to(np.eye(n_p), (n_u, n_p, n_p))], axis=1)
+    else:
+        K, G, Z = np.zeros((n_u, 0, n_S)), hp, np.broadcast_to(np.eye(n_p), (n_u, n_p, n_p))
+    eye = np.eye(n_S)
+    Yk = np.repeat(Y1, n_S, axis=0).reshape(n_S, n_u, n_y)
+    Pk = np.repeat(P1, n_S, axis=0)
+    lam_k = np.broadcast_to(eye[:, None, :], (n_S, n_u, n_S))
+    mu_k = -K.transpose(2, 0, 1)                                                     # (n_S, n_u, n_y)
+    Bk = _Points(model, points.Q_u, n_S).lag_hessians(Yk, Pk, lam_k, mu_k)          # (n_S, n_u, v, v)
+    T = np.einsum("jva,kjvw,jwb->jkab", Z, Bk, Z, optimize=True)                     # (n_u, n_S, n_p, n_p)
+    zb, wts = prep.zb[a], prep.wts[a]
+    lam = -wts * (zb - h[None])
+    g = np.einsum("mjs,jsp->mp", lam, G)
+    F = np.broadcast_to(np.einsum("mjs,jsp,jsr->mpr", wts, G, G), (m, n_p, n_p))
+    with np.errstate(over="ignore", invalid="ignore"):
+        obj = 0.5 * np.einsum("mjs,mjs->m", wts, (zb - h[None]) ** 2) + prep.const[a]
+    S = np.einsum("mjs,jsab->mab", lam, T)
+    S = 0.5 * (S + S.transpose(0, 2, 1))
+    ones = np.ones(m, bool)
+    return _Sweep(a, np.repeat(P1, m, axis=0), np.repeat(Y1, m, axis=0), np.broadcast_to(h, (m,) + h.shape),
+                  np.broadcast_to(G, (m,) + G.shape), np.array(F), S, ones, g, obj,
+                  np.zeros((m, n_u, n_y)), np.broadcast_to(Z[:, :n_y, :] if n_y else np.zeros((n_u, 0, n_p)),
+                                                           (m, n_u, n_y, n_p)), lam, ones, ones.copy())
 
 
 def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray, sym: bool,
@@ -483,73 +625,78 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
     a = sw.a
     unit = 2 * sw.obj / np.maximum(prep.n_data[a] - n_p, 1) if sigma_unknown else np.ones(a.size)
     dN, decN, goodN, LN = _chol_solve(sw.F + sw.S, -sw.g, s_p)
-    dG, decG, goodG, _ = _chol_solve(sw.F, -sw.g, s_p)
+    dG, _, goodG, _ = _chol_solve(sw.F, -sw.g, s_p)
     # the decrement that round-off in the gradient's sum over the data alone produces
     g_err = 16 * np.finfo(float).eps * np.einsum("mjs,mjsp->mp", np.abs(sw.lam), np.abs(sw.G)) * s_p
     u = np.linalg.solve(LN, g_err[:, :, None])[:, :, 0]
     round_off = np.einsum("mp,mp->m", u, u)
-    for k, i in enumerate(a):
-        if not sw.finite[k]:
+    dec = np.where(goodN, decN, np.inf)
+    bad = ~sw.finite
+    exact = sw.state_ok & sw.has_S & ~bad
+    with np.errstate(invalid="ignore"):
+        increased = exact & ~(sw.obj <= it.fobj[a] * (1 + 1e-14) + 1e-300)
+    # refine's test: a step may not increase Phi.  In the quadratic region (previous decrement below
+    # decrement_tol) Phi cannot resolve the decrease any more: the step is kept while the decrement
+    # falls, else the previous point is the optimum
+    quadratic = it.has_final[a] & (it.fdec[a] <= settings.decrement_tol * it.funit[a])
+    keep_inc = increased & quadratic & (dec < it.fdec[a])
+    stop_inc = increased & ~keep_inc
+    update = exact & ~stop_inc
+    b = a[update]
+    it.has_final[b] = True
+    it.fp[b], it.fY[b], it.fyp[b], it.fh[b], it.fG[b] = sw.P[update], sw.Y[update], sw.yp[update], sw.h[update], \
+        sw.G[update]
+    it.fF[b], it.fS[b], it.fobj[b], it.fdec[b], it.funit[b] = sw.F[update], sw.S[update], sw.obj[update], \
+        dec[update], unit[update]
+    it.fsweeps[b] = it.sweeps[b]
+    conv = update & goodN & ((decN <= np.maximum(settings.refine_decrement * unit, round_off))
+                             | (np.max(np.abs(dN / s_p), axis=1) < 1e-13))
+    it.done[a[conv | (stop_inc & quadratic)]] = True
+    step = ~bad & ~stop_inc & ~conv & goodG
+    use_N = it.newton[a] & sw.has_S & goodN
+    dp = np.where(use_N[:, None], dN, dG)
+    big = np.max(np.abs(dp / s_p), axis=1)
+    it.newton[a[step & (big < bs.newton_step)]] = True
+    dp = dp * np.where(big > bs.max_step, bs.max_step / np.where(big > 0, big, 1.0), 1.0)[:, None]
+    p_new = sw.P + dp
+    inside = np.all((p_new > model.lower) & (p_new < model.upper), axis=1)
+    for k in np.flatnonzero(~step | ~inside):
+        i = a[k]
+        if bad[k]:
             it.reason[i] = "the model or its derivatives are not finite (or E_y is singular) at the iterate"
-            it.active[i] = False
-            continue
-        exact = sw.state_ok[k] and sw.has_S[k]
-        if exact:
-            prev = it.final.get(i)
-            dec_k = decN[k] if goodN[k] else np.inf
-            if not sw.obj[k] <= it.prev_obj[i] * (1 + 1e-14) + 1e-300:
-                # refine's test: a step may not increase Phi.  In the quadratic region (previous
-                # decrement below decrement_tol) Phi cannot resolve the decrease any more: the
-                # step is kept while the decrement falls, else the previous point is the optimum
-                quadratic = prev is not None and prev["decrement"] <= settings.decrement_tol * prev["unit"]
-                if not quadratic or not dec_k < prev["decrement"]:
-                    if quadratic:
-                        it.done[i] = True
-                    else:
-                        it.reason[i] = "a Newton step increased the objective before the optimum was reached"
-                    it.active[i] = False
-                    continue
-            it.prev_obj[i] = sw.obj[k]
-            it.final[i] = dict(p=sw.P[k], Y=sw.Y[k], h=sw.h[k], G=sw.G[k], F=sw.F[k], S=sw.S[k], obj=sw.obj[k],
-                               decrement=dec_k, unit=unit[k], sweeps=int(it.sweeps[i]))
-            if goodN[k] and (decN[k] <= max(settings.refine_decrement * unit[k], round_off[k])
-                             or np.max(np.abs(dN[k] / s_p)) < 1e-13):
-                it.done[i] = True
-                it.active[i] = False
-                continue
-        if not goodG[k]:
+        elif stop_inc[k] and not quadratic[k]:
+            it.reason[i] = "a Newton step increased the objective before the optimum was reached"
+        elif not (conv[k] or stop_inc[k]) and not goodG[k]:
             it.reason[i] = "J^T Omega J is singular at the iterate"
-            it.active[i] = False
-            continue
-        if not it.newton[i] and np.max(np.abs(dG[k] / s_p)) < bs.newton_step:
-            it.newton[i] = True
-        dp = dN[k] if (it.newton[i] and sw.has_S[k] and goodN[k]) else dG[k]
-        big = np.max(np.abs(dp / s_p))
-        if big > bs.max_step:
-            dp = dp * (bs.max_step / big)
-        p_new = sw.P[k] + dp
-        if not (np.all(p_new > model.lower) and np.all(p_new < model.upper)):
+        elif step[k]:
             it.reason[i] = "the iteration left the parameter bounds"
-            it.active[i] = False
-            continue
-        it.P[i] = p_new
-        if model.n_y:
-            it.Y[i] = sw.Y[k] + sw.dyE[k] + sw.yp[k] @ dp
+    step &= inside
+    it.active[a[~step]] = False
+    b = a[step]
+    it.P[b] = p_new[step]
+    if model.n_y:
+        it.Y[b] = sw.Y[step] + sw.dyE[step] + np.einsum("mjyp,mp->mjy", sw.yp[step], dp[step])
 
 
 def _iterate(model, prep: _Prepared, points: _Points, s_p, P0, Y0, settings: IdentifySettings,
-             bs: BatchSettings, sym: bool, sigma_unknown: bool) -> _Iteration:
-    """Sweeps until every member has converged or stopped (see the module docstring)."""
+             bs: BatchSettings, sym: bool, sigma_unknown: bool, start_solved: bool) -> _Iteration:
+    """Sweeps until every member has converged or stopped (see the module docstring).
+
+    ``start_solved``: the start states solve E = 0 at the start values (the first sweep of
+    members sharing the start is then evaluated once, :func:`_evaluate_shared`)."""
     R = P0.shape[0]
-    it = _Iteration(P0.copy(), Y0.copy(), np.zeros(R, bool), np.ones(R, bool), np.zeros(R, bool), [""] * R,
-                    np.full(R, np.inf), np.zeros(R, int), {})
+    it = _Iteration.start(P0, Y0, model.n_S)
+    first = bool(start_solved)
     for _ in range(bs.max_sweeps):
         a = np.flatnonzero(it.active)
         if not a.size:
             break
         it.sweeps[a] += 1
+        shared = first and a.size > 1 and np.all(it.P[a] == it.P[a[0]]) and np.all(it.Y[a] == it.Y[a[0]])
+        first = False
         try:
-            sw = _evaluate(model, prep, points, it, a, sym, bs)
+            sw = (_evaluate_shared(model, prep, points, it, a) if shared
+                  else _evaluate(model, prep, points, it, a, sym, bs))
         except StateSolveError as exc:
             for i in a:
                 it.reason[i] = f"model evaluation failed: {exc}"
@@ -593,40 +740,68 @@ def _check_batch(model: Model, data, p0, weights) -> tuple:
     return data, p0, w
 
 
-def _member(model, prep: _Prepared, r: int, fin: dict, data: Measurements, s_p: np.ndarray,
-            settings: IdentifySettings) -> BatchMember:
-    """The estimate of a converged member: identifiability, covariance (eq. 7) and plausibility as
-    identify checks them; raises IdentificationError (the caller falls back) when a check fails."""
+def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndarray, settings: IdentifySettings,
+             sigma_unknown: bool) -> list:
+    """The estimates of converged members (local indices ``k`` with their final points in ``it``):
+    Assumption 3, the covariance of eq. 7 and plausibility, each the test identify applies
+    (:func:`identification.estimator.check_identifiability`, ``covariance_from_terms``, |p| and
+    finite standard errors), batched.  Returns per member a BatchMember or the reason text of a
+    failed check (the caller falls back to identify)."""
     n_p = model.n_p
-    G, cw, sig = fin["G"], prep.cw[r], prep.sig[r]
-    check_identifiability(model, G, cw, sig, s_p, settings.rank_rtol, prep.selected)
-    F, S = fin["F"], fin["S"]
-    F2 = np.einsum("jk,jkp,jkr->pr", cw * prep.w[None, :] / sig ** 2, G, G)
-    h_rows = fin["h"][prep.group]
-    resid = data.z - h_rows[None]
-    rss = float(np.nansum(resid[:, :, prep.selected] ** 2))
-    n = int(prep.n_data[r])
+    m = k.size
+    G, F, S, p = it.fG[k], it.fF[k], it.fS[k], it.fp[k]
+    cw, sig = prep.cw[k], prep.sig[k]
+    out = [""] * m
+    # Assumption 3: rank of the column-normalised sqrt(Omega) J (Gram matrix as identify's rows)
+    J = ((np.sqrt(cw) / sig[:, None, :])[..., None] * G * s_p).reshape(m, -1, n_p)
+    norms = np.linalg.norm(J, axis=1)
+    live = np.all(norms > 0, axis=1)
+    sv = np.linalg.svd(J / np.where(norms > 0, norms, 1.0)[:, None, :], compute_uv=False)
+    ratio = np.where(sv[:, 0] > 0, sv[:, -1] / np.where(sv[:, 0] > 0, sv[:, 0], 1.0), 0.0)
+    ident = live & (ratio >= settings.rank_rtol) & (J.shape[1] >= n_p)
+    # covariance (eq. 7) as covariance_from_terms
+    F2 = np.einsum("mjk,mjkp,mjkr->mpr", cw * prep.w[None, None, :] / sig[:, None, :] ** 2, G, G)
+    H = F + S
+    d = 1.0 / np.sqrt(np.abs(np.einsum("mii->mi", F)))
+    with np.errstate(all="ignore"):
+        cond = np.linalg.cond(H * d[:, :, None] * d[:, None, :])
+    H_ok = np.isfinite(cond) & (cond <= 1e15)
+    Hs = np.where(H_ok[:, None, None], H, np.eye(n_p))
+    cov = np.linalg.solve(Hs, np.linalg.solve(Hs, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
+    cov_gn = np.linalg.solve(F, np.linalg.solve(F, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
+    cov = np.where(H_ok[:, None, None], 0.5 * (cov + cov.transpose(0, 2, 1)), np.nan)
+    cov_gn = 0.5 * (cov_gn + cov_gn.transpose(0, 2, 1))
+    h_rows = it.fh[k][:, prep.group]                                                 # (m, n_q, n_S)
+    resid = prep.Z[k] - h_rows[:, None]
+    rss = np.nansum(resid[..., prep.selected] ** 2, axis=(1, 2, 3))
+    n = prep.n_data[k]
     dof = n - n_p
-    if data.sigma is None:
+    if sigma_unknown:
         s2 = rss / dof
-        factor = s2 / sig[0] ** 2
-        sig_used = np.full(model.n_S, math.sqrt(s2))
+        factor = s2 / sig[:, 0] ** 2
     else:
-        factor, sig_used = 1.0, sig
-    cov, cov_gn, H, _ = covariance_from_terms(F, F2, S)
-    cov, cov_gn = cov * factor, cov_gn * factor
-    p = fin["p"]
-    ref = np.maximum(s_p, 1.0)
-    if not np.all(np.isfinite(p) & (np.abs(p) <= ABSURD_SCALES * ref)):
-        raise IdentificationError("the estimate ran off to absurd values", status="absurd estimate")
-    d1, d2 = np.diag(cov), np.diag(cov_gn)
-    if not (np.all(np.isfinite(d1) & (d1 >= 0)) and np.all(np.isfinite(d2) & (d2 >= 0))):
-        raise IdentificationError("non-finite standard errors", status="non-finite standard errors")
-    states = fin["Y"][prep.group] if model.n_y else np.zeros((prep.group.size, 0))
-    return BatchMember(p=p, cov=cov, cov_gn=cov_gn, information=F / factor, S=S / factor, H=H / factor,
-                       objective=fin["obj"] / factor if data.sigma is None else fin["obj"], rss=rss, n_data=n,
-                       dof=dof, sigma_estimated=data.sigma is None, sigma=sig_used, states=states, fitted=h_rows,
-                       decrement=fin["decrement"] / factor, iterations=fin["sweeps"])
+        factor = np.ones(m)
+    cov, cov_gn = cov * factor[:, None, None], cov_gn * factor[:, None, None]
+    far = ~np.all(np.isfinite(p) & (np.abs(p) <= ABSURD_SCALES * np.maximum(s_p, 1.0)), axis=1)
+    d1, d2 = np.einsum("mii->mi", cov), np.einsum("mii->mi", cov_gn)
+    bad_se = ~(np.all(np.isfinite(d1) & (d1 >= 0), axis=1) & np.all(np.isfinite(d2) & (d2 >= 0), axis=1))
+    for i in range(m):
+        if not ident[i]:
+            out[i] = "Assumption 3 (rank(Omega J) = n_p) fails at the converged point"
+        elif far[i]:
+            out[i] = "the estimate ran off to absurd values"
+        elif bad_se[i]:
+            out[i] = "the standard errors are not finite (H singular)"
+        else:
+            sig_used = np.full(model.n_S, math.sqrt(rss[i] / dof[i])) if sigma_unknown else sig[i]
+            states = it.fY[k[i]][prep.group]
+            out[i] = BatchMember(p=p[i], cov=cov[i], cov_gn=cov_gn[i], information=F[i] / factor[i],
+                                 S=S[i] / factor[i], H=H[i] / factor[i],
+                                 objective=it.fobj[k[i]] / factor[i], rss=float(rss[i]),
+                                 n_data=int(n[i]), dof=int(dof[i]), sigma_estimated=sigma_unknown, sigma=sig_used,
+                                 states=states, fitted=h_rows[i], decrement=it.fdec[k[i]] / factor[i],
+                                 iterations=int(it.fsweeps[k[i]]), state_derivatives=it.fyp[k[i]][prep.group])
+    return out
 
 
 def _symmetric(model, points: _Points, p0: np.ndarray, Y_u: np.ndarray) -> bool:
@@ -733,30 +908,34 @@ def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, sett
     it = None
     if members.size:
         prep_m = _Prepared(prep.first, prep.group, prep.zb[members], prep.wts[members], prep.const[members],
-                           prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w)
+                           prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w,
+                           prep.Z[members])
         points.R = members.size
         it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs, sym,
-                      data[0].sigma is None)
+                      data[0].sigma is None, starts is None)
     converged = np.zeros(R, bool)
     decrement = np.full(R, np.nan)
     sweeps = np.zeros(R, int)
+    finals = []
+    margin = 1e-6 * s_p
     for k, r in enumerate(members):
         sweeps[r] = it.sweeps[k]
         if not it.done[k]:
             fallback[r] = it.reason[k] or "the batch iteration did not converge"
-            continue
-        fin = it.final[k]
-        margin = 1e-6 * s_p
-        if not (np.all(fin["p"] > model.lower + margin) and np.all(fin["p"] < model.upper - margin)):
+        elif not (np.all(it.fp[k] > model.lower + margin) and np.all(it.fp[k] < model.upper - margin)):
             fallback[r] = "the optimum lies at or beyond a parameter bound (identify solves the bounded problem)"
-            continue
-        try:
-            results[r] = _member(model, prep_m, k, fin, data[r], s_p, settings)
-        except (IdentificationError, IdentifiabilityError) as exc:
-            fallback[r] = f"the converged point failed identify's checks: {exc}"
-            continue
-        converged[r] = True
-        decrement[r] = results[r].decrement
+        else:
+            finals.append(k)
+    if finals:
+        finals = np.array(finals, int)
+        for k, res in zip(finals, _members(model, prep_m, it, finals, s_p, settings, data[0].sigma is None)):
+            r = members[k]
+            if isinstance(res, str):
+                fallback[r] = f"the converged point failed identify's checks: {res}"
+                continue
+            results[r] = res
+            converged[r] = True
+            decrement[r] = res.decrement
     run_fallbacks()
     return _collect(model, results, records, converged, decrement, sweeps)
 

@@ -32,6 +32,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
+from .batch import BatchFit, fit_batch
 from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
@@ -98,6 +99,9 @@ class MonteCarloSettings:
     jit : bool               compile small models' CasADi functions to C in every worker
                              (models.state.set_jit; same numbers, about 25 % faster
                              per replication after a one-off ~1 s compilation per worker)
+    batch : bool             fit the replications of a chunk together with the batch engine
+                             (identification.batch.fit_batch: same estimates to ~1e-10, identify as
+                             per-member fallback); False: one identify call per fit
     """
 
     n_rep: int = 2000
@@ -110,6 +114,7 @@ class MonteCarloSettings:
     ci_level: float = 0.95
     detect: DetectSettings = field(default_factory=lambda: DetectSettings(normality="override"))
     jit: bool = True
+    batch: bool = True
 
     def __post_init__(self):
         if int(self.n_rep) < 1:
@@ -182,6 +187,7 @@ class _Task:
     detect: DetectSettings
     coverage_alpha: float
     jit: bool = False
+    batch: bool = False
 
 
 @dataclass(eq=False)
@@ -239,52 +245,161 @@ def _init_worker(task: _Task) -> None:
     WORKER.install(task)
 
 
-def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
-    rng = np.random.default_rng(seed)
-    data = task.generator(rng)
+def _empty_result(task: _Task) -> dict:
+    """The result dict of one replication before its tests (NaN everywhere, no errors)."""
     n_m, n_s = len(task.names), len(task.splits)
-    a_p = np.full((n_m, n_s), np.nan)
-    a_t = np.full((n_m, n_s), np.nan)
-    a_l = np.full((n_m, n_s), np.nan)
-    cov = np.full((n_m, n_s, 2), np.nan)
-    errors = []
-    g2 = None
-    sw = None
+    return {"alpha_paper": np.full((n_m, n_s), np.nan), "alpha_two_sample": np.full((n_m, n_s), np.nan),
+            "alpha_lr": np.full((n_m, n_s), np.nan), "covered": np.full((n_m, n_s, 2), np.nan), "errors": [],
+            "shapiro": None}
+
+
+def _record(task: _Task, out: dict, im: int, tests) -> None:
+    """Enter the split tests of model ``im`` into a replication's result dict ``out``."""
+    name, model, truth = task.names[im], task.models[im], task.truth[im]
+    g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p) if truth is not None else None
+    for js, t in enumerate(tests):
+        if t.ok:
+            out["alpha_paper"][im, js] = t.alpha_paper
+            out["alpha_two_sample"][im, js] = t.alpha_two_sample
+            out["alpha_lr"][im, js] = t.alpha_lr
+            if t.lr_error:
+                out["errors"].append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
+        else:
+            out["errors"].append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
+        if truth is not None:
+            for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
+                if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
+                    try:
+                        L = np.linalg.cholesky(C)
+                    except np.linalg.LinAlgError:
+                        continue
+                    v = np.linalg.solve(L, truth - p)
+                    out["covered"][im, js, kk] = float(v @ v <= g2)
+
+
+def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
+    """One replication, one identify call per fit."""
+    data = task.generator(np.random.default_rng(seed))
+    out = _empty_result(task)
     for im, name in enumerate(task.names):
         model = task.models[im]
         d = data[name] if isinstance(data, Mapping) else data
-        if sw is None:
-            sw = normality_check(d).pvalue
+        if out["shapiro"] is None:
+            out["shapiro"] = normality_check(d).pvalue
         st0 = WORKER.start_states(name, model, task.p0s[im], d.inputs)
         tests = run_split_tests(model, d, task.splits, task.p0s[im], task.weights[im], task.detect, name, st0)
-        truth = task.truth[im]
-        if truth is not None and g2 is None:
-            g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p)
-        for js, t in enumerate(tests):
-            if t.ok:
-                a_p[im, js] = t.alpha_paper
-                a_t[im, js] = t.alpha_two_sample
-                a_l[im, js] = t.alpha_lr
-                if t.lr_error:
-                    errors.append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
-            else:
-                errors.append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
-            if truth is not None:
-                for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
-                    if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
-                        try:
-                            L = np.linalg.cholesky(C)
-                        except np.linalg.LinAlgError:
-                            continue
-                        v = np.linalg.solve(L, truth - p)
-                        cov[im, js, kk] = float(v @ v <= g2)
-    return {"alpha_paper": a_p, "alpha_two_sample": a_t, "alpha_lr": a_l, "covered": cov, "errors": errors,
-            "shapiro": sw}
+        _record(task, out, im, tests)
+    return out
+
+
+def _given(fit: BatchFit, member: int):
+    """A member's estimate for run_split_tests(fits=...): the estimate, or the exception of its fit."""
+    try:
+        return fit.result(member)
+    except (IdentificationError, DataError) as exc:
+        return exc
+
+
+def _pooled_starts(model: Model, split: Split, fits: list, members: list, n_q_u: int) -> tuple:
+    """Start values of the pooled fits: the precision-weighted mean (F_c + F_v)^{-1} (F_c p_c + F_v p_v)
+    of each member's two estimates with their states (as detect's pooled Newton; moved to p by the
+    tangent y' (p - p_est) when the fit is a batch member); NaN (start at p0)
+    where it is singular or outside the bounds."""
+    qs_c, qs_v = list(split.cal_inputs), list(split.val_inputs)
+    qs = sorted(set(qs_c) | set(qs_v))
+    P = np.full((len(members), model.n_p), np.nan)
+    Y = np.zeros((len(members), n_q_u, model.n_y))
+    for k, (ec, ev) in enumerate(fits):
+        Fc, Fv = ec.information, ev.information
+        try:
+            p = np.linalg.solve(Fc + Fv, Fc @ ec.p + Fv @ ev.p)
+        except np.linalg.LinAlgError:
+            continue
+        if not (np.all(p > model.lower) and np.all(p < model.upper)):
+            continue
+        if model.n_y:
+            for j_list, est in ((qs_c, ec), (qs_v, ev)):
+                rows = [qs.index(j) for j in j_list]
+                Y[k, rows] = est.states
+                yp = getattr(est, "state_derivatives", None)       # tangent predictor y(p) ~ y + y' (p - p_est)
+                if yp is not None:
+                    Y[k, rows] += yp @ (p - est.p)
+        P[k] = p
+    return P, Y
+
+
+def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
+    """run_split_tests for R replications of one model with the same inputs: every calibration,
+    validation and pooled fit of a split is one :func:`identification.batch.fit_batch` call over the
+    replications; the statistics are run_split_tests' own (fits passed in)."""
+    model, name, p0, weights = task.models[im], task.names[im], task.p0s[im], task.weights[im]
+    det = task.detect
+    R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
+    n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
+    fits = [[(None, None)] * len(task.splits) for _ in range(R)]
+    ok_split = []
+    for js, split in enumerate(task.splits):
+        try:
+            split.check(n_q, n_M, model.n_p, n_sel)
+        except SplitError:
+            ok_split.append(False)
+            continue
+        ok_split.append(True)
+        got = []
+        for sub, rows in ((split.calibration, split.cal_inputs), (split.validation, split.val_inputs)):
+            bf = fit_batch(model, [sub(d) for d in ds], p0, weights, det.identify,
+                           Y0=None if st0 is None else st0[list(rows)])
+            got.append([_given(bf, r) for r in range(R)])
+        for r in range(R):
+            fits[r][js] = (got[0][r], got[1][r])
+    pooled = [{} for _ in range(R)]
+    done_keys = {}
+    for js, split in enumerate(task.splits):
+        if not ok_split[js]:
+            continue
+        key = split.pooled_points(n_M)
+        have = done_keys.setdefault(key, set())
+        members = [r for r in range(R) if r not in have and not any(isinstance(e, Exception) for e in fits[r][js])]
+        if not members:
+            continue
+        have.update(members)
+        qs = sorted({j for j, _ in key})
+        P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], members, len(qs))
+        bf = fit_batch(model, [split.pooled(ds[r]) for r in members], p0, weights, det.identify,
+                       Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        for k, r in enumerate(members):
+            e = _given(bf, k)
+            pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
+    return [run_split_tests(model, ds[r], task.splits, p0, weights, det, name, st0, fits=fits[r], pooled=pooled[r])
+            for r in range(R)]
+
+
+def _replicate_chunk(task: _Task, chunk: list) -> list:
+    """The replications of a chunk with the batch engine: the data sets of each model are grouped by
+    their inputs and every group's fits run as batches (:func:`_batched_split_tests`)."""
+    datas = [task.generator(np.random.default_rng(seed)) for _, seed in chunk]
+    outs = [_empty_result(task) for _ in chunk]
+    for im, name in enumerate(task.names):
+        ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
+        for r, d in enumerate(ds):
+            if outs[r]["shapiro"] is None:
+                outs[r]["shapiro"] = normality_check(d).pvalue
+        groups = {}
+        for r, d in enumerate(ds):
+            groups.setdefault((d.inputs.tobytes(), d.inputs.shape, d.n_M, d.sigma is None), []).append(r)
+        for rows in groups.values():
+            sub = [ds[r] for r in rows]
+            st0 = WORKER.start_states(name, task.models[im], task.p0s[im], sub[0].inputs)
+            for r, tests in zip(rows, _batched_split_tests(task, im, sub, st0)):
+                _record(task, outs[r], im, tests)
+    return [(i, out) for (i, _), out in zip(chunk, outs)]
 
 
 def _run_chunk(task, chunk):
     """Replications [(index, SeedSequence), ...] -> [(index, result dict), ...]."""
     t = WORKER.task_for(task)
+    if t.batch:
+        return _replicate_chunk(t, chunk)
     return [(i, _replicate(t, s)) for i, s in chunk]
 
 
@@ -637,7 +752,8 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
     task = _Task(token=uuid.uuid4().hex, names=names, models=tuple(models.values()), p0s=p0s,
                  weights=_per_model("weights", weights, names), splits=splits, generator=generator, truth=tr,
-                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit))
+                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit),
+                 batch=bool(settings.batch))
     # fail early (in this process) on a generator or split that does not fit the models
     probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
     for n, m in zip(names, models.values()):
