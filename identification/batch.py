@@ -273,8 +273,8 @@ def _padded(m: int, R: int) -> int:
 class _Mapped:
     """A CasADi function mapped over n points, evaluated through one reused FunctionBuffer.
 
-    Arguments are C-contiguous (n, d_i) arrays (row = point), outputs dense (n, rows, cols) arrays
-    (CasADi's column-major (r, c n) output is the C array (n, c, r), transposed on return).
+    Arguments are C-contiguous (n, d_i) arrays (row = point); outputs are the dense C arrays
+    (n, cols, rows) of CasADi's column-major (rows, cols n) results (transpose the last two axes).
     """
 
     def __init__(self, f, n: int):
@@ -300,7 +300,7 @@ class _Mapped:
         self._ev()
         if self._buf.ret() != 0:
             raise StateSolveError(f"evaluation of {self._f.name()} failed (CasADi return code {self._buf.ret()})")
-        return [o.transpose(0, 2, 1) for o in outs]
+        return outs
 
 
 def _point_functions(model) -> dict:
@@ -350,9 +350,9 @@ class _Points:
         """(E, h, Ey, Ep, hy, hp) at Y (m, n_u, n_y), P (m, n_p), each (m, n_u, ...)."""
         m, n, Yf, Pf, Qf = self._args(Y, P)
         E, h, Ey, Ep, hy, hp = _mapped(self.model, "terms", n)(Yf, Pf, Qf)
-        out = (E[:, :, 0], h[:, :, 0], Ey, Ep, hy, hp)
-        k = m * self.n_u
-        return tuple(a[:k].reshape((m, self.n_u) + a.shape[1:]) for a in out)
+        k, sh = m * self.n_u, (m, self.n_u)
+        return (E[:k, 0].reshape(sh + (-1,)), h[:k, 0].reshape(sh + (-1,)),
+                *(a[:k].reshape(sh + a.shape[1:]).swapaxes(2, 3) for a in (Ey, Ep, hy, hp)))
 
     def lag_hessians(self, Y, P, lam, mu) -> np.ndarray:
         """Hessians of lam^T h + mu^T E w.r.t. (y, p) at every point, (m, n_u, n_y + n_p, n_y + n_p)."""
@@ -361,7 +361,7 @@ class _Points:
         idx = np.minimum(np.arange(mp), m - 1)
         L = lam[idx].reshape(n, -1)
         Mu = mu[idx].reshape(n, -1)
-        Hl = _mapped(self.model, "lag_hess", n)(Yf, Pf, Qf, L, Mu)[0]
+        Hl = _mapped(self.model, "lag_hess", n)(Yf, Pf, Qf, L, Mu)[0]       # symmetric: no transpose
         k = m * self.n_u
         return Hl[:k].reshape((m, self.n_u) + Hl.shape[1:])
 
@@ -564,16 +564,19 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
     E, h, Ey, Ep, hy, hp = points.terms(Y, P)
     zb, wts = prep.zb[a], prep.wts[a]
     with np.errstate(invalid="ignore", over="ignore"):
-        finite = (np.all(np.isfinite(h.reshape(m, -1)), axis=1) & np.all(np.isfinite(E.reshape(m, -1)), axis=1)
-                  & np.all(np.isfinite(Ey.reshape(m, -1)), axis=1) & np.all(np.isfinite(Ep.reshape(m, -1)), axis=1))
-    lam_h = -wts * (zb - np.where(finite[:, None, None], h, 0.0))        # dPhi/dh at the current states
+        finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(E).all(axis=(1, 2))
+                  & np.isfinite(Ey).all(axis=(1, 2, 3)) & np.isfinite(Ep).all(axis=(1, 2, 3)))
+    if not np.all(finite):           # neutral values where a member is not finite (it stops this sweep)
+        fin3, fin4 = finite[:, None, None], finite[:, None, None, None]
+        h, E = np.where(fin3, h, 0.0), np.where(fin3, E, 0.0)
+        Ey, Ep, hy = np.where(fin4, Ey, np.eye(n_y)), np.where(fin4, Ep, 0.0), np.where(fin4, hy, 0.0)
+    lam_h = -wts * (zb - h)                                               # dPhi/dh at the current states
     mu = None
     if n_y:
-        fin4 = finite[:, None, None, None]
-        Eyf = np.where(fin4, Ey, np.eye(n_y))
-        rhs = [-np.where(finite[:, None, None], E, 0.0)[..., None], -np.where(fin4, Ep, 0.0)]
+        Eyf = Ey
+        rhs = [-E[..., None], -Ep]
         if sym:                      # E_y symmetric: the adjoint needs no second factorisation
-            rhs.append(-np.einsum("mjsy,mjs->mjy", np.where(fin4, hy, 0.0), lam_h)[..., None])
+            rhs.append(-np.matmul(lam_h[:, :, None, :], hy).swapaxes(2, 3))
         B = np.concatenate(rhs, axis=3)
         try:
             X = np.linalg.solve(Eyf, B)
@@ -587,15 +590,15 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
         dyE, yp = X[..., 0], X[..., 1:1 + n_p]
         if sym:
             mu = X[..., -1]
-        G = hp + np.einsum("mjsy,mjyp->mjsp", hy, yp)
-        h_lin = h + np.einsum("mjsy,mjy->mjs", hy, dyE)
+        G = hp + np.matmul(hy, yp)
+        h_lin = h + np.matmul(hy, dyE[..., None])[..., 0]
         ynorm = 1.0 + np.abs(Y).max(axis=2)
         state_ok = np.all(np.abs(dyE).max(axis=2) <= bs.state_tol * ynorm, axis=1)
     else:
         dyE = yp = np.zeros((m, n_u, 0))
         G, h_lin = hp, h
         state_ok = np.ones(m, bool)
-    finite &= np.all(np.isfinite(G.reshape(m, -1)), axis=1) & np.all(np.isfinite(dyE.reshape(m, -1)), axis=1)
+    finite &= np.isfinite(G).all(axis=(1, 2, 3)) & np.isfinite(dyE).all(axis=(1, 2))
     lam = -wts * (zb - h_lin)
     g = np.einsum("mjs,mjsp->mp", lam, G)
     F = np.einsum("mjs,mjsp,mjsr->mpr", wts, G, G)
@@ -610,10 +613,13 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
             mu_b = np.linalg.solve(Ey[b].transpose(0, 1, 3, 2), rhs_mu[..., None])[..., 0]
         else:
             mu_b = mu[b] if n_y else np.zeros((b.size, n_u, 0))
-        Hl = points.lag_hessians(Y[b], P[b], lam_h[b], mu_b)
-        eye = np.broadcast_to(np.eye(n_p), (b.size, n_u, n_p, n_p))
-        Z = np.concatenate([yp[b], eye], axis=2) if n_y else eye
-        Sb = np.einsum("mjva,mjvw,mjwb->mab", Z, Hl, Z, optimize=True)
+        Hl = points.lag_hessians(Y[b], P[b], lam_h[b], mu_b)               # order (y, p)
+        if n_y:                      # Z^T Hl Z with Z = [y'; I], summed over the inputs
+            ypb = yp[b]
+            T = np.matmul(Hl[..., :n_y], ypb) + Hl[..., n_y:]                # (b, n_u, n_y + n_p, n_p)
+            Sb = (np.matmul(ypb.swapaxes(2, 3), T[..., :n_y, :]) + T[..., n_y:, :]).sum(axis=1)
+        else:
+            Sb = Hl.sum(axis=1)
         S[b] = 0.5 * (Sb + Sb.transpose(0, 2, 1))
     return _Sweep(a, P, Y, h, G, F, S, has_S, g, obj, dyE, yp, lam, state_ok, finite)
 
