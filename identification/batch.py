@@ -476,6 +476,7 @@ class _Iteration:
     fdec: np.ndarray           # (R,) Newton decrement (inf where H is not positive definite)
     funit: np.ndarray          # (R,) unit of the decrement (1, or s^2 / sigma_0^2 when sigma is unknown)
     fsweeps: np.ndarray        # (R,)
+    halvings: np.ndarray       # (R,) step halvings since the last exact point
 
     @classmethod
     def start(cls, P0, Y0, n_S):
@@ -484,7 +485,8 @@ class _Iteration:
         z = np.zeros
         return cls(P0.copy(), Y0.copy(), z(R, bool), np.ones(R, bool), z(R, bool), [""] * R, z(R, int), z(R, bool),
                    z((R, n_p)), z((R, n_u, n_y)), z((R, n_u, n_y, n_p)), z((R, n_u, n_S)), z((R, n_u, n_S, n_p)),
-                   z((R, n_p, n_p)), z((R, n_p, n_p)), np.full(R, np.inf), np.full(R, np.inf), np.ones(R), z(R, int))
+                   z((R, n_p, n_p)), z((R, n_p, n_p)), np.full(R, np.inf), np.full(R, np.inf), np.ones(R), z(R, int),
+                   z(R, int))
 
 
 @dataclass(frozen=True)
@@ -595,7 +597,7 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
         ynorm = 1.0 + np.abs(Y).max(axis=2)
         state_ok = np.all(np.abs(dyE).max(axis=2) <= bs.state_tol * ynorm, axis=1)
     else:
-        dyE = yp = np.zeros((m, n_u, 0))
+        dyE, yp = np.zeros((m, n_u, 0)), np.zeros((m, n_u, 0, n_p))
         G, h_lin = hp, h
         state_ok = np.ones(m, bool)
     finite &= np.isfinite(G).all(axis=(1, 2, 3)) & np.isfinite(dyE).all(axis=(1, 2))
@@ -646,9 +648,13 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
     # falls, else the previous point is the optimum
     quadratic = it.has_final[a] & (it.fdec[a] <= settings.decrement_tol * it.funit[a])
     keep_inc = increased & quadratic & (dec < it.fdec[a])
-    stop_inc = increased & ~keep_inc
-    update = exact & ~stop_inc
+    # outside the quadratic region an increase halves the step from the last exact point (the
+    # backtracking of identify's explicit Newton; at most 30 halvings)
+    back = increased & ~quadratic & (it.halvings[a] < 30)
+    stop_inc = increased & ~keep_inc & ~back
+    update = exact & ~stop_inc & ~back
     b = a[update]
+    it.halvings[b] = 0
     it.has_final[b] = True
     it.fp[b], it.fY[b], it.fyp[b], it.fh[b], it.fG[b] = sw.P[update], sw.Y[update], sw.yp[update], sw.h[update], \
         sw.G[update]
@@ -666,7 +672,14 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
     dp = dp * np.where(big > bs.max_step, bs.max_step / np.where(big > 0, big, 1.0), 1.0)[:, None]
     p_new = sw.P + dp
     inside = np.all((p_new > model.lower) & (p_new < model.upper), axis=1)
-    for k in np.flatnonzero(~step | ~inside):
+    for k in np.flatnonzero(back):
+        i = a[k]
+        d = 0.5 * (sw.P[k] - it.fp[i])
+        it.P[i] = it.fp[i] + d
+        it.Y[i] = it.fY[i] + it.fyp[i] @ d if model.n_y else it.Y[i]
+        it.halvings[i] += 1
+    step &= ~back
+    for k in np.flatnonzero(~step & ~back | ~inside & step):
         i = a[k]
         if bad[k]:
             it.reason[i] = "the model or its derivatives are not finite (or E_y is singular) at the iterate"
@@ -677,7 +690,7 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
         elif step[k]:
             it.reason[i] = "the iteration left the parameter bounds"
     step &= inside
-    it.active[a[~step]] = False
+    it.active[a[~step & ~back]] = False
     b = a[step]
     it.P[b] = p_new[step]
     if model.n_y:
