@@ -131,7 +131,8 @@ def run_timing(args):
     print("\n| path | backend | replications | wall | per replication | CPU (all processes) | CPU per replication |")
     print("|---|---|---|---|---|---|---|")
     for name, res, cpu in runs:
-        print(f"| {name} | {res.backend} | {res.n_rep} | {res.wall_time:.1f} s | {res.wall_time / res.n_rep * 1e3:.1f} ms "
+        per = res.wall_time / res.n_rep * 1e3
+        print(f"| {name} | {res.backend} | {res.n_rep} | {res.wall_time:.1f} s | {per:.1f} ms "
               f"| {cpu:.1f} s | {cpu / res.n_rep * 1e3:.1f} ms |")
     if n_cmp:
         old, cpu_old = runs[1][1], runs[1][2]
@@ -142,8 +143,8 @@ def run_timing(args):
                        ("alpha_lr", "alpha_two_sample", "alpha_paper"))
         same = all(np.array_equal(par.decisions(statistic=st)[:k], old.decisions(statistic=st)[:k], equal_nan=True)
                    for st in ("likelihood_ratio", "two_sample", "paper"))
-        print(f"\nfirst {k} replications: decisions identical (all three statistics): {same}; largest |alpha difference| "
-              f"{diff:.1e} (target 1e-6); same failed splits: {nan_same}")
+        print(f"\nfirst {k} replications: decisions identical (all three statistics): {same}; "
+              f"largest |alpha difference| {diff:.1e} (target 1e-6); same failed splits: {nan_same}")
         print(f"CPU per replication, per-fit / batch: {cpu_old / old.n_rep / (runs[0][2] / par.n_rep):.2f}; "
               f"wall per replication, per-fit / batch: {old.wall_time / old.n_rep / (par.wall_time / par.n_rep):.2f}")
 
