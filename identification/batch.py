@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
@@ -56,7 +56,7 @@ from .errors import DataError, IdentificationError, StateSolveError
 from .estimator import IdentifySettings, identify
 from .measurements import Measurements
 
-__all__ = ["fit_batch", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
+__all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
 
 #: an estimate farther than this many parameter scales from zero is a failed fit (as identify)
 ABSURD_SCALES = 1e6
@@ -110,6 +110,92 @@ def _readonly(a) -> np.ndarray:
     a = np.array(a, dtype=float, copy=True)
     a.setflags(write=False)
     return a
+
+
+@dataclass(frozen=True, eq=False)
+class BatchData:
+    """R data sets of one model with the same inputs, stacked (the input of :func:`fit_batch`).
+
+    Attributes
+    ----------
+    inputs : ndarray (n_q, d_q)      the common inputs
+    z : ndarray (R, n_M, n_q, n_S)   values (NaN: missing)
+    sigma : ndarray (R, n_S) or None sensor sigmas (None: a common unknown sigma for every member)
+    make : callable or None          member -> its Measurements (the data of a fallback fit; None:
+                                     ``Measurements(inputs, z[r], sigma[r])``)
+
+    Build it with :meth:`of` from Measurements, or directly from arrays (cheaper for many small
+    data sets: no Measurements is built unless a member falls back).
+    """
+
+    inputs: np.ndarray
+    z: np.ndarray
+    sigma: np.ndarray | None
+    make: Callable | None = None
+
+    def __post_init__(self):
+        q = np.asarray(self.inputs, float)
+        z = np.asarray(self.z, float)
+        if q.ndim != 2 or z.ndim != 4 or z.shape[2] != q.shape[0] or z.shape[0] < 1:
+            raise DataError(f"z, inputs: expected z of shape (R >= 1, n_M, n_q, n_S) and inputs (n_q, d_q), got "
+                            f"{z.shape} and {q.shape}")
+        if self.sigma is not None:
+            sig = np.asarray(self.sigma, float)
+            if sig.shape != (z.shape[0], z.shape[3]) or not np.all(np.isfinite(sig) & (sig > 0)):
+                raise DataError(f"sigma: expected positive finite values of shape {(z.shape[0], z.shape[3])} "
+                                f"or None, got {sig.shape}")
+            object.__setattr__(self, "sigma", sig)
+        object.__setattr__(self, "inputs", q)
+        object.__setattr__(self, "z", z)
+
+    @classmethod
+    def of(cls, data: Sequence[Measurements]) -> "BatchData":
+        """Stack Measurements with the same inputs (all sigmas given or all unknown; members with fewer
+        series are padded with missing values)."""
+        data = tuple(data)
+        if not data:
+            raise DataError("data: the batch is empty; give at least one Measurements")
+        for r, d in enumerate(data):
+            if not isinstance(d, Measurements):
+                raise TypeError(f"data[{r}]: expected an identification.Measurements, got {type(d).__name__}")
+        d0 = data[0]
+        for r, d in enumerate(data[1:], 1):
+            if d.inputs.shape != d0.inputs.shape or not np.array_equal(d.inputs, d0.inputs):
+                raise DataError(f"data[{r}]: its inputs differ from data[0]'s; a batch fits data sets with the same "
+                                "inputs (group the data sets by inputs, or call identify per data set)")
+            if (d.sigma is None) != (d0.sigma is None):
+                raise DataError(f"data[{r}]: sigma is {'unknown' if d.sigma is None else 'given'} but not for "
+                                "data[0]; a batch needs all sigmas given or all unknown")
+            if d.n_S != d0.n_S:
+                raise DataError(f"data[{r}]: has {d.n_S} sensors, data[0] has {d0.n_S}")
+        n_M = max(d.n_M for d in data)
+        z = np.full((len(data), n_M) + d0.z.shape[1:], np.nan)
+        for r, d in enumerate(data):
+            z[r, :d.n_M] = d.z
+        sig = None if d0.sigma is None else np.stack([np.asarray(d.sigma, float) for d in data])
+        return cls(d0.inputs, z, sig, data.__getitem__)
+
+    @property
+    def n_members(self) -> int:
+        return self.z.shape[0]
+
+    def member(self, r: int) -> Measurements:
+        """The Measurements of member r."""
+        if self.make is not None:
+            return self.make(r)
+        return Measurements(self.inputs, self.z[r], None if self.sigma is None else self.sigma[r])
+
+    def weights(self, weights=None) -> np.ndarray:
+        """Validated sensor weights (n_S,): ones for None, else finite and >= 0 (as Measurements.sensor_weights)."""
+        n_S = self.z.shape[3]
+        if weights is None:
+            return np.ones(n_S)
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (n_S,):
+            raise DataError(f"weights: expected {n_S} sensor weights, got shape {w.shape}")
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise DataError(f"weights: must be finite and non-negative, got {w.tolist()}")
+        return w
 
 
 @dataclass(frozen=True, eq=False)
@@ -234,15 +320,6 @@ def _param_scale(model: Model, p0: np.ndarray) -> np.ndarray:
         else:
             s[i] = 1.0
     return s
-
-
-def _objective_sigma(model: Model, data: Measurements, selected: np.ndarray) -> np.ndarray:
-    """The sigmas of the objective: the data's, or (sigma unknown) the common spread identify uses."""
-    if data.sigma is not None:
-        return np.asarray(data.sigma, float)
-    zs = data.z[:, :, selected]
-    spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
-    return np.full(model.n_S, spread)
 
 
 def _unique_rows(inputs: np.ndarray, Y: np.ndarray) -> tuple:
@@ -383,36 +460,26 @@ class _Prepared:
     Z: np.ndarray              # (R, n_M, n_q, n_S) the members' data
 
 
-def _stack(data) -> np.ndarray:
-    """The members' z as one array (R, n_M, n_q, n_S); members with fewer series are padded with NaN
-    (missing values)."""
-    n_M = max(d.n_M for d in data)
-    Z = np.full((len(data), n_M) + data[0].z.shape[1:], np.nan)
-    for r, d in enumerate(data):
-        Z[r, :d.n_M] = d.z
-    return Z
-
-
-def _prepare(model, data, w, Y_ref) -> _Prepared:
+def _prepare(model, data: BatchData, w, Y_ref) -> _Prepared:
     """Data terms of every member, as :meth:`identification.refinement.ReducedProblem.of` computes them
     (c_jk = n_jk w_k, zbar the per-(input, sensor) means, Phi_0 the within-group scatter) and the
     objective's sigmas as identify chooses them, pooled over identical input rows:
     sum_{j in u} c_j (zbar_j - h)^2 = C_u (zbar_u - h)^2 + sum_{j in u} c_j (zbar_j - zbar_u)^2 with
     C_u = sum_j c_j and zbar_u = sum_j c_j zbar_j / C_u (exact)."""
-    first, group = _unique_rows(data[0].inputs, Y_ref)
-    n_u, R = first.size, len(data)
+    first, group = _unique_rows(data.inputs, Y_ref)
+    n_u, R = first.size, data.n_members
     selected = np.flatnonzero(w > 0)
-    Z = _stack(data)
+    Z = data.z
     mask = np.isfinite(Z)
     counts = mask.sum(axis=1).astype(float)                                  # (R, n_q, n_S)
     zsum = np.where(mask, Z, 0.0).sum(axis=1)
     zbar = np.where(counts > 0, zsum / np.maximum(counts, 1), 0.0)
-    if data[0].sigma is not None:
-        sig = np.stack([np.asarray(d.sigma, float) for d in data])
-    else:
+    if data.sigma is not None:
+        sig = data.sigma
+    else:                            # identify's common spread of the selected sensors
         sig = np.empty((R, model.n_S))
-        for r, d in enumerate(data):
-            zs = d.z[:, :, selected]
+        for r in range(R):
+            zs = Z[r][:, :, selected]
             sig[r] = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
     cw = counts * w[None, None, :]
     dev = np.where(mask, Z - zbar[:, None], 0.0)
@@ -730,33 +797,17 @@ def _iterate(model, prep: _Prepared, points: _Points, s_p, P0, Y0, settings: Ide
 
 # ---------------------------------------------------------------------------- the front door
 def _check_batch(model: Model, data, p0, weights) -> tuple:
-    """Validated (data tuple, p0, w): one model, shared inputs, all sigmas known or all unknown."""
+    """Validated (BatchData, p0, w)."""
     if not isinstance(model, Model):
         raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
-    data = tuple(data)
-    if not data:
-        raise DataError("data: the batch is empty; give at least one Measurements")
-    for r, d in enumerate(data):
-        if not isinstance(d, Measurements):
-            raise TypeError(f"data[{r}]: expected an identification.Measurements, got {type(d).__name__}")
-    q = data[0].inputs
-    for r, d in enumerate(data[1:], 1):
-        if d.inputs.shape != q.shape or not np.array_equal(d.inputs, q):
-            raise DataError(f"data[{r}]: its inputs differ from data[0]'s; a batch fits data sets with the same "
-                            "inputs (group the data sets by inputs, or call identify per data set)")
-        if (d.sigma is None) != (data[0].sigma is None):
-            raise DataError(f"data[{r}]: sigma is {'unknown' if d.sigma is None else 'given'} but not for data[0]; "
-                            "a batch needs all sigmas given or all unknown")
-        if d.n_S != data[0].n_S:
-            raise DataError(f"data[{r}]: has {d.n_S} sensors, data[0] has {data[0].n_S}")
+    bd = data if isinstance(data, BatchData) else BatchData.of(data)
     try:
         p0 = np.asarray(p0, dtype=float).ravel()
     except (TypeError, ValueError):
         raise DataError(f"p0: not numeric: {p0!r}") from None
     if p0.shape != (model.n_p,):
         raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
-    w = data[0].sensor_weights(weights)
-    return data, p0, w
+    return bd, p0, bd.weights(weights)
 
 
 def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndarray, settings: IdentifySettings,
@@ -832,14 +883,14 @@ def _symmetric(model, points: _Points, p0: np.ndarray, Y_u: np.ndarray) -> bool:
     return bool(np.all(np.abs(Ey - Ey.transpose(0, 2, 1)) <= 1e-12 * np.abs(Ey).max(axis=(1, 2))[:, None, None]))
 
 
-def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, settings: IdentifySettings | None = None,
+def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weights=None, settings: IdentifySettings | None = None,
               Y0=None, starts=None, start_states=None, batch_settings: BatchSettings | None = None) -> BatchFit:
     """Fit R data sets of one model (same inputs, sensors and weights) together; see the module docstring.
 
     Parameters
     ----------
     model : models.Model
-    data : sequence of Measurements
+    data : sequence of Measurements, or BatchData
         The R data sets: the same inputs (n_q, d_q); sigma given for all or unknown for all
         (missing values may differ).
     p0 : array_like (n_p,)
@@ -872,22 +923,23 @@ def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, sett
     settings = settings or IdentifySettings()
     bs = batch_settings or BatchSettings()
     data, p0, w = _check_batch(model, data, p0, weights)
-    R, n_p, n_y = len(data), model.n_p, model.n_y
-    q = data[0].inputs
+    R, n_p, n_y = data.n_members, model.n_p, model.n_y
+    q = data.inputs
+    sigma_unknown = data.sigma is None
     records, results = [], [None] * R
     fallback = {}                                   # member -> reason
 
     def run_fallbacks():
         for r, why in sorted(fallback.items()):
             try:
-                est = identify(model, data[r], p0, weights=weights, settings=settings, Y0=Y0)
+                est = identify(model, data.member(r), p0, weights=weights, settings=settings, Y0=Y0)
                 records.append(FallbackRecord(r, why))
                 results[r] = est
             except (IdentificationError, DataError) as exc:
                 records.append(FallbackRecord(r, why, f"{type(exc).__name__}: {exc}"))
                 results[r] = exc
 
-    usable = (q.shape[1] == model.n_q_dim and data[0].n_S == model.n_S and np.any(w > 0)
+    usable = (q.shape[1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(w > 0)
               and np.all(p0 >= model.lower) and np.all(p0 <= model.upper) and np.all(np.isfinite(p0))
               and (not n_y or numerics(model).dense))
     Y_ref = None
@@ -902,10 +954,9 @@ def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, sett
         fallback.update({r: why for r in range(R)})
         run_fallbacks()
         return _collect(model, results, records, np.zeros(R, bool), np.full(R, np.nan), np.zeros(R, int))
-    for r, d in enumerate(data):
-        n = d.n_data(w)
-        if n < n_p or (d.sigma is None and n <= n_p):
-            fallback[r] = "too few values for the parameters"
+    n_values = np.isfinite(data.z[..., w > 0]).sum(axis=(1, 2, 3))
+    for r in np.flatnonzero((n_values < n_p) | (sigma_unknown & (n_values <= n_p))):
+        fallback[int(r)] = "too few values for the parameters"
     prep = _prepare(model, data, w, Y_ref if n_y else np.zeros((q.shape[0], 0)))
     Q_u = q[prep.first]
     points = _Points(model, Q_u, R)
@@ -931,7 +982,7 @@ def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, sett
                            prep.Z[members])
         points.R = members.size
         it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs, sym,
-                      data[0].sigma is None, starts is None)
+                      sigma_unknown, starts is None)
     converged = np.zeros(R, bool)
     decrement = np.full(R, np.nan)
     sweeps = np.zeros(R, int)
@@ -947,7 +998,7 @@ def fit_batch(model: Model, data: Sequence[Measurements], p0, weights=None, sett
             finals.append(k)
     if finals:
         finals = np.array(finals, int)
-        for k, res in zip(finals, _members(model, prep_m, it, finals, s_p, settings, data[0].sigma is None)):
+        for k, res in zip(finals, _members(model, prep_m, it, finals, s_p, settings, sigma_unknown)):
             r = members[k]
             if isinstance(res, str):
                 fallback[r] = f"the converged point failed identify's checks: {res}"

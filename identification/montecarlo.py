@@ -32,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from .batch import BatchFit, fit_batch
+from .batch import BatchData, BatchFit, fit_batch
 from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
@@ -328,6 +328,36 @@ def _pooled_starts(model: Model, split: Split, fits: list, members: list, n_q_u:
     return P, Y
 
 
+class _Subsets:
+    """Picklable member -> Measurements of a split's subset (the data of a fallback fit)."""
+
+    def __init__(self, ds: list, subset: Callable):
+        self.ds, self.subset = ds, subset
+
+    def __call__(self, r: int) -> Measurements:
+        return self.subset(self.ds[r])
+
+
+def _split_batch(ds: list, Z: np.ndarray, sig, inputs, series, subset: Callable) -> BatchData:
+    """The stacked data of one subset (inputs, series) of every replication (as Split.calibration etc.)."""
+    ser = list(range(Z.shape[1])) if series is None else list(series)
+    rows = list(inputs)
+    return BatchData(ds[0].inputs[rows], Z[:, ser][:, :, rows], sig, _Subsets(ds, subset))
+
+
+def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> BatchData:
+    """The stacked pooled data of a split for ``members`` (as Split.pooled: NaN outside the pooled points)."""
+    pts = split.pooled_points(Z.shape[1])
+    qs = sorted({j for j, _ in pts})
+    series = sorted({i for _, i in pts})
+    zp = np.full((len(members), len(series), len(qs), Z.shape[3]), np.nan)
+    jj = np.array([j for j, _ in pts])
+    ii = np.array([i for _, i in pts])
+    zp[:, np.searchsorted(series, ii), np.searchsorted(qs, jj)] = Z[members][:, ii, jj]
+    return BatchData(ds[0].inputs[qs], zp, None if sig is None else sig[members],
+                     _Subsets([ds[r] for r in members], split.pooled))
+
+
 def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
     """run_split_tests for R replications of one model with the same inputs: every calibration,
     validation and pooled fit of a split is one :func:`identification.batch.fit_batch` call over the
@@ -337,6 +367,8 @@ def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
     R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
     n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
     fits = [[(None, None)] * len(task.splits) for _ in range(R)]
+    Z = np.stack([d.z for d in ds])
+    sig = None if ds[0].sigma is None else np.stack([np.asarray(d.sigma, float) for d in ds])
     ok_split = []
     for js, split in enumerate(task.splits):
         try:
@@ -346,8 +378,9 @@ def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
             continue
         ok_split.append(True)
         got = []
-        for sub, rows in ((split.calibration, split.cal_inputs), (split.validation, split.val_inputs)):
-            bf = fit_batch(model, [sub(d) for d in ds], p0, weights, det.identify,
+        for sub, rows, series in ((split.calibration, split.cal_inputs, split.cal_series),
+                                  (split.validation, split.val_inputs, split.val_series)):
+            bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
                            Y0=None if st0 is None else st0[list(rows)])
             got.append([_given(bf, r) for r in range(R)])
         for r in range(R):
@@ -365,7 +398,7 @@ def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
         have.update(members)
         qs = sorted({j for j, _ in key})
         P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], members, len(qs))
-        bf = fit_batch(model, [split.pooled(ds[r]) for r in members], p0, weights, det.identify,
+        bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
                        Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
         for k, r in enumerate(members):
             e = _given(bf, k)
