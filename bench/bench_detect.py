@@ -87,6 +87,7 @@ def main(argv=None):
     ap.add_argument("--save", default=None, help="write the per-replication arrays to this .npz file")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}", flush=True)
+    c0 = _cpu()
     if args.study == "size":
         res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, not args.per_fit)
         _save(args.save, res)
@@ -95,7 +96,8 @@ def main(argv=None):
         for st in ("paper", "two_sample", "likelihood_ratio"):
             r = res.rejection_rate("M1", st)
             print(f"size {st}: {r}")
-        print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication")
+        print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication; "
+              f"CPU of all processes {_cpu() - c0:.1f} s ({'per-fit identify' if args.per_fit else 'batch engine'})")
     elif args.study == "timing":
         run_timing(args)
     elif args.study == "power":
@@ -106,7 +108,8 @@ def main(argv=None):
         for m in res.models:
             for st in ("paper", "two_sample", "likelihood_ratio"):
                 print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
-        print(f"wall {res.wall_time:.1f} s on {res.backend}")
+        print(f"wall {res.wall_time:.1f} s on {res.backend}; CPU of all processes {_cpu() - c0:.1f} s "
+              f"({'per-fit identify' if args.per_fit else 'batch engine'})")
     else:
         run_press()
 

@@ -29,17 +29,25 @@ state solver's test |dy_E| <= 1e-12 (1 + |y|) at every input) the point is an ex
 point and the test of :func:`identification.refinement.refine` applies: a member has converged
 when its Newton decrement g^T (J^T Omega J + S)^{-1} g is below ``refine_decrement`` (chi^2
 units; or below the round-off of the gradient's sum), or the Newton step is below 1e-13
-parameter scales; a step that increases Phi ends the iteration as in ``refine`` (accepted only
-when the decrement is below ``decrement_tol``).  The estimate is then checked as
-:func:`identification.identify` checks its own (Assumption 3, plausibility, finite covariance),
-and the second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same
-exact terms (:func:`identification.estimator.covariance_from_terms`).
+parameter scales.  A step that increases Phi is halved back towards the last exact point
+(identify's backtracking, at most 30 halvings); in the quadratic region (decrement below
+``decrement_tol``, where Phi cannot resolve the decrease) the step is kept while the decrement
+falls, else the last exact point is the optimum, as in ``refine``.  The estimate is then
+checked as :func:`identification.identify` checks its own (Assumption 3 on the column-
+normalised sqrt(Omega) J, |p| below 1e6 parameter scales, finite standard errors), and the
+second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same exact terms
+and formulas as :func:`identification.estimator.covariance_from_terms` (batched).
+
+Members that share the start (p0 and the states solved there) share the first sweep: the
+model is evaluated once and only the data terms differ.  Identical input rows (same q and
+the same state at p0) are evaluated once per member (their data terms are pooled exactly).
+Models with more than 60 states (sparse state Jacobians) are not batched: every member is
+fitted by identify.
 
 A member that does not converge (or fails a check, or ends on or outside a parameter bound)
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
 fallback is recorded (which member, why, and identify's error when it failed too): a member
-is never dropped.  Input rows that are identical (same q and same state at p0) are evaluated
-once per member (their data terms are pooled exactly).
+is never dropped.
 """
 from __future__ import annotations
 
@@ -933,10 +941,10 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         for r, why in sorted(fallback.items()):
             try:
                 est = identify(model, data.member(r), p0, weights=weights, settings=settings, Y0=Y0)
-                records.append(FallbackRecord(r, why))
+                records.append(FallbackRecord(int(r), why))
                 results[r] = est
             except (IdentificationError, DataError) as exc:
-                records.append(FallbackRecord(r, why, f"{type(exc).__name__}: {exc}"))
+                records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
                 results[r] = exc
 
     usable = (q.shape[1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(w > 0)

@@ -14,6 +14,12 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
   (1 - alpha) confidence ellipsoid {p : (p - p_hat)^T C^{-1} (p - p_hat) <= chi2_{n_p}(1 - alpha)}
   of each calibration and validation fit.
 
+The replications of a chunk are fitted together by the batch engine
+(:func:`identification.batch.fit_batch`: one batch per split and fit, same estimates as
+:func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
+the statistics are those of :func:`identification.detect.run_split_tests` on these fits
+(``MonteCarloSettings.batch=False``: one identify call per fit).
+
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
 depend on the number of workers or on the backend (serial, local processes, Dask).
