@@ -79,7 +79,7 @@ class BatchSettings:
     max_sweeps : int        sweeps (model evaluations at all points) before a member falls back
     newton_step : float     after a step shorter than this (parameter scales, inf-norm) a member
                             takes exact Newton steps (before: Gauss-Newton)
-    max_step : float        steps longer than this (parameter scales, inf-norm) are shortened to it
+    max_step : float        steps longer than this (inf-norm of |dp| / max(s_p, |p|)) are shortened to it
     state_tol : float       state convergence |dy_E|_inf <= state_tol (1 + |y|_inf) at every input
                             (the test of models.state.solve_states)
     """
@@ -665,8 +665,8 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
                 except np.linalg.LinAlgError:
                     finite[k] = False
         dyE, yp = X[..., 0], X[..., 1:1 + n_p]
-        if sym:
-            mu = X[..., -1]
+        if sym and np.abs(Ey - Ey.swapaxes(2, 3)).max() <= 1e-12 * np.abs(Ey).max():
+            mu = X[..., -1]          # (symmetry checked at every point; else the transpose solve below)
         G = hp + np.matmul(hy, yp)
         h_lin = h + np.matmul(hy, dyE[..., None])[..., 0]
         ynorm = 1.0 + np.abs(Y).max(axis=2)
@@ -744,7 +744,9 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
     dp = np.where(use_N[:, None], dN, dG)
     big = np.max(np.abs(dp / s_p), axis=1)
     it.newton[a[step & (big < bs.newton_step)]] = True
-    dp = dp * np.where(big > bs.max_step, bs.max_step / np.where(big > 0, big, 1.0), 1.0)[:, None]
+    # steps are limited relative to max(s_p, |p|): far optima (a wrong model) are reached geometrically
+    rel = np.max(np.abs(dp) / np.maximum(s_p, np.abs(sw.P)), axis=1)
+    dp = dp * np.where(rel > bs.max_step, bs.max_step / np.where(rel > 0, rel, 1.0), 1.0)[:, None]
     p_new = sw.P + dp
     inside = np.all((p_new > model.lower) & (p_new < model.upper), axis=1)
     for k in np.flatnonzero(back):
