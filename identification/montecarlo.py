@@ -306,15 +306,15 @@ def _given(fit: BatchFit, member: int):
         return exc
 
 
-def _pooled_starts(model: Model, split: Split, fits: list, members: list, n_q_u: int) -> tuple:
+def _pooled_starts(model: Model, split: Split, fits: list, n_q_u: int) -> tuple:
     """Start values of the pooled fits: the precision-weighted mean (F_c + F_v)^{-1} (F_c p_c + F_v p_v)
     of each member's two estimates with their states (as detect's pooled Newton; moved to p by the
     tangent y' (p - p_est) when the fit is a batch member); NaN (start at p0)
     where it is singular or outside the bounds."""
     qs_c, qs_v = list(split.cal_inputs), list(split.val_inputs)
     qs = sorted(set(qs_c) | set(qs_v))
-    P = np.full((len(members), model.n_p), np.nan)
-    Y = np.zeros((len(members), n_q_u, model.n_y))
+    P = np.full((len(fits), model.n_p), np.nan)
+    Y = np.zeros((len(fits), n_q_u, model.n_y))
     for k, (ec, ev) in enumerate(fits):
         Fc, Fv = ec.information, ev.information
         try:
@@ -403,7 +403,7 @@ def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
             continue
         have.update(members)
         qs = sorted({j for j, _ in key})
-        P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], members, len(qs))
+        P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
         bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
                        Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
         for k, r in enumerate(members):
