@@ -9,8 +9,12 @@ Studies (``--study``):
   the paper's statistic and of the two-sample statistic with Clopper-Pearson 95 %
   intervals, and the coverage of the 95 % ellipsoids of every fit.
 * ``timing``: the same four-scenario test, ``--n-rep`` replications on ``--workers``
-  processes, and ``--serial-rep`` replications in this process; prints the time per
-  replication and the speed-up ratio.
+  processes with the batch engine (:func:`identification.batch.fit_batch`, a chunk of
+  replications fitted together), then ``--compare-rep`` replications (default min(n_rep, 200))
+  on the same workers with one :func:`identification.identify` call per fit (the per-fit
+  path); prints wall and CPU time (this process and its workers) per replication, the ratio,
+  and whether the decisions of the common replications are identical (alpha to 1e-6);
+  ``--serial-rep`` adds a run in this process.
 * ``power``: campaigns from the virtual prototype (:mod:`models.prototype`) if it exposes
   a generator, M1 (and M2/M3 when :mod:`models.friction` provides them) tested on them.
 
@@ -50,10 +54,20 @@ def _machine() -> str:
             f"load average {load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}, python {platform.python_version()}")
 
 
-def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progress=True):
+def _cpu() -> float:
+    """CPU seconds (user + system) of this process and its finished child processes (the workers)."""
+    import resource
+    t = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        r = resource.getrusage(who)
+        t += r.ru_utime + r.ru_stime
+    return t
+
+
+def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progress=True, batch=True):
     model = press_model()
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
-                                  detect=DetectSettings(tol=0.05, normality="override"))
+                                  detect=DetectSettings(tol=0.05, normality="override"), batch=batch)
     return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, PAPER_SPLITS,
                       p0=P0, n_M=2, weights=WEIGHTS_110, settings=settings, name="M1")
 
@@ -62,7 +76,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench detect")
     ap.add_argument("--study", choices=("size", "timing", "power", "press"), default="size")
     ap.add_argument("--n-rep", type=int, default=2000)
-    ap.add_argument("--serial-rep", type=int, default=None, help="replications of the serial run (timing)")
+    ap.add_argument("--serial-rep", type=int, default=0, help="replications of a serial run (timing; 0: none)")
+    ap.add_argument("--compare-rep", type=int, default=None,
+                    help="replications of the per-fit comparison run (timing; default min(n_rep, 200); 0: none)")
+    ap.add_argument("--per-fit", action="store_true", help="one identify call per fit (no batch engine)")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--seed", type=int, default=20261121)
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
@@ -70,42 +87,69 @@ def main(argv=None):
     ap.add_argument("--save", default=None, help="write the per-replication arrays to this .npz file")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}", flush=True)
+    c0 = _cpu()
     if args.study == "size":
-        res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, not args.per_fit)
         _save(args.save, res)
         print(res.description)
         print(res.table())
         for st in ("paper", "two_sample", "likelihood_ratio"):
             r = res.rejection_rate("M1", st)
             print(f"size {st}: {r}")
-        print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication")
+        print(f"wall {res.wall_time:.1f} s on {res.backend}: {res.wall_time / res.n_rep * 1e3:.0f} ms per replication; "
+              f"CPU of all processes {_cpu() - c0:.1f} s ({'per-fit identify' if args.per_fit else 'batch engine'})")
     elif args.study == "timing":
-        par = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
-        _save(args.save, par)
-        print(par.table())
-        n_ser = args.serial_rep or args.n_rep
-        ser = run_size(n_ser, 1, args.seed, None, not args.no_progress)
-        same = all(np.array_equal(a[:n_ser], b, equal_nan=True) for a, b in
-                   ((par.alpha_lr, ser.alpha_lr), (par.alpha_two_sample, ser.alpha_two_sample),
-                    (par.alpha_paper, ser.alpha_paper)))
-        per_par = par.wall_time / par.n_rep
-        per_ser = ser.wall_time / ser.n_rep
-        print(f"parallel: {par.n_rep} replications in {par.wall_time:.1f} s on {par.backend} "
-              f"({per_par * 1e3:.0f} ms per replication)")
-        print(f"serial:   {ser.n_rep} replications in {ser.wall_time:.1f} s ({per_ser * 1e3:.0f} ms per replication)")
-        print(f"speed-up (serial / parallel time per replication): {per_ser / per_par:.2f}; serial estimate for "
-              f"{par.n_rep}: {per_ser * par.n_rep:.0f} s; first {n_ser} replications identical: {same}")
+        run_timing(args)
     elif args.study == "power":
-        res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress)
+        res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, not args.per_fit)
         _save(args.save, res)
         print(res.description)
         print(res.table())
         for m in res.models:
             for st in ("paper", "two_sample", "likelihood_ratio"):
                 print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
-        print(f"wall {res.wall_time:.1f} s on {res.backend}")
+        print(f"wall {res.wall_time:.1f} s on {res.backend}; CPU of all processes {_cpu() - c0:.1f} s "
+              f"({'per-fit identify' if args.per_fit else 'batch engine'})")
     else:
         run_press()
+
+
+def run_timing(args):
+    """Batch engine vs per-fit path on the same replications (see the module docstring)."""
+    runs = []
+    c0 = _cpu()
+    par = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, batch=True)
+    runs.append(("batch engine", par, _cpu() - c0))
+    _save(args.save, par)
+    print(par.table())
+    n_cmp = min(args.n_rep, 200) if args.compare_rep is None else args.compare_rep
+    if n_cmp:
+        c0 = _cpu()
+        old = run_size(n_cmp, args.workers, args.seed, args.scheduler, not args.no_progress, batch=False)
+        runs.append(("per-fit identify", old, _cpu() - c0))
+    if args.serial_rep:
+        c0 = _cpu()
+        ser = run_size(args.serial_rep, 1, args.seed, None, not args.no_progress, batch=True)
+        runs.append(("batch engine, serial", ser, _cpu() - c0))
+    print("\n| path | backend | replications | wall | per replication | CPU (all processes) | CPU per replication |")
+    print("|---|---|---|---|---|---|---|")
+    for name, res, cpu in runs:
+        per = res.wall_time / res.n_rep * 1e3
+        print(f"| {name} | {res.backend} | {res.n_rep} | {res.wall_time:.1f} s | {per:.1f} ms "
+              f"| {cpu:.1f} s | {cpu / res.n_rep * 1e3:.1f} ms |")
+    if n_cmp:
+        old, cpu_old = runs[1][1], runs[1][2]
+        k = min(n_cmp, par.n_rep)
+        diff = max(float(np.nanmax(np.abs(getattr(par, f)[:k] - getattr(old, f)[:k]))) for f in
+                   ("alpha_lr", "alpha_two_sample", "alpha_paper"))
+        nan_same = all(np.array_equal(np.isnan(getattr(par, f)[:k]), np.isnan(getattr(old, f)[:k])) for f in
+                       ("alpha_lr", "alpha_two_sample", "alpha_paper"))
+        same = all(np.array_equal(par.decisions(statistic=st)[:k], old.decisions(statistic=st)[:k], equal_nan=True)
+                   for st in ("likelihood_ratio", "two_sample", "paper"))
+        print(f"\nfirst {k} replications: decisions identical (all three statistics): {same}; "
+              f"largest |alpha difference| {diff:.1e} (target 1e-6); same failed splits: {nan_same}")
+        print(f"CPU per replication, per-fit / batch: {cpu_old / old.n_rep / (runs[0][2] / par.n_rep):.2f}; "
+              f"wall per replication, per-fit / batch: {old.wall_time / old.n_rep / (par.wall_time / par.n_rep):.2f}")
 
 
 def _save(path, res):
@@ -146,7 +190,7 @@ class PrototypeCampaign:
         return {n: campaign_measurements(c, inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
 
 
-def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
+def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, batch=True):
     from identification.montecarlo import power_study
     try:
         from models.friction import candidate_models
@@ -154,7 +198,7 @@ def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True):
     except ImportError:
         models = {"M1": press_model()}
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
-                                  detect=DetectSettings(tol=0.05, normality="override"))
+                                  detect=DetectSettings(tol=0.05, normality="override"), batch=batch)
     return power_study(models, PrototypeCampaign(names=tuple(models)), PAPER_SPLITS, P0, WEIGHTS_110, settings,
                        description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
                                    "after a run-in cycle, seed per replication), sigma = the paper's fixed values")

@@ -334,8 +334,10 @@ def _failed(model_name, split, stage, msg, n_p, p_cal=None, C_cal=None, n_cal=0,
                      math.nan, math.nan, math.nan, math.nan, n_cal, 0, tuple(notes))
 
 
-def _fit(model, data, p0, weights, settings, Y0=None):
-    est = identify(model, data, p0, weights=weights, settings=settings.identify, Y0=Y0)
+def _fit(model, data, p0, weights, settings, Y0=None, given=None):
+    if isinstance(given, Exception):
+        raise given
+    est = identify(model, data, p0, weights=weights, settings=settings.identify, Y0=Y0) if given is None else given
     C = est.cov if settings.covariance == "second_order" else est.cov_gn
     return est, C
 
@@ -372,7 +374,7 @@ def _counted(items, bar):
 
 def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None,
                     settings: DetectSettings | None = None, model_name: str | None = None,
-                    states0=None, curvature: bool = False, bar=None) -> tuple:
+                    states0=None, curvature: bool = False, bar=None, fits=None, pooled=None) -> tuple:
     """Lines 06-08 for every split: fits (p_cal, C_cal), (p_val, C_val), the pooled fit and the
     three alpha_min (likelihood ratio, two-sample Wald, paper).
 
@@ -384,27 +386,33 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     the states at p0 for every input of ``data``, warm-starts the fits (same result, faster).
     ``bar`` (a tqdm bar, e.g. from :meth:`identification.progress.Progress.bar`) is advanced by
     one per split done.
+
+    ``fits`` (one (calibration, validation) pair per split) and ``pooled`` ({split.pooled_points:
+    pooled fit}) give fits computed elsewhere (e.g. by :func:`identification.batch.fit_batch` for
+    many replications at once): an entry is an estimate (the fields of :class:`Estimate` the tests
+    read), the IdentificationError/DataError its fit raised, or (pooled) a failure text.
     """
     settings = settings or DetectSettings()
     name = model_name or model.name
     n_sel = int(np.count_nonzero(data.sensor_weights(weights) > 0))
     out = []
-    pooled = {}
-    for split in _counted(splits, bar):
+    pooled = {} if pooled is None else dict(pooled)
+    for js, split in enumerate(_counted(splits, bar)):
+        given = (None, None) if fits is None else fits[js]
         try:
             split.check(data.n_q, data.n_M, model.n_p, n_sel)
         except SplitError as exc:
             out.append(_failed(name, split, "split", str(exc), model.n_p))
             continue
         try:
-            est_c, C_c = _fit(model, split.calibration(data), p0, weights, settings,
-                              None if states0 is None else states0[list(split.cal_inputs)])
+            est_c, C_c = _fit(model, split.calibration(data) if given[0] is None else None, p0, weights, settings,
+                              None if states0 is None else states0[list(split.cal_inputs)], given[0])
         except (IdentificationError, DataError) as exc:
             out.append(_failed(name, split, "calibration fit", f"{type(exc).__name__}: {exc}", model.n_p))
             continue
         try:
-            est_v, C_v = _fit(model, split.validation(data), p0, weights, settings,
-                              None if states0 is None else states0[list(split.val_inputs)])
+            est_v, C_v = _fit(model, split.validation(data) if given[1] is None else None, p0, weights, settings,
+                              None if states0 is None else states0[list(split.val_inputs)], given[1])
         except (IdentificationError, DataError) as exc:
             out.append(_failed(name, split, "validation fit", f"{type(exc).__name__}: {exc}", model.n_p,
                                est_c.p, C_c, est_c.n_data, est_c.notes))

@@ -14,6 +14,12 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
   (1 - alpha) confidence ellipsoid {p : (p - p_hat)^T C^{-1} (p - p_hat) <= chi2_{n_p}(1 - alpha)}
   of each calibration and validation fit.
 
+The replications of a chunk are fitted together by the batch engine
+(:func:`identification.batch.fit_batch`: one batch per split and fit, same estimates as
+:func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
+the statistics are those of :func:`identification.detect.run_split_tests` on these fits
+(``MonteCarloSettings.batch=False``: one identify call per fit).
+
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
 depend on the number of workers or on the backend (serial, local processes, Dask).
@@ -33,6 +39,7 @@ from scipy import stats
 
 from models.contract import Model
 from . import cluster
+from .batch import BatchData, BatchFit, fit_batch
 from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
@@ -100,6 +107,9 @@ class MonteCarloSettings:
     jit : bool               compile small models' CasADi functions to C in every worker
                              (models.state.set_jit; same numbers, about 25 % faster
                              per replication after a one-off ~1 s compilation per worker)
+    batch : bool             fit the replications of a chunk together with the batch engine
+                             (identification.batch.fit_batch: same estimates to ~1e-10, identify as
+                             per-member fallback); False: one identify call per fit
     """
 
     n_rep: int = 2000
@@ -112,6 +122,7 @@ class MonteCarloSettings:
     ci_level: float = 0.95
     detect: DetectSettings = field(default_factory=lambda: DetectSettings(normality="override"))
     jit: bool = True
+    batch: bool = True
 
     def __post_init__(self):
         if int(self.n_rep) < 1:
@@ -185,6 +196,7 @@ class _Task:
     detect: DetectSettings
     coverage_alpha: float
     jit: bool = False
+    batch: bool = False
 
 
 @dataclass(eq=False)
@@ -242,52 +254,194 @@ def _init_worker(task: _Task) -> None:
     WORKER.install(task)
 
 
-def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
-    rng = np.random.default_rng(seed)
-    data = task.generator(rng)
+def _empty_result(task: _Task) -> dict:
+    """The result dict of one replication before its tests (NaN everywhere, no errors)."""
     n_m, n_s = len(task.names), len(task.splits)
-    a_p = np.full((n_m, n_s), np.nan)
-    a_t = np.full((n_m, n_s), np.nan)
-    a_l = np.full((n_m, n_s), np.nan)
-    cov = np.full((n_m, n_s, 2), np.nan)
-    errors = []
-    g2 = None
-    sw = None
+    return {"alpha_paper": np.full((n_m, n_s), np.nan), "alpha_two_sample": np.full((n_m, n_s), np.nan),
+            "alpha_lr": np.full((n_m, n_s), np.nan), "covered": np.full((n_m, n_s, 2), np.nan), "errors": [],
+            "shapiro": None}
+
+
+def _record(task: _Task, out: dict, im: int, tests) -> None:
+    """Enter the split tests of model ``im`` into a replication's result dict ``out``."""
+    name, model, truth = task.names[im], task.models[im], task.truth[im]
+    g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p) if truth is not None else None
+    for js, t in enumerate(tests):
+        if t.ok:
+            out["alpha_paper"][im, js] = t.alpha_paper
+            out["alpha_two_sample"][im, js] = t.alpha_two_sample
+            out["alpha_lr"][im, js] = t.alpha_lr
+            if t.lr_error:
+                out["errors"].append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
+        else:
+            out["errors"].append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
+        if truth is not None:
+            for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
+                if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
+                    try:
+                        L = np.linalg.cholesky(C)
+                    except np.linalg.LinAlgError:
+                        continue
+                    v = np.linalg.solve(L, truth - p)
+                    out["covered"][im, js, kk] = float(v @ v <= g2)
+
+
+def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
+    """One replication, one identify call per fit."""
+    data = task.generator(np.random.default_rng(seed))
+    out = _empty_result(task)
     for im, name in enumerate(task.names):
         model = task.models[im]
         d = data[name] if isinstance(data, Mapping) else data
-        if sw is None:
-            sw = normality_check(d).pvalue
+        if out["shapiro"] is None:
+            out["shapiro"] = normality_check(d).pvalue
         st0 = WORKER.start_states(name, model, task.p0s[im], d.inputs)
         tests = run_split_tests(model, d, task.splits, task.p0s[im], task.weights[im], task.detect, name, st0)
-        truth = task.truth[im]
-        if truth is not None and g2 is None:
-            g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p)
-        for js, t in enumerate(tests):
-            if t.ok:
-                a_p[im, js] = t.alpha_paper
-                a_t[im, js] = t.alpha_two_sample
-                a_l[im, js] = t.alpha_lr
-                if t.lr_error:
-                    errors.append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
-            else:
-                errors.append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
-            if truth is not None:
-                for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
-                    if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
-                        try:
-                            L = np.linalg.cholesky(C)
-                        except np.linalg.LinAlgError:
-                            continue
-                        v = np.linalg.solve(L, truth - p)
-                        cov[im, js, kk] = float(v @ v <= g2)
-    return {"alpha_paper": a_p, "alpha_two_sample": a_t, "alpha_lr": a_l, "covered": cov, "errors": errors,
-            "shapiro": sw}
+        _record(task, out, im, tests)
+    return out
+
+
+def _given(fit: BatchFit, member: int):
+    """A member's estimate for run_split_tests(fits=...): the estimate, or the exception of its fit."""
+    try:
+        return fit.result(member)
+    except (IdentificationError, DataError) as exc:
+        return exc
+
+
+def _pooled_starts(model: Model, split: Split, fits: list, n_q_u: int) -> tuple:
+    """Start values of the pooled fits: the precision-weighted mean (F_c + F_v)^{-1} (F_c p_c + F_v p_v)
+    of each member's two estimates with their states (as detect's pooled Newton; moved to p by the
+    tangent y' (p - p_est) when the fit is a batch member); NaN (start at p0)
+    where it is singular or outside the bounds."""
+    qs_c, qs_v = list(split.cal_inputs), list(split.val_inputs)
+    qs = sorted(set(qs_c) | set(qs_v))
+    P = np.full((len(fits), model.n_p), np.nan)
+    Y = np.zeros((len(fits), n_q_u, model.n_y))
+    for k, (ec, ev) in enumerate(fits):
+        Fc, Fv = ec.information, ev.information
+        try:
+            p = np.linalg.solve(Fc + Fv, Fc @ ec.p + Fv @ ev.p)
+        except np.linalg.LinAlgError:
+            continue
+        if not (np.all(p > model.lower) and np.all(p < model.upper)):
+            continue
+        if model.n_y:
+            for j_list, est in ((qs_c, ec), (qs_v, ev)):
+                rows = [qs.index(j) for j in j_list]
+                Y[k, rows] = est.states
+                yp = getattr(est, "state_derivatives", None)       # tangent predictor y(p) ~ y + y' (p - p_est)
+                if yp is not None:
+                    Y[k, rows] += yp @ (p - est.p)
+        P[k] = p
+    return P, Y
+
+
+class _Subsets:
+    """Picklable member -> Measurements of a split's subset (the data of a fallback fit)."""
+
+    def __init__(self, ds: list, subset: Callable):
+        self.ds, self.subset = ds, subset
+
+    def __call__(self, r: int) -> Measurements:
+        return self.subset(self.ds[r])
+
+
+def _split_batch(ds: list, Z: np.ndarray, sig, inputs, series, subset: Callable) -> BatchData:
+    """The stacked data of one subset (inputs, series) of every replication (as Split.calibration etc.)."""
+    ser = list(range(Z.shape[1])) if series is None else list(series)
+    rows = list(inputs)
+    return BatchData(ds[0].inputs[rows], Z[:, ser][:, :, rows], sig, _Subsets(ds, subset))
+
+
+def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> BatchData:
+    """The stacked pooled data of a split for ``members`` (as Split.pooled: NaN outside the pooled points)."""
+    pts = split.pooled_points(Z.shape[1])
+    qs = sorted({j for j, _ in pts})
+    series = sorted({i for _, i in pts})
+    zp = np.full((len(members), len(series), len(qs), Z.shape[3]), np.nan)
+    jj = np.array([j for j, _ in pts])
+    ii = np.array([i for _, i in pts])
+    zp[:, np.searchsorted(series, ii), np.searchsorted(qs, jj)] = Z[members][:, ii, jj]
+    return BatchData(ds[0].inputs[qs], zp, None if sig is None else sig[members],
+                     _Subsets([ds[r] for r in members], split.pooled))
+
+
+def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
+    """run_split_tests for R replications of one model with the same inputs: every calibration,
+    validation and pooled fit of a split is one :func:`identification.batch.fit_batch` call over the
+    replications; the statistics are run_split_tests' own (fits passed in)."""
+    model, name, p0, weights = task.models[im], task.names[im], task.p0s[im], task.weights[im]
+    det = task.detect
+    R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
+    n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
+    fits = [[(None, None)] * len(task.splits) for _ in range(R)]
+    Z = np.stack([d.z for d in ds])
+    sig = None if ds[0].sigma is None else np.stack([np.asarray(d.sigma, float) for d in ds])
+    ok_split = []
+    for js, split in enumerate(task.splits):
+        try:
+            split.check(n_q, n_M, model.n_p, n_sel)
+        except SplitError:
+            ok_split.append(False)
+            continue
+        ok_split.append(True)
+        got = []
+        for sub, rows, series in ((split.calibration, split.cal_inputs, split.cal_series),
+                                  (split.validation, split.val_inputs, split.val_series)):
+            bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
+                           Y0=None if st0 is None else st0[list(rows)])
+            got.append([_given(bf, r) for r in range(R)])
+        for r in range(R):
+            fits[r][js] = (got[0][r], got[1][r])
+    pooled = [{} for _ in range(R)]
+    done_keys = {}
+    for js, split in enumerate(task.splits):
+        if not ok_split[js]:
+            continue
+        key = split.pooled_points(n_M)
+        have = done_keys.setdefault(key, set())
+        members = [r for r in range(R) if r not in have and not any(isinstance(e, Exception) for e in fits[r][js])]
+        if not members:
+            continue
+        have.update(members)
+        qs = sorted({j for j, _ in key})
+        P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
+        bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
+                       Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        for k, r in enumerate(members):
+            e = _given(bf, k)
+            pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
+    return [run_split_tests(model, ds[r], task.splits, p0, weights, det, name, st0, fits=fits[r], pooled=pooled[r])
+            for r in range(R)]
+
+
+def _replicate_chunk(task: _Task, chunk: list) -> list:
+    """The replications of a chunk with the batch engine: the data sets of each model are grouped by
+    their inputs and every group's fits run as batches (:func:`_batched_split_tests`)."""
+    datas = [task.generator(np.random.default_rng(seed)) for _, seed in chunk]
+    outs = [_empty_result(task) for _ in chunk]
+    for im, name in enumerate(task.names):
+        ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
+        for r, d in enumerate(ds):
+            if outs[r]["shapiro"] is None:
+                outs[r]["shapiro"] = normality_check(d).pvalue
+        groups = {}
+        for r, d in enumerate(ds):
+            groups.setdefault((d.inputs.tobytes(), d.inputs.shape, d.n_M, d.sigma is None), []).append(r)
+        for rows in groups.values():
+            sub = [ds[r] for r in rows]
+            st0 = WORKER.start_states(name, task.models[im], task.p0s[im], sub[0].inputs)
+            for r, tests in zip(rows, _batched_split_tests(task, im, sub, st0)):
+                _record(task, outs[r], im, tests)
+    return [(i, out) for (i, _), out in zip(chunk, outs)]
 
 
 def _run_chunk(task, chunk):
     """Replications [(index, SeedSequence), ...] -> [(index, result dict), ...]."""
     t = WORKER.task_for(task)
+    if t.batch:
+        return _replicate_chunk(t, chunk)
     return [(i, _replicate(t, s)) for i, s in chunk]
 
 
@@ -636,7 +790,8 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
     task = _Task(token=uuid.uuid4().hex, names=names, models=tuple(models.values()), p0s=p0s,
                  weights=_per_model("weights", weights, names), splits=splits, generator=generator, truth=tr,
-                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit))
+                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit),
+                 batch=bool(settings.batch))
     # fail early (in this process) on a generator or split that does not fit the models
     probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
     for n, m in zip(names, models.values()):

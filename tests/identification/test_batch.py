@@ -1,0 +1,138 @@
+"""The batch engine (identification.batch.fit_batch) against identify, member by member.
+
+Agreement targets: estimates to 1e-8 relative, covariances to 1e-6 relative (identify itself
+stops at a Newton decrement of 1e-18 chi^2 units, i.e. within 1e-9 standard errors of the
+optimum, and so does the batch iteration; both are then a few 1e-11 apart on the press).
+"""
+import casadi as ca
+import numpy as np
+import pytest
+
+from identification import DataError, IdentifySettings, Measurements, identify
+from identification.batch import BatchFit, BatchMember, fit_batch
+from identification.montecarlo import ModelCampaign, MonteCarloSettings, size_study
+from identification.detect import DetectSettings
+from identification.splits import splits_from_scenarios
+from models.contract import Model, Parameter
+from models.press import PRESS_SCENARIOS, Q_PAPER, press_model
+
+SIGMA_MM = np.array([1.518e-05, 4.895e-06, 3.904e-06]) * 1e3
+W = np.array([1.0, 1.0, 0.0])
+P0 = np.array([450.0, 550.0])
+SPLITS = splits_from_scenarios(PRESS_SCENARIOS, len(Q_PAPER))
+
+
+@pytest.fixture(scope="module")
+def press():
+    return press_model()
+
+
+@pytest.fixture(scope="module")
+def press_data(press):
+    gen = ModelCampaign(press, press.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_MM, 2)
+    rng = np.random.default_rng(5)
+    return [gen(rng) for _ in range(4)]
+
+
+def _assert_same_as_identify(model, data, p0, weights, fit, rtol_p=1e-8, rtol_cov=1e-6):
+    for r, d in enumerate(data):
+        est = identify(model, d, p0, weights=weights)
+        got = fit.result(r)
+        np.testing.assert_allclose(got.p, est.p, rtol=rtol_p, atol=0)
+        np.testing.assert_allclose(fit.p[r], est.p, rtol=rtol_p, atol=0)
+        np.testing.assert_allclose(got.cov, est.cov, rtol=rtol_cov, atol=1e-14 * np.abs(est.cov).max())
+        np.testing.assert_allclose(got.cov_gn, est.cov_gn, rtol=rtol_cov, atol=1e-14 * np.abs(est.cov_gn).max())
+        np.testing.assert_allclose(got.information, est.information, rtol=rtol_cov)
+        assert got.objective == pytest.approx(est.objective, rel=1e-9)
+        assert got.rss == pytest.approx(est.rss, rel=1e-8)
+        assert (got.n_data, got.dof, got.sigma_estimated) == (est.n_data, est.dof, est.sigma_estimated)
+        np.testing.assert_allclose(got.states, est.states, rtol=1e-8, atol=1e-10)
+
+
+def test_press_batch_equals_identify(press, press_data):
+    # the interleaved scenario's calibration set repeats loads (q3 .. q27 visit each load twice):
+    # identical input rows are evaluated once per member, which must not change the result
+    for split in (SPLITS[0], SPLITS[3]):
+        cal = [split.calibration(d) for d in press_data]
+        fit = fit_batch(press, cal, P0, W)
+        assert isinstance(fit, BatchFit) and fit.converged.all() and fit.ok.all() and not fit.fallbacks
+        assert np.all(fit.decrement <= 1e-18)
+        assert isinstance(fit.result(0), BatchMember)
+        _assert_same_as_identify(press, cal, P0, W, fit)
+    with pytest.raises(ValueError):
+        fit.p[0, 0] = 1.0                        # read-only result
+
+
+def test_explicit_model_known_and_unknown_sigma():
+    model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    x = np.linspace(50.0, 800.0, 14)
+    rng = np.random.default_rng(2)
+    truth = np.array(230.0, float), np.array(5e-4)
+    y0 = truth[0] * (1 - np.exp(-truth[1] * x))
+    for sigma in (np.array([0.5]), None):
+        data = [Measurements(inputs=x, z=(y0 + 0.5 * rng.standard_normal((2, 14)))[:, :, None], sigma=sigma)
+                for _ in range(3)]
+        fit = fit_batch(model, data, [200.0, 4e-4])
+        assert fit.converged.all() and not fit.fallbacks
+        _assert_same_as_identify(model, data, [200.0, 4e-4], None, fit)
+
+
+def test_failing_members_fall_back_to_identify_and_are_recorded():
+    # bounded exponential model: member 1's data want b1 far beyond its upper bound (the batch
+    # iteration leaves the bounds, identify solves the bounded problem); member 2 has too few
+    # values (identify raises DataError, kept as the member's result, never dropped)
+    model = Model.explicit(params=[Parameter("b1", 0.0, 300.0), Parameter("b2", 0.0, 1.0)], inputs=["x"],
+                           sensors=["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    x = np.linspace(50.0, 800.0, 10)
+    rng = np.random.default_rng(4)
+
+    def campaign(b1):
+        return (b1 * (1 - np.exp(-5e-4 * x)) + 0.5 * rng.standard_normal((2, 10)))[:, :, None]
+
+    z_sparse = campaign(230.0)
+    z_sparse[:, 1:] = np.nan
+    z_sparse[1, 0] = np.nan                              # one value for two parameters
+    data = [Measurements(x, campaign(230.0), [0.5]), Measurements(x, campaign(900.0), [0.5]),
+            Measurements(x, z_sparse, [0.5]), Measurements(x, campaign(240.0), [0.5])]
+    fit = fit_batch(model, data, [200.0, 4e-4])
+    assert fit.n_members == 4
+    assert fit.converged.tolist() == [True, False, False, True]
+    assert fit.ok.tolist() == [True, True, False, True]
+    rec = {f.member: f for f in fit.fallbacks}
+    assert set(rec) == {1, 2}
+    assert "bound" in rec[1].reason and rec[1].error == ""
+    assert "too few values" in rec[2].reason and rec[2].error.startswith("DataError")
+    est = identify(model, data[1], [200.0, 4e-4])
+    np.testing.assert_allclose(fit.p[1], est.p, rtol=1e-12)
+    assert fit.p[1, 0] == pytest.approx(300.0)          # at the bound, identify's bounded solution
+    assert np.all(np.isnan(fit.p[2]))
+    with pytest.raises(DataError):
+        fit.result(2)
+
+
+def test_bad_batches_are_refused(press, press_data):
+    other = Measurements(np.array(Q_PAPER)[:10, None], press_data[0].z[:, :10], SIGMA_MM)
+    with pytest.raises(DataError, match=r"data\[1\].*inputs"):
+        fit_batch(press, [press_data[0], other], P0, W)
+    with pytest.raises(DataError, match="empty"):
+        fit_batch(press, [], P0, W)
+    with pytest.raises(DataError, match="p0"):
+        fit_batch(press, press_data[:1], [1.0], W)
+
+
+def test_monte_carlo_decisions_batch_equal_per_fit(press):
+    # scenarios 3 and 4 pool the same points: one pooled batch serves both
+    res = {}
+    for batch in (True, False):
+        s = MonteCarloSettings(n_rep=2, seed=9, workers=1, progress=False, jit=False, batch=batch,
+                               detect=DetectSettings(tol=0.05, normality="override"))
+        res[batch] = size_study(press, press.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_MM, SPLITS[2:],
+                                p0=P0, weights=W, settings=s, name="M1")
+    b, f = res[True], res[False]
+    assert not b.errors and not f.errors
+    for name in ("alpha_paper", "alpha_two_sample", "alpha_lr"):
+        np.testing.assert_allclose(getattr(b, name), getattr(f, name), rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(b.covered, f.covered)
+    for st in ("paper", "two_sample", "likelihood_ratio"):
+        np.testing.assert_array_equal(b.decisions(statistic=st), f.decisions(statistic=st))
