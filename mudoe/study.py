@@ -363,10 +363,10 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
     o = study.cfg.oed
     with progress.step(f"optimal sensor design ({o.criterion}, {v})"):
         F, S = information_contributions(study.models[v], study.data[v], est.p, states=est.states)
-        n_p = study.models[v].n_p
+        n_default = min(study.models[v].n_p, len(study.sensors))   # fewer sensors than parameters is allowed
         table = design_table(F, S if o.kind == "second_order" else None, study.sensors,
-                             o.min_sensors or n_p, kind=o.kind)
-        n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else n_p
+                             o.min_sensors or n_default, kind=o.kind)
+        n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else n_default
         res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind, n_sensors=n,
                                               max_sensors=o.max_sensors, costs=list(o.costs) if o.costs else None,
                                               budget=o.budget, include=o.include, exclude=o.exclude,

@@ -191,3 +191,15 @@ def test_refitted_discrimination_design_and_its_enumeration_limit(tmp_path, caps
     assert np.isnan(even) or even <= obj["value"] * (1 + 1e-12)
     code, _, err = _run_rivals(tmp_path, capsys, RIVALS + 'n_readings = 12\ndiscrimination_criterion = "T_refit"\n')
     assert code == 2 and "enumeration_limit" in err and len(err.strip().splitlines()) == 1
+
+
+def test_one_sensor_study_designs_without_min_sensors(tmp_path):
+    """A study with fewer sensors than parameters needs no min_sensors/n_sensors keys (default capped)."""
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "configs" / "truss_one_sensor.toml").read_text()
+    text = text.replace("n_sensors = 1", "").replace('"../', f'"{root}/')
+    cfg = tmp_path / "truss.toml"
+    cfg.write_text(text)
+    assert main(["oed", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 0
+    assert "P_x" in (tmp_path / "r" / "oed.txt").read_text()
