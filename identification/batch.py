@@ -61,7 +61,7 @@ import numpy as np
 from models.contract import Model
 from models.state import numerics, solve_states
 from .errors import DataError, IdentificationError, StateSolveError
-from .estimator import IdentifySettings, identify
+from .estimator import IdentifySettings, identify, param_scale
 from .measurements import Measurements
 
 __all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
@@ -314,20 +314,6 @@ class BatchFit:
 
 
 # ---------------------------------------------------------------------------- helpers
-def _param_scale(model: Model, p0: np.ndarray) -> np.ndarray:
-    """Parameter scales s_p as identify uses them: the declared scale, else |p0|, else the bound
-    range, else 1."""
-    s = np.empty(model.n_p)
-    for i, par in enumerate(model.params):
-        if par.scale is not None:
-            s[i] = par.scale
-        elif p0[i] != 0:
-            s[i] = abs(p0[i])
-        elif math.isfinite(par.lower) and math.isfinite(par.upper) and par.upper > par.lower:
-            s[i] = par.upper - par.lower
-        else:
-            s[i] = 1.0
-    return s
 
 
 def _unique_rows(inputs: np.ndarray, Y: np.ndarray) -> tuple:
@@ -973,7 +959,7 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     prep = _prepare(model, data, w, Y_ref if n_y else np.zeros((q.shape[0], 0)))
     Q_u = q[prep.first]
     points = _Points(model, Q_u, R)
-    s_p = _param_scale(model, p0)
+    s_p = param_scale(model, p0)
     Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
     P0 = np.tile(p0, (R, 1))
     Yst = np.tile(Y_u, (R, 1, 1))

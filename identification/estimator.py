@@ -38,7 +38,7 @@ from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
-           "covariance_from_terms"]
+           "covariance_from_terms", "param_scale"]
 
 
 @dataclass(frozen=True)
@@ -201,7 +201,8 @@ def _predictor(model, p0, inputs, Y0, zbar, cw, sig, s_p, max_step):
     return p1, Y0 + np.einsum("jyp,p->jy", yp, p1 - p0)
 
 
-def _param_scale(model, p0):
+def param_scale(model, p0) -> np.ndarray:
+    """Parameter scales s_p: the declared scale, else |p0|, else the bound range, else 1."""
     s = np.empty(model.n_p)
     for i, par in enumerate(model.params):
         if par.scale is not None:
@@ -619,7 +620,7 @@ def _start(model, data, p0, weights, Y0) -> _Start:
         sig = np.full(model.n_S, spread)
     else:
         sig = np.asarray(data.sigma, float)
-    s_p = _param_scale(model, p0)
+    s_p = param_scale(model, p0)
     if not model.n_y:                       # explicit: no states to solve or scale
         Y_init, s_y, e_scale = np.zeros((data.n_q, 0)), np.ones(0), np.ones(0)
     else:

@@ -65,9 +65,10 @@ def linear_model(X_by_sensor) -> Model:
                           h=lambda p, q: q[0] * (ca.DM(X) @ p), name="linear")
 
 
-def two_bar_truss(name: str = "two-bar truss") -> Model:
+def two_bar_truss(name: str = "two-bar truss", sensors: tuple = ("P_x", "P_y")) -> Model:
     """The README's two-bar truss: bars of stiffness k1, k2 (N/mm) from walls A (0, 0) and
-    B (800, 0) mm to the hook P (300, -400) mm, loaded by F (N) downwards; sensors P_x, P_y (mm)."""
+    B (800, 0) mm to the hook P (300, -400) mm, loaded by F (N) downwards; sensors a subset of
+    P_x, P_y (mm)."""
     from .mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model
     mech = Mechanism(
         "two_bar_truss",
@@ -77,5 +78,5 @@ def two_bar_truss(name: str = "two-bar truss") -> Model:
                   Load("hook", "P", fy=-1.0, input="F")],
         parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
                     MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
-        inputs=("F",), sensors=("P_x", "P_y"))
+        inputs=("F",), sensors=tuple(sensors))
     return build_model(mech, unknowns=("k1", "k2"), name=name)

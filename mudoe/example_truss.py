@@ -14,17 +14,8 @@ __all__ = ["build", "build_one_sensor"]
 
 
 def _truss(variant: str, sensors: tuple) -> Model:
-    from models.mechanism import Bar, Joint, Load, MechParameter, Mechanism, Support, build_model
-    mech = Mechanism(
-        "two_bar_truss",
-        joints=[Joint("A", 0.0, 0.0), Joint("B", 800.0, 0.0), Joint("P", 300.0, -400.0)],
-        elements=[Bar("1", "A", "P", "k1"), Bar("2", "B", "P", "k2"),
-                  Support("wall_A", "A", kx=1e6, ky=1e6), Support("wall_B", "B", kx=1e6, ky=1e6),
-                  Load("hook", "P", fy=-1.0, input="F")],
-        parameters=[MechParameter("k1", 200.0, 1.0, 1e5, 200.0, "N/mm"),
-                    MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
-        inputs=("F",), sensors=sensors)
-    return build_model(mech, unknowns=("k1", "k2"), name=f"truss {variant}")
+    from models.library import two_bar_truss
+    return two_bar_truss(name=f"truss {variant}", sensors=sensors)
 
 
 def build(variant: str = "linear") -> Model:
