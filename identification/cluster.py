@@ -110,7 +110,7 @@ def run_chunks(client, fn: Callable, task, chunks: list, on_result: Callable) ->
     here (the remaining futures are cancelled).
     """
     from distributed import as_completed
-    tf = client.scatter(task, broadcast=True)
+    tf = client.scatter(task, broadcast=True, hash=False)  # own key: no release race
     futs = client.map(call_locked, [fn] * len(chunks), [tf] * len(chunks), chunks, pure=False)
     try:
         for fut in as_completed(futs, loop=client.loop):
