@@ -61,7 +61,7 @@ import numpy as np
 from models.contract import Model
 from models.state import numerics, solve_states
 from .errors import DataError, IdentificationError, StateSolveError
-from .estimator import IdentifySettings, identify, param_scale
+from .estimator import IdentifySettings, as_start_vector, identify, param_scale
 from .measurements import Measurements
 
 __all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
@@ -797,13 +797,7 @@ def _check_batch(model: Model, data, p0, weights) -> tuple:
     if not isinstance(model, Model):
         raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
     bd = data if isinstance(data, BatchData) else BatchData.of(data)
-    try:
-        p0 = np.asarray(p0, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise DataError(f"p0: not numeric: {p0!r}") from None
-    if p0.shape != (model.n_p,):
-        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
-    return bd, p0, bd.weights(weights)
+    return bd, as_start_vector(model, p0), bd.weights(weights)
 
 
 def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndarray, settings: IdentifySettings,

@@ -34,7 +34,7 @@ from .measurements import Measurements
 from .profile import ConfidenceIntervals, resolve_params, validate_alpha
 from .progress import Progress
 
-__all__ = ["BootstrapError", "bootstrap_intervals", "bootstrap_replicates"]
+__all__ = ["BootstrapError", "bootstrap_intervals", "bootstrap_replicates", "simulated_campaign"]
 
 
 class BootstrapError(IdentificationError):
@@ -69,13 +69,21 @@ def _install(task: _Task) -> None:
     _Worker.task = task
 
 
+def simulated_campaign(task, seed: np.random.SeedSequence) -> Measurements:
+    """z_ijk = h_jk(p_hat) + sigma_k eps_ijk, eps ~ N(0, 1), where the data had a value (else NaN).
+
+    ``task`` carries ``mask`` (n_M, n_q, n_S), ``fitted`` (n_q, n_S), ``sigma_sim`` (n_S,),
+    ``inputs``, ``sigma_data``, ``sensors`` and ``input_names``; ``seed`` fixes the draw.
+    """
+    eps = np.random.default_rng(seed).standard_normal(task.mask.shape)
+    z = np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
+    return Measurements(task.inputs, z, task.sigma_data, sensors=task.sensors, input_names=task.input_names)
+
+
 def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
     """(p (n_p,) or NaN, error text or "") of one simulated campaign."""
-    rng = np.random.default_rng(seed)
-    eps = rng.standard_normal(task.mask.shape)
-    z = np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
     try:
-        data = Measurements(task.inputs, z, task.sigma_data, sensors=task.sensors, input_names=task.input_names)
+        data = simulated_campaign(task, seed)
         est = identify(task.model, data, task.p0, weights=task.weights, Y0=task.states)
     except (IdentificationError, StateSolveError, DataError) as exc:
         return np.full(task.p0.size, np.nan), f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}"

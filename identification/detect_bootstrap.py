@@ -39,6 +39,7 @@ import numpy as np
 
 from models.contract import Model
 from . import cluster
+from .bootstrap import simulated_campaign
 from .detect import STATISTICS, DetectSettings, run_split_tests
 from .errors import DataError, IdentificationError
 from .estimator import identify
@@ -103,10 +104,7 @@ def _install(task: _Task) -> None:
 
 def _campaign(task: _Task, seed: np.random.SeedSequence) -> tuple:
     """(T (n_splits, 3), asymptotic alpha (n_splits, 3), errors) of one simulated campaign."""
-    rng = np.random.default_rng(seed)
-    eps = rng.standard_normal(task.mask.shape)
-    z = np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
-    data = Measurements(task.inputs, z, task.sigma_data, sensors=task.sensors, input_names=task.input_names)
+    data = simulated_campaign(task, seed)
     tests = run_split_tests(task.model, data, task.splits, task.p0, task.weights, task.settings, task.model_name,
                             task.states)
     return _statistics(tests)

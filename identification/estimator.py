@@ -38,7 +38,7 @@ from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
-           "covariance_from_terms", "param_scale"]
+           "covariance_from_terms", "param_scale", "as_start_vector"]
 
 
 @dataclass(frozen=True)
@@ -110,12 +110,7 @@ def _validate(model, data, p0, weights):
     if data.sensors != default_names and data.sensors != model.sensors:
         raise DataError(f"data.sensors {list(data.sensors)} do not match the model's sensors "
                         f"{list(model.sensors)}; use data.select(model.sensors)")
-    try:
-        p0 = np.asarray(p0, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise DataError(f"p0: not numeric: {p0!r}") from None
-    if p0.shape != (model.n_p,):
-        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
+    p0 = as_start_vector(model, p0)
     for i, par in enumerate(model.params):
         if not math.isfinite(p0[i]):
             raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
@@ -199,6 +194,17 @@ def _predictor(model, p0, inputs, Y0, zbar, cw, sig, s_p, max_step):
     if np.any(p1 <= model.lower) or np.any(p1 >= model.upper):
         return p0, Y0
     return p1, Y0 + np.einsum("jyp,p->jy", yp, p1 - p0)
+
+
+def as_start_vector(model, p0) -> np.ndarray:
+    """``p0`` as a float vector of the model's n_p start values; DataError naming ``p0`` otherwise."""
+    try:
+        p0 = np.asarray(p0, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"p0: not numeric: {p0!r}") from None
+    if p0.shape != (model.n_p,):
+        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
+    return p0
 
 
 def param_scale(model, p0) -> np.ndarray:
