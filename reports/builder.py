@@ -92,6 +92,10 @@ def _page(title=None):
     return fig
 
 
+#: height of one line of 9-point text as a fraction of the page height (1.2 x 9 pt on an 8.27 in page)
+TEXT_LINE_HEIGHT = 0.019
+
+
 def _text(fig, x, y, text, width=150, size=9, **kw):
     wrapped = "\n".join("\n".join(textwrap.wrap(par, width)) if par else "" for par in text.split("\n"))
     fig.text(x, y, wrapped, va="top", ha="left", fontsize=size, family=kw.pop("family", "sans-serif"), **kw)
@@ -452,13 +456,16 @@ def _misses_pages(results, diagnosis):
            "The decision of page 1 uses the study's splits only.\n\n"
            + ("Findings:\n" + "\n".join(f"- {f}" for f in findings) if findings
               else "Findings: no diagnostic split rejects a model."))
-    fig = figs[-1]
-    y = 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
-    if y < 0.15:
-        fig = _page(title + " (findings)")
-        figs.append(fig)
-        y = 0.88
-    _text(fig, 0.04, y, txt, width=160, size=9)
+    lines = "\n".join("\n".join(textwrap.wrap(par, 160)) if par else "" for par in txt.split("\n")).split("\n")
+    fig, y = figs[-1], 0.89 - 0.027 * (len(parts[-1]) + 1) - 0.04
+    while lines:                                    # as many lines as fit above the margin, the rest on new pages
+        fit = max(0, int((y - 0.03) / TEXT_LINE_HEIGHT))
+        if fit == 0:
+            fig, y = _page(title + " (findings)"), 0.88
+            figs.append(fig)
+            continue
+        _text(fig, 0.04, y, "\n".join(lines[:fit]), width=160, size=9)
+        lines, y = lines[fit:], 0.0
     return figs
 
 
