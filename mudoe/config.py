@@ -483,6 +483,9 @@ class ReportConfig:
 
     title: str = "Model uncertainty study"
     dpi: int = _key(150, bounds=POSITIVE)
+    #: which fitted models get the pages "Uncertainty of ..." (profile intervals, likelihood regions):
+    #: "untrusted" those whose linearisation is not trustworthy, "all", or "none"
+    uncertainty: str = _key("untrusted", choices=("untrusted", "all", "none"))
 
 
 @dataclass(frozen=True)

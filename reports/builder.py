@@ -657,7 +657,7 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
     return pages
 
 
-def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True, uncertainty: str = "untrusted",
+def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True, uncertainty: str | None = None,
                  progress=None) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
@@ -672,10 +672,11 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
         Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
         phases, series; three fits per split and model) for the page "What the model misses",
         unless ``results.diagnosis`` holds it already.
-    uncertainty : "untrusted", "all" or "none"
+    uncertainty : "untrusted", "all" or "none", optional
         Which models get the pages "Uncertainty of ...": profile-likelihood intervals next to the
         Wald ones and the likelihood-ratio region of every parameter pair next to its ellipse
-        (default: the models whose linearisation is NOT trustworthy).
+        (default: the config's [report] uncertainty, "untrusted": the models whose linearisation
+        is NOT trustworthy).
     progress : identification.progress.Progress, optional
         Bars over the diagnostic fits, the profiles and regions, and the pages (default None: no output).
 
@@ -702,11 +703,12 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     from .diagnosis import diagnose as run_diagnosis
 
     from .uncertainty import UNCERTAINTY_CHOICES
-    if uncertainty not in UNCERTAINTY_CHOICES:
+    if uncertainty is not None and uncertainty not in UNCERTAINTY_CHOICES:
         raise ValueError(f"uncertainty: expected one of {', '.join(repr(c) for c in UNCERTAINTY_CHOICES)}, "
                          f"got {uncertainty!r}")
-    t0 = time.perf_counter()
     cfg = results.study.cfg
+    uncertainty = cfg.report.uncertainty if uncertainty is None else uncertainty
+    t0 = time.perf_counter()
     dpi = int(dpi or cfg.report.dpi)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -157,3 +157,33 @@ def test_valley_grid_reoptimises_the_other_parameters_against_scipy():
     # the middle row follows the valley: there D is the profile of V (K and c re-optimised), the minimum over K
     mid = reg.statistic[3]
     assert np.all(mid <= reg.statistic.min(axis=0) + 1e-6)
+
+
+def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
+    """[report] uncertainty reaches build_report (default "untrusted"); a bad value names the key."""
+    from mudoe.config import ConfigError, load_config
+    from mudoe.study import StudyResults, prepare
+    import reports.builder as builder
+    text = CONFIG.read_text().replace('"../data/truss_one_sensor"',
+                                      f'"{(CONFIG.parent.parent / "data" / "truss_one_sensor").as_posix()}"')
+    assert load_config(CONFIG).report.uncertainty == "untrusted"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("[report]", '[report]\nuncertainty = "some"'))
+    with pytest.raises(ConfigError, match="uncertainty"):
+        load_config(bad)
+    none = tmp_path / "none.toml"
+    none.write_text(text.replace("[report]", '[report]\nuncertainty = "none"'))
+    r = StudyResults(prepare(load_config(none)))
+
+    class Seen(Exception):
+        pass
+
+    def spy(results, diagnosis, with_diagnosis, uncertainty, progress):
+        raise Seen(uncertainty)
+
+    monkeypatch.setattr(builder, "report_pages", spy)
+    out = tmp_path / "out"
+    for given, expected in ((None, "none"), ("all", "all")):
+        with pytest.raises(Seen, match=expected):
+            builder.build_report(r, out, diagnose=False, uncertainty=given)
+    assert list(out.iterdir()) == []                 # nothing half-written
