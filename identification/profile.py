@@ -186,6 +186,7 @@ class ConfidenceIntervals:
     profiles : tuple               ParameterProfile per parameter (method "profile")
     replicates : ndarray (k, n_p)  successful bootstrap estimates (method "bootstrap")
     n_failed : int                 failed bootstrap refits (counted, excluded from the percentiles)
+    fallbacks : tuple of (int, str)   bootstrap refits the batch engine left to identify (replicate, why)
     """
 
     param_names: tuple
@@ -198,6 +199,7 @@ class ConfidenceIntervals:
     profiles: tuple = ()
     replicates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     n_failed: int = 0
+    fallbacks: tuple = ()
 
     def __post_init__(self):
         for name in ("estimate", "lower", "upper", "replicates"):
