@@ -9,8 +9,13 @@ Replicate r simulates a campaign from the fit,
 
 with the missing-value pattern of the original data and sigma_k the sensors' sigma (known), or
 the estimate s (sigma estimated; then the replicate's sigma is estimated again), refits it
-with :func:`identification.identify` warm-started at (p_hat, y_hat), and the (1 - alpha)
-percentile interval of parameter i is [q_{alpha/2}, q_{1 - alpha/2}] of the refitted p_i.
+warm-started at (p_hat, y_hat), and the (1 - alpha) percentile interval of parameter i is
+[q_{alpha/2}, q_{1 - alpha/2}] of the refitted p_i.
+
+The replicates of a chunk are refitted together by the batch engine
+(:func:`identification.batch.fit_batch`: the estimates of :func:`identification.identify` to
+~1e-10, with identify as per-replicate fallback, recorded: which replicate and why);
+``batch=False`` refits every replicate with identify.
 
 Replicate r draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(n)[r])``: the
 numbers do not depend on the backend (serial, local processes, a Dask scheduler), the number
@@ -28,13 +33,15 @@ import numpy as np
 
 from models.contract import Model
 from . import cluster
+from .batch import BatchData, fit_batch
 from .errors import DataError, IdentificationError, StateSolveError
 from .estimator import identify
 from .measurements import Measurements
 from .profile import ConfidenceIntervals, resolve_params, validate_alpha
 from .progress import Progress
 
-__all__ = ["BootstrapError", "bootstrap_intervals", "bootstrap_replicates", "simulated_campaign"]
+__all__ = ["BootstrapError", "BootstrapReplicates", "bootstrap_intervals", "bootstrap_replicates",
+           "simulated_campaign"]
 
 
 class BootstrapError(IdentificationError):
@@ -56,6 +63,7 @@ class _Task:
     p0: np.ndarray
     weights: np.ndarray
     states: object
+    batch: bool = True
 
 
 class _Worker:
@@ -75,9 +83,18 @@ def simulated_campaign(task, seed: np.random.SeedSequence) -> Measurements:
     ``task`` carries ``mask`` (n_M, n_q, n_S), ``fitted`` (n_q, n_S), ``sigma_sim`` (n_S,),
     ``inputs``, ``sigma_data``, ``sensors`` and ``input_names``; ``seed`` fixes the draw.
     """
+    return Measurements(task.inputs, _simulated_values(task, seed), task.sigma_data, sensors=task.sensors,
+                        input_names=task.input_names)
+
+
+def _simulated_values(task, seed: np.random.SeedSequence) -> np.ndarray:
+    """The values z (n_M, n_q, n_S) of :func:`simulated_campaign` (NaN where the data had none)."""
     eps = np.random.default_rng(seed).standard_normal(task.mask.shape)
-    z = np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
-    return Measurements(task.inputs, z, task.sigma_data, sensors=task.sensors, input_names=task.input_names)
+    return np.where(task.mask, task.fitted[None] + task.sigma_sim[None, None, :] * eps, np.nan)
+
+
+def _error_text(exc: Exception) -> str:
+    return f"{type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else ''}"
 
 
 def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
@@ -86,18 +103,82 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
         data = simulated_campaign(task, seed)
         est = identify(task.model, data, task.p0, weights=task.weights, Y0=task.states)
     except (IdentificationError, StateSolveError, DataError) as exc:
-        return np.full(task.p0.size, np.nan), f"{type(exc).__name__}: {str(exc).splitlines()[0][:200]}"
+        return np.full(task.p0.size, np.nan), _error_text(exc)
     return np.asarray(est.p, float), ""
 
 
+class _Campaigns:
+    """Member k of a chunk -> its simulated Measurements (the data of a fallback fit)."""
+
+    def __init__(self, task: _Task, seeds: list):
+        self.task, self.seeds = task, seeds
+
+    def __call__(self, k: int) -> Measurements:
+        return simulated_campaign(self.task, self.seeds[k])
+
+
+def _replicate_batch(task: _Task, chunk: list) -> list:
+    """The replicates of a chunk refitted together by :func:`identification.batch.fit_batch`:
+    [(index, p or NaN, error or "", fallback reason or ""), ...].  A replicate the batch iteration
+    did not fit was refitted by identify (its reason is kept); when the batch as a whole cannot be
+    formed, every replicate is refitted by identify and says why."""
+    seeds = [s for _, s in chunk]
+    R = len(chunk)
+    try:
+        data = BatchData(task.inputs, np.stack([_simulated_values(task, s) for s in seeds]),
+                         None if task.sigma_data is None else np.tile(task.sigma_data, (R, 1)),
+                         _Campaigns(task, seeds))
+        fit = fit_batch(task.model, data, task.p0, task.weights, Y0=task.states)
+    except (IdentificationError, StateSolveError, DataError) as exc:
+        why = f"the batch engine could not take the chunk ({_error_text(exc)})"
+        return [(i, *_replicate(task, s), why) for i, s in chunk]
+    reasons = {f.member: f.reason for f in fit.fallbacks}
+    out = []
+    for k, (i, _) in enumerate(chunk):
+        res = fit.results[k]
+        if isinstance(res, Exception):
+            out.append((i, np.full(task.p0.size, np.nan), _error_text(res), reasons.get(k, "")))
+        else:
+            out.append((i, np.asarray(res.p, float), "", reasons.get(k, "")))
+    return out
+
+
 def _run_chunk(task: _Task | None, chunk: list) -> list:
-    """Replicates [(index, SeedSequence), ...] -> [(index, p, error), ...] (task None: this process's)."""
+    """Replicates [(index, SeedSequence), ...] -> [(index, p, error, fallback reason), ...]
+    (task None: this process's)."""
     t = _Worker.task if task is None else task
-    return [(i, *_replicate(t, s)) for i, s in chunk]
+    if t.batch:
+        return _replicate_batch(t, chunk)
+    return [(i, *_replicate(t, s), "") for i, s in chunk]
+
+
+@dataclass(frozen=True, eq=False)
+class BootstrapReplicates:
+    """The refits of :func:`bootstrap_replicates`.
+
+    Attributes
+    ----------
+    P : ndarray (n, n_p)             refitted parameters (NaN rows: failed refits)
+    errors : tuple of (int, str)     replicate index and error of every failed refit
+    fallbacks : tuple of (int, str)  replicates the batch engine did not fit, refitted by
+                                     identify (index, why); a failed one is also in ``errors``
+    backend : str                    "serial", "2 local processes", "dask (...)"
+    """
+
+    P: np.ndarray
+    errors: tuple
+    fallbacks: tuple
+    backend: str
+
+    def __post_init__(self):
+        a = np.array(self.P, dtype=float, copy=True)
+        a.setflags(write=False)
+        object.__setattr__(self, "P", a)
 
 
 def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, seed=0, workers: int | None = 1,
-                         progress: Progress | None = None, scheduler=None, chunk_size: int | None = None) -> tuple:
+                         progress: Progress | None = None, scheduler=None, chunk_size: int | None = None,
+                         batch: bool = True) -> BootstrapReplicates:
     """Refitted parameters of ``n`` campaigns simulated from ``est`` (see the module docstring).
 
     Parameters
@@ -110,14 +191,17 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
     scheduler : str or distributed.Client, optional
         Run the chunks on this Dask scheduler instead (``workers`` is then ignored); see
         :mod:`identification.cluster`.
-    chunk_size : int, optional   replicates per task (default: about 4 tasks per worker, at most 20)
+    chunk_size : int, optional   replicates per task (default: about 4 tasks per worker, at most 20
+                                 refitted one by one or 100 refitted as one batch)
+    batch : bool                 refit the replicates of a chunk together with the batch engine
+                                 (identification.batch.fit_batch); False: one identify call per replicate
 
-    The numbers depend on ``seed`` only, not on the backend, the workers or the chunks.
+    The numbers depend on ``seed`` only, not on the backend, the workers or the chunks (and agree
+    between ``batch`` True and False to the estimator's tolerance, ~1e-10 relative).
 
     Returns
     -------
-    P : ndarray (n, n_p)         refitted parameters (NaN rows: failed refits)
-    errors : list of (int, str)  replicate index and error of every failed refit
+    BootstrapReplicates : the refits, the failed ones, the fallbacks of the batch engine
 
     Raises
     ------
@@ -130,20 +214,23 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
         raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
     if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
         raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
+    if not isinstance(batch, (bool, np.bool_)):
+        raise ValueError(f"batch: expected True (batch engine) or False (identify per refit), got {batch!r}")
     scheduler = cluster.check_scheduler(scheduler)
     sigma_sim = np.asarray(est.sigma, float)
     task = _Task(model, np.asarray(data.inputs), np.asarray(est.fitted, float), data.mask(), sigma_sim,
                  None if data.sigma is None else np.asarray(data.sigma, float), tuple(data.sensors),
                  None if data.input_names is None else tuple(data.input_names), np.asarray(est.p, float),
                  np.asarray(est.weights, float), None if est.states is None or est.states.size == 0
-                 else np.asarray(est.states, float))
+                 else np.asarray(est.states, float), bool(batch))
     got = _Collector(int(n), model.n_p, (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits"))
+    chunks = functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size,
+                               max_size=100 if batch else 20)
     try:
-        cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size),
-                        got.add, workers, scheduler, _install)
+        backend = cluster.execute(_run_chunk, task, chunks, got.add, workers, scheduler, _install)
     finally:
         got.bar.close()
-    return got.P, sorted(got.errors)
+    return BootstrapReplicates(got.P, tuple(sorted(got.errors)), tuple(sorted(got.fallbacks)), backend)
 
 
 class _Collector:
@@ -152,19 +239,22 @@ class _Collector:
     def __init__(self, n: int, n_p: int, bar):
         self.P = np.full((n, n_p), np.nan)
         self.errors = []
+        self.fallbacks = []
         self.bar = bar
 
     def add(self, results: list) -> None:
-        for i, p, err in results:
+        for i, p, err, why in results:
             self.P[i] = p
             if err:
                 self.errors.append((i, err))
+            if why:
+                self.fallbacks.append((i, why))
         self.bar.update(len(results))
 
 
 def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.05, params=None, n: int = 200,
                         seed=0, workers: int | None = 1, progress: Progress | None = None, scheduler=None,
-                        chunk_size: int | None = None) -> ConfidenceIntervals:
+                        chunk_size: int | None = None, batch: bool = True) -> ConfidenceIntervals:
     """Parametric bootstrap percentile (1 - alpha) intervals (see the module docstring).
 
     Parameters
@@ -179,11 +269,13 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     progress : Progress, optional   a tqdm bar over the replicates
     scheduler : str or distributed.Client, optional   run the refits on a Dask cluster instead
     chunk_size : int, optional  replicates per task (see :func:`bootstrap_replicates`)
+    batch : bool                refit with the batch engine (False: identify per refit)
 
     Returns
     -------
     ConfidenceIntervals (method "bootstrap"; ``replicates`` the successful refits,
-    ``n_failed`` the failed ones, named in ``notes``).
+    ``n_failed`` the failed ones, named in ``notes``; ``fallbacks`` the refits the batch engine
+    left to identify, (replicate, why), counted in ``notes``).
 
     Raises
     ------
@@ -195,7 +287,8 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     if model is None or data is None:
         raise ValueError("model, data: the bootstrap needs the model and the measurements the estimate was "
                          "fitted to (conf_int(..., model=model, data=data))")
-    P, errors = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size)
+    reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, batch)
+    P, errors = reps.P, reps.errors
     ok = np.all(np.isfinite(P), axis=1)
     if ok.sum() < 2:
         raise BootstrapError(f"bootstrap: {len(errors)} of {n} refits failed; first: "
@@ -205,10 +298,14 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     if errors:
         notes.append(f"{len(errors)} of {n} bootstrap refits failed and are excluded from the percentiles "
                      f"(first, replicate {errors[0][0]}: {errors[0][1]})")
+    if reps.fallbacks:
+        i0, why = reps.fallbacks[0]
+        notes.append(f"{len(reps.fallbacks)} of {n} bootstrap refits were not converged by the batch engine and "
+                     f"were refitted by identify (first, replicate {i0}: {why})")
     k = int(ok.sum())
     if min(alpha / 2 * k, k - (1 - alpha / 2) * k) < 5:
         notes.append(f"only {k} successful refits: the {100 * alpha / 2:g} % tails hold fewer than 5 of them; "
                      "the percentile ends are rough (use a larger n)")
     names = tuple(est.param_names[i] for i in idx)
     return ConfidenceIntervals(names, np.asarray(est.p)[idx], Q[0], Q[1], "bootstrap", alpha, tuple(notes),
-                               replicates=P[ok], n_failed=len(errors))
+                               replicates=P[ok], n_failed=len(errors), fallbacks=reps.fallbacks)

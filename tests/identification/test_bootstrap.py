@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from identification import Measurements, identify
-from identification.bootstrap import bootstrap_replicates
+from identification.bootstrap import bootstrap_intervals, bootstrap_replicates
 from identification.progress import Progress
 from models import Model
 
@@ -45,12 +45,13 @@ def test_same_seed_same_numbers_serial_and_processes():
     """Per-replicate SeedSequence children: identical numbers serially and on 2 spawned processes
     (slow: most of its time is starting the processes)."""
     model, data, est = _linear(known=False)
-    P1, e1 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=1)
-    P2, e2 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=2)
-    P3, _ = bootstrap_replicates(model, data, est, n=6, seed=12, workers=1)
-    assert e1 == e2 == []
-    np.testing.assert_array_equal(P1, P2)
-    assert not np.array_equal(P1, P3)
+    r1 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=1)
+    r2 = bootstrap_replicates(model, data, est, n=6, seed=11, workers=2)
+    r3 = bootstrap_replicates(model, data, est, n=6, seed=12, workers=1)
+    assert r1.errors == r2.errors == () and r1.fallbacks == r2.fallbacks == ()
+    assert r1.backend == "serial" and r2.backend == "2 local processes"
+    np.testing.assert_array_equal(r1.P, r2.P)
+    assert not np.array_equal(r1.P, r3.P)
 
 
 def test_failed_refits_are_counted_and_named():
@@ -62,13 +63,23 @@ def test_failed_refits_are_counted_and_named():
     est = identify(model, data, [0.01, 0.0])
     out = io.StringIO()
     ci = est.conf_int(method="bootstrap", model=model, data=data, n=16, seed=0, progress=Progress(stream=out))
-    P, errors = bootstrap_replicates(model, data, est, n=16, seed=0)
+    reps = bootstrap_replicates(model, data, est, n=16, seed=0)
+    P, errors = reps.P, reps.errors
     assert "bootstrap refits" in out.getvalue() and "16/16" in out.getvalue()
     assert 0 < ci.n_failed == len(errors) < 15
     assert ci.n_failed + ci.replicates.shape[0] == 16
     assert np.isnan(P[[i for i, _ in errors]]).all()
     assert any(n.startswith(f"{ci.n_failed} of 16 bootstrap refits failed and are excluded") for n in ci.notes)
     assert "IdentificationError" in ci.notes[0]
+    # every failed refit was first left by the batch engine to identify, and says why
+    failed = {i for i, _ in errors}
+    assert failed <= {i for i, _ in reps.fallbacks} and all(why for _, why in reps.fallbacks)
+    assert ci.fallbacks == reps.fallbacks
+    assert any(n.startswith(f"{len(reps.fallbacks)} of 16 bootstrap refits were not converged by the batch engine")
+               for n in ci.notes)
+    # the per-refit path fails on the same replicates, with no fallbacks
+    per_fit = bootstrap_replicates(model, data, est, n=16, seed=0, batch=False)
+    assert [i for i, _ in per_fit.errors] == [i for i, _ in errors] and per_fit.fallbacks == ()
 
 
 def test_bad_arguments():
@@ -86,17 +97,19 @@ def test_same_seed_same_numbers_on_a_dask_cluster():
     the interval from conf_int(..., scheduler=client) equals the serial one."""
     distributed = pytest.importorskip("distributed", reason="dask[distributed] is in the test extras (make setup)")
     model, data, est = _linear(known=False)
-    P1, e1 = bootstrap_replicates(model, data, est, n=7, seed=11, workers=1)
+    r1 = bootstrap_replicates(model, data, est, n=7, seed=11, workers=1)
+    P1, e1 = r1.P, r1.errors
     ci1 = est.conf_int(0.2, method="bootstrap", model=model, data=data, n=7, seed=11)
     out = io.StringIO()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cl, \
             distributed.Client(cl, set_as_default=False) as client:
-        P2, e2 = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=client, chunk_size=2,
-                                      progress=Progress(stream=out))
-        P3, _ = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=cl.scheduler_address, chunk_size=3)
+        r2 = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=client, chunk_size=2,
+                                  progress=Progress(stream=out))
+        P2, e2 = r2.P, r2.errors
+        P3 = bootstrap_replicates(model, data, est, n=7, seed=11, scheduler=cl.scheduler_address, chunk_size=3).P
         ci2 = est.conf_int(0.2, method="bootstrap", model=model, data=data, n=7, seed=11, scheduler=client)
         assert client.status == "running"                  # a Client passed in is used, not closed
-    assert e1 == e2 == [] and np.all(np.isfinite(P1))
+    assert e1 == e2 == () and np.all(np.isfinite(P1)) and r2.backend.startswith("dask")
     np.testing.assert_array_equal(P1, P2)
     np.testing.assert_array_equal(P1, P3)
     np.testing.assert_array_equal([ci1.lower, ci1.upper], [ci2.lower, ci2.upper])
@@ -109,3 +122,32 @@ def test_bad_scheduler_and_chunk_size_name_the_argument():
         bootstrap_replicates(model, data, est, n=4, scheduler="")
     with pytest.raises(ValueError, match="chunk_size"):
         bootstrap_replicates(model, data, est, n=4, chunk_size=0)
+    with pytest.raises(ValueError, match="batch: expected True"):
+        bootstrap_replicates(model, data, est, n=4, batch="yes")
+
+
+def _michaelis_menten(known: bool):
+    model = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] / (p[1] + q[0]), name="Michaelis-Menten")
+    x = np.linspace(0.5, 8.0, 8)
+    z = (x / (5.0 + x))[None, :, None] + 0.02 * np.random.default_rng(7).standard_normal((2, 8, 1))
+    z[0, 3, 0] = np.nan
+    data = Measurements(x, z, [0.02] if known else None)
+    return model, data, identify(model, data, [1.0, 5.0])
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_batch_engine_gives_the_refits_of_identify(known):
+    """The batch engine's refits equal identify's per-refit ones to 1e-8 relative (same seeds), whatever
+    the chunks; so do the percentile intervals."""
+    model, data, est = _michaelis_menten(known)
+    per_fit = bootstrap_replicates(model, data, est, n=24, seed=5, batch=False)
+    batched = bootstrap_replicates(model, data, est, n=24, seed=5, chunk_size=10)
+    whole = bootstrap_replicates(model, data, est, n=24, seed=5)
+    assert per_fit.errors == batched.errors == () and batched.fallbacks == ()
+    assert np.all(np.isfinite(per_fit.P))
+    np.testing.assert_allclose(batched.P, per_fit.P, rtol=1e-8, atol=0)
+    np.testing.assert_array_equal(batched.P, whole.P)
+    ci_b = bootstrap_intervals(model, data, est, 0.1, n=24, seed=5)
+    ci_f = bootstrap_intervals(model, data, est, 0.1, n=24, seed=5, batch=False)
+    np.testing.assert_allclose([ci_b.lower, ci_b.upper], [ci_f.lower, ci_f.upper], rtol=1e-8, atol=0)
