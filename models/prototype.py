@@ -45,6 +45,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 from scipy import stats
+from scipy.linalg.lapack import dgesv
 
 from .campaign import Campaign
 from .mechanism import MechanismError, RigidBody, Support, build_model
@@ -233,14 +234,18 @@ class VirtualPrototype:
     def _solve(self, ws: "_Workspace", y, s, q, where):
         """Semismooth Newton for R(y; s, q) = 0 from y (N); returns the converged y.
 
-        Damped steps y <- y + t dy, J dy = -R, t halved while |R| does not decrease (kinks of
-        the clip).  On return ``ws`` holds all outputs of the point function at (y, s, q).
+        Damped steps y <- y + t dy, J dy = -R (LAPACK LU with partial pivoting; J is overwritten,
+        the next evaluation writes it anew), t halved while |R| does not decrease (kinks of the
+        clip).  On return ``ws`` holds all outputs of the point function at (y, s, q).
         """
         ws.set_state(s, q)
         ws.evaluate(y)
         R = ws.R
         for _ in range(60):
-            dy = np.linalg.solve(ws.J, -R)
+            _, _, dy, info = dgesv(ws.J, -R, overwrite_a=True, overwrite_b=True)   # LU with pivoting (LAPACK)
+            if info != 0:
+                raise MechanismError(f"virtual prototype: singular Jacobian at {where} (q_P = {q:.6g} N, "
+                                     f"LAPACK dgesv info {info})")
             nr = math.sqrt(R.dot(R))            # = np.linalg.norm(R), without its overhead
             t = 1.0
             for _ in range(30):
