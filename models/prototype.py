@@ -224,8 +224,8 @@ class VirtualPrototype:
         p = ca.DM(self.p)
         R = model.E_fun(y, p, ca.vertcat(q, Ff))
         h = model.h_fun(y, p, ca.vertcat(q, Ff))
-        return ca.Function("proto", [y, s, q], [R, ca.densify(ca.jacobian(R, y)), Fi, Ff, H, Fb, h, y[iRy]],
-                           ["y", "s", "q"], ["R", "J", "Fi", "Ff", "H", "Fb", "h", "uRy"])
+        outs = ca.cse([R, ca.jacobian(R, y), Fi, Ff, H, Fb, h, y[iRy]])   # shared subexpressions once
+        return ca.Function("proto", [y, s, q], outs, ["y", "s", "q"], ["R", "J", "Fi", "Ff", "H", "Fb", "h", "uRy"])
 
     def initial_state(self):
         """Unloaded, friction-free reference: y = 0 (mm, rad), slip positions s = 0 (mm), last force 0 N."""
@@ -234,15 +234,15 @@ class VirtualPrototype:
     def _solve(self, ws: "_Workspace", y, s, q, where):
         """Semismooth Newton for R(y; s, q) = 0 from y (N); returns the converged y.
 
-        Damped steps y <- y + t dy, J dy = -R (LAPACK LU with partial pivoting; J is overwritten,
-        the next evaluation writes it anew), t halved while |R| does not decrease (kinks of the
-        clip).  On return ``ws`` holds all outputs of the point function at (y, s, q).
+        Damped steps y <- y + t dy, J dy = -R (LAPACK LU with partial pivoting), t halved while
+        |R| does not decrease (kinks of the clip).  On return ``ws`` holds all outputs of the
+        point function at (y, s, q).
         """
         ws.set_state(s, q)
         ws.evaluate(y)
         R = ws.R
         for _ in range(60):
-            _, _, dy, info = dgesv(ws.J, -R, overwrite_a=True, overwrite_b=True)   # LU with pivoting (LAPACK)
+            _, _, dy, info = dgesv(ws.jacobian(), -R, overwrite_a=True, overwrite_b=True)   # LU, pivoting
             if info != 0:
                 raise MechanismError(f"virtual prototype: singular Jacobian at {where} (q_P = {q:.6g} N, "
                                      f"LAPACK dgesv info {info})")
@@ -333,7 +333,7 @@ class _Workspace:
     :meth:`evaluate` runs the function in place, without conversions to and from CasADi
     matrices (the per-call overhead of ``Function.__call__`` was most of the prototype's
     time).  One workspace per :meth:`VirtualPrototype.run` call, so that runs in threads do
-    not share it.  J is stored column-major, as CasADi writes a dense matrix.
+    not share it.  J is kept as its structural nonzeros (:meth:`jacobian` gives it dense).
     """
 
     def __init__(self, fun: ca.Function):
@@ -342,14 +342,22 @@ class _Workspace:
         for i, a in enumerate((self.y, self.s, self.q)):
             self._buf.set_arg(i, memoryview(a))
         n_y = fun.size1_out(0)
+        sp = fun.sparsity_out(1)
+        self._n_y = n_y
+        self._J_at = np.asarray(sp.row(), int) + n_y * np.asarray(sp.get_col(), int)   # column-major positions
         self.R = np.zeros(n_y)
-        self.J = np.zeros((n_y, n_y), order="F")
+        self.J_nz = np.zeros(sp.nnz())
         self.Fi, self.Ff, self.H, self.Fb, self.h, self.uRy = (np.zeros(fun.nnz_out(i)) for i in range(2, 8))
-        for i, a in enumerate((self.R, self.J.reshape(-1, order="F"), self.Fi, self.Ff, self.H, self.Fb, self.h,
-                               self.uRy)):
-            if not a.flags.c_contiguous or a.size != fun.nnz_out(i):
+        for i, a in enumerate((self.R, self.J_nz, self.Fi, self.Ff, self.H, self.Fb, self.h, self.uRy)):
+            if a.size != fun.nnz_out(i):
                 raise MechanismError(f"virtual prototype: output {fun.name_out(i)} does not fit its buffer")
             self._buf.set_res(i, memoryview(a))
+
+    def jacobian(self):
+        """A fresh dense column-major copy of J = dR/dy (N/mm, N/rad) at the last evaluated state."""
+        J = np.zeros(self._n_y * self._n_y)
+        J[self._J_at] = self.J_nz
+        return J.reshape(self._n_y, self._n_y, order="F")
 
     def set_state(self, s, q):
         """Slip positions s (mm) and force q (N) of the next evaluations."""

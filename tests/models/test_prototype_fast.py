@@ -39,7 +39,8 @@ def _series_by_series(proto, seed, n_series):
     _, _, state = proto.run(Q)
     q_act, z_raw = [], []
     for _ in range(n_series):
-        q = Q * (1.0 + cfg.force_scatter * rng.standard_normal() + cfg.force_scatter_point * rng.standard_normal(Q.size))
+        level = cfg.force_scatter * rng.standard_normal()
+        q = Q * (1.0 + level + cfg.force_scatter_point * rng.standard_normal(Q.size))
         h, _, state = proto.run(q, state)
         eps = np.asarray(cfg.sigma_rep_um) * 1e-3 * rng.standard_normal((Q.size, len(PRESS_SENSORS)))
         q_act.append(q)
