@@ -16,7 +16,9 @@ Studies (``--study``):
   and whether the decisions of the common replications are identical (alpha to 1e-6);
   ``--serial-rep`` adds a run in this process.
 * ``power``: campaigns from the virtual prototype (:mod:`models.prototype`) if it exposes
-  a generator, M1 (and M2/M3 when :mod:`models.friction` provides them) tested on them.
+  a generator, M1 (and M2/M3 when :mod:`models.friction` provides them) tested on them;
+  then the CPU split between campaign generation (timed in this process on the first
+  replications' streams, JIT on as in the workers) and the rest (fits, tests, start-up).
 
 Run ``python -m bench.bench_detect --study size --n-rep 2000`` (or via ``python -m bench detect``
 with ``--study=size --n-rep=2000``).
@@ -108,8 +110,10 @@ def main(argv=None):
         for m in res.models:
             for st in ("paper", "two_sample", "likelihood_ratio"):
                 print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
-        print(f"wall {res.wall_time:.1f} s on {res.backend}; CPU of all processes {_cpu() - c0:.1f} s "
+        cpu_all = _cpu() - c0
+        print(f"wall {res.wall_time:.1f} s on {res.backend}; CPU of all processes {cpu_all:.1f} s "
               f"({'per-fit identify' if args.per_fit else 'batch engine'})")
+        report_power_split(res, cpu_all, 21, args.seed)
     else:
         run_press()
 
@@ -164,7 +168,11 @@ class PrototypeCampaign:
     """Picklable generator rng -> Measurements: a fresh virtual-prototype campaign of n_series series.
 
     Each replication draws the campaign seed from its own stream; the prototype (CasADi
-    functions) is built once per worker and not pickled.  sigma: the paper's fixed values (mm).
+    functions, JIT-compiled when the worker has models.state.set_jit on, and its noise-free first
+    cycle) is built once per worker copy and not pickled: the Monte Carlo workers keep their copy
+    of the task, so once per worker.  sigma: the paper's fixed values (mm).  ``cpu_campaign`` and
+    ``cpu_total`` add up the CPU seconds this copy spent in generate_campaign and in whole calls
+    (with building the Measurements), ``n_calls`` the calls, ``n_builds`` the prototypes built.
     """
 
     def __init__(self, n_series: int = 2, sigma_mm=SIGMA_PAPER_MM, names=("M1",)):
@@ -172,22 +180,57 @@ class PrototypeCampaign:
         self.names = tuple(names)
         self.sigma = np.asarray(sigma_mm, float)
         self._proto = None
+        self.cpu_campaign = self.cpu_total = 0.0
+        self.n_calls = self.n_builds = 0
 
     def __getstate__(self):
         d = dict(self.__dict__)
-        d["_proto"] = None
+        d.update(_proto=None, cpu_campaign=0.0, cpu_total=0.0, n_calls=0, n_builds=0)   # counters per copy
         return d
 
     def __call__(self, rng):
         from models.prototype import PrototypeConfig, VirtualPrototype, generate_campaign
+        t0 = time.process_time()
         if self._proto is None:
             self._proto = VirtualPrototype(PrototypeConfig())
+            self.n_builds += 1
         c = generate_campaign(seed=int(rng.integers(2 ** 32)), n_series=self.n_series, prototype=self._proto)
+        self.cpu_campaign += time.process_time() - t0
         from mudoe.press import campaign_measurements
         if self.names == ("M1",):
-            return campaign_measurements(c, sigma=self.sigma)
-        from models.friction import model_inputs
-        return {n: campaign_measurements(c, inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
+            out = campaign_measurements(c, sigma=self.sigma)
+        else:
+            from models.friction import model_inputs
+            out = {n: campaign_measurements(c, inputs=model_inputs(n, c.q_set), sigma=self.sigma) for n in self.names}
+        self.cpu_total += time.process_time() - t0
+        self.n_calls += 1
+        return out
+
+
+def generation_cost(generator: PrototypeCampaign, n: int, seed: int, jit: bool) -> dict:
+    """CPU seconds per campaign of ``generator`` in this process, on the first n replications' streams.
+
+    The first call (prototype build, JIT compilation when ``jit``, and the noise-free first
+    cycle) is timed apart; ``campaign`` and ``total`` are medians over the n - 1 later calls
+    (generate_campaign alone, and with building the Measurements).  JIT as the workers use it.
+    """
+    from models.state import set_jit
+    children = np.random.SeedSequence(seed).spawn(max(n, 2))
+    prev = set_jit(jit)
+    try:
+        w0 = time.perf_counter()
+        generator(np.random.default_rng(children[0]))
+        first = (time.perf_counter() - w0, generator.cpu_total)
+        camp, tot = [], []
+        for ch in children[1:]:
+            c0, t0 = generator.cpu_campaign, generator.cpu_total
+            generator(np.random.default_rng(ch))
+            camp.append(generator.cpu_campaign - c0)
+            tot.append(generator.cpu_total - t0)
+    finally:
+        set_jit(prev)
+    return dict(first_wall=first[0], first_cpu=first[1], campaign=float(np.median(camp)), total=float(np.median(tot)),
+                n=len(camp))
 
 
 def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, batch=True):
@@ -202,6 +245,23 @@ def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, bat
     return power_study(models, PrototypeCampaign(names=tuple(models)), PAPER_SPLITS, P0, WEIGHTS_110, settings,
                        description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
                                    "after a run-in cycle, seed per replication), sigma = the paper's fixed values")
+
+
+def report_power_split(res, cpu_all: float, n_gen: int, seed: int) -> None:
+    """Print where the power study's CPU went: campaign generation (measured in this process on the
+    first replications' streams, JIT on as in the workers) and the rest (fits, tests, worker start-up)."""
+    names = tuple(res.models)
+    g = generation_cost(PrototypeCampaign(names=names), min(n_gen, res.n_rep + 1), seed, jit=True)
+    gen = g["total"] * res.n_rep
+    print(f"\ngeneration (this process, JIT on, median of {g['n']} campaigns after the first): "
+          f"generate_campaign {g['campaign'] * 1e3:.1f} ms CPU, with the Measurements of {len(names)} models "
+          f"{g['total'] * 1e3:.1f} ms CPU per campaign; first call (prototype build, compilation, first cycle) "
+          f"{g['first_wall']:.2f} s wall, {g['first_cpu']:.2f} s CPU in this process")
+    print("| part | CPU s | share |\n|---|---|---|")
+    print(f"| generation ({res.n_rep} campaigns x {g['total'] * 1e3:.1f} ms) | {gen:.1f} | {gen / cpu_all:.0%} |")
+    print(f"| the rest: fits and tests, worker start-up and compilation, the probe | {cpu_all - gen:.1f} | "
+          f"{(cpu_all - gen) / cpu_all:.0%} |")
+    print(f"| all processes | {cpu_all:.1f} | 100% |")
 
 
 def run_press():

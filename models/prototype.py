@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Sequence
@@ -44,10 +45,12 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 from scipy import stats
+from scipy.linalg.lapack import dgesv
 
 from .campaign import Campaign
 from .mechanism import MechanismError, RigidBody, Support, build_model
 from .press import PRESS_SENSORS, Q_PAPER, press_mechanism
+from .state import JIT
 from .fileio import atomic_write_text
 
 __all__ = ["PrototypeConfig", "VirtualPrototype", "Campaign", "generate_campaign", "write_campaign",
@@ -180,6 +183,9 @@ class VirtualPrototype:
         self.p = np.array([config.k5, config.k7])
         self._fun = self._functions()
         self.n_slip = len(config.slip_stiffness)
+        compiled = JIT.compile(self._fun) if JIT.active() else None
+        self._eval_fun = self._fun if compiled is None else compiled
+        self._first_cycles: dict = {}
 
     @staticmethod
     def _mechanism(cfg):
@@ -218,34 +224,47 @@ class VirtualPrototype:
         p = ca.DM(self.p)
         R = model.E_fun(y, p, ca.vertcat(q, Ff))
         h = model.h_fun(y, p, ca.vertcat(q, Ff))
-        return ca.Function("proto", [y, s, q], [R, ca.jacobian(R, y), Fi, Ff, H, Fb, h, y[iRy]],
-                           ["y", "s", "q"], ["R", "J", "Fi", "Ff", "H", "Fb", "h", "uRy"])
+        outs = ca.cse([R, ca.jacobian(R, y), Fi, Ff, H, Fb, h, y[iRy]])   # shared subexpressions once
+        return ca.Function("proto", [y, s, q], outs, ["y", "s", "q"], ["R", "J", "Fi", "Ff", "H", "Fb", "h", "uRy"])
 
     def initial_state(self):
         """Unloaded, friction-free reference: y = 0 (mm, rad), slip positions s = 0 (mm), last force 0 N."""
         return np.zeros(self.model.n_y), np.zeros(self.n_slip), 0.0
 
-    def _solve(self, y, s, q, where):
-        """Semismooth Newton for R(y; s, q) = 0 from y (N); returns the converged y."""
-        ks = np.asarray(self.config.slip_stiffness)
-        for it in range(60):
-            out = self._fun(y, s, q)
-            R = np.asarray(out[0]).ravel()
-            J = np.asarray(out[1])
-            dy = np.linalg.solve(J, -R)
-            # damped step: halve while the residual does not decrease (kinks of the clip)
-            nr = np.linalg.norm(R)
+    def _solve(self, ws: "_Workspace", y, s, q, where):
+        """Semismooth Newton for R(y; s, q) = 0 from y (N); returns the converged y.
+
+        Damped steps y <- y + t dy, J dy = -R (LAPACK LU with partial pivoting), t halved while
+        |R| does not decrease (kinks of the clip).  On return ``ws`` holds all outputs of the
+        point function at (y, s, q).
+        """
+        ws.set_state(s, q)
+        ws.evaluate(y)
+        R = ws.R
+        for _ in range(60):
+            _, _, dy, info = dgesv(ws.jacobian(), -R, overwrite_a=True, overwrite_b=True)   # LU, pivoting
+            if info != 0:
+                raise MechanismError(f"virtual prototype: singular Jacobian at {where} (q_P = {q:.6g} N, "
+                                     f"LAPACK dgesv info {info})")
+            nr = math.sqrt(R.dot(R))            # = np.linalg.norm(R), without its overhead
             t = 1.0
             for _ in range(30):
-                Rt = np.asarray(self._fun(y + t * dy, s, q)[0]).ravel()
-                if np.linalg.norm(Rt) <= (1 - 1e-4 * t) * nr or nr < 1e-9:
+                y_new = y + t * dy
+                ws.evaluate(y_new)
+                nr_new = math.sqrt(R.dot(R))
+                if nr_new <= (1 - 1e-4 * t) * nr or nr < 1e-9:
                     break
                 t *= 0.5
-            y = y + t * dy
-            if np.max(np.abs(t * dy)) <= 1e-13 * max(1.0, np.max(np.abs(y))) or np.linalg.norm(Rt) < 1e-10:
+            else:                               # no decrease in 30 halvings: take the last halved step
+                y_new = y + t * dy
+                ws.evaluate(y_new)
+            y = y_new
+            step = t * dy
+            if max(step.max(), -step.min()) <= 1e-13 * max(1.0, y.max(), -y.min()) or nr_new < 1e-10:
                 return y
+        ks = np.asarray(self.config.slip_stiffness)
         raise MechanismError(f"virtual prototype: Newton did not converge at {where} (q_P = {q:.6g} N, "
-                             f"residual {np.linalg.norm(R):.3g} N; slip stiffness {ks.tolist()})")
+                             f"residual {np.linalg.norm(ws.R):.3g} N; slip stiffness {ks.tolist()})")
 
     def run(self, forces, state=None):
         """Follow the force path ``forces`` (N) quasi-statically; return readings and the final state.
@@ -279,19 +298,78 @@ class VirtualPrototype:
             raise PrototypeError("state: expected (y, s, q_last) as returned by run()")
         y, s, q_prev = np.array(state[0], float), np.array(state[1], float), float(state[2])
         ks = np.asarray(self.config.slip_stiffness)
+        ws = _Workspace(self._eval_fun)
         h = np.empty((f.size, len(PRESS_SENSORS)))
         fr, nn, fb = np.empty(f.size), np.empty(f.size), np.empty(f.size)
         for j, qj in enumerate(f):
             for t in np.linspace(0.0, 1.0, int(self.config.substeps) + 1)[1:]:
                 qs = q_prev + t * (qj - q_prev)
-                y = self._solve(y, s, qs, f"step {j}")
-                out = self._fun(y, s, qs)
-                Fi = np.asarray(out[2]).ravel()
-                s = float(out[7]) - Fi / ks                   # stop operator update
-            h[j] = np.asarray(out[6]).ravel()
-            fr[j], nn[j], fb[j] = float(out[3]), float(out[4]), float(out[5])
+                y = self._solve(ws, y, s, qs, f"step {j}")
+                s = ws.uRy[0] - ws.Fi / ks                    # stop operator update
+            h[j] = ws.h
+            fr[j], nn[j], fb[j] = ws.Ff[0], ws.H[0], ws.Fb[0]
             q_prev = qj
         return h, dict(friction=fr, normal=nn, breakaway=fb), (y, s, q_prev)
+
+    def first_cycle(self, forces):
+        """:meth:`run` of ``forces`` (N) from :meth:`initial_state`, computed once per force path and kept.
+
+        The noise-free path from the virgin state is the same for every campaign on the
+        same set points; returns fresh copies of (h, info, state) as :meth:`run` does.
+        """
+        f = np.asarray(forces, float)
+        key = (f.shape, f.tobytes())
+        got = self._first_cycles.get(key)
+        if got is None:
+            got = self.run(f)
+            self._first_cycles[key] = got
+        h, info, (y, s, q) = got
+        return h.copy(), {k: v.copy() for k, v in info.items()}, (y.copy(), s.copy(), q)
+
+
+class _Workspace:
+    """Arrays bound to a buffer of the prototype's point function (y, s, q) -> (R, J, Fi, Ff, H, Fb, h, uRy).
+
+    :meth:`evaluate` runs the function in place, without conversions to and from CasADi
+    matrices (the per-call overhead of ``Function.__call__`` was most of the prototype's
+    time).  One workspace per :meth:`VirtualPrototype.run` call, so that runs in threads do
+    not share it.  J is kept as its structural nonzeros (:meth:`jacobian` gives it dense).
+    """
+
+    def __init__(self, fun: ca.Function):
+        self._buf, self._eval = fun.buffer()
+        self.y, self.s, self.q = (np.zeros(fun.nnz_in(i)) for i in range(3))
+        for i, a in enumerate((self.y, self.s, self.q)):
+            self._buf.set_arg(i, memoryview(a))
+        n_y = fun.size1_out(0)
+        sp = fun.sparsity_out(1)
+        self._n_y = n_y
+        self._J_at = np.asarray(sp.row(), int) + n_y * np.asarray(sp.get_col(), int)   # column-major positions
+        self.R = np.zeros(n_y)
+        self.J_nz = np.zeros(sp.nnz())
+        self.Fi, self.Ff, self.H, self.Fb, self.h, self.uRy = (np.zeros(fun.nnz_out(i)) for i in range(2, 8))
+        for i, a in enumerate((self.R, self.J_nz, self.Fi, self.Ff, self.H, self.Fb, self.h, self.uRy)):
+            if a.size != fun.nnz_out(i):
+                raise MechanismError(f"virtual prototype: output {fun.name_out(i)} does not fit its buffer")
+            self._buf.set_res(i, memoryview(a))
+
+    def jacobian(self):
+        """A fresh dense column-major copy of J = dR/dy (N/mm, N/rad) at the last evaluated state."""
+        J = np.zeros(self._n_y * self._n_y)
+        J[self._J_at] = self.J_nz
+        return J.reshape(self._n_y, self._n_y, order="F")
+
+    def set_state(self, s, q):
+        """Slip positions s (mm) and force q (N) of the next evaluations."""
+        self.s[:] = s
+        self.q[0] = q
+
+    def evaluate(self, y):
+        """All outputs at state y (mm, rad), written into this workspace's arrays."""
+        self.y[:] = y
+        self._eval()
+        if self._buf.ret() != 0:
+            raise MechanismError(f"virtual prototype: evaluation failed (CasADi return code {self._buf.ret()})")
 
 
 # ---------------------------------------------------------------------------- campaign
@@ -343,23 +421,22 @@ def generate_campaign(seed: int = CAMPAIGN_SEED, config: PrototypeConfig = Proto
     if proto.config != config:
         raise PrototypeError("prototype: was built for another config than the one passed")
     rng = np.random.default_rng(seed)
-    n_S = len(PRESS_SENSORS)
-    # gauge linearity errors, drawn once per campaign (span from a noise-free nominal path)
-    h_nom, _, _ = proto.run(qd)
+    n_S, n_q = len(PRESS_SENSORS), qd.size
+    # the noise-free cycle from the virgin state: the span of the gauge linearity errors and the
+    # unrecorded run-in cycle (the same path; computed once per prototype and set points)
+    h_nom, _, state = proto.first_cycle(qd)
     span = np.maximum(np.ptp(h_nom, axis=0), 1e-3)
     lin = [_linearity_error(rng, int(config.linearity_modes), config.sigma_man_um[k] * 1e-3, span[k])
            for k in range(n_S)]
-    # run-in cycle (not recorded), then the series one after the other
-    _, _, state = proto.run(qd)
-    q_act = np.empty((n_series, qd.size))
-    z_raw = np.empty((n_series, qd.size, n_S))
-    sig_rep = np.asarray(config.sigma_rep_um) * 1e-3
-    for i in range(n_series):
-        q_act[i] = qd * (1.0 + config.force_scatter * rng.standard_normal()
-                         + config.force_scatter_point * rng.standard_normal(qd.size))
+    # per series, in this order: the series' pressure level, the point jitter, the repeatability
+    # errors; drawn in one go (the same stream as drawing them series by series)
+    xi = rng.standard_normal((n_series, 1 + n_q + n_q * n_S))
+    q_act = qd * (1.0 + config.force_scatter * xi[:, :1] + config.force_scatter_point * xi[:, 1:1 + n_q])
+    eps = np.asarray(config.sigma_rep_um) * 1e-3 * xi[:, 1 + n_q:].reshape(n_series, n_q, n_S)
+    z_raw = np.empty((n_series, n_q, n_S))
+    for i in range(n_series):                 # the series one after the other (the path continues)
         h, _, state = proto.run(q_act[i], state)
-        eps = sig_rep * rng.standard_normal((qd.size, n_S))
-        z_raw[i] = h + np.column_stack([lin[k](h[:, k]) for k in range(n_S)]) + eps
+        z_raw[i] = h + np.column_stack([lin[k](h[:, k]) for k in range(n_S)]) + eps[i]
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(q_act > 0, qd[None, :] / np.where(q_act > 0, q_act, 1.0), 1.0)
     z = z_raw * factor[:, :, None]
