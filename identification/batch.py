@@ -272,6 +272,11 @@ class BatchFit:
     fallbacks : tuple of FallbackRecord  members fitted by identify instead (which, why, outcome)
     results : tuple                      per member a BatchMember, an Estimate (fallback) or the
                                          exception identify raised (read with :meth:`result`)
+    dense_sweeps : int                   sweeps evaluated by the dense path (NumPy LAPACK solves of
+                                         E_y) instead of the fused compiled sweep function (used for
+                                         models in SX with JIT compilation on, where E_y is
+                                         symmetric positive definite; the shared first
+                                         sweep is not counted)
     """
 
     p: np.ndarray
@@ -286,6 +291,7 @@ class BatchFit:
     ok: np.ndarray
     fallbacks: tuple
     results: tuple = field(repr=False)
+    dense_sweeps: int = 0
 
     def __post_init__(self):
         for name in ("p", "cov", "cov_gn", "information", "objective", "rss", "decrement"):
@@ -434,8 +440,8 @@ def _sweep_function(model) -> ca.Function | None:
     v = ca.vertcat(y, p)
     lam_s, mu_s, Z_s = ca.SX.sym("lam", n_S), ca.SX.sym("mu", n_y), ca.SX.sym("Z", n_y + n_p, n_p)
     L = ca.dot(lam_s, h) + ca.dot(mu_s, E)
-    SZ = ca.Function("sz", [v, lam_s, mu_s, Z_s], [ca.mtimes(Z_s.T, ca.jtimes(ca.gradient(L, v), v, Z_s))])
-    S = SZ(v, lam_h, mu, ca.vertcat(yp, ca.SX.eye(n_p)))
+    SZ = ca.Function("sz", [v, q, lam_s, mu_s, Z_s], [ca.mtimes(Z_s.T, ca.jtimes(ca.gradient(L, v), v, Z_s))])
+    S = SZ(v, q, lam_h, mu, ca.vertcat(yp, ca.SX.eye(n_p)))
     absD = ca.fabs(D)
     outs = [dyE, yp, h, G, ca.mtimes(G.T, lam), ca.mtimes(G.T, ca.mtimes(ca.diag(wts), G)), S,
             0.5 * ca.dot(wts, (zb - h) ** 2), ca.mtimes(ca.fabs(G).T, ca.fabs(lam)),
@@ -624,6 +630,7 @@ class _Iteration:
     funit: np.ndarray          # (R,) unit of the decrement (1, or s^2 / sigma_0^2 when sigma is unknown)
     fsweeps: np.ndarray        # (R,)
     halvings: np.ndarray       # (R,) step halvings since the last exact point
+    dense_sweeps: int = 0      # sweeps evaluated by the dense path (_evaluate)
 
     @classmethod
     def start(cls, P0, Y0, n_S):
@@ -934,6 +941,7 @@ def _iterate(model, prep: _Prepared, points: _Points, s_p, P0, Y0, settings: Ide
             if sw is None and points.fused:
                 sw = _evaluate_fused(model, prep, points, it, a, bs)
             if sw is None:
+                it.dense_sweeps += 1
                 sw = _evaluate(model, prep, points, it, a, points.symmetric(), bs)
         except StateSolveError as exc:
             for i in a:
@@ -1155,10 +1163,10 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
             converged[r] = True
             decrement[r] = res.decrement
     run_fallbacks()
-    return _collect(model, results, records, converged, decrement, sweeps)
+    return _collect(model, results, records, converged, decrement, sweeps, 0 if it is None else it.dense_sweeps)
 
 
-def _collect(model, results, records, converged, decrement, sweeps) -> BatchFit:
+def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps: int = 0) -> BatchFit:
     R, n_p = len(results), model.n_p
     p = np.full((R, n_p), np.nan)
     cov = np.full((R, n_p, n_p), np.nan)
@@ -1174,4 +1182,4 @@ def _collect(model, results, records, converged, decrement, sweeps) -> BatchFit:
         p[r], cov[r], cov_gn[r], info[r] = res.p, res.cov, res.cov_gn, res.information
         obj[r], rss[r] = res.objective, res.rss
     return BatchFit(p, cov, cov_gn, info, obj, rss, decrement, sweeps, converged, ok,
-                    tuple(sorted(records, key=lambda x: x.member)), tuple(results))
+                    tuple(sorted(records, key=lambda x: x.member)), tuple(results), int(dense_sweeps))
