@@ -83,8 +83,9 @@ def main(argv=None):
           f"| {args.n_rep} | {args.chunk} | {cpu * 1e3:.1f} ms | {wall * 1e3:.1f} ms |")
     if args.save:
         res = [r for _, r in out]
-        np.savez(args.save, **{f: np.stack([r[f] for r in res]) for f in ("alpha_lr", "alpha_two_sample",
-                                                                           "alpha_paper", "covered")})
+        np.savez(args.save, errors=np.array([repr(e) for r in res for e in r["errors"]], dtype=str),
+                 **{f: np.stack([r[f] for r in res]) for f in ("alpha_lr", "alpha_two_sample", "alpha_paper",
+                                                               "covered", "shapiro")})
 
 
 if __name__ == "__main__":

@@ -189,3 +189,42 @@ def test_press_fused_sweeps_equal_identify(press, press_data):
         fit = fit_batch(press, cal, P0, W, Y0=Y0)
     assert fit.converged.all() and not fit.fallbacks and fit.dense_sweeps == 0
     _assert_same_as_identify(press, cal, P0, W, fit)
+
+
+class _ExpCampaign:
+    """Campaigns of y = b1 (1 - exp(-b2 x)) with unknown sigma; every third replication has its
+    validation inputs of the first split (x_4 .. x_7) missing, so that split's validation fit fails."""
+
+    def __init__(self):
+        self.x = np.linspace(50.0, 800.0, 8)
+        self.calls = 0
+
+    def __call__(self, rng):
+        z = (230.0 * (1 - np.exp(-5e-4 * self.x)) + 0.5 * rng.standard_normal((2, 8)))[:, :, None]
+        if rng.uniform() < 0.3:
+            z[:, 4:] = np.nan
+        return Measurements(self.x, z, None)
+
+
+def test_monte_carlo_batched_statistics_equal_per_fit_with_failures_and_unknown_sigma():
+    # the batched statistics (F test of the pooled fit, Wald distances, coverage, Shapiro-Wilk) and
+    # the replications they leave to run_split_tests (a failed fit: same error records)
+    from identification.montecarlo import run_monte_carlo
+    from identification.splits import Split
+    model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    splits = (Split("halves", [0, 1, 2, 3], [4, 5, 6, 7]), Split("odd/even", [0, 2, 4, 6], [1, 3, 5, 7]),
+              Split("series", list(range(8)), list(range(8)), [0], [1]))
+    res = {}
+    for batch in (True, False):
+        s = MonteCarloSettings(n_rep=12, seed=3, workers=1, progress=False, jit=False, batch=batch,
+                               detect=DetectSettings(tol=0.05, normality="override"))
+        res[batch] = run_monte_carlo(model, _ExpCampaign(), splits, [200.0, 4e-4], truth=[230.0, 5e-4],
+                                     kind="size", settings=s)
+    b, f = res[True], res[False]
+    assert f.errors and b.errors == f.errors                      # some replications fail, recorded alike
+    for name in ("alpha_paper", "alpha_two_sample", "alpha_lr"):
+        np.testing.assert_allclose(getattr(b, name), getattr(f, name), rtol=0, atol=1e-6)
+    assert np.isfinite(b.alpha_lr).sum() > 20
+    np.testing.assert_array_equal(b.covered, f.covered)
+    np.testing.assert_array_equal(b.shapiro, f.shapiro)
