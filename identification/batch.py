@@ -483,7 +483,8 @@ class _Points:
             self._sym = p0 is not None and _symmetric(self.model, self, p0, Y_u)
         return self._sym
 
-    def sweep(self, Y: np.ndarray, P: np.ndarray, wts: np.ndarray, zb: np.ndarray, c: np.ndarray | None = None) -> tuple:
+    def sweep(self, Y: np.ndarray, P: np.ndarray, wts: np.ndarray, zb: np.ndarray,
+              c: np.ndarray | None = None) -> tuple:
         """The outputs of :func:`_sweep_function` at Y (m, n_u, n_y), P (m, n_p) and the data terms
         wts, zb, c (m, n_u, n_S) (c None: zero), each (m, n_u, ...) (matrices in row-major order)."""
         m, n, Yf, Pf, Qf = self._args(Y, P)
