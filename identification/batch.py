@@ -38,6 +38,16 @@ normalised sqrt(Omega) J, |p| below 1e6 parameter scales, finite standard errors
 second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same exact terms
 and formulas as :func:`identification.estimator.covariance_from_terms` (batched).
 
+Evaluation: for a model in SX with JIT compilation on (:func:`models.state.set_jit`, as in
+the Monte Carlo workers) one compiled CasADi function, mapped over all (member, input)
+points, returns every per-point term of a sweep (dy_E, y', G, the point's share of g,
+J^T Omega J and S, and of Phi) from one sparse LDL^T factorisation of E_y (AMD ordering;
+S by forward-over-reverse AD); NumPy only sums over the inputs and takes the n_p x n_p steps.
+The factorisation has no pivoting, so it is used only where it is backward stable: every
+pivot positive and E_y symmetric to 1e-12 (checked at every point of every sweep); otherwise,
+and without JIT compilation, the sweep takes the dense path (E, h and their derivatives from
+CasADi, LU solves of E_y by LAPACK, the Lagrangian Hessian by CasADi).
+
 Members that share the start (p0 and the states solved there) share the first sweep: the
 model is evaluated once and only the data terms differ.  Identical input rows (same q and
 the same state at p0) are evaluated once per member (their data terms are pooled exactly).

@@ -17,8 +17,10 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
 The replications of a chunk are fitted together by the batch engine
 (:func:`identification.batch.fit_batch`: one batch per split and fit, same estimates as
 :func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
-the statistics are those of :func:`identification.detect.run_split_tests` on these fits
-(``MonteCarloSettings.batch=False``: one identify call per fit).
+the statistics are those of :func:`identification.detect.run_split_tests` on these fits,
+computed for all replications of a chunk at once with the same formulas (run_split_tests
+itself for a replication with a failed fit or an invalid covariance, which records the
+failure; ``MonteCarloSettings.batch=False``: one identify call per fit).
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
