@@ -141,9 +141,9 @@ def test_monte_carlo_decisions_batch_equal_per_fit(press):
         np.testing.assert_array_equal(b.decisions(statistic=st), f.decisions(statistic=st))
 
 
-def _two_state(E, name):
+def _two_state(E, name, h=lambda y, p, q: y):
     return Model(params=[Parameter("a", 0.1, 10.0), Parameter("b", 0.1, 10.0)], inputs=["q"], sensors=["u", "v"],
-                 n_y=2, E=E, h=lambda y, p, q: y, name=name)
+                 n_y=2, E=E, h=h, name=name)
 
 
 @contextlib.contextmanager
@@ -164,7 +164,8 @@ def test_fused_sweeps_equal_identify_and_dense_path_where_E_y_is_not_spd():
     # E_y SPD: every sweep by the fused compiled function (sparse LDL^T); symmetric indefinite
     # E_y (negative pivot) and a non-symmetric E_y with a symmetric pattern: the dense path
     spd = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] + 0.1 * y[0] ** 3 - p[0] * q[0],
-                                                y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "spd")
+                                                y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "spd",
+                     h=lambda y, p, q: ca.vertcat(y[0] + 0.1 * y[1] ** 2, p[1] * y[1]))   # h nonlinear in (y, p)
     indefinite = _two_state(lambda y, p, q: ca.vertcat(y[0] + 2 * y[1] - p[0] * q[0],
                                                        2 * y[0] + y[1] - p[0] * p[1] * q[0] ** 2), "indefinite")
     asymmetric = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] - p[0] * q[0],
