@@ -760,16 +760,16 @@ def _evaluate_fused(model, prep: _Prepared, points: _Points, it: _Iteration, a: 
     """:func:`_evaluate` by one mapped call of the fused sweep function (:func:`_sweep_function`):
     every per-point term (states' Newton correction, y', G, the gradient at the corrected states,
     J^T Omega J and S) comes from CasADi and NumPy only sums over the inputs.  None when E_y is not
-    symmetric positive definite at some point of a member with finite terms (the caller then takes
-    the dense path for this sweep)."""
+    certified symmetric positive definite at some point (a pivot that is not positive and finite,
+    or asymmetry): the caller then takes the dense path for this sweep."""
     n_p = model.n_p
     P, Y = it.P[a], it.Y[a]
     dyE, yp, h, G, g, F, S, obj, gabs, piv, asym = points.sweep(Y, P, prep.wts[a], prep.zb[a])
     with np.errstate(invalid="ignore", over="ignore"):
+        spd = np.all((piv[..., 0] > 0) & (asym[..., 0] <= 1e-12))
         finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(G).all(axis=(1, 2, 3))
                   & np.isfinite(dyE).all(axis=(1, 2)) & np.isfinite(yp).all(axis=(1, 2, 3)))
-        spd = np.all((piv[..., 0] > 0) & (asym[..., 0] <= 1e-12), axis=1)
-    if np.any(finite & ~spd):
+    if not spd:                      # a zero, negative or non-finite pivot, or E_y not symmetric
         return None
     g, F, S, gabs = g.sum(axis=1), F.sum(axis=1), S.sum(axis=1), gabs.sum(axis=1)
     with np.errstate(over="ignore", invalid="ignore"):

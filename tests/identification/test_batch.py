@@ -162,7 +162,8 @@ def jit_on():
 
 def test_fused_sweeps_equal_identify_and_dense_path_where_E_y_is_not_spd():
     # E_y SPD: every sweep by the fused compiled function (sparse LDL^T); symmetric indefinite
-    # E_y (negative pivot) and a non-symmetric E_y with a symmetric pattern: the dense path
+    # E_y (negative pivot), a zero pivot (no pivoting in LDL^T) and a non-symmetric E_y with a
+    # symmetric pattern: the dense path
     spd = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] + 0.1 * y[0] ** 3 - p[0] * q[0],
                                                 y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "spd",
                      h=lambda y, p, q: ca.vertcat(y[0] + 0.1 * y[1] ** 2, p[1] * y[1]))   # h nonlinear in (y, p)
@@ -170,9 +171,11 @@ def test_fused_sweeps_equal_identify_and_dense_path_where_E_y_is_not_spd():
                                                        2 * y[0] + y[1] - p[0] * p[1] * q[0] ** 2), "indefinite")
     asymmetric = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] - p[0] * q[0],
                                                        2 * y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "asymmetric")
+    zero_pivot = _two_state(lambda y, p, q: ca.vertcat(y[1] - p[0] * q[0], y[0] - p[0] * p[1] * q[0] ** 2),
+                            "zero_pivot")
     q = np.linspace(0.5, 3.0, 8)
     rng = np.random.default_rng(11)
-    for model, fused in ((spd, True), (indefinite, False), (asymmetric, False)):
+    for model, fused in ((spd, True), (indefinite, False), (asymmetric, False), (zero_pivot, False)):
         H = simulate(model, np.array([2.0, 1.5]), q[:, None])
         data = [Measurements(q, H[None] + 0.01 * rng.standard_normal((2, 8, 2)), [0.01, 0.01]) for _ in range(3)]
         Y0 = solve_states(model, np.array([1.5, 1.0]), q[:, None])
