@@ -38,6 +38,16 @@ normalised sqrt(Omega) J, |p| below 1e6 parameter scales, finite standard errors
 second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same exact terms
 and formulas as :func:`identification.estimator.covariance_from_terms` (batched).
 
+Evaluation: for a model in SX with JIT compilation on (:func:`models.state.set_jit`, as in
+the Monte Carlo workers) one compiled CasADi function, mapped over all (member, input)
+points, returns every per-point term of a sweep (dy_E, y', G, the point's share of g,
+J^T Omega J and S, and of Phi) from one sparse LDL^T factorisation of E_y (AMD ordering;
+S by forward-over-reverse AD); NumPy only sums over the inputs and takes the n_p x n_p steps.
+The factorisation has no pivoting, so it is used only where it is backward stable: every
+pivot positive and E_y symmetric to 1e-12 (checked at every point of every sweep); otherwise,
+and without JIT compilation, the sweep takes the dense path (E, h and their derivatives from
+CasADi, LU solves of E_y by LAPACK, the Lagrangian Hessian by CasADi).
+
 Members that share the start (p0 and the states solved there) share the first sweep: the
 model is evaluated once and only the data terms differ.  Identical input rows (same q and
 the same state at p0) are evaluated once per member (their data terms are pooled exactly).
@@ -272,6 +282,11 @@ class BatchFit:
     fallbacks : tuple of FallbackRecord  members fitted by identify instead (which, why, outcome)
     results : tuple                      per member a BatchMember, an Estimate (fallback) or the
                                          exception identify raised (read with :meth:`result`)
+    dense_sweeps : int                   sweeps evaluated by the dense path (NumPy LAPACK solves of
+                                         E_y) instead of the fused compiled sweep function (used for
+                                         models in SX with JIT compilation on, where E_y is
+                                         symmetric positive definite; the shared first
+                                         sweep is not counted)
     """
 
     p: np.ndarray
@@ -286,6 +301,7 @@ class BatchFit:
     ok: np.ndarray
     fallbacks: tuple
     results: tuple = field(repr=False)
+    dense_sweeps: int = 0
 
     def __post_init__(self):
         for name in ("p", "cov", "cov_gn", "information", "objective", "rss", "decrement"):
@@ -390,22 +406,109 @@ def _point_functions(model) -> dict:
     return model.cache.put("batch.point_functions", compiled, fns)
 
 
+#: the outputs of :func:`_sweep_function` that are matrices (y', G, F, S); the others are vectors
+_SWEEP_MATRICES = (1, 3, 5, 6)
+
+
+def _sweep_function(model) -> ca.Function | None:
+    r"""The fused per-point function of a sweep, or None when the model does not qualify.
+
+    (y, p, q, wts, zb, c) -> (dy_E, y', h, G, g, F, S, obj, gabs, pivot, asym) at one (member,
+    input) point, with lambda_h = c - wts (zb - h) (dPhi/dh at the current states; c = 0 in a
+    sweep, unit vectors for the basis of the shared first sweep) and, through one sparse LDL^T
+    factorisation of E_y (CasADi ``ldl`` with AMD ordering, no pivoting; valid where E_y is
+    symmetric positive definite, which ``pivot`` > 0 and ``asym`` <= 1e-12 certify):
+
+    dy_E = -E_y^{-1} E, y' = -E_y^{-1} E_p, mu = -E_y^{-1} h_y^T lambda_h, G = h_p + h_y y',
+    h_lin = h + h_y dy_E, lambda = -wts (zb - h_lin), g = G^T lambda, F = G^T diag(wts) G,
+    S = Z^T (d^2/dv^2 (lambda_h^T h + mu^T E)) Z with v = (y, p), Z = [y'; I] (exact AD,
+    forward over reverse), obj = 1/2 sum wts (zb - h)^2, gabs = |G|^T |lambda|,
+    pivot = min D / max |D|, asym = max |E_y - E_y^T| / max |E_y|.
+
+    Qualifies: a model in SX with states (n_y > 0, dense numerics), a symmetric sparsity pattern of
+    E_y, and JIT compilation active (the CasADi virtual machine evaluates this function slower
+    than the dense path evaluates its parts).  Kept in ``model.cache``."""
+    num = numerics(model)
+    if not (model.n_y and num.jit_active()):
+        return None
+    got = model.cache.get("batch.sweep_function", True)
+    if got is not None:
+        return got or None
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    y, p, q = ca.SX.sym("y", n_y), ca.SX.sym("p", n_p), ca.SX.sym("q", model.n_q_dim)
+    wts, zb, c = ca.SX.sym("wts", n_S), ca.SX.sym("zb", n_S), ca.SX.sym("c", n_S)
+    E = model.E_fun(y, p, q)
+    h, Ey, Ep, hy, hp = num.sens(y, p, q)
+    if not Ey.sparsity().is_symmetric():
+        return model.cache.put("batch.sweep_function", True, False) or None
+    D, LT, perm = ca.ldl(Ey, True)
+    lam_h = c - wts * (zb - h)
+    X = ca.ldl_solve(ca.horzcat(-E, -Ep, -ca.mtimes(hy.T, lam_h)), D, LT, perm)
+    dyE, yp, mu = X[:, 0], X[:, 1:1 + n_p], X[:, 1 + n_p]
+    G = hp + ca.mtimes(hy, yp)
+    lam = -wts * (zb - h - ca.mtimes(hy, dyE))
+    v = ca.vertcat(y, p)
+    lam_s, mu_s, Z_s = ca.SX.sym("lam", n_S), ca.SX.sym("mu", n_y), ca.SX.sym("Z", n_y + n_p, n_p)
+    L = ca.dot(lam_s, h) + ca.dot(mu_s, E)
+    SZ = ca.Function("sz", [v, q, lam_s, mu_s, Z_s], [ca.mtimes(Z_s.T, ca.jtimes(ca.gradient(L, v), v, Z_s))])
+    S = SZ(v, q, lam_h, mu, ca.vertcat(yp, ca.SX.eye(n_p)))
+    absD = ca.fabs(D)
+    outs = [dyE, yp, h, G, ca.mtimes(G.T, lam), ca.mtimes(G.T, ca.mtimes(ca.diag(wts), G)), S,
+            0.5 * ca.dot(wts, (zb - h) ** 2), ca.mtimes(ca.fabs(G).T, ca.fabs(lam)),
+            ca.mmin(D) / ca.mmax(absD), ca.mmax(ca.fabs(Ey - Ey.T)) / ca.mmax(ca.fabs(Ey))]
+    f = ca.Function("batch_sweep", [y, p, q, wts, zb, c], [ca.densify(o) for o in outs],
+                    ["y", "p", "q", "wts", "zb", "c"],
+                    ["dyE", "yp", "h", "G", "g", "F", "S", "obj", "gabs", "pivot", "asym"])
+    g = num.compiled("batch_sweep", f)
+    if g is f:                          # no compiler after all: the dense path
+        return model.cache.put("batch.sweep_function", True, False) or None
+    return model.cache.put("batch.sweep_function", True, g)
+
+
 def _mapped(model, name: str, n: int) -> _Mapped:
     """The :class:`_Mapped` evaluator of a point function over n points (kept in ``model.cache``)."""
-    fns = _point_functions(model)
     key = (name, n, numerics(model).jit_active())
     f = model.cache.get("batch.mapped", key)
     if f is None:
-        f = model.cache.put("batch.mapped", key, _Mapped(fns[name], n), maxsize=256)
+        base = _sweep_function(model) if name == "sweep" else _point_functions(model)[name]
+        f = model.cache.put("batch.mapped", key, _Mapped(base, n), maxsize=256)
     return f
 
 
 class _Points:
     """Mapped evaluation of the model at (member, unique input) points: E, h and derivatives."""
 
-    def __init__(self, model: Model, Q_u: np.ndarray, R: int):
+    def __init__(self, model: Model, Q_u: np.ndarray, R: int, p0: np.ndarray | None = None,
+                 Y_u: np.ndarray | None = None):
         self.model, self.Q_u, self.R = model, Q_u, R
         self.n_u = Q_u.shape[0]
+        self.fused = _sweep_function(model) is not None
+        self._start = (p0, Y_u)
+        self._sym = None
+
+    def symmetric(self) -> bool:
+        """:func:`_symmetric` at the start (p0, Y_u), evaluated once, when the dense path first needs it."""
+        if self._sym is None:
+            p0, Y_u = self._start
+            self._sym = p0 is not None and _symmetric(self.model, self, p0, Y_u)
+        return self._sym
+
+    def sweep(self, Y: np.ndarray, P: np.ndarray, wts: np.ndarray, zb: np.ndarray,
+              c: np.ndarray | None = None) -> tuple:
+        """The outputs of :func:`_sweep_function` at Y (m, n_u, n_y), P (m, n_p) and the data terms
+        wts, zb, c (m, n_u, n_S) (c None: zero), each (m, n_u, ...) (matrices in row-major order)."""
+        m, n, Yf, Pf, Qf = self._args(Y, P)
+        mp = n // self.n_u
+        idx = np.minimum(np.arange(mp), m - 1)
+        W, Zb = wts[idx].reshape(n, -1), zb[idx].reshape(n, -1)
+        C = np.zeros_like(W) if c is None else c[idx].reshape(n, -1)
+        outs = _mapped(self.model, "sweep", n)(Yf, Pf, Qf, W, Zb, C)
+        k, sh = m * self.n_u, (m, self.n_u)
+        res = []
+        for i, o in enumerate(outs):
+            o = o[:k].reshape(sh + o.shape[1:])
+            res.append(o.swapaxes(2, 3) if i in _SWEEP_MATRICES else o[..., 0, :])
+        return tuple(res)
 
     def _args(self, Y, P):
         m = P.shape[0]
@@ -538,6 +641,7 @@ class _Iteration:
     funit: np.ndarray          # (R,) unit of the decrement (1, or s^2 / sigma_0^2 when sigma is unknown)
     fsweeps: np.ndarray        # (R,)
     halvings: np.ndarray       # (R,) step halvings since the last exact point
+    dense_sweeps: int = 0      # sweeps evaluated by the dense path (_evaluate)
 
     @classmethod
     def start(cls, P0, Y0, n_S):
@@ -566,22 +670,41 @@ class _Sweep:
     obj: np.ndarray
     dyE: np.ndarray
     yp: np.ndarray
-    lam: np.ndarray
+    gabs: np.ndarray           # (m, n_p) sum over the data of |lambda| |G| (round-off of the gradient)
     state_ok: np.ndarray
     finite: np.ndarray
 
 
-def _evaluate_shared(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray) -> _Sweep:
-    """:func:`_evaluate` when every member in ``a`` is at the same (p, states) with the states solved
-    (the common start p0): the model terms are evaluated once and only the data terms differ.
+def _shared_terms_fused(model, points: _Points, P1: np.ndarray, Y1: np.ndarray) -> tuple | None:
+    """:func:`_shared_terms` by the fused sweep function: one mapped call at the n_u inputs with
+    lambda_h = 0 (h, G, y') and with lambda_h = e_k for every sensor k (T_jk); None when E_y is not
+    symmetric positive definite (or not finite) at some input (the caller takes the dense path)."""
+    n_S, n_u = model.n_S, points.n_u
+    Yk = np.repeat(Y1, n_S + 1, axis=0)
+    Pk = np.repeat(P1, n_S + 1, axis=0)
+    zero = np.zeros((n_S + 1, n_u, n_S))
+    c = zero.copy()
+    c[1:] = np.eye(n_S)[:, None, :]
+    _, yp, h, G, _, _, S, _, _, piv, asym = _Points(model, points.Q_u, n_S + 1).sweep(Yk, Pk, zero, zero, c)
+    with np.errstate(invalid="ignore"):
+        good = (np.all(np.isfinite(h[0])) and np.all(np.isfinite(G[0])) and np.all(np.isfinite(yp[0]))
+                and np.all(np.isfinite(S)) and np.all(piv > 0) and np.all(asym <= 1e-12))
+    if not good:
+        return None
+    return h[0], G[0], yp[0], S[1:].transpose(1, 0, 2, 3)
 
-    With K = E_y^{-T} h_y^T the adjoint of member r is mu_r = -K lambda_r, and since the Lagrangian
-    Hessian is linear in (lambda, mu), S_r = sum_jk lambda_r,jk Z_j^T B_jk Z_j with
-    B_jk = lag_hess(e_k, -K_j e_k) (one evaluation per input and sensor).
-    """
+
+def _shared_terms(model, points: _Points, P1: np.ndarray, Y1: np.ndarray) -> tuple:
+    """The model terms at a common point (P1 (1, n_p), Y1 (1, n_u, n_y), states solved):
+    h (n_u, n_S), G (n_u, n_S, n_p), y' (n_u, n_y, n_p) and T (n_u, n_S, n_p, n_p) with
+    T_jk = Z_j^T B_jk Z_j, B_jk the Hessian of the Lagrangian for lambda_h = e_k (see
+    :func:`_evaluate_shared`)."""
     n_p, n_y, n_S = model.n_p, model.n_y, model.n_S
-    m, n_u = a.size, points.n_u
-    P1, Y1 = it.P[a[:1]], it.Y[a[:1]]
+    n_u = points.n_u
+    if points.fused:
+        got = _shared_terms_fused(model, points, P1, Y1)
+        if got is not None:
+            return got
     E, h, Ey, Ep, hy, hp = (x[0] for x in points.terms(Y1, P1))
     if not (np.all(np.isfinite(h)) and np.all(np.isfinite(Ey)) and np.all(np.isfinite(Ep))):
         raise StateSolveError("the model or its derivatives are not finite at the common start")
@@ -602,9 +725,25 @@ def _evaluate_shared(model, prep: _Prepared, points: _Points, it: _Iteration, a:
     mu_k = -K.transpose(2, 0, 1)                                                     # (n_S, n_u, n_y)
     Bk = _Points(model, points.Q_u, n_S).lag_hessians(Yk, Pk, lam_k, mu_k)          # (n_S, n_u, v, v)
     T = np.einsum("jva,kjvw,jwb->jkab", Z, Bk, Z, optimize=True)                     # (n_u, n_S, n_p, n_p)
+    return h, G, (Z[:, :n_y, :] if n_y else np.zeros((n_u, 0, n_p))), T
+
+
+def _evaluate_shared(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray) -> _Sweep:
+    """:func:`_evaluate` when every member in ``a`` is at the same (p, states) with the states solved
+    (the common start p0): the model terms are evaluated once and only the data terms differ.
+
+    With K = E_y^{-T} h_y^T the adjoint of member r is mu_r = -K lambda_r, and since the Lagrangian
+    Hessian is linear in (lambda, mu), S_r = sum_jk lambda_r,jk Z_j^T B_jk Z_j with
+    B_jk = lag_hess(e_k, -K_j e_k) (one evaluation per input and sensor).
+    """
+    n_p, n_y = model.n_p, model.n_y
+    m, n_u = a.size, points.n_u
+    P1, Y1 = it.P[a[:1]], it.Y[a[:1]]
+    h, G, yp, T = _shared_terms(model, points, P1, Y1)
     zb, wts = prep.zb[a], prep.wts[a]
     lam = -wts * (zb - h[None])
     g = np.einsum("mjs,jsp->mp", lam, G)
+    gabs = np.einsum("mjs,jsp->mp", np.abs(lam), np.abs(G))
     F = np.broadcast_to(np.einsum("mjs,jsp,jsr->mpr", wts, G, G), (m, n_p, n_p))
     with np.errstate(over="ignore", invalid="ignore"):
         obj = 0.5 * np.einsum("mjs,mjs->m", wts, (zb - h[None]) ** 2) + prep.const[a]
@@ -613,8 +752,39 @@ def _evaluate_shared(model, prep: _Prepared, points: _Points, it: _Iteration, a:
     ones = np.ones(m, bool)
     return _Sweep(a, np.repeat(P1, m, axis=0), np.repeat(Y1, m, axis=0), np.broadcast_to(h, (m,) + h.shape),
                   np.broadcast_to(G, (m,) + G.shape), np.array(F), S, ones, g, obj,
-                  np.zeros((m, n_u, n_y)), np.broadcast_to(Z[:, :n_y, :] if n_y else np.zeros((n_u, 0, n_p)),
-                                                           (m, n_u, n_y, n_p)), lam, ones, ones.copy())
+                  np.zeros((m, n_u, n_y)), np.broadcast_to(yp, (m, n_u, n_y, n_p)), gabs, ones, ones.copy())
+
+
+def _evaluate_fused(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray,
+                    bs: BatchSettings) -> _Sweep | None:
+    """:func:`_evaluate` by one mapped call of the fused sweep function (:func:`_sweep_function`):
+    every per-point term (states' Newton correction, y', G, the gradient at the corrected states,
+    J^T Omega J and S) comes from CasADi and NumPy only sums over the inputs.  None when E_y is not
+    certified symmetric positive definite at some point (a pivot that is not positive and finite,
+    or asymmetry): the caller then takes the dense path for this sweep."""
+    n_p = model.n_p
+    P, Y = it.P[a], it.Y[a]
+    dyE, yp, h, G, g, F, S, obj, gabs, piv, asym = points.sweep(Y, P, prep.wts[a], prep.zb[a])
+    with np.errstate(invalid="ignore", over="ignore"):
+        spd = np.all((piv[..., 0] > 0) & (asym[..., 0] <= 1e-12))
+        finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(G).all(axis=(1, 2, 3))
+                  & np.isfinite(dyE).all(axis=(1, 2)) & np.isfinite(yp).all(axis=(1, 2, 3)))
+    if not spd:                      # a zero, negative or non-finite pivot, or E_y not symmetric
+        return None
+    g, F, S, gabs = g.sum(axis=1), F.sum(axis=1), S.sum(axis=1), gabs.sum(axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        obj = obj[..., 0].sum(axis=1) + prep.const[a]
+        ynorm = 1.0 + np.abs(Y).max(axis=2)
+        state_ok = np.all(np.abs(dyE).max(axis=2) <= bs.state_tol * ynorm, axis=1)
+    if not np.all(finite):           # neutral values where a member is not finite (it stops this sweep)
+        bad = ~finite
+        for arr in (dyE, yp, h, G, g, S, gabs):
+            arr[bad] = 0.0
+        F[bad] = np.eye(n_p)
+        state_ok &= finite
+    has_S = (it.newton[a] | state_ok) & finite
+    S = np.where(has_S[:, None, None], 0.5 * (S + S.transpose(0, 2, 1)), 0.0)
+    return _Sweep(a, P, Y, h, G, F, S, has_S, g, obj, dyE, yp, gabs, state_ok, finite)
 
 
 def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.ndarray, sym: bool,
@@ -684,7 +854,8 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
         else:
             Sb = Hl.sum(axis=1)
         S[b] = 0.5 * (Sb + Sb.transpose(0, 2, 1))
-    return _Sweep(a, P, Y, h, G, F, S, has_S, g, obj, dyE, yp, lam, state_ok, finite)
+    gabs = np.einsum("mjs,mjsp->mp", np.abs(lam), np.abs(G))
+    return _Sweep(a, P, Y, h, G, F, S, has_S, g, obj, dyE, yp, gabs, state_ok, finite)
 
 
 def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray, settings: IdentifySettings,
@@ -696,7 +867,7 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
     dN, decN, goodN, LN = _chol_solve(sw.F + sw.S, -sw.g, s_p)
     dG, _, goodG, _ = _chol_solve(sw.F, -sw.g, s_p)
     # the decrement that round-off in the gradient's sum over the data alone produces
-    g_err = 16 * np.finfo(float).eps * np.einsum("mjs,mjsp->mp", np.abs(sw.lam), np.abs(sw.G)) * s_p
+    g_err = 16 * np.finfo(float).eps * sw.gabs * s_p
     u = np.linalg.solve(LN, g_err[:, :, None])[:, :, 0]
     round_off = np.einsum("mp,mp->m", u, u)
     dec = np.where(goodN, decN, np.inf)
@@ -761,7 +932,7 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
 
 
 def _iterate(model, prep: _Prepared, points: _Points, s_p, P0, Y0, settings: IdentifySettings,
-             bs: BatchSettings, sym: bool, sigma_unknown: bool, start_solved: bool) -> _Iteration:
+             bs: BatchSettings, sigma_unknown: bool, start_solved: bool) -> _Iteration:
     """Sweeps until every member has converged or stopped (see the module docstring).
 
     ``start_solved``: the start states solve E = 0 at the start values (the first sweep of
@@ -777,8 +948,12 @@ def _iterate(model, prep: _Prepared, points: _Points, s_p, P0, Y0, settings: Ide
         shared = first and a.size > 1 and np.all(it.P[a] == it.P[a[0]]) and np.all(it.Y[a] == it.Y[a[0]])
         first = False
         try:
-            sw = (_evaluate_shared(model, prep, points, it, a) if shared
-                  else _evaluate(model, prep, points, it, a, sym, bs))
+            sw = _evaluate_shared(model, prep, points, it, a) if shared else None
+            if sw is None and points.fused:
+                sw = _evaluate_fused(model, prep, points, it, a, bs)
+            if sw is None:
+                it.dense_sweeps += 1
+                sw = _evaluate(model, prep, points, it, a, points.symmetric(), bs)
         except StateSolveError as exc:
             for i in a:
                 it.reason[i] = f"model evaluation failed: {exc}"
@@ -952,9 +1127,9 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         fallback[int(r)] = "too few values for the parameters"
     prep = _prepare(model, data, w, Y_ref if n_y else np.zeros((q.shape[0], 0)))
     Q_u = q[prep.first]
-    points = _Points(model, Q_u, R)
     s_p = param_scale(model, p0)
     Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
+    points = _Points(model, Q_u, R, p0, Y_u)
     P0 = np.tile(p0, (R, 1))
     Yst = np.tile(Y_u, (R, 1, 1))
     if starts is not None:
@@ -966,7 +1141,6 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         if n_y:
             YS = np.asarray(start_states, float).reshape(R, q.shape[0], n_y)
             Yst[own] = YS[own][:, prep.first]
-    sym = _symmetric(model, points, p0, Y_u)
     members = np.array([r for r in range(R) if r not in fallback], int)
     it = None
     if members.size:
@@ -974,7 +1148,7 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                            prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w,
                            prep.Z[members])
         points.R = members.size
-        it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs, sym,
+        it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs,
                       sigma_unknown, starts is None)
     converged = np.zeros(R, bool)
     decrement = np.full(R, np.nan)
@@ -1000,10 +1174,10 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
             converged[r] = True
             decrement[r] = res.decrement
     run_fallbacks()
-    return _collect(model, results, records, converged, decrement, sweeps)
+    return _collect(model, results, records, converged, decrement, sweeps, 0 if it is None else it.dense_sweeps)
 
 
-def _collect(model, results, records, converged, decrement, sweeps) -> BatchFit:
+def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps: int = 0) -> BatchFit:
     R, n_p = len(results), model.n_p
     p = np.full((R, n_p), np.nan)
     cov = np.full((R, n_p, n_p), np.nan)
@@ -1019,4 +1193,4 @@ def _collect(model, results, records, converged, decrement, sweeps) -> BatchFit:
         p[r], cov[r], cov_gn[r], info[r] = res.p, res.cov, res.cov_gn, res.information
         obj[r], rss[r] = res.objective, res.rss
     return BatchFit(p, cov, cov_gn, info, obj, rss, decrement, sweeps, converged, ok,
-                    tuple(sorted(records, key=lambda x: x.member)), tuple(results))
+                    tuple(sorted(records, key=lambda x: x.member)), tuple(results), int(dense_sweeps))

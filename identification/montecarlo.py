@@ -17,8 +17,10 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
 The replications of a chunk are fitted together by the batch engine
 (:func:`identification.batch.fit_batch`: one batch per split and fit, same estimates as
 :func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
-the statistics are those of :func:`identification.detect.run_split_tests` on these fits
-(``MonteCarloSettings.batch=False``: one identify call per fit).
+the statistics are those of :func:`identification.detect.run_split_tests` on these fits,
+computed for all replications of a chunk at once with the same formulas (run_split_tests
+itself for a replication with a failed fit or an invalid covariance, which records the
+failure; ``MonteCarloSettings.batch=False``: one identify call per fit).
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
@@ -35,7 +37,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from models.contract import Model
 from . import cluster
@@ -367,10 +369,12 @@ def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> 
                      _Subsets([ds[r] for r in members], split.pooled))
 
 
-def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
-    """run_split_tests for R replications of one model with the same inputs: every calibration,
-    validation and pooled fit of a split is one :func:`identification.batch.fit_batch` call over the
-    replications; the statistics are run_split_tests' own (fits passed in)."""
+def _batched_fits(task: _Task, im: int, ds: list, st0) -> tuple:
+    """The fits of run_split_tests for R replications of one model with the same inputs: every
+    calibration, validation and pooled fit of a split is one :func:`identification.batch.fit_batch`
+    call over the replications.  Returns (fits, pooled, ok_split): per replication the (calibration,
+    validation) estimates of every split and {pooled points: pooled estimate or failure text} (the
+    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data."""
     model, name, p0, weights = task.models[im], task.names[im], task.p0s[im], task.weights[im]
     det = task.detect
     R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
@@ -412,28 +416,183 @@ def _batched_split_tests(task: _Task, im: int, ds: list, st0) -> list:
         for k, r in enumerate(members):
             e = _given(bf, k)
             pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
-    return [run_split_tests(model, ds[r], task.splits, p0, weights, det, name, st0, fits=fits[r], pooled=pooled[r])
-            for r in range(R)]
+    return fits, pooled, ok_split
+
+
+def _covariances(fits: list, det: DetectSettings, n_p: int) -> tuple:
+    """(p (R, 2, n_p), C (R, 2, n_p, n_p), regular (R,)) of the calibration and validation fits of one
+    split; regular False where a fit failed."""
+    R = len(fits)
+    P = np.full((R, 2, n_p), np.nan)
+    C = np.full((R, 2, n_p, n_p), np.nan)
+    regular = np.ones(R, bool)
+    second = det.covariance == "second_order"
+    for r, pair in enumerate(fits):
+        for i, est in enumerate(pair):
+            if isinstance(est, Exception) or est is None:
+                regular[r] = False
+                continue
+            P[r, i] = est.p
+            C[r, i] = est.cov if second else est.cov_gn
+    return P, C, regular
+
+
+def _batched_cholesky(C: np.ndarray) -> tuple:
+    """(L, ok): the lower Cholesky factors of a stack (m, n, n) (numpy.linalg.cholesky), ok False (L the
+    identity) where a matrix is not finite or not positive definite."""
+    m, n = C.shape[0], C.shape[-1]
+    ok = np.all(np.isfinite(C), axis=(1, 2))
+    A = np.where(ok[:, None, None], C, np.eye(n))
+    try:
+        return np.linalg.cholesky(A), ok
+    except np.linalg.LinAlgError:
+        L = np.broadcast_to(np.eye(n), A.shape).copy()
+        for i in np.flatnonzero(ok):
+            try:
+                L[i] = np.linalg.cholesky(A[i])
+            except np.linalg.LinAlgError:
+                ok[i] = False
+        return L, ok
+
+
+def _wald_d2(D: np.ndarray, C: np.ndarray) -> tuple:
+    """(d2, ok) with d2 = D^T C^{-1} D for stacks D (m, n), C (m, n, n), as
+    :func:`identification.regions.mahalanobis2` (Cholesky of (C + C^T)/2); ok False where it would raise
+    CovarianceError (C not finite, not symmetric to rtol 1e-8 / atol 1e-14 max|C|, not positive definite)."""
+    Ct = C.swapaxes(1, 2)
+    with np.errstate(invalid="ignore"):
+        atol = 1e-14 * np.abs(C).max(axis=(1, 2))
+        sym = np.all(np.abs(C - Ct) <= atol[:, None, None] + 1e-8 * np.abs(Ct), axis=(1, 2))
+    L, ok = _batched_cholesky(0.5 * (C + Ct))
+    ok &= sym
+    v = np.linalg.solve(L, np.where(ok[:, None], D, 0.0)[:, :, None])[:, :, 0]
+    return np.einsum("mi,mi->m", v, v), ok
+
+
+def _split_statistics(task: _Task, im: int, n_M: int, fits: list, pooled: list, ok_split: list,
+                      outs: list) -> np.ndarray:
+    """The three alpha_min and the ellipsoid coverage of every split of R replications, batched, written
+    into the replications' result dicts ``outs``: the numbers :func:`run_split_tests` and
+    :func:`_record` give (same formulas: Wald distances by Cholesky of the symmetrised covariance,
+    the likelihood ratio 2 (Phi_pooled - Phi_cal - Phi_val) or, sigma estimated, the F (Chow) test).
+
+    Returns the replications that are not regular (a failed fit or pooled fit, a covariance that is
+    not symmetric positive definite, a likelihood ratio that is not computable or clearly negative):
+    their result dicts are left untouched and the caller runs run_split_tests on them, which records
+    the failures with their messages."""
+    model, truth = task.models[im], task.truth[im]
+    n_p, R = model.n_p, len(fits)
+    det = task.detect
+    regular = np.ones(R, bool)
+    res = []
+    for js, split in enumerate(task.splits):
+        if not ok_split[js]:
+            regular[:] = False
+            break
+        P, C, reg = _covariances([f[js] for f in fits], det, n_p)
+        D = P[:, 1] - P[:, 0]
+        d2p, okp = _wald_d2(D, C[:, 0])
+        d2t, okt = _wald_d2(D, C[:, 0] + C[:, 1])
+        reg &= okp & okt
+        key = split.pooled_points(n_M)
+        stat = np.full(R, np.nan)
+        sig_est = np.zeros(R, bool)
+        num, scale, dof = np.zeros(R), np.ones(R), np.zeros(R)
+        for r in np.flatnonzero(reg):
+            est_c, est_v = fits[r][js]
+            est_u = pooled[r].get(key)
+            if est_u is None or isinstance(est_u, str):
+                reg[r] = False
+                continue
+            sig_est[r] = est_c.sigma_estimated
+            if sig_est[r]:
+                dof[r] = est_c.n_data + est_v.n_data - 2 * n_p
+                rss_sep = est_c.rss + est_v.rss
+                if dof[r] <= 0 or not rss_sep > 0:
+                    reg[r] = False
+                    continue
+                num[r], scale[r] = est_u.rss - rss_sep, rss_sep
+                stat[r] = (num[r] / n_p) / (rss_sep / dof[r])
+            else:
+                num[r] = 2.0 * (est_u.objective - est_c.objective - est_v.objective)
+                scale[r] = 2.0 * max(est_u.objective, 1.0)
+                stat[r] = num[r]
+        reg &= ~(num < -1e-7 * scale)
+        stat = np.maximum(stat, 0.0)
+        a_lr = np.where(sig_est, stats.f.sf(stat, n_p, np.maximum(dof, 1)), special.chdtrc(n_p, stat))
+        regular &= reg
+        res.append((P, C, special.chdtrc(n_p, d2p), special.chdtrc(n_p, d2t), a_lr))
+    if not np.any(regular):
+        return np.flatnonzero(~regular)
+    g2 = stats.chi2.ppf(1 - task.coverage_alpha, n_p) if truth is not None else None
+    rows = np.flatnonzero(regular)
+    for js, (P, C, a_p, a_t, a_lr) in enumerate(res):
+        if truth is not None:
+            covered = np.full((R, 2), np.nan)
+            for kk in range(2):
+                L, ok = _batched_cholesky(C[:, kk])
+                ok &= np.all(np.isfinite(P[:, kk]), axis=1)
+                v = np.linalg.solve(L, np.where(ok[:, None], truth - P[:, kk], 0.0)[:, :, None])[:, :, 0]
+                covered[:, kk] = np.where(ok, (np.einsum("mi,mi->m", v, v) <= g2).astype(float), np.nan)
+        for r in rows:
+            out = outs[r]
+            out["alpha_paper"][im, js] = a_p[r]
+            out["alpha_two_sample"][im, js] = a_t[r]
+            out["alpha_lr"][im, js] = a_lr[r]
+            if truth is not None:
+                out["covered"][im, js] = covered[r]
+    return np.flatnonzero(~regular)
+
+
+def _shapiro_pvalues(ds: list) -> list:
+    """``normality_check(d).pvalue`` of every data set: the Shapiro-Wilk p-values per sensor of the
+    differences of pairs of series.  Data sets without missing values and of a common shape are
+    tested in one ``scipy.stats.shapiro(..., axis=0)`` call (the same test per column); the others
+    by :func:`identification.detect.normality_check`."""
+    out = [None] * len(ds)
+    groups = {}
+    for r, d in enumerate(ds):
+        if d.n_M >= 2 and np.all(np.isfinite(d.z)):
+            groups.setdefault(d.z.shape, []).append(r)
+        else:
+            out[r] = normality_check(d).pvalue
+    for (n_M, n_q, n_S), rows in groups.items():
+        n_pairs = n_M // 2
+        Z = np.stack([ds[r].z for r in rows])                                   # (m, n_M, n_q, n_S)
+        D = (Z[:, 1:2 * n_pairs:2] - Z[:, 0:2 * n_pairs:2]).reshape(len(rows), n_pairs * n_q, n_S)
+        cols = D.transpose(1, 0, 2).reshape(n_pairs * n_q, -1)
+        pv = np.full(cols.shape[1], np.nan)
+        ok = np.ptp(cols, axis=0) > 0 if cols.shape[0] >= 3 else np.zeros(cols.shape[1], bool)
+        if np.any(ok):
+            pv[ok] = stats.shapiro(cols[:, ok], axis=0).pvalue
+        for k, r in enumerate(pv.reshape(len(rows), n_S)):
+            out[rows[k]] = r
+    return out
 
 
 def _replicate_chunk(task: _Task, chunk: list) -> list:
     """The replications of a chunk with the batch engine: the data sets of each model are grouped by
-    their inputs and every group's fits run as batches (:func:`_batched_split_tests`)."""
+    their inputs, every group's fits run as batches (:func:`_batched_fits`) and their statistics are
+    computed together (:func:`_split_statistics`; run_split_tests for the replications it leaves)."""
     datas = [task.generator(np.random.default_rng(seed)) for _, seed in chunk]
     outs = [_empty_result(task) for _ in chunk]
     for im, name in enumerate(task.names):
         ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
-        for r, d in enumerate(ds):
-            if outs[r]["shapiro"] is None:
-                outs[r]["shapiro"] = normality_check(d).pvalue
+        todo = [r for r in range(len(ds)) if outs[r]["shapiro"] is None]
+        for r, pv in zip(todo, _shapiro_pvalues([ds[r] for r in todo])):
+            outs[r]["shapiro"] = pv
         groups = {}
         for r, d in enumerate(ds):
             groups.setdefault((d.inputs.tobytes(), d.inputs.shape, d.n_M, d.sigma is None), []).append(r)
         for rows in groups.values():
             sub = [ds[r] for r in rows]
-            st0 = WORKER.start_states(name, task.models[im], task.p0s[im], sub[0].inputs)
-            for r, tests in zip(rows, _batched_split_tests(task, im, sub, st0)):
-                _record(task, outs[r], im, tests)
+            model = task.models[im]
+            st0 = WORKER.start_states(name, model, task.p0s[im], sub[0].inputs)
+            fits, pooled, ok_split = _batched_fits(task, im, sub, st0)
+            for k in _split_statistics(task, im, sub[0].n_M, fits, pooled, ok_split, [outs[r] for r in rows]):
+                tests = run_split_tests(model, sub[k], task.splits, task.p0s[im], task.weights[im], task.detect,
+                                        name, st0, fits=fits[k], pooled=pooled[k])
+                _record(task, outs[rows[k]], im, tests)
     return [(i, out) for (i, _), out in zip(chunk, outs)]
 
 

@@ -4,6 +4,8 @@ Agreement targets: estimates to 1e-8 relative, covariances to 1e-6 relative (ide
 stops at a Newton decrement of 1e-18 chi^2 units, i.e. within 1e-9 standard errors of the
 optimum, and so does the batch iteration; both are then a few 1e-11 apart on the press).
 """
+import contextlib
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from identification.detect import DetectSettings
 from identification.splits import splits_from_scenarios
 from models.contract import Model, Parameter
 from models.press import PRESS_SCENARIOS, Q_PAPER, press_model
+from models.state import simulate, solve_states
 
 SIGMA_MM = np.array([1.518e-05, 4.895e-06, 3.904e-06]) * 1e3
 W = np.array([1.0, 1.0, 0.0])
@@ -136,3 +139,96 @@ def test_monte_carlo_decisions_batch_equal_per_fit(press):
     np.testing.assert_array_equal(b.covered, f.covered)
     for st in ("paper", "two_sample", "likelihood_ratio"):
         np.testing.assert_array_equal(b.decisions(statistic=st), f.decisions(statistic=st))
+
+
+def _two_state(E, name, h=lambda y, p, q: y):
+    return Model(params=[Parameter("a", 0.1, 10.0), Parameter("b", 0.1, 10.0)], inputs=["q"], sensors=["u", "v"],
+                 n_y=2, E=E, h=h, name=name)
+
+
+@contextlib.contextmanager
+def jit_on():
+    """JIT compilation switched on (only around the batch fits: identify's own functions are not
+    compiled, which keeps the test fast; identify's numbers do not depend on it)."""
+    from models.state import JIT, set_jit
+    prev = set_jit(True)
+    try:
+        if not JIT.active():
+            pytest.skip("no C compiler: the fused sweep function needs JIT compilation")
+        yield
+    finally:
+        set_jit(prev)
+
+
+def test_fused_sweeps_equal_identify_and_dense_path_where_E_y_is_not_spd():
+    # E_y SPD: every sweep by the fused compiled function (sparse LDL^T); symmetric indefinite
+    # E_y (negative pivot), a zero pivot (no pivoting in LDL^T) and a non-symmetric E_y with a
+    # symmetric pattern: the dense path
+    spd = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] + 0.1 * y[0] ** 3 - p[0] * q[0],
+                                                y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "spd",
+                     h=lambda y, p, q: ca.vertcat(y[0] + 0.1 * y[1] ** 2, p[1] * y[1]))   # h nonlinear in (y, p)
+    indefinite = _two_state(lambda y, p, q: ca.vertcat(y[0] + 2 * y[1] - p[0] * q[0],
+                                                       2 * y[0] + y[1] - p[0] * p[1] * q[0] ** 2), "indefinite")
+    asymmetric = _two_state(lambda y, p, q: ca.vertcat(3 * y[0] + y[1] - p[0] * q[0],
+                                                       2 * y[0] + 2 * y[1] - p[0] * p[1] * q[0] ** 2), "asymmetric")
+    zero_pivot = _two_state(lambda y, p, q: ca.vertcat(y[1] - p[0] * q[0], y[0] - p[0] * p[1] * q[0] ** 2),
+                            "zero_pivot")
+    q = np.linspace(0.5, 3.0, 8)
+    rng = np.random.default_rng(11)
+    for model, fused in ((spd, True), (indefinite, False), (asymmetric, False), (zero_pivot, False)):
+        H = simulate(model, np.array([2.0, 1.5]), q[:, None])
+        data = [Measurements(q, H[None] + 0.01 * rng.standard_normal((2, 8, 2)), [0.01, 0.01]) for _ in range(3)]
+        Y0 = solve_states(model, np.array([1.5, 1.0]), q[:, None])
+        with jit_on():
+            fit = fit_batch(model, data, [1.5, 1.0], Y0=Y0)
+        assert fit.converged.all() and not fit.fallbacks, model.name
+        assert (fit.dense_sweeps == 0) if fused else (fit.dense_sweeps > 0), (model.name, fit.dense_sweeps)
+        _assert_same_as_identify(model, data, [1.5, 1.0], None, fit)
+
+
+def test_press_fused_sweeps_equal_identify(press, press_data):
+    cal = [SPLITS[3].calibration(d) for d in press_data[:2]]
+    Y0 = solve_states(press, P0, cal[0].inputs)
+    with jit_on():
+        fit = fit_batch(press, cal, P0, W, Y0=Y0)
+    assert fit.converged.all() and not fit.fallbacks and fit.dense_sweeps == 0
+    _assert_same_as_identify(press, cal, P0, W, fit)
+
+
+class _ExpCampaign:
+    """Campaigns of y = b1 (1 - exp(-b2 x)) with unknown sigma; every third replication has its
+    validation inputs of the first split (x_4 .. x_7) missing, so that split's validation fit fails."""
+
+    def __init__(self):
+        self.x = np.linspace(50.0, 800.0, 8)
+        self.calls = 0
+
+    def __call__(self, rng):
+        z = (230.0 * (1 - np.exp(-5e-4 * self.x)) + 0.5 * rng.standard_normal((2, 8)))[:, :, None]
+        if rng.uniform() < 0.3:
+            z[:, 4:] = np.nan
+        return Measurements(self.x, z, None)
+
+
+def test_monte_carlo_batched_statistics_equal_per_fit_with_failures_and_unknown_sigma():
+    # the batched statistics (F test of the pooled fit, Wald distances, coverage, Shapiro-Wilk) and
+    # the replications they leave to run_split_tests (a failed fit: same error records)
+    from identification.montecarlo import run_monte_carlo
+    from identification.splits import Split
+    model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    splits = (Split("halves", [0, 1, 2, 3], [4, 5, 6, 7]), Split("odd/even", [0, 2, 4, 6], [1, 3, 5, 7]),
+              Split("series", list(range(8)), list(range(8)), [0], [1]))
+    res = {}
+    for batch in (True, False):
+        s = MonteCarloSettings(n_rep=12, seed=3, workers=1, progress=False, jit=False, batch=batch,
+                               detect=DetectSettings(tol=0.05, normality="override"))
+        res[batch] = run_monte_carlo(model, _ExpCampaign(), splits, [200.0, 4e-4], truth=[230.0, 5e-4],
+                                     kind="size", settings=s)
+    b, f = res[True], res[False]
+    assert f.errors and b.errors == f.errors                      # some replications fail, recorded alike
+    for name in ("alpha_paper", "alpha_two_sample", "alpha_lr"):
+        np.testing.assert_allclose(getattr(b, name), getattr(f, name), rtol=0, atol=1e-6)
+    assert np.isfinite(b.alpha_lr).sum() > 20
+    np.testing.assert_array_equal(b.covered, f.covered)
+    np.testing.assert_array_equal(b.shapiro, f.shapiro)
