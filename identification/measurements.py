@@ -139,6 +139,10 @@ class Measurements:
     def __setattr__(self, name, value):
         raise AttributeError("Measurements is immutable; use subset(), with_sigma() or select()")
 
+    def __reduce__(self):
+        """Pickle through the constructor (the immutable slots cannot be set by pickle's default)."""
+        return (Measurements, (self.inputs, self.z, self.sigma, self.sensors, self.input_names, self.series))
+
     # ------------------------------------------------------------------ sizes
     @property
     def n_M(self) -> int:

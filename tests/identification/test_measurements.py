@@ -63,6 +63,22 @@ def test_immutable(m):
         m.sigma = None
 
 
+@settings(max_examples=40, deadline=None)
+@given(campaigns())
+def test_pickle_round_trip(m):
+    """Measurements reach worker processes (pickle) unchanged and still immutable."""
+    import pickle
+    r = pickle.loads(pickle.dumps(m))
+    np.testing.assert_array_equal(r.inputs, m.inputs)
+    np.testing.assert_array_equal(r.z, m.z)
+    assert (r.sigma is None) == (m.sigma is None)
+    if m.sigma is not None:
+        np.testing.assert_array_equal(r.sigma, m.sigma)
+    assert (r.sensors, r.input_names, r.series) == (m.sensors, m.input_names, m.series)
+    with pytest.raises(AttributeError):
+        r.sigma = None
+
+
 @pytest.mark.parametrize("kwargs, match", [
     (dict(inputs=np.ones((3, 1)), z=np.ones((2, 4, 1))), "z: has 4 inputs along axis 1 but inputs has 3 rows"),
     (dict(inputs=np.ones((3, 1)), z=np.ones((3, 1))), r"z: expected shape \(n_M, n_q, n_S\)"),
