@@ -165,9 +165,10 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
     already, so it starts on the first chunk at once, and the C code it JIT-compiles on the
     way lands in the on-disk cache (:mod:`models.jit_cache`) from which the spawned processes
     load it (they pay the interpreter start and the imports, about 1 s each, meanwhile).
-    Chunks are handed out one at a time, in order, to whichever worker is free (one feeder
-    thread per spawned process waits on its result; this process's main thread runs chunks
-    between them), so the last chunk ends at most one chunk after the others.  The chunks
+    Chunks are handed out one at a time, in order, to whichever worker is free, a spawned one
+    from the moment it is ready (one feeder thread per spawned process waits on its results;
+    this process's main thread runs chunks between them): a short run is not held up by a
+    starting process, and the last chunk ends at most one chunk after the others.  The chunks
     themselves do not change, so neither do the numbers.
 
     Parameters
@@ -205,6 +206,11 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
                 t.join()
 
 
+def _ready() -> int:
+    """A spawned worker's first call: returns once it is started and its task installed (its pid)."""
+    return os.getpid()
+
+
 class _Dispatch:
     """The chunks of one :func:`run_local` call, handed out in order to whichever worker is free."""
 
@@ -223,8 +229,10 @@ class _Dispatch:
             return self.todo.popleft() if self.todo and not self.stop.is_set() else None
 
     def feed(self, pool, fn: Callable) -> None:
-        """Hand one spawned process one chunk at a time (feeder thread); results or the error go to ``done``."""
+        """Hand one spawned process one chunk at a time (feeder thread), from the moment it is ready (started
+        and its task installed: no chunk waits on a starting process); results or the error go to ``done``."""
         try:
+            pool.submit(_ready).result()
             while (ch := self.take()) is not None:
                 self.done.put((pool.submit(fn, None, ch).result(), None))
         except Exception as exc:        # re-raised in the main thread (a chunk's error, a broken pool)
