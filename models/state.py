@@ -12,6 +12,7 @@ import shutil
 import tempfile
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -89,9 +90,13 @@ class JitConfig:
         if self.cache:
             try:
                 return JitCache(self.directory, self.flags, stats=self.stats).get(f)
-            except (JitCompileError, OSError):
-                self.failed = True      # no working compiler or no writable cache: keep the virtual machine
+            except JitCompileError:
+                self.failed = True      # no working compiler: keep the virtual machine
                 return None
+            except OSError as exc:      # the cache directory is not usable: compile in a private one
+                warnings.warn(f"JIT cache {self.directory or '(default)'} not usable ({exc}); compiling per process",
+                              RuntimeWarning, stacklevel=2)
+                self.cache = False
         d = self.workdir()
         t0 = time.perf_counter()
         try:

@@ -165,3 +165,15 @@ def test_press_functions_identical_with_and_without_the_cache(tmp_path):
     for vm, a, b in zip(_outputs(num.E_y, args), _outputs(cached, args), _outputs(plain, args)):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(a, vm, rtol=1e-14, atol=1e-300)
+
+
+def test_an_unusable_cache_directory_falls_back_to_compiling_per_process(tmp_path):
+    blocker = tmp_path / "a file"
+    blocker.write_text("not a directory")
+    cfg = JitConfig(enabled=True, directory=str(blocker / "jit"))
+    with pytest.warns(RuntimeWarning, match="not usable"):
+        g = cfg.compile(_small())
+    assert g is not None and not cfg.failed and not cfg.cache
+    x = [np.array([0.1, 0.2, 0.3])]
+    for a, b in zip(_outputs(_small(), x), _outputs(g, x)):
+        np.testing.assert_allclose(b, a, rtol=1e-15, atol=0)
