@@ -139,7 +139,7 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
 
     Returns
     -------
-    str : the backend used, e.g. "serial", "2 local processes (this one and 1 spawned)",
+    str : the backend used, e.g. "serial", "2 local processes" (this one and 1 spawned),
     "dask (tcp://..., 4 workers)".
     """
     if scheduler is not None:
@@ -155,7 +155,7 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
     if install is None:
         raise ValueError("install: local processes need the function that stores the task in a worker")
     run_local(fn, task, make_chunks(n_w), on_result, n_w, install)
-    return f"{n_w} local processes (this one and {n_w - 1} spawned)"
+    return f"{n_w} local processes"
 
 
 def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: int, install: Callable) -> None:
