@@ -11,13 +11,17 @@ every ``--sizes`` n it runs n replications from one seed and records
 * whether the numbers (alpha_min of the three statistics, coverage) equal the serial run's
   of the same n (same seed: they must).
 
-Backends: ``serial`` (this process), ``processes2`` (2 spawned local processes, a new pool per run:
-its start-up and the per-process model compilation are inside the time), ``daskN`` (a
-``distributed.LocalCluster`` of N worker processes with one thread each, started once per N; its
-start-up time and a warm-up run of 2 N replications are reported apart and not in the table).
+Backends: ``serial`` (this process), ``processes2`` (2 local processes: this one and 1 spawned, a new
+pool per run: the spawned process's start-up is inside the time, :func:`identification.cluster.run_local`),
+``daskN`` (a ``distributed.LocalCluster`` of N worker processes with one thread each, started once per
+N; its start-up time and a warm-up run of 2 N replications are reported apart and not in the tables).
+The compiled model functions come from the JIT cache (:mod:`models.jit_cache`); ``--jit-cache cold``
+starts from an empty one (the first run of every backend then compiles, once per machine).
 
 Run ``python -m bench.bench_workers`` (sizes 10 100 1000, every backend; ``--sizes 10 100 1000 10000``
-for the long version) and read the markdown table.
+for the long version, ``--backends serial processes2`` for a subset) and read the two markdown tables
+(one row per run; per replication by backend and size), followed by the check against the serial
+numbers.
 """
 from __future__ import annotations
 
@@ -43,8 +47,9 @@ def _cpu(who: int) -> float:
 
 
 def _worker_cpu() -> float:
-    """CPU seconds of this (worker) process; run on every Dask worker by ``client.run``."""
-    return _cpu(resource.RUSAGE_SELF)
+    """CPU seconds of this (worker) process and its finished children (the C compiler of the JIT);
+    run on every Dask worker by ``client.run``."""
+    return _cpu(resource.RUSAGE_SELF) + _cpu(resource.RUSAGE_CHILDREN)
 
 
 def _machine() -> str:
@@ -54,10 +59,19 @@ def _machine() -> str:
 
 
 def _same(a, b) -> str:
+    """"yes" when every alpha and coverage equals the serial run's to the bit; else the largest difference
+    and whether the NaN pattern (failed fits) and the decisions of the three statistics agree."""
     if b is None:
         return "n/a"
-    return "yes" if all(np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True)
-                        for f in ("alpha_lr", "alpha_two_sample", "alpha_paper", "covered")) else "NO"
+    fields = ("alpha_lr", "alpha_two_sample", "alpha_paper", "covered")
+    if all(np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True) for f in fields):
+        return "yes"
+    nan_same = all(np.array_equal(np.isnan(getattr(a, f)), np.isnan(getattr(b, f))) for f in fields)
+    diff = max(float(np.nanmax(np.abs(getattr(a, f) - getattr(b, f)), initial=0.0)) for f in fields)
+    dec = all(np.array_equal(a.decisions(statistic=st), b.decisions(statistic=st), equal_nan=True)
+              for st in ("likelihood_ratio", "two_sample", "paper"))
+    return (f"NO: max diff {diff:.1e}, same failed fits {'yes' if nan_same else 'NO'}, "
+            f"same decisions {'yes' if dec else 'NO'}")
 
 
 def _timed(n: int, seed: int, workers=None, client=None) -> tuple:
@@ -76,13 +90,26 @@ def _timed(n: int, seed: int, workers=None, client=None) -> tuple:
     return res, wall, cpu
 
 
+LABELS = {"serial": "serial (this process)", "processes2": "2 local processes (this one + 1 spawned)",
+          "dask1": "Dask LocalCluster, 1 process", "dask2": "Dask LocalCluster, 2 processes",
+          "dask4": "Dask LocalCluster, 4 processes"}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[10, 100, 1000])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10, 100, 1000],
+                    help="numbers of replications (e.g. 10 100 1000 10000)")
     ap.add_argument("--backends", nargs="+", choices=BACKENDS, default=list(BACKENDS))
     ap.add_argument("--seed", type=int, default=20261121)
+    ap.add_argument("--jit-cache", choices=("keep", "cold"), default="keep",
+                    help="keep: the user's JIT cache (models.jit_cache; warm after a first run); cold: a new empty "
+                         "cache directory for this benchmark (every backend's first run compiles once)")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
-    print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}", flush=True)
+    if args.jit_cache == "cold":
+        import tempfile
+        os.environ["MUDOE_JIT_CACHE"] = tempfile.mkdtemp(prefix="mudoe-jit-bench-")   # inherited by every worker
+    print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}; "
+          f"JIT cache: {os.environ.get('MUDOE_JIT_CACHE', 'default (per user)')}", flush=True)
     rows, serial, setup = [], {}, []
     for backend in args.backends:
         if backend.startswith("dask"):
@@ -93,9 +120,9 @@ def main(argv=None) -> None:
                                           dashboard_address=None) as cl, \
                     distributed.Client(cl, set_as_default=False) as client:
                 start = time.perf_counter() - t0
-                _, warm, _ = _timed(2 * n_w, args.seed + 1, client=client)
-                setup.append(f"{backend}: cluster start {start:.1f} s, warm-up ({2 * n_w} replications, model "
-                             f"compiled in every worker) {warm:.1f} s")
+                _, warm, warm_cpu = _timed(2 * n_w, args.seed + 1, client=client)
+                setup.append(f"{backend}: cluster start {start:.1f} s, warm-up ({2 * n_w} replications: imports, "
+                             f"model, JIT load or compile in every worker) {warm:.1f} s wall, {warm_cpu:.1f} s CPU")
                 print(setup[-1], flush=True)
                 for n in args.sizes:
                     res, wall, cpu = _timed(n, args.seed, client=client)
@@ -109,14 +136,26 @@ def main(argv=None) -> None:
                     serial[n] = res
                 rows.append((backend, n, wall, cpu, _same(res, serial.get(n)) if backend != "serial" else "-"))
                 print(rows[-1], flush=True)
-    print()
-    print("| backend | replications | wall (s) | wall per replication (ms) | CPU (s) | CPU per replication (ms) "
+    print("\n| backend | replications | wall (s) | wall per replication (ms) | CPU (s) | CPU per replication (ms) "
           "| same numbers as serial |")
     print("|---|---|---|---|---|---|---|")
     for backend, n, wall, cpu, same in rows:
-        print(f"| {backend} | {n} | {wall:.1f} | {1e3 * wall / n:.0f} | {cpu:.1f} | {1e3 * cpu / n:.0f} | {same} |")
-    print()
-    print("Not in the table: " + "; ".join(setup) if setup else "")
+        print(f"| {LABELS[backend]} | {n} | {wall:.1f} | {1e3 * wall / n:.1f} | {cpu:.1f} | {1e3 * cpu / n:.1f} "
+              f"| {same} |")
+    print("\nPer replication, wall ms (CPU ms), by backend and number of replications:\n")
+    print("| backend | " + " | ".join(f"{n} reps" for n in args.sizes) + " |")
+    print("|---|" + "---|" * len(args.sizes))
+    for backend in args.backends:
+        cells = {n: f"{1e3 * w / n:.1f} ({1e3 * c / n:.1f})" for b, n, w, c, _ in rows if b == backend}
+        print(f"| {LABELS[backend]} | " + " | ".join(cells.get(n, "") for n in args.sizes) + " |")
+    checked = [same for b, _, _, _, same in rows if b != "serial"]
+    if checked:
+        verdict = ("all equal" if all(x == "yes" for x in checked) else
+                   "NOT all equal (see the table)" if any(x.startswith("NO") for x in checked)
+                   else "not checked for every size (serial not run)")
+        print(f"\nSame numbers as the serial run (alpha of the three statistics, coverage): {verdict}")
+    if setup:
+        print("Not in the tables (once per cluster): " + "; ".join(setup))
 
 
 if __name__ == "__main__":

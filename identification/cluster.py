@@ -19,7 +19,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "execute", "n_workers", "run_chunks", "seed_chunks"]
+__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "execute", "n_workers", "run_chunks", "run_local",
+           "seed_chunks"]
 
 #: how long :func:`connect` waits for at least one worker to join the scheduler (s)
 WORKER_WAIT_S = 30.0
@@ -130,14 +131,16 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
     task : picklable
     make_chunks : callable (n_workers) -> list of chunks
     on_result : callable (list) -> None, called with every chunk's result as it finishes
-    workers : int or None   local processes (1: serial in this process; None: all cores)
+    workers : int or None   processes (1: serial in this process; None: all cores; N > 1: this process and
+                            N - 1 spawned ones, :func:`run_local`)
     scheduler : None, a Dask scheduler address or a distributed.Client (then ``workers`` is ignored)
     install : module-level callable (task) -> None
         Stores ``task`` in a spawned process (the pool initializer); needed when ``workers`` > 1.
 
     Returns
     -------
-    str : the backend used, e.g. "serial", "2 local processes", "dask (tcp://..., 4 workers)".
+    str : the backend used, e.g. "serial", "2 local processes" (this one and 1 spawned),
+    "dask (tcp://..., 4 workers)".
     """
     if scheduler is not None:
         with connect(scheduler) as client:
@@ -151,14 +154,103 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
         return "serial"
     if install is None:
         raise ValueError("install: local processes need the function that stores the task in a worker")
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"), initializer=install,
-                             initargs=(task,)) as pool:
-        futures = [pool.submit(fn, None, ch) for ch in make_chunks(n_w)]
-        for fut in as_completed(futures):
-            on_result(fut.result())
+    run_local(fn, task, make_chunks(n_w), on_result, n_w, install)
     return f"{n_w} local processes"
+
+
+def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: int, install: Callable) -> None:
+    """``on_result(fn(task, chunk))`` for every chunk, on this process and ``n_workers - 1`` spawned ones.
+
+    This process is one of the workers: it has imported everything and built the models
+    already, so it starts on the first chunk at once, and the C code it JIT-compiles on the
+    way lands in the on-disk cache (:mod:`models.jit_cache`) from which the spawned processes
+    load it (they pay the interpreter start and the imports, about 1 s each, meanwhile).
+    Chunks are handed out one at a time, in order, to whichever worker is free, a spawned one
+    from the moment it is ready (one feeder thread per spawned process waits on its results;
+    this process's main thread runs chunks between them): a short run is not held up by a
+    starting process, and the last chunk ends at most one chunk after the others.  The chunks
+    themselves do not change, so neither do the numbers.
+
+    Parameters
+    ----------
+    fn : module-level callable (task or None, chunk) -> list
+        Called here as ``fn(task, chunk)``; in a spawned process as ``fn(None, chunk)`` after
+        ``install(task)`` (the pool initializer).  Resetting what ``fn(task, chunk)`` leaves in
+        this process (a worker state, a JIT switch) is the caller's job.
+    task : picklable
+    chunks : list
+    on_result : callable (list) -> None, called with every chunk's result (in this thread)
+    n_workers : int >= 2    processes in all, this one included
+    install : module-level callable (task) -> None
+    """
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    if int(n_workers) < 2:
+        raise ValueError(f"n_workers: run_local needs at least 2 processes (this one and 1 spawned), got {n_workers}")
+    run = _Dispatch(chunks, on_result)
+    with ProcessPoolExecutor(max_workers=int(n_workers) - 1, mp_context=mp.get_context("spawn"),
+                             initializer=install, initargs=(task,)) as pool:
+        feeders = [threading.Thread(target=run.feed, args=(pool, fn), daemon=True, name=f"mudoe-feed-{k}")
+                   for k in range(int(n_workers) - 1)]
+        try:
+            for t in feeders:
+                t.start()
+            while (ch := run.take()) is not None:
+                on_result(fn(task, ch))
+                run.deliver(0)
+            while any(t.is_alive() for t in feeders) or not run.done.empty():
+                run.deliver(0.05)
+        finally:
+            run.stop.set()
+            for t in feeders:
+                t.join()
+
+
+def _ready() -> int:
+    """A spawned worker's first call: returns once it is started and its task installed (its pid)."""
+    return os.getpid()
+
+
+class _Dispatch:
+    """The chunks of one :func:`run_local` call, handed out in order to whichever worker is free."""
+
+    def __init__(self, chunks: list, on_result: Callable):
+        import queue
+        from collections import deque
+        self.todo = deque(chunks)
+        self.lock = threading.Lock()
+        self.done = queue.Queue()      # (result, None) or (None, exception) from the feeder threads
+        self.stop = threading.Event()
+        self.on_result = on_result
+
+    def take(self):
+        """The next chunk, or None when none is left (or a worker failed)."""
+        with self.lock:
+            return self.todo.popleft() if self.todo and not self.stop.is_set() else None
+
+    def feed(self, pool, fn: Callable) -> None:
+        """Hand one spawned process one chunk at a time (feeder thread), from the moment it is ready (started
+        and its task installed: no chunk waits on a starting process); results or the error go to ``done``."""
+        try:
+            pool.submit(_ready).result()
+            while (ch := self.take()) is not None:
+                self.done.put((pool.submit(fn, None, ch).result(), None))
+        except Exception as exc:        # re-raised in the main thread (a chunk's error, a broken pool)
+            self.stop.set()
+            self.done.put((None, exc))
+
+    def deliver(self, timeout: float) -> None:
+        """Pass the finished results to ``on_result`` (main thread), waiting up to ``timeout`` s for the first."""
+        import queue
+        try:
+            while True:
+                res, exc = self.done.get(timeout=timeout) if timeout else self.done.get_nowait()
+                if exc is not None:
+                    raise exc
+                self.on_result(res)
+                timeout = 0
+        except queue.Empty:
+            return
 
 
 def seed_chunks(n: int, seed, n_workers: int, chunk_size: int | None = None, per_worker: int = 4,

@@ -652,16 +652,16 @@ def _run_serial(task: _Task, chunks: list, got: _Collector) -> str:
 
 
 def _run_processes(task: _Task, chunks: list, n_w: int, got: _Collector) -> str:
-    """Chunks on ``n_w`` spawned local processes (each installs the task once, :func:`_init_worker`)."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    """Chunks on this process and ``n_w - 1`` spawned ones (:func:`identification.cluster.run_local`; each
+    spawned process installs the task once, :func:`_init_worker`; this one's state is restored after)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    with ProcessPoolExecutor(max_workers=n_w, mp_context=mp.get_context("spawn"),
-                             initializer=_init_worker, initargs=(task,)) as ex:
-        futs = [ex.submit(_run_chunk, None, ch) for ch in chunks]
-        for fut in as_completed(futs):
-            got.add(fut.result())
-    return f"local processes ({n_w} workers, spawn)"
+    prev = set_jit(task.jit)
+    try:
+        cluster.run_local(_run_chunk, task, chunks, got.add, n_w, _init_worker)
+    finally:
+        set_jit(prev)
+        WORKER.clear()
+    return f"local processes ({n_w} workers: this one and {n_w - 1} spawned)"
 
 
 def _execute(task: _Task, settings: MonteCarloSettings, desc: str) -> tuple:

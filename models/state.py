@@ -11,7 +11,9 @@ import os
 import shutil
 import tempfile
 import threading
-from dataclasses import dataclass
+import time
+import warnings
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -20,6 +22,7 @@ import scipy.sparse.linalg as spla
 
 from .cache import Cache
 from .errors import StateSolveError
+from .jit_cache import JitCache, JitCompileError, JitStats
 from .vectorised import VectorisedSX, vectorisable
 
 __all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
@@ -31,52 +34,82 @@ class JitConfig:
     """Just-in-time compilation of the per-model CasADi functions (C code through the system compiler).
 
     One process-wide instance, :data:`JIT`, is read by :meth:`Numerics.jit_active`; switch it
-    with :func:`set_jit`.  Off by default: compiling the press functions takes about 1.5 s,
-    which pays off only for many repeated fits (the Monte Carlo workers switch it on).  Only
-    models stated in SX with at most 60 states are compiled, and only when a C compiler
-    (``cc``/``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as
-    usual (same numbers, slower).
+    with :func:`set_jit`.  Off by default: compiling the press functions takes about 1.5 s of
+    ``gcc``, which pays off only for many repeated fits (the Monte Carlo workers switch it on).
+    Only models stated in SX with at most 60 states are compiled, and only when a C compiler
+    (``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as usual
+    (same numbers, slower).
+
+    The compiled libraries are kept in an on-disk cache shared by all processes of the user
+    (:class:`models.jit_cache.JitCache`, content-addressed by the function, the flags, CasADi and
+    the compiler): a function is compiled once per machine, and every other process (each local
+    worker, each Dask worker on the machine, the next run) loads it in about 20 ms.
 
     Attributes
     ----------
     enabled : bool          compile when a model qualifies
     failed : bool           set when no working compiler was found (compilation stays off)
-    directory : str or None this process's temporary directory for the generated C code and
-                            libraries (created on first use, removed at exit)
+    cache : bool            keep the compiled libraries in the on-disk cache (False: compile in a
+                            temporary directory of this process, removed at exit, as before the cache)
+    directory : str or None the cache directory (None: :func:`models.jit_cache.default_cache_dir`,
+                            ``$MUDOE_JIT_CACHE`` or ``~/.cache/mudoe/jit``)
+    scratch : str or None   with ``cache`` False: this process's temporary directory for the generated
+                            code and libraries (created on first use, removed at exit)
+    flags : tuple of str    compiler flags
+    stats : JitStats        this process's compilations and cache loads (counts, seconds)
     """
 
     enabled: bool = False
     failed: bool = False
+    cache: bool = True
     directory: str | None = None
+    scratch: str | None = None
+    flags: tuple = ("-O1",)
+    stats: JitStats = field(default_factory=JitStats)
 
     def active(self) -> bool:
         """True when compilation is switched on and a compiler has not failed."""
         return self.enabled and not self.failed
 
     def workdir(self) -> str:
-        """The temporary directory for generated code (created on first use, removed at exit),
-        so that nothing is written to the working directory."""
-        d = self.directory
+        """The temporary directory for generated code without the cache (created on first use,
+        removed at exit), so that nothing is written to the working directory."""
+        d = self.scratch
         if d is None or not os.path.isdir(d):
             d = tempfile.mkdtemp(prefix="mudoe_jit_")
             atexit.register(shutil.rmtree, d, ignore_errors=True)
-            self.directory = d
+            self.scratch = d
         return d
 
     def compile(self, f: ca.Function) -> ca.Function | None:
-        """A C-compiled copy of an SX function, or None (no compiler: ``failed`` is then set)."""
-        if shutil.which("gcc") is None and shutil.which("cc") is None:
+        """A C-compiled copy of an SX function (from the cache when :attr:`cache`), or None (no
+        working compiler: :attr:`failed` is then set and the virtual machine stays in use)."""
+        if shutil.which("gcc") is None:
             self.failed = True
             return None
+        if self.cache:
+            try:
+                return JitCache(self.directory, self.flags, stats=self.stats).get(f)
+            except JitCompileError:
+                self.failed = True      # no working compiler: keep the virtual machine
+                return None
+            except OSError as exc:      # the cache directory is not usable: compile in a private one
+                warnings.warn(f"JIT cache {self.directory or '(default)'} not usable ({exc}); compiling per process",
+                              RuntimeWarning, stacklevel=2)
+                self.cache = False
         d = self.workdir()
+        t0 = time.perf_counter()
         try:
-            return ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
-                               {"jit": True, "compiler": "shell", "jit_name": "jit_tmp", "jit_cleanup": False,
-                                "jit_options": {"flags": ["-O1"], "verbose": False, "cleanup": False,
-                                                "directory": d + os.sep}})
+            g = ca.Function(f"{f.name()}_jit", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(),
+                            {"jit": True, "compiler": "shell", "jit_name": "jit_tmp", "jit_cleanup": False,
+                             "jit_options": {"flags": list(self.flags), "verbose": False, "cleanup": False,
+                                             "directory": d + os.sep}})
         except RuntimeError:
             self.failed = True          # no working compiler: keep the virtual machine
             return None
+        self.stats.compiled += 1
+        self.stats.compile_s += time.perf_counter() - t0
+        return g
 
 
 #: the process-wide JIT configuration (see :class:`JitConfig` and :func:`set_jit`)
