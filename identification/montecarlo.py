@@ -106,9 +106,9 @@ class MonteCarloSettings:
     coverage_alpha : float   the ellipsoid level checked for coverage (0.05: 95 % ellipsoids)
     ci_level : float         level of the Clopper-Pearson intervals
     detect : DetectSettings  tol, covariance kind, identify settings (normality is not gated here)
-    jit : bool               compile small models' CasADi functions to C in every worker
-                             (models.state.set_jit; same numbers, about 25 % faster
-                             per replication after a one-off ~1 s compilation per worker)
+    jit : bool               compile small models' CasADi functions to C (models.state.set_jit;
+                             same numbers, faster per replication); the libraries are compiled
+                             once per machine and loaded from models.jit_cache by every worker
     batch : bool             fit the replications of a chunk together with the batch engine
                              (identification.batch.fit_batch: same estimates to ~1e-10, identify as
                              per-member fallback); False: one identify call per fit
