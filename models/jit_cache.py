@@ -23,12 +23,17 @@ Safety under concurrent processes (local pools, Dask workers, several runs):
 * the compiling process holds an exclusive ``fcntl.flock`` on ``<key>.lock``; a second process
   needing the same key waits for it and then loads the entry (one compilation, not one per
   worker).  Without ``fcntl`` (Windows) both compile and the last ``os.replace`` wins;
+* CasADi compiles the derivatives of a loaded function (Ipopt's gradients) with the entry's own
+  options, into the cache directory, and reserves an (empty) source name on every load; the
+  library names carry a random suffix so that each derivative gets its own library, and
+  :func:`prune_strays` removes what no entry names once it is an hour old (once per process);
 * an entry that cannot be loaded (hash mismatch, truncated, library missing, other signature) is
   replaced by a fresh compilation, never an error; a failing compiler raises
   :class:`JitCompileError` (callers fall back to CasADi's virtual machine).
 """
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
 import os
@@ -99,6 +104,10 @@ def default_cache_dir() -> str:
     raise JitCompileError("no writable directory for the JIT cache; set MUDOE_JIT_CACHE to one")
 
 
+#: part of every key: entries of an older layout (libraries without a random suffix, whose derivatives
+#: could not be loaded) are never used
+CACHE_FORMAT = "mudoe-jit-2"
+
 _COMPILER_IDS: dict = {}
 
 
@@ -118,11 +127,53 @@ def _compiler_id(compiler: str) -> str:
 def function_key(f: ca.Function, flags, compiler: str = "gcc") -> str:
     """sha256 (hex) of ``f``'s serialisation, the compiler flags, CasADi's version, the compiler and machine."""
     h = hashlib.sha256()
-    for part in (f.serialize(), "\0".join(flags), ca.__version__, _compiler_id(compiler), platform.machine(),
+    for part in (f.serialize(), CACHE_FORMAT, "\0".join(flags), ca.__version__, _compiler_id(compiler), platform.machine(),
                  platform.system()):
         h.update(part.encode())
         h.update(b"\0\1")
     return h.hexdigest()
+
+
+#: files older than this (s) that no entry names are removed (the derivatives' generated code and libraries)
+STRAY_AGE_S = 3600.0
+
+_PRUNED: set = set()
+
+
+def prune_strays(directory: str, max_age_s: float = STRAY_AGE_S) -> int:
+    """Remove the files of ``directory`` that no entry needs and that are older than ``max_age_s``.
+
+    CasADi compiles the derivatives of a loaded function (Ipopt's gradients and Hessians) with the
+    function's own options, so their code and libraries land in the cache directory too, under the
+    entry's name and a random suffix; nothing else refers to them once the process that made them
+    has loaded them.  Kept: entries (``*.casadi``), locks, the library each entry names, and every
+    file younger than ``max_age_s`` (a compilation in progress).  Returns the number removed.
+    """
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return 0
+    keep = set()
+    for n in names:
+        if n.endswith(".casadi"):
+            try:
+                with open(os.path.join(directory, n), "rb") as fh:
+                    keep.add(json.loads(fh.readline())["library"])
+            except (OSError, ValueError, KeyError, TypeError):
+                continue                        # unreadable entry: its library goes when it is old
+    now = time.time()
+    removed = 0
+    for n in names:
+        if n in keep or n.endswith((".casadi", ".lock")) or not n.startswith("jit"):
+            continue
+        path = os.path.join(directory, n)
+        try:
+            if now - os.path.getmtime(path) > max_age_s:
+                os.remove(path)
+                removed += 1
+        except OSError:
+            continue
+    return removed
 
 
 def _remove(path: str) -> None:
@@ -156,6 +207,9 @@ class JitCache:
         if self._directory is None:
             self._directory = default_cache_dir()
         os.makedirs(self._directory, mode=0o700, exist_ok=True)
+        if self._directory not in _PRUNED:      # once per process and directory
+            _PRUNED.add(self._directory)
+            prune_strays(self._directory)
         return self._directory
 
     def entry_path(self, key: str) -> str:
@@ -235,20 +289,28 @@ class JitCache:
         try:
             g = ca.Function(wrapped.name(), wrapped.sx_in(), wrapped.call(wrapped.sx_in()), wrapped.name_in(),
                             wrapped.name_out(),
-                            {"jit": True, "compiler": "shell", "jit_name": stem, "jit_temp_suffix": False,
+                            {"jit": True, "compiler": "shell", "jit_name": stem, "jit_temp_suffix": True,
                              "jit_cleanup": False, "jit_serialize": "link",
                              "jit_options": {"flags": list(self.flags), "verbose": False, "cleanup": False,
-                                             "directory": d + os.sep, "name": stem, "temp_suffix": False,
+                                             "directory": d + os.sep, "name": stem, "temp_suffix": True,
                                              "compiler": self.compiler}})
         except RuntimeError as exc:
-            for ext in (".c", ".o", ".so"):
-                _remove(os.path.join(d, stem + ext))
+            for path in glob.glob(os.path.join(d, stem + "*")):
+                _remove(path)
             raise JitCompileError(f"compiling {wrapped.name()} with {self.compiler} failed: "
                                   f"{' '.join(str(exc).split())[:300]}") from None
-        for ext in (".c", ".o"):
-            _remove(os.path.join(d, stem + ext))
+        # The names carry a random suffix (``temp_suffix``): the derivatives CasADi compiles later from
+        # the loaded function (Ipopt's gradients, with these same options) then get libraries of their
+        # own; a fixed name made dlopen return this library again and the derivative failed to load.
+        libs = glob.glob(os.path.join(d, stem + "*.so"))
+        for path in glob.glob(os.path.join(d, stem + "*.c")) + glob.glob(os.path.join(d, stem + "*.o")):
+            _remove(path)
+        if len(libs) != 1:
+            raise JitCompileError(f"compiling {wrapped.name()}: expected one library {stem}*.so in {d}, "
+                                  f"found {len(libs)}")
+        lib = os.path.basename(libs[0])
         body = g.serialize().encode()
-        header = json.dumps({"library": stem + ".so", "library_sha256": _file_sha256(os.path.join(d, stem + ".so")),
+        header = json.dumps({"library": lib, "library_sha256": _file_sha256(libs[0]),
                              "entry_sha256": hashlib.sha256(body).hexdigest(), "function": wrapped.name()})
         tmp = os.path.join(d, f"{stem}.tmp")
         with open(tmp, "wb") as fh:
@@ -257,7 +319,7 @@ class JitCache:
             os.fsync(fh.fileno())
         os.replace(tmp, self.entry_path(key))
         for old in os.listdir(d):               # libraries of replaced (damaged) entries of this key
-            if old.startswith(f"jit{key}t") and old.endswith(".so") and old != stem + ".so":
+            if old.startswith(f"jit{key}t") and old.endswith(".so") and old != lib:
                 _remove(os.path.join(d, old))   # a process that still maps one keeps it (unlink)
         return g
 

@@ -41,11 +41,52 @@ def test_miss_then_hit_gives_the_same_function(tmp_path):
     for a, b, c in zip(_outputs(f, x), _outputs(g1, x), _outputs(g2, x)):
         np.testing.assert_array_equal(b, c)
         np.testing.assert_allclose(b, a, rtol=1e-15, atol=0)
+    assert len([n for n in os.listdir(tmp_path) if n.endswith(".so")]) == 1
+    # loading leaves only an empty source name CasADi reserves (pruned when old, see below)
+    assert not [n for n in os.listdir(tmp_path) if n.endswith((".c", ".o", ".tmp")) and (tmp_path / n).stat().st_size]
     # derivatives stay available (an SX function calling compiled code, as jit=True gives)
     np.testing.assert_allclose(np.asarray(g2.jacobian()(x[0], *_outputs(g2, x))[0]),
                                np.asarray(f.jacobian()(x[0], *_outputs(f, x))[0]), rtol=1e-14)
-    assert len([n for n in os.listdir(tmp_path) if n.endswith(".so")]) == 1
-    assert not [n for n in os.listdir(tmp_path) if n.endswith((".c", ".o", ".tmp"))]
+
+
+_DERIV_CHILD = """
+import sys
+import casadi as ca
+import numpy as np
+from models.jit_cache import JitCache
+x = ca.SX.sym("x", 3)
+f = ca.Function("small", [x], [ca.sin(x) * x[0] + ca.exp(x[1]), ca.jacobian(ca.sum1(x ** 3), x)])
+c = JitCache(sys.argv[1])
+g = c.get(f)
+assert c.stats.loaded == 1 and c.stats.compiled == 0
+v = [0.3, -1.2, 2.5]
+r = g.reverse(1)(v, *g(v), np.ones(3), np.ones(3))
+e = f.reverse(1)(v, *f(v), np.ones(3), np.ones(3))
+print(float(np.max(np.abs(np.asarray(r) - np.asarray(e)))))
+"""
+
+
+def test_a_loaded_function_is_differentiated_in_another_process_and_strays_are_pruned(tmp_path):
+    """Ipopt differentiates the loaded NLP functions: CasADi compiles their derivatives with the
+    entry's options, so the library names carry a random suffix (a fixed name made dlopen return the
+    entry's own library and the derivative failed to load).  Their leftovers are pruned when old."""
+    from models.jit_cache import prune_strays
+    JitCache(str(tmp_path)).get(_small())
+    entry_files = set(os.listdir(tmp_path))
+    out = subprocess.run([sys.executable, "-c", _DERIV_CHILD, str(tmp_path)], capture_output=True, text=True,
+                         env=_env(), cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert float(out.stdout.strip().splitlines()[-1]) < 1e-12
+    strays = set(os.listdir(tmp_path)) - entry_files
+    assert any(n.endswith(".so") for n in strays)        # the derivative's own library
+    assert prune_strays(str(tmp_path)) == 0               # young: a compilation may be in progress
+    for n in strays:
+        os.utime(tmp_path / n, (0, 0))
+    assert prune_strays(str(tmp_path)) == len(strays)
+    assert set(os.listdir(tmp_path)) == entry_files
+    c = JitCache(str(tmp_path))
+    c.get(_small())
+    assert c.stats.loaded == 1                            # the entry and its library survived
 
 
 def test_the_key_follows_the_function_and_the_flags():
