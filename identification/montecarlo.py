@@ -376,7 +376,11 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
     calibration, validation and pooled fit of a split is one :func:`identification.batch.fit_batch`
     call over the data sets.  Returns (fits, pooled, ok_split): per data set the (calibration,
     validation) estimates of every split and {pooled points: pooled estimate or failure text} (the
-    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data."""
+    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data.
+
+    A fit_batch call that raises LinAlgError (a singular system for the batch as a whole, e.g. a
+    subset that cannot identify the parameters) leaves its fits out (None): run_split_tests then
+    runs identify on each of them, which names the failure as it does without the batch engine."""
     R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
     n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
     fits = [[(None, None)] * len(splits) for _ in range(R)]
@@ -393,8 +397,12 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
         got = []
         for sub, rows, series in ((split.calibration, split.cal_inputs, split.cal_series),
                                   (split.validation, split.val_inputs, split.val_series)):
-            bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
-                           Y0=None if st0 is None else st0[list(rows)])
+            try:
+                bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
+                               Y0=None if st0 is None else st0[list(rows)])
+            except np.linalg.LinAlgError:
+                got.append([None] * R)         # singular batch (e.g. rank-deficient subset): identify per member
+                continue
             got.append([_given(bf, r) for r in range(R)])
         for r in range(R):
             fits[r][js] = (got[0][r], got[1][r])
@@ -405,14 +413,18 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
             continue
         key = split.pooled_points(n_M)
         have = done_keys.setdefault(key, set())
-        members = [r for r in range(R) if r not in have and not any(isinstance(e, Exception) for e in fits[r][js])]
+        members = [r for r in range(R)
+                   if r not in have and not any(e is None or isinstance(e, Exception) for e in fits[r][js])]
         if not members:
             continue
         have.update(members)
         qs = sorted({j for j, _ in key})
         P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
-        bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
-                       Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        try:
+            bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
+                           Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        except np.linalg.LinAlgError:
+            continue                           # run_split_tests fits these pooled data itself
         for k, r in enumerate(members):
             e = _given(bf, k)
             pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
