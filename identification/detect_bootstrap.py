@@ -280,7 +280,8 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     workers : int or None           local processes (1: serial; None: all cores)
     scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
     progress : Progress, optional   a tqdm bar over the campaigns
-    chunk_size : int, optional      campaigns per task
+    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, at most 50
+                                    campaigns with ``batch``, 20 without; the numbers do not depend on it)
     model_name : str, optional      label (default the model's name)
     batch : bool                    fit the campaigns of a chunk together with the batch engine
                                     (:func:`identification.montecarlo.batched_split_tests`: the same
@@ -339,7 +340,8 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
                                                                                         "bootstrap campaigns"))
     try:
         backend = cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n_boot), seed,
-                                                                      chunk_size=chunk_size),
+                                                                      chunk_size=chunk_size,
+                                                                      max_size=50 if batch else 20),
                                   got.add, workers, scheduler, _install)
     finally:
         got.bar.close()
