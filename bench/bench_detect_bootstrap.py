@@ -20,11 +20,14 @@ Run ``python -m bench.bench_detect_bootstrap --n-rep 200 --n-boot 39 --workers 2
 the batch engine (``batch=True``: the campaigns of a chunk fitted together), in this process and in
 the same run, on two cases: the Michaelis-Menten campaign above (2 splits) and the press model M1 of
 the paper on a campaign simulated at its nominal stiffnesses (29 loads, 2 series, sensors D_y and
-F_x, the paper's four scenarios).  Each case runs once untimed (compilation, caches), then
+F_x, the paper's four scenarios).  Each case runs once untimed with another seed (compilation, caches,
+the batch engine's functions mapped once per batch size), then
 ``batch=False`` and ``batch=True`` with ``--n-boot`` campaigns each and the same seed; the CPU
 (user + system, ``resource.getrusage``) of the whole call divided by B is reported (the observed
 split tests and the null fit, one campaign's worth, are included in both), with the largest
-relative difference of the bootstrap statistics T* and whether p-values and failures agree.
+relative difference of the bootstrap statistics T* and whether p-values and failures agree.  Both
+paths run twice: with the CasADi virtual machine and with the models JIT-compiled to C
+(``models.state.set_jit(True)``, what Monte Carlo workers use; bootstrap_detect leaves it as set).
 Run ``python -m bench.bench_detect_bootstrap --compare --n-boot 200``.
 """
 from __future__ import annotations
@@ -46,6 +49,7 @@ from identification.detect_bootstrap import bootstrap_detect  # noqa: E402
 from identification.montecarlo import clopper_pearson  # noqa: E402
 from identification.splits import Split  # noqa: E402
 from models import Model  # noqa: E402
+from models.state import set_jit  # noqa: E402
 
 P_TRUE = np.array([1.0, 5.0])
 X = np.linspace(0.5, 8.0, 8)
@@ -99,24 +103,32 @@ def compare(n_boot: int, seed: int) -> None:
           f"B = {n_boot}, seed {seed}, serial in one process; {platform.node()}, {os.cpu_count()} CPUs, "
           f"load average {os.getloadavg()[0]:.1f}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print()
-    print("| case | per fit: CPU / campaign | batched: CPU / campaign | speed-up | max rel. diff of T* | "
+    print("| case | JIT | per fit: CPU / campaign | batched: CPU / campaign | speed-up | max rel. diff of T* | "
           "p-values identical | failed fits (per fit / batched) |")
-    print("|---|---|---|---|---|---|---|")
-    for label, model, data, splits, p0, w in compare_cases(seed):
-        bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1)          # warm-up: compile, caches
-        res, cpu = {}, {}
-        for batch in (False, True):
-            c0 = _cpu()
-            res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch)
-            cpu[batch] = (_cpu() - c0) / n_boot
-        a, b = res[False].boot_statistics, res[True].boot_statistics
-        both = np.isfinite(a) & np.isfinite(b)
-        rel = float(np.max(np.abs(b[both] - a[both]) / np.abs(a[both]))) if both.any() else float("nan")
-        same_p = (np.array_equal(res[False].pvalue, res[True].pvalue, equal_nan=True)
-                  and np.array_equal(res[False].family_pvalue, res[True].family_pvalue, equal_nan=True)
-                  and np.array_equal(np.isnan(a), np.isnan(b)))
-        print(f"| {label} | {1e3 * cpu[False]:.1f} ms | {1e3 * cpu[True]:.1f} ms | {cpu[False] / cpu[True]:.1f}x | "
-              f"{rel:.1e} | {'yes' if same_p else 'no'} | {len(res[False].errors)} / {len(res[True].errors)} |")
+    print("|---|---|---|---|---|---|---|---|")
+    for jit in (False, True):
+        prev = set_jit(jit)
+        try:
+            for label, model, data, splits, p0, w in compare_cases(seed):
+                # warm-up (compilation, caches; the batch engine maps its functions once per batch size)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, batch=False)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1)
+                res, cpu = {}, {}
+                for batch in (False, True):
+                    c0 = _cpu()
+                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch)
+                    cpu[batch] = (_cpu() - c0) / n_boot
+                a, b = res[False].boot_statistics, res[True].boot_statistics
+                both = np.isfinite(a) & np.isfinite(b)
+                rel = float(np.max(np.abs(b[both] - a[both]) / np.abs(a[both]))) if both.any() else float("nan")
+                same_p = (np.array_equal(res[False].pvalue, res[True].pvalue, equal_nan=True)
+                          and np.array_equal(res[False].family_pvalue, res[True].family_pvalue, equal_nan=True)
+                          and np.array_equal(np.isnan(a), np.isnan(b)))
+                print(f"| {label} | {'on' if jit else 'off'} | {1e3 * cpu[False]:.1f} ms | {1e3 * cpu[True]:.1f} ms | "
+                      f"{cpu[False] / cpu[True]:.1f}x | {rel:.1e} | {'yes' if same_p else 'no'} | "
+                      f"{len(res[False].errors)} / {len(res[True].errors)} |", flush=True)
+        finally:
+            set_jit(prev)
 
 
 def main(argv=None) -> None:

@@ -129,6 +129,15 @@ def _run_chunk(task: _Task | None, chunk: list) -> list:
     return [(b, *_statistics(tests)) for (b, _), tests in zip(chunk, got)]
 
 
+def _seed_chunks(n: int, seed, chunk_size: int | None, batch: bool, n_workers: int) -> list:
+    """The campaigns cut into chunks (:func:`identification.cluster.seed_chunks`).  With ``batch`` and no
+    ``chunk_size``, min(n, 16) to 50 campaigns per chunk (about 4 per worker): the batch engine pays a
+    per-call cost once per chunk, which outweighs one identify per fit below about 4 campaigns."""
+    if chunk_size is None and batch:
+        chunk_size = max(min(n, 16), min(50, math.ceil(n / (4 * max(1, n_workers)))))
+    return cluster.seed_chunks(n, seed, n_workers, chunk_size)
+
+
 class _Collector:
     """Bootstrap statistics by campaign index (NaN until filled) and their errors; advances the bar."""
 
@@ -280,8 +289,9 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     workers : int or None           local processes (1: serial; None: all cores)
     scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
     progress : Progress, optional   a tqdm bar over the campaigns
-    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, at most 50
-                                    campaigns with ``batch``, 20 without; the numbers do not depend on it)
+    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, with ``batch``
+                                    min(n_boot, 16) to 50 campaigns, without at most 20; the numbers do
+                                    not depend on it)
     model_name : str, optional      label (default the model's name)
     batch : bool                    fit the campaigns of a chunk together with the batch engine
                                     (:func:`identification.montecarlo.batched_split_tests`: the same
@@ -339,9 +349,8 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     got = _Collector(int(n_boot), len(splits), (progress or Progress(enabled=False)).bar(int(n_boot),
                                                                                         "bootstrap campaigns"))
     try:
-        backend = cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n_boot), seed,
-                                                                      chunk_size=chunk_size,
-                                                                      max_size=50 if batch else 20),
+        backend = cluster.execute(_run_chunk, task, functools.partial(_seed_chunks, int(n_boot), seed, chunk_size,
+                                                                      bool(batch)),
                                   got.add, workers, scheduler, _install)
     finally:
         got.bar.close()

@@ -20,7 +20,9 @@ The replications of a chunk are fitted together by the batch engine
 the statistics are those of :func:`identification.detect.run_split_tests` on these fits,
 computed for all replications of a chunk at once with the same formulas (run_split_tests
 itself for a replication with a failed fit or an invalid covariance, which records the
-failure; ``MonteCarloSettings.batch=False``: one identify call per fit).
+failure; ``MonteCarloSettings.batch=False``: one identify call per fit).  The same batched
+split tests serve other loops over many campaigns of one design (the parametric bootstrap of
+:mod:`identification.detect_bootstrap`) through :func:`batched_split_tests`.
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
