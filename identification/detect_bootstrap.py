@@ -29,7 +29,9 @@ local processes and a Dask scheduler (:mod:`identification.cluster`) give identi
 The campaigns of a chunk share their inputs, so their split tests run together
 (:func:`identification.montecarlo.batched_split_tests`: every calibration, validation and
 pooled fit of a split one batch over the campaigns, the statistics computed together), which
-gives the statistics of one run_split_tests per campaign (``batch=False``) to ~1e-9 relative.
+gives the statistics of one run_split_tests per campaign (``batch=False``) to ~1e-8 relative
+(measured <= 9.3e-9 on 200 campaigns; the estimates agree to ~1e-10, and a Wald statistic of two
+near-equal estimates keeps less of that relative precision the smaller it is).
 """
 from __future__ import annotations
 
@@ -295,7 +297,7 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     model_name : str, optional      label (default the model's name)
     batch : bool                    fit the campaigns of a chunk together with the batch engine
                                     (:func:`identification.montecarlo.batched_split_tests`: the same
-                                    statistics to ~1e-9 relative, failures named as run_split_tests
+                                    statistics to ~1e-8 relative, failures named as run_split_tests
                                     names them); False: one run_split_tests (identify per fit) per campaign
 
     Raises
