@@ -14,12 +14,28 @@ the randomised bootstrap p-value p - U/(B + 1) (U ~ U(0, 1)), which is continuou
 bootstrap is exact.  Campaigns whose observed test failed are counted apart.
 
 Run ``python -m bench.bench_detect_bootstrap --n-rep 200 --n-boot 39 --workers 2``.
+
+``--compare`` instead measures the CPU per bootstrap campaign of one-fit-at-a-time
+(``bootstrap_detect(batch=False)``: one run_split_tests, i.e. identify per fit, per campaign) against
+the batch engine (``batch=True``: the campaigns of a chunk fitted together), in this process and in
+the same run, on two cases: the Michaelis-Menten campaign above (2 splits) and the press model M1 of
+the paper on a campaign simulated at its nominal stiffnesses (29 loads, 2 series, sensors D_y and
+F_x, the paper's four scenarios).  Each case runs once untimed with another seed (compilation, caches,
+the batch engine's functions mapped once per batch size), then
+``batch=False`` and ``batch=True`` with ``--n-boot`` campaigns each and the same seed; the CPU
+(user + system, ``resource.getrusage``) of the whole call divided by B is reported (the observed
+split tests and the null fit, one campaign's worth, are included in both), with the largest
+relative difference of the bootstrap statistics T* and whether p-values and failures agree.  Both
+paths run twice: with the CasADi virtual machine and with the models JIT-compiled to C
+(``models.state.set_jit(True)``, what Monte Carlo workers use; bootstrap_detect leaves it as set).
+Run ``python -m bench.bench_detect_bootstrap --compare --n-boot 200``.
 """
 from __future__ import annotations
 
 import argparse
 import os
 import platform
+import resource
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -33,6 +49,7 @@ from identification.detect_bootstrap import bootstrap_detect  # noqa: E402
 from identification.montecarlo import clopper_pearson  # noqa: E402
 from identification.splits import Split  # noqa: E402
 from models import Model  # noqa: E402
+from models.state import set_jit  # noqa: E402
 
 P_TRUE = np.array([1.0, 5.0])
 X = np.linspace(0.5, 8.0, 8)
@@ -60,13 +77,72 @@ def one_campaign(args: tuple) -> tuple:
     return r, a, p, len(res.errors)
 
 
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def compare_cases(seed: int) -> list:
+    """[(label, model, data, splits, p0, weights), ...] of the ``--compare`` study."""
+    from bench.bench_detect import P0, PAPER_SPLITS, SIGMA_PAPER_MM, WEIGHTS_110
+    from identification.montecarlo import ModelCampaign
+    from models.press import Q_PAPER, press_model
+    rng = np.random.default_rng(seed)
+    h = P_TRUE[0] * X / (P_TRUE[1] + X)
+    mm = Measurements(X, h[None, :, None] + SIGMA * rng.standard_normal((2, X.size, 1)), [SIGMA])
+    press = press_model()
+    gen = ModelCampaign(press, press.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, 2)
+    return [("Michaelis-Menten, 2 splits (8 inputs, 2 series)", mm_model(), mm, SPLITS, P_TRUE, None),
+            ("press M1, the paper's 4 scenarios (29 loads, 2 series, D_y + F_x)", press, gen(rng), PAPER_SPLITS,
+             P0, WEIGHTS_110)]
+
+
+def compare(n_boot: int, seed: int) -> None:
+    """Print the CPU per bootstrap campaign of batch=False vs batch=True (markdown table)."""
+    print(f"CPU per bootstrap campaign, one identify per fit (batch=False) vs the batch engine (batch=True), "
+          f"B = {n_boot}, seed {seed}, serial in one process; {platform.node()}, {os.cpu_count()} CPUs, "
+          f"load average {os.getloadavg()[0]:.1f}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
+    print()
+    print("| case | JIT | per fit: CPU / campaign | batched: CPU / campaign | speed-up | max rel. diff of T* | "
+          "p-values identical | failed fits (per fit / batched) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for jit in (False, True):
+        prev = set_jit(jit)
+        try:
+            for label, model, data, splits, p0, w in compare_cases(seed):
+                # warm-up (compilation, caches; the batch engine maps its functions once per batch size)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, batch=False)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1)
+                res, cpu = {}, {}
+                for batch in (False, True):
+                    c0 = _cpu()
+                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch)
+                    cpu[batch] = (_cpu() - c0) / n_boot
+                a, b = res[False].boot_statistics, res[True].boot_statistics
+                both = np.isfinite(a) & np.isfinite(b)
+                rel = float(np.max(np.abs(b[both] - a[both]) / np.abs(a[both]))) if both.any() else float("nan")
+                same_p = (np.array_equal(res[False].pvalue, res[True].pvalue, equal_nan=True)
+                          and np.array_equal(res[False].family_pvalue, res[True].family_pvalue, equal_nan=True)
+                          and np.array_equal(np.isnan(a), np.isnan(b)))
+                print(f"| {label} | {'on' if jit else 'off'} | {1e3 * cpu[False]:.1f} ms | {1e3 * cpu[True]:.1f} ms | "
+                      f"{cpu[False] / cpu[True]:.1f}x | {rel:.1e} | {'yes' if same_p else 'no'} | "
+                      f"{len(res[False].errors)} / {len(res[True].errors)} |", flush=True)
+        finally:
+            set_jit(prev)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n-rep", type=int, default=200)
     ap.add_argument("--n-boot", type=int, default=39)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=20261123)
+    ap.add_argument("--compare", action="store_true",
+                    help="CPU per bootstrap campaign of batch=False vs batch=True (Michaelis-Menten, press M1)")
     args = ap.parse_args(argv)
+    if args.compare:
+        compare(args.n_boot, args.seed)
+        return
     seeds = np.random.SeedSequence(args.seed).spawn(args.n_rep)
     jobs = [(r, s, args.n_boot) for r, s in enumerate(seeds)]
     t0 = time.perf_counter()

@@ -26,6 +26,12 @@ accounted for, where Bonferroni only bounds it).
 
 Campaign b draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(B)[b])``: serial,
 local processes and a Dask scheduler (:mod:`identification.cluster`) give identical numbers.
+The campaigns of a chunk share their inputs, so their split tests run together
+(:func:`identification.montecarlo.batched_split_tests`: every calibration, validation and
+pooled fit of a split one batch over the campaigns, the statistics computed together), which
+gives the statistics of one run_split_tests per campaign (``batch=False``) to ~1e-8 relative
+(measured <= 9.3e-9 on 200 campaigns; the estimates agree to ~1e-10, and a Wald statistic of two
+near-equal estimates keeps less of that relative precision the smaller it is).
 """
 from __future__ import annotations
 
@@ -44,6 +50,7 @@ from .detect import STATISTICS, DetectSettings, run_split_tests
 from .errors import DataError, IdentificationError
 from .estimator import identify
 from .measurements import Measurements
+from .montecarlo import batched_split_tests
 from .progress import Progress
 from .splits import Split, SplitError
 
@@ -89,6 +96,7 @@ class _Task:
     weights: object
     settings: DetectSettings
     states: object              # (n_q, n_y) states of the null fit, or None
+    batch: bool = True          # the campaigns of a chunk fitted together (montecarlo.batched_split_tests)
 
 
 class _Worker:
@@ -111,9 +119,25 @@ def _campaign(task: _Task, seed: np.random.SeedSequence) -> tuple:
 
 
 def _run_chunk(task: _Task | None, chunk: list) -> list:
-    """Campaigns [(index, SeedSequence), ...] -> [(index, T, alpha, errors), ...] (task None: this process's)."""
+    """Campaigns [(index, SeedSequence), ...] -> [(index, T, alpha, errors), ...] (task None: this process's).
+
+    With ``task.batch`` the split tests of the chunk's campaigns (same inputs) run together
+    (:func:`identification.montecarlo.batched_split_tests`), else one run_split_tests per campaign."""
     t = _Worker.task if task is None else task
-    return [(b, *_campaign(t, s)) for b, s in chunk]
+    if not t.batch:
+        return [(b, *_campaign(t, s)) for b, s in chunk]
+    datas = [simulated_campaign(t, s) for _, s in chunk]
+    got = batched_split_tests(t.model, t.model_name, datas, t.splits, t.p0, t.weights, t.settings, t.states)
+    return [(b, *_statistics(tests)) for (b, _), tests in zip(chunk, got)]
+
+
+def _seed_chunks(n: int, seed, chunk_size: int | None, batch: bool, n_workers: int) -> list:
+    """The campaigns cut into chunks (:func:`identification.cluster.seed_chunks`).  With ``batch`` and no
+    ``chunk_size``, min(n, 16) to 50 campaigns per chunk (about 4 per worker): the batch engine pays a
+    per-call cost once per chunk, which outweighs one identify per fit below about 4 campaigns."""
+    if chunk_size is None and batch:
+        chunk_size = max(min(n, 16), min(50, math.ceil(n / (4 * max(1, n_workers)))))
+    return cluster.seed_chunks(n, seed, n_workers, chunk_size)
 
 
 class _Collector:
@@ -250,7 +274,8 @@ class BootstrapDetection:
 def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None, *,
                      n_boot: int = 199, seed=0, settings: DetectSettings | None = None,
                      workers: int | None = 1, scheduler=None, progress: Progress | None = None,
-                     chunk_size: int | None = None, model_name: str | None = None) -> BootstrapDetection:
+                     chunk_size: int | None = None, model_name: str | None = None,
+                     batch: bool = True) -> BootstrapDetection:
     """Bootstrap p-values of the split tests of ``model`` on ``data`` (see the module docstring).
 
     Parameters
@@ -266,8 +291,14 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     workers : int or None           local processes (1: serial; None: all cores)
     scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
     progress : Progress, optional   a tqdm bar over the campaigns
-    chunk_size : int, optional      campaigns per task
+    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, with ``batch``
+                                    min(n_boot, 16) to 50 campaigns, without at most 20; the numbers do
+                                    not depend on it)
     model_name : str, optional      label (default the model's name)
+    batch : bool                    fit the campaigns of a chunk together with the batch engine
+                                    (:func:`identification.montecarlo.batched_split_tests`: the same
+                                    statistics to ~1e-8 relative, failures named as run_split_tests
+                                    names them); False: one run_split_tests (identify per fit) per campaign
 
     Raises
     ------
@@ -289,6 +320,8 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
         raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
     if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
         raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
+    if not isinstance(batch, (bool, np.bool_)):
+        raise TypeError(f"batch: expected True (batched fits) or False (one identify per fit), got {batch!r}")
     scheduler = cluster.check_scheduler(scheduler)
     settings = settings or DetectSettings()
     if not isinstance(settings, DetectSettings):
@@ -313,12 +346,13 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
                  np.asarray(null.sigma, float), None if data.sigma is None else np.asarray(data.sigma, float),
                  tuple(data.sensors), None if data.input_names is None else tuple(data.input_names),
                  np.asarray(null.p, float), None if weights is None else np.asarray(weights, float), settings,
-                 None if null.states is None or null.states.size == 0 else np.asarray(null.states, float))
+                 None if null.states is None or null.states.size == 0 else np.asarray(null.states, float),
+                 bool(batch))
     got = _Collector(int(n_boot), len(splits), (progress or Progress(enabled=False)).bar(int(n_boot),
                                                                                         "bootstrap campaigns"))
     try:
-        backend = cluster.execute(_run_chunk, task, functools.partial(cluster.seed_chunks, int(n_boot), seed,
-                                                                      chunk_size=chunk_size),
+        backend = cluster.execute(_run_chunk, task, functools.partial(_seed_chunks, int(n_boot), seed, chunk_size,
+                                                                      bool(batch)),
                                   got.add, workers, scheduler, _install)
     finally:
         got.bar.close()

@@ -20,7 +20,9 @@ The replications of a chunk are fitted together by the batch engine
 the statistics are those of :func:`identification.detect.run_split_tests` on these fits,
 computed for all replications of a chunk at once with the same formulas (run_split_tests
 itself for a replication with a failed fit or an invalid covariance, which records the
-failure; ``MonteCarloSettings.batch=False``: one identify call per fit).
+failure; ``MonteCarloSettings.batch=False``: one identify call per fit).  The same batched
+split tests serve other loops over many campaigns of one design (the parametric bootstrap of
+:mod:`identification.detect_bootstrap`) through :func:`batched_split_tests`.
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
@@ -42,7 +44,8 @@ from scipy import special, stats
 from models.contract import Model
 from . import cluster
 from .batch import BatchData, BatchFit, fit_batch
-from .detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, normality_check, run_split_tests
+from .detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
+                     run_split_tests)
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
 from .progress import Progress
@@ -50,7 +53,7 @@ from .splits import Split, SplitError
 from models.state import set_jit, simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
-           "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize"]
+           "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -369,21 +372,24 @@ def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> 
                      _Subsets([ds[r] for r in members], split.pooled))
 
 
-def _batched_fits(task: _Task, im: int, ds: list, st0) -> tuple:
-    """The fits of run_split_tests for R replications of one model with the same inputs: every
+def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: DetectSettings, ds: list,
+                  st0) -> tuple:
+    """The fits of run_split_tests for R data sets of one model with the same inputs: every
     calibration, validation and pooled fit of a split is one :func:`identification.batch.fit_batch`
-    call over the replications.  Returns (fits, pooled, ok_split): per replication the (calibration,
+    call over the data sets.  Returns (fits, pooled, ok_split): per data set the (calibration,
     validation) estimates of every split and {pooled points: pooled estimate or failure text} (the
-    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data."""
-    model, name, p0, weights = task.models[im], task.names[im], task.p0s[im], task.weights[im]
-    det = task.detect
+    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data.
+
+    A fit_batch call that raises LinAlgError (a singular system for the batch as a whole, e.g. a
+    subset that cannot identify the parameters) leaves its fits out (None): run_split_tests then
+    runs identify on each of them, which names the failure as it does without the batch engine."""
     R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
     n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
-    fits = [[(None, None)] * len(task.splits) for _ in range(R)]
+    fits = [[(None, None)] * len(splits) for _ in range(R)]
     Z = np.stack([d.z for d in ds])
     sig = None if ds[0].sigma is None else np.stack([np.asarray(d.sigma, float) for d in ds])
     ok_split = []
-    for js, split in enumerate(task.splits):
+    for js, split in enumerate(splits):
         try:
             split.check(n_q, n_M, model.n_p, n_sel)
         except SplitError:
@@ -393,26 +399,34 @@ def _batched_fits(task: _Task, im: int, ds: list, st0) -> tuple:
         got = []
         for sub, rows, series in ((split.calibration, split.cal_inputs, split.cal_series),
                                   (split.validation, split.val_inputs, split.val_series)):
-            bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
-                           Y0=None if st0 is None else st0[list(rows)])
+            try:
+                bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
+                               Y0=None if st0 is None else st0[list(rows)])
+            except np.linalg.LinAlgError:
+                got.append([None] * R)         # singular batch (e.g. rank-deficient subset): identify per member
+                continue
             got.append([_given(bf, r) for r in range(R)])
         for r in range(R):
             fits[r][js] = (got[0][r], got[1][r])
     pooled = [{} for _ in range(R)]
     done_keys = {}
-    for js, split in enumerate(task.splits):
+    for js, split in enumerate(splits):
         if not ok_split[js]:
             continue
         key = split.pooled_points(n_M)
         have = done_keys.setdefault(key, set())
-        members = [r for r in range(R) if r not in have and not any(isinstance(e, Exception) for e in fits[r][js])]
+        members = [r for r in range(R)
+                   if r not in have and not any(e is None or isinstance(e, Exception) for e in fits[r][js])]
         if not members:
             continue
         have.update(members)
         qs = sorted({j for j, _ in key})
         P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
-        bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
-                       Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        try:
+            bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
+                           Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
+        except np.linalg.LinAlgError:
+            continue                           # run_split_tests fits these pooled data itself
         for k, r in enumerate(members):
             e = _given(bf, k)
             pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
@@ -469,26 +483,22 @@ def _wald_d2(D: np.ndarray, C: np.ndarray) -> tuple:
     return np.einsum("mi,mi->m", v, v), ok
 
 
-def _split_statistics(task: _Task, im: int, n_M: int, fits: list, pooled: list, ok_split: list,
-                      outs: list) -> np.ndarray:
-    """The three alpha_min and the ellipsoid coverage of every split of R replications, batched, written
-    into the replications' result dicts ``outs``: the numbers :func:`run_split_tests` and
-    :func:`_record` give (same formulas: Wald distances by Cholesky of the symmetrised covariance,
-    the likelihood ratio 2 (Phi_pooled - Phi_cal - Phi_val) or, sigma estimated, the F (Chow) test).
+def _split_statistics(model: Model, name: str, splits: tuple, det: DetectSettings, n_M: int, fits: list,
+                      pooled: list, ok_split: list) -> list:
+    """The split tests of R data sets from their batched fits, computed together: per data set the
+    tuple of :class:`identification.detect.SplitTest` that :func:`run_split_tests` gives with these
+    fits (same formulas: Wald distances by Cholesky of the symmetrised covariance, the likelihood
+    ratio 2 (Phi_pooled - Phi_cal - Phi_val) or, sigma estimated, the F (Chow) test).
 
-    Returns the replications that are not regular (a failed fit or pooled fit, a covariance that is
-    not symmetric positive definite, a likelihood ratio that is not computable or clearly negative):
-    their result dicts are left untouched and the caller runs run_split_tests on them, which records
-    the failures with their messages."""
-    model, truth = task.models[im], task.truth[im]
+    None for a data set that is not regular (a failed fit or pooled fit, a covariance that is not
+    symmetric positive definite, a likelihood ratio that is not computable or clearly negative): the
+    caller runs run_split_tests on it, which records the failures with their messages."""
     n_p, R = model.n_p, len(fits)
-    det = task.detect
     regular = np.ones(R, bool)
     res = []
-    for js, split in enumerate(task.splits):
+    for js, split in enumerate(splits):
         if not ok_split[js]:
-            regular[:] = False
-            break
+            return [None] * R
         P, C, reg = _covariances([f[js] for f in fits], det, n_p)
         D = P[:, 1] - P[:, 0]
         d2p, okp = _wald_d2(D, C[:, 0])
@@ -521,27 +531,110 @@ def _split_statistics(task: _Task, im: int, n_M: int, fits: list, pooled: list, 
         stat = np.maximum(stat, 0.0)
         a_lr = np.where(sig_est, stats.f.sf(stat, n_p, np.maximum(dof, 1)), special.chdtrc(n_p, stat))
         regular &= reg
-        res.append((P, C, special.chdtrc(n_p, d2p), special.chdtrc(n_p, d2t), a_lr))
-    if not np.any(regular):
-        return np.flatnonzero(~regular)
-    g2 = stats.chi2.ppf(1 - task.coverage_alpha, n_p) if truth is not None else None
-    rows = np.flatnonzero(regular)
-    for js, (P, C, a_p, a_t, a_lr) in enumerate(res):
-        if truth is not None:
-            covered = np.full((R, 2), np.nan)
-            for kk in range(2):
-                L, ok = _batched_cholesky(C[:, kk])
-                ok &= np.all(np.isfinite(P[:, kk]), axis=1)
-                v = np.linalg.solve(L, np.where(ok[:, None], truth - P[:, kk], 0.0)[:, :, None])[:, :, 0]
-                covered[:, kk] = np.where(ok, (np.einsum("mi,mi->m", v, v) <= g2).astype(float), np.nan)
-        for r in rows:
-            out = outs[r]
-            out["alpha_paper"][im, js] = a_p[r]
-            out["alpha_two_sample"][im, js] = a_t[r]
-            out["alpha_lr"][im, js] = a_lr[r]
-            if truth is not None:
-                out["covered"][im, js] = covered[r]
-    return np.flatnonzero(~regular)
+        res.append((P, C, d2p, d2t, special.chdtrc(n_p, d2p), special.chdtrc(n_p, d2t), stat, a_lr))
+    out = [None] * R
+    for r in np.flatnonzero(regular):
+        tests = []
+        for js, (split, (P, C, d2p, d2t, a_p, a_t, stat, a_lr)) in enumerate(zip(splits, res)):
+            est_c, est_v = fits[r][js]
+            notes = (tuple(f"calibration fit: {n}" for n in est_c.notes)
+                     + tuple(f"validation fit: {n}" for n in est_v.notes))
+            c, v = split.label()
+            tests.append(SplitTest(name, split.name, c, v, True, "", "", P[r, 0], P[r, 1], C[r, 0], C[r, 1],
+                                   float(d2p[r]), float(d2t[r]), float(a_p[r]), float(a_t[r]), est_c.n_data,
+                                   est_v.n_data, notes, float(stat[r]), float(a_lr[r]), ""))
+        out[r] = tuple(tests)
+    return out
+
+
+def _same_design(datasets) -> list:
+    """``datasets`` as a list of Measurements with the same inputs, series count and kind of sigma
+    (DataError naming the argument otherwise)."""
+    if isinstance(datasets, Measurements):
+        raise TypeError("datasets: expected a sequence of Measurements, got one Measurements (wrap it in a list)")
+    ds = list(datasets)
+    if not ds:
+        raise DataError("datasets: give at least one data set")
+    bad = [type(d).__name__ for d in ds if not isinstance(d, Measurements)]
+    if bad:
+        raise TypeError(f"datasets: expected identification.Measurements, got {bad[0]}")
+    d0 = ds[0]
+    for r, d in enumerate(ds[1:], 1):
+        if d.inputs.shape != d0.inputs.shape or not np.array_equal(d.inputs, d0.inputs):
+            raise DataError(f"datasets: data set {r} has other inputs than data set 0; group the data sets by their "
+                            "inputs and call once per group")
+        if d.n_M != d0.n_M or d.z.shape != d0.z.shape:
+            raise DataError(f"datasets: data set {r} has values of shape {d.z.shape}, data set 0 {d0.z.shape}; "
+                            "give data sets of one shape")
+        if (d.sigma is None) != (d0.sigma is None):
+            raise DataError(f"datasets: data set {r} and data set 0 differ in whether sigma is known; give "
+                            "sigma for all or for none")
+    return ds
+
+
+def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequence[Split], p0, weights=None,
+                        detect_settings: DetectSettings | None = None, start_states=None) -> list:
+    """``run_split_tests(model, d, splits, p0, weights, detect_settings, name, start_states)`` for every
+    data set d of ``datasets``, the fits of all data sets done together by the batch engine.
+
+    Every calibration, validation and pooled fit of a split is one
+    :func:`identification.batch.fit_batch` call over the data sets (same estimates as
+    :func:`identification.identify` to ~1e-10; identify as recorded per-member fallback), and the
+    statistics (Wald distances d2 and the likelihood ratio or F statistic, chi^2 / F units, with
+    their p-values alpha_min) are computed for all data sets at once with the formulas of
+    :func:`identification.detect.run_split_tests`.  A data set with a failed fit, a covariance that
+    is not symmetric positive definite or a likelihood ratio that cannot be computed goes through
+    run_split_tests itself (with the batch's fits), which records each failure with its stage and
+    message, so failures are named exactly as there.
+
+    Parameters
+    ----------
+    model : Model
+    name : str or None               model label in the SplitTest records (None: the model's name)
+    datasets : sequence of Measurements
+        The R data sets: the same inputs, the same shape of values (n_M, n_q, n_S) and sigma known
+        for all or for none (missing values may differ).  Group data sets by their inputs first.
+    splits : sequence of Split
+    p0 : array_like (n_p,)           start of every fit
+    weights : array_like (n_S,), optional   sensor weights (0/1 selects sensors)
+    detect_settings : DetectSettings, optional   covariance kind and identify settings
+    start_states : array (n_q, n_y), optional   states at p0 for every input (warm start)
+
+    Returns
+    -------
+    list of tuple of SplitTest
+        One tuple (one SplitTest per split) per data set, in the order of ``datasets``.
+
+    Raises
+    ------
+    TypeError, DataError, SplitError
+        A bad argument (the message names it).
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
+    ds = _same_design(datasets)
+    splits = tuple(splits)
+    if not splits or not all(isinstance(sp, Split) for sp in splits):
+        raise SplitError("splits: give at least one identification.splits.Split")
+    det = detect_settings or DetectSettings()
+    if not isinstance(det, DetectSettings):
+        raise TypeError(f"detect_settings: expected DetectSettings, got {type(det).__name__}")
+    p0 = np.asarray(p0, float).ravel()
+    if p0.shape != (model.n_p,):
+        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
+    if start_states is not None:
+        start_states = np.asarray(start_states, float)
+        if start_states.shape != (ds[0].n_q, model.n_y):
+            raise DataError(f"start_states: expected the states at p0 of shape {(ds[0].n_q, model.n_y)}, got "
+                            f"{start_states.shape}")
+    name = name or model.name
+    fits, pooled, ok_split = _batched_fits(model, splits, p0, weights, det, ds, start_states)
+    out = _split_statistics(model, name, splits, det, ds[0].n_M, fits, pooled, ok_split)
+    for r, tests in enumerate(out):
+        if tests is None:
+            out[r] = run_split_tests(model, ds[r], splits, p0, weights, det, name, start_states, fits=fits[r],
+                                     pooled=pooled[r])
+    return out
 
 
 def _shapiro_pvalues(ds: list) -> list:
@@ -572,8 +665,7 @@ def _shapiro_pvalues(ds: list) -> list:
 
 def _replicate_chunk(task: _Task, chunk: list) -> list:
     """The replications of a chunk with the batch engine: the data sets of each model are grouped by
-    their inputs, every group's fits run as batches (:func:`_batched_fits`) and their statistics are
-    computed together (:func:`_split_statistics`; run_split_tests for the replications it leaves)."""
+    their inputs and every group's split tests run together (:func:`batched_split_tests`)."""
     datas = [task.generator(np.random.default_rng(seed)) for _, seed in chunk]
     outs = [_empty_result(task) for _ in chunk]
     for im, name in enumerate(task.names):
@@ -588,11 +680,9 @@ def _replicate_chunk(task: _Task, chunk: list) -> list:
             sub = [ds[r] for r in rows]
             model = task.models[im]
             st0 = WORKER.start_states(name, model, task.p0s[im], sub[0].inputs)
-            fits, pooled, ok_split = _batched_fits(task, im, sub, st0)
-            for k in _split_statistics(task, im, sub[0].n_M, fits, pooled, ok_split, [outs[r] for r in rows]):
-                tests = run_split_tests(model, sub[k], task.splits, task.p0s[im], task.weights[im], task.detect,
-                                        name, st0, fits=fits[k], pooled=pooled[k])
-                _record(task, outs[rows[k]], im, tests)
+            for r, tests in zip(rows, batched_split_tests(model, name, sub, task.splits, task.p0s[im],
+                                                          task.weights[im], task.detect, st0)):
+                _record(task, outs[r], im, tests)
     return [(i, out) for (i, _), out in zip(chunk, outs)]
 
 

@@ -152,3 +152,69 @@ def test_progress_bar_and_timed_steps():
     b.update(2)
     b.close()
     assert quiet.getvalue() == "" and "fit" in q.timing
+
+
+def _mm_campaigns(n, known=True, seed=11):
+    """``n`` Michaelis-Menten campaigns y = Vm x / (K + x) at 8 inputs, 2 series, one missing value."""
+    from identification import Measurements
+    from models import Model
+    mm = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] * q[0] / (p[1] + q[0]),
+                        name="MM")
+    x = np.linspace(0.5, 8.0, 8)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        z = (x / (5.0 + x))[None, :, None] + 0.01 * rng.standard_normal((2, 8, 1))
+        z[1, 3, 0] = np.nan
+        out.append(Measurements(x, z, [0.01] if known else None))
+    return mm, out
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_batched_split_tests_are_run_split_tests_of_each_data_set(known):
+    """Every field of every SplitTest as run_split_tests gives it (estimates 1e-7, statistics 1e-8 relative),
+    and a rank-deficient split fails in both with the same stage and message."""
+    from identification.detect import run_split_tests
+    from identification.montecarlo import batched_split_tests
+    from identification.splits import Split
+    mm, ds = _mm_campaigns(6, known)
+    splits = (Split("low/high", range(0, 4), range(4, 8)), Split("odd/even", range(0, 8, 2), range(1, 8, 2)))
+    one = Split("one input", range(0, 7), [7])          # Vm, K not identifiable from one input
+    for sp, regular in ((splits, True), (splits + (one,), False)):
+        got = batched_split_tests(mm, "mm", ds, sp, [1.0, 5.0])
+        assert len(got) == len(ds)
+        for d, tests in zip(ds, got):
+            ref = run_split_tests(mm, d, sp, [1.0, 5.0], model_name="mm")
+            assert [t.split for t in tests] == [s.name for s in sp]
+            for t, r in zip(tests, ref):
+                assert (t.ok, t.stage, t.error, t.lr_error, t.n_cal, t.n_val) == (r.ok, r.stage, r.error, r.lr_error,
+                                                                                 r.n_cal, r.n_val)
+                for f in ("p_cal", "p_val", "C_cal", "C_val"):
+                    np.testing.assert_allclose(getattr(t, f), getattr(r, f), rtol=1e-7, atol=1e-14)
+                for f in ("d2_paper", "d2_two_sample", "lr", "alpha_paper", "alpha_two_sample", "alpha_lr"):
+                    np.testing.assert_allclose(getattr(t, f), getattr(r, f), rtol=1e-8)
+            assert all(t.ok for t in tests) == regular
+        if not regular:
+            assert got[0][2].stage == "validation fit"
+            assert ("not identifiable" if known else "no degree of freedom") in got[0][2].error
+
+
+def test_batched_split_tests_bad_input_names_the_argument():
+    from identification import Measurements
+    from identification.montecarlo import batched_split_tests
+    from identification.splits import Split
+    mm, ds = _mm_campaigns(2)
+    sp = [Split("low/high", range(0, 4), range(4, 8))]
+    other = Measurements(ds[0].inputs + 1.0, ds[0].z, [0.01])
+    unknown = Measurements(ds[0].inputs, ds[0].z, None)
+    for args, exc, match in (((mm, None, [], sp, [1, 5]), Exception, "datasets"),
+                             ((mm, None, ds[0], sp, [1, 5]), TypeError, "datasets"),
+                             ((mm, None, [ds[0], other], sp, [1, 5]), Exception, "datasets: data set 1 has other inputs"),
+                             ((mm, None, [ds[0], unknown], sp, [1, 5]), Exception, "sigma"),
+                             ((mm, None, ds, [], [1, 5]), Exception, "splits"),
+                             ((mm, None, ds, sp, [1, 5, 3]), Exception, "p0"),
+                             ((mm, None, ds, sp, [1, 5], None, "x"), TypeError, "detect_settings"),
+                             ((mm, None, ds, sp, [1, 5], None, None, np.zeros((3, 1))), Exception, "start_states"),
+                             (("mm", None, ds, sp, [1, 5]), TypeError, "model")):
+        with pytest.raises(exc, match=match):
+            batched_split_tests(*args)
