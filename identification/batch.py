@@ -62,7 +62,7 @@ is never dropped.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import casadi as ca
@@ -78,6 +78,8 @@ __all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord"
 
 #: an estimate farther than this many parameter scales from zero is a failed fit (as identify)
 ABSURD_SCALES = 1e6
+#: the fallback reason of a member whose Newton iteration left the parameter bounds
+LEFT_BOUNDS = "the iteration left the parameter bounds"
 
 
 @dataclass(frozen=True)
@@ -922,7 +924,7 @@ def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray
         elif not (conv[k] or stop_inc[k]) and not goodG[k]:
             it.reason[i] = "J^T Omega J is singular at the iterate"
         elif step[k]:
-            it.reason[i] = "the iteration left the parameter bounds"
+            it.reason[i] = LEFT_BOUNDS
     step &= inside
     it.active[a[~step & ~back]] = False
     b = a[step]
@@ -975,6 +977,18 @@ def _check_batch(model: Model, data, p0, weights) -> tuple:
     return bd, as_start_vector(model, p0), bd.weights(weights)
 
 
+def _solvable(M: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Per member: True when the stacked matrix M (m, n_p, n_p), scaled by D = diag(d), is finite
+    with condition number cond(D M D) <= 1e15 (the test identify's covariance applies)."""
+    Ms = M * d[:, :, None] * d[:, None, :]
+    ok = np.all(np.isfinite(Ms), axis=(1, 2))
+    cond = np.full(M.shape[0], np.inf)
+    if np.any(ok):
+        with np.errstate(all="ignore"):
+            cond[ok] = np.linalg.cond(Ms[ok])
+    return ok & np.isfinite(cond) & (cond <= 1e15)
+
+
 def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndarray, settings: IdentifySettings,
              sigma_unknown: bool) -> list:
     """The estimates of converged members (local indices ``k`` with their final points in ``it``):
@@ -997,15 +1011,15 @@ def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndar
     # covariance (eq. 7) as covariance_from_terms
     F2 = np.einsum("mjk,mjkp,mjkr->mpr", cw * prep.w[None, None, :] / sig[:, None, :] ** 2, G, G)
     H = F + S
-    d = 1.0 / np.sqrt(np.abs(np.einsum("mii->mi", F)))
     with np.errstate(all="ignore"):
-        cond = np.linalg.cond(H * d[:, :, None] * d[:, None, :])
-    H_ok = np.isfinite(cond) & (cond <= 1e15)
+        d = 1.0 / np.sqrt(np.abs(np.einsum("mii->mi", F)))
+    H_ok, F_ok = _solvable(H, d), _solvable(F, d)
     Hs = np.where(H_ok[:, None, None], H, np.eye(n_p))
+    Fs = np.where(F_ok[:, None, None], F, np.eye(n_p))     # a singular member must not stop the others
     cov = np.linalg.solve(Hs, np.linalg.solve(Hs, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
-    cov_gn = np.linalg.solve(F, np.linalg.solve(F, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
+    cov_gn = np.linalg.solve(Fs, np.linalg.solve(Fs, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
     cov = np.where(H_ok[:, None, None], 0.5 * (cov + cov.transpose(0, 2, 1)), np.nan)
-    cov_gn = 0.5 * (cov_gn + cov_gn.transpose(0, 2, 1))
+    cov_gn = np.where(F_ok[:, None, None], 0.5 * (cov_gn + cov_gn.transpose(0, 2, 1)), np.nan)
     h_rows = it.fh[k][:, prep.group]                                                 # (m, n_q, n_S)
     resid = prep.Z[k] - h_rows[:, None]
     rss = np.nansum(resid[..., prep.selected] ** 2, axis=(1, 2, 3))
@@ -1100,7 +1114,10 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     def run_fallbacks():
         for r, why in sorted(fallback.items()):
             try:
-                est = identify(model, data.member(r), p0, weights=weights, settings=settings, Y0=Y0)
+                # a member whose iteration left the bounds is solved with them from the start: the
+                # unbounded first pass of identify (lazy_bounds) may run to Ipopt's max_iter first
+                use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
+                est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0)
                 records.append(FallbackRecord(int(r), why))
                 results[r] = est
             except (IdentificationError, DataError) as exc:

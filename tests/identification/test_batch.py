@@ -114,6 +114,36 @@ def test_failing_members_fall_back_to_identify_and_are_recorded():
         fit.result(2)
 
 
+def test_members_with_a_singular_information_fall_back_one_by_one(monkeypatch):
+    """Every member's J^T W J singular (b2 has no effect): no LinAlgError for the batch, each member
+    is handed to identify with its reason; a member that left the bounds is refitted by identify
+    with the bounds from the start (lazy_bounds off: the unbounded pass may run to max_iter)."""
+    import identification.batch as batch
+    model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] * q[0] + 0 * p[1])
+    x = np.linspace(1.0, 5.0, 6)
+    rng = np.random.default_rng(3)
+    data = [Measurements(x, (2.0 * x + 0.1 * rng.standard_normal((2, 6)))[:, :, None], [0.1]) for _ in range(3)]
+    fit = fit_batch(model, data, [1.0, 1.0])
+    assert fit.n_members == 3 and not fit.ok.any()
+    assert {f.member for f in fit.fallbacks} == {0, 1, 2}
+    assert all(f.error for f in fit.fallbacks)          # identify's own failure, named
+    seen = []
+
+    def spy(model, data, p0, weights=None, settings=None, Y0=None):
+        seen.append(settings.lazy_bounds)
+        return identify(model, data, p0, weights=weights, settings=settings, Y0=Y0)
+
+    monkeypatch.setattr(batch, "identify", spy)
+    bounded = Model.explicit(params=[Parameter("b1", 0.0, 300.0), Parameter("b2", 0.0, 1.0)], inputs=["x"],
+                             sensors=["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    xs = np.linspace(50.0, 800.0, 10)
+    far = Measurements(xs, (900.0 * (1 - np.exp(-5e-4 * xs)) + 0.5 * rng.standard_normal((2, 10)))[:, :, None],
+                       [0.5])
+    fit = fit_batch(bounded, [far], [200.0, 4e-4])
+    assert [f.reason for f in fit.fallbacks] == [batch.LEFT_BOUNDS] and seen == [False]
+    assert fit.p[0, 0] == pytest.approx(300.0)
+
+
 def test_bad_batches_are_refused(press, press_data):
     other = Measurements(np.array(Q_PAPER)[:10, None], press_data[0].z[:, :10], SIGMA_MM)
     with pytest.raises(DataError, match=r"data\[1\].*inputs"):
