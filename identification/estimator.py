@@ -588,6 +588,22 @@ def covariance_from_terms(F, F2, S):
     return 0.5 * (cov + cov.T), 0.5 * (cov_gn + cov_gn.T), H, ok
 
 
+class _PhaseClock:
+    """Wall and CPU seconds (``time.perf_counter``, ``time.process_time``) of the phases of one
+    :func:`identify`, recorded in ``Estimate.extra["timing"]`` as {phase: (wall s, CPU s)}."""
+
+    def __init__(self):
+        self._wall, self._cpu = time.perf_counter(), time.process_time()
+        self.phases: dict = {}
+
+    def lap(self, name: str) -> None:
+        """Charge the time since the previous lap (or the start) to phase ``name``."""
+        w, c = time.perf_counter(), time.process_time()
+        old = self.phases.get(name, (0.0, 0.0))
+        self.phases[name] = (old[0] + w - self._wall, old[1] + c - self._cpu)
+        self._wall, self._cpu = w, c
+
+
 # ---------------------------------------------------------------------------- the pipeline of identify
 @dataclass(frozen=True)
 class _Start:
@@ -885,7 +901,7 @@ def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitOb
     return res, point, None if cur.S is None else cur.S / np.outer(s_p, s_p)
 
 
-def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
+def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock | None = None) -> _FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
     An explicit model is first solved by exact reduced-space Newton steps
@@ -907,6 +923,8 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
             margin = 1e-6 * s_p
             lo, up = model.lower, model.upper
             if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
+                if clock is not None:
+                    clock.lap("reduced-space Newton (explicit model)")
                 return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
@@ -914,6 +932,8 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
     p_start, Y_start = _predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
                                   settings.predictor_step)
+    if clock is not None:
+        clock.lap("start point of Ipopt")
     x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
     free_y = np.full(data.n_q * model.n_y, np.inf)
 
@@ -940,6 +960,8 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     if res is None:
         res = solve(x0 if passes == 1 else np.concatenate([st.p0 / s_p, (st.Y_init / s_y[None, :]).ravel()]),
                     np.concatenate([model.lower / s_p, -free_y]), np.concatenate([model.upper / s_p, free_y]))
+    if clock is not None:
+        clock.lap("NLP build, Ipopt set-up and solve")
     p = np.clip(res.x[:model.n_p] * s_p, model.lower, model.upper)  # Ipopt relaxes bounds by ~1e-8
     Y = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
     at_bound = (np.abs(p - model.lower) <= 1e-7 * s_p) | (np.abs(p - model.upper) <= 1e-7 * s_p)
@@ -971,7 +993,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
 
 
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
-              t_start: float) -> Estimate:
+              t_start: float, clock: _PhaseClock | None = None) -> Estimate:
     """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
 
     With sigma unknown the covariance, information and objective are rescaled by
@@ -1001,6 +1023,14 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
     res = sol.result
+    extra = {"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
+             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes}
+    if "t_wall_callbacks" in res.stats:
+        extra["ipopt_timing"] = {"build": res.stats["t_build"], "nlpsol": res.stats["t_nlpsol"],
+                                 "solve": res.wall_time, "callbacks": dict(res.stats["t_wall_callbacks"])}
+    if clock is not None:
+        clock.lap("identifiability, covariance, notes")
+        extra["timing"] = dict(clock.phases)
     return Estimate(
         p=point.p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
         sensors=model.sensors, states=point.states, fitted=sens.h, residuals=resid, weights=st.w, sigma=sig_used,
@@ -1009,9 +1039,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         status=res.status, message=res.message, iterations=res.iterations,
         solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
-        extra={"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
-               "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes},
-        model=model, data=data)
+        extra=extra, model=model, data=data)
 
 
 #: an estimate farther than this many parameter scales from zero is a failed fit
@@ -1126,10 +1154,13 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
+    clock = _PhaseClock()
     st = _start(model, data, p0, weights, Y0)
-    sol = _solve_full_space(st, settings)
+    clock.lap("validation, data, states at p0")
+    sol = _solve_full_space(st, settings, clock)
     ref = _refine_solution(st, sol, settings)
-    return _estimate(st, sol, ref, settings, t_start)
+    clock.lap("refinement (states, sensitivities, S at the estimate)")
+    return _estimate(st, sol, ref, settings, t_start, clock)
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
