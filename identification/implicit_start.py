@@ -120,7 +120,7 @@ class ImplicitObjective:
     Y0 : ndarray (n_q, n_y)  states at s_p ⊙ x0
     """
 
-    _KEEP = 4
+    _KEEP = 2
 
     def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray):
         self._problem, self._sp = problem, problem.p_scale
