@@ -323,7 +323,6 @@ def _stage_functions(model):
     data set, input set and scaling of the model:
 
     * ``stage``: (e ⊙ E(s_y ⊙ ỹ, s_p ⊙ p̃, q),  f = 1/2 sum_k c_k (h_k - zbar_k)^2)
-    * ``grad``:  (f, df/dp̃, df/dỹ)
     * ``jac``:   ((diag(e) E_p diag(s_p))^T, diag(e) E_y diag(s_y))
     * ``hess``:  the blocks (H_pp, H_py, H_yy) of
       D [s_f J^T diag(c) J + lag_hess(s_f r, e ⊙ l_g)] D in the order (p, y)
@@ -359,12 +358,34 @@ def _stage_functions(model):
         H = ca.hessian(sf * f + (ca.dot(lg, E) if n_y else 0), ca.vertcat(p, y))[0]
         Jp, Jy = ca.jacobian(E, p), ca.jacobian(E, y)
     fns = {"stage": ca.Function("nlp_stage", base, [E, f]),
-           "grad": ca.Function("nlp_stage_grad", base, [f, ca.gradient(f, p), ca.gradient(f, y)]),
            "hess": ca.Function("nlp_stage_hess", base + [sf, lg], [H[:n_p, :n_p], H[:n_p, n_p:], H[n_p:, n_p:]])}
     if n_y:
         fns["jac"] = ca.Function("nlp_stage_jac", [y, p, q, sy, sp, e], [Jp.T, Jy])
     fns = {k: num.compiled(f"nlp_stage_{k}", fn) for k, fn in fns.items()}
     return model.cache.put("identify.nlp_stage", compiled, fns)
+
+
+def _stage_gradient(model) -> ca.Function:
+    """(ỹ, p̃, q, zbar, c, s_y, s_p, e) -> (f, df/dp̃, df/dỹ) of one stage (see
+    :func:`_stage_functions`), by AD of the stage objective; built once per model and kept in
+    ``model.cache`` (only large NLPs use it, so it is neither built nor compiled with the others)."""
+    got = model.cache.get("identify.nlp_stage_grad", None)
+    if got is not None:
+        return got
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    S = ca.SX if model.symbolic == "SX" else ca.MX
+    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
+    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
+    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    r = model.h_fun(y * sy, p * sp, q) - zb
+    f = 0.5 * ca.dot(c * r, r)
+    fn = ca.Function("nlp_stage_grad", [y, p, q, zb, c, sy, sp, e], [f, ca.gradient(f, p), ca.gradient(f, y)])
+    return model.cache.put("identify.nlp_stage_grad", None, fn)
+
+
+#: NLPs with more variables than this get the objective gradient assembled from a mapped stage
+#: gradient (:func:`_stage_gradient`); smaller ones are expanded to SX and differentiated by nlpsol
+_ASSEMBLED_GRADIENT_MIN = 1000
 
 
 def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
@@ -476,10 +497,13 @@ def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     E_all, f_j = fns["stage"].map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal)
     f = ca.sum2(f_j)
     g = ca.vec(E_all)
-    f_g, gp_j, gy = fns["grad"].map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal)
-    # the assembled gradient must be dense: with a sparse output Ipopt received misplaced entries
-    grad_f = ca.Function("nlp_grad_f", [x, par], [ca.sum2(f_g), ca.densify(ca.vertcat(ca.sum2(gp_j), ca.vec(gy)))],
-                         ["x", "p"], ["f", "grad_f_x"])
+    grad_f = None
+    if n_p + n_q * n_y > _ASSEMBLED_GRADIENT_MIN:
+        # reverse mode through the mapped graph costs 2-4x the mapped stage gradient (1e5 inputs);
+        # the assembled gradient must be dense: with a sparse output Ipopt received misplaced entries
+        f_g, gp_j, gy = _stage_gradient(model).map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal)
+        grad_f = ca.Function("nlp_grad_f", [x, par], [ca.sum2(f_g), ca.densify(ca.vertcat(ca.sum2(gp_j), ca.vec(gy)))],
+                             ["x", "p"], ["f", "grad_f_x"])
     H_pp, H_py, H_yy = fns["hess"].map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
     H_pp = ca.repsum(H_pp, 1, n_q)
     hyy_sp = fns["hess"].sparsity_out(2)
