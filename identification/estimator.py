@@ -13,6 +13,10 @@ covariance
     C = H^{-1} J^T Omega^2 J H^{-T},    H = J^T Omega J + S(Omega)
 
 is evaluated exactly by AD and the implicit function theorem.
+
+For implicit models with many inputs Ipopt is started at the reduced-space optimum
+(:mod:`identification.implicit_start`) with its multipliers, so that it verifies that point
+(at iteration 0, or after one step at round-off) instead of iterating on the n_q n_y states.
 """
 from __future__ import annotations
 
@@ -993,6 +997,13 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
     6-8 iterations for the press).  Its solution is kept only when it lies strictly inside the
     bounds: it is then a KKT point of the bounded problem too (zero bound multipliers).
     Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
+
+    An implicit model with small (dense) states and at least ``reduced_start_inputs`` inputs
+    starts Ipopt at the reduced-space optimum (:func:`_reduced_start`) with the multipliers that
+    make it a primal-dual solution (warm start, no barrier: pass 1 without bounds), so Ipopt
+    verifies it at iteration 0 or after one step at round-off; the estimate is then that point
+    (and its S), else Ipopt's solution as usual.  When the reduced iteration fails, Ipopt starts
+    from the predictor as before.
     """
     model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
     newton_passes = None
