@@ -103,7 +103,8 @@ class IdentifySettings:
             raise ValueError(f"ill_conditioned: expected a condition number > 1, got {self.ill_conditioned!r}")
         if self.reduced_start_inputs is not None and not (
                 isinstance(self.reduced_start_inputs, (int, np.integer)) and self.reduced_start_inputs >= 1):
-            raise ValueError(f"reduced_start_inputs: expected None or an integer >= 1, got {self.reduced_start_inputs!r}")
+            raise ValueError(f"reduced_start_inputs: expected None or an integer >= 1, "
+                             f"got {self.reduced_start_inputs!r}")
         if not (isinstance(self.predictor_step, (int, float, np.floating)) and 0 <= self.predictor_step < np.inf):
             raise ValueError(f"predictor_step: expected a finite number >= 0 (0 disables the predictor), "
                              f"got {self.predictor_step!r}")

@@ -91,7 +91,8 @@ def solve_states_from(model, p: np.ndarray, inputs: np.ndarray, Y0: np.ndarray,
             E_new, Ey_new = f(Y_new, p, inputs)
             E_new = E_new[:, :, 0]
             n_new = _row_max_abs(E_new)
-            good = ~active | done | tiny | (np.isfinite(n_new) & ((n_new <= nE * (1 - 1e-4 * step)) | (n_new <= 1e-300)))
+            decrease = (n_new <= nE * (1 - 1e-4 * step)) | (n_new <= 1e-300)
+            good = ~active | done | tiny | (np.isfinite(n_new) & decrease)
             if np.all(good):
                 break
             step = np.where(good, step, 0.5 * step)
