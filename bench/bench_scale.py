@@ -21,7 +21,12 @@ process (``ru_maxrss``) and its increase during the fit, the time and memory per
 ratio mudoe / scipy, and the largest relative difference of the estimates.
 
 Run: ``python -m bench scale`` (sizes 1e2..1e6 explicit, 1e2..1e5 implicit); options
-``--quick`` (up to 1e5 explicit, 1e4 implicit), ``--max-explicit=N``, ``--max-implicit=N``.
+``--quick`` (up to 1e5 explicit, 1e4 implicit), ``--max-explicit=N``, ``--max-implicit=N``,
+``--min-implicit=N``, ``--only=implicit`` (or explicit).
+
+``python -m bench scale --phases[=N] [--kind=implicit|explicit]``: where the time of one cold fit of
+N points (default 1e5, implicit model) goes, phase by phase (validation and start states, start
+point of Ipopt, NLP build, Ipopt set-up, callbacks and linear solves, refinement, covariance).
 
 ``python -m bench scale --small [--rep=K] [--rounds=R] [--against=/path/to/other/checkout]``: the
 small explicit problems instead (Rooney-Biegler, NIST Eckerle4 and MGH09 from both certified
@@ -107,7 +112,39 @@ def _run_mudoe(kind, n):
     est = identify(model, data, p0=p0)
     wall, cpu = time.perf_counter() - t, _cpu() - c
     return {"time": wall, "cpu": cpu, "rss_base": base, "rss_peak": _rss_mb(), "p": est.p.tolist(),
-            "se": est.stderr.tolist(), "status": est.status, "iterations": est.iterations}
+            "se": est.stderr.tolist(), "status": est.status, "iterations": est.iterations,
+            "timing": est.extra.get("timing", {}), "ipopt_timing": est.extra.get("ipopt_timing"),
+            "ipopt_passes": est.extra.get("ipopt_passes"), "solver": est.extra.get("solver")}
+
+
+def phases(n: int = 100_000, kind: str = "implicit"):
+    """Where the time of one cold fit of ``n`` points goes: the phases of ``identify`` (wall and
+    CPU seconds, from ``Estimate.extra["timing"]``) and, for the Ipopt solve, the NLP build,
+    the solver set-up, the time in the derivative callbacks and Ipopt's own work (the linear
+    solves of the KKT system, mostly), in a fresh subprocess (as one row of the scale table)."""
+    m = _subprocess("mudoe", kind, n)
+    print(f"# phases of one cold identify, {kind} model, {n:.0e} points  "
+          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}  nproc {os.cpu_count()}  "
+          f"load {os.getloadavg()[0]:.1f}")
+    print(f"total {m['time']:.3f} s wall, {m['cpu']:.3f} s CPU, peak {m['rss_peak']:.0f} MB "
+          f"(+{m['rss_peak'] - m['rss_base']:.0f}), solver {m['solver']}, Ipopt iterations {m['iterations']}, "
+          f"passes {m['ipopt_passes']}")
+    print("| phase | wall s | CPU s | share of wall |")
+    print("|---|---|---|---|")
+    for name, (w, c) in m["timing"].items():
+        print(f"| {name} | {w:.3f} | {c:.3f} | {100 * w / m['time']:.0f} % |")
+    it = m["ipopt_timing"]
+    if it:
+        calls = it["callbacks"]
+        inside = sum(calls.values())
+        print("\n| Ipopt part (wall s) | s |")
+        print("|---|---|")
+        print(f"| NLP build (mapped stage functions) | {it['build']:.3f} |")
+        print(f"| nlpsol set-up | {it['nlpsol']:.3f} |")
+        print(f"| solve | {it['solve']:.3f} |")
+        for k, v in calls.items():
+            print(f"| - callback {k} | {v:.3f} |")
+        print(f"| - Ipopt's own work (KKT factorisations and solves) | {it['solve'] - inside:.3f} |")
 
 
 def _run_scipy(kind, n):
@@ -311,6 +348,10 @@ def main(argv=None):
     if argv and argv[0] == "--small-one":
         print(json.dumps(_small_one(int(argv[1]), int(argv[2]))))
         return
+    if any(a.startswith("--phases") for a in argv):
+        opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
+        phases(int(float(opts.get("phases", 1e5))), opts.get("kind", "implicit"))
+        return
     if "--small" in argv:
         opts = dict(a.lstrip("-").split("=", 1) for a in argv if "=" in a)
         small(int(opts.get("rep", 30)), opts.get("against"), int(opts.get("rounds", 2)))
@@ -325,8 +366,11 @@ def main(argv=None):
     print("| model | points | mudoe s (CPU s) | scipy exact-J s (CPU s) | ratio wall (CPU) | mudoe CPU us/point "
           "| mudoe peak MB (+fit) | bytes/point | scipy peak MB | max rel diff p |")
     print("|---|---|---|---|---|---|---|---|---|---|")
+    only = opts.get("only")
     for kind, top in (("explicit", max_exp), ("implicit", max_imp)):
-        n = 100
+        if only is not None and kind != only:
+            continue
+        n = int(float(opts.get(f"min-{kind}", 100)))
         while n <= top:
             m = _subprocess("mudoe", kind, n)
             s = _subprocess("scipy", kind, n)

@@ -13,9 +13,14 @@ covariance
     C = H^{-1} J^T Omega^2 J H^{-T},    H = J^T Omega J + S(Omega)
 
 is evaluated exactly by AD and the implicit function theorem.
+
+For implicit models with many inputs Ipopt is started at the reduced-space optimum
+(:mod:`identification.implicit_start`) with its multipliers, so that it verifies that point
+(at iteration 0, or after one step at round-off) instead of iterating on the n_q n_y states.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -29,13 +34,14 @@ from scipy import special
 from models.contract import Model
 from . import dense
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
-from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp
+from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
+from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
 from .measurements import Measurements
 from .explicit_kernel import ExplicitTerms, explicit_terms
 from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
-from models.state import numerics, solve_states
+from models.state import BATCH_START_MIN, numerics, solve_states
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector"]
@@ -65,6 +71,11 @@ class IdentifySettings:
     explicit_newton : bool    explicit models (no state) are first solved by exact reduced-space
                               Gauss-Newton/Newton steps (:func:`_solve_explicit_newton`); Ipopt is
                               the fallback and solves the problem when a bound is active
+    reduced_start_inputs : int or None
+                              implicit models with small (dense) states and at least this many
+                              inputs start Ipopt at the reduced-space optimum with its
+                              multipliers (:func:`_reduced_start`; Ipopt verifies it, usually at
+                              iteration 0, instead of iterating on the n_q n_y states); None never
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -77,6 +88,7 @@ class IdentifySettings:
     lazy_bounds: bool = True
     refine_decrement: float = 1e-18
     explicit_newton: bool = True
+    reduced_start_inputs: int | None = 200
 
     def __post_init__(self):
         if not isinstance(self.ipopt, IpoptSettings):
@@ -89,6 +101,10 @@ class IdentifySettings:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
         if not (isinstance(self.ill_conditioned, (int, float, np.floating)) and self.ill_conditioned > 1):
             raise ValueError(f"ill_conditioned: expected a condition number > 1, got {self.ill_conditioned!r}")
+        if self.reduced_start_inputs is not None and not (
+                isinstance(self.reduced_start_inputs, (int, np.integer)) and self.reduced_start_inputs >= 1):
+            raise ValueError(f"reduced_start_inputs: expected None or an integer >= 1, "
+                             f"got {self.reduced_start_inputs!r}")
         if not (isinstance(self.predictor_step, (int, float, np.floating)) and 0 <= self.predictor_step < np.inf):
             raise ValueError(f"predictor_step: expected a finite number >= 0 (0 disables the predictor), "
                              f"got {self.predictor_step!r}")
@@ -140,10 +156,21 @@ def _initial_states(model, p0, inputs, Y0):
         return solve_states(model, p0, inputs, Y0=Y0)
     key = (p0.tobytes(), inputs.tobytes())
     Y = model.cache.get("identify.initial_states", key)
+    if Y is not None:
+        return Y
+    if numerics(model).dense and inputs.shape[0] >= BATCH_START_MIN:
+        # all inputs at once from the model's guesses (faster than solve_states' batched start;
+        # the same damped Newton); solve_states is the fallback
+        guess = (np.array([model.y_guess(p0, q) for q in inputs]) if model.has_y_guess
+                 else np.zeros((inputs.shape[0], model.n_y)))
+        try:
+            Y = solve_states_from(model, p0, inputs, guess)
+        except StateSolveError:
+            Y = None
     if Y is None:
         Y = solve_states(model, p0, inputs)
-        Y.setflags(write=False)
-        model.cache.put("identify.initial_states", key, Y, maxsize=_START_CACHE_SIZE)
+    Y.setflags(write=False)
+    model.cache.put("identify.initial_states", key, Y, maxsize=_START_CACHE_SIZE)
     return Y
 
 
@@ -343,6 +370,29 @@ def _stage_functions(model):
     return model.cache.put("identify.nlp_stage", compiled, fns)
 
 
+def _stage_gradient(model) -> ca.Function:
+    """(ỹ, p̃, q, zbar, c, s_y, s_p, e) -> (f, df/dp̃, df/dỹ) of one stage (see
+    :func:`_stage_functions`), by AD of the stage objective; built once per model and kept in
+    ``model.cache`` (only large NLPs use it, so it is neither built nor compiled with the others)."""
+    got = model.cache.get("identify.nlp_stage_grad", None)
+    if got is not None:
+        return got
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    S = ca.SX if model.symbolic == "SX" else ca.MX
+    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
+    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
+    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    r = model.h_fun(y * sy, p * sp, q) - zb
+    f = 0.5 * ca.dot(c * r, r)
+    fn = ca.Function("nlp_stage_grad", [y, p, q, zb, c, sy, sp, e], [f, ca.gradient(f, p), ca.gradient(f, y)])
+    return model.cache.put("identify.nlp_stage_grad", None, fn)
+
+
+#: NLPs with more variables than this get the objective gradient assembled from a mapped stage
+#: gradient (:func:`_stage_gradient`); smaller ones are expanded to SX and differentiated by nlpsol
+_ASSEMBLED_GRADIENT_MIN = 1000
+
+
 def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
     """The scaled full-space problem as CasADi expressions and derivative Functions.
 
@@ -447,22 +497,30 @@ def _build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
     x = ca.vertcat(pt, ca.vec(yt))
     par = ca.vertcat(ca.vec(Zb), ca.vec(Cw))
-    E_all, f = fns["stage"].map("nlp_stage_map", "serial", n_q, [1, 5, 6, 7], [1])(yt, pt, Q, Zb, Cw, *scal)
+    # plain maps (the shared arguments broadcast, the sums over inputs by repsum): building a map
+    # with reduced arguments and outputs costs 0.1-0.2 s per map at 1e5 inputs, a plain one ~0
+    E_all, f_j = fns["stage"].map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal)
+    f = ca.sum2(f_j)
     g = ca.vec(E_all)
-    H_pp, H_py, H_yy = fns["hess"].map("nlp_hess_map", "serial", n_q, [1, 5, 6, 7, 8], [0])(
-        yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
+    grad_f = None
+    if n_p + n_q * n_y > _ASSEMBLED_GRADIENT_MIN:
+        # reverse mode through the mapped graph costs 2-4x the mapped stage gradient (1e5 inputs);
+        # the assembled gradient must be dense: with a sparse output Ipopt received misplaced entries
+        f_g, gp_j, gy = _stage_gradient(model).map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal)
+        grad_f = ca.Function("nlp_grad_f", [x, par], [ca.sum2(f_g), ca.densify(ca.vertcat(ca.sum2(gp_j), ca.vec(gy)))],
+                             ["x", "p"], ["f", "grad_f_x"])
+    H_pp, H_py, H_yy = fns["hess"].map(n_q, "serial")(yt, pt, Q, Zb, Cw, *scal, lam_f, ca.reshape(lam_g, n_y, n_q))
+    H_pp = ca.repsum(H_pp, 1, n_q)
     hyy_sp = fns["hess"].sparsity_out(2)
     if "jac" in fns and model.symbolic == "SX":
-        Jp_t, Jy_h = fns["jac"].map("nlp_jac_map", "serial", n_q, [1, 3, 4, 5], [])(yt, pt, Q, *scal)
+        Jp_t, Jy_h = fns["jac"].map(n_q, "serial")(yt, pt, Q, *scal)
         jac_sp = fns["jac"].sparsity_out(1)
     else:
         Jp_t = Jy_h = jac_sp = None
     jac_g, hess_lag = _assemble_kkt(x, par, g, Jp_t, Jy_h, H_pp, H_py, H_yy, lam_f, lam_g, n_p, n_y, n_q,
                                     jac_sp, hyy_sp)
-    # (the objective gradient is left to CasADi's reverse mode.  An assembled gradient must be
-    # densified: with a sparse output Ipopt received misplaced entries and crawled.  Densified
-    # it is correct, but measured no faster cold or warm (spring chain d_y = 3000, 10 runs))
-    return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g, compiled=numerics(model).jit_active())
+    return NlpProblem(x, f, g, par, hess_lag=hess_lag, jac_g=jac_g, grad_f=grad_f,
+                      compiled=numerics(model).jit_active())
 
 
 def _glued_stage_functions(model):
@@ -588,6 +646,22 @@ def covariance_from_terms(F, F2, S):
     return 0.5 * (cov + cov.T), 0.5 * (cov_gn + cov_gn.T), H, ok
 
 
+class _PhaseClock:
+    """Wall and CPU seconds (``time.perf_counter``, ``time.process_time``) of the phases of one
+    :func:`identify`, recorded in ``Estimate.extra["timing"]`` as {phase: (wall s, CPU s)}."""
+
+    def __init__(self):
+        self._wall, self._cpu = time.perf_counter(), time.process_time()
+        self.phases: dict = {}
+
+    def lap(self, name: str) -> None:
+        """Charge the time since the previous lap (or the start) to phase ``name``."""
+        w, c = time.perf_counter(), time.process_time()
+        old = self.phases.get(name, (0.0, 0.0))
+        self.phases[name] = (old[0] + w - self._wall, old[1] + c - self._cpu)
+        self._wall, self._cpu = w, c
+
+
 # ---------------------------------------------------------------------------- the pipeline of identify
 @dataclass(frozen=True)
 class _Start:
@@ -677,6 +751,10 @@ class _ExplicitObjective:
         self._outer = np.outer(st.s_p, st.s_p)
         self._kernel = explicit_terms(st.model, st.data.inputs, problem.zbar, problem.cw / st.sig[None, :] ** 2,
                                       st.s_p)
+
+    def point(self, x: np.ndarray) -> ReducedPoint:
+        """The reduced point at p = s_p ⊙ x."""
+        return self._problem.evaluate(x * self._sp)
 
     def __call__(self, x: np.ndarray, second_order: bool) -> ExplicitTerms:
         """The terms at p = s_p ⊙ x (``S`` when ``second_order``); raises StateSolveError when
@@ -873,9 +951,8 @@ def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitOb
         x, cur = x_new, new
     else:
         return None
-    p = x * s_p
     try:
-        point = st.problem.evaluate(p)
+        point = objective.point(x)
     except StateSolveError:
         return None
     res = IpoptResult(x=x, f=point.objective, status="Solve_Succeeded",
@@ -885,7 +962,31 @@ def _newton_from(st: _Start, settings: IdentifySettings, objective: "_ExplicitOb
     return res, point, None if cur.S is None else cur.S / np.outer(s_p, s_p)
 
 
-def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolution:
+def _reduced_start(st: _Start, settings: IdentifySettings):
+    r"""The reduced-space optimum of an implicit model with small (dense) states, as Ipopt's start.
+
+    The Gauss-Newton/Newton iteration of explicit models (:func:`_newton_from`, the same line
+    search and convergence test) on the reduced objective Phi(p) with the states eliminated
+    (:class:`identification.implicit_start.ImplicitObjective`: states by batched damped Newton
+    from the nearest point evaluated, sensitivities by the implicit function theorem, S by
+    adjoints, all inputs at once).  Used for models with at least
+    ``settings.reduced_start_inputs`` inputs.  Returns (result, point, S) as
+    :func:`_solve_explicit_newton`, or None (not used, or the iteration failed: Ipopt then
+    starts from the predictor as before).
+    """
+    model = st.model
+    min_inputs = settings.reduced_start_inputs
+    if (not model.n_y or min_inputs is None or st.data.n_q < min_inputs or not numerics(model).dense):
+        return None
+    x0 = st.p0 / st.s_p
+    objective = ImplicitObjective(st.problem, x0, st.Y_init)
+    # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
+    # 1e-24 can leave at 1e-8 when the information is large (many inputs)
+    return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,
+                        time.perf_counter(), _GN_MAX_HALVINGS)
+
+
+def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock | None = None) -> _FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
     An explicit model is first solved by exact reduced-space Newton steps
@@ -897,6 +998,13 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     6-8 iterations for the press).  Its solution is kept only when it lies strictly inside the
     bounds: it is then a KKT point of the bounded problem too (zero bound multipliers).
     Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
+
+    An implicit model with small (dense) states and at least ``reduced_start_inputs`` inputs
+    starts Ipopt at the reduced-space optimum (:func:`_reduced_start`) with the multipliers that
+    make it a primal-dual solution (warm start, no barrier: pass 1 without bounds), so Ipopt
+    verifies it at iteration 0 or after one step at round-off; the estimate is then that point
+    (and its S), else Ipopt's solution as usual.  When the reduced iteration fails, Ipopt starts
+    from the predictor as before.
     """
     model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
     newton_passes = None
@@ -907,28 +1015,42 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
             margin = 1e-6 * s_p
             lo, up = model.lower, model.upper
             if np.all(point.p > lo + margin) and np.all(point.p < up - margin):
+                if clock is not None:
+                    clock.lap("reduced-space Newton (explicit model)")
                 return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
-    p_start, Y_start = _predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
-                                  settings.predictor_step)
+    bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
+    warm = None                                 # (reduced point, S) of the reduced-space optimum
+    if newton_passes is None and (settings.lazy_bounds or not bounded):
+        got = _reduced_start(st, settings)
+        if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
+                np.all(got[1].p < model.upper - 1e-6 * s_p):
+            warm = got[1], got[2]
+    if warm is not None:
+        p_start, Y_start = warm[0].p, warm[0].states
+    else:
+        p_start, Y_start = _predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
+                                      settings.predictor_step)
+    if clock is not None:
+        clock.lap("start point of Ipopt")
     x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
     free_y = np.full(data.n_q * model.n_y, np.inf)
 
-    def solve(x_start, lbx, ubx):
+    def solve(x_start, lbx, ubx, lam_g0=None):
         return solve_nlp(functools.partial(_build_nlp, model, data.inputs, s_p, s_y, st.e_scale), x_start, lbx, ubx,
-                         0.0, 0.0, par_value, settings.ipopt, what=f"identification of {model.name}", key=key,
-                         cache=model.cache)
+                         0.0, 0.0, par_value, settings.ipopt if lam_g0 is None else warm_start(settings.ipopt),
+                         what=f"identification of {model.name}", key=key, cache=model.cache, lam_g0=lam_g0)
 
     res = None
     passes = 1 if newton_passes is None else newton_passes
-    bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
-    if passes == 1 and settings.lazy_bounds and bounded:
+    if passes == 1 and ((settings.lazy_bounds and bounded) or warm is not None):
         free_p = np.full(model.n_p, np.inf)
         try:
-            r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]))
+            r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]),
+                       None if warm is None else nlp_multipliers(warm[0], st.e_scale))
         except IdentificationError:
             r1 = None
         if r1 is not None and r1.accepted:
@@ -940,9 +1062,16 @@ def _solve_full_space(st: _Start, settings: IdentifySettings) -> _FullSpaceSolut
     if res is None:
         res = solve(x0 if passes == 1 else np.concatenate([st.p0 / s_p, (st.Y_init / s_y[None, :]).ravel()]),
                     np.concatenate([model.lower / s_p, -free_y]), np.concatenate([model.upper / s_p, free_y]))
+    if clock is not None:
+        clock.lap("NLP build, Ipopt set-up and solve")
     p = np.clip(res.x[:model.n_p] * s_p, model.lower, model.upper)  # Ipopt relaxes bounds by ~1e-8
     Y = res.x[model.n_p:].reshape(data.n_q, model.n_y) * s_y[None, :] if model.n_y else None
     at_bound = (np.abs(p - model.lower) <= 1e-7 * s_p) | (np.abs(p - model.upper) <= 1e-7 * s_p)
+    if warm is not None and passes == 1 and np.max(np.abs(res.x[:model.n_p] - x0[:model.n_p])) <= 1e-12:
+        # Ipopt verified the reduced-space optimum without a step or with a step at round-off (the
+        # gradient of a fit to many inputs stays above Ipopt's tolerance at one ulp of p): its point
+        # and S are the estimate's
+        return _FullSpaceSolution(res, passes, warm[0].p, warm[0].states, at_bound, warm[0], warm[1])
     return _FullSpaceSolution(res, passes, p, Y, at_bound)
 
 
@@ -971,7 +1100,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
 
 
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
-              t_start: float) -> Estimate:
+              t_start: float, clock: _PhaseClock | None = None) -> Estimate:
     """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
 
     With sigma unknown the covariance, information and objective are rescaled by
@@ -1001,6 +1130,14 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
     res = sol.result
+    extra = {"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
+             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes}
+    if "t_wall_callbacks" in res.stats:
+        extra["ipopt_timing"] = {"build": res.stats["t_build"], "nlpsol": res.stats["t_nlpsol"],
+                                 "solve": res.wall_time, "callbacks": dict(res.stats["t_wall_callbacks"])}
+    if clock is not None:
+        clock.lap("identifiability, covariance, notes")
+        extra["timing"] = dict(clock.phases)
     return Estimate(
         p=point.p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
         sensors=model.sensors, states=point.states, fitted=sens.h, residuals=resid, weights=st.w, sigma=sig_used,
@@ -1009,9 +1146,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         status=res.status, message=res.message, iterations=res.iterations,
         solve_time=time.perf_counter() - t_start, refinement_steps=ref.steps,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)), notes=notes, model_name=model.name,
-        extra={"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
-               "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes},
-        model=model, data=data)
+        extra=extra, model=model, data=data)
 
 
 #: an estimate farther than this many parameter scales from zero is a failed fit
@@ -1126,10 +1261,13 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
+    clock = _PhaseClock()
     st = _start(model, data, p0, weights, Y0)
-    sol = _solve_full_space(st, settings)
+    clock.lap("validation, data, states at p0")
+    sol = _solve_full_space(st, settings, clock)
     ref = _refine_solution(st, sol, settings)
-    return _estimate(st, sol, ref, settings, t_start)
+    clock.lap("refinement (states, sensitivities, S at the estimate)")
+    return _estimate(st, sol, ref, settings, t_start, clock)
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,

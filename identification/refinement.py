@@ -136,7 +136,11 @@ class ReducedProblem:
             When the state equation cannot be solved at p.
         """
         Y = solve_states(self.model, p, self.data.inputs, Y0=states0)
-        sens = sensitivities(self.model, p, self.data.inputs, Y)
+        return self.point_at(p, Y, sensitivities(self.model, p, self.data.inputs, Y))
+
+    def point_at(self, p: np.ndarray, Y: np.ndarray, sens: Sensitivities) -> ReducedPoint:
+        """Phi, dPhi/dp and lambda at p from the states ``Y`` solved there and their
+        sensitivities ``sens`` (what :meth:`evaluate` does after the state solve)."""
         dev = self.zbar - sens.h
         with np.errstate(over="ignore"):            # a trial point far off may overflow: f = inf
             f = 0.5 * float(np.sum(self.cw * dev ** 2 / self.sigma ** 2)) + self.const

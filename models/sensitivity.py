@@ -45,6 +45,18 @@ class Sensitivities:
         n_p = self.G.shape[2]
         return np.stack([Z[:Z.shape[0] - n_p] for _, _, Z in self._cache])
 
+    def adjoint(self, lam: np.ndarray) -> np.ndarray:
+        """The adjoint states mu_j solving (dE/dy)_j^T mu_j = -(dh/dy)_j^T lam_j at every input,
+        shape (n_q, n_y), for weights ``lam`` (n_q, n_S) (the multipliers of E that make
+        lam_j^T h + mu_j^T E stationary in y_j)."""
+        lam = np.asarray(lam, float)
+        n_y = self._Y.shape[1] if np.ndim(self._Y) == 2 else 0
+        out = np.zeros((lam.shape[0], n_y))
+        for j, (solve, hy, _) in enumerate(self._cache):
+            if solve is not None:
+                out[j] = solve(-(hy.T @ lam[j]), trans=1)
+        return out
+
     def hessians(self, lam: np.ndarray) -> np.ndarray:
         """Sum over inputs of d^2/dp^2 [lam_j^T h(y_j(p), p, q_j)] for several weight sets.
 
@@ -100,9 +112,16 @@ class _BatchedSensitivities(Sensitivities):
             return np.zeros((self.G.shape[0], 0, self.G.shape[2]))
         return Z[:, :Z.shape[1] - Z.shape[2], :]
 
+    def adjoint(self, lam: np.ndarray) -> np.ndarray:
+        Ey, hy, Z = self._cache
+        if Z is None:
+            return np.zeros((self.G.shape[0], 0))
+        rhs = -np.einsum("jsy,js->jy", hy, np.asarray(lam, float))
+        return np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
+
     def hessians(self, lam: np.ndarray) -> np.ndarray:
         lam = np.asarray(lam, float)
-        Ey, hy, Z = self._cache
+        Z = self._cache[2]
         n_q, n_p = self._inputs.shape[0], self.G.shape[2]
         f = self._num.batched("lag_hess", n_q)
         out = np.zeros((lam.shape[0], n_p, n_p))
@@ -111,9 +130,7 @@ class _BatchedSensitivities(Sensitivities):
                 Hl = f(self._Y, self._p, self._inputs, lam[a], np.zeros((n_q, 0)))[0]
                 out[a] = Hl.sum(axis=0)
                 continue
-            rhs = -np.einsum("jsy,js->jy", hy, lam[a])
-            mu = np.linalg.solve(Ey.transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
-            Hl = f(self._Y, self._p, self._inputs, lam[a], mu)[0]
+            Hl = f(self._Y, self._p, self._inputs, lam[a], self.adjoint(lam[a]))[0]
             out[a] = np.einsum("jva,jvw,jwb->ab", Z, Hl, Z, optimize=True)
         return 0.5 * (out + out.transpose(0, 2, 1))
 
