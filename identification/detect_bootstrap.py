@@ -25,7 +25,9 @@ splits with its bootstrap law (min-p; the dependence between splits that share d
 accounted for, where Bonferroni only bounds it).
 
 Campaign b draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(B)[b])``: serial,
-local processes and a Dask scheduler (:mod:`identification.cluster`) give identical numbers.
+local processes and a Dask scheduler (:mod:`identification.cluster`) give identical numbers with
+the same chunks, and numbers equal to round-off with other chunks (the batched reductions sum in
+another order: estimates a few units in the last place apart).
 The campaigns of a chunk share their inputs, so their split tests run together
 (:func:`identification.montecarlo.batched_split_tests`: every calibration, validation and
 pooled fit of a split one batch over the campaigns, the statistics computed together), which

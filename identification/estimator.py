@@ -63,7 +63,8 @@ class IdentifySettings:
                               Ipopt stalls (1e-10: within 1e-5 standard errors of the optimum)
     predictor_step : float    largest relative parameter change of the linearised Gauss-Newton
                               predictor that sets Ipopt's start point (0 disables it)
-    lazy_bounds : bool        first solve without the parameter bounds and keep that solution
+    lazy_bounds : bool        first solve without the parameter bounds (at most LAZY_PASS_MAX_ITER
+                              Ipopt iterations) and keep that solution
                               when it lies strictly inside them (else solve with the bounds)
     refine_decrement : float  no refinement step is taken once the Newton decrement g^T H^-1 g
                               (chi^2 units) is below this (1e-18: p within 1e-9 standard errors
@@ -417,6 +418,8 @@ def _build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
 #: explicit NLPs with at most this many inputs are expanded to SX by nlpsol (fast callbacks,
 #: a set-up that grows with the inputs); larger ones keep the mapped MX graph (flat set-up)
 _EXPAND_EXPLICIT_MAX = 2000
+#: Ipopt iterations of identify's unbounded first pass (lazy_bounds); the press needs 3-4
+LAZY_PASS_MAX_ITER = 100
 
 
 def _symbols(model, n_q):
@@ -1039,9 +1042,9 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
     x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
     free_y = np.full(data.n_q * model.n_y, np.inf)
 
-    def solve(x_start, lbx, ubx, lam_g0=None):
+    def solve(x_start, lbx, ubx, lam_g0=None, ipopt=settings.ipopt):
         return solve_nlp(functools.partial(_build_nlp, model, data.inputs, s_p, s_y, st.e_scale), x_start, lbx, ubx,
-                         0.0, 0.0, par_value, settings.ipopt if lam_g0 is None else warm_start(settings.ipopt),
+                         0.0, 0.0, par_value, ipopt if lam_g0 is None else warm_start(ipopt),
                          what=f"identification of {model.name}", key=key, cache=model.cache, lam_g0=lam_g0)
 
     res = None
@@ -1049,8 +1052,11 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
     if passes == 1 and ((settings.lazy_bounds and bounded) or warm is not None):
         free_p = np.full(model.n_p, np.inf)
         try:
+            # a capped pass: when the unbounded optimum lies at infinity Ipopt would otherwise
+            # run to max_iter (seconds) before pass 2 solves the bounded problem
             r1 = solve(x0, np.concatenate([-free_p, -free_y]), np.concatenate([free_p, free_y]),
-                       None if warm is None else nlp_multipliers(warm[0], st.e_scale))
+                       None if warm is None else nlp_multipliers(warm[0], st.e_scale),
+                       dataclasses.replace(settings.ipopt, max_iter=min(settings.ipopt.max_iter, LAZY_PASS_MAX_ITER)))
         except IdentificationError:
             r1 = None
         if r1 is not None and r1.accepted:
