@@ -138,14 +138,15 @@ def main(argv=None):
           "| batch wall / replicate | max rel. diff of the refits | batch fallbacks | failed refits |")
     print("|---|---|---|---|---|---|---|---|---|")
     for label, model, data, est in problems():
-        bootstrap_replicates(model, data, est, n=4, seed=0)                  # build (and compile) once
-        bootstrap_replicates(model, data, est, n=2, seed=0, batch=False)
+        jit = bool(args.jit)
+        bootstrap_replicates(model, data, est, n=4, seed=0, jit=jit)         # build (and compile) once
+        bootstrap_replicates(model, data, est, n=2, seed=0, batch=False, jit=jit)
         times = {True: [], False: []}
         got = {}
         for _ in range(args.repeats):
             for batch in (False, True):
                 got[batch], w, c = _timed(lambda: bootstrap_replicates(model, data, est, n=args.n, seed=args.seed,
-                                                                       batch=batch))
+                                                                       batch=batch, jit=jit))
                 times[batch].append((w, c))
         (wi, ci), (wb, cb) = (np.median(np.array(times[b]), axis=0) for b in (False, True))
         Pf, Pb = got[False].P, got[True].P

@@ -27,7 +27,7 @@ the batch engine's functions mapped once per batch size), then
 split tests and the null fit, one campaign's worth, are included in both), with the largest
 relative difference of the bootstrap statistics T* and whether p-values and failures agree.  Both
 paths run twice: with the CasADi virtual machine and with the models JIT-compiled to C
-(``models.state.set_jit(True)``, what Monte Carlo workers use; bootstrap_detect leaves it as set).
+(``bootstrap_detect(..., jit=True)``, the default, what Monte Carlo workers use).
 Run ``python -m bench.bench_detect_bootstrap --compare --n-boot 200``.
 """
 from __future__ import annotations
@@ -111,12 +111,13 @@ def compare(n_boot: int, seed: int) -> None:
         try:
             for label, model, data, splits, p0, w in compare_cases(seed):
                 # warm-up (compilation, caches; the batch engine maps its functions once per batch size)
-                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, batch=False)
-                bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, batch=False, jit=jit)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1, jit=jit)
                 res, cpu = {}, {}
                 for batch in (False, True):
                     c0 = _cpu()
-                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch)
+                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch,
+                                                  jit=jit)
                     cpu[batch] = (_cpu() - c0) / n_boot
                 a, b = res[False].boot_statistics, res[True].boot_statistics
                 both = np.isfinite(a) & np.isfinite(b)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.contract import Model
+from models.state import set_jit
 from . import cluster
 from .batch import BatchData, fit_batch
 from .errors import DataError, IdentificationError, StateSolveError
@@ -64,6 +65,7 @@ class _Task:
     weights: np.ndarray
     states: object
     batch: bool = True
+    jit: bool = False
 
 
 class _Worker:
@@ -147,9 +149,13 @@ def _run_chunk(task: _Task | None, chunk: list) -> list:
     """Replicates [(index, SeedSequence), ...] -> [(index, p, error, fallback reason), ...]
     (task None: this process's)."""
     t = _Worker.task if task is None else task
-    if t.batch:
-        return _replicate_batch(t, chunk)
-    return [(i, *_replicate(t, s), "") for i, s in chunk]
+    prev = set_jit(t.jit)
+    try:
+        if t.batch:
+            return _replicate_batch(t, chunk)
+        return [(i, *_replicate(t, s), "") for i, s in chunk]
+    finally:
+        set_jit(prev)
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,7 +184,7 @@ class BootstrapReplicates:
 
 def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, seed=0, workers: int | None = 1,
                          progress: Progress | None = None, scheduler=None, chunk_size: int | None = None,
-                         batch: bool = True) -> BootstrapReplicates:
+                         batch: bool = True, jit: bool = True) -> BootstrapReplicates:
     """Refitted parameters of ``n`` campaigns simulated from ``est`` (see the module docstring).
 
     Parameters
@@ -195,6 +201,9 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
                                  refitted one by one or 100 refitted as one batch)
     batch : bool                 refit the replicates of a chunk together with the batch engine
                                  (identification.batch.fit_batch); False: one identify call per replicate
+    jit : bool                   evaluate small models' CasADi functions as compiled C during the refits
+                                 (models.state.set_jit, as Monte Carlo does; compiled once per machine
+                                 and kept in models.jit_cache; without a C compiler the virtual machine)
 
     The numbers depend on ``seed`` only, not on the backend, the workers or the chunks (and agree
     between ``batch`` True and False to the estimator's tolerance, ~1e-10 relative).
@@ -216,13 +225,15 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
         raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
     if not isinstance(batch, (bool, np.bool_)):
         raise ValueError(f"batch: expected True (batch engine) or False (identify per refit), got {batch!r}")
+    if not isinstance(jit, (bool, np.bool_)):
+        raise ValueError(f"jit: expected True (compiled model functions) or False, got {jit!r}")
     scheduler = cluster.check_scheduler(scheduler)
     sigma_sim = np.asarray(est.sigma, float)
     task = _Task(model, np.asarray(data.inputs), np.asarray(est.fitted, float), data.mask(), sigma_sim,
                  None if data.sigma is None else np.asarray(data.sigma, float), tuple(data.sensors),
                  None if data.input_names is None else tuple(data.input_names), np.asarray(est.p, float),
                  np.asarray(est.weights, float), None if est.states is None or est.states.size == 0
-                 else np.asarray(est.states, float), bool(batch))
+                 else np.asarray(est.states, float), bool(batch), bool(jit))
     got = _Collector(int(n), model.n_p, (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits"))
     chunks = functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size,
                                max_size=100 if batch else 20)
@@ -254,7 +265,7 @@ class _Collector:
 
 def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.05, params=None, n: int = 200,
                         seed=0, workers: int | None = 1, progress: Progress | None = None, scheduler=None,
-                        chunk_size: int | None = None, batch: bool = True) -> ConfidenceIntervals:
+                        chunk_size: int | None = None, batch: bool = True, jit: bool = True) -> ConfidenceIntervals:
     """Parametric bootstrap percentile (1 - alpha) intervals (see the module docstring).
 
     Parameters
@@ -270,6 +281,7 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     scheduler : str or distributed.Client, optional   run the refits on a Dask cluster instead
     chunk_size : int, optional  replicates per task (see :func:`bootstrap_replicates`)
     batch : bool                refit with the batch engine (False: identify per refit)
+    jit : bool                  compiled model functions during the refits (see :func:`bootstrap_replicates`)
 
     Returns
     -------
@@ -287,7 +299,7 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     if model is None or data is None:
         raise ValueError("model, data: the bootstrap needs the model and the measurements the estimate was "
                          "fitted to (conf_int(..., model=model, data=data))")
-    reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, batch)
+    reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, batch, jit)
     P, errors = reps.P, reps.errors
     ok = np.all(np.isfinite(P), axis=1)
     if ok.sum() < 2:

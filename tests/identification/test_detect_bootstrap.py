@@ -135,3 +135,23 @@ def test_batch_must_be_a_bool():
     mm, data = _mm()
     with pytest.raises(TypeError, match="batch"):
         bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, batch="yes")
+
+
+def test_jit_gives_the_same_numbers_and_restores_the_setting():
+    """jit=True (the default: compiled model functions, as Monte Carlo) vs jit=False (the virtual
+    machine): the same statistics to round-off; the process-wide JIT setting is left as it was."""
+    import shutil
+    from models.state import JIT
+    mm, data = _mm()
+    kw = dict(n_boot=6, seed=4, chunk_size=3)
+    before = JIT.enabled
+    a = bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], jit=False, **kw)
+    used = JIT.stats.compiled + JIT.stats.loaded
+    b = bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], **kw)
+    assert JIT.enabled == before
+    np.testing.assert_allclose(b.boot_statistics, a.boot_statistics, rtol=1e-10)
+    np.testing.assert_array_equal(b.pvalue, a.pvalue)
+    if shutil.which("gcc") is not None:
+        assert JIT.stats.compiled + JIT.stats.loaded > used      # the compiled path was really taken
+    with pytest.raises(TypeError, match="jit"):
+        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, jit="yes")
