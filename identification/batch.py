@@ -1179,8 +1179,12 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     Y_ref = None
     if usable:
         try:
+            own_all = (not data.shared and starts is not None and start_states is not None
+                       and np.all(np.isfinite(np.asarray(starts, float))))
             if Y0 is not None:
                 Y_ref = Y0
+            elif own_all:            # every member starts from its own states: no solve at p0
+                Y_ref = np.asarray(start_states, float).reshape(R, n_q, n_y)
             elif data.shared:
                 Y_ref = solve_states(model, p0, q)
             else:                    # all members' rows in one solve
@@ -1225,7 +1229,8 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         if data.shared:
             points = _Points(model, Q_u, members.size, p0, Y_u)
         else:
-            points = _Points(model, Q_u[members], members.size, p0, Y_u[members])
+            # (E_y's symmetry, a shortcut checked again at every sweep, is first tested at one member's start)
+            points = _Points(model, Q_u[members], members.size, P0[members[0]], Yst[members[0]])
         it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs,
                       sigma_unknown, starts is None and data.shared)
     converged = np.zeros(R, bool)
