@@ -1,7 +1,9 @@
 r"""Batched weighted least squares: many data sets of one model fitted together.
 
 Monte Carlo replications, bootstrap samples and profile points fit the SAME model with the
-same inputs, sensors and weights to R data sets z^(r).  States and sensitivities depend on
+same sensors and weights to R data sets z^(r), with common inputs or with each member's own
+inputs of one shape (n_q, d_q) (profile points: the fixed parameter values are input columns of
+:func:`identification.fixed.fixed_model`).  States and sensitivities depend on
 p only, never on the data, so the R fits are advanced together: every sweep evaluates the
 model at all (member, input) points in one mapped CasADi call and does the linear algebra
 as batched NumPy.  Member r minimises the reduced objective of paper eq. 3,
@@ -48,9 +50,10 @@ pivot positive and E_y symmetric to 1e-12 (checked at every point of every sweep
 and without JIT compilation, the sweep takes the dense path (E, h and their derivatives from
 CasADi, LU solves of E_y by LAPACK, the Lagrangian Hessian by CasADi).
 
-Members that share the start (p0 and the states solved there) share the first sweep: the
-model is evaluated once and only the data terms differ.  Identical input rows (same q and
-the same state at p0) are evaluated once per member (their data terms are pooled exactly).
+With common inputs, members that share the start (p0 and the states solved there) share the
+first sweep: the model is evaluated once and only the data terms differ, and identical input
+rows (same q and the same state at p0) are evaluated once per member (their data terms are
+pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
 fitted by identify.
 
