@@ -36,9 +36,9 @@ The grid's constrained fits are fits of one model with different fixed values: w
 :func:`identification.fixed.fixed_model`, the fixed values as per-member input columns, so K
 points cost K n_q row evaluations per sweep), each point started from its solved neighbour in
 the row before the block; points the batch does not converge are solved by the per-point Newton.
-``python -m bench.bench_bootstrap_batch --profiles-only`` measured 1.5-3.1x less CPU per grid
-point than the per-point path (11 x 11 and 25 x 25 valley grids, explicit and implicit
-3-parameter models; same statistic to 2e-11).
+``python -m bench.bench_bootstrap_batch --profiles-only`` measured 2.1-4.2x less CPU per grid
+point than the per-point path on valley grids (1.4-5.1x on axes grids; 11 x 11 and 25 x 25,
+explicit and implicit 3-parameter models; the same statistic to 3e-10).
 """
 from __future__ import annotations
 
