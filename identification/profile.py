@@ -889,7 +889,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     :func:`identification.fixed.fixed_model` (the pair's values as per-member input columns), each
     point started from its column's solved point in the row before the block (towards the
     centre); a point the batch does not converge (or ends on a bound) is solved point by point
-    from its neighbour, counted in ``notes``.  ``batch=False``: every point by the per-point solver.
+    from its neighbour, counted in ``notes``.  ``batch=False``, or a model of two parameters (no
+    free parameter left): every point by the per-point solver.
     """
     alpha = validate_alpha(alpha)
     idx = resolve_params(list(pair), tuple(est.param_names))
@@ -932,7 +933,7 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
         U, W = np.meshgrid(u, u)
         X = ph[0] + L[0, 0] * U + L[0, 1] * W
         Y = ph[1] + L[1, 0] * U + L[1, 1] * W
-    solve = _grid_batched if batch else _grid_per_point
+    solve = _grid_batched if batch and model.n_p > 2 else _grid_per_point      # (a pair alone: nothing to fit)
     D, failed, outside, batch_note = solve(prof, idx, X, Y, C, ph)
     notes = [valley_note] if valley_note else []
     if batch_note:

@@ -57,3 +57,16 @@ def test_a_row_the_batch_cannot_solve_falls_back_point_by_point():
     assert any("point by point" in note for note in bat.notes)
     np.testing.assert_array_equal(np.isfinite(bat.statistic), np.isfinite(per.statistic))
     np.testing.assert_allclose(bat.statistic, per.statistic, rtol=1e-8, atol=1e-8)
+
+
+def test_a_two_parameter_model_takes_the_per_point_path():
+    """With the pair fixed nothing is left to fit: batch=True solves every point per point, as batch=False."""
+    model = Model.explicit(params=["a", "b"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
+    x = np.linspace(0.5, 10.0, 12)
+    z = (3 * (1 - np.exp(-0.4 * x)))[None, :, None] + 0.05 * np.random.default_rng(2).standard_normal((1, 12, 1))
+    data = Measurements(x, z, [0.05])
+    est = identify(model, data, [2.0, 0.5])
+    bat = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=True)
+    per = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
+    assert np.all(np.isfinite(bat.statistic))
+    np.testing.assert_array_equal(bat.statistic, per.statistic)
