@@ -12,17 +12,18 @@ Problems: the press model M1 (the paper's 29 loads, n_M = 2, sensors D_y and F_x
 sigma, known), Michaelis-Menten (8 points, n_M = 2, sigma known) and Rooney-Biegler (6 points,
 sigma estimated).
 
-``--profiles`` adds a second table: the constrained fits of a likelihood-ratio region
-(:func:`identification.profile.lr_region`, ``grid="axes"``, the pair fixed at every grid point,
-the other parameters re-optimised) computed by lr_region (one reduced Newton per point, warm
-started from its neighbour) and by :func:`identification.batch.fit_batch` on the derived model
-of :func:`identification.fixed.fixed_model` (K grid points per batch, their rows stacked by
-:func:`identification.fixed.stacked_fixed_batch`), CPU per grid point and the largest relative
-difference of the objectives, on a 3-parameter explicit model and the implicit spring chain
-(4 states, 3 parameters).
+``--profiles`` adds a second table: likelihood-ratio regions
+(:func:`identification.profile.lr_region`, ``grid="valley"`` by default, the pair fixed at every
+grid point, the third parameter re-optimised) computed with ``batch=False`` (one reduced Newton
+per point, warm started from its neighbour) and ``batch=True`` (every row but the centre one as
+one :func:`identification.batch.fit_batch` call on the derived model of
+:func:`identification.fixed.fixed_model`, per-member inputs), alternating in one process: CPU
+and wall per grid point, the largest difference of the statistic D between the paths and the
+batched points redone point by point, on a 3-parameter explicit model and the implicit spring
+chain (4 states, 3 parameters), 11 x 11 and 25 x 25 grids.
 
-Run ``python -m bench.bench_bootstrap_batch --n 200 --repeats 3 --profiles`` (``--jit`` compiles
-the CasADi functions to C for both paths).
+Run ``python -m bench.bench_bootstrap_batch --n 200 --repeats 3 --profiles`` (``--profiles-only``:
+only the region table; ``--jit`` compiles the CasADi functions to C for both paths).
 """
 from __future__ import annotations
 
@@ -38,9 +39,7 @@ import numpy as np  # noqa: E402
 
 from bench.bench_detect import P0, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
 from identification import Measurements, identify  # noqa: E402
-from identification.batch import fit_batch  # noqa: E402
 from identification.bootstrap import bootstrap_replicates  # noqa: E402
-from identification.fixed import fixed_model, stacked_fixed_batch  # noqa: E402
 from identification.profile import lr_region  # noqa: E402
 from identification.montecarlo import ModelCampaign  # noqa: E402
 from models import Model  # noqa: E402
@@ -87,33 +86,34 @@ def region_problems() -> list:
     return out
 
 
-def region_table(n_grid: int, sizes: tuple) -> None:
-    """CPU per grid point: lr_region (per-point Newton) against fit_batch on the derived model."""
-    print(f"\nConstrained fits of an {n_grid} x {n_grid} likelihood-ratio region (pair (0, 1) fixed, the third "
-          "parameter re-optimised)\n")
-    print("| problem | lr_region CPU / point | " + " | ".join(f"fit_batch, K = {k}: CPU / point" for k in sizes)
-          + " | max rel. diff of the objectives | batch fallbacks |")
-    print("|---|---|" + "---|" * len(sizes) + "---|---|")
+def region_table(sizes: tuple, repeats: int, grid: str = "valley") -> None:
+    """CPU per grid point of lr_region: the per-point solver (batch=False) against the rows batched (batch=True)."""
+    print(f"\nLikelihood-ratio regions (lr_region, grid = {grid!r}, pair (0, 1), the third parameter re-optimised at "
+          f"every point): per-point Newton (batch=False) against rows as fit_batch calls with per-member inputs "
+          f"(batch=True); medians of {repeats} alternating runs\n")
+    print("| problem | grid | per-point CPU / point | batched CPU / point | CPU ratio | per-point wall / point "
+          "| batched wall / point | max abs diff of D | points solved | batched points redone point by point |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for label, model, data, est in region_problems():
-        lr_region(model, data, est, (0, 1), n_grid=3, grid="axes")
-        reg, _, c_lr = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n_grid, grid="axes"))
-        values = np.column_stack([reg.X.ravel(), reg.Y.ravel()])
-        fm = fixed_model(model, [0, 1])
-        target = est.objective + reg.statistic.ravel() / 2
-        cells, diff, n_fb = [], 0.0, 0
-        for k in sizes:
-            fit_batch(fm, stacked_fixed_batch(data.inputs, data.z, est.sigma, values[:k]), est.p[2:], est.weights)
-
-            def run():
-                return [fit_batch(fm, stacked_fixed_batch(data.inputs, data.z, est.sigma, values[a:a + k]),
-                                  est.p[2:], est.weights) for a in range(0, len(values), k)]
-            fits, _, c_b = _timed(run)
-            obj = np.concatenate([f.objective for f in fits])
-            diff = max(diff, float(np.nanmax(np.abs(obj - target) / np.abs(target))))
-            n_fb += sum(len(f.fallbacks) for f in fits)
-            cells.append(f"{c_b / len(values) * 1e3:.2f} ms")
-        print(f"| {label} | {c_lr / len(values) * 1e3:.2f} ms | " + " | ".join(cells) + f" | {diff:.1e} | {n_fb} |",
-              flush=True)
+        for b in (False, True):
+            lr_region(model, data, est, (0, 1), n_grid=5, grid=grid, batch=b)            # build once
+        for n in sizes:
+            times = {True: [], False: []}
+            got = {}
+            for _ in range(repeats):
+                for b in (False, True):
+                    got[b], w, c = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n, grid=grid, batch=b))
+                    times[b].append((w, c))
+            (wp, cp), (wb, cb) = (np.median(np.array(times[b]), axis=0) for b in (False, True))
+            Dp, Db = got[False].statistic, got[True].statistic
+            both = np.isfinite(Dp) & np.isfinite(Db)
+            same = bool(np.array_equal(np.isfinite(Dp), np.isfinite(Db)))
+            diff = float(np.max(np.abs(Dp[both] - Db[both]))) if both.any() else float("nan")
+            redo = [note.split()[0] for note in got[True].notes if "point by point" in note]
+            k = n * n
+            print(f"| {label} | {n} x {n} | {cp / k * 1e3:.2f} ms | {cb / k * 1e3:.2f} ms | {cp / cb:.1f} | "
+                  f"{wp / k * 1e3:.2f} ms | {wb / k * 1e3:.2f} ms | {diff:.1e} | {int(both.sum())} of {k}"
+                  f"{'' if same else ' (different points solved!)'} | {redo[0] if redo else 0} |", flush=True)
 
 
 def _timed(f):
@@ -129,11 +129,16 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--jit", action="store_true", help="compile the CasADi functions to C (both paths)")
     ap.add_argument("--profiles", action="store_true", help="also the constrained fits of a likelihood-ratio region")
-    ap.add_argument("--n-grid", type=int, default=11, help="grid points per axis of the region (--profiles)")
+    ap.add_argument("--n-grid", type=int, nargs="+", default=[11, 25], help="grid points per axis of the region (--profiles)")
+    ap.add_argument("--grid", default="valley", choices=("valley", "axes", "principal"), help="grid of the region")
+    ap.add_argument("--profiles-only", action="store_true", help="only the region table")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     print(f"machine: {_machine()}; {time.strftime('%Y-%m-%d %H:%M:%S %Z')}; n = {args.n} replicates, "
           f"{args.repeats} alternating repeats (medians), serial, JIT {'on' if args.jit else 'off'}", flush=True)
     set_jit(bool(args.jit))
+    if args.profiles_only:
+        region_table(tuple(args.n_grid), args.repeats, args.grid)
+        return
     print("\n| problem | identify CPU / replicate | batch CPU / replicate | CPU ratio | identify wall / replicate "
           "| batch wall / replicate | max rel. diff of the refits | batch fallbacks | failed refits |")
     print("|---|---|---|---|---|---|---|---|---|")
@@ -157,7 +162,7 @@ def main(argv=None):
               f"| {wb / n * 1e3:.2f} ms | {diff:.1e} | {len(got[True].fallbacks)} | "
               f"{len(got[True].errors)} (identify path: {len(got[False].errors)}) |", flush=True)
     if args.profiles:
-        region_table(args.n_grid, (3, 11, 33))
+        region_table(tuple(args.n_grid), args.repeats, args.grid)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 r"""Batched weighted least squares: many data sets of one model fitted together.
 
 Monte Carlo replications, bootstrap samples and profile points fit the SAME model with the
-same inputs, sensors and weights to R data sets z^(r).  States and sensitivities depend on
+same sensors and weights to R data sets z^(r), with common inputs or with each member's own
+inputs of one shape (n_q, d_q) (profile points: the fixed parameter values are input columns of
+:func:`identification.fixed.fixed_model`).  States and sensitivities depend on
 p only, never on the data, so the R fits are advanced together: every sweep evaluates the
 model at all (member, input) points in one mapped CasADi call and does the linear algebra
 as batched NumPy.  Member r minimises the reduced objective of paper eq. 3,
@@ -48,9 +50,10 @@ pivot positive and E_y symmetric to 1e-12 (checked at every point of every sweep
 and without JIT compilation, the sweep takes the dense path (E, h and their derivatives from
 CasADi, LU solves of E_y by LAPACK, the Lagrangian Hessian by CasADi).
 
-Members that share the start (p0 and the states solved there) share the first sweep: the
-model is evaluated once and only the data terms differ.  Identical input rows (same q and
-the same state at p0) are evaluated once per member (their data terms are pooled exactly).
+With common inputs, members that share the start (p0 and the states solved there) share the
+first sweep: the model is evaluated once and only the data terms differ, and identical input
+rows (same q and the same state at p0) are evaluated once per member (their data terms are
+pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
 fitted by identify.
 
@@ -134,11 +137,13 @@ def _readonly(a) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class BatchData:
-    """R data sets of one model with the same inputs, stacked (the input of :func:`fit_batch`).
+    """R data sets of one model, stacked (the input of :func:`fit_batch`).
 
     Attributes
     ----------
-    inputs : ndarray (n_q, d_q)      the common inputs
+    inputs : ndarray (n_q, d_q)      the common inputs, or (R, n_q, d_q): each member's own inputs
+                                     (same shape; e.g. profile points, whose fixed parameter values
+                                     are input columns, :func:`identification.fixed.fixed_model`)
     z : ndarray (R, n_M, n_q, n_S)   values (NaN: missing)
     sigma : ndarray (R, n_S) or None sensor sigmas (None: a common unknown sigma for every member)
     make : callable or None          member -> its Measurements (the data of a fallback fit; None:
@@ -156,9 +161,12 @@ class BatchData:
     def __post_init__(self):
         q = np.asarray(self.inputs, float)
         z = np.asarray(self.z, float)
-        if q.ndim != 2 or z.ndim != 4 or z.shape[2] != q.shape[0] or z.shape[0] < 1:
-            raise DataError(f"z, inputs: expected z of shape (R >= 1, n_M, n_q, n_S) and inputs (n_q, d_q), got "
-                            f"{z.shape} and {q.shape}")
+        if q.ndim not in (2, 3) or z.ndim != 4 or z.shape[2] != q.shape[-2] or z.shape[0] < 1:
+            raise DataError(f"z, inputs: expected z of shape (R >= 1, n_M, n_q, n_S) and inputs (n_q, d_q) or "
+                            f"(R, n_q, d_q), got {z.shape} and {q.shape}")
+        if q.ndim == 3 and q.shape[0] != z.shape[0]:
+            raise DataError(f"inputs: per-member inputs need one (n_q, d_q) array per member of z: expected shape "
+                            f"({z.shape[0]}, {q.shape[1]}, {q.shape[2]}), got {q.shape}")
         if self.sigma is not None:
             sig = np.asarray(self.sigma, float)
             if sig.shape != (z.shape[0], z.shape[3]) or not np.all(np.isfinite(sig) & (sig > 0)):
@@ -170,8 +178,9 @@ class BatchData:
 
     @classmethod
     def of(cls, data: Sequence[Measurements]) -> "BatchData":
-        """Stack Measurements with the same inputs (all sigmas given or all unknown; members with fewer
-        series are padded with missing values)."""
+        """Stack Measurements (all sigmas given or all unknown; members with fewer series are padded
+        with missing values).  Inputs of the same shape (n_q, d_q): when they are all equal the batch
+        has common inputs, else each member keeps its own (``inputs`` of shape (R, n_q, d_q))."""
         data = tuple(data)
         if not data:
             raise DataError("data: the batch is empty; give at least one Measurements")
@@ -180,9 +189,10 @@ class BatchData:
                 raise TypeError(f"data[{r}]: expected an identification.Measurements, got {type(d).__name__}")
         d0 = data[0]
         for r, d in enumerate(data[1:], 1):
-            if d.inputs.shape != d0.inputs.shape or not np.array_equal(d.inputs, d0.inputs):
-                raise DataError(f"data[{r}]: its inputs differ from data[0]'s; a batch fits data sets with the same "
-                                "inputs (group the data sets by inputs, or call identify per data set)")
+            if d.inputs.shape != d0.inputs.shape:
+                raise DataError(f"data[{r}]: its inputs have shape {d.inputs.shape}, data[0]'s {d0.inputs.shape}; a "
+                                "batch fits data sets whose inputs have one shape (n_q, d_q) (group the data sets "
+                                "by shape, or call identify per data set)")
             if (d.sigma is None) != (d0.sigma is None):
                 raise DataError(f"data[{r}]: sigma is {'unknown' if d.sigma is None else 'given'} but not for "
                                 "data[0]; a batch needs all sigmas given or all unknown")
@@ -193,17 +203,28 @@ class BatchData:
         for r, d in enumerate(data):
             z[r, :d.n_M] = d.z
         sig = None if d0.sigma is None else np.stack([np.asarray(d.sigma, float) for d in data])
-        return cls(d0.inputs, z, sig, data.__getitem__)
+        shared = all(np.array_equal(d.inputs, d0.inputs) for d in data[1:])
+        inputs = d0.inputs if shared else np.stack([d.inputs for d in data])
+        return cls(inputs, z, sig, data.__getitem__)
 
     @property
     def n_members(self) -> int:
         return self.z.shape[0]
 
+    @property
+    def shared(self) -> bool:
+        """True when all members have the same inputs (``inputs`` of shape (n_q, d_q))."""
+        return self.inputs.ndim == 2
+
+    def member_inputs(self, r: int) -> np.ndarray:
+        """The inputs (n_q, d_q) of member r."""
+        return self.inputs if self.shared else self.inputs[r]
+
     def member(self, r: int) -> Measurements:
         """The Measurements of member r."""
         if self.make is not None:
             return self.make(r)
-        return Measurements(self.inputs, self.z[r], None if self.sigma is None else self.sigma[r])
+        return Measurements(self.member_inputs(r), self.z[r], None if self.sigma is None else self.sigma[r])
 
     def weights(self, weights=None) -> np.ndarray:
         """Validated sensor weights (n_S,): ones for None, else finite and >= 0 (as Measurements.sensor_weights)."""
@@ -478,12 +499,15 @@ def _mapped(model, name: str, n: int) -> _Mapped:
 
 
 class _Points:
-    """Mapped evaluation of the model at (member, unique input) points: E, h and derivatives."""
+    """Mapped evaluation of the model at (member, unique input) points: E, h and derivatives.
+
+    ``Q_u`` (n_u, d_q): the inputs of every member; (R, n_u, d_q): each member's own (the methods
+    then take ``members``, the members' positions in Q_u)."""
 
     def __init__(self, model: Model, Q_u: np.ndarray, R: int, p0: np.ndarray | None = None,
                  Y_u: np.ndarray | None = None):
         self.model, self.Q_u, self.R = model, Q_u, R
-        self.n_u = Q_u.shape[0]
+        self.n_u = Q_u.shape[-2]
         self.fused = _sweep_function(model) is not None
         self._start = (p0, Y_u)
         self._sym = None
@@ -492,14 +516,15 @@ class _Points:
         """:func:`_symmetric` at the start (p0, Y_u), evaluated once, when the dense path first needs it."""
         if self._sym is None:
             p0, Y_u = self._start
-            self._sym = p0 is not None and _symmetric(self.model, self, p0, Y_u)
+            self._sym = p0 is not None and _symmetric(self.model, self, p0, Y_u if Y_u.ndim == 2 else Y_u[0],
+                                                      None if self.Q_u.ndim == 2 else np.zeros(1, int))
         return self._sym
 
     def sweep(self, Y: np.ndarray, P: np.ndarray, wts: np.ndarray, zb: np.ndarray,
-              c: np.ndarray | None = None) -> tuple:
+              c: np.ndarray | None = None, members: np.ndarray | None = None) -> tuple:
         """The outputs of :func:`_sweep_function` at Y (m, n_u, n_y), P (m, n_p) and the data terms
         wts, zb, c (m, n_u, n_S) (c None: zero), each (m, n_u, ...) (matrices in row-major order)."""
-        m, n, Yf, Pf, Qf = self._args(Y, P)
+        m, n, Yf, Pf, Qf = self._args(Y, P, members)
         mp = n // self.n_u
         idx = np.minimum(np.arange(mp), m - 1)
         W, Zb = wts[idx].reshape(n, -1), zb[idx].reshape(n, -1)
@@ -512,27 +537,30 @@ class _Points:
             res.append(o.swapaxes(2, 3) if i in _SWEEP_MATRICES else o[..., 0, :])
         return tuple(res)
 
-    def _args(self, Y, P):
+    def _args(self, Y, P, members=None):
         m = P.shape[0]
         mp = _padded(m, self.R)
         idx = np.minimum(np.arange(mp), m - 1)
         n = mp * self.n_u
         Yf = Y[idx].reshape(n, -1)
         Pf = np.repeat(P[idx], self.n_u, axis=0)
-        Qf = np.tile(self.Q_u, (mp, 1))
+        if self.Q_u.ndim == 2:
+            Qf = np.tile(self.Q_u, (mp, 1))
+        else:                        # per-member inputs: the rows of each evaluated member
+            Qf = self.Q_u[np.asarray(members)[idx]].reshape(n, -1)
         return m, n, Yf, Pf, Qf
 
-    def terms(self, Y: np.ndarray, P: np.ndarray) -> tuple:
+    def terms(self, Y: np.ndarray, P: np.ndarray, members: np.ndarray | None = None) -> tuple:
         """(E, h, Ey, Ep, hy, hp) at Y (m, n_u, n_y), P (m, n_p), each (m, n_u, ...)."""
-        m, n, Yf, Pf, Qf = self._args(Y, P)
+        m, n, Yf, Pf, Qf = self._args(Y, P, members)
         E, h, Ey, Ep, hy, hp = _mapped(self.model, "terms", n)(Yf, Pf, Qf)
         k, sh = m * self.n_u, (m, self.n_u)
         return (E[:k, 0].reshape(sh + (-1,)), h[:k, 0].reshape(sh + (-1,)),
                 *(a[:k].reshape(sh + a.shape[1:]).swapaxes(2, 3) for a in (Ey, Ep, hy, hp)))
 
-    def lag_hessians(self, Y, P, lam, mu) -> np.ndarray:
+    def lag_hessians(self, Y, P, lam, mu, members: np.ndarray | None = None) -> np.ndarray:
         """Hessians of lam^T h + mu^T E w.r.t. (y, p) at every point, (m, n_u, n_y + n_p, n_y + n_p)."""
-        m, n, Yf, Pf, Qf = self._args(Y, P)
+        m, n, Yf, Pf, Qf = self._args(Y, P, members)
         mp = n // self.n_u
         idx = np.minimum(np.arange(mp), m - 1)
         L = lam[idx].reshape(n, -1)
@@ -565,7 +593,10 @@ def _prepare(model, data: BatchData, w, Y_ref) -> _Prepared:
     objective's sigmas as identify chooses them, pooled over identical input rows:
     sum_{j in u} c_j (zbar_j - h)^2 = C_u (zbar_u - h)^2 + sum_{j in u} c_j (zbar_j - zbar_u)^2 with
     C_u = sum_j c_j and zbar_u = sum_j c_j zbar_j / C_u (exact)."""
-    first, group = _unique_rows(data.inputs, Y_ref)
+    if data.shared:
+        first, group = _unique_rows(data.inputs, Y_ref)
+    else:                            # per-member inputs: no pooling of rows
+        first = group = np.arange(data.inputs.shape[1])
     n_u, R = first.size, data.n_members
     selected = np.flatnonzero(w > 0)
     Z = data.z
@@ -766,7 +797,7 @@ def _evaluate_fused(model, prep: _Prepared, points: _Points, it: _Iteration, a: 
     or asymmetry): the caller then takes the dense path for this sweep."""
     n_p = model.n_p
     P, Y = it.P[a], it.Y[a]
-    dyE, yp, h, G, g, F, S, obj, gabs, piv, asym = points.sweep(Y, P, prep.wts[a], prep.zb[a])
+    dyE, yp, h, G, g, F, S, obj, gabs, piv, asym = points.sweep(Y, P, prep.wts[a], prep.zb[a], members=a)
     with np.errstate(invalid="ignore", over="ignore"):
         spd = np.all((piv[..., 0] > 0) & (asym[..., 0] <= 1e-12))
         finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(G).all(axis=(1, 2, 3))
@@ -796,7 +827,7 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
     n_p, n_y = model.n_p, model.n_y
     P, Y = it.P[a], it.Y[a]
     m, n_u = a.size, points.n_u
-    E, h, Ey, Ep, hy, hp = points.terms(Y, P)
+    E, h, Ey, Ep, hy, hp = points.terms(Y, P, a)
     zb, wts = prep.zb[a], prep.wts[a]
     with np.errstate(invalid="ignore", over="ignore"):
         finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(E).all(axis=(1, 2))
@@ -848,7 +879,7 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
             mu_b = np.linalg.solve(Ey[b].transpose(0, 1, 3, 2), rhs_mu[..., None])[..., 0]
         else:
             mu_b = mu[b] if n_y else np.zeros((b.size, n_u, 0))
-        Hl = points.lag_hessians(Y[b], P[b], lam_h[b], mu_b)               # order (y, p)
+        Hl = points.lag_hessians(Y[b], P[b], lam_h[b], mu_b, a[b])         # order (y, p)
         if n_y:                      # Z^T Hl Z with Z = [y'; I], summed over the inputs
             ypb = yp[b]
             T = np.matmul(Hl[..., :n_y], ypb) + Hl[..., n_y:]                # (b, n_u, n_y + n_p, n_p)
@@ -1053,28 +1084,32 @@ def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndar
     return out
 
 
-def _symmetric(model, points: _Points, p0: np.ndarray, Y_u: np.ndarray) -> bool:
-    """True when E_y is symmetric at the start (checked at every unique input to 1e-12 relative):
-    the adjoint E_y^{-T} h_y^T lambda then shares the factorisation of the other solves."""
+def _symmetric(model, points: _Points, p0: np.ndarray, Y_u: np.ndarray, members=None) -> bool:
+    """True when E_y is symmetric at the start (checked at every unique input to 1e-12 relative; with
+    per-member inputs at those of ``members``): the adjoint E_y^{-T} h_y^T lambda then shares the
+    factorisation of the other solves."""
     if not model.n_y:
         return False
     try:
-        Ey = points.terms(Y_u[None], p0[None])[2][0]
+        Ey = points.terms(Y_u[None], p0[None], members)[2][0]
     except StateSolveError:
         return False
     return bool(np.all(np.abs(Ey - Ey.transpose(0, 2, 1)) <= 1e-12 * np.abs(Ey).max(axis=(1, 2))[:, None, None]))
 
 
 def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weights=None, settings: IdentifySettings | None = None,
-              Y0=None, starts=None, start_states=None, batch_settings: BatchSettings | None = None) -> BatchFit:
-    """Fit R data sets of one model (same inputs, sensors and weights) together; see the module docstring.
+              Y0=None, starts=None, start_states=None, batch_settings: BatchSettings | None = None,
+              fallback: bool = True) -> BatchFit:
+    """Fit R data sets of one model (same sensors and weights) together; see the module docstring.
 
     Parameters
     ----------
     model : models.Model
     data : sequence of Measurements, or BatchData
-        The R data sets: the same inputs (n_q, d_q); sigma given for all or unknown for all
-        (missing values may differ).
+        The R data sets: inputs of one shape (n_q, d_q), common or per member (each member is then
+        evaluated at its own n_q rows; identical rows are pooled and the first sweep shared only
+        when the inputs are common); sigma given for all or unknown for all (missing values may
+        differ).
     p0 : array_like (n_p,)
         Start values (inside the bounds), also the start of identify for a fallback member.
     weights : array_like (n_S,), optional
@@ -1082,7 +1117,7 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     settings : IdentifySettings, optional
         The estimator's settings: the convergence test (``refine_decrement``, ``decrement_tol``),
         the identifiability test (``rank_rtol``) and the settings of the fallback fits.
-    Y0 : array (n_q, n_y), optional
+    Y0 : array (n_q, n_y), or (R, n_q, n_y) with per-member inputs, optional
         States at p0 (else solved), the start of the members without ``starts``.
     starts : array (R, n_p), optional
         Per-member start values (a row of NaN: start at p0), e.g. the precision-weighted mean of
@@ -1090,6 +1125,11 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     start_states : array (R, n_q, n_y), optional
         States at (or near) ``starts``.
     batch_settings : BatchSettings, optional
+    fallback : bool
+        True (default): a member the batch iteration does not give is fitted by identify.  False:
+        it is left without an estimate (``ok`` False, the result an IdentificationError with the
+        reason, recorded in ``fallbacks`` with error "not refitted (fallback=False)"), for a caller
+        with its own solver.
 
     Returns
     -------
@@ -1107,30 +1147,51 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     data, p0, w = _check_batch(model, data, p0, weights)
     R, n_p, n_y = data.n_members, model.n_p, model.n_y
     q = data.inputs
+    n_q = q.shape[-2]
+    if Y0 is not None and n_y:
+        Y0 = np.asarray(Y0, float)
+        want = (n_q, n_y) if data.shared else (R, n_q, n_y)
+        if Y0.shape != want:
+            raise DataError(f"Y0: expected the states at p0 of shape {want}, got {Y0.shape}")
     sigma_unknown = data.sigma is None
     records, results = [], [None] * R
-    fallback = {}                                   # member -> reason
 
     def run_fallbacks():
         for r, why in sorted(fallback.items()):
+            if not fallback_on:
+                records.append(FallbackRecord(int(r), why, "not refitted (fallback=False)"))
+                results[r] = IdentificationError(f"member {r}: {why} (not refitted: fallback=False)")
+                continue
             try:
                 # a member whose iteration left the bounds is solved with them from the start: the
                 # unbounded first pass of identify (lazy_bounds) may run to Ipopt's max_iter first
                 use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
-                est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0)
+                Y0_r = Y0 if Y0 is None or data.shared or not n_y else Y0[r]
+                est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
                 records.append(FallbackRecord(int(r), why))
                 results[r] = est
             except (IdentificationError, DataError) as exc:
                 records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
                 results[r] = exc
 
-    usable = (q.shape[1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(w > 0)
+    fallback_on = bool(fallback)
+    fallback = {}
+    usable = (q.shape[-1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(w > 0)
               and np.all(p0 >= model.lower) and np.all(p0 <= model.upper) and np.all(np.isfinite(p0))
               and (not n_y or numerics(model).dense))
     Y_ref = None
     if usable:
         try:
-            Y_ref = np.asarray(Y0, float) if Y0 is not None else solve_states(model, p0, q)
+            own_all = (not data.shared and starts is not None and start_states is not None
+                       and np.all(np.isfinite(np.asarray(starts, float))))
+            if Y0 is not None:
+                Y_ref = Y0
+            elif own_all:            # every member starts from its own states: no solve at p0
+                Y_ref = np.asarray(start_states, float).reshape(R, n_q, n_y)
+            elif data.shared:
+                Y_ref = solve_states(model, p0, q)
+            else:                    # all members' rows in one solve
+                Y_ref = solve_states(model, p0, q.reshape(-1, q.shape[2])).reshape(R, n_q, -1)
         except StateSolveError:
             usable = False
     if not usable:
@@ -1142,13 +1203,17 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
     n_values = np.isfinite(data.z[..., w > 0]).sum(axis=(1, 2, 3))
     for r in np.flatnonzero((n_values < n_p) | (sigma_unknown & (n_values <= n_p))):
         fallback[int(r)] = "too few values for the parameters"
-    prep = _prepare(model, data, w, Y_ref if n_y else np.zeros((q.shape[0], 0)))
-    Q_u = q[prep.first]
+    prep = _prepare(model, data, w, Y_ref if n_y else np.zeros(q.shape[:-1] + (0,)))
     s_p = param_scale(model, p0)
-    Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
-    points = _Points(model, Q_u, R, p0, Y_u)
+    if data.shared:
+        Q_u = q[prep.first]
+        Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
+        Yst = np.tile(Y_u, (R, 1, 1))
+    else:
+        Q_u = q
+        Y_u = Y_ref if n_y else np.zeros((R, n_q, 0))
+        Yst = Y_u.copy()
     P0 = np.tile(p0, (R, 1))
-    Yst = np.tile(Y_u, (R, 1, 1))
     if starts is not None:
         S0 = np.asarray(starts, float).reshape(R, n_p)
         if start_states is None and n_y:
@@ -1156,7 +1221,7 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         own = np.all(np.isfinite(S0), axis=1)
         P0[own] = S0[own]
         if n_y:
-            YS = np.asarray(start_states, float).reshape(R, q.shape[0], n_y)
+            YS = np.asarray(start_states, float).reshape(R, n_q, n_y)
             Yst[own] = YS[own][:, prep.first]
     members = np.array([r for r in range(R) if r not in fallback], int)
     it = None
@@ -1164,9 +1229,13 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         prep_m = _Prepared(prep.first, prep.group, prep.zb[members], prep.wts[members], prep.const[members],
                            prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w,
                            prep.Z[members])
-        points.R = members.size
+        if data.shared:
+            points = _Points(model, Q_u, members.size, p0, Y_u)
+        else:
+            # (E_y's symmetry, a shortcut checked again at every sweep, is first tested at one member's start)
+            points = _Points(model, Q_u[members], members.size, P0[members[0]], Yst[members[0]])
         it = _iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs,
-                      sigma_unknown, starts is None)
+                      sigma_unknown, starts is None and data.shared)
     converged = np.zeros(R, bool)
     decrement = np.full(R, np.nan)
     sweeps = np.zeros(R, int)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from identification import Measurements, identify
-from identification.batch import fit_batch
-from identification.fixed import fixed_model, full_parameters, stacked_fixed_batch
+from identification.batch import BatchData, fit_batch
+from identification.fixed import fixed_batch, fixed_model, full_parameters, stacked_fixed_batch
 from identification.profile import lr_region
 from models import Model
 from models.library import spring_chain
@@ -86,3 +86,59 @@ def test_a_batch_of_constrained_fits_gives_the_likelihood_ratio_region():
 def test_stacked_batch_rejects_mismatched_shapes():
     with pytest.raises(Exception, match="z, inputs"):
         stacked_fixed_batch(np.zeros((3, 1)), np.zeros((2, 4, 1)), [1.0], [[1.0]])
+
+
+def _rise_and_slope():
+    model = Model.explicit(params=["a", "b", "c"], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])) + p[2] * q[0], name="rise and slope")
+    x = np.linspace(0.5, 10.0, 12)
+    z = (3 * (1 - np.exp(-0.4 * x)) + 0.1 * x)[None, :, None] + 0.05 * np.random.default_rng(1).standard_normal((2, 12, 1))
+    data = Measurements(x, z, [0.05])
+    return model, data, identify(model, data, [2.0, 0.5, 0.0])
+
+
+def _spring():
+    from identification.montecarlo import ModelCampaign
+    model = spring_chain(n_y=4, n_sensors=2, n_groups=2)
+    p_true = np.array([2.0, 3.0, 0.05])
+    gen = ModelCampaign(model, p_true, np.column_stack([np.linspace(0.5, 3.0, 10), np.linspace(1.0, -1.0, 10)]), 0.01, 2)
+    data = gen(np.random.default_rng(5))
+    return model, data, identify(model, data, p_true)
+
+
+@pytest.mark.parametrize("problem", [_rise_and_slope, _spring])
+def test_a_batch_with_per_member_inputs_gives_the_constrained_fits(problem):
+    """Explicit and implicit 3-parameter models, (p_0, p_1) fixed at the 16 points of a 4 x 4 grid: fit_batch
+    with per-member inputs (each member its own rows (q, c)) gives the objectives of lr_region's per-point
+    Newton (to 1e-8) and of the stacked batch, and each member's estimate is that of a one-member batch."""
+    model, data, est = problem()
+    reg = lr_region(model, data, est, (0, 1), n_grid=4, grid="axes")
+    assert np.all(np.isfinite(reg.statistic))
+    values = np.column_stack([reg.X.ravel(), reg.Y.ravel()])
+    fm = fixed_model(model, [0, 1])
+    bd = fixed_batch(data.inputs, data.z, est.sigma, values)
+    assert not bd.shared and bd.inputs.shape == (16, data.n_q, data.inputs.shape[1] + 2)
+    bf = fit_batch(fm, bd, est.p[2:], est.weights)
+    assert bf.fallbacks == () and np.all(bf.converged)
+    np.testing.assert_allclose(bf.objective, est.objective + reg.statistic.ravel() / 2, rtol=1e-8)
+    for r in (0, 7):
+        one = fit_batch(fm, [bd.member(r)], est.p[2:], est.weights)
+        np.testing.assert_allclose(bf.p[r], one.p[0], rtol=1e-9)
+        np.testing.assert_allclose(bf.objective[r], one.objective[0], rtol=1e-12)
+
+
+def test_per_member_inputs_of_another_shape_are_refused():
+    model, data, est = _rise_and_slope()
+    with pytest.raises(Exception, match="inputs"):
+        BatchData(np.zeros((3, data.n_q, 2)), np.zeros((2,) + data.z.shape), None)
+    other = Measurements(data.inputs[:5], data.z[:, :5], [0.05])
+    with pytest.raises(Exception, match=r"data\[1\].*shape"):
+        BatchData.of([data, other])
+    shifted = Measurements(data.inputs + 0.1, data.z, [0.05])
+    bd = BatchData.of([data, shifted])
+    assert not bd.shared
+    np.testing.assert_array_equal(bd.member_inputs(1), shifted.inputs)
+    ch, cd, cest = _spring()
+    moved = Measurements(cd.inputs * 1.1, cd.z, cd.sigma)
+    with pytest.raises(Exception, match="Y0"):
+        fit_batch(ch, [cd, moved], cest.p, Y0=np.zeros((cd.n_q, ch.n_y)))     # per member: (2, n_q, n_y)
