@@ -15,8 +15,9 @@ so values agree to the last bit and derivatives are exact (CasADi AD of the same
 A constrained fit min over p_R of Phi(P(p_R, c)) (a profile point) is then an ordinary fit of
 the derived model to data whose input rows carry c; fits with different fixed values are fits
 of one model to different inputs: a batch for :func:`identification.batch.fit_batch` with
-per-member inputs (:func:`fixed_batch`: K fits cost K n_q row evaluations per sweep), or with
-the rows of all members stacked as common inputs (:func:`stacked_fixed_batch`: K^2 n_q).
+per-member inputs (:func:`fixed_batch`: K fits cost K n_q row evaluations per sweep; stacking
+the rows of all members as common inputs instead cost K^2 n_q and was 4-20x slower than
+separate fits, bench/RESULTS.md).
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ from models.contract import Model
 from .batch import BatchData
 from .errors import DataError
 
-__all__ = ["fixed_model", "full_parameters", "fixed_batch", "stacked_fixed_batch"]
+__all__ = ["fixed_model", "full_parameters", "fixed_batch"]
 
 
 def _fixed_indices(model: Model, fixed) -> tuple:
@@ -143,29 +144,3 @@ def fixed_batch(inputs, z, sigma, values) -> BatchData:
                           axis=2)
     sig = np.tile(np.asarray(sigma, float), (R, 1))
     return BatchData(rows, np.broadcast_to(z, (R,) + z.shape), sig)
-
-
-def stacked_fixed_batch(inputs, z, sigma, values) -> BatchData:
-    """The data of R fits of a derived model (:func:`fixed_model`), one per row of ``values``, as one batch.
-
-    Member r's inputs are the rows (q_j, c_r); the batch's inputs are those of all members
-    stacked (R n_q rows), and member r has the values ``z`` on its own rows and none (NaN) on the
-    others', so its objective is that of its own fit.  (:class:`identification.batch.BatchData`
-    with common inputs evaluates each member at all R n_q rows, R times the evaluations of
-    separate fits: :func:`fixed_batch` gives every member its own rows instead.)
-
-    Parameters
-    ----------
-    inputs : ndarray (n_q, d_q)
-    z : ndarray (n_M, n_q, n_S)      the data (NaN: missing)
-    sigma : ndarray (n_S,)           the sensors' sigmas of the objective
-    values : ndarray (R, n_F)        the fixed values of every member
-    """
-    q, z, c = _checked(inputs, z, values)
-    R, n_q = c.shape[0], q.shape[0]
-    rows = np.concatenate([np.hstack([q, np.tile(c[r], (n_q, 1))]) for r in range(R)])
-    Z = np.full((R, z.shape[0], R * n_q, z.shape[2]), np.nan)
-    for r in range(R):
-        Z[r, :, r * n_q:(r + 1) * n_q] = z
-    sig = np.tile(np.asarray(sigma, float), (R, 1))
-    return BatchData(rows, Z, sig)

@@ -9,7 +9,7 @@ import pytest
 
 from identification import Measurements, identify
 from identification.batch import BatchData, fit_batch
-from identification.fixed import fixed_batch, fixed_model, full_parameters, stacked_fixed_batch
+from identification.fixed import fixed_batch, fixed_model, full_parameters
 from identification.profile import lr_region
 from models import Model
 from models.library import spring_chain
@@ -63,29 +63,6 @@ def test_full_parameters_and_bad_fixed_indices():
             fixed_model(model, bad)
     with pytest.raises(TypeError, match="model"):
         fixed_model("press", [0])
-
-
-def test_a_batch_of_constrained_fits_gives_the_likelihood_ratio_region():
-    """Three parameters, the pair (a, b) fixed at every point of a 5 x 5 grid: fit_batch on the derived
-    model (members stacked) gives the objective min over c of Phi that lr_region re-optimises, to 1e-8."""
-    model = Model.explicit(params=["a", "b", "c"], inputs=["x"], sensors=["y"],
-                           h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])) + p[2] * q[0], name="rise and slope")
-    x = np.linspace(0.5, 10.0, 12)
-    z = (3 * (1 - np.exp(-0.4 * x)) + 0.1 * x)[None, :, None] + 0.05 * np.random.default_rng(1).standard_normal((2, 12, 1))
-    data = Measurements(x, z, [0.05])
-    est = identify(model, data, [2.0, 0.5, 0.0])
-    reg = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes")
-    assert np.all(np.isfinite(reg.statistic))
-    values = np.column_stack([reg.X.ravel(), reg.Y.ravel()])
-    fm = fixed_model(model, [0, 1])
-    bf = fit_batch(fm, stacked_fixed_batch(data.inputs, data.z, est.sigma, values), est.p[2:], est.weights)
-    assert bf.fallbacks == () and np.all(bf.converged)
-    np.testing.assert_allclose(bf.objective, est.objective + reg.statistic.ravel() / 2, rtol=1e-8)
-
-
-def test_stacked_batch_rejects_mismatched_shapes():
-    with pytest.raises(Exception, match="z, inputs"):
-        stacked_fixed_batch(np.zeros((3, 1)), np.zeros((2, 4, 1)), [1.0], [[1.0]])
 
 
 def _rise_and_slope():
