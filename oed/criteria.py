@@ -252,31 +252,33 @@ def batch_criteria(F, S, W, kind="gauss_newton", *, settings: CriteriaSettings =
             singular, cond = _scaled_eigs(G, F_scale, settings)
             ok = ~singular
         if ok.any():
-            lam = np.linalg.eigvalsh(G[ok])
+            Gs, sc, log_d = _diag_scaled(G[ok])
+            lam = np.linalg.eigvalsh(Gs)
             bad = lam[:, 0] <= 0
             lam_safe = np.where(lam > 0, lam, 1.0)
-            A[ok] = np.where(bad, np.inf, np.sum(1.0 / lam_safe, axis=1))
-            logdet[ok] = np.where(bad, np.inf, -np.sum(np.log(lam_safe), axis=1))
-            E[ok] = np.where(bad, np.inf, 1.0 / lam_safe[:, 0])
+            C = _unscaled(np.linalg.inv(np.where(bad[:, None, None], np.eye(n_p)[None], Gs)), sc)
+            A[ok] = np.where(bad, np.inf, np.trace(C, axis1=1, axis2=2))
+            logdet[ok] = np.where(bad, np.inf, -(np.sum(np.log(lam_safe), axis=1) + log_d))
+            E[ok] = np.where(bad, np.inf, np.linalg.eigvalsh(C)[:, -1])
             idx = np.flatnonzero(ok)[bad]
             singular[idx] = True
     else:
         Sflat = (np.zeros_like(F) if S is None else S).reshape(n_S, -1)
         H = (W @ (Fflat + Sflat)).reshape(nb, n_p, n_p)
         if ok.any():
-            Hs = H[ok]
+            hs_sing, hcond = _scaled_eigs_any(H[ok], settings)
+            Gs, sc, log_d = _diag_scaled(G[ok])
+            Hs = H[ok] * sc[:, :, None] * sc[:, None, :]        # C = D^-1/2 Hs^-1 Gs Hs^-1 D^-1/2
             sign, logabs = np.linalg.slogdet(Hs)
-            hs_sing, hcond = _scaled_eigs_any(Hs, settings)
             hbad = (sign == 0) | hs_sing
             idx_ok = np.flatnonzero(ok)
             Hsafe = np.where(hbad[:, None, None], np.eye(n_p)[None], Hs)
             X = np.linalg.inv(Hsafe)
-            C = X @ G[ok] @ X.transpose(0, 2, 1)
-            C = 0.5 * (C + C.transpose(0, 2, 1))
+            C = _unscaled(X @ Gs @ X.transpose(0, 2, 1), sc)
             lam = np.linalg.eigvalsh(C)
-            _, logdetG = np.linalg.slogdet(G[ok])
+            _, logdetGs = np.linalg.slogdet(Gs)
             A[idx_ok] = np.where(hbad, np.inf, np.trace(C, axis1=1, axis2=2))
-            logdet[idx_ok] = np.where(hbad, np.inf, logdetG - 2.0 * logabs)
+            logdet[idx_ok] = np.where(hbad, np.inf, logdetGs - 2.0 * logabs - log_d)
             E[idx_ok] = np.where(hbad, np.inf, lam[:, -1])
             for j in np.flatnonzero(hbad):
                 singular[idx_ok[j]] = True
@@ -292,6 +294,23 @@ def batch_criteria(F, S, W, kind="gauss_newton", *, settings: CriteriaSettings =
         det = np.exp(logdet)
     return BatchCriteria(A=A, logdet=logdet, det=det, E=E, cond=cond, singular=singular,
                          near_singular=near, reason=tuple(reason))
+
+
+def _diag_scaled(G):
+    """(G_s, s, log det D): G = D^1/2 G_s D^1/2 with D = diag G (1 where not positive), s = D^-1/2.
+
+    Parameters in very different units give an information G whose eigenvalues span many decades;
+    its inverse and log det are then evaluated on G_s (rounding of cond(G_s) eps, not cond(G) eps)."""
+    d = np.einsum("bii->bi", G)
+    d = np.where(d > 0, d, 1.0)
+    sc = 1.0 / np.sqrt(d)
+    return G * sc[:, :, None] * sc[:, None, :], sc, np.log(d).sum(axis=1)
+
+
+def _unscaled(Cs, sc):
+    """D^-1/2 C_s D^-1/2, symmetrised."""
+    C = Cs * sc[:, :, None] * sc[:, None, :]
+    return 0.5 * (C + C.transpose(0, 2, 1))
 
 
 def _scaled_eigs_any(H, settings):
@@ -333,19 +352,26 @@ def screening_values(F, S, W, criterion, kind="gauss_newton") -> np.ndarray:
     Wf = np.asarray(W, dtype=float)
     G = (Wf @ F.reshape(n_S, -1)).reshape(-1, n_p, n_p)
     second = kind is Kind.SECOND_ORDER and S is not None
+    # diagonally scaled as batch_criteria evaluates (G = D^1/2 G_s D^1/2): with parameters of very
+    # different units the unscaled log det / inverse carry rounding of cond(G) eps, far above the
+    # screening margin, and the best designs were screened out
+    Gs, s, log_d = _diag_scaled(G)
     with np.errstate(all="ignore"):
+        if second:
+            H = (Wf @ (F + S).reshape(n_S, -1)).reshape(-1, n_p, n_p)
+            Hs = H * s[:, :, None] * s[:, None, :]
         if crit is Criterion.D:
-            sg, lg = np.linalg.slogdet(G)
+            sg, lg = np.linalg.slogdet(Gs)
             if not second:
-                return np.where(sg > 0, -lg, -np.inf)
-            sh, lh = np.linalg.slogdet((Wf @ (F + S).reshape(n_S, -1)).reshape(-1, n_p, n_p))
-            return np.where((sg > 0) & (sh != 0), lg - 2.0 * lh, -np.inf)
+                return np.where(sg > 0, -(lg + log_d), -np.inf)
+            sh, lh = np.linalg.slogdet(Hs)
+            return np.where((sg > 0) & (sh != 0), lg - 2.0 * lh - log_d, -np.inf)
         try:
             if second:
-                X = np.linalg.inv((Wf @ (F + S).reshape(n_S, -1)).reshape(-1, n_p, n_p))
-                diag = np.einsum("bij,bij->bi", X @ G, X)
+                X = np.linalg.inv(Hs)
+                diag = np.einsum("bij,bij->bi", X @ Gs, X) * s ** 2
             else:
-                diag = np.einsum("bii->bi", np.linalg.inv(G))
+                diag = np.einsum("bii->bi", np.linalg.inv(Gs)) * s ** 2
         except np.linalg.LinAlgError:
             return np.full(len(Wf), -np.inf)
         return diag.sum(axis=1) if crit is Criterion.A else diag.max(axis=1)

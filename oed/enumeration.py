@@ -151,6 +151,7 @@ def _candidates(F, S, W, crit, kind, best_v, settings, criteria_settings, n_seed
     if not settings.screen:
         return np.arange(len(W))
     sv = screening_values(F, S, W, crit, kind)
+    seed = np.array([], dtype=np.intp)
     if not np.isfinite(best_v) and len(W) > n_seed:
         seed = np.argsort(np.where(np.isnan(sv), -np.inf, sv), kind="stable")[:n_seed]
         vs = batch_criteria(F, S, W[seed], kind, settings=criteria_settings, validated=True).value(crit)
@@ -158,4 +159,5 @@ def _candidates(F, S, W, crit, kind, best_v, settings, criteria_settings, n_seed
     if not np.isfinite(best_v):
         return np.arange(len(W))
     margin = settings.screen_margin * (1.0 if crit is Criterion.D else max(abs(best_v), np.finfo(float).tiny))
-    return np.flatnonzero(~(sv > best_v + margin))
+    # the seeds stay candidates: the provisional incumbent is one of them, whatever the rounding
+    return np.union1d(np.flatnonzero(~(sv > best_v + margin)), seed)

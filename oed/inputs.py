@@ -277,6 +277,10 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
                                           costs=costs, budget=budget, include=include, exclude=exclude,
                                           method=method, time_limit=time_limit, sensor_names=names,
                                           settings=settings)
+    if not res.indices:
+        raise ValueError(f"n_points: no admissible design of {n_points} "
+                         f"{'pairs' if joint else 'input rows'} identifies the parameters ({res.message}); "
+                         "give more points or other candidates")
     notes = list(res.notes)
     if kind_e is Kind.SECOND_ORDER:
         notes.append("kind='second_order' planned without data: expected residual 0, S = 0, so the design is "

@@ -64,3 +64,27 @@ def test_screening_values_never_exceed_the_criterion(crit, kind):
     assert ok.sum() > 100
     tol = 1e-9 * np.maximum(np.abs(exact[ok]), 1.0)
     assert np.all(sv[ok] <= exact[ok] + tol)
+
+
+@pytest.mark.parametrize("kind", ["gauss_newton", "second_order"])
+@pytest.mark.parametrize("crit", "ADE")
+def test_parameters_in_very_different_units_keep_the_screen_exact(crit, kind):
+    """F_k = T A_k T with T = diag(1, 1e-2, 5e3), the spread of the cstr study (a rate in 1/min, an
+    energy in kJ/mol, ...): the
+    information spans 14 decades, the unscaled log det / inverse rounded far beyond the screening
+    margin and every design was screened out (found on an input design of the cstr study)."""
+    rng = np.random.default_rng(ord(crit) + len(kind))
+    T = np.diag([1.0, 1e-2, 5e3])
+    A = low_rank(rng, 13, 3)
+    F = T @ A @ T
+    F, S = validate_information(F, second_order_terms(rng, F, scale=0.1))
+    cons = make_constraints(13, 3, n_sensors=6)
+    a = enumerate_designs(F, S, cons, crit, kind)
+    b = enumerate_designs(F, S, cons, crit, kind, settings=EnumerationSettings(screen=False))
+    assert a.w is not None and np.isfinite(a.value)
+    assert abs(a.value - b.value) <= 1e-9 * max(abs(b.value), 1.0)
+    W = np.concatenate(list(iter_designs(cons)))
+    exact = batch_criteria(F, S, W, kind, validated=True).value(Criterion.parse(crit))
+    sv = screening_values(F, S, W, crit, kind)
+    ok = np.isfinite(exact)
+    assert np.all(sv[ok] <= exact[ok] + 1e-9 * np.maximum(np.abs(exact[ok]), 1.0))

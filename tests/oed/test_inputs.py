@@ -100,6 +100,7 @@ def test_refinement_of_an_implicit_model_uses_the_implicit_sensitivity():
     (dict(candidates=[1.0, np.nan, 3.0]), "candidates: non-finite value at row 1"),
     (dict(candidates=[1.0, 2.0, 1.0]), r"candidates: duplicate rows \[0, 2\]"),
     (dict(n_points=4), "n_points: expected an integer in 1..3"),
+    (dict(n_points=1), "n_points: no admissible design of 1 input rows identifies the parameters"),
     (dict(costs=[5.0, 5.0, 5.0], budget=1.0), "budget: 1 is below the cheapest"),
     (dict(p=[240.0, -1.0]), r"p: nominal parameters \['b2'\] lie outside their bounds"),
     (dict(sigma=[-1.0]), "sigma: expected 1 positive"),
