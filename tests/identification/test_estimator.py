@@ -9,6 +9,7 @@ from identification import (DataError, IdentifiabilityError, IdentificationError
                             information_contributions, simulate, solve_states)
 from models import Model, ModelError, Parameter
 from models.library import linear_model, spring_chain
+from optimum import assert_agree_in_sd, assert_same_optimum
 
 
 def _chain_data(n_y=5, n_M=2, seed=0, rel_sigma=0.01, p_true=(2.0, 0.5)):
@@ -104,7 +105,7 @@ def test_full_space_equals_reduced_space_least_squares():
     ls = least_squares(resid, x0=[1.0, 0.1], method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15,
                        x_scale="jac", max_nfev=2000)
     assert ls.success
-    np.testing.assert_allclose(est.p, ls.x, rtol=1e-8)
+    assert_agree_in_sd(est, ls.x)
     assert est.objective == pytest.approx(0.5 * float(ls.fun @ ls.fun), rel=1e-10)
 
 
@@ -348,7 +349,7 @@ def test_large_state_model_uses_the_glued_nlp_and_agrees_with_the_reduced_fit(mo
     assert calls, "the glued NLP was not used for an 80-state model"
     ref = least_squares(lambda p: ((data.z - simulate(model, p, q)[None]) / sig).ravel(), [1.0, 1.0, 0.1],
                         xtol=1e-14, ftol=1e-14, gtol=1e-14)
-    np.testing.assert_allclose(est.p, ref.x, rtol=1e-8)
+    assert_agree_in_sd(est, ref.x)
 
 
 def test_jit_compiled_functions_give_the_same_numbers():
@@ -465,7 +466,7 @@ def test_explicit_nlp_is_over_p_only_and_its_hessian_equals_casadi_ad():
 
 def test_many_point_explicit_fit_equals_scipy_exact_jacobian():
     """y = a (1 - exp(-b x)) on 40 000 points (more than one evaluation chunk): the estimate equals
-    scipy least_squares with the exact Jacobian, and the covariance equals (J^T W J)^-1 to the
+    scipy least_squares with the exact Jacobian (in standard errors; mudoe's point is the optimum), and the covariance equals (J^T W J)^-1 to the
     second-order term's size."""
     n = 40_000
     model = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
@@ -483,7 +484,9 @@ def test_many_point_explicit_fit_equals_scipy_exact_jacobian():
         return np.column_stack([1 - e, p[0] * x * e]) / sig
 
     ref = least_squares(res, [1.0, 1.0], jac=jac, xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    np.testing.assert_allclose(est.p, ref.x, rtol=1e-10)
+    # scipy stops where its tolerances are met, which depends on the CPU's kernels (on one machine
+    # 7e-10 sd short of the optimum): agreement in standard errors and mudoe's optimality hold anywhere
+    assert_same_optimum(est.p, ref.x, res, jac)
     J = jac(ref.x)
     np.testing.assert_allclose(est.cov_gn, np.linalg.inv(J.T @ J), rtol=1e-8)
     assert est.fitted.shape == (n, 1) and est.G.shape == (n, 1, 2)
