@@ -207,3 +207,306 @@ def log10_det(F):
     """log10 det F of a symmetric positive definite matrix (Cholesky; raises if not SPD)."""
     L = np.linalg.cholesky(np.asarray(F, dtype=float))
     return float(2.0 * np.sum(np.log10(np.diag(L))))
+
+
+# ---------------------------------------------------------------------------------------------
+# Example models of issue 22: constant experiment inputs, hand-written partial derivatives
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class OdeExample:
+    """An ODE model dx/dt = f(x, p, u), x(0) = x0(p, u), y = h(x, p, u) with its partials.
+
+    Every callable is vectorised over experiments: p has shape (n_p,), u shape (n_u, m),
+    x shape (n_x, m); f and x0 return (n_x, m), h returns (n_y, m); the partials return
+    (rows, columns, m): f_x (n_x, n_x, m), f_p (n_x, n_p, m), x0_p (n_x, n_p, m),
+    h_x (n_y, n_x, m), h_p (n_y, n_p, m).
+    """
+
+    name: str
+    params: tuple
+    p_true: tuple
+    p_start: tuple
+    inputs: tuple
+    input_bounds: tuple
+    states: tuple
+    sensors: tuple
+    sigma: tuple
+    t_end: float
+    f: Callable
+    f_x: Callable
+    f_p: Callable
+    x0: Callable
+    x0_p: Callable
+    h: Callable
+    h_x: Callable
+    h_p: Callable
+
+
+def batch_reactor(t_ref=350.0):
+    r"""The A -> B -> C batch reactor with Arrhenius rates (time in h, concentrations in mol/L).
+
+    .. math:: \dot c_A = -k_1 c_A,\ \dot c_B = k_1 c_A - k_2 c_B,\ \dot c_C = k_2 c_B,\quad
+              k_i = k_{i,ref} \exp(-E_i / R\, (1/T - 1/T_{ref}))
+
+    R = 8.314e-3 kJ/(mol K), T_ref = ``t_ref`` (K). Parameters k1ref, k2ref (1/h), E1, E2
+    (kJ/mol); experiment inputs cA0 (mol/L, cB0 = cC0 = 0) and a constant T (K); sensors cA, cB
+    with sigma 0.01 mol/L; horizon 5 h.
+    """
+    R = 8.314e-3
+
+    def rates(p, u):
+        g = -(1.0 / u[1] - 1.0 / t_ref) / R          # d ln k_i / d E_i
+        return p[0] * np.exp(p[2] * g), p[1] * np.exp(p[3] * g), g
+
+    def f(x, p, u):
+        k1, k2, _ = rates(p, u)
+        return np.array([-k1 * x[0], k1 * x[0] - k2 * x[1], k2 * x[1]])
+
+    def f_x(x, p, u):
+        k1, k2, _ = rates(p, u)
+        z = 0 * k1
+        return np.array([[-k1, z, z], [k1, -k2, z], [z, k2, z]])
+
+    def f_p(x, p, u):
+        k1, k2, g = rates(p, u)
+        r1, r2, z = k1 * x[0], k2 * x[1], 0 * k1     # reaction rates and their log-derivatives
+        return np.array([[-r1 / p[0], z, -r1 * g, z],
+                         [r1 / p[0], -r2 / p[1], r1 * g, -r2 * g],
+                         [z, r2 / p[1], z, r2 * g]])
+
+    def x0(p, u):
+        return np.array([u[0], 0 * u[0], 0 * u[0]])
+
+    return OdeExample(
+        name="batch_reactor", params=("k1ref", "k2ref", "E1", "E2"), p_true=(1.0, 0.5, 60.0, 80.0),
+        p_start=(0.7, 0.7, 50.0, 60.0), inputs=("cA0", "T"), input_bounds=((0.5, 2.0), (330.0, 370.0)),
+        states=("cA", "cB", "cC"), sensors=("cA", "cB"), sigma=(0.01, 0.01), t_end=5.0,
+        f=f, f_x=f_x, f_p=f_p, x0=x0, x0_p=lambda p, u: np.zeros((3, 4, u.shape[1])),
+        h=lambda x, p, u: x[:2], h_x=lambda x, p, u: np.broadcast_to(np.eye(2, 3)[:, :, None], (2, 3) + x.shape[1:]),
+        h_p=lambda x, p, u: np.zeros((2, 4) + x.shape[1:]))
+
+
+def spring_damper(mass=1.0):
+    r"""A mass-spring-damper with a cubic spring under a step force (SI units).
+
+    .. math:: m \ddot x + c \dot x + k x + k_3 x^3 = F,\quad x(0) = \dot x(0) = 0
+
+    m = ``mass`` (kg, known); parameters c (N s/m), k (N/m), k3 (N/m^3); experiment input the
+    step force F (N); sensors the displacement x (m, sigma 0.002) and the acceleration
+    a = (F - c v - k x - k3 x^3) / m (m/s^2, sigma 0.02); horizon 10 s.
+    """
+    m = float(mass)
+
+    def acc(x, p, u):
+        return (u[0] - p[0] * x[1] - p[1] * x[0] - p[2] * x[0] ** 3) / m
+
+    def acc_x(x, p):
+        return -(p[1] + 3 * p[2] * x[0] ** 2) / m, -p[0] / m + 0 * x[0]   # da/dx, da/dv
+
+    def f_x(x, p, u):
+        z, one = 0 * x[0], 1 + 0 * x[0]
+        ax = acc_x(x, p)
+        return np.array([[z, one], [ax[0], ax[1]]])
+
+    def a_p(x):
+        return np.array([-x[1], -x[0], -x[0] ** 3]) / m
+
+    def f_p(x, p, u):
+        return np.array([np.zeros((3,) + x.shape[1:]), a_p(x)])
+
+    def h_x(x, p, u):
+        z, one = 0 * x[0], 1 + 0 * x[0]
+        ax = acc_x(x, p)
+        return np.array([[one, z], [ax[0], ax[1]]])
+
+    return OdeExample(
+        name="spring_damper", params=("c", "k", "k3"), p_true=(0.4, 4.0, 2.0), p_start=(0.3, 3.0, 1.0),
+        inputs=("F",), input_bounds=((0.5, 3.0),), states=("x", "v"), sensors=("x", "a"),
+        sigma=(0.002, 0.02), t_end=10.0,
+        f=lambda x, p, u: np.array([x[1], acc(x, p, u)]), f_x=f_x, f_p=f_p,
+        x0=lambda p, u: np.zeros((2,) + u.shape[1:]), x0_p=lambda p, u: np.zeros((2, 3) + u.shape[1:]),
+        h=lambda x, p, u: np.array([x[0], acc(x, p, u)]), h_x=h_x,
+        h_p=lambda x, p, u: np.array([np.zeros((3,) + x.shape[1:]), a_p(x)]))
+
+
+def _rhs(ex, p, u, sens):
+    """The right-hand side for solve_ivp of m stacked experiments, with sensitivities if sens."""
+    n_x, n_p, m = len(ex.states), len(ex.params), u.shape[1]
+    if not sens:
+        return lambda _, z: ex.f(z.reshape(n_x, m), p, u).ravel()
+
+    def rhs(_, z):
+        Z = z.reshape(n_x, 1 + n_p, m)
+        x, S = Z[:, 0], Z[:, 1:]
+        dS = np.einsum("ijm,jkm->ikm", ex.f_x(x, p, u), S) + ex.f_p(x, p, u)
+        return np.concatenate([ex.f(x, p, u)[:, None], dS], axis=1).ravel()
+    return rhs
+
+
+def _integrate(ex, p, u, times, rtol, sens, method):
+    """States (n_x, m, n_t) and state sensitivities (n_x, n_p, m, n_t) or None, of m experiments."""
+    n_x, n_p, m = len(ex.states), len(ex.params), u.shape[1]
+    z0 = ex.x0(p, u)[:, None]
+    if sens:
+        z0 = np.concatenate([z0, ex.x0_p(p, u)], axis=1)
+    sol = solve_ivp(_rhs(ex, p, u, sens), (0.0, times[-1]), z0.ravel(), method=method, t_eval=times,
+                    rtol=rtol, atol=1e-2 * rtol)
+    if not sol.success:
+        raise RuntimeError(f"{ex.name}: solve_ivp failed at p = {p.tolist()}: {sol.message}")
+    Z = sol.y.reshape(n_x, 1 + n_p if sens else 1, m, times.size)
+    return Z[:, 0], (Z[:, 1:] if sens else None)
+
+
+def simulate(ex, p, inputs, times, rtol=1e-10, sens=False, method="DOP853", stacked=False):
+    r"""Outputs y(t) of every experiment and, with ``sens``, their exact sensitivities dy/dp.
+
+    Integrates dx/dt = f(x, p, u) (and dS/dt = f_x S + f_p, S(0) = dx0/dp) with scipy
+    ``solve_ivp``; dy/dp = h_x S + h_p.
+
+    Parameters
+    ----------
+    ex : OdeExample
+    p : array_like, shape (n_p,)
+    inputs : array_like, shape (n_exp, n_u)
+        One row of constant inputs per experiment.
+    times : array_like, shape (n_t,)
+        Increasing sampling times >= 0 (the ODE starts at t = 0).
+    rtol : float
+        solve_ivp's relative tolerance (absolute tolerance 1e-2 rtol).
+    sens : bool
+        Also integrate the forward sensitivity equations.
+    method : str
+        solve_ivp's method.
+    stacked : bool
+        Integrate all experiments as one system (one call, a common step size) instead of one
+        ``solve_ivp`` per experiment.
+
+    Returns
+    -------
+    y : ndarray, shape (n_exp, n_t, n_y)
+    S : ndarray, shape (n_exp, n_t, n_y, n_p), only with ``sens``.
+    """
+    p = np.asarray(p, dtype=float)
+    Q = np.atleast_2d(np.asarray(inputs, dtype=float))
+    times = np.asarray(times, dtype=float)
+    if p.shape != (len(ex.params),):
+        raise ValueError(f"p: expected {len(ex.params)} values {ex.params}, got shape {p.shape}")
+    if Q.ndim != 2 or Q.shape[1] != len(ex.inputs):
+        raise ValueError(f"inputs: expected shape (n_exp, {len(ex.inputs)}) for {ex.inputs}, got {Q.shape}")
+    if times.ndim != 1 or times.size == 0 or times[0] < 0 or np.any(np.diff(times) <= 0):
+        raise ValueError(f"times: expected increasing sampling times >= 0, got {times!r}")
+    blocks = [Q.T] if stacked else [Q[j:j + 1].T for j in range(Q.shape[0])]
+    ys, Ss = [], []
+    for u in blocks:
+        x, S = _integrate(ex, p, u, times, rtol, sens, method)
+        m, n_t = u.shape[1], times.size
+        xf, uf = x.reshape(x.shape[0], m * n_t), np.repeat(u, n_t, axis=1)
+        ys.append(ex.h(xf, p, uf).reshape(-1, m, n_t).transpose(1, 2, 0))
+        if sens:
+            Sf = S.reshape(S.shape[0], S.shape[1], m * n_t)
+            dy = np.einsum("ijk,jpk->ipk", ex.h_x(xf, p, uf), Sf) + ex.h_p(xf, p, uf)
+            Ss.append(dy.reshape(dy.shape[0], dy.shape[1], m, n_t).transpose(2, 3, 0, 1))
+    y = np.concatenate(ys)
+    return (y, np.concatenate(Ss)) if sens else y
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """Simulated measurements: inputs (n_exp, n_u), times (n_t,), z (n_exp, n_t, n_y), sigma (n_y,)."""
+
+    inputs: np.ndarray
+    times: np.ndarray
+    z: np.ndarray
+    sigma: np.ndarray
+    p_true: np.ndarray
+    seed: int
+
+
+def simulate_data(ex, n_exp, n_times, seed=0, p=None, rtol=1e-12):
+    r"""Seeded measurements z = y(t; p) + sigma e, e ~ N(0, I), of ``n_exp`` random experiments.
+
+    The inputs are uniform in ``ex.input_bounds`` and the sampling times equally spaced,
+    t_i = i t_end / n_times (i = 1..n_times); both the inputs and then the noise are drawn from
+    ``numpy.random.default_rng(seed)``. The truth p defaults to ``ex.p_true``; the outputs are
+    integrated with DOP853 at ``rtol``.
+    """
+    rng = np.random.default_rng(seed)
+    p = np.asarray(ex.p_true if p is None else p, dtype=float)
+    lo, hi = np.array(ex.input_bounds, dtype=float).T
+    Q = lo + (hi - lo) * rng.random((int(n_exp), len(ex.inputs)))
+    times = ex.t_end * np.arange(1, int(n_times) + 1) / int(n_times)
+    sigma = np.asarray(ex.sigma, dtype=float)
+    y = simulate(ex, p, Q, times, rtol=rtol)
+    return Dataset(Q, times, y + sigma * rng.standard_normal(y.shape), sigma, p, int(seed))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A reference fit: estimate, Gauss-Newton covariance and cost (chi2 = sum of squared weighted residuals)."""
+
+    p: np.ndarray
+    se: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    n_data: int
+    nfev: int
+    njev: int
+    fit_seconds: float
+    cov_seconds: float
+    message: str
+
+
+def gauss_newton_covariance(ex, p, data, rtol=1e-10, method="DOP853"):
+    r"""Cov(p) = (J^T J)^{-1}, J = (dy/dp) / sigma from the exact sensitivities at p (known sigma).
+
+    Raises ``numpy.linalg.LinAlgError`` if J^T J is not positive definite (parameters not
+    identifiable from these data).
+    """
+    _, S = simulate(ex, p, data.inputs, data.times, rtol=rtol, sens=True, method=method)
+    ok = np.isfinite(data.z)
+    J = (S / data.sigma[:, None])[ok]
+    L = np.linalg.cholesky(J.T @ J)
+    Linv = np.linalg.solve(L, np.eye(L.shape[0]))
+    return Linv.T @ Linv
+
+
+def reference_fit(ex, data, p0=None, rtol=1e-10, jac="sens", method="DOP853", stacked=False, tol=1e-10):
+    r"""Weighted least squares min_p sum ((y(t; p, u) - z) / sigma)^2 by scipy over solve_ivp.
+
+    ``least_squares(method="trf", x_scale="jac", ftol=xtol=gtol=tol)``; missing data (NaN in z)
+    are left out. The Jacobian is the exact one from the forward sensitivities (``jac="sens"``)
+    or scipy's finite differences (``jac="2-point"``, what a typical user writes). Standard errors
+    by :func:`gauss_newton_covariance` at the estimate (rtol 1e-10 whatever the fit's rtol),
+    timed apart from the fit.
+    """
+    if jac not in ("sens", "2-point", "3-point"):
+        raise ValueError(f"jac: expected 'sens', '2-point' or '3-point', got {jac!r}")
+    ok = np.isfinite(data.z)
+    zs = (data.z / data.sigma)[ok]
+    last = {}
+
+    def evaluate(p):
+        key = p.tobytes()
+        if last.get("key") != key:
+            out = simulate(ex, p, data.inputs, data.times, rtol, jac == "sens", method, stacked)
+            last.update(key=key, out=out if jac == "sens" else (out, None))
+        return last["out"]
+
+    def fun(p):
+        return (evaluate(p)[0] / data.sigma)[ok] - zs
+
+    def jacobian(p):
+        return (evaluate(p)[1] / data.sigma[:, None])[ok]
+
+    p0 = np.asarray(ex.p_start if p0 is None else p0, dtype=float)
+    t0 = time.perf_counter()
+    res = least_squares(fun, p0, jac=jacobian if jac == "sens" else jac, method="trf", x_scale="jac",
+                        ftol=tol, xtol=tol, gtol=tol)
+    t1 = time.perf_counter()
+    if res.status <= 0:
+        raise RuntimeError(f"{ex.name}: least_squares failed: {res.message}")
+    cov = gauss_newton_covariance(ex, res.x, data, method=method)
+    t2 = time.perf_counter()
+    return FitResult(res.x, np.sqrt(np.diag(cov)), cov, float(2 * res.cost), int(ok.sum()), int(res.nfev),
+                     int(res.njev or 0), t1 - t0, t2 - t1, str(res.message))
