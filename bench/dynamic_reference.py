@@ -72,7 +72,11 @@ def _reactor_closed_form(ca0, p, T, t):
         k2 = p[1] * np.exp(-1000.0 * p[3] / (R * T[j]))
         tau = t[j + 1] - t[j]
         e1, e2 = np.exp(-k1 * tau), np.exp(-k2 * tau)
-        ca, cb = ca * e1, cb * e2 + ca * k1 / (k2 - k1) * (e1 - e2)
+        # k1 (e1 - e2) / (k2 - k1) = k1 tau e1 phi(-d), phi(z) = (e^z - 1) / z, d = (k2 - k1) tau:
+        # no cancellation where k1 = k2 (T = 591.6 K at the nominal parameters)
+        d = (k2 - k1) * tau
+        phi = 1 - d / 2 + d * d / 6 - d ** 3 / 24 if abs(d) < 1e-4 else np.expm1(-d) / -d
+        ca, cb = ca * e1, cb * e2 + ca * k1 * tau * e1 * phi
         out.append((ca, cb))
     ca, cb = np.array(out).T
     return np.array([ca, cb, ca0 - ca - cb])
@@ -204,9 +208,15 @@ def pyomo_doe_reactor_fim(ca0=None, temperatures=None, params=None, method="cvod
 
 
 def log10_det(F):
-    """log10 det F of a symmetric positive definite matrix (Cholesky; raises if not SPD)."""
-    L = np.linalg.cholesky(np.asarray(F, dtype=float))
-    return float(2.0 * np.sum(np.log10(np.diag(L))))
+    """log10 det F of a symmetric positive semi-definite matrix; -inf if singular to double precision.
+
+    Singular means an eigenvalue <= 1e-13 times the largest (e.g. the reactor at one constant
+    temperature, where A_i and E_i cannot be told apart).
+    """
+    w = np.linalg.eigvalsh(np.asarray(F, dtype=float))
+    if w[0] <= 1e-13 * w[-1]:
+        return -np.inf
+    return float(np.sum(np.log10(w)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -510,3 +520,46 @@ def reference_fit(ex, data, p0=None, rtol=1e-10, jac="sens", method="DOP853", st
     t2 = time.perf_counter()
     return FitResult(res.x, np.sqrt(np.diag(cov)), cov, float(2 * res.cost), int(ok.sum()), int(res.nfev),
                      int(res.njev or 0), t1 - t0, t2 - t1, str(res.message))
+
+
+def pyomo_doe_reactor_factorial(ca0_grid=None, t0_grid=None, method="closed"):
+    """log10 det of the ODE's FIM on the (CA0, T0) grid of Pyomo.DoE's factorial (T = 300 K after t = 0.125).
+
+    Defaults: 9 x 9 points, CA0 in linspace(1, 5, 9) (mol/L), T0 in linspace(300, 700, 9) (K).
+    Returns ``(ca0, t0, log10det)``, each of shape (n_ca0 * n_t0,), CA0 varying slowest (Pyomo's
+    order).
+    """
+    ca0_grid = np.linspace(1, 5, 9) if ca0_grid is None else np.asarray(ca0_grid, dtype=float)
+    t0_grid = np.linspace(300, 700, 9) if t0_grid is None else np.asarray(t0_grid, dtype=float)
+    rest = PYOMO_DOE_REACTOR["T"][1:]
+    C, T0 = (g.ravel() for g in np.meshgrid(ca0_grid, t0_grid, indexing="ij"))
+    d = [log10_det(pyomo_doe_reactor_fim(c, (t,) + rest, method=method)) for c, t in zip(C, T0)]
+    return C, T0, np.array(d)
+
+
+def pyomo_doe_reactor_optimal_design(starts=None, bounds_ca0=(1.0, 5.0), bounds_t=(300.0, 700.0)):
+    r"""The ODE's D-optimal design of the Pyomo.DoE reactor: max log10 det F(CA0, T_0..T_7).
+
+    T_8 (at t = 1) has no effect on the ODE and is left out. Bounded L-BFGS-B on the closed-form
+    FIM from each start (default: Pyomo.DoE's nominal design, its run_doe optimum and two
+    linear ramps); the best local optimum is returned as ``(x, log10det)`` with
+    x = (CA0, T_0, ..., T_7). A reference only: local search, finite-difference gradients.
+    """
+    from scipy.optimize import minimize
+
+    rest = np.array(PYOMO_DOE_REACTOR["T"][1:-1])
+    if starts is None:
+        starts = [np.r_[5.0, 500.0, rest], np.r_[5.0, 481.88, rest], np.r_[3.0, np.linspace(650, 350, 8)],
+                  np.r_[3.0, np.linspace(350, 650, 8)]]
+
+    def neg(x):
+        v = log10_det(pyomo_doe_reactor_fim(x[0], np.r_[x[1:], x[-1]], method="closed"))
+        return -v if np.isfinite(v) else 1e3        # a singular FIM (constant T): rejected
+
+    best = None
+    for x0 in starts:
+        r = minimize(neg, x0, method="L-BFGS-B", bounds=[bounds_ca0] + [bounds_t] * 8,
+                     options={"ftol": 1e-14, "gtol": 1e-10, "maxiter": 2000})
+        if best is None or r.fun < best.fun:
+            best = r
+    return best.x, float(-best.fun)
