@@ -213,10 +213,11 @@ def log10_det(F):
     Singular means an eigenvalue <= 1e-13 times the largest (e.g. the reactor at one constant
     temperature, where A_i and E_i cannot be told apart).
     """
-    w = np.linalg.eigvalsh(np.asarray(F, dtype=float))
+    F = np.asarray(F, dtype=float)
+    w = np.linalg.eigvalsh(F)
     if w[0] <= 1e-13 * w[-1]:
         return -np.inf
-    return float(np.sum(np.log10(w)))
+    return float(2.0 * np.sum(np.log10(np.diag(np.linalg.cholesky(F)))))   # more accurate than sum log w
 
 
 # ---------------------------------------------------------------------------------------------
