@@ -21,18 +21,19 @@ settings dataclass validates their values, and the section hands the workflow a 
 object (``cfg.detect.settings()``, ``cfg.validate.settings(...)``).  The keys backed by a
 settings field (:func:`settings_keys`):
 
-===================  ===============================
-TOML key             settings field
-===================  ===============================
-[detect] tol         ``DetectSettings.tol``
-[detect] statistic   ``DetectSettings.statistic``
-[detect] correction  ``DetectSettings.correction``
-[detect] normality   ``DetectSettings.normality``
-[detect] covariance  ``DetectSettings.covariance``
-[validate] n_runs    ``MonteCarloSettings.n_rep``
-[validate] seed      ``MonteCarloSettings.seed``
-[validate] scheduler ``MonteCarloSettings.scheduler``
-===================  ===============================
+==============================  ========================================
+TOML key                        settings field
+==============================  ========================================
+[detect] tol                    ``DetectSettings.tol``
+[detect] statistic              ``DetectSettings.statistic``
+[detect] correction             ``DetectSettings.correction``
+[detect] normality              ``DetectSettings.normality``
+[detect] normality_correction   ``DetectSettings.normality_correction``
+[detect] covariance             ``DetectSettings.covariance``
+[validate] n_runs               ``MonteCarloSettings.n_rep``
+[validate] seed                 ``MonteCarloSettings.seed``
+[validate] scheduler            ``MonteCarloSettings.scheduler``
+==============================  ========================================
 
 Their defaults are the settings dataclasses' except where the study has always used its own,
 listed in the one table :data:`STUDY_DEFAULTS` ([validate] n_runs = 200, seed = 1).
@@ -378,6 +379,7 @@ class DetectConfig:
     statistic: str = setting(DetectSettings, "statistic")
     correction: str = setting(DetectSettings, "correction")
     normality: str = setting(DetectSettings, "normality")
+    normality_correction: str = setting(DetectSettings, "normality_correction")
     covariance: str = setting(DetectSettings, "covariance")
     sensors: Any = "oed"
 
@@ -466,15 +468,16 @@ class ValidateConfig:
     scheduler: str | None = setting(MonteCarloSettings, "scheduler")
     variant: str = ""
 
-    def settings(self, tol: float, workers: int | None = None, progress: bool = True) -> MonteCarloSettings:
+    def settings(self, tol: float, workers: int | None = None, progress: bool = True,
+                 normality_correction: str = "holm") -> MonteCarloSettings:
         """The :class:`MonteCarloSettings` of the size study: ``n_rep`` and ``seed`` from this section.
 
-        The tests run at level ``tol`` with the normality gate recorded, not enforced, and every
-        other field at its default: the settings :func:`identification.montecarlo.validate`
-        builds from its keyword arguments.
+        The tests run at level ``tol`` with the normality gate recorded, not enforced (its failure
+        rate counted with ``normality_correction``, ``[detect]``), and every other field at its
+        default: the settings :func:`identification.montecarlo.validate` builds from its keyword arguments.
         """
-        return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress,
-                                  detect=DetectSettings(tol=tol, normality="override"))
+        det = DetectSettings(tol=tol, normality="override", normality_correction=normality_correction)
+        return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress, detect=det)
 
 
 @dataclass(frozen=True)

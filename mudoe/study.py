@@ -301,7 +301,8 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
             raise ConfigError(f"{cfg.path}: [data] series {bad} out of range: the data hold {n_M} series "
                               "(0-based indices)")
     m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
-    norm = normality_check(m_all)
+    det = cfg.detect.settings()
+    norm = normality_check(m_all, det.normality_level, correction=det.normality_correction)
     sigma, sig_rows = _sigma(cfg, sensors, norm, units)
     models, data, data_all = {}, {}, {}
     for v, (m, fn) in built.items():
@@ -429,7 +430,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     progress = progress or Progress(False)
     vc = study.cfg.validate
     v = vc.variant or next(iter(study.models))
-    settings = vc.settings(study.cfg.detect.tol, workers, progress.enabled)
+    settings = vc.settings(study.cfg.detect.tol, workers, progress.enabled, study.cfg.detect.normality_correction)
     if scheduler is not None:
         settings = dataclasses.replace(settings, scheduler=scheduler)
     address = settings.scheduler
