@@ -3,9 +3,10 @@
 A reading z_ijk is absurd when it lies more than :data:`ABSURD_RATIO` robust spreads from its
 sensor's median, |z_ijk - med_k| > ABSURD_RATIO * s_k, with s_k the median absolute deviation of
 the sensor's finite readings (all series, all inputs), or the median |z| when the MAD is 0.  With
-ABSURD_RATIO = 1e7 no measured signal is refused (a load curve from 0 to its maximum spans a few
-MADs, Gaussian noise ~10, a decay over five decades ~1e5); a unit or export error is (the press's
-1e14 um reading among readings of ~100 um is 1e12 MADs away and made the fitted sigma 7.6e9 mm).
+ABSURD_RATIO = 1e6 no measured signal is refused (a load curve from 0 to its maximum lies within 2
+MADs of its median, Gaussian noise within ~5, an exponential decay over five decades 3e2, over ten
+decades 9e4); a unit or export error is (the issue's 1e14 um press reading among readings of
+~700 um is 2.8e11 MADs away and made the fitted sigma 7.6e9 mm; an 800 m one, 2e6).
 Refusing it (exit 2, naming file, series, set point and value) is the choice here: a warning would
 still let every estimate and test of the run rest on that reading.
 """
@@ -16,7 +17,7 @@ import numpy as np
 __all__ = ["ABSURD_RATIO", "absurd_reading", "absurd_reading_message"]
 
 #: robust spreads (MADs) beyond which a reading is refused
-ABSURD_RATIO = 1e7
+ABSURD_RATIO = 1e6
 
 
 def absurd_reading(z) -> tuple | None:

@@ -151,7 +151,7 @@ def test_absurd_reading_is_refused_with_file_series_and_set_point(capsys, accel)
 def test_plausible_signals_are_not_absurd():
     rng = np.random.default_rng(0)
     load = np.r_[np.linspace(0, 1000, 15), np.linspace(1000, 0, 15)[1:]]
-    decay = np.exp(-np.linspace(0, 5 * math.log(10), 30))                  # five decades
+    decay = np.exp(-np.linspace(0, 10 * math.log(10), 30))                 # ten decades: 9e4 MADs
     for signal in (load, decay, np.zeros(30)):
         z = signal[None, :, None] + 1e-9 * rng.standard_normal((2, signal.size, 1))
         assert absurd_reading(z) is None
