@@ -88,4 +88,5 @@ def correction_text(correction: str, level: float, n_gated: int) -> str:
     check_correction(correction, "correction")
     if correction == "none":
         return f"{100 * level:g} % per sensor, no multiplicity correction"
-    return f"family-wise {100 * level:g} % over {n_gated} sensor{'s' if n_gated != 1 else ''} ({correction.capitalize()})"
+    plural = "s" if n_gated != 1 else ""
+    return f"family-wise {100 * level:g} % over {n_gated} sensor{plural} ({correction.capitalize()})"

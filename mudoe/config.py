@@ -7,7 +7,8 @@ bounds, the calibration / validation splits, the test level and statistic, and t
 optimal-design criterion and constraints.  Every value has a default (``configs/press.toml``
 spells them out for the press study); an unknown key is an error naming the key, the file
 and the line.  Units are declared once (any unit pint knows, :mod:`mudoe.units`; an unknown unit
-is an error naming the key) and converted once, by pint, to the model's units (the press: mm, N).  ``[simulate]`` drives ``mudoe simulate`` for an own model.
+is an error naming the key) and converted once, by pint, to the model's units (the press: mm, N).
+``[simulate]`` drives ``mudoe simulate`` for an own model.
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
 

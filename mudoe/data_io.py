@@ -80,11 +80,7 @@ class DataUnits:
         unit, e.g. "N", "kN", "lbf" / "mm", "um", "m"), model in N and mm."""
         for key, unit, dim, ex in (("displacement_unit", displacement_unit, "length", "mm, um, m"),
                                    ("force_unit", force_unit, "force", "N, kN, lbf")):
-            try:
-                ok = bool(unit) and dimension(check_unit(unit)) == dim
-            except UnitError:
-                ok = False
-            if not ok:
+            if not _is(unit, dim):
                 raise DataFileError(f"{key}: {unit!r} is not a unit of {dim} (e.g. {ex})")
         return cls(force_unit, "N", (displacement_unit,) * n_sensors, ("mm",) * n_sensors)
 
@@ -121,7 +117,7 @@ class DataUnits:
 
 
 def _is(unit: str, dim: str) -> bool:
-    """Whether ``unit`` (declared by a model; "" = undeclared) is a unit of dimension ``dim``."""
+    """Whether ``unit`` ("" = undeclared; an unknown unit is not) is a unit of dimension ``dim``."""
     try:
         return bool(unit) and dimension(unit) == dim
     except UnitError:
