@@ -482,6 +482,7 @@ class SimulatedCampaign:
     truth : dict             true parameters (model units)
     sigma : tuple of float   noise standard deviation per sensor (model units)
     seed : int
+    truth_units : dict       {parameter: the model's unit of its true value} ("" undeclared)
     """
 
     campaign: Campaign
@@ -490,6 +491,7 @@ class SimulatedCampaign:
     truth: dict
     sigma: tuple
     seed: int
+    truth_units: dict = field(default_factory=dict)
 
 
 def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampaign:
@@ -545,7 +547,8 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     z = h[None] + np.asarray(sigma) * rng.standard_normal((sc.n_series,) + h.shape)
     camp = Campaign(q_set=q, q_actual=None, z=z, sensors=tuple(m.sensors),
                     source=f"simulated from {cfg.model.name} ({variant}, seed {seed})", seed=seed)
-    return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed)
+    return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed,
+                             truth_units={p.name: p.unit for p in m.params})
 
 
 # ---------------------------------------------------------------------------- designs before data (issue 13)

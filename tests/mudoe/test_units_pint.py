@@ -159,3 +159,18 @@ def test_plausible_signals_are_not_absurd():
     z[1, 7, 0] = 1e14
     i, j, k, ratio = absurd_reading(z)
     assert (i, j, k) == (1, 7, 0) and ratio > ABSURD_RATIO
+
+
+def test_parameter_in_another_unit_is_converted_for_simulate(tmp_path, capsys, cstr_config):
+    """[[parameters]] E_a in J/mol against the model's kJ/mol: start and bounds converted by pint; the
+    simulated truth (default: the starts) is recorded in the model's unit."""
+    cfg = cstr_config(tmp_path, layout="paper")
+    text = cfg.read_text().replace("start = 50.0\nlower = 1.0\nupper = 300.0\nunit = \"kJ/mol\"",
+                                   "start = 5e4\nlower = 1e3\nupper = 3e5\nunit = \"J/mol\"")
+    cfg.write_text(text.replace("E_a = 60.0, ", ""))
+    assert main(["simulate", str(cfg), "--out", str(tmp_path / "d"), "--quiet", "--json", "--seed", "3"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["truth"]["E_a"] == pytest.approx(50.0, rel=1e-14) and rec["truth_units"]["E_a"] == "kJ/mol"
+    cfg.write_text(text.replace('unit = "J/mol"', 'unit = "J/K"'))
+    line = _one_line(capsys, ["simulate", str(cfg), "--out", str(tmp_path / "e"), "--quiet"])
+    assert "[[parameters]] E_a: unit 'J/K' but the model declares 'kJ/mol': cannot convert" in line
