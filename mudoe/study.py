@@ -27,7 +27,7 @@ from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
-from .units import UnitError, convert
+from .parameter_units import model_parameters
 from .press import diagnosis_explanations, press_variant
 
 __all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
@@ -181,7 +181,7 @@ def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
     missing = [n for n in m.param_names if n not in names]
     if missing:
         raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
-    cfg = dataclasses.replace(cfg, parameters=_model_parameters(cfg, m))
+    cfg = dataclasses.replace(cfg, parameters=model_parameters(cfg, m))
     try:
         new = m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
     except ModelError as exc:
@@ -189,27 +189,6 @@ def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
     units = {pc.name: pc.unit for pc in cfg.parameters if pc.unit}
     new.params = tuple(dataclasses.replace(p, unit=p.unit or units.get(p.name, "")) for p in new.params)
     return new
-
-
-def _model_parameters(cfg: StudyConfig, m: Model) -> tuple:
-    """The [[parameters]] entries with start and bounds in the model's units (:func:`_parameter_in_model_unit`)."""
-    units = dict(zip(m.param_names, (p.unit for p in m.params)))
-    return tuple(_parameter_in_model_unit(cfg, pc, units.get(pc.name, "")) for pc in cfg.parameters)
-
-
-def _parameter_in_model_unit(cfg: StudyConfig, pc, own: str):
-    """``pc`` (a [[parameters]] entry) with start and bounds in the model's unit ``own`` (pint's conversion).
-
-    x_model = f x_config (+ offset for temperatures); a unit of another dimension is a ConfigError.
-    """
-    if not pc.unit or not own or pc.unit == own:
-        return pc
-    try:
-        conv = [float(convert(v, pc.unit, own)) if math.isfinite(v) else v for v in (pc.start, pc.lower, pc.upper)]
-    except UnitError as exc:
-        raise ConfigError(f"{cfg.path}: [[parameters]] {pc.name}: unit {pc.unit!r} but the model declares {own!r}: "
-                          f"{exc}; give the parameter in a unit of the model's dimension (or drop the key)") from None
-    return dataclasses.replace(pc, start=conv[0], lower=conv[1], upper=conv[2], unit=own)
 
 
 def _declare_units(m: Model, units: DataUnits) -> Model:
@@ -226,7 +205,7 @@ def _declare_units(m: Model, units: DataUnits) -> Model:
 
 def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
     if cfg.parameters:
-        d = {p.name: p.start for p in _model_parameters(cfg, m)}
+        d = {p.name: p.start for p in model_parameters(cfg, m)}
         return np.array([d[n] for n in m.param_names], float)
     nominal = getattr(m, "p_nominal", None)
     if nominal is None:
@@ -518,7 +497,7 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     m, fn = built[variant]
     units = study_units(cfg, m)
     m = _declare_units(m, units)
-    truth = {p.name: p.start for p in _model_parameters(cfg, m)}
+    truth = {p.name: p.start for p in model_parameters(cfg, m)}
     unknown = [k for k in sc.truth if k not in m.param_names]
     if unknown:
         raise ConfigError(f"{cfg.path}: [simulate] truth: unknown parameter(s) {', '.join(unknown)}; the model has "
