@@ -14,13 +14,22 @@ import re
 from functools import lru_cache
 
 import numpy as np
-import pint
 
 __all__ = ["UNITS", "UnitError", "dimension", "convert", "known_units", "same_dimension", "check_unit",
-           "unit_name", "REGISTRY"]
+           "unit_name", "registry"]
 
-#: the one unit registry of mudoe (pint's default definitions)
-REGISTRY = pint.UnitRegistry(autoconvert_offset_to_baseunit=False)
+
+@lru_cache(maxsize=1)
+def registry():
+    """The one unit registry of mudoe (pint's default definitions), built at first use: importing pint
+    and reading its definitions takes about 0.5 s, which commands without units do not pay."""
+    import pint
+    return pint.UnitRegistry(autoconvert_offset_to_baseunit=False)
+
+
+def _errors() -> tuple:
+    import pint
+    return (pint.errors.PintError, ValueError, TypeError, SyntaxError, AttributeError, KeyError)
 
 #: names of common dimensions (for messages and the data rules): name -> a unit of that dimension
 _NAMED = {"dimensionless": "1", "length": "m", "force": "N", "temperature": "K", "time": "s", "mass": "kg",
@@ -36,13 +45,13 @@ class UnitError(ValueError):
 
 
 @lru_cache(maxsize=512)
-def _parse(unit: str) -> pint.Unit:
+def _parse(unit: str):
     if not isinstance(unit, str):
         raise UnitError(f"a unit must be a string, got {unit!r}")
     text = _BARE_POWER.sub(r"^\1", unit.strip())
     try:
-        return REGISTRY.parse_units(text)
-    except (pint.errors.PintError, ValueError, TypeError, SyntaxError, AttributeError, KeyError) as exc:
+        return registry().parse_units(text)
+    except _errors() as exc:
         raise UnitError(f"unknown unit {unit!r} (pint does not know it: {type(exc).__name__}); use e.g. 'mm', 'N', "
                         "'m/s^2', 'mol/L', 'degC', or '1' for dimensionless") from None
 
@@ -115,9 +124,9 @@ def same_dimension(a: str, b: str) -> bool:
 def _factor(a: str, b: str) -> tuple:
     """(f, offset units): the linear factor of the conversion a -> b (pint's base-unit factors, offsets
     ignored) and whether either unit has an offset (degC, degF)."""
-    fa, _ = REGISTRY.get_base_units(_parse(a))
-    fb, _ = REGISTRY.get_base_units(_parse(b))
-    zero = REGISTRY.Quantity(0.0, _parse(a)).to(_parse(b)).magnitude
+    fa, _ = registry().get_base_units(_parse(a))
+    fb, _ = registry().get_base_units(_parse(b))
+    zero = registry().Quantity(0.0, _parse(a)).to(_parse(b)).magnitude
     return float(fa) / float(fb), bool(zero != 0.0)
 
 
@@ -138,7 +147,7 @@ def convert(values, from_unit: str, to_unit: str, difference: bool = False):
     scalar = np.isscalar(values)
     v = np.asarray(values, float)
     if offset and not difference:
-        out = REGISTRY.Quantity(v, _parse(from_unit)).to(_parse(to_unit)).magnitude
+        out = registry().Quantity(v, _parse(from_unit)).to(_parse(to_unit)).magnitude
     else:
         out = v * factor
     return float(out) if scalar else np.asarray(out, float)
