@@ -41,7 +41,8 @@ fails: they are marked in the summary and the verdict is taken from the likeliho
 that disagree by more than a factor 100 across the decision line get a numbered note.
 
 Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
-series z_2 - z_1, z_4 - z_3, ... over all inputs; the repeatability standard deviation
+series z_2 - z_1, z_4 - z_3, ... over all inputs, at the family-wise level over the gated
+sensors (Holm by default; :mod:`identification.normality_gate`); the repeatability standard deviation
 of a sensor is std(differences) / sqrt(2) (same unit as z).
 """
 from __future__ import annotations
@@ -61,6 +62,7 @@ from models.contract import Model
 from .errors import DataError, IdentificationError
 from .estimator import IdentifySettings, identify
 from .measurements import Measurements
+from .normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction, correction_text
 from .progress import Progress
 from .regions import CovarianceError, mahalanobis2
 from .splits import Split, SplitError
@@ -109,7 +111,9 @@ class DetectSettings:
                                "paper" (Wald, C_cal only)
     correction : str           "bonferroni" (paper) or "holm"
     normality : str            "check" (raise NormalityError on failure) or "override" (record only)
-    normality_level : float    level of each per-sensor Shapiro-Wilk test (paper: 5 %)
+    normality_level : float    family-wise level of the Shapiro-Wilk gate (paper: 5 % per sensor)
+    normality_correction : str "holm" (default), "bonferroni" or "none" (the paper's per-sensor gate,
+                               family-wise level 1 - (1 - level)^m over m sensors)
     covariance : str           "second_order" (paper eq. 7) or "gauss_newton"
     identify : IdentifySettings | None  passed to identify()
     """
@@ -119,6 +123,7 @@ class DetectSettings:
     correction: str = "bonferroni"
     normality: str = "check"
     normality_level: float = 0.05
+    normality_correction: str = GATE_CORRECTIONS[0]
     covariance: str = "second_order"
     identify: IdentifySettings | None = None
 
@@ -134,6 +139,7 @@ class DetectSettings:
             raise ValueError(f"normality: expected 'check' or 'override', got {self.normality!r}")
         if not (0.0 < float(self.normality_level) < 1.0):
             raise ValueError(f"normality_level: must lie in (0, 1), got {self.normality_level!r}")
+        check_correction(self.normality_correction)
         if self.covariance not in ("second_order", "gauss_newton"):
             raise ValueError(f"covariance: expected 'second_order' or 'gauss_newton', got {self.covariance!r}")
         object.__setattr__(self, "tol", tol)
@@ -150,13 +156,16 @@ class NormalityCheck:
     pvalue : ndarray (n_S,)        Shapiro-Wilk p-values (NaN when not computable)
     sigma_rep : ndarray (n_S,)     repeatability std(differences) / sqrt(2), unit of z
     n_diff : ndarray (n_S,)        number of differences used
-    level : float                  test level per sensor
+    level : float                  family-wise level of the gate (per sensor with correction "none")
     gated : tuple of str           sensors whose result decides the gate (the selected sensors)
-    passed : bool                  every gated sensor has p >= level
+    passed : bool                  every gated sensor has an adjusted p-value >= level
     overridden : bool              the gate failed and normality="override" let the run continue
     pairs : tuple                  0-based series pairs (first, second) differenced
     note : str
     series : tuple of str          labels of the series the test ran on (``Measurements.series``)
+    correction : str               multiplicity correction over the gated sensors ("holm", "bonferroni",
+                                   "none"; :mod:`identification.normality_gate`)
+    adjusted : ndarray (n_S,)      adjusted p-values of the gated sensors (NaN for the others; derived)
     """
 
     sensors: tuple
@@ -170,12 +179,24 @@ class NormalityCheck:
     pairs: tuple = ()
     note: str = ""
     series: tuple = ()
+    correction: str = "none"
+    adjusted: np.ndarray = dataclasses.field(default=None, compare=False)
 
     def __post_init__(self):
-        for name in ("pvalue", "sigma_rep", "n_diff"):
+        gated = [s in self.gated for s in self.sensors]
+        object.__setattr__(self, "adjusted", adjusted_pvalues(self.pvalue, check_correction(self.correction), gated))
+        for name in ("pvalue", "sigma_rep", "n_diff", "adjusted"):
             a = np.array(getattr(self, name), dtype=float, copy=True)
             a.setflags(write=False)
             object.__setattr__(self, name, a)
+
+    def gate_text(self) -> str:
+        """The gate in words: "Shapiro-Wilk at family-wise 5 % over 3 sensors (Holm)"."""
+        return "Shapiro-Wilk at " + correction_text(self.correction, self.level, len(self.gated))
+
+    def failing(self) -> tuple:
+        """The gated sensors that fail the gate (adjusted p-value below the level, or none computable)."""
+        return tuple(s for k, s in enumerate(self.sensors) if s in self.gated and not self.adjusted[k] >= self.level)
 
     def series_text(self) -> str:
         """The tested series as a reader names them: "5, 6", "1-6" or the labels ("" when unknown)."""
@@ -197,13 +218,16 @@ class NormalityCheck:
         units = units or {}
         p_head, s_head = f"SW p % ({data_name})", f"sigma_rep ({data_name})"
         wp, ws = max(12, len(p_head)), max(11, len(s_head))
-        lines = [f"{'sensor':<10} {p_head:>{wp}} {s_head:>{ws}} {'unit':<8} {'n':>4}  gate"]
+        adj = self.correction != "none"
+        lines = [f"{'sensor':<10} {p_head:>{wp}} {s_head:>{ws}} {'unit':<8} {'n':>4}  "
+                 + (f"{self.correction + ' p %':>14}  " if adj else "") + "gate"]
+        bad = self.failing()
         for k, s in enumerate(self.sensors):
             pv = self.pvalue[k]
             factor, unit = units.get(s, (1.0, ""))
-            ok = "" if s not in self.gated else ("pass" if pv >= self.level else "FAIL")
+            ok = "" if s not in self.gated else ("FAIL" if s in bad else "pass")
             lines.append(f"{s:<10} {100 * pv:>{wp}.2f} {factor * self.sigma_rep[k]:>{ws}.4g} {unit or '-':<8} "
-                         f"{int(self.n_diff[k]):>4}  {ok}")
+                         f"{int(self.n_diff[k]):>4}  " + (f"{100 * self.adjusted[k]:>14.2f}  " if adj else "") + ok)
         return "\n".join(lines)
 
 
@@ -226,15 +250,20 @@ def series_text(labels) -> str:
     return ", ".join(nums)
 
 
-def normality_check(data: Measurements, level: float = 0.05, weights=None) -> NormalityCheck:
-    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor.
+def normality_check(data: Measurements, level: float = 0.05, weights=None,
+                    correction: str = GATE_CORRECTIONS[0]) -> NormalityCheck:
+    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor, at a family-wise level.
 
     tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q}; the pairs are
     consecutive series (an odd last series is left out).  Returns the p-values and the
     repeatability sigma std(tilde z_k) / sqrt(2) (unit of z); never raises on a failed test.
+    The gate passes when every gated sensor (weight > 0) has an adjusted p-value >= ``level``;
+    ``correction`` ("holm", "bonferroni" or "none", the paper's per-sensor gate) adjusts over the
+    gated sensors (:func:`identification.normality_gate.adjusted_pvalues`).
     """
     if not isinstance(data, Measurements):
         raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    check_correction(correction, "correction")
     w = data.sensor_weights(weights)
     n_pairs = data.n_M // 2
     pairs = tuple((2 * m, 2 * m + 1) for m in range(n_pairs))
@@ -246,7 +275,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None) -> No
     if n_pairs == 0:
         return NormalityCheck(data.sensors, pv, sig, nd, level, gated, False, pairs=pairs,
                               note="only one series: differences of repeated series cannot be formed",
-                              series=tuple(data.series))
+                              series=tuple(data.series), correction=correction)
     if data.n_M % 2:
         notes.append(f"series {data.n_M} (odd count) left out of the differences")
     for k in range(data.n_S):
@@ -260,9 +289,9 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None) -> No
         else:
             notes.append(f"sensor {data.sensors[k]!r}: {d.size} differences"
                          + (" all equal" if d.size >= 3 else "") + "; Shapiro-Wilk not computable")
-    passed = all(np.isfinite(pv[k]) and pv[k] >= level for k in range(data.n_S) if w[k] > 0)
-    return NormalityCheck(data.sensors, pv, sig, nd, float(level), gated, bool(passed), pairs=pairs,
-                          note="; ".join(notes), series=tuple(data.series))
+    chk = NormalityCheck(data.sensors, pv, sig, nd, float(level), gated, False, pairs=pairs,
+                         note="; ".join(notes), series=tuple(data.series), correction=correction)
+    return dataclasses.replace(chk, passed=not chk.failing())
 
 
 # ---------------------------------------------------------------------------- one split
@@ -753,7 +782,7 @@ class DetectionResult:
             if any(chk is c for c in seen):
                 continue
             seen.append(chk)
-            head = (f"Normality gate (line 05), Shapiro-Wilk at {100 * chk.level:g} % on the differences "
+            head = (f"Normality gate (line 05), {chk.gate_text()} on the differences "
                     f"{chk.pairs_text()} of the {data_name} {chk.series_text()}"
                     + (f" [data of {mname}]" if len(self.models) > 1 else ""))
             status = "passed" if chk.passed else ("FAILED, overridden by the user "
@@ -948,16 +977,17 @@ class _NormalityGate:
                     found = chk
         if found is not None:
             return found
-        chk = normality_check(data, self.settings.normality_level, w)
+        chk = normality_check(data, self.settings.normality_level, w, self.settings.normality_correction)
         if not chk.passed:
             chk = self._failed(chk)
         self.seen.append((data.z, wk, chk))
         return chk
 
     def _failed(self, chk: NormalityCheck) -> NormalityCheck:
-        bad = [s for k, s in enumerate(chk.sensors) if s in chk.gated and not chk.pvalue[k] >= chk.level]
+        bad = chk.failing()
+        adj = "" if chk.correction == "none" else f" ({chk.correction}-adjusted over {len(chk.gated)} sensors)"
         msg = (f"normality gate (Algorithm 1, line 05) failed for sensor(s) {', '.join(bad)}: Shapiro-Wilk "
-               f"p-value(s) {', '.join(f'{100 * chk.pvalue[chk.sensors.index(s)]:.3g} %' for s in bad)} "
+               f"p-value(s){adj} {', '.join(f'{100 * chk.adjusted[chk.sensors.index(s)]:.3g} %' for s in bad)} "
                f"< {100 * chk.level:g} % on the differences of repeated series"
                + (f" ({chk.note})" if chk.note else "")
                + "; acquire new data, or pass normality='override' to continue on record")

@@ -48,12 +48,14 @@ from .detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, 
                      run_split_tests)
 from .errors import DataError, IdentificationError
 from .measurements import Measurements
+from .normality_gate import correction_text, gate_fails
 from .progress import Progress
 from .splits import Split, SplitError
 from models.state import set_jit, simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
-           "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests"]
+           "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests",
+           "shapiro_pvalues"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -637,7 +639,12 @@ def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequen
     return out
 
 
-def _shapiro_pvalues(ds: list) -> list:
+def _first(data, names):
+    """The first model's Measurements of a generator's output (a Measurements or a mapping of them)."""
+    return data[names[0]] if isinstance(data, Mapping) else data
+
+
+def shapiro_pvalues(ds: list) -> list:
     """``normality_check(d).pvalue`` of every data set: the Shapiro-Wilk p-values per sensor of the
     differences of pairs of series.  Data sets without missing values and of a common shape are
     tested in one ``scipy.stats.shapiro(..., axis=0)`` call (the same test per column); the others
@@ -671,7 +678,7 @@ def _replicate_chunk(task: _Task, chunk: list) -> list:
     for im, name in enumerate(task.names):
         ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
         todo = [r for r in range(len(ds)) if outs[r]["shapiro"] is None]
-        for r, pv in zip(todo, _shapiro_pvalues([ds[r] for r in todo])):
+        for r, pv in zip(todo, shapiro_pvalues([ds[r] for r in todo])):
             outs[r]["shapiro"] = pv
         groups = {}
         for r, d in enumerate(ds):
@@ -789,6 +796,9 @@ class MonteCarloResult:
                                 failed (alpha_lr also where the pooled fit failed)
     covered : ndarray (n_rep, n_models, n_splits, 2)   1/0 p* in the cal/val ellipsoid, NaN if n/a
     shapiro : ndarray (n_rep, n_S)   normality-gate p-values of each simulated campaign
+    gated : tuple of bool       the sensors of the gate (the first model's selected sensors)
+    normality_level, normality_correction   the gate's family-wise level and correction
+                                (``detect.normality_level`` / ``normality_correction`` of the settings)
     errors : tuple              (replication, model, split, stage, message) of every failed split
     seed, backend, workers, wall_time, coverage_alpha, ci_level, description
     """
@@ -811,6 +821,9 @@ class MonteCarloResult:
     coverage_alpha: float
     ci_level: float
     description: str = ""
+    gated: tuple = ()
+    normality_level: float = 0.05
+    normality_correction: str = "holm"
 
     def __post_init__(self):
         for name in ("alpha_paper", "alpha_two_sample", "alpha_lr", "covered", "shapiro"):
@@ -837,6 +850,12 @@ class MonteCarloResult:
         rej = np.any(a < thr, axis=1)
         undec = ~rej & np.any(~np.isfinite(a), axis=1)
         return np.where(rej, 1.0, np.where(undec, np.nan, 0.0))
+
+    def gate_failure_rate(self) -> Rate:
+        """Fraction of the campaigns failing the normality gate (its correction over the gated sensors;
+        :func:`identification.normality_gate.gate_fails`, as :func:`identification.detect.normality_check`)."""
+        fail = gate_fails(self.shapiro, self.normality_level, self.normality_correction, self.gated or None)
+        return clopper_pearson(int(np.sum(fail)), int(fail.size), self.ci_level)
 
     def rejection_rate(self, model=None, statistic: str = DEFAULT_STATISTIC) -> Rate:
         """Family-wise rejection rate over the decided replications, with Clopper-Pearson CI."""
@@ -898,7 +917,10 @@ class MonteCarloResult:
         sw = self.shapiro
         if sw.size and np.any(np.isfinite(sw)):
             rates = [f"{100 * np.mean(sw[:, k][np.isfinite(sw[:, k])] < 0.05):.1f} %" for k in range(sw.shape[1])]
-            lines += ["", "Normality gate (Shapiro-Wilk 5 %) rejection rate per sensor: " + ", ".join(rates)]
+            gate = correction_text(self.normality_correction, self.normality_level,
+                                   int(np.sum(self.gated)) if self.gated else sw.shape[1])
+            lines += ["", "Normality gate (Shapiro-Wilk 5 %) rejection rate per sensor: " + ", ".join(rates),
+                      f"Normality gate (Shapiro-Wilk at {gate}) failure rate: {self.gate_failure_rate()}"]
         if self.errors:
             lines += ["", f"{len(self.errors)} failed split fits, e.g.: {self.errors[0]}"]
         return "\n".join(lines)
@@ -1060,7 +1082,9 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
         alpha_lr=np.stack([r["alpha_lr"] for r in out]),
         covered=np.stack([r["covered"] for r in out]), shapiro=np.stack([r["shapiro"] for r in out]),
         errors=errors, seed=int(settings.seed), backend=backend, workers=n_w, wall_time=wall,
-        coverage_alpha=float(settings.coverage_alpha), ci_level=float(settings.ci_level), description=description)
+        coverage_alpha=float(settings.coverage_alpha), ci_level=float(settings.ci_level), description=description,
+        gated=tuple(bool(x) for x in _first(probe, names).sensor_weights(task.weights[0]) > 0),
+        normality_level=settings.detect.normality_level, normality_correction=settings.detect.normality_correction)
 
 
 def size_study(model: Model, p_true, inputs, sigma, splits: Sequence[Split], p0=None, n_M: int = 2,

@@ -414,7 +414,7 @@ def _simulate_study(cfg, args, progress, out) -> int:
                 os.replace(paths[k], target)
                 paths[k] = target
     record = dict(model=cfg.model.name, variant=sim.variant, seed=sim.seed, n_series=c.n_M,
-                  truth=sim.truth, truth_units={p.name: p.unit for p in cfg.parameters},
+                  truth=sim.truth, truth_units=sim.truth_units,
                   sigma_model_units=dict(zip(c.sensors, sim.sigma)), layout=d.layout,
                   input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
                   files=[str(p) for p in paths])

@@ -6,8 +6,9 @@ which units, the sensors and their sigma, the unknown parameters with start valu
 bounds, the calibration / validation splits, the test level and statistic, and the
 optimal-design criterion and constraints.  Every value has a default (``configs/press.toml``
 spells them out for the press study); an unknown key is an error naming the key, the file
-and the line.  Units are declared once (any unit of :data:`mudoe.units.UNITS`) and converted once,
-to the model's units (the press: mm, N).  ``[simulate]`` drives ``mudoe simulate`` for an own model.
+and the line.  Units are declared once (any unit pint knows, :mod:`mudoe.units`; an unknown unit
+is an error naming the key) and converted once, by pint, to the model's units (the press: mm, N).
+``[simulate]`` drives ``mudoe simulate`` for an own model.
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
 
@@ -21,18 +22,19 @@ settings dataclass validates their values, and the section hands the workflow a 
 object (``cfg.detect.settings()``, ``cfg.validate.settings(...)``).  The keys backed by a
 settings field (:func:`settings_keys`):
 
-===================  ===============================
-TOML key             settings field
-===================  ===============================
-[detect] tol         ``DetectSettings.tol``
-[detect] statistic   ``DetectSettings.statistic``
-[detect] correction  ``DetectSettings.correction``
-[detect] normality   ``DetectSettings.normality``
-[detect] covariance  ``DetectSettings.covariance``
-[validate] n_runs    ``MonteCarloSettings.n_rep``
-[validate] seed      ``MonteCarloSettings.seed``
-[validate] scheduler ``MonteCarloSettings.scheduler``
-===================  ===============================
+==============================  ========================================
+TOML key                        settings field
+==============================  ========================================
+[detect] tol                    ``DetectSettings.tol``
+[detect] statistic              ``DetectSettings.statistic``
+[detect] correction             ``DetectSettings.correction``
+[detect] normality              ``DetectSettings.normality``
+[detect] normality_correction   ``DetectSettings.normality_correction``
+[detect] covariance             ``DetectSettings.covariance``
+[validate] n_runs               ``MonteCarloSettings.n_rep``
+[validate] seed                 ``MonteCarloSettings.seed``
+[validate] scheduler            ``MonteCarloSettings.scheduler``
+==============================  ========================================
 
 Their defaults are the settings dataclasses' except where the study has always used its own,
 listed in the one table :data:`STUDY_DEFAULTS` ([validate] n_runs = 200, seed = 1).
@@ -59,7 +61,7 @@ from identification.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.press import PRESS_SCENARIO_NAMES
 
-from .units import known_units
+from .units import UnitError, check_unit, convert, dimension, known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
@@ -67,9 +69,9 @@ __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "Paramete
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
            "settings_values"]
 
-#: factor converting a declared length unit to the model's mm
+#: examples of declared length units and their factor to the model's mm (any pint length unit is accepted)
 LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "m": 1e3}
-#: factor converting a declared force unit to the model's N
+#: examples of declared force units and their factor to the model's N (any pint force unit is accepted)
 FORCE_UNITS = {"N": 1.0, "kN": 1e3}
 #: known models and their variants (friction models of the paper); read through :func:`known_variants`
 MODEL_VARIANTS = {"press": FRICTION_VARIANTS}
@@ -84,7 +86,7 @@ STUDY_DEFAULTS = {(MonteCarloSettings, "n_rep"): 200, (MonteCarloSettings, "seed
 #: the default study shipped with the repository
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 
-#: the units a config may declare (README "Data formats"; "" = not declared)
+#: examples of the units a config may declare (README "Data formats"; "" = not declared; any unit pint knows)
 UNIT_CHOICES = ("",) + known_units()
 
 #: an own model factory, "package.module:function"
@@ -134,9 +136,11 @@ NON_NEGATIVE = Bounds(0)
 OPEN_UNIT = Bounds(0, strict=True, high=1)
 
 
-def _key(default, *, choices=None, bounds=None, allow_inf=False) -> Field:
-    """A config key: its default and how its value is checked (choices, bounds, infinite allowed)."""
-    return field(default=default, metadata={"choices": choices, "bounds": bounds, "allow_inf": allow_inf})
+def _key(default, *, choices=None, bounds=None, allow_inf=False, unit=None) -> Field:
+    """A config key: its default and how its value is checked (choices, bounds, infinite allowed; ``unit``:
+    the value is a unit pint knows, ``"any"`` or of the named dimension, e.g. ``"length"``)."""
+    return field(default=default, metadata={"choices": choices, "bounds": bounds, "allow_inf": allow_inf,
+                                            "unit": unit})
 
 
 def _field_of(cls, name: str) -> Field:
@@ -226,12 +230,14 @@ class DataConfig:
         Paper layout, optional: actual forces in the same layout (set force, one column per series).
     value_column : {"value", "raw"}
         Tidy layout: which reading column to use (``raw`` = before any force correction).
-    displacement_unit : {"mm", "um", "m"}
-        Unit of readings that are lengths (the model's sensor unit is a length or undeclared).
-    force_unit : {"N", "kN"}
-        Unit of an input that is a force (the model's input unit is a force or undeclared).
+    displacement_unit : str
+        Unit of readings that are lengths (the model's sensor unit is a length): any pint length
+        unit ("mm", "um", "m", "in", ...).
+    force_unit : str
+        Unit of an input that is a force (the model's input unit is a force): any pint force unit
+        ("N", "kN", "lbf", ...).
     input_unit, output_unit : str
-        Any unit of :data:`mudoe.units.UNITS` for the input column and the readings in the files
+        Any unit pint knows (:mod:`mudoe.units`) for the input column and the readings in the files
         ("" = the model's own unit, or force_unit / displacement_unit as above); a sensor's
         ``unit`` in [[sensors]] overrides output_unit.  Converted once to the model's units.
     force_correction : bool
@@ -251,10 +257,10 @@ class DataConfig:
     file: str = "campaign_long.csv"
     actual_forces_file: str = ""
     value_column: str = _key("value", choices=("value", "raw"))
-    displacement_unit: str = _key("um", choices=tuple(LENGTH_UNITS))
-    force_unit: str = _key("N", choices=tuple(FORCE_UNITS))
-    input_unit: str = _key("", choices=UNIT_CHOICES)
-    output_unit: str = _key("", choices=UNIT_CHOICES)
+    displacement_unit: str = _key("um", unit="length")
+    force_unit: str = _key("N", unit="force")
+    input_unit: str = _key("", unit="any")
+    output_unit: str = _key("", unit="any")
     force_correction: bool = False
     series: tuple[int, ...] | None = None
     seed: int = _key(20190731, bounds=NON_NEGATIVE)
@@ -276,22 +282,23 @@ class SensorConfig:
     name: str
     sigma: float | None = _key(None, bounds=POSITIVE)
     sigma_man: float | None = _key(None, bounds=NON_NEGATIVE)
-    unit: str = _key("", choices=UNIT_CHOICES)
+    unit: str = _key("", unit="any")
 
 
 @dataclass(frozen=True)
 class ParameterConfig:
-    """An unknown parameter: start value and bounds in the model's unit (N/mm for the press).
+    """An unknown parameter: start value and bounds in ``unit`` (default the model's unit; N/mm for the press).
 
-    ``unit`` (free text, e.g. "1/K") names that unit for tables and the report; a model that
-    declares another unit for the parameter is an error (parameters are never converted).
+    ``unit`` (any unit pint knows, e.g. "1/K") names that unit; when the model declares another unit
+    of the same dimension, start and bounds are converted to the model's unit by pint; a unit of
+    another dimension is an error.
     """
 
     name: str
     start: float
     lower: float = _key(-math.inf, allow_inf=True)
     upper: float = _key(math.inf, allow_inf=True)
-    unit: str = ""
+    unit: str = _key("", unit="any")
 
 
 @dataclass(frozen=True)
@@ -378,6 +385,7 @@ class DetectConfig:
     statistic: str = setting(DetectSettings, "statistic")
     correction: str = setting(DetectSettings, "correction")
     normality: str = setting(DetectSettings, "normality")
+    normality_correction: str = setting(DetectSettings, "normality_correction")
     covariance: str = setting(DetectSettings, "covariance")
     sensors: Any = "oed"
 
@@ -466,15 +474,16 @@ class ValidateConfig:
     scheduler: str | None = setting(MonteCarloSettings, "scheduler")
     variant: str = ""
 
-    def settings(self, tol: float, workers: int | None = None, progress: bool = True) -> MonteCarloSettings:
+    def settings(self, tol: float, workers: int | None = None, progress: bool = True,
+                 normality_correction: str = "holm") -> MonteCarloSettings:
         """The :class:`MonteCarloSettings` of the size study: ``n_rep`` and ``seed`` from this section.
 
-        The tests run at level ``tol`` with the normality gate recorded, not enforced, and every
-        other field at its default: the settings :func:`identification.montecarlo.validate`
-        builds from its keyword arguments.
+        The tests run at level ``tol`` with the normality gate recorded, not enforced (its failure
+        rate counted with ``normality_correction``, ``[detect]``), and every other field at its
+        default: the settings :func:`identification.montecarlo.validate` builds from its keyword arguments.
         """
-        return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress,
-                                  detect=DetectSettings(tol=tol, normality="override"))
+        det = DetectSettings(tol=tol, normality="override", normality_correction=normality_correction)
+        return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress, detect=det)
 
 
 @dataclass(frozen=True)
@@ -510,12 +519,12 @@ class StudyConfig:
     @property
     def length_factor(self) -> float:
         """Factor from the declared displacement unit to mm."""
-        return LENGTH_UNITS[self.data.displacement_unit]
+        return float(convert(1.0, self.data.displacement_unit, "mm"))
 
     @property
     def force_factor(self) -> float:
         """Factor from the declared force unit to N."""
-        return FORCE_UNITS[self.data.force_unit]
+        return float(convert(1.0, self.data.force_unit, "N"))
 
     def resolve(self, rel: str) -> Path:
         """A path from the config, relative to the config file's folder."""
@@ -642,6 +651,21 @@ def _str(ctx, section, key, v, choices=None):
     return v
 
 
+def _unit(ctx, section, key, v, dim):
+    """A unit pint knows ("" = undeclared, unless ``dim`` names the dimension it must have)."""
+    try:
+        check_unit(v)
+    except UnitError as exc:
+        raise ctx.error(section, key, str(exc)) from None
+    if dim != "any" and (v == "" or dimension(v) != dim):
+        got = "nothing" if v == "" else f"{v!r}, a unit of {dimension(v)}"
+        raise ctx.error(section, key, f"expected a unit of {dim} (e.g. {_DIM_EXAMPLES.get(dim, '')}), got {got}")
+    return v
+
+
+_DIM_EXAMPLES = {"length": "'mm', 'um', 'm', 'in'", "force": "'N', 'kN', 'lbf'"}
+
+
 def _bool(ctx, section, key, v):
     if not isinstance(v, bool):
         raise ctx.error(section, key, f"expected true or false, got {v!r}")
@@ -702,7 +726,8 @@ def _read(ctx: _Ctx, section: str, f: Field, v, what: str = ""):
         return _num(ctx, section, f.name, v, integer=kind == "int", bounds=meta.get("bounds"),
                     allow_inf=meta.get("allow_inf", False), what=what)
     if kind == "str":
-        return _str(ctx, section, f.name, v, meta.get("choices"))
+        v = _str(ctx, section, f.name, v, meta.get("choices"))
+        return v if meta.get("unit") is None else _unit(ctx, section, f.name, v, meta["unit"])
     if kind not in _READERS:
         raise TypeError(f"{section}.{f.name}: no reader for a {f.type!r} key")
     return _READERS[kind](ctx, section, f.name, v)

@@ -13,10 +13,13 @@ Tidy long layout (one file)::
 
 Required tidy columns: ``series``, ``set_force``, ``sensor``, ``value`` (or ``raw``);
 optional: ``index`` (1-based set-point number; default: order of appearance),
-``actual_force``, ``raw``.  A column name may carry its unit as a suffix (``_N``,
-``_kN``, ``_mm``, ``_um``, ``_m``); it must then agree with the units declared in the
-config.  Empty cells and ``NaN``/``NA`` mark a missing reading; set forces must be known.
-Everything is converted once to the model's units (mm, N).
+``actual_force``, ``raw``.  A column name may carry its unit as a suffix (``force_N``,
+``set_force_kN``, ``value_um``, ``force [lbf]``): any unit pint knows (:mod:`mudoe.units`).  An
+input column in another unit of the declared dimension is converted by pint (``force_lbf``
+with force_unit = "N"); a unit of another dimension (``force_parsec``) or one pint does not
+know is an error naming the file and column; a reading column must carry the declared unit
+(its sigma is declared in it).  Empty cells and ``NaN``/``NA`` mark a missing reading; set forces
+must be known.  Everything is converted once to the model's units (mm, N).
 """
 from __future__ import annotations
 
@@ -33,8 +36,9 @@ import numpy as np
 from models.campaign import Campaign
 from models.fileio import atomic_write_text
 
-from .config import FORCE_UNITS, LENGTH_UNITS, StudyConfig
-from .units import UNITS, UnitError, convert, dimension, known_units
+from .config import StudyConfig
+from .data_checks import absurd_reading_message
+from .units import UnitError, check_unit, convert, dimension, same_dimension, unit_name
 
 __all__ = ["DataFileError", "DataUnits", "study_units", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
@@ -72,11 +76,12 @@ class DataUnits:
 
     @classmethod
     def legacy(cls, displacement_unit: str, force_unit: str, n_sensors: int) -> "DataUnits":
-        """Forces in ``force_unit`` and displacements in ``displacement_unit``, model in N and mm."""
-        if displacement_unit not in LENGTH_UNITS:
-            raise DataFileError(f"displacement_unit: {displacement_unit!r} is not one of {', '.join(LENGTH_UNITS)}")
-        if force_unit not in FORCE_UNITS:
-            raise DataFileError(f"force_unit: {force_unit!r} is not one of {', '.join(FORCE_UNITS)}")
+        """Forces in ``force_unit`` and displacements in ``displacement_unit`` (any pint force / length
+        unit, e.g. "N", "kN", "lbf" / "mm", "um", "m"), model in N and mm."""
+        for key, unit, dim, ex in (("displacement_unit", displacement_unit, "length", "mm, um, m"),
+                                   ("force_unit", force_unit, "force", "N, kN, lbf")):
+            if not _is(unit, dim):
+                raise DataFileError(f"{key}: {unit!r} is not a unit of {dim} (e.g. {ex})")
         return cls(force_unit, "N", (displacement_unit,) * n_sensors, ("mm",) * n_sensors)
 
     def q_to_model(self, q):
@@ -111,60 +116,75 @@ class DataUnits:
         return {"actual_force", "actual_input", "actual_" + n}
 
 
-def _model_unit(declared: str, file_unit: str, legacy: str) -> str:
-    """The model-side unit: the model's own, else ``legacy`` (mm, N) for a length/force, else the file's."""
-    if declared:
-        return declared
-    if file_unit and dimension(file_unit) == dimension(legacy):
-        return legacy
-    return file_unit
+def _is(unit: str, dim: str) -> bool:
+    """Whether ``unit`` ("" = undeclared; an unknown unit is not) is a unit of dimension ``dim``."""
+    try:
+        return bool(unit) and dimension(unit) == dim
+    except UnitError:
+        return False
+
+
+def _input_file_unit(cfg: StudyConfig, model) -> tuple:
+    """(file unit, config key) of the input column (:func:`study_units`)."""
+    from .config import ConfigError
+    q_model = model.input_units[0] if model.input_units else ""
+    if cfg.data.input_unit:
+        return cfg.data.input_unit, "input_unit"
+    if _is(q_model, "force"):
+        return cfg.data.force_unit, "force_unit"
+    if q_model:
+        return q_model, "input_unit"
+    raise ConfigError(f"{cfg.path}: [data] input_unit: the input {model.inputs[0]!r} has no unit (the model declares "
+                      "none); declare the unit of the input column, e.g. input_unit = \"N\" or \"degC\" (any unit "
+                      "pint knows; \"1\" for a dimensionless input)")
+
+
+def _sensor_file_unit(cfg: StudyConfig, s: str, u_model: str) -> str:
+    """The file unit of sensor ``s`` (:func:`study_units`); never a silent default for an undeclared one."""
+    from .config import ConfigError
+    own = next((sc.unit for sc in cfg.sensors if sc.name == s), "")
+    if own or cfg.data.output_unit:
+        return own or cfg.data.output_unit
+    if _is(u_model, "length"):
+        return cfg.data.displacement_unit
+    if u_model:
+        return u_model
+    raise ConfigError(f"{cfg.path}: [[sensors]] unit: sensor {s!r} has no unit (the model declares none); declare "
+                      "the unit of its readings, e.g. unit = \"m/s^2\" in its [[sensors]] entry or [data] "
+                      "output_unit (any unit pint knows; \"1\" for a dimensionless reading)")
 
 
 def study_units(cfg: StudyConfig, model) -> DataUnits:
     """The :class:`DataUnits` of a study: file units from the config, model units from the model.
 
     File unit of the input: ``[data] input_unit``, else ``force_unit`` when the model's input is a
-    force or undeclared, else the model's unit.  File unit of sensor k: its [[sensors]] ``unit``,
-    else ``[data] output_unit``, else ``displacement_unit`` when the model's unit is a length or
-    undeclared, else the model's unit.  Model units: the model's declared ones; undeclared ones are
-    mm / N for lengths / forces and the file's unit otherwise.
+    force, else the model's unit.  File unit of sensor k: its [[sensors]] ``unit``, else
+    ``[data] output_unit``, else ``displacement_unit`` when the model's unit is a length, else the
+    model's unit.  A unit declared nowhere (model and config) is an error, never a default.  Model
+    units: the model's declared ones; an undeclared one is the file's unit (no conversion).
 
     Raises
     ------
     ConfigError
-        A declared unit cannot be converted to the model's unit (different dimensions).
+        A unit is declared nowhere, unknown to pint, or of another dimension than the model's.
     """
     from .config import ConfigError
     d = cfg.data
-    sensor_cfg = {s.name: s for s in cfg.sensors}
     q_model = model.input_units[0] if model.input_units else ""
-    if d.input_unit:
-        q_file, q_key = d.input_unit, "input_unit"
-    elif not q_model or (q_model in UNITS and dimension(q_model) == "force"):
-        q_file, q_key = d.force_unit, "force_unit"
-    else:
-        q_file, q_key = q_model, "input_unit"
-    out_file, out_model = [], []
-    for s, u_model in zip(model.sensors, model.sensor_units):
-        own = sensor_cfg[s].unit if s in sensor_cfg else ""
-        if own or d.output_unit:
-            u = own or d.output_unit
-        elif not u_model or (u_model in UNITS and dimension(u_model) == "length"):
-            u = d.displacement_unit
-        else:
-            u = u_model
-        out_file.append(u)
-        out_model.append(_model_unit(u_model, u, "mm"))
-    units = DataUnits(q_file, _model_unit(q_model, q_file, "N"), tuple(out_file), tuple(out_model),
+    q_file, q_key = _input_file_unit(cfg, model)
+    out_file = [_sensor_file_unit(cfg, s, u) for s, u in zip(model.sensors, model.sensor_units)]
+    out_model = [u or f for u, f in zip(model.sensor_units, out_file)]
+    units = DataUnits(q_file, q_model or q_file, tuple(out_file), tuple(out_model),
                       input_name=model.inputs[0] if d.input_unit or q_key == "input_unit" else "force",
                       input_key=q_key, output_key="output_unit" if d.output_unit else "displacement_unit")
     pairs = [(q_file, units.input_model, f"[data] {q_key}", f"input {model.inputs[0]!r}")]
     pairs += [(a, b, f"[[sensors]] unit / [data] {units.output_key}", f"sensor {s!r}")
               for s, a, b in zip(model.sensors, out_file, out_model)]
     for a, b, key, what in pairs:
-        if b not in UNITS:
-            raise ConfigError(f"{cfg.path}: the model declares unit {b!r} for {what}, which is not in the unit "
-                              f"table; known units: {', '.join(known_units())}")
+        try:
+            check_unit(b)
+        except UnitError as exc:
+            raise ConfigError(f"{cfg.path}: the model declares unit {b!r} for {what}: {exc}") from None
         try:
             convert(1.0, a, b)
         except UnitError as exc:
@@ -197,26 +217,49 @@ def _read_rows(path: Path) -> list[list[str]]:
     return rows
 
 
-_ALL_UNITS = {u: None for u in UNITS if u}
+def _split_unit(name: str, bases=()) -> tuple[str, str | None]:
+    """'set_force_kN' -> ('set_force', 'kN'): a known column name ``bases`` (lower case) and the unit
+    after it ("_unit", " unit", "[unit]" or "(unit)"); other names -> (name lower-cased, None).
 
-
-def _split_unit(name: str, units: dict = _ALL_UNITS) -> tuple[str, str | None]:
-    """'set_force_kN' -> ('set_force', 'kN'); unit suffixes are matched case-sensitively."""
+    The unit is returned as written (checked by :func:`_check_unit`); matching the known names
+    first keeps a name such as "set_T" from being read as a unit (T is the tesla).
+    """
     n = name.strip()
-    for sep in ("_", " "):
-        for u in sorted(units, key=len, reverse=True):
-            if n.endswith(sep + u):
-                return n[: -len(u) - 1].strip().lower(), u
-    for u in units:
-        if n.endswith(f"[{u}]") or n.endswith(f"({u})"):
-            return n[: -len(u) - 2].strip().rstrip("_ ").lower(), u
-    return n.lower(), None
+    low = n.lower()
+    for b in sorted(bases, key=len, reverse=True):
+        if low == b:
+            return b, None
+        if low.startswith(b) and len(n) > len(b) + 1 and n[len(b)] in "_ [(":
+            rest = n[len(b):].strip(" _")
+            if rest[:1] in "[(" and rest[-1:] in "])":
+                rest = rest[1:-1].strip()
+            return b, rest or None
+    return low, None
 
 
-def _check_unit(path, col, found, declared, what):
-    if found is not None and declared and found != declared:
-        raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares "
-                            f"{what} = {declared!r}; fix the header or [data] {what}")
+def _check_unit(path, col, found, declared, what, convertible: bool = False) -> str:
+    """The unit of column ``col``: ``found`` in its header, else ``declared``.
+
+    A header unit must be a unit pint knows and of the declared unit's dimension; unless
+    ``convertible`` (the values are then converted by pint), it must be the declared unit itself.
+    """
+    if found is None or found == declared:
+        return declared
+    try:
+        check_unit(found)
+    except UnitError as exc:
+        raise DataFileError(f"{path}:1: column {col!r}: {exc}") from None
+    if not declared:
+        raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares no unit for it; "
+                            f"declare [data] {what} = {found!r}")
+    if not same_dimension(found, declared):
+        raise DataFileError(f"{path}:1: column {col!r} is in {found} ({unit_name(found)}, a unit of "
+                            f"{dimension(found)}) but the config declares {what} = {declared!r}, a unit of "
+                            f"{dimension(declared)}; fix the header or [data] {what}")
+    if convertible or convert(1.0, found, declared) == 1.0 and convert(0.0, found, declared) == 0.0:
+        return found
+    raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares "
+                        f"{what} = {declared!r}; fix the header or [data] {what}")
 
 
 def _number(path, line, col, cell, allow_missing=True):
@@ -253,12 +296,12 @@ def _with_unit(name: str, unit: str) -> str:
 def _read_paper_file(path: Path, units: DataUnits):
     rows = _read_rows(path)
     header = [h.strip() for h in rows[0]]
-    base, unit = _split_unit(header[0])
+    base, unit = _split_unit(header[0], units.input_names() | {"force"})
     if not base.startswith("force") and base not in units.input_names():
         example = f"{units.input_name}_{units.input_file}" if units.input_file else units.input_name
         raise DataFileError(f"{path}:1: wrong header: the first column must be the input {units.input_name!r} "
                             f"(e.g. {example!r}), got {header[0]!r}")
-    _check_unit(path, header[0], unit, units.input_file, units.input_key)
+    q_unit = _check_unit(path, header[0], unit, units.input_file, units.input_key, convertible=True)
     if len(header) < 2:
         raise DataFileError(f"{path}:1: wrong header: expected the force column then one column per series, "
                             f"got only {header!r}")
@@ -275,7 +318,7 @@ def _read_paper_file(path: Path, units: DataUnits):
         q[j] = _number(path, line, header[0], r[0], allow_missing=False)
         for i in range(1, len(header)):
             z[i - 1, j] = _number(path, line, header[i], r[i])
-    return q, z, tuple(header[1:])
+    return convert(q, q_unit, units.input_file), z, tuple(header[1:])
 
 
 def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: str = "N",
@@ -400,7 +443,7 @@ def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits)
     cols = {}
     same = set(units.output_file)
     for i, h in enumerate(header):
-        base, unit = _split_unit(h)
+        base, unit = _split_unit(h, units.input_names() | units.actual_names() | {"value", "raw"})
         if base in units.input_names():
             role = "set_force"
         elif base in units.actual_names():
@@ -413,7 +456,7 @@ def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits)
             raise DataFileError(f"{path}:1: wrong header: column {role!r} appears twice")
         cols[role] = (i, h, unit)
         if role in ("set_force", "actual_force"):
-            _check_unit(path, h, unit, units.input_file, units.input_key)
+            cols[role] = (i, h, _check_unit(path, h, unit, units.input_file, units.input_key, convertible=True))
         elif role in ("value", "raw") and unit is not None:
             if len(same) > 1:
                 raise DataFileError(f"{path}:1: column {h!r} carries unit {unit} but the sensors are declared in "
@@ -532,6 +575,9 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
     if absent:
         raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
     q_set, q_act, z = _tidy_arrays(path, recs, order_series, sens)
+    q_set = convert(q_set, cols["set_force"][2], units.input_file)           # a header in lbf, K, ...: pint
+    if "actual_force" in cols:
+        q_act = convert(q_act, cols["actual_force"][2], units.input_file)
     if np.isnan(q_set).any():
         j = int(np.flatnonzero(np.isnan(q_set))[0])
         raise DataFileError(f"{path}: no row for set-point index {j + 1}")
@@ -638,4 +684,7 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str], units: DataUnits | N
         c = read_tidy_layout(base / d.file, value_column=d.value_column, sensors=sensors, units=units)
     if d.force_correction:
         c = _force_correct(c, cfg.path)
+    absurd = absurd_reading_message(c, units, cfg.path)
+    if absurd:
+        raise DataFileError(absurd)
     return c

@@ -27,6 +27,7 @@ from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
+from .parameter_units import model_parameters
 from .press import diagnosis_explanations, press_variant
 
 __all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
@@ -180,11 +181,7 @@ def _apply_parameters(cfg: StudyConfig, m: Model) -> Model:
     missing = [n for n in m.param_names if n not in names]
     if missing:
         raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
-    for pc in cfg.parameters:
-        own = m.params[m.param_names.index(pc.name)].unit
-        if pc.unit and own and pc.unit != own:
-            raise ConfigError(f"{cfg.path}: [[parameters]] {pc.name}: unit {pc.unit!r} but the model declares "
-                              f"{own!r}; parameters are in the model's unit (drop the key or use {own!r})")
+    cfg = dataclasses.replace(cfg, parameters=model_parameters(cfg, m))
     try:
         new = m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
     except ModelError as exc:
@@ -208,7 +205,7 @@ def _declare_units(m: Model, units: DataUnits) -> Model:
 
 def _p0(cfg: StudyConfig, m: Model) -> np.ndarray:
     if cfg.parameters:
-        d = {p.name: p.start for p in cfg.parameters}
+        d = {p.name: p.start for p in model_parameters(cfg, m)}
         return np.array([d[n] for n in m.param_names], float)
     nominal = getattr(m, "p_nominal", None)
     if nominal is None:
@@ -301,7 +298,8 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
             raise ConfigError(f"{cfg.path}: [data] series {bad} out of range: the data hold {n_M} series "
                               "(0-based indices)")
     m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
-    norm = normality_check(m_all)
+    det = cfg.detect.settings()
+    norm = normality_check(m_all, det.normality_level, correction=det.normality_correction)
     sigma, sig_rows = _sigma(cfg, sensors, norm, units)
     models, data, data_all = {}, {}, {}
     for v, (m, fn) in built.items():
@@ -429,7 +427,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     progress = progress or Progress(False)
     vc = study.cfg.validate
     v = vc.variant or next(iter(study.models))
-    settings = vc.settings(study.cfg.detect.tol, workers, progress.enabled)
+    settings = vc.settings(study.cfg.detect.tol, workers, progress.enabled, study.cfg.detect.normality_correction)
     if scheduler is not None:
         settings = dataclasses.replace(settings, scheduler=scheduler)
     address = settings.scheduler
@@ -463,6 +461,7 @@ class SimulatedCampaign:
     truth : dict             true parameters (model units)
     sigma : tuple of float   noise standard deviation per sensor (model units)
     seed : int
+    truth_units : dict       {parameter: the model's unit of its true value} ("" undeclared)
     """
 
     campaign: Campaign
@@ -471,6 +470,7 @@ class SimulatedCampaign:
     truth: dict
     sigma: tuple
     seed: int
+    truth_units: dict = field(default_factory=dict)
 
 
 def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampaign:
@@ -497,7 +497,7 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     m, fn = built[variant]
     units = study_units(cfg, m)
     m = _declare_units(m, units)
-    truth = {p.name: p.start for p in cfg.parameters}
+    truth = {p.name: p.start for p in model_parameters(cfg, m)}
     unknown = [k for k in sc.truth if k not in m.param_names]
     if unknown:
         raise ConfigError(f"{cfg.path}: [simulate] truth: unknown parameter(s) {', '.join(unknown)}; the model has "
@@ -526,7 +526,8 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     z = h[None] + np.asarray(sigma) * rng.standard_normal((sc.n_series,) + h.shape)
     camp = Campaign(q_set=q, q_actual=None, z=z, sensors=tuple(m.sensors),
                     source=f"simulated from {cfg.model.name} ({variant}, seed {seed})", seed=seed)
-    return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed)
+    return SimulatedCampaign(camp, units, variant, {n: float(truth[n]) for n in m.param_names}, tuple(sigma), seed,
+                             truth_units={p.name: p.unit for p in m.params})
 
 
 # ---------------------------------------------------------------------------- designs before data (issue 13)

@@ -204,9 +204,10 @@ def _normality_page(results):
         said.append(f"on {'all series' if name == ALL_SERIES else 'the ' + name} ({chk.series_text()}; "
                     f"differences {chk.pairs_text()}): "
                     + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
-                    + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else ""))
-    txt = (f"Shapiro-Wilk test at {100 * s.normality.level:g} % of the differences of consecutive series over all set "
-           f"points, per sensor, {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
+                    + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else "")
+                    + (f" (failing: {', '.join(chk.failing())})" if chk.failing() else ""))
+    txt = (f"Normality gate: {(gate or s.normality).gate_text()} (one test per sensor, on the differences of "
+           f"consecutive series over all set points), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
            "fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2) with sigma_rep on all series, unless "
            "given directly in the config. The terminal (mudoe detect) prints the gate of Algorithm 1 (line 05) on "
            "the study series, in the same unit.")

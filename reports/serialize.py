@@ -79,6 +79,7 @@ def normality_dict(chk, units=None, data_name: str = "series") -> dict:
     return dict(computed_on=f"{data_name} {chk.series_text()}".strip(), series=list(chk.series),
                 sensors=chk.sensors, pvalue=chk.pvalue, sigma_rep=[f * v for (f, _), v in zip(fu, chk.sigma_rep)],
                 sigma_rep_unit=[u for _, u in fu], passed=chk.passed, overridden=chk.overridden, level=chk.level,
+                correction=chk.correction, pvalue_adjusted=chk.adjusted, gated=list(chk.gated), gate=chk.gate_text(),
                 note=chk.note)
 
 

@@ -16,6 +16,7 @@ from scipy import stats
 from identification.detect import DetectSettings
 from identification.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
                                        run_monte_carlo, size_study, validate)
+from identification.normality_gate import gate_fails
 from identification.splits import splits_from_scenarios
 from models.library import linear_model
 from models.press import PRESS_SCENARIOS
@@ -77,6 +78,12 @@ def test_size_of_both_statistics_and_coverage(model):
     assert abs(cov.rate - 0.95) <= 3.5 * math.sqrt(0.95 * 0.05 / N_REP), cov
     text = res.table()
     assert "family-wise rejection rate" in text and "Coverage" in text
+    # the normality gate (Holm over both sensors, as detect's): its failure rate from the stored p-values
+    gate = res.gate_failure_rate()
+    assert res.normality_correction == "holm" and res.gated == (True, True)
+    assert gate.k == int(np.sum(gate_fails(res.shapiro, 0.05, "holm")))
+    assert abs(gate.rate - 0.05) <= 3.5 * math.sqrt(0.05 * 0.95 / N_REP), gate
+    assert "family-wise 5 % over 2 sensors (Holm)) failure rate" in text
 
 
 def test_same_seeds_same_numbers_serial_processes_and_dask(model):

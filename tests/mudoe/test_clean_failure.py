@@ -187,7 +187,8 @@ def absurd_study(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
     x = np.linspace(0.5, 5, 20)
     z = 1.0 + 0.01 * np.sin(7 * x)[None, :, None] + 0.01 * np.random.default_rng(2).standard_normal((2, 20, 1))
-    write_paper_layout(tmp_path / "data", x, z, ["y"])
+    from mudoe.data_io import DataUnits
+    write_paper_layout(tmp_path / "data", x, z, ["y"], units=DataUnits("1", "1", ("1",), ("1",), input_name="x"))
     cfg = tmp_path / "absurd.toml"
     cfg.write_text(textwrap.dedent("""\
         [model]
@@ -195,6 +196,8 @@ def absurd_study(tmp_path, monkeypatch):
         variants = ["v"]
         [data]
         directory = "data"
+        input_unit = "1"                # the model declares no units: the config must (issue 20)
+        output_unit = "1"
         [[sensors]]
         name = "y"
         sigma = 0.01

@@ -17,7 +17,7 @@ def _settings_field(settings, name):
 
 def test_key_names_map_to_settings_fields_in_one_place():
     assert settings_keys(DetectConfig) == {k: k for k in ("tol", "statistic", "correction", "normality",
-                                                          "covariance")}
+                                                          "normality_correction", "covariance")}
     assert settings_keys(ValidateConfig) == {"n_runs": "n_rep", "seed": "seed", "scheduler": "scheduler"}
 
 
@@ -44,12 +44,13 @@ def test_study_defaults_are_the_only_departures_and_keep_the_old_numbers():
 
 def test_detect_section_hands_out_the_settings_the_study_built_before():
     cfg = parse_config('[detect]\ntol = 0.1\nstatistic = "paper"\ncorrection = "holm"\nnormality = "override"\n'
-                       'covariance = "gauss_newton"\nsensors = "all"\n', "d.toml")
+                       'normality_correction = "none"\ncovariance = "gauss_newton"\nsensors = "all"\n', "d.toml")
     d = cfg.detect
     assert d.settings() == DetectSettings(tol=d.tol, statistic=d.statistic, correction=d.correction,
-                                          normality=d.normality, covariance=d.covariance)
+                                          normality=d.normality, normality_correction="none",
+                                          covariance=d.covariance)
     assert settings_values(d) == {"tol": 0.1, "statistic": "paper", "correction": "holm", "normality": "override",
-                                  "covariance": "gauss_newton"}
+                                  "normality_correction": "none", "covariance": "gauss_newton"}
     assert parse_config("", "e.toml").detect.settings() == DetectSettings()
 
 
@@ -64,6 +65,7 @@ def test_validate_section_hands_out_the_settings_validate_built_from_keywords():
 @pytest.mark.parametrize("text, key, line, words", [
     ("[detect]\ntol = 0.05\n\nstatistic = \"t\"\n", "statistic", 4, ["likelihood_ratio", "two_sample"]),
     ("[detect]\nnormality = \"maybe\"\n", "normality", 2, ["check", "override"]),
+    ("[detect]\nnormality_correction = \"sidak\"\n", "normality_correction", 2, ["holm", "bonferroni", "none"]),
     ("[detect]\ncovariance = \"exact\"\n", "covariance", 2, ["second_order"]),
     ("[report]\ntitle = \"x\"\n[validate]\nseed = 2\nn_runs = 0\n", "n_runs", 5, ["at least one replication"]),
     ("[validate]\nseed = -3\n", "seed", 2, ["non-negative"]),

@@ -50,11 +50,24 @@ def test_kN_and_m_units_are_converted(tmp_path, synthetic):
     np.testing.assert_allclose(c.q_set, q, rtol=1e-13)
 
 
-def test_unit_in_header_must_match_declared(tmp_path, synthetic):
+def test_unit_in_header_is_converted_by_pint_or_refused(tmp_path, synthetic):
+    """A force column in kN or lbf is converted (pint); a parsec is a length, an unknown suffix is refused."""
     q, z, sensors = synthetic
     write_paper_layout(tmp_path, q, z, sensors, "um", "kN")
-    with pytest.raises(DataFileError, match="force_unit"):
-        read_paper_layout({s: tmp_path / f"measurements_{s}.csv" for s in sensors}, "um", "N")
+    files = {s: tmp_path / f"measurements_{s}.csv" for s in sensors}
+    np.testing.assert_allclose(read_paper_layout(files, "um", "N").q_set, q, rtol=1e-13)
+    f = files["D_y"]
+    text = f.read_text()
+    f.write_text(text.replace("force_kN", "force_lbf", 1))
+    c = read_paper_layout({"D_y": f}, "um", "N")
+    np.testing.assert_allclose(c.q_set, q / 1e3 * 4.4482216152605, rtol=1e-13)
+    f.write_text(text.replace("force_kN", "force_parsec", 1))
+    with pytest.raises(DataFileError, match=r"measurements_D_y.csv:1: column 'force_parsec' is in parsec .*a unit of "
+                                            r"length.* force_unit = 'N', a unit of force"):
+        read_paper_layout({"D_y": f}, "um", "N")
+    f.write_text(text.replace("force_kN", "force_xyz", 1))
+    with pytest.raises(DataFileError, match=r"column 'force_xyz': unknown unit 'xyz'"):
+        read_paper_layout({"D_y": f}, "um", "N")
 
 
 def test_nan_cells_are_missing_values(tmp_path, synthetic):

@@ -23,8 +23,10 @@ def test_unit_table_conversions():
     assert convert(2.0, "kN", "N") == 2000.0
     with pytest.raises(UnitError, match="temperature is not concentration"):
         convert(1.0, "degC", "mol/L")
-    with pytest.raises(UnitError, match="unknown unit 'furlong'"):
-        convert(1.0, "furlong", "m")
+    assert convert(1.0, "in", "mm") == pytest.approx(25.4, rel=1e-14)          # any unit pint knows
+    assert convert(1.0, "lbf", "N") == pytest.approx(4.4482216152605, rel=1e-14)
+    with pytest.raises(UnitError, match="unknown unit 'furlongs_x'"):
+        convert(1.0, "furlongs_x", "m")
 
 
 def _cstr_cfg(extra_data="", sensors=None, params=""):
@@ -84,9 +86,12 @@ def test_tidy_layout_round_trip_and_header_unit_checks(tmp_path):
     assert text.splitlines()[0] == "series,index,set_T_degC,sensor,value"   # mixed units: no suffix
     c = read_tidy_layout(f, sensors=m.sensors, units=u)
     np.testing.assert_allclose(c.z, z, rtol=1e-13)
+    # an input column in another temperature unit is converted by pint (the header says what it is)
     f.write_text(text.replace("set_T_degC", "set_T_K", 1))
-    with pytest.raises(DataFileError, match=r"t.csv:1: column 'set_T_K' is in K but the config declares "
-                                            r"input_unit = 'degC'"):
+    np.testing.assert_allclose(read_tidy_layout(f, sensors=m.sensors, units=u).q_set, T - 273.15, rtol=1e-12)
+    f.write_text(text.replace("set_T_degC", "set_T_mol", 1))
+    with pytest.raises(DataFileError, match=r"t.csv:1: column 'set_T_mol' is in mol .*a unit of \[substance\]\) but "
+                                            r"the config declares input_unit = 'degC', a unit of temperature"):
         read_tidy_layout(f, sensors=m.sensors, units=u)
     f.write_text(text.replace(",value", ",value_mol/L", 1))
     with pytest.raises(DataFileError, match="different units"):
@@ -108,12 +113,17 @@ def test_parameter_unit_key(tmp_path):
     cfg = _cstr_cfg(params=params)
     assert [p.unit for p in cfg.parameters] == ["1/min", "kJ/mol", "1/min"]
     from mudoe.study import _apply_parameters
-    with pytest.raises(ConfigError, match="E_a: unit 'J/mol' but the model declares 'kJ/mol'"):
-        _apply_parameters(_cstr_cfg(params=params.replace('"kJ/mol"', '"J/mol"')), build())
+    # another unit of the same dimension: start and bounds converted by pint to the model's kJ/mol
+    cfg_j = _cstr_cfg(params=params.replace('start = 50.0\nunit = "kJ/mol"', 'start = 5e4\nunit = "J/mol"'))
+    m = _apply_parameters(cfg_j, build())
+    from mudoe.study import _p0
+    assert _p0(cfg_j, m)[1] == pytest.approx(50.0, rel=1e-14) and m.params[1].unit == "kJ/mol"
+    with pytest.raises(ConfigError, match=r"E_a: unit '1/s' but the model declares 'kJ/mol': cannot convert"):
+        _apply_parameters(_cstr_cfg(params=params.replace('"kJ/mol"', '"1/s"')), build())
 
 
 def test_unknown_unit_in_config_names_the_line():
-    with pytest.raises(ConfigError, match=r"u.toml:2: \[data\] input_unit: unknown value 'Celsius'"):
+    with pytest.raises(ConfigError, match=r"u.toml:2: \[data\] input_unit: unknown unit 'Celsius'"):
         parse_config('[data]\ninput_unit = "Celsius"\n', "u.toml")
 
 
