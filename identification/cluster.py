@@ -287,7 +287,14 @@ def worker_start(install: Callable, blob: bytes, parent: int) -> None:
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="mudoe-parent-watch").start()
-    install(shipping.loads(blob))
+    try:
+        install(shipping.loads(blob))
+    except Exception as exc:  # noqa: BLE001 -- raised by _ready() instead: the parent then sees this error
+        _START_ERRORS.append(exc)           # (an initializer's error only breaks the pool without a reason)
+
+
+#: what went wrong while this spawned worker unpacked and installed its task (raised by :func:`_ready`)
+_START_ERRORS: list = []
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -299,7 +306,10 @@ def _exit_with_parent(parent: int) -> None:
 
 
 def _ready() -> int:
-    """A spawned worker's first call: returns once it is started and its task installed (its pid)."""
+    """A spawned worker's first call: returns once it is started and its task installed (its pid), or
+    raises what failed while it unpacked or installed the task (e.g. a model's factory)."""
+    if _START_ERRORS:
+        raise _START_ERRORS[0]
     return os.getpid()
 
 

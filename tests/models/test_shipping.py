@@ -19,8 +19,11 @@ SX_FACTORY = textwrap.dedent('''
     from models.contract import Model, Parameter
 
     def build(variant="quadratic"):
+        import multiprocessing
+        if variant == "other in workers" and multiprocessing.parent_process() is not None:
+            return Model.explicit(["a"], ["q"], ["y"], h=lambda p, q: p[0] * q[0])
         half = ca.SX(0.5)
-        lock = threading.Lock() if variant == "locked" else None
+        lock = threading.Lock() if variant != "quadratic" else None
 
         def y_guess(p, q):
             if lock is not None:
@@ -107,7 +110,9 @@ def _simulate_chunk(task, chunk):
     """(index, outputs, pid) of every input in the chunk; this process waits until the spawned one has run one."""
     t = _INSTALLED["task"] if task is None else task
     flag = t["flag"]
-    if task is None:
+    if flag is None:
+        pass
+    elif task is None:
         open(flag, "w").close()
     else:
         end = time.monotonic() + 60
@@ -127,3 +132,11 @@ def test_a_spawned_worker_runs_a_rebuilt_model(sx_factory, tmp_path):
     assert len({pid for _, _, pid in got}) == 2            # the spawned process simulated some of them
     for i, y, _ in got:
         np.testing.assert_allclose(y, m.simulate([2.0, 0.1], np.array([[float(i)]])).ravel(), rtol=1e-13)
+
+
+def test_a_factory_that_builds_another_model_in_the_worker_is_an_error_here(sx_factory):
+    m = sx_factory("other in workers")
+    m.origin = ModelSource("ship_pkg.cubic:build", "other in workers")
+    task = {"model": m, "flag": None}
+    with pytest.raises(ShippingError, match=r"built another model in this process"):
+        cluster.run_local(_simulate_chunk, task, [[1]], lambda r: None, 2, _install)
