@@ -37,8 +37,9 @@ __all__ = ["Interrupt", "INTERRUPT", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "GRA
 EXIT_INTERRUPTED = 128 + int(signal.SIGINT)
 #: exit code of a terminated run (128 + SIGTERM)
 EXIT_TERMINATED = 128 + int(signal.SIGTERM)
-#: seconds after the first signal before the watchdog ends a run that did not stop by itself (s)
-GRACE_S = 0.5
+#: seconds after the first signal before the watchdog ends a run that did not stop by itself (s); the
+#: watchdog itself takes 0.1-0.2 s on a loaded machine (it looks for the processes started meanwhile)
+GRACE_S = 0.3
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _WORDS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}
@@ -121,10 +122,22 @@ class Interrupt:
         import _thread
         while True:
             signum = signal.sigwait(set(_SIGNALS))
+            if not self._previous:          # no CLI run (main() returned): Python's own behaviour
+                self._default(signum)
+                continue
             if self.flag:
                 self.exit_now()
             self.signalled(signum)
             _thread.interrupt_main()
+
+    @staticmethod
+    def _default(signum: int) -> None:
+        """Outside a CLI run: SIGINT raises KeyboardInterrupt in the main thread, SIGTERM ends the process."""
+        import _thread
+        if signum == signal.SIGINT:
+            _thread.interrupt_main()
+        else:
+            os._exit(EXIT_TERMINATED)
 
     def _handler(self, signum, frame):
         """Python-level handler (platforms without ``sigwait``; and ``interrupt_main`` from the waiting thread)."""
@@ -136,11 +149,11 @@ class Interrupt:
         """First signal: record it, kill the processes this one started, close the outputs, start the watchdog."""
         from models.fileio import close_outputs
         self.flag, self.signum = True, int(signum)
-        kill_children()
-        close_outputs()
         watchdog = threading.Timer(GRACE_S, self.exit_now)
         watchdog.daemon = True
         watchdog.start()
+        kill_children()
+        close_outputs()
 
     def exit_now(self) -> None:
         """End the process with :attr:`exit_code` now: temporary outputs removed, child processes killed."""
@@ -186,8 +199,19 @@ def _is_resource_tracker(proc) -> bool:
 
 
 def kill_children() -> int:
-    """Kill (SIGKILL) every process this one started, and theirs, except the resource tracker; returns how many."""
+    """Kill (SIGKILL) every process this one started, and theirs, except the resource tracker; returns how many.
+
+    The worker processes (multiprocessing's) first, at once; then whatever else runs below this
+    process (the compilers they or this process started).
+    """
+    import multiprocessing
+
     import psutil
+    for child in multiprocessing.active_children():
+        try:
+            os.kill(child.pid, signal.SIGKILL)
+        except OSError:
+            continue
     try:
         procs = psutil.Process().children(recursive=True)
     except psutil.Error:
