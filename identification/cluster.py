@@ -115,8 +115,9 @@ class Shipped:
         self.key = uuid.uuid4().hex
 
 
-#: the task this process last unpacked from a :class:`Shipped` ({key: task}; one entry)
+#: the task this process last unpacked from a :class:`Shipped` ({key: task}; one entry), and its lock
 _UNPACKED: dict = {}
+_UNPACK_LOCK = threading.Lock()
 
 
 def unpack(task):
@@ -128,9 +129,6 @@ def unpack(task):
             _UNPACKED.clear()
             _UNPACKED[task.key] = shipping.loads(task.blob)
         return _UNPACKED[task.key]
-
-
-_UNPACK_LOCK = threading.Lock()
 
 
 def call_locked(fn: Callable, task, chunk):
@@ -273,6 +271,9 @@ def _start_resource_tracker() -> None:
 #: seconds between a spawned worker's checks that the process that started it still runs
 PARENT_POLL_S = 0.5
 
+#: what went wrong while this spawned worker unpacked and installed its task (raised by :func:`_ready`)
+_START_ERRORS: list = []
+
 
 def worker_start(install: Callable, blob: bytes, parent: int) -> None:
     """A spawned worker's initializer: signals (see the module docstring), then ``install(task)``.
@@ -291,10 +292,6 @@ def worker_start(install: Callable, blob: bytes, parent: int) -> None:
         install(shipping.loads(blob))
     except Exception as exc:  # noqa: BLE001 -- raised by _ready() instead: the parent then sees this error
         _START_ERRORS.append(exc)           # (an initializer's error only breaks the pool without a reason)
-
-
-#: what went wrong while this spawned worker unpacked and installed its task (raised by :func:`_ready`)
-_START_ERRORS: list = []
 
 
 def _exit_with_parent(parent: int) -> None:
