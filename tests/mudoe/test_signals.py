@@ -145,3 +145,14 @@ def test_ctrl_c_while_the_report_is_written(tmp_path):
     run.wait_for(lambda kids: out.is_dir() and any(any(d.iterdir()) for d in out.glob(".report-*")))
     dt = run.signal(signal.SIGINT)
     _check(run, dt, 130, "interrupted", out)
+
+
+def test_workers_end_when_the_cli_is_killed(tmp_path):
+    """SIGKILL cannot be handled: the spawned worker notices its parent is gone and ends (no orphan fitting on)."""
+    out = tmp_path / "out"
+    run = _Run(["validate", "configs/cstr.toml", "--runs", "2000", "--workers", "2", "--out", str(out)], ENV)
+    run.wait_for(lambda kids: any(_is_worker(k) for k in kids) and any("rep/s" in ln and " 0/" not in ln
+                                                                         for ln in run.lines))
+    run.signal(signal.SIGKILL)
+    assert run.p.returncode == -signal.SIGKILL
+    assert run.left_over() == [], f"processes left: {run.left_over()}"
