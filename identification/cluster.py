@@ -3,9 +3,14 @@
 The Monte Carlo studies (:mod:`identification.montecarlo`) and the bootstrap
 (:mod:`identification.bootstrap`) split their replications into chunks ``[(index,
 SeedSequence), ...]``; every chunk is one Dask task ``fn(task, chunk) -> [(index, ...), ...]``.
-The task (models, data, settings) is scattered once to every worker; ``fn`` must be a
-module-level function that the workers can import (the same ``mudoe`` installed on them, and
-an own model's factory module on their ``sys.path``).
+The task (models, data, settings) is sent once to every worker, serialised by
+:func:`models.shipping.dumps` (cloudpickle: a model whose factory defines local functions is
+sent by value; a model that cannot be is rebuilt from its factory in the worker); ``fn`` must
+be a module-level function that the workers can import (the same ``mudoe`` installed on them).
+
+Local worker processes leave interrupts to the process that started them: they ignore SIGINT
+(a terminal's Ctrl-C reaches the whole process group; the parent decides and ends them), keep
+SIGTERM's default action and end themselves when that parent is gone.
 
 Seeds travel with the chunks, so the numbers do not depend on how the scheduler places them.
 """
@@ -13,14 +18,17 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import threading
 from contextlib import contextmanager
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["SchedulerError", "call_locked", "check_scheduler", "connect", "execute", "n_workers", "run_chunks", "run_local",
-           "seed_chunks"]
+from models import shipping
+
+__all__ = ["SchedulerError", "Shipped", "call_locked", "check_scheduler", "connect", "execute", "n_workers",
+           "run_chunks", "run_local", "seed_chunks", "unpack", "worker_start"]
 
 #: how long :func:`connect` waits for at least one worker to join the scheduler (s)
 WORKER_WAIT_S = 30.0
@@ -98,20 +106,48 @@ def n_workers(client) -> int:
 _PROCESS_LOCK = threading.Lock()
 
 
+class Shipped:
+    """A task serialised once by :func:`models.shipping.dumps` (``blob``), with a ``key`` naming it."""
+
+    def __init__(self, task):
+        import uuid
+        self.blob = shipping.dumps(task)
+        self.key = uuid.uuid4().hex
+
+
+#: the task this process last unpacked from a :class:`Shipped` ({key: task}; one entry), and its lock
+_UNPACKED: dict = {}
+_UNPACK_LOCK = threading.Lock()
+
+
+def unpack(task):
+    """``task`` itself, or the task of a :class:`Shipped` (unpacked once per process and key)."""
+    if not isinstance(task, Shipped):
+        return task
+    with _UNPACK_LOCK:
+        if task.key not in _UNPACKED:
+            _UNPACKED.clear()
+            _UNPACKED[task.key] = shipping.loads(task.blob)
+        return _UNPACKED[task.key]
+
+
 def call_locked(fn: Callable, task, chunk):
-    """``fn(task, chunk)`` holding this process's chunk lock (the Dask task of :func:`run_chunks`)."""
+    """``fn(task, chunk)`` holding this process's chunk lock (the Dask task of :func:`run_chunks`);
+    ``task`` may be a :class:`Shipped` (unpacked once per process)."""
     with _PROCESS_LOCK:
-        return fn(task, chunk)
+        return fn(unpack(task), chunk)
 
 
 def run_chunks(client, fn: Callable, task, chunks: list, on_result: Callable) -> None:
-    """``on_result(fn(task, chunk))`` for every chunk, as the Dask tasks finish (task scattered once).
+    """``on_result(fn(task, chunk))`` for every chunk, as the Dask tasks finish (task sent once).
 
-    ``fn`` runs under a per-process lock (:func:`call_locked`).  A chunk that raises re-raises
-    here (the remaining futures are cancelled).
+    ``task`` is serialised here by :func:`models.shipping.dumps` (a :class:`Shipped`: a model that
+    cannot be pickled by value is rebuilt from its factory on the workers); ``fn`` runs under a
+    per-process lock (:func:`call_locked`).  A chunk that raises re-raises here (the remaining
+    futures are cancelled).
     """
     from distributed import as_completed
-    tf = client.scatter(task, broadcast=True, hash=False)  # own key: no release race
+    tf = client.scatter(Shipped(task), broadcast=True, hash=False)  # own key: no release race
     futs = client.map(call_locked, [fn] * len(chunks), [tf] * len(chunks), chunks, pure=False)
     try:
         for fut in as_completed(futs, loop=client.loop):
@@ -177,19 +213,26 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
         Called here as ``fn(task, chunk)``; in a spawned process as ``fn(None, chunk)`` after
         ``install(task)`` (the pool initializer).  Resetting what ``fn(task, chunk)`` leaves in
         this process (a worker state, a JIT switch) is the caller's job.
-    task : picklable
+    task : any object :func:`models.shipping.dumps` can send (serialised once, here)
     chunks : list
     on_result : callable (list) -> None, called with every chunk's result (in this thread)
     n_workers : int >= 2    processes in all, this one included
     install : module-level callable (task) -> None
+
+    Raises
+    ------
+    models.shipping.ShippingError
+        ``task`` cannot be sent (before any process is started).
     """
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
     if int(n_workers) < 2:
         raise ValueError(f"n_workers: run_local needs at least 2 processes (this one and 1 spawned), got {n_workers}")
+    blob = shipping.dumps(task)
+    _start_resource_tracker()
     run = _Dispatch(chunks, on_result)
     with ProcessPoolExecutor(max_workers=int(n_workers) - 1, mp_context=mp.get_context("spawn"),
-                             initializer=install, initargs=(task,)) as pool:
+                             initializer=worker_start, initargs=(install, blob, os.getpid())) as pool:
         feeders = [threading.Thread(target=run.feed, args=(pool, fn), daemon=True, name=f"mudoe-feed-{k}")
                    for k in range(int(n_workers) - 1)]
         try:
@@ -206,8 +249,64 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
                 t.join()
 
 
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker now, keeping this thread's signal mask.
+
+    The standard library starts it with the first pool and unblocks SIGINT and SIGTERM in the
+    starting thread afterwards, whatever the mask was: a program that takes these signals in a
+    thread of its own (``sigwait``, the CLI) would then get them in this thread, where a C
+    library running ``system()`` (CasADi's JIT compiler) ignores them.
+    """
+    from multiprocessing import resource_tracker
+    if not hasattr(signal, "pthread_sigmask"):
+        resource_tracker.ensure_running()
+        return
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+#: seconds between a spawned worker's checks that the process that started it still runs
+PARENT_POLL_S = 0.5
+
+#: what went wrong while this spawned worker unpacked and installed its task (raised by :func:`_ready`)
+_START_ERRORS: list = []
+
+
+def worker_start(install: Callable, blob: bytes, parent: int) -> None:
+    """A spawned worker's initializer: signals (see the module docstring), then ``install(task)``.
+
+    SIGINT is ignored (the parent ends its workers), SIGTERM has its default action and is not
+    blocked (a spawned process inherits the parent's signal mask), and a daemon thread ends the
+    process when ``parent`` is gone (its parent id changes), so that no worker outlives a
+    parent that was killed.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="mudoe-parent-watch").start()
+    try:
+        install(shipping.loads(blob))
+    except Exception as exc:  # noqa: BLE001 -- raised by _ready() instead: the parent then sees this error
+        _START_ERRORS.append(exc)           # (an initializer's error only breaks the pool without a reason)
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Daemon thread of a spawned worker: end the process once ``parent`` no longer is its parent."""
+    import time
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
 def _ready() -> int:
-    """A spawned worker's first call: returns once it is started and its task installed (its pid)."""
+    """A spawned worker's first call: returns once it is started and its task installed (its pid), or
+    raises what failed while it unpacked or installed the task (e.g. a model's factory)."""
+    if _START_ERRORS:
+        raise _START_ERRORS[0]
     return os.getpid()
 
 

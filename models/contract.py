@@ -222,6 +222,9 @@ class Model:
         self.h_fun = ca.Function("h", [y, p, q], [h_expr], ["y", "p", "q"], ["h"])
         self._y_guess = y_guess
         self.cache = Cache()
+        #: where the model came from (a :class:`models.shipping.ModelSource`: factory and variant), or None;
+        #: worker processes rebuild the model from it when it cannot be sent by value
+        self.origin = None
         self._check_finite_structure()
 
     # ------------------------------------------------------------------ constructors
@@ -319,6 +322,14 @@ class Model:
         """Model outputs h(y_j(p), p, q_j) for every input row, shape (n_q, n_S)."""
         from .state import simulate
         return simulate(self, p, inputs)
+
+    def __reduce_ex__(self, protocol):
+        """Pickled by value; while :func:`models.shipping.dumps` sends models as recipes, a model with an
+        :attr:`origin` is its factory and variant plus the metadata changed after building."""
+        from . import shipping
+        if getattr(self, "origin", None) is not None and shipping.by_source():
+            return (shipping.rebuild, (self.origin, {k: self.__dict__[k] for k in shipping.METADATA}))
+        return super().__reduce_ex__(protocol)
 
     def __repr__(self):
         return (f"Model({self.name!r}, params={list(self.param_names)}, inputs={list(self.inputs)}, "

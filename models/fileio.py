@@ -1,32 +1,118 @@
-"""Atomic file writing shared by the data writers (prototype, friction constants, CLI outputs)."""
+"""Atomic file writing shared by the data writers (prototype, friction constants, CLI outputs, the report).
+
+Outputs are written under a temporary name and moved into place by ``os.replace`` once complete.
+For a process that must end at once (Ctrl-C, SIGTERM: ``mudoe.signals``) this module also keeps
+
+* the temporary files and folders being written (:func:`scratch`), which :func:`abandon_outputs`
+  removes, and
+* the moves into place (:func:`publishing`): :func:`close_outputs` waits for one in progress and
+  refuses any later one, so that a set of outputs is published whole or not at all.
+"""
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
+import shutil
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_write_text"]
+__all__ = ["atomic_write_text", "register_scratch", "release_scratch", "scratch", "publishing", "close_outputs", "reopen_outputs", "abandon_outputs"]
+
+_LOCK = threading.Lock()        # held while outputs are moved into place (publishing)
+_SCRATCH: set = set()           # temporary paths being written
+_STATE = {"closed": False}
+
+
+def register_scratch(path) -> None:
+    """Register ``path``, a temporary file or folder about to be written, for :func:`abandon_outputs`."""
+    _SCRATCH.add(os.fspath(path))
+
+
+def release_scratch(path) -> None:
+    """Forget ``path`` (moved into place or removed)."""
+    _SCRATCH.discard(os.fspath(path))
+
+
+@contextmanager
+def scratch(path):
+    """:func:`register_scratch` ``path`` for the block (see the module docstring)."""
+    register_scratch(path)
+    try:
+        yield Path(path)
+    finally:
+        release_scratch(path)
+
+
+@contextmanager
+def publishing():
+    """The block moves finished outputs into place; it is not cut by an interrupt (see :func:`close_outputs`).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        The outputs are closed (the process is being interrupted): nothing is moved.
+    """
+    with _LOCK:
+        if _STATE["closed"]:
+            raise KeyboardInterrupt("outputs closed: the process is being interrupted")
+        yield
+
+
+def close_outputs() -> None:
+    """Let a :func:`publishing` block in progress finish, then refuse every later one."""
+    with _LOCK:
+        _STATE["closed"] = True
+
+
+def reopen_outputs() -> None:
+    """Allow publishing again (a new run in the same process)."""
+    with _LOCK:
+        _STATE["closed"] = False
+
+
+def abandon_outputs() -> int:
+    """Close the outputs and remove every registered temporary path (the process is about to end at once).
+
+    Returns the number of paths removed.
+    """
+    close_outputs()
+    removed = 0
+    for path in list(_SCRATCH):
+        try:
+            if os.path.isdir(path) and not os.path.islink(path):
+                shutil.rmtree(path)
+            else:
+                os.remove(path)
+            removed += 1
+        except FileNotFoundError:
+            continue
+        except OSError:
+            continue                    # best effort: the process is ending
+    return removed
 
 
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8, newlines as given) to ``path`` via a temporary file and ``os.replace``.
 
     The temporary file lives in the target folder, gets the permissions a plain ``open`` would
-    give (0o666 less the umask) and is removed if anything fails, so a reader sees either the
-    old file or the complete new one, never a half-written file.
+    give (0o666 less the umask) and is removed if anything fails (or by :func:`abandon_outputs`),
+    so a reader sees either the old file or the complete new one, never a half-written file.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    tmp = os.path.join(path.parent, f".{path.name}.{secrets.token_hex(6)}.tmp")
+    with scratch(tmp):                  # registered before it exists: an abrupt end never leaves it behind
+        try:
+            umask = os.umask(0)
+            os.umask(umask)
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~umask)
+            with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+                fh.write(text)
+            with publishing():
+                os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
     return path

@@ -6,7 +6,8 @@ Summaries go to stdout (JSON with ``--json``), progress to stderr.
 
 Exit codes: 0 success; 2 bad input (config, data, arguments: one line on stderr, no
 traceback); 3 a library piece the command needs is not available yet; 1 a computation
-failed (one line; ``--debug`` shows the traceback); 130 interrupted.
+failed (one line; ``--debug`` shows the traceback); 130 interrupted (Ctrl-C), 143 terminated
+(SIGTERM): within a second, worker processes ended, nothing half-written (:mod:`mudoe.signals`).
 """
 from __future__ import annotations
 
@@ -100,15 +101,14 @@ def _print_line(msg: str) -> None:
 
 def main(argv=None) -> int:
     """Run the CLI; returns the exit code (never raises for bad input)."""
-    from .console import EXIT_INTERRUPTED, INTERRUPT
+    from .signals import INTERRUPT
     INTERRUPT.install()
     try:
         return _main(argv)
     except KeyboardInterrupt:
-        _print_line("mudoe: interrupted")
-        return EXIT_INTERRUPTED
+        return INTERRUPT.announce(_print_line)
     finally:
-        INTERRUPT.uninstall()
+        INTERRUPT.finish()               # after SIGINT / SIGTERM: ends the process with 130 / 143
 
 
 def _main(argv) -> int:
@@ -124,18 +124,16 @@ def _main(argv) -> int:
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from .console import EXIT_INTERRUPTED, INTERRUPT
+    from .signals import INTERRUPT
     try:
         code = _run(args)
         INTERRUPT.check()
         return code
     except KeyboardInterrupt:
-        _print_line("mudoe: interrupted")
-        return EXIT_INTERRUPTED
+        return INTERRUPT.announce(_print_line)
     except Exception as exc:  # noqa: BLE001 -- the CLI boundary turns every failure into one line
-        if INTERRUPT.flag:               # e.g. a worker pool broken by Ctrl-C
-            _print_line("mudoe: interrupted")
-            return EXIT_INTERRUPTED
+        if INTERRUPT.flag:               # e.g. a worker pool broken by Ctrl-C or SIGTERM
+            return INTERRUPT.announce(_print_line)
         from .study import MissingPieceError
         bad = _bad_input_types()
         if isinstance(exc, bad):

@@ -7,30 +7,23 @@
   Ipopt's banner through ``sys.stdout``; C code and worker processes write to the file
   descriptors 1 and 2) go to a temporary file; mudoe's own progress lines and bars pass
   through to the terminal.  The captured text is shown only with ``--debug``.
-* :class:`Interrupt`: Ctrl-C (SIGINT) sets a flag, terminates the Monte Carlo worker
-  processes this process started and raises :class:`KeyboardInterrupt`; a solver that turns
-  the interrupt into a failed fit cannot hide it (the flag is checked at every step and
-  before any output is written); a second Ctrl-C exits at once with code 130, and so does the
-  watchdog when the run has not stopped :data:`INTERRUPT_GRACE` seconds after the first one
-  (a loop in a lower layer that counts an interrupted fit as a failed replication and goes on
-  cannot keep the run alive).
+* :class:`Interrupt` (:mod:`mudoe.signals`, re-exported here): Ctrl-C and SIGTERM set a flag,
+  kill the worker processes this process started and raise :class:`KeyboardInterrupt`; a
+  solver that turns the interrupt into a failed fit cannot hide it (the flag is checked at
+  every step and before any output is written); the run ends with 130 (143 for SIGTERM)
+  within :data:`mudoe.signals.GRACE_S` seconds at the latest.
 """
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import tempfile
-import threading
 import warnings
 from pathlib import Path
 
-__all__ = ["OutDirError", "check_out_dir", "Chatter", "Interrupt", "INTERRUPT", "EXIT_INTERRUPTED"]
+from .signals import EXIT_INTERRUPTED, INTERRUPT, Interrupt
 
-#: exit code of an interrupted run (128 + SIGINT)
-EXIT_INTERRUPTED = 130
-#: seconds after the first Ctrl-C before the watchdog ends a run that did not stop by itself (s)
-INTERRUPT_GRACE = 10.0
+__all__ = ["OutDirError", "check_out_dir", "Chatter", "Interrupt", "INTERRUPT", "EXIT_INTERRUPTED"]
 
 
 class OutDirError(ValueError):
@@ -158,82 +151,3 @@ class Chatter:
             self.text = self._file.read() + "".join(
                 f"{w.filename}:{w.lineno}: {w.category.__name__}: {w.message}\n" for w in self._caught)
             self._file.close()
-
-
-class Interrupt:
-    """Ctrl-C handling of one CLI run (see the module docstring); ``flag`` says whether it was pressed."""
-
-    def __init__(self):
-        self.flag = False
-        self.stderr_fd = 2          # the terminal's stderr (a saved copy while :class:`Chatter` is active)
-        self._previous = None
-        self._waiter = None         # the sigwait thread, started once
-
-    def install(self) -> None:
-        """Install the SIGINT handling (main thread only; elsewhere nothing happens).
-
-        Ipopt (3.14+) installs its own SIGINT handler during every solve, so a Ctrl-C that arrives
-        inside a solve never reaches Python's handler (about 3 in 4 presses during a Monte Carlo
-        run).  SIGINT is therefore blocked in this process's threads and taken by a daemon thread
-        with ``sigwait``, which handlers cannot intercept; that thread runs :meth:`_pressed` and
-        interrupts the main thread (``_thread.interrupt_main``).
-        """
-        self.flag = False
-        try:
-            self._previous = signal.signal(signal.SIGINT, self._handler)
-        except ValueError:
-            self._previous = None
-            return
-        if hasattr(signal, "pthread_sigmask") and hasattr(signal, "sigwait"):
-            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-            if self._waiter is None:         # one waiting thread per process (main() may run many times)
-                self._waiter = threading.Thread(target=self._wait_for_sigint, daemon=True, name="mudoe-sigint")
-                self._waiter.start()
-
-    def _wait_for_sigint(self) -> None:
-        """Daemon thread: every SIGINT is taken here (it is blocked, so no handler sees it)."""
-        import _thread
-        while True:
-            signal.sigwait({signal.SIGINT})
-            if self.flag:
-                self._exit_now()
-            self._pressed()
-            _thread.interrupt_main()
-
-    def uninstall(self) -> None:
-        """Restore the previous handler and unblock SIGINT in the main thread."""
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
-            self._previous = None
-            if hasattr(signal, "pthread_sigmask"):
-                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-
-    def _handler(self, signum, frame):
-        """Python-level SIGINT handler (also run by ``interrupt_main`` from the sigwait thread)."""
-        if not self.flag:
-            self._pressed()
-        raise KeyboardInterrupt
-
-    def _pressed(self) -> None:
-        """First Ctrl-C: set the flag, terminate the worker processes, start the watchdog."""
-        self.flag = True
-        import multiprocessing
-        for child in multiprocessing.active_children():
-            child.terminate()
-        watchdog = threading.Timer(INTERRUPT_GRACE, self._exit_now)
-        watchdog.daemon = True
-        watchdog.start()
-
-    def _exit_now(self) -> None:
-        """End the process with code 130 (second Ctrl-C, or the run ignored the first one)."""
-        os.write(self.stderr_fd, b"mudoe: interrupted\n")
-        os._exit(EXIT_INTERRUPTED)
-
-    def check(self) -> None:
-        """Raise :class:`KeyboardInterrupt` if Ctrl-C was pressed (e.g. swallowed by a solver)."""
-        if self.flag:
-            raise KeyboardInterrupt
-
-
-#: the process-wide Ctrl-C state of the CLI
-INTERRUPT = Interrupt()

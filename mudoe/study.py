@@ -23,6 +23,7 @@ from identification.splits import Split, random_splits, splits_from_scenarios
 from models.campaign import Campaign
 from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
+from models.shipping import ModelSource
 
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
@@ -139,6 +140,7 @@ def _build_models(cfg: StudyConfig) -> dict:
         if not isinstance(m, Model):
             raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
                               f"{type(m).__name__}, expected a models.Model")
+        m.origin = ModelSource(cfg.model.name, v)     # worker processes may rebuild it from here
         out[v] = (_apply_parameters(cfg, m), getattr(m, "mudoe_inputs", None))
     return out
 

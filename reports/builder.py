@@ -4,7 +4,9 @@
 one PNG per page (150 dpi by default) and ``results.json`` (config, data hash, package
 versions, timing, every number of the report).  Everything is first written into a
 temporary folder inside ``out_dir`` and moved into place with ``os.replace`` only when
-all files are complete: a failure leaves no partial file behind (earlier reports stay).
+all files are complete: a failure leaves no partial file behind (earlier reports stay), and
+an interrupted process removes the folder and never moves part of the files
+(:mod:`models.fileio`).
 
 Pages (:func:`report_pages`): verdict table and verdicts; measured data and model outputs;
 normality and sigma; optimal sensor design; estimates; confidence regions of every parameter
@@ -17,8 +19,8 @@ holds, besides every number, the texts drawn on each page (``pages``).
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
-import tempfile
 import textwrap
 import time
 from functools import partial
@@ -26,6 +28,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+
+from models.fileio import publishing, register_scratch, release_scratch
 
 from .view import STATISTIC_WORDS, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust
 
@@ -713,9 +717,11 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     dpi = int(dpi or cfg.report.dpi)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
+    tmp = out / f".report-{secrets.token_hex(6)}"
+    register_scratch(tmp)           # before it exists: an interrupted process removes it (models.fileio)
     written = []
     try:
+        tmp.mkdir(mode=0o700)
         diagnosis = getattr(results, "diagnosis", None)
         if diagnosis is None and diagnose:
             diagnosis = run_diagnosis(results, progress=progress)
@@ -746,10 +752,12 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
                     results=results_dict(results), pages=texts,
                     diagnosis=diagnosis_dict(diagnosis) if diagnosis is not None else None)
         (tmp / "results.json").write_text(dumps(meta), encoding="utf-8")
-        for name in ["report.pdf"] + names + ["results.json"]:
-            os.replace(tmp / name, out / name)
-            written.append(out / name)
+        with publishing():          # all files or none: an interrupt waits for the moves (models.fileio)
+            for name in ["report.pdf"] + names + ["results.json"]:
+                os.replace(tmp / name, out / name)
+                written.append(out / name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        release_scratch(tmp)
         plt.close("all")
     return written
