@@ -33,12 +33,13 @@ from scipy import special
 
 from models.contract import Model
 from . import dense
+from .factor import estimate_covariances
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
 from .measurements import Measurements
 from .explicit_kernel import ExplicitTerms, explicit_terms
-from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
+from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
@@ -1096,7 +1097,9 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
     ref = refine(st.problem, point, settings.refine_steps if not np.any(sol.at_bound) else 0,
-                 stop_decrement=settings.refine_decrement, start_S=sol.S)
+                 stop_decrement=settings.refine_decrement, start_S=sol.S,
+                 dof=st.n - st.model.n_p if st.data.sigma is None else None,
+                 quadratic_decrement=settings.decrement_tol)
     if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
         raise IdentificationError(
             f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "
@@ -1116,10 +1119,6 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     sens = point.sens
     cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected)
     F = ref.information
-    if np.all((st.w == 0) | (st.w == 1)):    # w^2 = w: J^T Omega^2 J is J^T Omega J (same sums)
-        F2 = F
-    else:
-        F2 = gauss_newton_information(sens.G, st.problem.cw * st.w[None, :], st.sig)
     resid = data.z - sens.h[None]
     rss = float(np.nansum(resid[:, :, st.selected] ** 2))
     dof = st.n - model.n_p
@@ -1130,14 +1129,17 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     else:
         factor = 1.0
         sig_used = st.sig
-    cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, ref.S)
+    # from the QR factor of sqrt(Omega) J (not the normal equations): issue 20
+    cov, cov_gn, H_ok, sv, K_eig = estimate_covariances(sens.G, st.problem.cw, st.w, st.sig, ref.S)
+    H = F + ref.S
     cov, cov_gn = cov * factor, cov_gn * factor
     _check_plausible(st, point.p, cov, cov_gn, sol.result.status)
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
     res = sol.result
     extra = {"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
-             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes}
+             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes,
+             "singular_values": sv, "hessian_eigenvalues": K_eig, "refinement_stop": ref.stop_reason}
     if "t_wall_callbacks" in res.stats:
         extra["ipopt_timing"] = {"build": res.stats["t_build"], "nlpsol": res.stats["t_nlpsol"],
                                  "solve": res.wall_time, "callbacks": dict(res.stats["t_wall_callbacks"])}

@@ -165,6 +165,7 @@ class Refinement:
     decrement : float             Newton decrement g^T (J^T Omega J + S)^{-1} g (objective units;
                                   inf when the Hessian is not positive definite)
     steps : int                   Newton steps taken
+    stop_reason : str             why the refinement stopped (see :func:`refine`)
     """
 
     point: ReducedPoint
@@ -172,19 +173,47 @@ class Refinement:
     information: np.ndarray
     decrement: float
     steps: int
+    stop_reason: str = ""
+
+
+#: the gradient's round-off bound: this many ulps of sum |lambda_jk| |G_jk|
+_GRAD_ULPS = 16
+
+
+def _gradient_roundoff(point: ReducedPoint, L: np.ndarray, s_p: np.ndarray) -> float:
+    """The decrement that round-off in the gradient's sum over the data alone produces:
+    ||L^{-1} (16 eps sum_jk |lambda_jk| |G_jk| s_p)||^2 (the test of the batch engine)."""
+    G = point.sens.G.reshape(-1, s_p.size)
+    g_err = _GRAD_ULPS * np.finfo(float).eps * (np.abs(point.lam).reshape(-1) @ np.abs(G)) * s_p
+    u = dense.tri_solve(L, g_err)
+    return float(u @ u)
 
 
 def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0,
-           start_S: np.ndarray | None = None) -> Refinement:
+           start_S: np.ndarray | None = None, *, dof: int | None = None,
+           quadratic_decrement: float = 1e-10) -> Refinement:
     """Exact reduced Newton steps p <- p - (J^T Omega J + S)^{-1} g from ``start``.
 
     ``start_S``: the second-order term S at ``start.p`` when the caller has it already (saves
-    one evaluation of the second derivatives).
+    one evaluation of the second derivatives).  ``dof``: with sigma unknown, n - n_p; the
+    decrements ``stop_decrement`` and ``quadratic_decrement`` are then in chi^2 units of the
+    estimated sigma (unit 2 Phi / dof of the objective), else in objective units.
 
-    A step is taken while the Hessian is positive definite, the state solves succeed and the
-    objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
-    1e-12 s_p, after ``max_steps`` steps, or when the Newton decrement g^T H^{-1} g is below
-    ``stop_decrement``.  Steps are clipped to the model's parameter bounds.
+    A step is taken while the Hessian is positive definite and the state solves succeed.  It is
+    kept when Phi does not increase, or, in the quadratic region (decrement below
+    ``quadratic_decrement``, where Phi cannot resolve the decrease any more), when the decrement
+    falls.  ``stop_reason`` says why it stopped:
+
+    * ``"converged"``: decrement g^T H^{-1} g below ``stop_decrement``;
+    * ``"round-off of the gradient"``: decrement below the one round-off in the gradient's sum
+      over the data produces (the tolerance cannot be resolved in double precision);
+    * ``"round-off of p"``: the Newton step is below 8 ulps of every parameter;
+    * ``"no progress at round-off"``: in the quadratic region the step raised both Phi and the
+      decrement (the previous point is kept: the achieved decrement is the attainable one);
+    * ``"objective increased"``: outside the quadratic region a Newton step increased Phi;
+    * ``"Hessian not positive definite"``, ``"state solve failed"``, ``"max_steps"``.
+
+    Steps are clipped to the model's parameter bounds.
     """
     model, s_p = problem.model, problem.p_scale
     lo, up = model.lower, model.upper
@@ -192,38 +221,57 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     steps = 0
     S_terms = start_S
     F = dec = None                         # J^T Omega J and the decrement at ``point`` once known
+    reason = "max_steps"
+    tiny = 8 * np.finfo(float).eps
     for _ in range(max_steps):
         F = problem.information(point)
         if S_terms is None:
             S_terms = point.sens.hessians(point.lam[None])[0]
         L = dense.cholesky_lower((F + S_terms) * np.outer(s_p, s_p))
         if L is None:
-            dec = float("inf")
+            dec, reason = float("inf"), "Hessian not positive definite"
             break
         v = dense.tri_solve(L, point.gradient * s_p)
         dec = float(v @ v)
-        if dec < stop_decrement:
+        unit = 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
+        if dec < stop_decrement * unit:
+            reason = "converged"
+            break
+        if dec <= _gradient_roundoff(point, L, s_p):
+            reason = "round-off of the gradient"
             break
         dp = -s_p * dense.tri_solve(L, v, trans=1)
-        if np.max(np.abs(dp / s_p)) < 1e-13:
-            break                          # converged to round-off: keep p and its terms
-        small = np.max(np.abs(dp / s_p)) < 1e-12
+        if np.all(np.abs(dp) <= tiny * np.abs(point.p)):
+            reason = "round-off of p"
+            break
         p_new = np.clip(point.p + dp, lo, up)
         try:
             new = problem.evaluate(p_new, point.states)
         except StateSolveError:
+            reason = "state solve failed"
             break
         if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
-            break
+            if not dec <= quadratic_decrement * unit:
+                reason = "objective increased"
+                break
+            # quadratic region: keep the step only if the decrement falls
+            F_new, S_new = problem.information(new), new.sens.hessians(new.lam[None])[0]
+            dec_new = newton_decrement(F_new + S_new, new.gradient, s_p)
+            if not dec_new < dec:
+                reason = "no progress at round-off"
+                break
+            point, F, S_terms, dec = new, F_new, S_new, None
+            steps += 1
+            continue
         point = new
         S_terms = F = dec = None
         steps += 1
-        if small:
-            break
     if S_terms is None:
         S_terms = point.sens.hessians(point.lam[None])[0]
     if F is None:
         F = problem.information(point)
     if dec is None:
         dec = newton_decrement(F + S_terms, point.gradient, s_p)
-    return Refinement(point, S_terms, F, dec, steps)
+    if reason == "max_steps" and dec < stop_decrement * (1.0 if dof is None else 2.0 * point.objective / max(dof, 1)):
+        reason = "converged"
+    return Refinement(point, S_terms, F, dec, steps, reason)
