@@ -34,7 +34,8 @@ from scipy import special
 from models.contract import Model
 from . import dense
 from .factor import estimate_covariances
-from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
+from . import secondorder
+from .errors import ConvergenceError, DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
 from .measurements import Measurements
@@ -1108,8 +1109,66 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
     return ref
 
 
+#: at most this many restarts from points found along a direction of negative curvature
+MAX_SADDLE_ESCAPES = 3
+
+
+def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
+                  clock: _PhaseClock | None = None) -> tuple:
+    """Second-order optimality before success (:mod:`identification.secondorder`).
+
+    At a stationary point whose reduced Hessian (free parameters) is not positive definite the
+    point is not a minimum: a point with a lower objective along the negative-curvature direction
+    is the start of a new solve (and refinement), at most :data:`MAX_SADDLE_ESCAPES` times.
+    Returns (st, sol, ref, escaped) of the minimum (its decrement computed through K when the
+    Cholesky factor of H failed to working precision); ``escaped`` lists the saddle points left
+    as {"p", "rss", "eigenvalue"}.
+
+    Raises
+    ------
+    ConvergenceError
+        When no descent is found from such a point (naming it, the eigenvalue and what to try).
+    """
+    escaped = []
+    for escapes in range(MAX_SADDLE_ESCAPES + 1):
+        so = secondorder.check(st.problem, ref.point, ref.S, ~sol.at_bound)
+        if so is None:                      # rank deficient: the identifiability test reports it
+            return st, sol, ref, tuple(escaped)
+        if so.minimum:
+            if not math.isfinite(ref.decrement):
+                ref = dataclasses.replace(ref, decrement=so.decrement)
+            return st, sol, ref, tuple(escaped)
+        new = secondorder.escape(st.problem, ref.point, so) if escapes < MAX_SADDLE_ESCAPES else None
+        if new is None:
+            raise _not_a_minimum(st, ref, so, escapes)
+        resid = st.data.z[:, :, st.selected] - ref.point.sens.h[None][:, :, st.selected]
+        escaped.append({"p": ref.point.p.copy(), "rss": float(np.nansum(resid ** 2)), "eigenvalue": so.eigenvalue})
+        st = dataclasses.replace(st, p0=new.p, Y_init=new.states if st.model.n_y else st.Y_init)
+        sol = _solve_full_space(st, settings, clock)
+        ref = _refine_solution(st, sol, settings)
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _not_a_minimum(st: _Start, ref: Refinement, so, escapes: int) -> ConvergenceError:
+    names = st.model.param_names
+    p = ref.point.p
+    at = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, p))
+    d = so.direction / max(np.abs(so.direction).max(), 1e-300)
+    big = [i for i in range(p.size) if abs(d[i]) >= 0.1]
+    along = " + ".join(f"{d[i]:.2g} {names[i]}" for i in big)
+    kind = ("a saddle point" if so.eigenvalue < -so.roundoff else
+            "a stationary point whose Hessian is singular to working precision")
+    more = f" (after {escapes} restart(s) from lower points)" if escapes else ""
+    return ConvergenceError(
+        f"the fit of {st.model.name} stopped at {kind}, not a minimum{more}: {at}; the Hessian "
+        f"J^T Omega J + S has eigenvalue {so.eigenvalue:.3g} (in units of the Gauss-Newton curvature; "
+        f"round-off level {so.roundoff:.1e}) along {along}, and no lower objective was found along it. "
+        "Try other start values (or parameter scales near the expected magnitudes), or bounds on the "
+        "parameters", p=p.copy(), eigenvalue=so.eigenvalue, direction=so.direction.copy())
+
+
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
-              t_start: float, clock: _PhaseClock | None = None) -> Estimate:
+              t_start: float, clock: _PhaseClock | None = None, escaped: tuple = ()) -> Estimate:
     """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
 
     With sigma unknown the covariance, information and objective are rescaled by
@@ -1136,10 +1195,15 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     _check_plausible(st, point.p, cov, cov_gn, sol.result.status)
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
+    for e in escaped:
+        notes += (f"the solver first stopped at a saddle point (RSS {e['rss']:.6g}, Hessian "
+                  f"eigenvalue {e['eigenvalue']:.3g} in Gauss-Newton units); restarted from a lower point along "
+                  "its direction of negative curvature",)
     res = sol.result
     extra = {"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
              "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes,
-             "singular_values": sv, "hessian_eigenvalues": K_eig, "refinement_stop": ref.stop_reason}
+             "singular_values": sv, "hessian_eigenvalues": K_eig, "refinement_stop": ref.stop_reason,
+             "saddle_escapes": escaped}
     if "t_wall_callbacks" in res.stats:
         extra["ipopt_timing"] = {"build": res.stats["t_build"], "nlpsol": res.stats["t_nlpsol"],
                                  "solve": res.wall_time, "callbacks": dict(res.stats["t_wall_callbacks"])}
@@ -1274,8 +1338,9 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     clock.lap("validation, data, states at p0")
     sol = _solve_full_space(st, settings, clock)
     ref = _refine_solution(st, sol, settings)
+    st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
     clock.lap("refinement (states, sensitivities, S at the estimate)")
-    return _estimate(st, sol, ref, settings, t_start, clock)
+    return _estimate(st, sol, ref, settings, t_start, clock, escaped)
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
