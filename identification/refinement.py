@@ -180,13 +180,27 @@ class Refinement:
 _GRAD_ULPS = 16
 
 
-def _gradient_roundoff(point: ReducedPoint, L: np.ndarray, s_p: np.ndarray) -> float:
-    """The decrement that round-off in the gradient's sum over the data alone produces:
-    ||L^{-1} (16 eps sum_jk |lambda_jk| |G_jk| s_p)||^2 (the test of the batch engine)."""
+def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, L: np.ndarray, s_p: np.ndarray) -> float:
+    """The decrement that round-off alone produces (objective units), the larger of
+
+    * the gradient's sum over the data: ||L^{-1} (16 eps sum_jk |lambda_jk| |G_jk| s_p)||^2 (the
+      test of the batch engine);
+    * the residuals' own round-off e_jk = 16 eps (|zbar_jk| + |h_jk|): the Newton step moves p by
+      the projection of the weighted residual errors onto the n_p columns of sqrt(Omega) J, whose
+      squared norm is about n_p max_jk c_jk e_jk^2 / sigma_k^2.
+    """
+    eps16 = _GRAD_ULPS * np.finfo(float).eps
     G = point.sens.G.reshape(-1, s_p.size)
-    g_err = _GRAD_ULPS * np.finfo(float).eps * (np.abs(point.lam).reshape(-1) @ np.abs(G)) * s_p
-    u = dense.tri_solve(L, g_err)
-    return float(u @ u)
+    u = dense.tri_solve(L, eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)) * s_p)
+    e2 = problem.cw / problem.sigma ** 2 * (eps16 * (np.abs(problem.zbar) + np.abs(point.sens.h))) ** 2
+    return max(float(u @ u), s_p.size * float(e2.max(initial=0.0)))
+
+
+def _objective_roundoff(problem: ReducedProblem, point: ReducedPoint) -> float:
+    """A bound of the round-off of Phi from the residuals' own round-off:
+    16 eps sum_jk |lambda_jk| (|zbar_jk| + |h_jk|) (lambda = dPhi/dh)."""
+    return _GRAD_ULPS * np.finfo(float).eps * float(np.sum(np.abs(point.lam) * (np.abs(problem.zbar)
+                                                                                 + np.abs(point.sens.h))))
 
 
 def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0,
@@ -201,12 +215,12 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
 
     A step is taken while the Hessian is positive definite and the state solves succeed.  It is
     kept when Phi does not increase, or, in the quadratic region (decrement below
-    ``quadratic_decrement``, where Phi cannot resolve the decrease any more), when the decrement
-    falls.  ``stop_reason`` says why it stopped:
+    ``quadratic_decrement``, or the predicted decrease dec / 2 below 10 times the round-off of Phi:
+    Phi cannot resolve the decrease any more), when the decrement falls.  ``stop_reason`` says why it stopped:
 
     * ``"converged"``: decrement g^T H^{-1} g below ``stop_decrement``;
-    * ``"round-off of the gradient"``: decrement below the one round-off in the gradient's sum
-      over the data produces (the tolerance cannot be resolved in double precision);
+    * ``"round-off of the gradient"``: decrement below the one round-off in the residuals and the
+      gradient's sum over the data produces (the tolerance cannot be resolved in double precision);
     * ``"round-off of p"``: the Newton step is below 8 ulps of every parameter;
     * ``"no progress at round-off"``: in the quadratic region the step raised both Phi and the
       decrement (the previous point is kept: the achieved decrement is the attainable one);
@@ -237,7 +251,7 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
         if dec < stop_decrement * unit:
             reason = "converged"
             break
-        if dec <= _gradient_roundoff(point, L, s_p):
+        if dec <= _gradient_roundoff(problem, point, L, s_p):
             reason = "round-off of the gradient"
             break
         dp = -s_p * dense.tri_solve(L, v, trans=1)
@@ -251,7 +265,7 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
             reason = "state solve failed"
             break
         if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
-            if not dec <= quadratic_decrement * unit:
+            if not (dec <= quadratic_decrement * unit or dec <= 20 * _objective_roundoff(problem, point)):
                 reason = "objective increased"
                 break
             # quadratic region: keep the step only if the decrement falls

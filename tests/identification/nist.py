@@ -32,7 +32,8 @@ import numpy as np
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "nist"
 
-__all__ = ["DATA_DIR", "NistDataset", "load", "available", "MODELS", "RESPONSE", "model_function", "h_of"]
+__all__ = ["DATA_DIR", "NistDataset", "load", "available", "MODELS", "RESPONSE", "model_function", "h_of",
+           "attainable_digits"]
 
 
 @dataclass(frozen=True)
@@ -155,6 +156,29 @@ def load(name: str, data_dir: Path | str = DATA_DIR) -> NistDataset:
         certified_stdev=np.array(sd), certified_rss=rss, certified_rsd=rsd, dof=dof,
         model_text=model_text,
     )
+
+
+def attainable_digits(d: NistDataset) -> float:
+    """Digits of the RSS (and so of the standard errors, which scale with sqrt(RSS)) that double
+    precision can give: log10(RSD / (eps max|y|)), the residual standard deviation in units of
+    the round-off of one residual y_i - f(x_i) (capped at 11, the certified digits).
+
+    About 2.2 for Lanczos1 (RSD 8.9e-14 on values up to 2.5), above 9 for the other 26 problems.
+    """
+    ulp = np.finfo(float).eps * float(np.max(np.abs(d.y)))
+    return float(min(11.0, math.log10(d.certified_rsd / ulp)))
+
+
+def certified_rounding(d: NistDataset) -> float:
+    """A bound of ||r(b_cert) - r(b*)||: the residuals' change when the parameters move by the
+    rounding of their 11-digit certified values (at most 5e-10 relative), ||J diag(5e-10 |b|)||_F
+    with J = df/db at the certified values (CasADi AD)."""
+    b = ca.SX.sym("b", d.n_p)
+    x = ca.SX.sym("x", d.n, d.n_x)
+    arg = x if d.n_x == 1 else tuple(x[:, i] for i in range(d.n_x))
+    jac = ca.Function("j", [b, x], [ca.jacobian(MODELS[d.name](b, arg), b)])
+    J = np.asarray(jac(d.certified, d.x))
+    return float(np.linalg.norm(J * (5e-10 * np.abs(d.certified))[None, :]))
 
 
 def available(data_dir: Path | str = DATA_DIR) -> list[str]:
