@@ -33,8 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import dense
+
 __all__ = ["WeightedFactor", "weighted_factor", "normalised_hessian", "covariances", "weighted_rows",
-           "estimate_covariances"]
+           "estimate_covariances", "NewtonSystem", "newton_system"]
 
 
 @dataclass(frozen=True)
@@ -170,3 +172,46 @@ def estimate_covariances(G: np.ndarray, cw: np.ndarray, w: np.ndarray, sig: np.n
     rows2 = None if binary else weighted_rows(G, cw * w[None, :], sig)[None]
     cov, cov_gn, lam = covariances(fac, S[None], rows2)
     return cov[0], cov_gn[0], bool(np.all(np.isfinite(cov[0]))), fac.sv[0], lam[0]
+
+
+@dataclass(frozen=True)
+class NewtonSystem:
+    r"""The exact Newton system H dp = -g of one problem through the QR factor:
+    H = D^{-1} R^T K R D^{-1} with K = L_K L_K^T (Cholesky), so that
+
+    .. math::
+
+        v^T H^{-1} v = \|L_K^{-1} R^{-T} D v\|^2,\qquad
+        dp = -D R^{-1} L_K^{-T} L_K^{-1} R^{-T} D g.
+
+    Positive definiteness is that of K (the Hessian in the Gauss-Newton metric), which round-off
+    does not decide the way it decides that of H in the parameters' own scaling (MGH10: the
+    eigenvalues of H span 1e-3 .. 2e13).
+    """
+
+    R: np.ndarray       # (n_p, n_p) upper triangular
+    d: np.ndarray       # (n_p,) column scales
+    LK: np.ndarray      # (n_p, n_p) lower Cholesky factor of K
+
+    def whiten(self, v: np.ndarray) -> np.ndarray:
+        """L_K^{-1} R^{-T} D v (its squared norm is v^T H^{-1} v)."""
+        return dense.tri_solve(self.LK, dense.tri_solve(self.R.T, self.d * v))
+
+    def step(self, g: np.ndarray) -> tuple:
+        """(dp, g^T H^{-1} g) of the Newton step dp = -H^{-1} g."""
+        w = self.whiten(g)
+        dp = -self.d * dense.tri_solve(self.R.T, dense.tri_solve(self.LK, w, trans=1), trans=1)
+        return dp, float(w @ w)
+
+
+def newton_system(rows: np.ndarray, S: np.ndarray) -> NewtonSystem | None:
+    """The :class:`NewtonSystem` of the weighted rows (n, n_p) and the second-order term S, or None
+    when sqrt(Omega) J is rank deficient or K is not positive definite (H is not)."""
+    fac = weighted_factor(rows[None])
+    if not fac.full_rank[0]:
+        return None
+    K = normalised_hessian(fac, S[None])[0]
+    LK = dense.cholesky_lower(K)
+    if LK is None:
+        return None
+    return NewtonSystem(fac.R[0], fac.d[0], LK)

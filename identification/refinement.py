@@ -28,6 +28,7 @@ from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from . import dense
+from .factor import newton_system, weighted_rows
 from .measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
@@ -180,20 +181,31 @@ class Refinement:
 _GRAD_ULPS = 16
 
 
-def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, L: np.ndarray, s_p: np.ndarray) -> float:
+def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> float:
     """The decrement that round-off alone produces (objective units), the larger of
 
-    * the gradient's sum over the data: ||L^{-1} (16 eps sum_jk |lambda_jk| |G_jk| s_p)||^2 (the
-      test of the batch engine);
+    * the gradient's sum over the data: e^T H^{-1} e with e = 16 eps sum_jk |lambda_jk| |G_jk|
+      (the test of the batch engine);
     * the residuals' own round-off e_jk = 16 eps (|zbar_jk| + |h_jk|): the Newton step moves p by
       the projection of the weighted residual errors onto the n_p columns of sqrt(Omega) J, whose
       squared norm is about n_p max_jk c_jk e_jk^2 / sigma_k^2.
     """
     eps16 = _GRAD_ULPS * np.finfo(float).eps
-    G = point.sens.G.reshape(-1, s_p.size)
-    u = dense.tri_solve(L, eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)) * s_p)
+    G = point.sens.G.reshape(-1, point.p.size)
+    u = system.whiten(eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)))
     e2 = problem.cw / problem.sigma ** 2 * (eps16 * (np.abs(problem.zbar) + np.abs(point.sens.h))) ** 2
-    return max(float(u @ u), s_p.size * float(e2.max(initial=0.0)))
+    return max(float(u @ u), point.p.size * float(e2.max(initial=0.0)))
+
+
+def _system(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray):
+    """The Newton system at ``point`` through the QR factor of sqrt(Omega) J
+    (:func:`identification.factor.newton_system`), or None when H is not positive definite."""
+    return newton_system(weighted_rows(point.sens.G, problem.cw, problem.sigma), S)
+
+
+def _decrement(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray) -> float:
+    system = _system(problem, point, S)
+    return float("inf") if system is None else system.step(point.gradient)[1]
 
 
 def _objective_roundoff(problem: ReducedProblem, point: ReducedPoint) -> float:
@@ -241,20 +253,18 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
         F = problem.information(point)
         if S_terms is None:
             S_terms = point.sens.hessians(point.lam[None])[0]
-        L = dense.cholesky_lower((F + S_terms) * np.outer(s_p, s_p))
-        if L is None:
+        system = _system(problem, point, S_terms)
+        if system is None:
             dec, reason = float("inf"), "Hessian not positive definite"
             break
-        v = dense.tri_solve(L, point.gradient * s_p)
-        dec = float(v @ v)
+        dp, dec = system.step(point.gradient)
         unit = 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
         if dec < stop_decrement * unit:
             reason = "converged"
             break
-        if dec <= _gradient_roundoff(problem, point, L, s_p):
+        if dec <= _gradient_roundoff(problem, point, system):
             reason = "round-off of the gradient"
             break
-        dp = -s_p * dense.tri_solve(L, v, trans=1)
         if np.all(np.abs(dp) <= tiny * np.abs(point.p)):
             reason = "round-off of p"
             break
@@ -270,7 +280,7 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
                 break
             # quadratic region: keep the step only if the decrement falls
             F_new, S_new = problem.information(new), new.sens.hessians(new.lam[None])[0]
-            dec_new = newton_decrement(F_new + S_new, new.gradient, s_p)
+            dec_new = _decrement(problem, new, S_new)
             if not dec_new < dec:
                 reason = "no progress at round-off"
                 break
@@ -285,7 +295,7 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     if F is None:
         F = problem.information(point)
     if dec is None:
-        dec = newton_decrement(F + S_terms, point.gradient, s_p)
+        dec = _decrement(problem, point, S_terms)
     if reason == "max_steps" and dec < stop_decrement * (1.0 if dof is None else 2.0 * point.objective / max(dof, 1)):
         reason = "converged"
     return Refinement(point, S_terms, F, dec, steps, reason)
