@@ -1131,7 +1131,7 @@ def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings
     """
     escaped = []
     for escapes in range(MAX_SADDLE_ESCAPES + 1):
-        so = secondorder.check(st.problem, ref.point, ref.S, ~sol.at_bound)
+        so = secondorder.check(st.problem, ref.point, ref.S, ~sol.at_bound, ref.factor)
         if so is None:                      # rank deficient: the identifiability test reports it
             return st, sol, ref, tuple(escaped)
         if so.minimum:
@@ -1189,7 +1189,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
         factor = 1.0
         sig_used = st.sig
     # from the QR factor of sqrt(Omega) J (not the normal equations): issue 20
-    cov, cov_gn, H_ok, sv, K_eig = estimate_covariances(sens.G, st.problem.cw, st.w, st.sig, ref.S)
+    cov, cov_gn, H_ok, sv, K_eig = estimate_covariances(sens.G, st.problem.cw, st.w, st.sig, ref.S, ref.factor)
     H = F + ref.S
     cov, cov_gn = cov * factor, cov_gn * factor
     _check_plausible(st, point.p, cov, cov_gn, sol.result.status)

@@ -154,11 +154,13 @@ def weighted_rows(G: np.ndarray, cw: np.ndarray, sig: np.ndarray) -> np.ndarray:
     return ((np.sqrt(cw) / sig)[:, :, None] * G).reshape(-1, G.shape[-1])
 
 
-def estimate_covariances(G: np.ndarray, cw: np.ndarray, w: np.ndarray, sig: np.ndarray, S: np.ndarray) -> tuple:
+def estimate_covariances(G: np.ndarray, cw: np.ndarray, w: np.ndarray, sig: np.ndarray, S: np.ndarray,
+                         fac: WeightedFactor | None = None) -> tuple:
     """The covariances of one estimate through the QR factor (see the module docstring).
 
     ``G`` (n_q, n_S, n_p) sensitivities, ``cw`` (n_q, n_S) weighted counts c_jk = n_jk w_k,
-    ``w`` (n_S,) sensor weights, ``sig`` (n_S,) sigmas, ``S`` (n_p, n_p) the second-order term.
+    ``w`` (n_S,) sensor weights, ``sig`` (n_S,) sigmas, ``S`` (n_p, n_p) the second-order term;
+    ``fac`` the factor of these rows when the caller has it (m = 1).
 
     Returns
     -------
@@ -167,7 +169,8 @@ def estimate_covariances(G: np.ndarray, cw: np.ndarray, w: np.ndarray, sig: np.n
     sv : ndarray (n_p,)                singular values of the column-normalised sqrt(Omega) J
     K_eig : ndarray (n_p,)             eigenvalues of K = I + R^-T D S D R^-1, ascending
     """
-    fac = weighted_factor(weighted_rows(G, cw, sig)[None])
+    if fac is None:
+        fac = weighted_factor(weighted_rows(G, cw, sig)[None])
     binary = bool(np.all((w == 0) | (w == 1)))
     rows2 = None if binary else weighted_rows(G, cw * w[None, :], sig)[None]
     cov, cov_gn, lam = covariances(fac, S[None], rows2)
@@ -204,10 +207,9 @@ class NewtonSystem:
         return dp, float(w @ w)
 
 
-def newton_system(rows: np.ndarray, S: np.ndarray) -> NewtonSystem | None:
-    """The :class:`NewtonSystem` of the weighted rows (n, n_p) and the second-order term S, or None
+def newton_system(fac: WeightedFactor, S: np.ndarray) -> NewtonSystem | None:
+    """The :class:`NewtonSystem` of one problem's factor (m = 1) and its second-order term S, or None
     when sqrt(Omega) J is rank deficient or K is not positive definite (H is not)."""
-    fac = weighted_factor(rows[None])
     if not fac.full_rank[0]:
         return None
     K = normalised_hessian(fac, S[None])[0]

@@ -28,7 +28,7 @@ from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from . import dense
-from .factor import newton_system, weighted_rows
+from .factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
 from .measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
@@ -167,6 +167,8 @@ class Refinement:
                                   inf when the Hessian is not positive definite)
     steps : int                   Newton steps taken
     stop_reason : str             why the refinement stopped (see :func:`refine`)
+    factor : WeightedFactor       QR factor of the column-normalised sqrt(Omega) J at ``point.p``
+                                  (:mod:`identification.factor`; None if not computed)
     """
 
     point: ReducedPoint
@@ -175,6 +177,7 @@ class Refinement:
     decrement: float
     steps: int
     stop_reason: str = ""
+    factor: WeightedFactor | None = None
 
 
 #: the gradient's round-off bound: this many ulps of sum |lambda_jk| |G_jk|
@@ -197,14 +200,14 @@ def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> 
     return max(float(u @ u), point.p.size * float(e2.max(initial=0.0)))
 
 
-def _system(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray):
-    """The Newton system at ``point`` through the QR factor of sqrt(Omega) J
-    (:func:`identification.factor.newton_system`), or None when H is not positive definite."""
-    return newton_system(weighted_rows(point.sens.G, problem.cw, problem.sigma), S)
+def point_factor(problem: ReducedProblem, point: ReducedPoint) -> WeightedFactor:
+    """The QR factor of the column-normalised sqrt(Omega) J at ``point`` (a stack of one)."""
+    return weighted_factor(weighted_rows(point.sens.G, problem.cw, problem.sigma)[None])
 
 
-def _decrement(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray) -> float:
-    system = _system(problem, point, S)
+def _decrement(fac: WeightedFactor, point: ReducedPoint, S: np.ndarray) -> float:
+    """g^T H^{-1} g through the factor; inf when H is not positive definite."""
+    system = newton_system(fac, S)
     return float("inf") if system is None else system.step(point.gradient)[1]
 
 
@@ -246,14 +249,16 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
     point = start
     steps = 0
     S_terms = start_S
-    F = dec = None                         # J^T Omega J and the decrement at ``point`` once known
+    F = dec = fac = None                   # J^T Omega J, decrement and factor at ``point`` once known
     reason = "max_steps"
     tiny = 8 * np.finfo(float).eps
     for _ in range(max_steps):
         F = problem.information(point)
         if S_terms is None:
             S_terms = point.sens.hessians(point.lam[None])[0]
-        system = _system(problem, point, S_terms)
+        if fac is None:
+            fac = point_factor(problem, point)
+        system = newton_system(fac, S_terms)
         if system is None:
             dec, reason = float("inf"), "Hessian not positive definite"
             break
@@ -279,23 +284,26 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
                 reason = "objective increased"
                 break
             # quadratic region: keep the step only if the decrement falls
-            F_new, S_new = problem.information(new), new.sens.hessians(new.lam[None])[0]
-            dec_new = _decrement(problem, new, S_new)
+            F_new, S_new, fac_new = problem.information(new), new.sens.hessians(new.lam[None])[0], \
+                point_factor(problem, new)
+            dec_new = _decrement(fac_new, new, S_new)
             if not dec_new < dec:
                 reason = "no progress at round-off"
                 break
-            point, F, S_terms, dec = new, F_new, S_new, None
+            point, F, S_terms, dec, fac = new, F_new, S_new, dec_new, fac_new
             steps += 1
             continue
         point = new
-        S_terms = F = dec = None
+        S_terms = F = dec = fac = None
         steps += 1
     if S_terms is None:
         S_terms = point.sens.hessians(point.lam[None])[0]
     if F is None:
         F = problem.information(point)
+    if fac is None:
+        fac = point_factor(problem, point)
     if dec is None:
-        dec = _decrement(problem, point, S_terms)
+        dec = _decrement(fac, point, S_terms)
     if reason == "max_steps" and dec < stop_decrement * (1.0 if dof is None else 2.0 * point.objective / max(dof, 1)):
         reason = "converged"
-    return Refinement(point, S_terms, F, dec, steps, reason)
+    return Refinement(point, S_terms, F, dec, steps, reason, fac)

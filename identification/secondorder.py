@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.errors import StateSolveError
-from .factor import normalised_hessian, weighted_factor, weighted_rows
+from .factor import WeightedFactor, normalised_hessian, weighted_factor, weighted_rows
 from .refinement import ReducedPoint, ReducedProblem
 
 __all__ = ["SecondOrder", "check", "escape"]
@@ -60,15 +60,17 @@ class SecondOrder:
         return self.eigenvalue > 0
 
 
-def check(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray, free: np.ndarray) -> SecondOrder | None:
+def check(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray, free: np.ndarray,
+          fac: WeightedFactor | None = None) -> SecondOrder | None:
     """The second-order test at ``point`` on the parameters ``free`` (bool, n_p): None when the
     weighted Jacobian of the free parameters is rank deficient (the identifiability test names
-    them) or no parameter is free."""
+    them) or no parameter is free.  ``fac``: the factor of all parameters' rows at ``point`` when
+    the caller has it (used when every parameter is free)."""
     idx = np.flatnonzero(free)
     if not idx.size:
         return None
-    G = point.sens.G[:, :, idx]
-    fac = weighted_factor(weighted_rows(G, problem.cw, problem.sigma)[None])
+    if fac is None or idx.size < point.p.size:
+        fac = weighted_factor(weighted_rows(point.sens.G[:, :, idx], problem.cw, problem.sigma)[None])
     if not fac.full_rank[0]:
         return None
     K = normalised_hessian(fac, S[np.ix_(idx, idx)][None])[0]
