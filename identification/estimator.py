@@ -1083,6 +1083,12 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
     return _FullSpaceSolution(res, passes, p, Y, at_bound)
 
 
+def _decrement_unit(st: _Start, objective: float) -> float:
+    """Objective units per chi^2 unit of the decrement: 1 with sigma known, else 2 Phi / (n - n_p)
+    (the objective's sigma is a common spread; the standard errors use s^2 = RSS / (n - n_p))."""
+    return 1.0 if st.data.sigma is not None else 2.0 * objective / max(st.n - st.model.n_p, 1)
+
+
 def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySettings) -> Refinement:
     """Step 3 of :func:`identify`: states consistent with Ipopt's p, then at most
     ``refine_steps`` exact reduced Newton steps (none when a parameter is at a bound), and
@@ -1101,11 +1107,13 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
                  stop_decrement=settings.refine_decrement, start_S=sol.S,
                  dof=st.n - st.model.n_p if st.data.sigma is None else None,
                  quadratic_decrement=settings.decrement_tol)
-    if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
+    unit = _decrement_unit(st, ref.point.objective)
+    if res.accepted is None and not (ref.decrement <= settings.decrement_tol * unit):
         raise IdentificationError(
             f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "
-            f"refinement did not reach the optimum (Newton decrement {ref.decrement:.2e} > "
-            f"{settings.decrement_tol:.0e}); try other start values", status=res.status)
+            f"refinement did not reach the optimum (Newton decrement {ref.decrement / unit:.2e} > "
+            f"{settings.decrement_tol:.0e}; refinement stopped: {ref.stop_reason}); try other start values",
+            status=res.status)
     return ref
 
 
@@ -1260,8 +1268,9 @@ def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
     model, data, res = st.model, st.data, sol.result
     notes = []
     if res.accepted is None:
+        dec = ref.decrement / _decrement_unit(st, ref.point.objective)
         notes.append(f"Ipopt stalled ({res.status}); the exact Newton refinement verified the optimum "
-                     f"(Newton decrement {ref.decrement:.1e}, i.e. within {math.sqrt(max(ref.decrement, 0)):.1e} "
+                     f"(Newton decrement {dec:.1e}, i.e. within {math.sqrt(max(dec, 0)):.1e} "
                      "standard errors)")
     elif res.status != "Solve_Succeeded":
         notes.append(f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
