@@ -35,7 +35,7 @@ from models.contract import Model
 from . import dense
 from .factor import estimate_covariances
 from . import secondorder
-from .errors import ConvergenceError, DataError, IdentifiabilityError, IdentificationError, StateSolveError
+from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
 from .measurements import Measurements
@@ -1117,62 +1117,21 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
     return ref
 
 
-#: at most this many restarts from points found along a direction of negative curvature
-MAX_SADDLE_ESCAPES = 3
-
-
 def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
                   clock: _PhaseClock | None = None) -> tuple:
-    """Second-order optimality before success (:mod:`identification.secondorder`).
+    """Second-order optimality before success (:func:`identification.secondorder.ensure_minimum`):
+    from a point found below a saddle along its negative curvature the problem is solved again
+    (:func:`_solve_full_space`, :func:`_refine_solution`).  Returns (st, sol, ref, escaped);
+    raises ConvergenceError when no descent is found."""
+    state = {"st": st, "sol": sol}
 
-    At a stationary point whose reduced Hessian (free parameters) is not positive definite the
-    point is not a minimum: a point with a lower objective along the negative-curvature direction
-    is the start of a new solve (and refinement), at most :data:`MAX_SADDLE_ESCAPES` times.
-    Returns (st, sol, ref, escaped) of the minimum (its decrement computed through K when the
-    Cholesky factor of H failed to working precision); ``escaped`` lists the saddle points left
-    as {"p", "rss", "eigenvalue"}.
+    def resolve(new):
+        s = dataclasses.replace(state["st"], p0=new.p, Y_init=new.states if st.model.n_y else st.Y_init)
+        state["st"], state["sol"] = s, _solve_full_space(s, settings, clock)
+        return ~state["sol"].at_bound, _refine_solution(s, state["sol"], settings)
 
-    Raises
-    ------
-    ConvergenceError
-        When no descent is found from such a point (naming it, the eigenvalue and what to try).
-    """
-    escaped = []
-    for escapes in range(MAX_SADDLE_ESCAPES + 1):
-        so = secondorder.check(st.problem, ref.point, ref.S, ~sol.at_bound, ref.factor)
-        if so is None:                      # rank deficient: the identifiability test reports it
-            return st, sol, ref, tuple(escaped)
-        if so.minimum:
-            if not math.isfinite(ref.decrement):
-                ref = dataclasses.replace(ref, decrement=so.decrement)
-            return st, sol, ref, tuple(escaped)
-        new = secondorder.escape(st.problem, ref.point, so) if escapes < MAX_SADDLE_ESCAPES else None
-        if new is None:
-            raise _not_a_minimum(st, ref, so, escapes)
-        resid = st.data.z[:, :, st.selected] - ref.point.sens.h[None][:, :, st.selected]
-        escaped.append({"p": ref.point.p.copy(), "rss": float(np.nansum(resid ** 2)), "eigenvalue": so.eigenvalue})
-        st = dataclasses.replace(st, p0=new.p, Y_init=new.states if st.model.n_y else st.Y_init)
-        sol = _solve_full_space(st, settings, clock)
-        ref = _refine_solution(st, sol, settings)
-    raise AssertionError("unreachable")  # pragma: no cover
-
-
-def _not_a_minimum(st: _Start, ref: Refinement, so, escapes: int) -> ConvergenceError:
-    names = st.model.param_names
-    p = ref.point.p
-    at = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, p))
-    d = so.direction / max(np.abs(so.direction).max(), 1e-300)
-    big = [i for i in range(p.size) if abs(d[i]) >= 0.1]
-    along = " + ".join(f"{d[i]:.2g} {names[i]}" for i in big)
-    kind = ("a saddle point" if so.eigenvalue < -so.roundoff else
-            "a stationary point whose Hessian is singular to working precision")
-    more = f" (after {escapes} restart(s) from lower points)" if escapes else ""
-    return ConvergenceError(
-        f"the fit of {st.model.name} stopped at {kind}, not a minimum{more}: {at}; the Hessian "
-        f"J^T Omega J + S has eigenvalue {so.eigenvalue:.3g} (in units of the Gauss-Newton curvature; "
-        f"round-off level {so.roundoff:.1e}) along {along}, and no lower objective was found along it. "
-        "Try other start values (or parameter scales near the expected magnitudes), or bounds on the "
-        "parameters", p=p.copy(), eigenvalue=so.eigenvalue, direction=so.direction.copy())
+    ref, escaped = secondorder.ensure_minimum(st.problem, ref, ~sol.at_bound, resolve, st.selected)
+    return state["st"], state["sol"], ref, escaped
 
 
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
@@ -1339,6 +1298,11 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         Ipopt failed (carries Ipopt's status), or the state equation could not be solved.
     IdentifiabilityError
         rank(Omega J) < n_p at the estimate (names the parameters and sensors).
+    ConvergenceError
+        The solver stopped at a stationary point that is not a minimum (the reduced Hessian
+        J^T Omega J + S is not positive definite) and no lower point was found along its negative
+        curvature (names the point and the eigenvalue); from such a point with descent the problem
+        is solved again (:mod:`identification.secondorder`; ``extra["saddle_escapes"]`` and a note).
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()

@@ -244,66 +244,81 @@ def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_de
 
     Steps are clipped to the model's parameter bounds.
     """
-    model, s_p = problem.model, problem.p_scale
-    lo, up = model.lower, model.upper
-    point = start
-    steps = 0
-    S_terms = start_S
-    F = dec = fac = None                   # J^T Omega J, decrement and factor at ``point`` once known
-    reason = "max_steps"
-    tiny = 8 * np.finfo(float).eps
+    at = _At(problem, start, S=start_S)
+    steps, reason, dec = 0, "max_steps", None
     for _ in range(max_steps):
-        F = problem.information(point)
-        if S_terms is None:
-            S_terms = point.sens.hessians(point.lam[None])[0]
-        if fac is None:
-            fac = point_factor(problem, point)
-        system = newton_system(fac, S_terms)
+        system = newton_system(at.filled().fac, at.S)
         if system is None:
             dec, reason = float("inf"), "Hessian not positive definite"
             break
-        dp, dec = system.step(point.gradient)
-        unit = 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
-        if dec < stop_decrement * unit:
-            reason = "converged"
+        dp, dec = system.step(at.point.gradient)
+        unit = _unit(at.point, dof)
+        reason = _stop_reason(problem, at.point, system, dp, dec, stop_decrement * unit)
+        if reason:
             break
-        if dec <= _gradient_roundoff(problem, point, system):
-            reason = "round-off of the gradient"
+        new, reason = _newton_step(problem, at, dp, dec, quadratic_decrement * unit)
+        if new is None:
             break
-        if np.all(np.abs(dp) <= tiny * np.abs(point.p)):
-            reason = "round-off of p"
-            break
-        p_new = np.clip(point.p + dp, lo, up)
-        try:
-            new = problem.evaluate(p_new, point.states)
-        except StateSolveError:
-            reason = "state solve failed"
-            break
-        if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
-            if not (dec <= quadratic_decrement * unit or dec <= 20 * _objective_roundoff(problem, point)):
-                reason = "objective increased"
-                break
-            # quadratic region: keep the step only if the decrement falls
-            F_new, S_new, fac_new = problem.information(new), new.sens.hessians(new.lam[None])[0], \
-                point_factor(problem, new)
-            dec_new = _decrement(fac_new, new, S_new)
-            if not dec_new < dec:
-                reason = "no progress at round-off"
-                break
-            point, F, S_terms, dec, fac = new, F_new, S_new, dec_new, fac_new
-            steps += 1
-            continue
-        point = new
-        S_terms = F = dec = fac = None
+        at, dec, reason = new, None, "max_steps"
         steps += 1
-    if S_terms is None:
-        S_terms = point.sens.hessians(point.lam[None])[0]
-    if F is None:
-        F = problem.information(point)
-    if fac is None:
-        fac = point_factor(problem, point)
+    at.filled()
     if dec is None:
-        dec = _decrement(fac, point, S_terms)
-    if reason == "max_steps" and dec < stop_decrement * (1.0 if dof is None else 2.0 * point.objective / max(dof, 1)):
+        dec = _decrement(at.fac, at.point, at.S)
+    if reason == "max_steps" and dec < stop_decrement * _unit(at.point, dof):
         reason = "converged"
-    return Refinement(point, S_terms, F, dec, steps, reason, fac)
+    return Refinement(at.point, at.S, at.F, dec, steps, reason, at.fac)
+
+
+@dataclass
+class _At:
+    """A point of :func:`refine` with its second-order term, information and factor (on demand)."""
+
+    problem: ReducedProblem
+    point: ReducedPoint
+    S: np.ndarray | None = None
+    F: np.ndarray | None = None
+    fac: WeightedFactor | None = None
+
+    def filled(self) -> "_At":
+        if self.S is None:
+            self.S = self.point.sens.hessians(self.point.lam[None])[0]
+        if self.F is None:
+            self.F = self.problem.information(self.point)
+        if self.fac is None:
+            self.fac = point_factor(self.problem, self.point)
+        return self
+
+
+def _unit(point: ReducedPoint, dof: int | None) -> float:
+    """Objective units per decrement unit: 1, or 2 Phi / dof with sigma unknown."""
+    return 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
+
+
+def _stop_reason(problem: ReducedProblem, point: ReducedPoint, system, dp: np.ndarray, dec: float,
+                 tol: float) -> str:
+    """Why :func:`refine` stops before the step dp ("" when it does not)."""
+    if dec < tol:
+        return "converged"
+    if dec <= _gradient_roundoff(problem, point, system):
+        return "round-off of the gradient"
+    if np.all(np.abs(dp) <= 8 * np.finfo(float).eps * np.abs(point.p)):
+        return "round-off of p"
+    return ""
+
+
+def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, quadratic: float) -> tuple:
+    """(the point after the step, "") when it is kept, else (None, the reason to stop): kept when Phi
+    does not increase or, in the quadratic region (dec <= ``quadratic`` or dec below 20 times Phi's
+    round-off), when the decrement falls."""
+    model, point = problem.model, at.point
+    try:
+        new = _At(problem, problem.evaluate(np.clip(point.p + dp, model.lower, model.upper), point.states))
+    except StateSolveError:
+        return None, "state solve failed"
+    if new.point.objective <= point.objective * (1 + 1e-14) + 1e-300:
+        return new, ""
+    if not (dec <= quadratic or dec <= 20 * _objective_roundoff(problem, point)):
+        return None, "objective increased"
+    if not _decrement(new.filled().fac, new.point, new.S) < dec:
+        return None, "no progress at round-off"
+    return new, ""

@@ -20,15 +20,19 @@ Cholesky factor of H in the parameters' own scaling fails to working precision).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from models.errors import StateSolveError
+from .errors import ConvergenceError
 from .factor import WeightedFactor, normalised_hessian, weighted_factor, weighted_rows
-from .refinement import ReducedPoint, ReducedProblem
+from .refinement import ReducedPoint, ReducedProblem, Refinement
 
-__all__ = ["SecondOrder", "check", "escape"]
+__all__ = ["SecondOrder", "check", "escape", "ensure_minimum", "MAX_SADDLE_ESCAPES"]
+
+#: at most this many restarts from points found along a direction of negative curvature
+MAX_SADDLE_ESCAPES = 3
 
 #: the doublings and halvings of the step along the negative-curvature direction
 _MAX_DOUBLINGS = 60
@@ -140,3 +144,58 @@ def escape(problem: ReducedProblem, point: ReducedPoint, so: SecondOrder) -> Red
         if best is not None:
             break
     return best
+
+
+def ensure_minimum(problem: ReducedProblem, ref: Refinement, free: np.ndarray, resolve, selected) -> tuple:
+    """Second-order optimality before success.
+
+    At a stationary point whose reduced Hessian (on the ``free`` parameters) is not positive
+    definite the point is not a minimum: a point with a lower objective along the negative-curvature
+    direction (:func:`escape`) is handed to ``resolve(point) -> (free, Refinement)``, which solves
+    the problem again from there; at most :data:`MAX_SADDLE_ESCAPES` times.
+
+    Returns
+    -------
+    (Refinement, escaped)
+        The minimum's refinement (its decrement computed through K when the Cholesky factor of H
+        failed to working precision) and the saddle points left, as dicts {"p", "rss", "eigenvalue"}
+        (``selected``: the sensors of the RSS).
+
+    Raises
+    ------
+    ConvergenceError
+        When no descent is found (naming the point, the eigenvalue and what to try).
+    """
+    escaped = []
+    for escapes in range(MAX_SADDLE_ESCAPES + 1):
+        so = check(problem, ref.point, ref.S, free, ref.factor)
+        if so is None:                      # rank deficient: the identifiability test reports it
+            return ref, tuple(escaped)
+        if so.minimum:
+            if not math.isfinite(ref.decrement):
+                ref = replace(ref, decrement=so.decrement)
+            return ref, tuple(escaped)
+        new = escape(problem, ref.point, so) if escapes < MAX_SADDLE_ESCAPES else None
+        if new is None:
+            raise not_a_minimum(problem.model, ref.point.p, so, escapes)
+        resid = problem.data.z[:, :, selected] - ref.point.sens.h[None][:, :, selected]
+        escaped.append({"p": ref.point.p.copy(), "rss": float(np.nansum(resid ** 2)), "eigenvalue": so.eigenvalue})
+        free, ref = resolve(new)
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def not_a_minimum(model, p: np.ndarray, so: SecondOrder, escapes: int) -> ConvergenceError:
+    """The ConvergenceError of a stationary point that is not a minimum and has no descent."""
+    names = model.param_names
+    at = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, p))
+    d = so.direction / max(np.abs(so.direction).max(), 1e-300)
+    along = " + ".join(f"{d[i]:.2g} {names[i]}" for i in range(p.size) if abs(d[i]) >= 0.1)
+    kind = ("a saddle point" if so.eigenvalue < -so.roundoff else
+            "a stationary point whose Hessian is singular to working precision")
+    more = f" (after {escapes} restart(s) from lower points)" if escapes else ""
+    return ConvergenceError(
+        f"the fit of {model.name} stopped at {kind}, not a minimum{more}: {at}; the Hessian "
+        f"J^T Omega J + S has eigenvalue {so.eigenvalue:.3g} (in units of the Gauss-Newton curvature; "
+        f"round-off level {so.roundoff:.1e}) along {along}, and no lower objective was found along it. "
+        "Try other start values (or parameter scales near the expected magnitudes), or bounds on the "
+        "parameters", p=p.copy(), eigenvalue=so.eigenvalue, direction=so.direction.copy())
