@@ -1130,7 +1130,8 @@ def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings
         state["st"], state["sol"] = s, _solve_full_space(s, settings, clock)
         return ~state["sol"].at_bound, _refine_solution(s, state["sol"], settings)
 
-    ref, escaped = secondorder.ensure_minimum(st.problem, ref, ~sol.at_bound, resolve, st.selected)
+    ref, escaped = secondorder.ensure_minimum(st.problem, ref, ~sol.at_bound, resolve, st.selected,
+                                             settings.rank_rtol)
     return state["st"], state["sol"], ref, escaped
 
 

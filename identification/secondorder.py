@@ -65,17 +65,18 @@ class SecondOrder:
 
 
 def check(problem: ReducedProblem, point: ReducedPoint, S: np.ndarray, free: np.ndarray,
-          fac: WeightedFactor | None = None) -> SecondOrder | None:
+          fac: WeightedFactor | None = None, rank_rtol: float = 0.0) -> SecondOrder | None:
     """The second-order test at ``point`` on the parameters ``free`` (bool, n_p): None when the
-    weighted Jacobian of the free parameters is rank deficient (the identifiability test names
-    them) or no parameter is free.  ``fac``: the factor of all parameters' rows at ``point`` when
-    the caller has it (used when every parameter is free)."""
+    column-normalised weighted Jacobian of the free parameters is rank deficient (relative singular
+    value below ``rank_rtol``: the identifiability test reports it) or no parameter is free.
+    ``fac``: the factor of all parameters' rows at ``point`` when the caller has it (used when every
+    parameter is free)."""
     idx = np.flatnonzero(free)
     if not idx.size:
         return None
     if fac is None or idx.size < point.p.size:
         fac = weighted_factor(weighted_rows(point.sens.G[:, :, idx], problem.cw, problem.sigma)[None])
-    if not fac.full_rank[0]:
+    if not fac.full_rank[0] or fac.sv[0][-1] < rank_rtol * fac.sv[0][0]:
         return None
     K = normalised_hessian(fac, S[np.ix_(idx, idx)][None])[0]
     if not np.all(np.isfinite(K)):
@@ -146,13 +147,16 @@ def escape(problem: ReducedProblem, point: ReducedPoint, so: SecondOrder) -> Red
     return best
 
 
-def ensure_minimum(problem: ReducedProblem, ref: Refinement, free: np.ndarray, resolve, selected) -> tuple:
+def ensure_minimum(problem: ReducedProblem, ref: Refinement, free: np.ndarray, resolve, selected,
+                   rank_rtol: float = 0.0) -> tuple:
     """Second-order optimality before success.
 
     At a stationary point whose reduced Hessian (on the ``free`` parameters) is not positive
     definite the point is not a minimum: a point with a lower objective along the negative-curvature
     direction (:func:`escape`) is handed to ``resolve(point) -> (free, Refinement)``, which solves
-    the problem again from there; at most :data:`MAX_SADDLE_ESCAPES` times.
+    the problem again from there; at most :data:`MAX_SADDLE_ESCAPES` times.  A point where the
+    column-normalised sqrt(Omega) J has a relative singular value below ``rank_rtol`` is left to
+    the identifiability test (Assumption 3).
 
     Returns
     -------
@@ -168,7 +172,7 @@ def ensure_minimum(problem: ReducedProblem, ref: Refinement, free: np.ndarray, r
     """
     escaped = []
     for escapes in range(MAX_SADDLE_ESCAPES + 1):
-        so = check(problem, ref.point, ref.S, free, ref.factor)
+        so = check(problem, ref.point, ref.S, free, ref.factor, rank_rtol)
         if so is None:                      # rank deficient: the identifiability test reports it
             return ref, tuple(escaped)
         if so.minimum:
