@@ -80,12 +80,17 @@ def weighted_factor(rows: np.ndarray) -> WeightedFactor:
     False (its covariances are NaN; the rank test names the parameters).
     """
     m, n, n_p = rows.shape
-    norms = np.linalg.norm(rows, axis=1)                                 # (m, n_p)
-    live = np.all(norms > 0, axis=1) & (n >= n_p) & np.all(np.isfinite(rows), axis=(1, 2))
-    d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
     R = np.zeros((m, n_p, n_p))
-    if n >= n_p and np.any(live):
-        R[live] = np.linalg.qr(rows[live] * d[live][:, None, :], mode="r")[..., :n_p, :]
+    with np.errstate(over="ignore", invalid="ignore"):
+        fin = np.isfinite(rows.sum(axis=(1, 2))) if n else np.ones(m, bool)
+    if n >= n_p and np.any(fin):
+        # QR of A, then its columns scaled: Householder QR commutes with column scaling, and the
+        # column norms of A are those of R (Q is orthogonal), so A is read once
+        R[fin] = np.linalg.qr(rows[fin] if not np.all(fin) else rows, mode="r")[..., :n_p, :]
+    norms = np.sqrt(np.einsum("mij,mij->mj", R, R))
+    live = fin & np.all(norms > 0, axis=1) & (n >= n_p)
+    d = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
+    R = R * d[:, None, :]
     sv = np.zeros((m, n_p))
     if np.any(live):
         sv[live] = np.linalg.svd(R[live], compute_uv=False)
