@@ -594,11 +594,15 @@ def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
     return NlpProblem(x, f, ca.vec(E_all), par, hess_lag=hess_lag, jac_g=jac_g)
 
 
-def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
+def check_identifiability(model, G, cw, sig, s_p, rtol, selected, sv=None):
     """Assumption 3: rank(sqrt(Omega) J) = n_p, checked on the column-normalised matrix.
 
+    ``sv``: its singular values when the caller has them (the QR factor of
+    :mod:`identification.factor`); a full rank is then confirmed without another pass over the data.
     Returns the condition number of the normalised matrix; raises IdentifiabilityError.
     """
+    if sv is not None and sv.size == model.n_p and sv[-1] > 0 and sv[-1] >= rtol * sv[0]:
+        return float(sv[0] / sv[-1])
     rows = (np.sqrt(cw) / sig)[:, :, None] * G * s_p[None, None, :]
     J = rows.reshape(-1, model.n_p)
     norms = np.linalg.norm(J, axis=0)
@@ -1144,7 +1148,8 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     """
     model, data, point = st.model, st.data, ref.point
     sens = point.sens
-    cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected)
+    cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected,
+                                 None if ref.factor is None else ref.factor.sv[0])
     F = ref.information
     resid = data.z - sens.h[None]
     rss = float(np.nansum(resid[:, :, st.selected] ** 2))
