@@ -12,7 +12,10 @@ means and Phi_0 the constant within-group scatter.  Its gradient is g = J^T lamb
 lambda_jk = dPhi/dh_jk = -c_jk (zbar_jk - h_jk) / sigma_k^2, and its exact Hessian is
 H = J^T Omega J + S with S the second-order term (by AD and the implicit function theorem,
 :meth:`models.sensitivity.Sensitivities.hessians`).  :func:`refine` takes Newton steps
-p <- p - H^{-1} g while they decrease Phi.
+p <- p - H^{-1} g, solved through the QR factor of the weighted Jacobian
+(H = D^{-1} R^T K R D^{-1}, :mod:`identification.factor`), while they decrease Phi (or, where
+Phi cannot resolve the decrease, while the decrement falls) down to the stated tolerance or to
+round-off, and says why it stopped.
 
 The estimator (:func:`identification.identify`) refines Ipopt's solution with it, and the
 likelihood-ratio test of :mod:`identification.detect` finds the pooled minimum with it.
