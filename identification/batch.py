@@ -38,7 +38,7 @@ falls, else the last exact point is the optimum, as in ``refine``.  The estimate
 checked as :func:`identification.identify` checks its own (Assumption 3 on the column-
 normalised sqrt(Omega) J, |p| below 1e6 parameter scales, finite standard errors), and the
 second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same exact terms
-and formulas as :func:`identification.estimator.covariance_from_terms` (batched).
+and the same QR factor of sqrt(Omega) J as identify's (:mod:`identification.factor`, batched).
 
 Evaluation: for a model in SX with JIT compilation on (:func:`models.state.set_jit`, as in
 the Monte Carlo workers) one compiled CasADi function, mapped over all (member, input)
@@ -75,6 +75,7 @@ from models.contract import Model
 from models.state import numerics, solve_states
 from .errors import DataError, IdentificationError, StateSolveError
 from .estimator import IdentifySettings, as_start_vector, identify, param_scale
+from .factor import covariances, weighted_factor
 from .measurements import Measurements
 
 __all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
@@ -1008,23 +1009,11 @@ def _check_batch(model: Model, data, p0, weights) -> tuple:
     return bd, as_start_vector(model, p0), bd.weights(weights)
 
 
-def _solvable(M: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Per member: True when the stacked matrix M (m, n_p, n_p), scaled by D = diag(d), is finite
-    with condition number cond(D M D) <= 1e15 (the test identify's covariance applies)."""
-    Ms = M * d[:, :, None] * d[:, None, :]
-    ok = np.all(np.isfinite(Ms), axis=(1, 2))
-    cond = np.full(M.shape[0], np.inf)
-    if np.any(ok):
-        with np.errstate(all="ignore"):
-            cond[ok] = np.linalg.cond(Ms[ok])
-    return ok & np.isfinite(cond) & (cond <= 1e15)
-
-
 def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndarray, settings: IdentifySettings,
              sigma_unknown: bool) -> list:
     """The estimates of converged members (local indices ``k`` with their final points in ``it``):
     Assumption 3, the covariance of eq. 7 and plausibility, each the test identify applies
-    (:func:`identification.estimator.check_identifiability`, ``covariance_from_terms``, |p| and
+    (:func:`identification.estimator.check_identifiability`, :mod:`identification.factor`, |p| and
     finite standard errors), batched.  Returns per member a BatchMember or the reason text of a
     failed check (the caller falls back to identify)."""
     n_p = model.n_p
@@ -1032,25 +1021,18 @@ def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndar
     G, F, S, p = it.fG[k], it.fF[k], it.fS[k], it.fp[k]
     cw, sig = prep.cw[k], prep.sig[k]
     out = [""] * m
-    # Assumption 3: rank of the column-normalised sqrt(Omega) J (Gram matrix as identify's rows)
-    J = ((np.sqrt(cw) / sig[:, None, :])[..., None] * G * s_p).reshape(m, -1, n_p)
-    norms = np.linalg.norm(J, axis=1)
-    live = np.all(norms > 0, axis=1)
-    sv = np.linalg.svd(J / np.where(norms > 0, norms, 1.0)[:, None, :], compute_uv=False)
-    ratio = np.where(sv[:, 0] > 0, sv[:, -1] / np.where(sv[:, 0] > 0, sv[:, 0], 1.0), 0.0)
-    ident = live & (ratio >= settings.rank_rtol) & (J.shape[1] >= n_p)
-    # covariance (eq. 7) as covariance_from_terms
-    F2 = np.einsum("mjk,mjkp,mjkr->mpr", cw * prep.w[None, None, :] / sig[:, None, :] ** 2, G, G)
+    # Assumption 3 and the covariances (eq. 7) from the QR factor of the column-normalised
+    # sqrt(Omega) J, as identify (identification.factor)
+    rows = ((np.sqrt(cw) / sig[:, None, :])[..., None] * G).reshape(m, -1, n_p)
+    fac = weighted_factor(rows)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(fac.sv[:, 0] > 0, fac.sv[:, -1] / np.where(fac.sv[:, 0] > 0, fac.sv[:, 0], 1.0), 0.0)
+    ident = fac.full_rank & (ratio >= settings.rank_rtol)
+    binary = bool(np.all((prep.w == 0) | (prep.w == 1)))
+    rows2 = None if binary else ((np.sqrt(cw * prep.w[None, None, :]) / sig[:, None, :])[..., None]
+                                 * G).reshape(m, -1, n_p)
+    cov, cov_gn, _ = covariances(fac, S, rows2)
     H = F + S
-    with np.errstate(all="ignore"):
-        d = 1.0 / np.sqrt(np.abs(np.einsum("mii->mi", F)))
-    H_ok, F_ok = _solvable(H, d), _solvable(F, d)
-    Hs = np.where(H_ok[:, None, None], H, np.eye(n_p))
-    Fs = np.where(F_ok[:, None, None], F, np.eye(n_p))     # a singular member must not stop the others
-    cov = np.linalg.solve(Hs, np.linalg.solve(Hs, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
-    cov_gn = np.linalg.solve(Fs, np.linalg.solve(Fs, F2).transpose(0, 2, 1)).transpose(0, 2, 1)
-    cov = np.where(H_ok[:, None, None], 0.5 * (cov + cov.transpose(0, 2, 1)), np.nan)
-    cov_gn = np.where(F_ok[:, None, None], 0.5 * (cov_gn + cov_gn.transpose(0, 2, 1)), np.nan)
     h_rows = it.fh[k][:, prep.group]                                                 # (m, n_q, n_S)
     resid = prep.Z[k] - h_rows[:, None]
     rss = np.nansum(resid[..., prep.selected] ** 2, axis=(1, 2, 3))

@@ -1,7 +1,7 @@
 """Exceptions of the identification package (all subclass ValueError or RuntimeError)."""
 from models.errors import NumericsError, StateSolveError
 
-__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "StateSolveError"]
+__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "StateSolveError", "ConvergenceError"]
 
 
 class DataError(ValueError):
@@ -33,3 +33,21 @@ class IdentifiabilityError(IdentificationError):
         super().__init__(message, status="not identifiable")
         self.params = tuple(params)
         self.sensors = tuple(sensors)
+
+
+class ConvergenceError(IdentificationError):
+    """The solver stopped at a stationary point that is not a minimum (a saddle point, or a
+    Hessian singular to working precision) and no descent was found from it.
+
+    Attributes
+    ----------
+    p : ndarray               the point
+    eigenvalue : float        smallest eigenvalue of the Hessian in the Gauss-Newton metric
+    direction : ndarray       its direction in parameter units
+    """
+
+    def __init__(self, message: str, p=None, eigenvalue: float = float("nan"), direction=None, status: str = ""):
+        super().__init__(message, status=status or "not a minimum")
+        self.p = p
+        self.eigenvalue = eigenvalue
+        self.direction = direction

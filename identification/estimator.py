@@ -33,12 +33,14 @@ from scipy import special
 
 from models.contract import Model
 from . import dense
+from .factor import estimate_covariances
+from . import secondorder
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
 from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
 from .measurements import Measurements
 from .explicit_kernel import ExplicitTerms, explicit_terms
-from .refinement import ReducedPoint, ReducedProblem, Refinement, gauss_newton_information, refine
+from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
@@ -592,11 +594,15 @@ def _build_nlp_glued(model, inputs, s_p, s_y, e_scale):
     return NlpProblem(x, f, ca.vec(E_all), par, hess_lag=hess_lag, jac_g=jac_g)
 
 
-def check_identifiability(model, G, cw, sig, s_p, rtol, selected):
+def check_identifiability(model, G, cw, sig, s_p, rtol, selected, sv=None):
     """Assumption 3: rank(sqrt(Omega) J) = n_p, checked on the column-normalised matrix.
 
+    ``sv``: its singular values when the caller has them (the QR factor of
+    :mod:`identification.factor`); a full rank is then confirmed without another pass over the data.
     Returns the condition number of the normalised matrix; raises IdentifiabilityError.
     """
+    if sv is not None and sv.size == model.n_p and sv[-1] > 0 and sv[-1] >= rtol * sv[0]:
+        return float(sv[0] / sv[-1])
     rows = (np.sqrt(cw) / sig)[:, :, None] * G * s_p[None, None, :]
     J = rows.reshape(-1, model.n_p)
     norms = np.linalg.norm(J, axis=0)
@@ -1081,6 +1087,12 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
     return _FullSpaceSolution(res, passes, p, Y, at_bound)
 
 
+def _decrement_unit(st: _Start, objective: float) -> float:
+    """Objective units per chi^2 unit of the decrement: 1 with sigma known, else 2 Phi / (n - n_p)
+    (the objective's sigma is a common spread; the standard errors use s^2 = RSS / (n - n_p))."""
+    return 1.0 if st.data.sigma is not None else 2.0 * objective / max(st.n - st.model.n_p, 1)
+
+
 def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySettings) -> Refinement:
     """Step 3 of :func:`identify`: states consistent with Ipopt's p, then at most
     ``refine_steps`` exact reduced Newton steps (none when a parameter is at a bound), and
@@ -1096,17 +1108,39 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
         raise IdentificationError(f"the state equation cannot be solved at the estimate: {exc}",
                                   status=res.status) from None
     ref = refine(st.problem, point, settings.refine_steps if not np.any(sol.at_bound) else 0,
-                 stop_decrement=settings.refine_decrement, start_S=sol.S)
-    if res.accepted is None and not (ref.decrement <= settings.decrement_tol):
+                 stop_decrement=settings.refine_decrement, start_S=sol.S,
+                 dof=st.n - st.model.n_p if st.data.sigma is None else None,
+                 quadratic_decrement=settings.decrement_tol)
+    unit = _decrement_unit(st, ref.point.objective)
+    if res.accepted is None and not (ref.decrement <= settings.decrement_tol * unit):
         raise IdentificationError(
             f"Ipopt stalled on the identification of {st.model.name} ({res.status}) and the exact Newton "
-            f"refinement did not reach the optimum (Newton decrement {ref.decrement:.2e} > "
-            f"{settings.decrement_tol:.0e}); try other start values", status=res.status)
+            f"refinement did not reach the optimum (Newton decrement {ref.decrement / unit:.2e} > "
+            f"{settings.decrement_tol:.0e}; refinement stopped: {ref.stop_reason}); try other start values",
+            status=res.status)
     return ref
 
 
+def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
+                  clock: _PhaseClock | None = None) -> tuple:
+    """Second-order optimality before success (:func:`identification.secondorder.ensure_minimum`):
+    from a point found below a saddle along its negative curvature the problem is solved again
+    (:func:`_solve_full_space`, :func:`_refine_solution`).  Returns (st, sol, ref, escaped);
+    raises ConvergenceError when no descent is found."""
+    state = {"st": st, "sol": sol}
+
+    def resolve(new):
+        s = dataclasses.replace(state["st"], p0=new.p, Y_init=new.states if st.model.n_y else st.Y_init)
+        state["st"], state["sol"] = s, _solve_full_space(s, settings, clock)
+        return ~state["sol"].at_bound, _refine_solution(s, state["sol"], settings)
+
+    ref, escaped = secondorder.ensure_minimum(st.problem, ref, ~sol.at_bound, resolve, st.selected,
+                                             settings.rank_rtol)
+    return state["st"], state["sol"], ref, escaped
+
+
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
-              t_start: float, clock: _PhaseClock | None = None) -> Estimate:
+              t_start: float, clock: _PhaseClock | None = None, escaped: tuple = ()) -> Estimate:
     """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
 
     With sigma unknown the covariance, information and objective are rescaled by
@@ -1114,12 +1148,9 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     """
     model, data, point = st.model, st.data, ref.point
     sens = point.sens
-    cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected)
+    cond = check_identifiability(model, sens.G, st.problem.cw, st.sig, st.s_p, settings.rank_rtol, st.selected,
+                                 None if ref.factor is None else ref.factor.sv[0])
     F = ref.information
-    if np.all((st.w == 0) | (st.w == 1)):    # w^2 = w: J^T Omega^2 J is J^T Omega J (same sums)
-        F2 = F
-    else:
-        F2 = gauss_newton_information(sens.G, st.problem.cw * st.w[None, :], st.sig)
     resid = data.z - sens.h[None]
     rss = float(np.nansum(resid[:, :, st.selected] ** 2))
     dof = st.n - model.n_p
@@ -1130,14 +1161,22 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     else:
         factor = 1.0
         sig_used = st.sig
-    cov, cov_gn, H, H_ok = covariance_from_terms(F, F2, ref.S)
+    # from the QR factor of sqrt(Omega) J (not the normal equations): issue 20
+    cov, cov_gn, H_ok, sv, K_eig = estimate_covariances(sens.G, st.problem.cw, st.w, st.sig, ref.S, ref.factor)
+    H = F + ref.S
     cov, cov_gn = cov * factor, cov_gn * factor
     _check_plausible(st, point.p, cov, cov_gn, sol.result.status)
     objective = point.objective / factor if data.sigma is None else point.objective
     notes = _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof)
+    for e in escaped:
+        notes += (f"the solver first stopped at a saddle point (RSS {e['rss']:.6g}, Hessian "
+                  f"eigenvalue {e['eigenvalue']:.3g} in Gauss-Newton units); restarted from a lower point along "
+                  "its direction of negative curvature",)
     res = sol.result
     extra = {"newton_decrement": ref.decrement / factor, "solver": res.stats.get("solver", "ipopt"),
-             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes}
+             "ipopt_iterations": 0 if "solver" in res.stats else res.iterations, "ipopt_passes": sol.passes,
+             "singular_values": sv, "hessian_eigenvalues": K_eig, "refinement_stop": ref.stop_reason,
+             "saddle_escapes": escaped}
     if "t_wall_callbacks" in res.stats:
         extra["ipopt_timing"] = {"build": res.stats["t_build"], "nlpsol": res.stats["t_nlpsol"],
                                  "solve": res.wall_time, "callbacks": dict(res.stats["t_wall_callbacks"])}
@@ -1194,8 +1233,9 @@ def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
     model, data, res = st.model, st.data, sol.result
     notes = []
     if res.accepted is None:
+        dec = ref.decrement / _decrement_unit(st, ref.point.objective)
         notes.append(f"Ipopt stalled ({res.status}); the exact Newton refinement verified the optimum "
-                     f"(Newton decrement {ref.decrement:.1e}, i.e. within {math.sqrt(max(ref.decrement, 0)):.1e} "
+                     f"(Newton decrement {dec:.1e}, i.e. within {math.sqrt(max(dec, 0)):.1e} "
                      "standard errors)")
     elif res.status != "Solve_Succeeded":
         notes.append(f"not converged to full tolerance: Ipopt status {res.status} ({res.message})")
@@ -1264,6 +1304,11 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         Ipopt failed (carries Ipopt's status), or the state equation could not be solved.
     IdentifiabilityError
         rank(Omega J) < n_p at the estimate (names the parameters and sensors).
+    ConvergenceError
+        The solver stopped at a stationary point that is not a minimum (the reduced Hessian
+        J^T Omega J + S is not positive definite) and no lower point was found along its negative
+        curvature (names the point and the eigenvalue); from such a point with descent the problem
+        is solved again (:mod:`identification.secondorder`; ``extra["saddle_escapes"]`` and a note).
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
@@ -1272,8 +1317,9 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     clock.lap("validation, data, states at p0")
     sol = _solve_full_space(st, settings, clock)
     ref = _refine_solution(st, sol, settings)
+    st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
     clock.lap("refinement (states, sensitivities, S at the estimate)")
-    return _estimate(st, sol, ref, settings, t_start, clock)
+    return _estimate(st, sol, ref, settings, t_start, clock, escaped)
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,

@@ -12,7 +12,10 @@ means and Phi_0 the constant within-group scatter.  Its gradient is g = J^T lamb
 lambda_jk = dPhi/dh_jk = -c_jk (zbar_jk - h_jk) / sigma_k^2, and its exact Hessian is
 H = J^T Omega J + S with S the second-order term (by AD and the implicit function theorem,
 :meth:`models.sensitivity.Sensitivities.hessians`).  :func:`refine` takes Newton steps
-p <- p - H^{-1} g while they decrease Phi.
+p <- p - H^{-1} g, solved through the QR factor of the weighted Jacobian
+(H = D^{-1} R^T K R D^{-1}, :mod:`identification.factor`), while they decrease Phi (or, where
+Phi cannot resolve the decrease, while the decrement falls) down to the stated tolerance or to
+round-off, and says why it stopped.
 
 The estimator (:func:`identification.identify`) refines Ipopt's solution with it, and the
 likelihood-ratio test of :mod:`identification.detect` finds the pooled minimum with it.
@@ -28,6 +31,7 @@ from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from . import dense
+from .factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
 from .measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
@@ -165,6 +169,9 @@ class Refinement:
     decrement : float             Newton decrement g^T (J^T Omega J + S)^{-1} g (objective units;
                                   inf when the Hessian is not positive definite)
     steps : int                   Newton steps taken
+    stop_reason : str             why the refinement stopped (see :func:`refine`)
+    factor : WeightedFactor       QR factor of the column-normalised sqrt(Omega) J at ``point.p``
+                                  (:mod:`identification.factor`; None if not computed)
     """
 
     point: ReducedPoint
@@ -172,58 +179,149 @@ class Refinement:
     information: np.ndarray
     decrement: float
     steps: int
+    stop_reason: str = ""
+    factor: WeightedFactor | None = None
+
+
+#: the gradient's round-off bound: this many ulps of sum |lambda_jk| |G_jk|
+_GRAD_ULPS = 16
+
+
+def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> float:
+    """The decrement that round-off alone produces (objective units), the larger of
+
+    * the gradient's sum over the data: e^T H^{-1} e with e = 16 eps sum_jk |lambda_jk| |G_jk|
+      (the test of the batch engine);
+    * the residuals' own round-off e_jk = 16 eps (|zbar_jk| + |h_jk|): the Newton step moves p by
+      the projection of the weighted residual errors onto the n_p columns of sqrt(Omega) J, whose
+      squared norm is about n_p max_jk c_jk e_jk^2 / sigma_k^2.
+    """
+    eps16 = _GRAD_ULPS * np.finfo(float).eps
+    G = point.sens.G.reshape(-1, point.p.size)
+    u = system.whiten(eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)))
+    e2 = problem.cw / problem.sigma ** 2 * (eps16 * (np.abs(problem.zbar) + np.abs(point.sens.h))) ** 2
+    return max(float(u @ u), point.p.size * float(e2.max(initial=0.0)))
+
+
+def point_factor(problem: ReducedProblem, point: ReducedPoint) -> WeightedFactor:
+    """The QR factor of the column-normalised sqrt(Omega) J at ``point`` (a stack of one)."""
+    return weighted_factor(weighted_rows(point.sens.G, problem.cw, problem.sigma)[None])
+
+
+def _decrement(fac: WeightedFactor, point: ReducedPoint, S: np.ndarray) -> float:
+    """g^T H^{-1} g through the factor; inf when H is not positive definite."""
+    system = newton_system(fac, S)
+    return float("inf") if system is None else system.step(point.gradient)[1]
+
+
+def _objective_roundoff(problem: ReducedProblem, point: ReducedPoint) -> float:
+    """A bound of the round-off of Phi from the residuals' own round-off:
+    16 eps sum_jk |lambda_jk| (|zbar_jk| + |h_jk|) (lambda = dPhi/dh)."""
+    return _GRAD_ULPS * np.finfo(float).eps * float(np.sum(np.abs(point.lam) * (np.abs(problem.zbar)
+                                                                                 + np.abs(point.sens.h))))
 
 
 def refine(problem: ReducedProblem, start: ReducedPoint, max_steps: int, stop_decrement: float = 0.0,
-           start_S: np.ndarray | None = None) -> Refinement:
+           start_S: np.ndarray | None = None, *, dof: int | None = None,
+           quadratic_decrement: float = 1e-10) -> Refinement:
     """Exact reduced Newton steps p <- p - (J^T Omega J + S)^{-1} g from ``start``.
 
     ``start_S``: the second-order term S at ``start.p`` when the caller has it already (saves
-    one evaluation of the second derivatives).
+    one evaluation of the second derivatives).  ``dof``: with sigma unknown, n - n_p; the
+    decrements ``stop_decrement`` and ``quadratic_decrement`` are then in chi^2 units of the
+    estimated sigma (unit 2 Phi / dof of the objective), else in objective units.
 
-    A step is taken while the Hessian is positive definite, the state solves succeed and the
-    objective does not increase; it stops at round-off (|dp| < 1e-13 s_p), after a step below
-    1e-12 s_p, after ``max_steps`` steps, or when the Newton decrement g^T H^{-1} g is below
-    ``stop_decrement``.  Steps are clipped to the model's parameter bounds.
+    A step is taken while the Hessian is positive definite and the state solves succeed.  It is
+    kept when Phi does not increase, or, in the quadratic region (decrement below
+    ``quadratic_decrement``, or the predicted decrease dec / 2 below 10 times the round-off of Phi:
+    Phi cannot resolve the decrease any more), when the decrement falls.  ``stop_reason`` says why it stopped:
+
+    * ``"converged"``: decrement g^T H^{-1} g below ``stop_decrement``;
+    * ``"round-off of the gradient"``: decrement below the one round-off in the residuals and the
+      gradient's sum over the data produces (the tolerance cannot be resolved in double precision);
+    * ``"round-off of p"``: the Newton step is below 8 ulps of every parameter;
+    * ``"no progress at round-off"``: in the quadratic region the step raised both Phi and the
+      decrement (the previous point is kept: the achieved decrement is the attainable one);
+    * ``"objective increased"``: outside the quadratic region a Newton step increased Phi;
+    * ``"Hessian not positive definite"``, ``"state solve failed"``, ``"max_steps"``.
+
+    Steps are clipped to the model's parameter bounds.
     """
-    model, s_p = problem.model, problem.p_scale
-    lo, up = model.lower, model.upper
-    point = start
-    steps = 0
-    S_terms = start_S
-    F = dec = None                         # J^T Omega J and the decrement at ``point`` once known
+    at = _At(problem, start, S=start_S)
+    steps, reason, dec = 0, "max_steps", None
     for _ in range(max_steps):
-        F = problem.information(point)
-        if S_terms is None:
-            S_terms = point.sens.hessians(point.lam[None])[0]
-        L = dense.cholesky_lower((F + S_terms) * np.outer(s_p, s_p))
-        if L is None:
-            dec = float("inf")
+        system = newton_system(at.filled().fac, at.S)
+        if system is None:
+            dec, reason = float("inf"), "Hessian not positive definite"
             break
-        v = dense.tri_solve(L, point.gradient * s_p)
-        dec = float(v @ v)
-        if dec < stop_decrement:
+        dp, dec = system.step(at.point.gradient)
+        unit = _unit(at.point, dof)
+        reason = _stop_reason(problem, at.point, system, dp, dec, stop_decrement * unit)
+        if reason:
             break
-        dp = -s_p * dense.tri_solve(L, v, trans=1)
-        if np.max(np.abs(dp / s_p)) < 1e-13:
-            break                          # converged to round-off: keep p and its terms
-        small = np.max(np.abs(dp / s_p)) < 1e-12
-        p_new = np.clip(point.p + dp, lo, up)
-        try:
-            new = problem.evaluate(p_new, point.states)
-        except StateSolveError:
+        new, reason = _newton_step(problem, at, dp, dec, quadratic_decrement * unit)
+        if new is None:
             break
-        if not (new.objective <= point.objective * (1 + 1e-14) + 1e-300):
-            break
-        point = new
-        S_terms = F = dec = None
+        at, dec, reason = new, None, "max_steps"
         steps += 1
-        if small:
-            break
-    if S_terms is None:
-        S_terms = point.sens.hessians(point.lam[None])[0]
-    if F is None:
-        F = problem.information(point)
+    at.filled()
     if dec is None:
-        dec = newton_decrement(F + S_terms, point.gradient, s_p)
-    return Refinement(point, S_terms, F, dec, steps)
+        dec = _decrement(at.fac, at.point, at.S)
+    if reason == "max_steps" and dec < stop_decrement * _unit(at.point, dof):
+        reason = "converged"
+    return Refinement(at.point, at.S, at.F, dec, steps, reason, at.fac)
+
+
+@dataclass
+class _At:
+    """A point of :func:`refine` with its second-order term, information and factor (on demand)."""
+
+    problem: ReducedProblem
+    point: ReducedPoint
+    S: np.ndarray | None = None
+    F: np.ndarray | None = None
+    fac: WeightedFactor | None = None
+
+    def filled(self) -> "_At":
+        if self.S is None:
+            self.S = self.point.sens.hessians(self.point.lam[None])[0]
+        if self.F is None:
+            self.F = self.problem.information(self.point)
+        if self.fac is None:
+            self.fac = point_factor(self.problem, self.point)
+        return self
+
+
+def _unit(point: ReducedPoint, dof: int | None) -> float:
+    """Objective units per decrement unit: 1, or 2 Phi / dof with sigma unknown."""
+    return 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
+
+
+def _stop_reason(problem: ReducedProblem, point: ReducedPoint, system, dp: np.ndarray, dec: float,
+                 tol: float) -> str:
+    """Why :func:`refine` stops before the step dp ("" when it does not)."""
+    if dec < tol:
+        return "converged"
+    if dec <= _gradient_roundoff(problem, point, system):
+        return "round-off of the gradient"
+    if np.all(np.abs(dp) <= 8 * np.finfo(float).eps * np.abs(point.p)):
+        return "round-off of p"
+    return ""
+
+
+def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, quadratic: float) -> tuple:
+    """(the point after the step, "") when it is kept, else (None, the reason to stop): kept when Phi
+    does not increase or, in the quadratic region (dec <= ``quadratic`` or dec below 20 times Phi's
+    round-off), when the decrement falls."""
+    model, point = problem.model, at.point
+    try:
+        new = _At(problem, problem.evaluate(np.clip(point.p + dp, model.lower, model.upper), point.states))
+    except StateSolveError:
+        return None, "state solve failed"
+    if new.point.objective <= point.objective * (1 + 1e-14) + 1e-300:
+        return new, ""
+    if not (dec <= quadratic or dec <= 20 * _objective_roundoff(problem, point)):
+        return None, "objective increased"
+    if not _decrement(new.filled().fac, new.point, new.S) < dec:
+        return None, "no progress at round-off"
+    return new, ""
