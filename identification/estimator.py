@@ -1265,6 +1265,11 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     IdentifiabilityError
         rank(Omega J) < n_p at the estimate (names the parameters and sensors).
     """
+    if getattr(model, "is_dynamic", False):    # an ODE/DAE model: collocation with error control
+        from .dynamic_fit import identify_dynamic
+        if Y0 is not None:
+            raise TypeError("Y0: not used for a dynamic model (its trajectories start from an integration at p0)")
+        return identify_dynamic(model, data, p0, weights=weights, settings=settings)
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
     clock = _PhaseClock()

@@ -230,6 +230,14 @@ class Model:
         """An explicit model ``z ~ f(p, q)`` (no state): ``h`` takes ``(p, q)``."""
         return cls(params, inputs, sensors, n_y=0, E=None, h=lambda y, p, q: h(p, q), **kw)
 
+    @classmethod
+    def ode(cls, params, states, inputs, sensors, rhs: Callable, x0: Callable, h: Callable, **kw):
+        """A dynamic model dx/dt = rhs(x, p, u), x(0) = x0(p, u), outputs h(x, p, u) (with ``algebraic``
+        states and ``alg``: an index-1 DAE); returns a :class:`models.dynamic.DynamicModel`, which
+        :meth:`~models.dynamic.DynamicModel.collocate` turns into a Model at given sampling times."""
+        from .dynamic import DynamicModel
+        return DynamicModel(params, states, inputs, sensors, rhs, x0, h, **kw)
+
     # ------------------------------------------------------------------ sizes
     @property
     def n_p(self) -> int:
