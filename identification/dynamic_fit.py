@@ -7,11 +7,12 @@ with order 2d - 1 at element boundaries, so the difference
 
 .. math::
 
-    e_{jk} = |h_k^{N/2}(\hat p, q_j) - h_k^{N}(\hat p, q_j)| / \sigma_k
+    e_{jk} = \frac{2^o}{2^o - 1} |h_k^{N/2}(\hat p, q_j) - h_k^{N}(\hat p, q_j)| / \sigma_k,
+    \qquad o = 2d - 1,
 
-estimates the discretisation error of the fit's mesh N in units of each sensor's sigma, and
-the linearised shift of the estimate were the fine outputs used,
-dp = (G^T W G)^{-1} G^T W (h^{N/2} - h^N), in standard errors.  While max e > ``tol_sigma``
+(Richardson) estimates the discretisation error of the fit's mesh N in units of each sensor's
+sigma, and the linearised shift of the estimate were exact outputs used,
+dp = (G^T W G)^{-1} G^T W \delta h with \delta h the error so estimated, in standard errors.  While max e > ``tol_sigma``
 or max |dp / se| > ``tol_se`` the mesh is refined (each element split into
 ceil(1.25 (error / tolerance)^{1/(2d-1)}) parts, 2..``max_factor``) and the fit repeated from
 p̂.  The estimate records the mesh and the achieved error (``extra["discretisation"]``, a
@@ -80,9 +81,9 @@ class DiscretisationRecord:
     ----------
     degree, n_elements : int
     boundaries : tuple of float       the mesh (time unit of the model)
-    error_sigma : float               max over data of |h(mesh halved) - h(mesh)| / sigma at the estimate
+    error_sigma : float               max over the data of the estimated output error / sigma at the estimate
     error_by_sensor : dict            the same per instrument
-    shift_se : ndarray (n_p,)         linearised change of the estimate on the halved mesh, in standard errors
+    shift_se : ndarray (n_p,)         linearised change of the estimate without discretisation error, in standard errors
     tol_sigma, tol_se : float
     bounded : bool                    both errors are within their tolerances
     history : tuple                   (n_elements, error_sigma, max |shift_se|) of every mesh fitted
@@ -107,12 +108,13 @@ class DiscretisationRecord:
         shift = float(np.max(np.abs(self.shift_se))) if np.all(np.isfinite(self.shift_se)) else float("nan")
         if self.bounded:
             return (f"discretisation: Radau IIA collocation of degree {self.degree} on {self.n_elements} elements "
-                    f"(longest {h:.3g}); halving every element changes the outputs at the sampling times by at "
-                    f"most {100 * self.error_sigma:.2g} % of sigma (tolerance {100 * self.tol_sigma:.2g} %) and "
-                    f"the estimate by at most {shift:.2g} standard errors")
+                    f"(longest {h:.3g}); its error, estimated against every element halved, is at most "
+                    f"{100 * self.error_sigma:.2g} % of sigma in the outputs at the sampling times (tolerance "
+                    f"{100 * self.tol_sigma:.2g} %) and {shift:.2g} standard errors in the estimate")
         return (f"discretisation error NOT bounded: {self.reason}; on {self.n_elements} elements (degree "
-                f"{self.degree}) the outputs change by {100 * self.error_sigma:.3g} % of sigma and the estimate by "
-                f"{shift:.3g} standard errors when every element is halved (tolerances {100 * self.tol_sigma:.2g} % "
+                f"{self.degree}) the error, estimated against every element halved, is {100 * self.error_sigma:.3g} "
+                f"% of sigma in the outputs and {shift:.3g} standard errors in the estimate (tolerances "
+                f"{100 * self.tol_sigma:.2g} % "
                 f"and {self.tol_se:.2g}); the estimate and its verdicts may reflect the discretisation, not the model")
 
 
@@ -165,9 +167,11 @@ def _weights(data: DynamicMeasurements, weights):
 
 def _error(model, data, est, mesh, w):
     """(error per flat sensor in sigmas, max, linearised estimate shift in standard errors) of the
-    fit ``est`` on ``mesh`` against the mesh with every element halved."""
+    fit ``est`` on ``mesh``: Richardson's estimate 2^o / (2^o - 1) (h^{N/2} - h^N) with the mesh
+    halved, o = 2 d - 1 the order at the element boundaries."""
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
-    dh = fine.simulate(est.p, data.inputs) - est.fitted               # (n_q, n_pairs)
+    order = 2 * mesh.degree - 1
+    dh = (fine.simulate(est.p, data.inputs) - est.fitted) * 2 ** order / (2 ** order - 1)   # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
     e = np.where(counts > 0, np.abs(dh) / est.sigma[None, :], 0.0)

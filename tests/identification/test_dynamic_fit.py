@@ -1,0 +1,128 @@
+"""identify on dynamic models: collocation with discretisation error control (identification.dynamic_fit)."""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import least_squares
+
+from identification import DataError, DynamicMeasurements, Measurements, identify
+from identification.dynamic_fit import (DiscretisationRecord, DiscretisationSettings, collocated_problem,
+                                       identify_dynamic)
+from mudoe.example_reactor import HORIZON, P_TRUE, R_KJ, T_REF, TIMES, build
+
+Q = np.array([[1.0, 330.0], [1.0, 340.0], [1.0, 350.0], [2.0, 350.0], [2.0, 360.0], [2.0, 370.0]])
+SIGMA = np.array([0.01, 0.008])
+P0 = [1.5, 50.0, 1.0, 70.0]
+
+
+def ivp(p, q, t):
+    """c_A, c_B at times t by solve_ivp (rtol 1e-10): the reference integrator."""
+    k1, k2 = (p[2 * i] * np.exp(-p[2 * i + 1] / R_KJ * (1 / q[1] - 1 / T_REF)) for i in range(2))
+    r = solve_ivp(lambda _, x: [-k1 * x[0], k1 * x[0] - k2 * x[1], k2 * x[1]], (0, t[-1]), [q[0], 0, 0],
+                  t_eval=t, rtol=1e-10, atol=1e-13, method="LSODA")
+    return r.y[:2].T
+
+
+def campaign(seed=0, times=None, n_M=1):
+    rng = np.random.default_rng(seed)
+    times = [TIMES] * len(Q) if times is None else times
+    n_t = max(len(t) for t in times)
+    z = np.full((n_M, len(Q), n_t, 2), np.nan)
+    for j, (q, t) in enumerate(zip(Q, times)):
+        z[:, j, :len(t)] = ivp(P_TRUE, q, np.asarray(t)) + SIGMA * rng.standard_normal((n_M, len(t), 2))
+    return z
+
+
+def reference_fit(z, times):
+    """scipy least_squares over solve_ivp on the present values (the weighted residuals of identify)."""
+    def res(p):
+        out = []
+        for j, (q, t) in enumerate(zip(Q, times)):
+            r = (z[0, j, :len(t)] - ivp(p, q, np.asarray(t))) / SIGMA
+            out.append(r[np.isfinite(r)])
+        return np.concatenate(out)
+    return least_squares(res, P0, x_scale=[1, 50, 1, 50], xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+
+
+def test_reactor_agrees_with_reference_fit_within_five_hundredths_of_a_standard_error():
+    z = campaign()
+    est = identify(build(), DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"]), P0)
+    ref = reference_fit(z, [TIMES] * len(Q))
+    assert np.all(np.abs(est.p - ref) / est.stderr < 0.05), (est.p - ref) / est.stderr
+    rec = est.extra["discretisation"]
+    assert isinstance(rec, DiscretisationRecord) and rec.bounded
+    assert rec.error_sigma <= 0.01 and np.abs(rec.shift_se).max() <= 0.01
+    assert any(n.startswith("discretisation: Radau IIA") for n in est.notes) and "discretisation" in est.summary()
+    # the estimate is that of the collocated static model: covariance and profiles work on it unchanged
+    assert est.model.n_y == 3 * (1 + 3 * rec.n_elements) and est.cov.shape == (4, 4)
+    ci = est.conf_int(0.05, method="profile")
+    wald = est.conf_int(0.05)
+    # curvature is small (relative 0.01 << 0.64): the profile intervals equal the Wald ones to 1 % of their width
+    width = wald[:, 1] - wald[:, 0]
+    assert np.all(np.abs(np.asarray(ci.lower) - wald[:, 0]) < 0.01 * width)
+    assert np.all(np.abs(np.asarray(ci.upper) - wald[:, 1]) < 0.01 * width)
+
+
+def test_error_control_refines_a_coarse_mesh():
+    z = campaign(seed=1)
+    data = DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"])
+    coarse = DiscretisationSettings(degree=2, elements=1)       # order 3 on the sampling grid (10 elements)
+    est = identify_dynamic(build(), data, P0, discretisation=coarse)
+    rec = est.extra["discretisation"]
+    assert len(rec.history) >= 2 and rec.history[0][1] > 0.01 and rec.bounded
+    assert rec.n_elements > rec.history[0][0] and rec.error_sigma <= 0.01
+    ref = reference_fit(z, [TIMES] * len(Q))
+    assert np.all(np.abs(est.p - ref) / est.stderr < 0.05)
+    # no refinement allowed: the fit says that its discretisation error is not bounded
+    est = identify_dynamic(build(), data, P0, discretisation=DiscretisationSettings(degree=2, elements=1,
+                                                                                    max_refinements=0))
+    rec = est.extra["discretisation"]
+    assert not rec.bounded and rec.error_sigma > 0.01
+    assert "discretisation error NOT bounded" in est.summary()
+
+
+def test_ragged_times_and_missing_values():
+    times = [TIMES, TIMES[::2], TIMES[1:7], TIMES, np.r_[0.1, TIMES[3:]], TIMES[:4]]
+    z = campaign(seed=2, times=times)
+    z[0, 0, 3, 1] = np.nan                     # a missing reading
+    times_ref = [np.asarray(t) for t in times]
+    data = DynamicMeasurements(Q, times, z, SIGMA, sensors=["cA", "cB"])
+    flat = data.flat()
+    assert flat.n_data() == int(np.isfinite(z).sum())
+    assert ("cA", 0.1) in data.pairs and np.isnan(flat.z[0, 0, flat.sensors.index("cA@0.1")])
+    est = identify(build(), data, P0)
+    ref = reference_fit(z, times_ref)
+    assert np.all(np.abs(est.p - ref) / est.stderr < 0.05)
+    assert est.n_data == int(np.isfinite(z).sum())
+    sub = data.subset(inputs=[1, 2])
+    assert sub.times.shape == (2, 6) and np.isnan(sub.times[0, 5])
+
+
+def test_collocated_problem_is_a_static_model():
+    data = DynamicMeasurements(Q, TIMES, campaign(seed=3), SIGMA)        # default sensor names s1, s2
+    cm, flat = collocated_problem(build(), data)
+    assert isinstance(flat, Measurements) and flat.sensors[:2] == ("cA@0.2", "cB@0.2")
+    assert cm.sensors == flat.sensors and cm.mesh.boundaries[-1] == HORIZON
+    est = identify(cm, flat, P0)                # no error control: the caller's mesh
+    assert "discretisation" not in est.extra and np.all(np.abs(est.p - P_TRUE) / est.stderr < 4)
+
+
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: DynamicMeasurements(Q, TIMES[::-1], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
+     "times: experiment 0: sampling times must be strictly increasing"),
+    (lambda: DynamicMeasurements(Q, np.r_[-0.1, TIMES[1:]], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
+     "times: experiment 0 has a negative sampling time"),
+    (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 10, 2)), np.ones((10, 2))), DataError,
+     "sigma: expected 2 values .one per instrument"),
+    (lambda: DynamicMeasurements(Q, [TIMES, TIMES[:5]] + [TIMES] * 4, np.zeros((1, 6, 10, 2)), SIGMA),
+     DataError, "z: experiment 1 has a value at sample 5"),
+    (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 9, 2)), SIGMA), DataError, "z: expected shape"),
+    (lambda: identify(build(), DynamicMeasurements(Q, TIMES + 0.5, campaign(), SIGMA), P0), DataError,
+     "data.times: sampling time 2.5 lies beyond the horizon 2"),
+    (lambda: identify(build("profile"), DynamicMeasurements(Q, TIMES, campaign(), SIGMA), P0), DataError,
+     r"data.inputs: has 2 columns but model .* takes 9 \(cA0, T@0"),
+    (lambda: identify(build(), Measurements(Q, np.zeros((1, 6, 2)), SIGMA), P0), TypeError,
+     "data: a dynamic model needs identification.DynamicMeasurements"),
+])
+def test_bad_data_names_the_argument(make, exc, match):
+    with pytest.raises(exc, match=match):
+        make()
