@@ -15,9 +15,26 @@ import numpy as np
 
 from models.collocation import pair_name
 from .errors import DataError
-from .measurements import Measurements, _index, _readonly
+from .measurements import Measurements
 
 __all__ = ["DynamicMeasurements"]
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _selection(arg: str, idx, n: int) -> np.ndarray:
+    """The distinct indices chosen by ints, a boolean mask of length n or a slice (DataError naming ``arg``)."""
+    try:
+        out = np.arange(n)[idx if isinstance(idx, (slice, np.ndarray)) else np.asarray(list(idx), dtype=int)]
+    except (IndexError, TypeError, ValueError) as exc:
+        raise DataError(f"{arg}: not a valid selection of {n} entries ({exc})") from None
+    if out.size == 0 or np.unique(out).size != out.size:
+        raise DataError(f"{arg}: the selection is empty or names an entry twice: {out.tolist()}")
+    return out
 
 
 def _times_table(times, n_q: int) -> np.ndarray:
@@ -172,8 +189,8 @@ class DynamicMeasurements:
 
     def subset(self, inputs=None, series=None) -> "DynamicMeasurements":
         """The campaign restricted to some experiments and/or series (their own sampling times kept)."""
-        qi = np.arange(self.n_q) if inputs is None else _index("inputs", inputs, self.n_q)
-        si = np.arange(self.n_M) if series is None else _index("series", series, self.n_M)
+        qi = np.arange(self.n_q) if inputs is None else _selection("inputs", inputs, self.n_q)
+        si = np.arange(self.n_M) if series is None else _selection("series", series, self.n_M)
         t = self.times[qi]
         n_t = int(np.isfinite(t).sum(axis=1).max())
         f = self._flat

@@ -237,3 +237,66 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     rec = DiscretisationRecord(ds.degree, mesh.n_elements, mesh.boundaries, err, per, shift, ds.tol_sigma,
                                ds.tol_se, ok, tuple(history), reason)
     return dataclasses.replace(est, notes=est.notes + (rec.note(),), extra={**est.extra, "discretisation": rec})
+
+
+def controlled_mesh(model: DynamicModel, p, inputs, times, sigma, outputs=None,
+                    discretisation: DiscretisationSettings | None = None):
+    """The collocated model at ``times`` whose outputs at p are within ``tol_sigma`` sigmas of the
+    halved mesh's (Richardson, as in :func:`identify_dynamic`), and its record, for planning
+    without data.  Raises :class:`identification.errors.StateSolveError` when no such mesh is
+    found within ``max_refinements`` / ``max_elements``."""
+    ds = discretisation or DiscretisationSettings()
+    t = model.check_times(times)
+    horizon = model.horizon if model.horizon is not None else float(t[-1])
+    cm = collocate(model, t, degree=ds.degree, max_step=horizon / ds.elements, outputs=outputs)
+    sig = np.asarray([dict(zip(model.sensors, np.broadcast_to(np.asarray(sigma, float), (model.n_S,))))[s]
+                      for s, _ in cm.outputs])
+    order = 2 * ds.degree - 1
+    for _ in range(ds.max_refinements + 1):
+        fine = collocate(model, t, mesh=cm.mesh.refined(2), outputs=cm.outputs)
+        err = float(np.max(np.abs(fine.simulate(p, inputs) - cm.simulate(p, inputs)) / sig)) * 2 ** order / (2 ** order - 1)
+        if err <= ds.tol_sigma:
+            return cm, err
+        factor = int(min(max(math.ceil(1.25 * (err / ds.tol_sigma) ** (1.0 / order)), 2), ds.max_factor))
+        if cm.mesh.n_elements * factor > ds.max_elements:
+            break
+        cm = collocate(model, t, mesh=cm.mesh.refined(factor), outputs=cm.outputs)
+    raise StateSolveError(f"discretisation of {model.name!r}: no mesh within {ds.max_elements} elements and "
+                          f"{ds.max_refinements} refinements brings the output error below {ds.tol_sigma:g} sigma "
+                          f"(last estimate {err:.3g} sigma on {cm.mesh.n_elements} elements)")
+
+
+def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None, sigma=None, n_series=1,
+                        discretisation: DiscretisationSettings | None = None):
+    """Per-(sensor, time) information F_k and second-order terms S_k (n_pairs, n_p, n_p) of a dynamic
+    model at p (see :func:`identification.information_contributions`), on a mesh whose output error is
+    within the discretisation tolerance.
+
+    With ``data=None`` (planning): ``inputs`` (n_q, d_q), common sampling ``times`` and one ``sigma``
+    per instrument; the pairs are time-major (every sensor at the first time, then the next).  With
+    DynamicMeasurements: the pairs of ``data.pairs``.
+    """
+    from .estimator import information_contributions      # same layer; it dispatches here
+    p = np.asarray(p, float).ravel()
+    if data is None:
+        if inputs is None or times is None or sigma is None:
+            raise DataError("data: None needs inputs= (experiment input rows), times= (sampling times) and "
+                            "sigma= (one per instrument)")
+        q = np.atleast_2d(np.asarray(inputs, float))
+        if q.shape[1] != model.n_q_dim:
+            raise DataError(f"inputs: has {q.shape[1]} columns but model {model.name!r} takes {model.n_q_dim} "
+                            f"({', '.join(model.inputs)})")
+        try:
+            cm, _ = controlled_mesh(model, p, q, times, sigma, discretisation=discretisation)
+        except ModelError as exc:
+            raise DataError(str(exc)) from None
+        sig = np.tile(np.broadcast_to(np.asarray(sigma, float), (model.n_S,)), cm.times.size)
+        return information_contributions(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
+    if times is not None or inputs is not None or sigma is not None:
+        raise DataError("inputs/times/sigma: give them only when data is None (the data carry their own)")
+    data = _dynamic_data(model, data)
+    if data.sigma is None:
+        raise DataError("data.sigma: information contributions need known sensor sigmas")
+    cm, _ = controlled_mesh(model, p, data.inputs, data.union_times, data.sigma, outputs=data.pairs,
+                            discretisation=discretisation)
+    return information_contributions(cm, data.flat(), p)

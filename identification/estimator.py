@@ -1282,7 +1282,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
-                              sigma=None, n_series=1):
+                              sigma=None, n_series=1, times=None):
     """Per-sensor Gauss-Newton information and second-order terms at p.
 
     F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2,
@@ -1295,10 +1295,18 @@ def information_contributions(model: Model, data: Measurements | None, p, states
     planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
     nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
 
+    A dynamic model (:class:`models.dynamic.DynamicModel`) takes ``times`` (sampling times) and
+    returns one matrix per (sensor, time) pair (:func:`identification.dynamic_fit.dynamic_information`).
+
     Returns
     -------
     F, S : ndarray (n_S, n_p, n_p)
     """
+    if getattr(model, "is_dynamic", False):
+        from .dynamic_fit import dynamic_information
+        if states is not None:
+            raise TypeError("states: not used for a dynamic model")
+        return dynamic_information(model, data, p, inputs=inputs, times=times, sigma=sigma, n_series=n_series)
     p = np.asarray(p, float).ravel()
     if p.shape != (model.n_p,):
         raise DataError(f"p: expected {model.n_p} values, got {p.size}")

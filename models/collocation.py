@@ -36,6 +36,8 @@ __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_n
 
 #: elements of the default mesh over the horizon (before the sampling times and control grid are added)
 DEFAULT_ELEMENTS = 10
+#: collocated models kept per dynamic model (with their compiled numerics: repeated fits reuse them)
+COLLOCATED_CACHE_SIZE = 8
 
 
 def pair_name(sensor: str, t: float) -> str:
@@ -167,18 +169,21 @@ class CollocatedModel(Model):
     # ------------------------------------------------------------------ E and h
     def _equations(self, y, p, q):
         dyn, d, b = self.dynamic, self.mesh.degree, np.asarray(self.mesh.boundaries)
-        x0, z0 = self._point(y, -1, d)
+        N, n_x = self.mesh.n_elements, dyn.n_x
+        W = ca.reshape(y, n_x + dyn.n_z, 1 + N * d)            # one column per point, the initial point first
+        X, Z = W[:n_x, :], W[n_x:, :]
         u0 = dyn.u_at(q, 0.0, 0.5 * b[1])
-        eqs = [x0 - dyn.x0_fun(p, u0), dyn.alg_fun(x0, z0, p, u0)]
-        for k in range(self.mesh.n_elements):
-            hk, tm = b[k + 1] - b[k], 0.5 * (b[k] + b[k + 1])
-            xs = [self._point(y, k, j)[0] for j in range(d + 1)]
-            for r in range(1, d + 1):
-                x, z = self._point(y, k, r)
-                u = dyn.u_at(q, b[k] + self.tau[r] * hk, tm)
-                eqs.append(sum(self.C[j, r] * xs[j] for j in range(d + 1)) - hk * dyn.rhs_fun(x, z, p, u))
-                eqs.append(dyn.alg_fun(x, z, p, u))
-        return ca.vertcat(*eqs)
+        C = ca.DM(self.C[:, 1:])
+        # element k holds the columns k d .. k d + d (its start is the previous element's end)
+        XP = ca.horzcat(*[ca.mtimes(X[:, k * d:k * d + d + 1], C) for k in range(N)])
+        hk = np.repeat(np.diff(b), d)
+        U = ca.horzcat(*[dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+                         for k in range(N) for r in range(1, d + 1)])
+        n = N * d
+        F = dyn.rhs_fun.map(n)(X[:, 1:], Z[:, 1:], ca.repmat(p, 1, n), U)
+        G = dyn.alg_fun.map(n)(X[:, 1:], Z[:, 1:], ca.repmat(p, 1, n), U)
+        R = XP - F * ca.repmat(ca.DM(hk).T, n_x, 1)
+        return ca.vertcat(X[:, 0] - dyn.x0_fun(p, u0), dyn.alg_fun(X[:, 0], Z[:, 0], p, u0), ca.vec(ca.vertcat(R, G)))
 
     def _outputs(self, y, p, q):
         dyn, d, b = self.dynamic, self.mesh.degree, np.asarray(self.mesh.boundaries)
@@ -284,4 +289,6 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
     if missing or b[-1] != horizon:
         raise ModelError(f"mesh: its boundaries must contain every sampling time and control grid point and end "
                          f"at the horizon {horizon:g}; missing {', '.join(f'{v:g}' for v in missing) or 'the end'}")
-    return CollocatedModel(dynamic, t, mesh, outputs)
+    key = (t.tobytes(), mesh, None if outputs is None else tuple((str(k), float(v)) for k, v in outputs))
+    return dynamic.cache.get_or_make("collocated", key, lambda: CollocatedModel(dynamic, t, mesh, outputs),
+                                     maxsize=COLLOCATED_CACHE_SIZE)

@@ -135,6 +135,10 @@ def _as_column(expr, what: str, symbolic):
     return expr
 
 
+#: the argument checks shared with :mod:`models.dynamic` (public names of the helpers above)
+as_parameters, check_names, as_column = _as_parameters, _check_names, _as_column
+
+
 class Model:
     """A parametrised quasi-static model ``E(y, p, q) = 0``, ``z ~ h(y, p, q)``.
 

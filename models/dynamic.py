@@ -26,7 +26,8 @@ from typing import Callable, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from .contract import ModelError, _as_column, _as_parameters, _check_names
+from .cache import Cache
+from .contract import ModelError, as_column, as_parameters, check_names
 
 __all__ = ["Control", "DynamicModel", "time_label"]
 
@@ -134,6 +135,7 @@ class DynamicModel:
     rhs_fun, alg_fun, x0_fun, h_fun : casadi.Function
         ``(x, z, p, u) -> dx/dt``, ``(x, z, p, u) -> g``, ``(p, u) -> x(0)``, ``(x, z, p, u) -> h``
         with u = (constants, control values at t).
+    cache : models.cache.Cache   collocated models of this model (per times, mesh and outputs)
     """
 
     is_dynamic = True
@@ -142,22 +144,22 @@ class DynamicModel:
                  algebraic: Sequence[str] | None = None, alg: Callable | None = None, controls=None,
                  horizon: float | None = None, name: str = "dynamic model", state_units=None, sensor_units=None,
                  input_units=None, time_unit: str = "", description: str = ""):
-        self.params = _as_parameters(params)
-        _check_names("params", [p.name for p in self.params])
+        self.params = as_parameters(params)
+        check_names("params", [p.name for p in self.params])
         if not self.params:
             raise ModelError("params: a model needs at least one parameter")
-        self.states = _check_names("states", states)
+        self.states = check_names("states", states)
         if not self.states:
             raise ModelError("states: a dynamic model needs at least one differential state")
-        self.algebraic = _check_names("algebraic", algebraic or ())
+        self.algebraic = check_names("algebraic", algebraic or ())
         if self.algebraic and alg is None:
             raise ModelError("alg: algebraic states are named but no algebraic equation alg(x, z, p, u) is given")
         if alg is not None and not self.algebraic:
             raise ModelError("algebraic: alg(x, z, p, u) is given but no algebraic states are named")
-        self.constants = _check_names("inputs", inputs)
+        self.constants = check_names("inputs", inputs)
         self.controls = _as_controls(controls)
-        _check_names("inputs and controls", list(self.constants) + [c.name for c in self.controls])
-        self.sensors = _check_names("sensors", sensors)
+        check_names("inputs and controls", list(self.constants) + [c.name for c in self.controls])
+        self.sensors = check_names("sensors", sensors)
         if not self.sensors:
             raise ModelError("sensors: a model needs at least one sensor")
         self.inputs = self.constants + tuple(n for c in self.controls for n in c.input_names)
@@ -176,6 +178,7 @@ class DynamicModel:
         n_u = len(self.constants) + len(self.controls)
         self.input_units = _units("input_units", input_units, n_u)
         self._build(rhs, x0, h, alg)
+        self.cache = Cache()
 
     def _build(self, rhs, x0, h, alg):
         x, z = ca.SX.sym("x", self.n_x), ca.SX.sym("z", self.n_z)
@@ -191,23 +194,23 @@ class DynamicModel:
                 raise ModelError(f"{arg}: calling it with CasADi symbols failed ({type(exc).__name__}: {exc}); "
                                  f"expected {arg}{'(x, z, p, u)' if dae and arg != 'x0' else '(x, p, u)'}") from exc
 
-        f = _as_column(call(rhs, "rhs", *((x, z, p, u) if dae else (x, p, u))), "rhs", ca.SX)
+        f = as_column(call(rhs, "rhs", *((x, z, p, u) if dae else (x, p, u))), "rhs", ca.SX)
         if f.size1() != self.n_x:
             raise ModelError(f"rhs returns {f.size1()} derivatives but {self.n_x} states are named "
                              f"({', '.join(self.states)})")
-        x_init = _as_column(call(x0, "x0", p, u), "x0", ca.SX)
+        x_init = as_column(call(x0, "x0", p, u), "x0", ca.SX)
         if x_init.size1() != self.n_x:
             raise ModelError(f"x0 returns {x_init.size1()} initial values but {self.n_x} states are named "
                              f"({', '.join(self.states)})")
         if ca.depends_on(x_init, ca.vertcat(x, z)):
             raise ModelError("x0 must depend on (p, u) only")
-        g = _as_column(call(alg, "alg", x, z, p, u), "alg", ca.SX) if dae else ca.SX(0, 1)
+        g = as_column(call(alg, "alg", x, z, p, u), "alg", ca.SX) if dae else ca.SX(0, 1)
         if g.size1() != self.n_z:
             raise ModelError(f"alg returns {g.size1()} equations but {self.n_z} algebraic states are named")
         if dae and ca.sprank(ca.jacobian(g, z).sparsity()) < self.n_z:
             raise ModelError("alg: dg/dz is structurally singular; the DAE is not of index 1 in the named "
                              "algebraic states")
-        y = _as_column(call(h, "h", *((x, z, p, u) if dae else (x, p, u))), "h", ca.SX)
+        y = as_column(call(h, "h", *((x, z, p, u) if dae else (x, p, u))), "h", ca.SX)
         if y.size1() != self.n_S:
             raise ModelError(f"h returns {y.size1()} outputs but {self.n_S} sensors are named "
                              f"({', '.join(self.sensors)})")

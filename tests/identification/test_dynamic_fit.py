@@ -4,7 +4,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
-from identification import DataError, DynamicMeasurements, Measurements, identify
+from identification import (DataError, DynamicMeasurements, Measurements, Split, detect, identify,
+                            information_contributions)
 from identification.dynamic_fit import (DiscretisationRecord, DiscretisationSettings, collocated_problem,
                                        identify_dynamic)
 from mudoe.example_reactor import HORIZON, P_TRUE, R_KJ, T_REF, TIMES, build
@@ -126,3 +127,29 @@ def test_collocated_problem_is_a_static_model():
 def test_bad_data_names_the_argument(make, exc, match):
     with pytest.raises(exc, match=match):
         make()
+
+
+def test_planned_information_per_sensor_and_time():
+    # planning before data: one matrix per (sensor, time) pair, on an error-controlled mesh
+    m = build()
+    F, S = information_contributions(m, None, P_TRUE, inputs=Q, times=TIMES, sigma=SIGMA)
+    assert F.shape == (2 * TIMES.size, 4, 4) and not S.any()
+    data = DynamicMeasurements(Q, TIMES, campaign(seed=4), SIGMA, sensors=["cA", "cB"])
+    est = identify(m, data, P0)
+    # with data, at the estimate: the matrices sum to the estimate's information and S
+    F2, S2 = information_contributions(m, data, est.p)
+    assert np.allclose(F2.sum(axis=0), est.information, rtol=1e-8)
+    assert np.allclose(S2.sum(axis=0), est.S, rtol=1e-6, atol=1e-9 * np.abs(est.information).max())
+    # the planned information at the true p is that at the estimate up to the estimation error
+    assert abs(np.linalg.slogdet(F.sum(axis=0))[1] - np.linalg.slogdet(est.information)[1]) < 0.1
+    with pytest.raises(DataError, match="times="):
+        information_contributions(m, None, P_TRUE, inputs=Q, sigma=SIGMA)
+
+
+def test_detect_splits_by_experiment_on_the_collocated_model():
+    # Algorithm 1 runs unchanged on the estimate's collocated model and flat data (a correct model)
+    z = campaign(seed=5, n_M=2)
+    est = identify(build(), DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"]), P0)
+    res = detect(est.model, est.data, [Split("cA0 = 1 vs 2", (0, 1, 2), (3, 4, 5))], est.p, normality="override")
+    test = res.tests[0]
+    assert test.ok and test.alpha_lr > 0.025 and "likelihood_ratio bonferroni: not rejected" in res.summary()
