@@ -153,3 +153,25 @@ def test_detect_splits_by_experiment_on_the_collocated_model():
     res = detect(est.model, est.data, [Split("cA0 = 1 vs 2", (0, 1, 2), (3, 4, 5))], est.p, normality="override")
     test = res.tests[0]
     assert test.ok and test.alpha_lr > 0.025 and "likelihood_ratio bonferroni: not rejected" in res.summary()
+
+
+def test_spring_damper_with_cubic_spring_agrees_with_reference_fit():
+    from mudoe.example_oscillator import MASS, P_TRUE as P_OSC, TIMES as T_OSC, build as oscillator
+    F, sig = np.array([[2.0], [8.0]]), np.array([0.05, 0.05])       # N; mm, m/s^2
+    T_OSC = T_OSC[:25]                                                # 0.5 s, 1.6 periods
+
+    def ivp_osc(p, f):
+        def rhs(_, s):
+            return [s[1], (f - p[1] * s[1] - p[0] * s[0] - p[2] * s[0] ** 3) / MASS]
+        x, v = solve_ivp(rhs, (0, T_OSC[-1]), [0, 0], t_eval=T_OSC, rtol=1e-10, atol=1e-13, method="DOP853").y
+        return np.c_[1e3 * x, (f - p[1] * v - p[0] * x - p[2] * x ** 3) / MASS]
+
+    z = np.array([ivp_osc(P_OSC, f[0]) for f in F])[None]
+    z = z + sig * np.random.default_rng(6).standard_normal(z.shape)
+    est = identify(oscillator(), DynamicMeasurements(F, T_OSC, z, sig, sensors=["x", "a"]), [300.0, 3.0, 2e6])
+    assert est.extra["discretisation"].bounded
+    # the reference optimum: scipy least_squares over solve_ivp (rtol 1e-10) to tight tolerances, started at
+    # the estimate to keep the test fast (it converges to its own optimum, not to the start)
+    ref = least_squares(lambda p: ((z[0] - np.array([ivp_osc(p, f[0]) for f in F])) / sig).ravel(), est.p * 1.01,
+                        x_scale=[400, 4, 4e6], xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+    assert np.all(np.abs(est.p - ref) / est.stderr < 0.05), (est.p - ref) / est.stderr
