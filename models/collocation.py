@@ -86,8 +86,8 @@ class Mesh:
         out = [0.0]
         for a, b in zip(pts[:-1], pts[1:]):
             n = max(1, int(math.ceil((b - a) / max_step - 1e-9)))
-            out.extend(a + (b - a) * np.arange(1, n + 1) / n)
-        out[-1] = float(horizon)
+            out.extend(a + (b - a) * np.arange(1, n) / n)
+            out.append(b)                   # exactly the breakpoint (a + (b - a) may differ from b)
         return cls(tuple(out), degree)
 
     @property

@@ -135,3 +135,23 @@ def test_trajectory_and_outputs_subset():
     assert err.max() < 1e-5             # interior Radau points: stage order d = 3
     with pytest.raises(ModelError, match="outputs: "):
         decay().collocate([0.5, 1.0], outputs=[("x", 0.7)])
+
+
+def test_reactor_temperature_profile_matches_piecewise_integration():
+    # T(t) piecewise constant on the 0.25 h grid: solve_ivp restarted at every jump is the reference
+    from scipy.integrate import solve_ivp
+    from mudoe.example_reactor import PROFILE_GRID
+    m = build("profile")
+    T = np.array([330.0, 345.0, 360.0, 370.0, 355.0, 340.0, 335.0, 350.0])
+    q = np.r_[1.5, T]
+    out = m.collocate(TIMES, max_step=0.025).simulate(P_TRUE, [q])[0].reshape(TIMES.size, 2)
+    x, ref = [1.5, 0.0, 0.0], []
+    edges = np.r_[PROFILE_GRID, 2.0]
+    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        k1, k2 = (P_TRUE[2 * j] * np.exp(-P_TRUE[2 * j + 1] / R_KJ * (1 / T[i] - 1 / T_REF)) for j in range(2))
+        ts = TIMES[(TIMES > a) & (TIMES <= b)]
+        r = solve_ivp(lambda _, c: [-k1 * c[0], k1 * c[0] - k2 * c[1], k2 * c[1]], (a, b), x,
+                      t_eval=np.r_[ts, b] if ts.size == 0 or ts[-1] != b else ts, rtol=1e-11, atol=1e-14)
+        ref.extend(r.y[:2, :ts.size].T)
+        x = r.y[:, -1]
+    assert np.abs(out - np.array(ref)).max() < 5e-8
