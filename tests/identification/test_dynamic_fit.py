@@ -175,3 +175,49 @@ def test_spring_damper_with_cubic_spring_agrees_with_reference_fit():
     ref = least_squares(lambda p: ((z[0] - np.array([ivp_osc(p, f[0]) for f in F])) / sig).ravel(), est.p * 1.01,
                         x_scale=[400, 4, 4e6], xtol=1e-12, ftol=1e-12, gtol=1e-12).x
     assert np.all(np.abs(est.p - ref) / est.stderr < 0.05), (est.p - ref) / est.stderr
+
+
+def pyomo_doe_reactor():
+    """Pyomo.DoE's reactor example (pyomo/contrib/doe/examples/reactor_experiment.py): A -> B -> C,
+    k_i = A_i exp(-1000 E_i / (R T)), T piecewise constant on 9 grid points, CA, CB, CC = CA0 - CA - CB
+    measured at the grid points with sigma 0.01."""
+    import casadi as ca
+    from models import Model
+
+    def rhs(x, p, u):
+        k1, k2 = p[0] * ca.exp(-p[2] * 1000 / (8.314 * u[1])), p[1] * ca.exp(-p[3] * 1000 / (8.314 * u[1]))
+        return ca.vertcat(-k1 * x[0], k1 * x[0] - k2 * x[1])
+    grid = np.arange(9) * 0.125
+    return Model.ode(["A1", "A2", "E1", "E2"], ["CA", "CB"], ["CA0"], ["CA", "CB", "CC"], rhs=rhs,
+                     x0=lambda p, u: ca.vertcat(u[0], 0), h=lambda x, p, u: ca.vertcat(x[0], x[1], u[0] - x[0] - x[1]),
+                     controls={"T": {"grid": grid, "kind": "constant"}}, horizon=1.0), grid
+
+
+def test_pyomo_doe_reactor_information_equals_the_odes():
+    # planned FIM at Pyomo.DoE's nominal design, scaled by the nominal parameters as Pyomo.DoE does;
+    # the reference: forward sensitivities by solve_ivp (rtol 1e-11), interval by interval
+    model, grid = pyomo_doe_reactor()
+    p = np.array([84.79, 371.72, 7.78, 15.05])
+    T = np.r_[500.0, [300.0] * 8]
+    F, _ = information_contributions(model, None, p, inputs=[np.r_[5.0, T]], times=grid, sigma=0.01)
+    D = np.diag(p)
+    logdet = np.linalg.slogdet(D @ F.sum(axis=0) @ D)[1] / np.log(10)
+
+    def sens_rhs(_, w, temp):
+        x, s = w[:2], w[2:].reshape(2, 4)
+        e1, e2 = np.exp(-p[2] * 1000 / (8.314 * temp)), np.exp(-p[3] * 1000 / (8.314 * temp))
+        k1, k2 = p[0] * e1, p[1] * e2
+        fx = np.array([[-k1, 0], [k1, -k2]])
+        dk1 = np.array([e1, 0, -k1 * 1000 / (8.314 * temp), 0])
+        dk2 = np.array([0, e2, 0, -k2 * 1000 / (8.314 * temp)])
+        fp = np.array([-dk1 * x[0], dk1 * x[0] - dk2 * x[1]])
+        return np.r_[fx @ x, (fx @ s + fp).ravel()]
+    w, G = np.r_[5.0, 0.0, np.zeros(8)], [np.zeros((3, 4))]
+    for i in range(8):
+        w = solve_ivp(sens_rhs, (grid[i], grid[i + 1]), w, args=(T[i],), rtol=1e-11, atol=1e-14).y[:, -1]
+        s = w[2:].reshape(2, 4)
+        G.append(np.vstack([s, -s.sum(axis=0)]))
+    G = np.concatenate(G) @ D / 0.01
+    ref = np.linalg.slogdet(G.T @ G)[1] / np.log(10)
+    assert abs(ref - 19.240939) < 1e-5          # the ODE's value quoted in issue 22
+    assert abs(logdet - ref) < 1e-4, (logdet, ref)
