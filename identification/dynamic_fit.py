@@ -144,12 +144,22 @@ def _dynamic_data(model: DynamicModel, data) -> DynamicMeasurements:
 
 
 def collocated_problem(model: DynamicModel, data: DynamicMeasurements, mesh: Mesh | None = None,
-                       degree: int = 3, elements: int = DEFAULT_ELEMENTS):
+                       degree: int = 3, elements: int = DEFAULT_ELEMENTS, p=None,
+                       discretisation: DiscretisationSettings | None = None):
     """(collocated model, flat data) of a dynamic model and its data: the static problem that
-    :func:`identification.identify`, ``detect`` and the design functions take.  The default mesh has
-    ``elements`` elements over the horizon plus every sampling time and control grid point."""
+    :func:`identification.identify`, ``detect`` and the design functions take.
+
+    The mesh: ``mesh`` if given; else, with ``p`` (and known sigma), the mesh whose output error at p
+    is within the discretisation tolerance (:func:`controlled_mesh`); else ``elements`` elements over
+    the horizon plus every sampling time and control grid point."""
     data = _dynamic_data(model, data)
     t = data.union_times
+    if mesh is None and p is not None:
+        if data.sigma is None:
+            raise DataError("data.sigma: a mesh controlled at p needs known sigmas; give mesh= or sigma")
+        cm, _ = controlled_mesh(model, np.asarray(p, float), data.inputs, t, data.sigma, outputs=data.pairs,
+                                discretisation=discretisation)
+        return cm, data.flat()
     horizon = model.horizon if model.horizon is not None else float(t[-1])
     cm = collocate(model, t, mesh=mesh, degree=degree, max_step=horizon / elements, outputs=data.pairs)
     return cm, data.flat()

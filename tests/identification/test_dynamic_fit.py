@@ -221,3 +221,41 @@ def test_pyomo_doe_reactor_information_equals_the_odes():
     ref = np.linalg.slogdet(G.T @ G)[1] / np.log(10)
     assert abs(ref - 19.240939) < 1e-5          # the ODE's value quoted in issue 22
     assert abs(logdet - ref) < 1e-4, (logdet, ref)
+
+
+def test_collocated_problem_with_a_mesh_controlled_at_p():
+    data = DynamicMeasurements(Q, TIMES, campaign(seed=8), SIGMA, sensors=["cA", "cB"])
+    cm, flat = collocated_problem(build(), data, p=P_TRUE)
+    est = identify(build(), data, P0)
+    fine = build().collocate(TIMES, max_step=0.005)
+    h = fine.simulate(P_TRUE, Q)
+    assert np.max(np.abs(cm.simulate(P_TRUE, Q) - h) / np.tile(SIGMA, TIMES.size)) < 0.01
+    assert cm.mesh.n_elements <= est.extra["discretisation"].n_elements * 2
+
+
+def test_index1_dae_identify():
+    # x' = -k w, 0 = w - x^2 (x = x0 / (1 + k x0 t)); sensors x and w
+    import casadi as ca
+    from models import Model
+    m = Model.ode(["k"], ["x"], ["x0"], ["x", "w"], rhs=lambda x, z, p, u: -p[0] * z[0],
+                  alg=lambda x, z, p, u: z[0] - x[0] ** 2, algebraic=["w"], x0=lambda p, u: u[0],
+                  h=lambda x, z, p, u: ca.vertcat(x[0], z[0]))
+    t, q = np.array([0.5, 1.0, 2.0, 3.0]), np.array([[1.0], [2.0]])
+    x = q / (1 + 0.8 * q * t)
+    z = np.stack([x, x ** 2], axis=-1)[None] + 0.01 * np.random.default_rng(9).standard_normal((1, 2, 4, 2))
+    est = identify(m, DynamicMeasurements(q, t, z, [0.01, 0.01]), [0.5])
+    ref = least_squares(lambda k: ((z[0] - np.stack([q / (1 + k * q * t), (q / (1 + k * q * t)) ** 2], -1)) / 0.01)
+                        .ravel(), [0.5], xtol=1e-14, ftol=1e-14, gtol=1e-14).x
+    assert abs(est.p[0] - ref[0]) / est.stderr[0] < 0.05 and est.extra["discretisation"].bounded
+
+
+def test_blow_up_at_p0_names_the_experiment_and_time():
+    import casadi as ca
+    from identification import IdentificationError
+    from models import Model
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, horizon=2.0)
+    t, q = np.array([0.5, 1.0, 2.0]), np.array([[0.1], [1.0]])
+    z = (q / (1 - 0.1 * q * t))[None, :, :, None]
+    with pytest.raises(IdentificationError, match=r"inputs \[1.0\]: no collocation solution on the element"):
+        identify(m, DynamicMeasurements(q, t, z, [0.01]), [1.0])
