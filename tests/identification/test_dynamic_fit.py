@@ -259,3 +259,18 @@ def test_blow_up_at_p0_names_the_experiment_and_time():
     z = (q / (1 - 0.1 * q * t))[None, :, :, None]
     with pytest.raises(IdentificationError, match=r"inputs \[1.0\]: no collocation solution on the element"):
         identify(m, DynamicMeasurements(q, t, z, [0.01]), [1.0])
+
+
+def test_detect_rejects_a_linear_spring_on_hardening_spring_data():
+    # step responses of the cubic spring-damper; a linear spring cannot explain small and large steps at once
+    from mudoe.example_oscillator import P_TRUE as P_OSC, TIMES as T_OSC, build as oscillator
+    F, t = np.array([[1.0], [2.0], [6.0], [8.0]]), T_OSC[:15]
+    Y = oscillator().collocate(t, max_step=0.005).simulate(P_OSC, F).reshape(len(F), t.size, 2)   # 1e-4 sigma
+    z = Y[None] + 0.05 * np.random.default_rng(1).standard_normal((1,) + Y.shape)
+    data = DynamicMeasurements(F, t, z, [0.05, 0.05], sensors=["x", "a"])
+    split = [Split("small vs large steps", (0, 1), (2, 3))]
+    wrong = identify(oscillator("linear"), data, [300.0, 3.0])
+    right = identify(oscillator(), data, [300.0, 3.0, 2e6])
+    assert wrong.extra["discretisation"].bounded and right.extra["discretisation"].bounded
+    assert detect(wrong.model, wrong.data, split, wrong.p, normality="override").tests[0].alpha_lr < 1e-6
+    assert detect(right.model, right.data, split, right.p, normality="override").tests[0].alpha_lr > 0.05
