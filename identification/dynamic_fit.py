@@ -181,7 +181,7 @@ def _error(model, data, est, mesh, w):
     halved, o = 2 d - 1 the order at the element boundaries."""
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
     order = 2 * mesh.degree - 1
-    dh = (fine.simulate(est.p, data.inputs) - est.fitted) * 2 ** order / (2 ** order - 1)   # (n_q, n_pairs)
+    dh = (fine.integrated_outputs(est.p, data.inputs) - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
     e = np.where(counts > 0, np.abs(dh) / est.sigma[None, :], 0.0)
@@ -264,7 +264,8 @@ def controlled_mesh(model: DynamicModel, p, inputs, times, sigma, outputs=None,
     order = 2 * ds.degree - 1
     for _ in range(ds.max_refinements + 1):
         fine = collocate(model, t, mesh=cm.mesh.refined(2), outputs=cm.outputs)
-        err = float(np.max(np.abs(fine.simulate(p, inputs) - cm.simulate(p, inputs)) / sig)) * 2 ** order / (2 ** order - 1)
+        diff = fine.integrated_outputs(p, inputs) - cm.integrated_outputs(p, inputs)
+        err = float(np.max(np.abs(diff) / sig)) * 2 ** order / (2 ** order - 1)
         if err <= ds.tol_sigma:
             return cm, err
         factor = int(min(max(math.ceil(1.25 * (err / ds.tol_sigma) ** (1.0 / order)), 2), ds.max_factor))

@@ -141,7 +141,7 @@ class CollocatedModel(Model):
                          name=dynamic.name, sensor_units=[units[s] for s, _ in self.outputs],
                          input_units=list(dynamic.input_units[:len(dynamic.constants)]) + c_units,
                          description=dynamic.description)
-        self._element_solver = None
+        self._element_solver = self._march = None
 
     # ------------------------------------------------------------------ layout
     def _point(self, y, k: int, r: int):
@@ -195,6 +195,13 @@ class CollocatedModel(Model):
             at[float(t)] = dyn.h_fun(x, z, p, dyn.u_at(q, float(t), tm))
         return ca.vertcat(*[at[t][self.dynamic.sensors.index(s)] for s, t in self.outputs])
 
+    def integrated_outputs(self, p, inputs) -> np.ndarray:
+        """Outputs (n_q, n_S) of the collocation solution obtained element by element (Newton on each
+        element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
+        p = np.asarray(p, float).ravel()
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])
+
     # ------------------------------------------------------------------ state guess
     def _element_functions(self):
         """(rootfinder, residual) of one element: unknowns V = (x_r, z_r), r = 1..d; parameters
@@ -226,30 +233,45 @@ class CollocatedModel(Model):
                                                        [dyn.alg_fun(x0, z, p, u0)]), {"error_on_fail": False})
         return np.asarray(rf(np.ones(dyn.n_z), ca.DM(0, 1))).ravel()
 
+    def _march_functions(self):
+        """(march, residuals, Umap): march(w_0, P) -> (W_end, V) solves the elements one after the other
+        (``mapaccum`` of one element's Newton solve; column k of P is (p, U_k, h_k)); residuals(V, (x_start,
+        P)) are the elements' collocation residuals; U = Umap q the inputs at every point (linear in q)."""
+        if self._march is None:
+            dyn, d, N = self.dynamic, self.mesh.degree, self.mesh.n_elements
+            b = np.asarray(self.mesh.boundaries)
+            rf, R = self._element_functions()
+            n_w = dyn.n_x + dyn.n_z
+            ws, par = ca.SX.sym("ws", n_w), ca.SX.sym("par", dyn.n_p + dyn.n_u * d + 1)
+            V = rf(ca.repmat(ws, d, 1), ca.vertcat(ws[:dyn.n_x], par))
+            march = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
+            q = ca.SX.sym("q", dyn.n_q_dim)
+            U = ca.vertcat(*[dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+                             for k in range(N) for r in range(1, d + 1)])
+            Umap = np.asarray(ca.evalf(ca.jacobian(U, q))) if dyn.n_q_dim else np.zeros((U.size1(), 0))
+            self._march = (march, R.map(N), Umap)
+        return self._march
+
     def _integrate(self, p, q) -> np.ndarray:
         """The collocation solution at (p, q), element by element (Newton on each element)."""
-        dyn, d, b = self.dynamic, self.mesh.degree, np.asarray(self.mesh.boundaries)
-        rf, R = self._element_functions()
+        dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
+        p, q = np.asarray(p, float).ravel(), np.asarray(q, float).ravel()
+        march, residuals, Umap = self._march_functions()
         u0 = dyn.u_at(q, 0.0, 0.5 * b[1])
-        xs = np.asarray(dyn.x0_fun(p, u0)).ravel()
-        zs = self._initial_algebraic(xs, p, u0)
-        out = [np.r_[xs, zs]]
-        for k in range(self.mesh.n_elements):
-            hk, tm = b[k + 1] - b[k], 0.5 * (b[k] + b[k + 1])
-            U = np.concatenate([dyn.u_at(q, b[k] + self.tau[r] * hk, tm) for r in range(1, d + 1)])
-            par = np.r_[xs, p, U, hk]
-            V = np.asarray(rf(np.tile(np.r_[xs, zs], d), par)).ravel()
-            res = np.asarray(R(V, par)).ravel()
-            scale = 1.0 + np.max(np.abs(V), initial=0.0)
-            if not (np.all(np.isfinite(V)) and np.max(np.abs(res), initial=0.0) <= 1e-8 * scale):
-                raise StateSolveError(
-                    f"integration of {dyn.name!r} failed at p = {np.asarray(p).tolist()}, inputs {np.asarray(q).tolist()}"
-                    f": no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] (the trajectory blows up "
-                    "or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
-            W = V.reshape(d, -1)
-            out.extend(W)
-            xs, zs = W[-1, :dyn.n_x], W[-1, dyn.n_x:]
-        return np.concatenate(out)
+        x0 = np.asarray(dyn.x0_fun(p, u0)).ravel()
+        w0 = np.r_[x0, self._initial_algebraic(x0, p, u0)]
+        P = np.vstack([np.tile(p[:, None], (1, N)), (Umap @ q).reshape(N, -1).T, np.diff(b)[None, :]])
+        W_end, V = (np.asarray(a) for a in march(w0, P))
+        res = np.asarray(residuals(V, np.vstack([np.column_stack([x0, W_end[:dyn.n_x, :-1]]), P])))
+        scale = 1.0 + np.max(np.abs(V), axis=0)
+        bad = ~(np.all(np.isfinite(V), axis=0) & (np.max(np.abs(res), axis=0) <= 1e-8 * scale))
+        if np.any(bad):
+            k = int(np.flatnonzero(bad)[0])
+            raise StateSolveError(
+                f"integration of {dyn.name!r} failed at p = {p.tolist()}, inputs {q.tolist()}: no collocation "
+                f"solution on the element [{b[k]:g}, {b[k + 1]:g}] (the trajectory blows up or is too stiff for "
+                "the element); check p0 and the inputs, or give a finer mesh")
+        return np.r_[w0, V.T.ravel()]
 
 
 def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: int = 3,
