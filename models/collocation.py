@@ -16,7 +16,9 @@ derivative of the j-th Lagrange polynomial on tau at tau_r (the coefficients of 
 ``direct_collocation.py`` example).  Radau IIA of degree d is of order 2d - 1 at the element
 boundaries, which hold every sampling time and every control grid point, so that a
 piecewise-constant control jumps only between elements.  The outputs are the sensors at the
-sampling times, named ``sensor@time`` (``cA@0.5``).  The state guess integrates the model
+sampling times, named ``sensor@time`` (``cA@0.5``); at a time where a piecewise-constant control
+jumps, the outputs take the value before the jump (that of the element ending there) and the
+initial state x(0) the value from time 0 on.  The state guess integrates the model
 element by element (Newton on each element's collocation equations), so the state solve of the
 whole trajectory starts at its solution.
 """
@@ -129,6 +131,11 @@ class CollocatedModel(Model):
             raise ModelError(f"outputs: every (sensor, time) pair must name a sensor of {dynamic.name!r} and a "
                              f"sampling time; unknown sensors {unknown}, times {stray}")
         units = dict(zip(dynamic.sensors, dynamic.sensor_units))
+        labels = [time_label(t) for t in self.times]
+        if len(set(labels)) < len(labels):
+            i = next(i for i in range(1, len(labels)) if labels[i] == labels[i - 1])
+            raise ModelError(f"times: {self.times[i - 1]!r} and {self.times[i]!r} agree to 12 digits (both read "
+                             f"{labels[i]}); merge them or give times that differ")
         self.tau, self.C = radau_coefficients(mesh.degree)
         b = np.asarray(mesh.boundaries)
         self._end_of = {float(t): int(np.flatnonzero(b == t)[0]) - 1 for t in self.times}

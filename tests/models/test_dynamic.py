@@ -103,6 +103,7 @@ def test_bad_definitions_name_the_argument(kw, match):
 
 
 @pytest.mark.parametrize("times, match", [([0.5, 0.4], "strictly increasing"), ([-0.1, 1.0], ">= 0"),
+                                          ([0.5, 0.5 + 1e-14, 1.0], "agree to 12 digits"),
                                           ([0.5, 3.0], "beyond the horizon"), ([np.nan], "finite"),
                                           ([], "no sampling time")])
 def test_bad_times(times, match):
