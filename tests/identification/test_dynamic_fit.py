@@ -273,3 +273,15 @@ def test_detect_rejects_a_linear_spring_on_hardening_spring_data():
     assert wrong.extra["discretisation"].bounded and right.extra["discretisation"].bounded
     assert detect(wrong.model, wrong.data, split, wrong.p, normality="override").tests[0].alpha_lr < 1e-6
     assert detect(right.model, right.data, split, right.p, normality="override").tests[0].alpha_lr > 0.05
+
+
+def test_instrument_weights_equal_dropping_the_instrument():
+    z = campaign(seed=10)
+    m = build()
+    weighted = identify(m, DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"]), P0, weights=[0.0, 1.0])
+    z_a = z.copy()
+    z_a[..., 0] = np.nan                         # cA never read (cB alone identifies all four)
+    dropped = identify(m, DynamicMeasurements(Q, TIMES, z_a, SIGMA, sensors=["cA", "cB"]), P0)
+    assert np.allclose(weighted.p, dropped.p, rtol=1e-7) and np.allclose(weighted.cov, dropped.cov, rtol=1e-6)
+    with pytest.raises(DataError, match="weights: expected 2 instrument weights"):
+        identify(m, DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"]), P0, weights=[1.0] * 20)
