@@ -12,10 +12,10 @@ with order 2d - 1 at element boundaries, so the difference
 
 (Richardson) estimates the discretisation error of the fit's mesh N in units of each sensor's
 sigma, and the linearised shift of the estimate were exact outputs used,
-dp = (G^T W G)^{-1} G^T W \delta h with \delta h the error so estimated, in standard errors.  While max e > ``tol_sigma``
-or max |dp / se| > ``tol_se`` the mesh is refined (each element split into
-ceil(1.25 (error / tolerance)^{1/(2d-1)}) parts, 2..``max_factor``) and the fit repeated from
-p̂.  The estimate records the mesh and the achieved error (``extra["discretisation"]``, a
+dp = (G^T W G)^{-1} G^T W \delta h with \delta h the error so estimated, in standard errors.
+While max e > ``tol_sigma`` or max |dp / se| > ``tol_se`` the mesh is refined (each element
+split into ceil(1.25 (error / tolerance)^{1/(2d-1)}) parts, 2..``max_factor``) and the fit
+repeated from p̂.  The estimate records the mesh and the achieved error (``extra["discretisation"]``, a
 :class:`DiscretisationRecord`) and its summary says so, or says that the error could not be
 bounded.
 """
@@ -63,7 +63,8 @@ class DiscretisationSettings:
     def __post_init__(self):
         for name in ("degree", "elements", "max_refinements", "max_elements", "max_factor"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (0 if name == "max_refinements" else 1):
+            least = 0 if name == "max_refinements" else 1
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
                 raise ValueError(f"{name}: expected a positive integer, got {v!r}")
         if self.max_factor < 2:
             raise ValueError(f"max_factor: expected an integer >= 2, got {self.max_factor!r}")
