@@ -187,6 +187,15 @@ class DynamicMeasurements:
         experiment has no sample there."""
         return self._flat
 
+    def by_instrument(self) -> Measurements:
+        """The readings with one column per instrument: z (n_M, n_rows, n_S) over the (experiment, time)
+        rows that exist, inputs (experiment number, time).  For checks pooled per instrument over
+        times, e.g. ``identification.normality_check(data.by_instrument())`` (Algorithm 1's gate on the
+        flat data tests every (sensor, time) pair on its own)."""
+        j, i = np.nonzero(np.isfinite(self.times))
+        return Measurements(np.c_[j + 1, self.times[j, i]], self._z[:, j, i, :], self.sigma, sensors=self.sensors,
+                            input_names=("experiment", "time"), series=self._flat.series)
+
     def subset(self, inputs=None, series=None) -> "DynamicMeasurements":
         """The campaign restricted to some experiments and/or series (their own sampling times kept)."""
         qi = np.arange(self.n_q) if inputs is None else _selection("inputs", inputs, self.n_q)
