@@ -16,7 +16,7 @@ import csv
 import io
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -30,6 +30,15 @@ __all__ = ["read_long_csv", "write_long_csv", "LONG_COLUMNS"]
 
 LONG_COLUMNS = ("series", "experiment", "time", "sensor", "value", "unit")
 _MISSING = {"", "nan", "na", "n/a", "null", "none"}
+
+
+class _Reading(NamedTuple):
+    series: int          # 1-based
+    experiment: int      # 1-based
+    time: float
+    sensor: int          # index into the model's sensors
+    value: float         # model unit (NaN: missing)
+    line: int            # line of the file
 
 
 def write_long_csv(path, data: DynamicMeasurements, units: Sequence[str] | None = None) -> Path:
@@ -116,27 +125,27 @@ def read_long_csv(path, inputs, sensors: Sequence[str], units: Sequence[str] | N
                 v = float(convert(v, unit, units[sensors.index(s)]))
             except UnitError as exc:
                 raise DataFileError(f"{path}, line {line}: {exc}") from None
-        recs.append((series, exp, t, sensors.index(s), v, line))
+        recs.append(_Reading(series, exp, t, sensors.index(s), v, line))
     if not recs:
         raise DataFileError(f"{path}: no reading")
     return _assemble(path, q, sensors, recs, sigma, input_names)
 
 
 def _assemble(path, q, sensors, recs, sigma, input_names) -> DynamicMeasurements:
-    n_M = max(r[0] for r in recs)
-    times = [sorted({r[2] for r in recs if r[1] == j + 1}) for j in range(q.shape[0])]
+    n_M = max(r.series for r in recs)
+    times = [sorted({r.time for r in recs if r.experiment == j + 1}) for j in range(q.shape[0])]
     empty = [j + 1 for j, t in enumerate(times) if not t]
     if empty:
         raise DataFileError(f"{path}: experiment(s) {', '.join(map(str, empty))} of the input table have no reading")
     n_t = max(len(t) for t in times)
     z = np.full((n_M, q.shape[0], n_t, len(sensors)), np.nan)
     seen = {}
-    for series, exp, t, k, v, line in recs:
-        key = (series, exp, t, k)
+    for r in recs:
+        key = (r.series, r.experiment, r.time, r.sensor)
         if key in seen:
-            raise DataFileError(f"{path}, line {line}: series {series}, experiment {exp}, time {t:g}, sensor "
-                                f"{sensors[k]!r} was already given on line {seen[key]}")
-        seen[key] = line
-        z[series - 1, exp - 1, times[exp - 1].index(t), k] = v
+            raise DataFileError(f"{path}, line {r.line}: series {r.series}, experiment {r.experiment}, time "
+                                f"{r.time:g}, sensor {sensors[r.sensor]!r} was already given on line {seen[key]}")
+        seen[key] = r.line
+        z[r.series - 1, r.experiment - 1, times[r.experiment - 1].index(r.time), r.sensor] = r.value
     return DynamicMeasurements(q, [np.asarray(t) for t in times] if len({len(t) for t in times}) > 1
                                else np.array(times), z, sigma, sensors=sensors, input_names=input_names)
