@@ -188,7 +188,7 @@ def _error(model, data, est, mesh, w):
     e = np.where(counts > 0, np.abs(dh) / est.sigma[None, :], 0.0)
     A = np.einsum("jkp,jk,jkq->pq", est.G, wt, est.G)
     b = np.einsum("jkp,jk,jk->p", est.G, wt, dh)
-    shift = np.linalg.solve(A, b) / est.stderr
+    shift = np.linalg.solve(A, b) / est.stderr_gn      # Gauss-Newton: finite whenever p is identifiable
     return e.max(axis=0), float(e.max()), shift
 
 
