@@ -33,7 +33,8 @@ from models.dynamic import DynamicModel
 from .dynamic_data import DynamicMeasurements
 from .errors import DataError, StateSolveError
 
-__all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem"]
+__all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem", "controlled_mesh",
+           "dynamic_information", "predict", "simulate_campaign"]
 
 
 @dataclass(frozen=True)
@@ -312,3 +313,30 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
     cm, _ = controlled_mesh(model, p, data.inputs, data.union_times, data.sigma, outputs=data.pairs,
                             discretisation=discretisation)
     return information_contributions(cm, data.flat(), p)
+
+
+def predict(model: DynamicModel, p, inputs, times, sigma, discretisation: DiscretisationSettings | None = None):
+    """Outputs h(x(t), p, u(t)) of every experiment at the common sampling ``times``, shape (n_q, n_t, n_S),
+    on a mesh whose error is within ``tol_sigma`` of each instrument's ``sigma`` (:func:`controlled_mesh`)."""
+    q = np.atleast_2d(np.asarray(inputs, float))
+    if q.shape[1] != model.n_q_dim:
+        raise DataError(f"inputs: has {q.shape[1]} columns but model {model.name!r} takes {model.n_q_dim} "
+                        f"({', '.join(model.inputs)})")
+    try:
+        cm, _ = controlled_mesh(model, np.asarray(p, float), q, times, sigma, discretisation=discretisation)
+    except ModelError as exc:
+        raise DataError(str(exc)) from None
+    return cm.integrated_outputs(p, q).reshape(q.shape[0], cm.times.size, model.n_S)
+
+
+def simulate_campaign(model: DynamicModel, p, inputs, times, sigma, n_series: int = 1, seed=None,
+                      discretisation: DiscretisationSettings | None = None) -> DynamicMeasurements:
+    """A campaign z = h(x(t), p, u(t)) + eps, eps ~ N(0, sigma_k^2) independent, of ``n_series`` series at the
+    common sampling ``times`` (predictions by :func:`predict`; ``seed`` for numpy's default generator)."""
+    if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+        raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
+    sig = np.broadcast_to(np.asarray(sigma, float), (model.n_S,))
+    h = predict(model, p, inputs, times, sig, discretisation)
+    z = h[None] + sig * np.random.default_rng(seed).standard_normal((n_series,) + h.shape)
+    return DynamicMeasurements(np.atleast_2d(np.asarray(inputs, float)), np.asarray(times, float), z, sig,
+                               sensors=model.sensors, input_names=model.inputs)

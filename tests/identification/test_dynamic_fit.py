@@ -298,3 +298,14 @@ def test_normality_gate_pooled_per_instrument():
     assert np.all(check.n_diff == n_rows) and np.all(np.isfinite(check.pvalue))
     # the repeatability estimate from 49 differences: within 30 % of sigma (its standard error is 10 %)
     assert np.allclose(check.sigma_rep, SIGMA, rtol=0.3)
+
+
+def test_predict_and_simulate_campaign():
+    from identification.dynamic_fit import predict, simulate_campaign
+    h = predict(build(), P_TRUE, Q, TIMES, SIGMA, DiscretisationSettings(tol_sigma=1e-3))
+    ref = np.array([ivp(P_TRUE, q, TIMES) for q in Q])
+    assert h.shape == (6, 10, 2) and np.max(np.abs(h - ref) / SIGMA) < 1e-3
+    data = simulate_campaign(build(), P_TRUE, Q, TIMES, SIGMA, n_series=3, seed=4)
+    assert data.z.shape == (3, 6, 10, 2) and data.sensors == ("cA", "cB") and np.allclose(data.sigma, SIGMA)
+    resid = (data.z - ref[None]) / SIGMA
+    assert abs(resid.mean()) < 4 / np.sqrt(resid.size) and abs(resid.std() - 1) < 4 / np.sqrt(2 * resid.size)
