@@ -33,8 +33,8 @@ from models.dynamic import DynamicModel
 from .dynamic_data import DynamicMeasurements
 from .errors import DataError, StateSolveError
 
-__all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem", "controlled_mesh",
-           "dynamic_information", "predict", "simulate_campaign"]
+__all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem",
+           "controlled_mesh", "dynamic_information", "predict", "simulate_campaign"]
 
 
 @dataclass(frozen=True)
