@@ -1242,6 +1242,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     Parameters
     ----------
     model : models.Model
+        Or a dynamic model (:meth:`models.Model.ode`) with :class:`DynamicMeasurements`: fitted by
+        :func:`identification.dynamic_fit.identify_dynamic` (collocation with error control).
     data : Measurements
         z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
     p0 : array_like (n_p,)
