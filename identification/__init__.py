@@ -1,6 +1,7 @@
 """Identification: measurements, the full-space estimator, covariances, confidence regions."""
 from .errors import ConvergenceError, DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from .measurements import Measurements
+from .dynamic_data import DynamicMeasurements
 from .estimator import IdentifySettings, identify, information_contributions, covariance_from_terms
 from .ipopt_solver import IpoptSettings
 from .regions import Ellipsoid, alpha_min, alpha_min_two_sample, in_region, mahalanobis2, CovarianceError
@@ -20,4 +21,5 @@ __all__ = [
     "DetectionResult", "DetectSettings", "NormalityError", "detect", "normality_check",
     "MonteCarloResult", "MonteCarloSettings", "clopper_pearson", "linearized_size", "power_study", "size_study",
     "validate",
+    "DynamicMeasurements",
 ]

@@ -1282,6 +1282,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     Parameters
     ----------
     model : models.Model
+        Or a dynamic model (:meth:`models.Model.ode`) with :class:`DynamicMeasurements`: fitted by
+        :func:`identification.dynamic_fit.identify_dynamic` (collocation with error control).
     data : Measurements
         z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
     p0 : array_like (n_p,)
@@ -1310,6 +1312,11 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         curvature (names the point and the eigenvalue); from such a point with descent the problem
         is solved again (:mod:`identification.secondorder`; ``extra["saddle_escapes"]`` and a note).
     """
+    if getattr(model, "is_dynamic", False):    # an ODE/DAE model: collocation with error control
+        from .dynamic_fit import identify_dynamic
+        if Y0 is not None:
+            raise TypeError("Y0: not used for a dynamic model (its trajectories start from an integration at p0)")
+        return identify_dynamic(model, data, p0, weights=weights, settings=settings)
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
     clock = _PhaseClock()
@@ -1323,7 +1330,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
-                              sigma=None, n_series=1):
+                              sigma=None, n_series=1, times=None):
     """Per-sensor Gauss-Newton information and second-order terms at p.
 
     F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2,
@@ -1336,10 +1343,18 @@ def information_contributions(model: Model, data: Measurements | None, p, states
     planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
     nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
 
+    A dynamic model (:class:`models.dynamic.DynamicModel`) takes ``times`` (sampling times) and
+    returns one matrix per (sensor, time) pair (:func:`identification.dynamic_fit.dynamic_information`).
+
     Returns
     -------
     F, S : ndarray (n_S, n_p, n_p)
     """
+    if getattr(model, "is_dynamic", False):
+        from .dynamic_fit import dynamic_information
+        if states is not None:
+            raise TypeError("states: not used for a dynamic model")
+        return dynamic_information(model, data, p, inputs=inputs, times=times, sigma=sigma, n_series=n_series)
     p = np.asarray(p, float).ravel()
     if p.shape != (model.n_p,):
         raise DataError(f"p: expected {model.n_p} values, got {p.size}")

@@ -135,6 +135,10 @@ def _as_column(expr, what: str, symbolic):
     return expr
 
 
+#: the argument checks shared with :mod:`models.dynamic` (public names of the helpers above)
+as_parameters, check_names, as_column = _as_parameters, _check_names, _as_column
+
+
 class Model:
     """A parametrised quasi-static model ``E(y, p, q) = 0``, ``z ~ h(y, p, q)``.
 
@@ -232,6 +236,14 @@ class Model:
     def explicit(cls, params, inputs, sensors, h: Callable, **kw) -> "Model":
         """An explicit model ``z ~ f(p, q)`` (no state): ``h`` takes ``(p, q)``."""
         return cls(params, inputs, sensors, n_y=0, E=None, h=lambda y, p, q: h(p, q), **kw)
+
+    @classmethod
+    def ode(cls, params, states, inputs, sensors, rhs: Callable, x0: Callable, h: Callable, **kw):
+        """A dynamic model dx/dt = rhs(x, p, u), x(0) = x0(p, u), outputs h(x, p, u) (with ``algebraic``
+        states and ``alg``: an index-1 DAE); returns a :class:`models.dynamic.DynamicModel`, which
+        :meth:`~models.dynamic.DynamicModel.collocate` turns into a Model at given sampling times."""
+        from .dynamic import DynamicModel
+        return DynamicModel(params, states, inputs, sensors, rhs, x0, h, **kw)
 
     # ------------------------------------------------------------------ sizes
     @property

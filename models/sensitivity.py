@@ -185,10 +185,10 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
     for j in range(n_q):
         hj, Ey, Ep, hy, hp = num.point("sens")(Y[j], p, inputs[j])
         h[j] = hj
-        hp = _dense(hp)
+        hp = _dense(hp).reshape(model.n_S, model.n_p)       # a column comes back 1-D when n_p = 1
         if model.n_y:
             solve = num.factor(Ey)
-            Ep = _dense(Ep)
+            Ep = _dense(Ep).reshape(model.n_y, model.n_p)
             yp = -solve(Ep)
             if yp.ndim == 1:
                 yp = yp[:, None]

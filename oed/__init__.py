@@ -12,8 +12,10 @@ from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, desig
                      select_sensors_from_information)
 from .discrimination import DiscriminationResult, select_discriminating
 from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs, select_inputs
+from .times import select_times, time_information
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
-           "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating"]
+           "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating",
+           "select_times", "time_information"]

@@ -1,0 +1,222 @@
+"""Measurements over time: n_M series x n_q experiments x n_t sampling times x n_S sensors.
+
+z_ijtk = h_k(x_j(t), p*, u_j(t)) + eps_ijtk, eps ~ N(0, sigma_k^2) independent, one sigma per
+instrument (not per time).  Experiments may have their own sampling times (ragged): ``times`` is
+then one row per experiment padded with NaN, and the matching entries of z are NaN (missing,
+never imputed).  :meth:`DynamicMeasurements.flat` maps the campaign onto the static form
+(series, experiments, ``sensor@time``) over the union of all sampling times, which the
+collocated model of :mod:`models.collocation` predicts.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from models.collocation import pair_name
+from .errors import DataError
+from .measurements import Measurements
+
+__all__ = ["DynamicMeasurements"]
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _selection(arg: str, idx, n: int) -> np.ndarray:
+    """The distinct indices chosen by ints, a boolean mask of length n or a slice (DataError naming ``arg``)."""
+    try:
+        out = np.arange(n)[idx if isinstance(idx, (slice, np.ndarray)) else np.asarray(list(idx), dtype=int)]
+    except (IndexError, TypeError, ValueError) as exc:
+        raise DataError(f"{arg}: not a valid selection of {n} entries ({exc})") from None
+    if out.size == 0 or np.unique(out).size != out.size:
+        raise DataError(f"{arg}: the selection is empty or names an entry twice: {out.tolist()}")
+    return out
+
+
+def _times_table(times, n_q: int) -> np.ndarray:
+    """Sampling times as an (n_q, n_t) array, NaN-padded at the end of a row (ragged experiments)."""
+    if isinstance(times, (list, tuple)) and times and all(np.ndim(r) == 1 for r in times) \
+            and len({len(r) for r in times}) > 1:
+        n_t = max(len(r) for r in times)
+        t = np.full((len(times), n_t), np.nan)
+        for j, r in enumerate(times):
+            t[j, :len(r)] = np.asarray(r, float)
+    else:
+        try:
+            t = np.asarray(times, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"times: not numeric ({exc})") from None
+        if t.ndim == 1:
+            t = np.broadcast_to(t, (n_q, t.size))
+    if t.ndim != 2 or t.shape[0] != n_q or t.shape[1] == 0:
+        raise DataError(f"times: expected one row of sampling times per experiment ({n_q} rows) or one common "
+                        f"row, got shape {np.shape(times)}")
+    for j, row in enumerate(t):
+        ok = np.isfinite(row)
+        n = int(ok.sum())
+        if n == 0:
+            raise DataError(f"times: experiment {j} has no sampling time")
+        if not np.all(ok[:n]) or np.any(np.isinf(row)):
+            raise DataError(f"times: experiment {j}: NaN may only pad the end of a row (ragged times), "
+                            "and times must be finite")
+        r = row[:n]
+        if r[0] < 0:
+            raise DataError(f"times: experiment {j} has a negative sampling time {r[0]:g}")
+        if np.any(np.diff(r) <= 0):
+            i = int(np.flatnonzero(np.diff(r) <= 0)[0])
+            raise DataError(f"times: experiment {j}: sampling times must be strictly increasing; "
+                            f"{r[i + 1]:g} follows {r[i]:g}")
+    return t
+
+
+class DynamicMeasurements:
+    """An immutable campaign of time series.
+
+    Parameters
+    ----------
+    inputs : array_like (n_q, d_q)      experiment input rows (constants, then control grid values)
+    times : array_like                  sampling times: (n_t,) common to all experiments, (n_q, n_t) per
+                                        experiment padded with NaN, or a list of 1-D arrays (ragged)
+    z : array_like (n_M, n_q, n_t, n_S) measured values; NaN marks a missing value
+    sigma : array_like (n_S,), float or None
+                                        one standard deviation per instrument (unit of z); None: unknown
+    sensors, input_names, series : sequence of str, optional
+
+    Raises
+    ------
+    DataError
+        Bad shapes, times (negative, not increasing, NaN inside a row), a value at a padded time,
+        and everything :class:`Measurements` refuses (the message names the argument).
+    """
+
+    __slots__ = ("times", "sensors", "_flat", "_z", "_sigma", "pairs")
+
+    def __init__(self, inputs, times, z, sigma=None, sensors: Sequence[str] | None = None,
+                 input_names: Sequence[str] | None = None, series: Sequence[str] | None = None):
+        q = np.asarray(inputs, dtype=float)
+        n_q = q.shape[0] if q.ndim >= 1 else 0
+        t = _times_table(times, n_q)
+        zz = np.asarray(z, dtype=float)
+        if zz.ndim != 4 or zz.shape[1:3] != t.shape:
+            raise DataError(f"z: expected shape (series, experiments, times, sensors) = (n_M, {t.shape[0]}, "
+                            f"{t.shape[1]}, n_S), got {zz.shape}")
+        pad = ~np.isfinite(t)
+        if np.any(np.isfinite(zz[:, pad, :])):
+            j, i = np.argwhere(pad)[0]
+            raise DataError(f"z: experiment {j} has a value at sample {i}, where it has no sampling time")
+        n_S = zz.shape[3]
+        names = tuple(sensors) if sensors is not None else tuple(f"s{k + 1}" for k in range(n_S))
+        if len(names) != n_S:
+            raise DataError(f"sensors: {len(names)} names given but z has {n_S} sensors")
+        union = np.unique(t[np.isfinite(t)])
+        col = {float(v): i for i, v in enumerate(union)}
+        flat = np.full((zz.shape[0], n_q, union.size, n_S), np.nan)
+        for j in range(n_q):
+            n = int(np.isfinite(t[j]).sum())
+            flat[:, j, [col[float(v)] for v in t[j, :n]], :] = zz[:, j, :n, :]
+        flat = flat.reshape(zz.shape[0], n_q, -1)
+        keep = np.flatnonzero(np.isfinite(flat).any(axis=(0, 1)))      # (sensor, time) pairs with data
+        pairs = tuple((names[i % n_S], float(union[i // n_S])) for i in keep)
+        s = s_inst = None
+        if sigma is not None:
+            try:
+                s_inst = np.asarray(sigma, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise DataError(f"sigma: not numeric ({exc})") from None
+            s_inst = np.full(n_S, float(s_inst)) if s_inst.ndim == 0 else s_inst
+            if s_inst.shape != (n_S,):
+                raise DataError(f"sigma: expected {n_S} values (one per instrument, not per time), "
+                                f"got shape {s_inst.shape}")
+            s = np.tile(s_inst, union.size)[keep]
+        if keep.size == 0:
+            raise DataError("z: no finite value (NaN only)")
+        fm = Measurements(q, flat[:, :, keep], s, sensors=[pair_name(k, v) for k, v in pairs],
+                          input_names=input_names, series=series)
+        t = _readonly(t)
+        for name, value in (("times", t), ("sensors", names), ("_flat", fm), ("_z", _readonly(zz)),
+                            ("_sigma", None if s_inst is None else _readonly(s_inst)), ("pairs", pairs)):
+            object.__setattr__(self, name, value)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("DynamicMeasurements is immutable; use subset() or with_sigma()")
+
+    def __reduce__(self):
+        f = self._flat
+        return (DynamicMeasurements, (f.inputs, self.times, self._z, self.sigma, self.sensors, f.input_names,
+                                      f.series))
+
+    # ------------------------------------------------------------------ views
+    @property
+    def z(self) -> np.ndarray:
+        """The values, (n_M, n_q, n_t, n_S)."""
+        return self._z
+
+    @property
+    def inputs(self) -> np.ndarray:
+        return self._flat.inputs
+
+    @property
+    def sigma(self):
+        """One sigma per instrument (n_S,), or None when unknown."""
+        return self._sigma
+
+    @property
+    def n_M(self) -> int:
+        return self._z.shape[0]
+
+    @property
+    def n_q(self) -> int:
+        return self._z.shape[1]
+
+    @property
+    def n_S(self) -> int:
+        return len(self.sensors)
+
+    @property
+    def union_times(self) -> np.ndarray:
+        """All sampling times of the campaign, sorted."""
+        return np.unique(self.times[np.isfinite(self.times)])
+
+    def flat(self) -> Measurements:
+        """The static form: z (n_M, n_q, n_pairs) over the (sensor, time) pairs with data (:attr:`pairs`,
+        time-major over the union of the sampling times), sensors ``sensor@time``, NaN where an
+        experiment has no sample there."""
+        return self._flat
+
+    def by_instrument(self) -> Measurements:
+        """The readings with one column per instrument: z (n_M, n_rows, n_S) over the (experiment, time)
+        rows that exist, inputs (experiment number, time).  For checks pooled per instrument over
+        times, e.g. ``identification.normality_check(data.by_instrument())`` (Algorithm 1's gate on the
+        flat data tests every (sensor, time) pair on its own)."""
+        j, i = np.nonzero(np.isfinite(self.times))
+        return Measurements(np.c_[j + 1, self.times[j, i]], self._z[:, j, i, :], self.sigma, sensors=self.sensors,
+                            input_names=("experiment", "time"), series=self._flat.series)
+
+    def subset(self, inputs=None, series=None) -> "DynamicMeasurements":
+        """The campaign restricted to some experiments and/or series (their own sampling times kept)."""
+        qi = np.arange(self.n_q) if inputs is None else _selection("inputs", inputs, self.n_q)
+        si = np.arange(self.n_M) if series is None else _selection("series", series, self.n_M)
+        t = self.times[qi]
+        n_t = int(np.isfinite(t).sum(axis=1).max())
+        f = self._flat
+        return DynamicMeasurements(f.inputs[qi], t[:, :n_t], self._z[np.ix_(si, qi)][:, :, :n_t], self.sigma,
+                                   self.sensors, f.input_names, [f.series[i] for i in si])
+
+    def with_sigma(self, sigma) -> "DynamicMeasurements":
+        f = self._flat
+        return DynamicMeasurements(f.inputs, self.times, self._z, sigma, self.sensors, f.input_names, f.series)
+
+    def with_z(self, z) -> "DynamicMeasurements":
+        """The same inputs, times, sigma and labels with other values z (n_M', n_q, n_t, n_S)."""
+        f = self._flat
+        return DynamicMeasurements(f.inputs, self.times, z, self.sigma, self.sensors, f.input_names,
+                                   f.series if np.shape(z)[0] == self.n_M else None)
+
+    def __repr__(self):
+        sig = "unknown" if self.sigma is None else np.array2string(self.sigma, precision=4)
+        return (f"DynamicMeasurements(n_M={self.n_M}, n_q={self.n_q}, times={self.union_times.size}, "
+                f"sensors={list(self.sensors)}, sigma={sig}, missing={int((~np.isfinite(self._z)).sum())})")

@@ -1,0 +1,290 @@
+r"""Dynamic models: ODEs and semi-explicit index-1 DAEs with experiment inputs and control profiles.
+
+A dynamic model is
+
+.. math::
+
+    \dot x = f(x, z, p, u(t)),\qquad 0 = g(x, z, p, u(t)),\qquad x(0) = x_0(p, u(0)),
+    \qquad \text{outputs } h(x, z, p, u(t)),
+
+with differential states x, algebraic states z (none for an ODE), parameters p and the
+experiment inputs u(t): constants (an initial concentration, a load level) followed by controls
+given by their values on a time grid (piecewise constant or piecewise linear).  One experiment is
+one row q of the input table: the constants, then each control's values at its grid points.
+
+It is not itself a :class:`models.Model`: outputs exist only at sampling times.
+:meth:`DynamicModel.collocate` turns it, for given sampling times and a mesh, into an ordinary
+static Model whose state is the whole trajectory (Radau IIA collocation,
+:mod:`models.collocation`), which estimation, design and detection use unchanged.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .cache import Cache
+from .contract import ModelError, as_column, as_parameters, check_names
+
+__all__ = ["Control", "DynamicModel", "time_label"]
+
+
+def time_label(t: float) -> str:
+    """t to 12 significant digits (``0.5``, ``1``, ``0.125``; 0.6000000000000001 reads ``0.6``)."""
+    return f"{float(t):.12g}"
+
+
+@dataclass(frozen=True)
+class Control:
+    """A time-varying experiment input given by its values at grid points.
+
+    Attributes
+    ----------
+    name : str
+    grid : tuple of float       strictly increasing times, the first 0 (time unit of the model)
+    kind : str                  ``"constant"``: u(t) = u_i on [t_i, t_{i+1}) (the last value to the horizon);
+                                ``"linear"``: linear between grid points, the last value held after the grid
+    unit : str
+    """
+
+    name: str
+    grid: tuple
+    kind: str = "constant"
+    unit: str = ""
+
+    def __post_init__(self):
+        g = np.asarray(self.grid, float).ravel()
+        where = f"controls[{self.name!r}]"
+        if g.size == 0:
+            raise ModelError(f"{where}: 'grid' is empty; give the times at which the control's values are set")
+        if not np.all(np.isfinite(g)):
+            raise ModelError(f"{where}: 'grid' holds a non-finite time")
+        if g[0] != 0.0:
+            raise ModelError(f"{where}: 'grid' must start at time 0, got {g[0]:g}")
+        if np.any(np.diff(g) <= 0):
+            i = int(np.flatnonzero(np.diff(g) <= 0)[0])
+            raise ModelError(f"{where}: 'grid' must be strictly increasing; {g[i + 1]:g} follows {g[i]:g}")
+        if self.kind not in ("constant", "linear"):
+            raise ModelError(f"{where}: 'kind' must be 'constant' or 'linear', got {self.kind!r}")
+        object.__setattr__(self, "grid", tuple(float(v) for v in g))
+
+    @property
+    def input_names(self) -> tuple:
+        """Names of this control's columns in the input row, ``T@0``, ``T@0.125``, ..."""
+        return tuple(f"{self.name}@{time_label(t)}" for t in self.grid)
+
+    def value(self, values, t: float, t_ref: float):
+        """u(t) as an expression of the grid values, on the grid interval that holds t_ref.
+
+        t_ref picks the side of a jump (an element's midpoint: the element's own interval);
+        t is where the value is taken (a collocation point of that element)."""
+        g = np.asarray(self.grid)
+        i = max(int(np.searchsorted(g, t_ref, side="right")) - 1, 0)
+        if self.kind == "constant" or i == g.size - 1:
+            return values[i]
+        w = (t - g[i]) / (g[i + 1] - g[i])
+        return (1.0 - w) * values[i] + w * values[i + 1]
+
+
+def _as_controls(controls) -> tuple:
+    if controls is None:
+        return ()
+    if not isinstance(controls, Mapping):
+        raise ModelError("controls: expected a dict {name: {'grid': [...], 'kind': 'constant' | 'linear'}}, "
+                         f"got {type(controls).__name__}")
+    out = []
+    for name, spec in controls.items():
+        if isinstance(spec, Control):
+            out.append(spec)
+            continue
+        if not isinstance(spec, Mapping) or "grid" not in spec:
+            raise ModelError(f"controls[{name!r}]: expected a dict with 'grid' (and 'kind', 'unit'), got {spec!r}")
+        unknown = set(spec) - {"grid", "kind", "unit"}
+        if unknown:
+            raise ModelError(f"controls[{name!r}]: unknown key(s) {', '.join(sorted(unknown))}; "
+                             "allowed: grid, kind, unit")
+        out.append(Control(str(name), tuple(np.asarray(spec["grid"], float).ravel()), spec.get("kind", "constant"),
+                           spec.get("unit", "")))
+    return tuple(out)
+
+
+def _units(arg: str, units, n: int) -> tuple:
+    if units is None:
+        return ("",) * n
+    units = tuple(units)
+    if len(units) != n:
+        raise ModelError(f"{arg}: {len(units)} units given for {n} names")
+    return units
+
+
+class DynamicModel:
+    r"""A parametrised ODE / index-1 DAE model with experiment inputs (see the module docstring).
+
+    Build it with :meth:`models.Model.ode`; the arguments are documented there.
+
+    Attributes
+    ----------
+    params : tuple of Parameter
+    states, algebraic, constants, sensors : tuple of str
+    controls : tuple of Control
+    inputs : tuple of str           names of the input row: the constants, then ``name@t`` of every control grid point
+    horizon : float or None         end of the experiment (None: the last sampling time)
+    rhs_fun, alg_fun, x0_fun, h_fun : casadi.Function
+        ``(x, z, p, u) -> dx/dt``, ``(x, z, p, u) -> g``, ``(p, u) -> x(0)``, ``(x, z, p, u) -> h``
+        with u = (constants, control values at t).
+    cache : models.cache.Cache   collocated models of this model (per times, mesh and outputs)
+    """
+
+    is_dynamic = True
+
+    def __init__(self, params, states, inputs, sensors, rhs: Callable, x0: Callable, h: Callable,
+                 algebraic: Sequence[str] | None = None, alg: Callable | None = None, controls=None,
+                 horizon: float | None = None, name: str = "dynamic model", state_units=None, sensor_units=None,
+                 input_units=None, time_unit: str = "", description: str = ""):
+        self.params = as_parameters(params)
+        check_names("params", [p.name for p in self.params])
+        if not self.params:
+            raise ModelError("params: a model needs at least one parameter")
+        self.states = check_names("states", states)
+        if not self.states:
+            raise ModelError("states: a dynamic model needs at least one differential state")
+        self.algebraic = check_names("algebraic", algebraic or ())
+        if self.algebraic and alg is None:
+            raise ModelError("alg: algebraic states are named but no algebraic equation alg(x, z, p, u) is given")
+        if alg is not None and not self.algebraic:
+            raise ModelError("algebraic: alg(x, z, p, u) is given but no algebraic states are named")
+        self.constants = check_names("inputs", inputs)
+        self.controls = _as_controls(controls)
+        check_names("inputs and controls", list(self.constants) + [c.name for c in self.controls])
+        self.sensors = check_names("sensors", sensors)
+        if not self.sensors:
+            raise ModelError("sensors: a model needs at least one sensor")
+        self.inputs = self.constants + tuple(n for c in self.controls for n in c.input_names)
+        if horizon is not None:
+            if not (isinstance(horizon, (int, float, np.floating, np.integer)) and math.isfinite(horizon)
+                    and horizon > 0):
+                raise ModelError(f"horizon: expected a positive finite time, got {horizon!r}")
+            late = [c.name for c in self.controls if c.grid[-1] > horizon]
+            if late:
+                raise ModelError(f"controls: the grid of {', '.join(late)} extends beyond the horizon {horizon:g}")
+            horizon = float(horizon)
+        self.horizon = horizon
+        self.name, self.description, self.time_unit = str(name), description, time_unit
+        self.state_units = _units("state_units", state_units, self.n_x)
+        self.sensor_units = _units("sensor_units", sensor_units, self.n_S)
+        n_u = len(self.constants) + len(self.controls)
+        self.input_units = _units("input_units", input_units, n_u)
+        self._build(rhs, x0, h, alg)
+        self.cache = Cache()
+
+    def _build(self, rhs, x0, h, alg):
+        x, z = ca.SX.sym("x", self.n_x), ca.SX.sym("z", self.n_z)
+        p, u = ca.SX.sym("p", self.n_p), ca.SX.sym("u", self.n_u)
+        dae = self.n_z > 0
+
+        def call(fn, arg, *args):
+            try:
+                return fn(*args)
+            except ModelError:
+                raise
+            except Exception as exc:    # a user callable failing on symbols: name the argument
+                raise ModelError(f"{arg}: calling it with CasADi symbols failed ({type(exc).__name__}: {exc}); "
+                                 f"expected {arg}{'(x, z, p, u)' if dae and arg != 'x0' else '(x, p, u)'}") from exc
+
+        f = as_column(call(rhs, "rhs", *((x, z, p, u) if dae else (x, p, u))), "rhs", ca.SX)
+        if f.size1() != self.n_x:
+            raise ModelError(f"rhs returns {f.size1()} derivatives but {self.n_x} states are named "
+                             f"({', '.join(self.states)})")
+        x_init = as_column(call(x0, "x0", p, u), "x0", ca.SX)
+        if x_init.size1() != self.n_x:
+            raise ModelError(f"x0 returns {x_init.size1()} initial values but {self.n_x} states are named "
+                             f"({', '.join(self.states)})")
+        if ca.depends_on(x_init, ca.vertcat(x, z)):
+            raise ModelError("x0 must depend on (p, u) only")
+        g = as_column(call(alg, "alg", x, z, p, u), "alg", ca.SX) if dae else ca.SX(0, 1)
+        if g.size1() != self.n_z:
+            raise ModelError(f"alg returns {g.size1()} equations but {self.n_z} algebraic states are named")
+        if dae and ca.sprank(ca.jacobian(g, z).sparsity()) < self.n_z:
+            raise ModelError("alg: dg/dz is structurally singular; the DAE is not of index 1 in the named "
+                             "algebraic states")
+        y = as_column(call(h, "h", *((x, z, p, u) if dae else (x, p, u))), "h", ca.SX)
+        if y.size1() != self.n_S:
+            raise ModelError(f"h returns {y.size1()} outputs but {self.n_S} sensors are named "
+                             f"({', '.join(self.sensors)})")
+        self.rhs_fun = ca.Function("rhs", [x, z, p, u], [f], ["x", "z", "p", "u"], ["xdot"])
+        self.alg_fun = ca.Function("alg", [x, z, p, u], [g], ["x", "z", "p", "u"], ["g"])
+        self.x0_fun = ca.Function("x0", [p, u], [x_init], ["p", "u"], ["x0"])
+        self.h_fun = ca.Function("h", [x, z, p, u], [y], ["x", "z", "p", "u"], ["h"])
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_p(self) -> int:
+        return len(self.params)
+
+    @property
+    def n_x(self) -> int:
+        return len(self.states)
+
+    @property
+    def n_z(self) -> int:
+        return len(self.algebraic)
+
+    @property
+    def n_u(self) -> int:
+        """Length of u(t): the constants and one value per control."""
+        return len(self.constants) + len(self.controls)
+
+    @property
+    def n_S(self) -> int:
+        return len(self.sensors)
+
+    @property
+    def n_q_dim(self) -> int:
+        """Length of one experiment's input row."""
+        return len(self.inputs)
+
+    @property
+    def param_names(self) -> tuple:
+        return tuple(p.name for p in self.params)
+
+    def u_at(self, q, t: float, t_ref: float):
+        """u(t) = (constants, control values at t) from the input row q (an expression or array);
+        t_ref selects the side of a control jump (see :meth:`Control.value`)."""
+        n_c = len(self.constants)
+        parts = [q[i] for i in range(n_c)]
+        k = n_c
+        for c in self.controls:
+            vals = [q[k + i] for i in range(len(c.grid))]
+            parts.append(c.value(vals, t, t_ref))
+            k += len(c.grid)
+        return ca.vertcat(*parts) if isinstance(q, (ca.SX, ca.MX)) else np.array(parts, float)
+
+    def check_times(self, times, arg: str = "times") -> np.ndarray:
+        """Validated sampling times: finite, >= 0, strictly increasing, within the horizon."""
+        t = np.asarray(times, float).ravel()
+        if t.size == 0:
+            raise ModelError(f"{arg}: no sampling time given")
+        if not np.all(np.isfinite(t)):
+            raise ModelError(f"{arg}: sampling times must be finite")
+        if t[0] < 0:
+            raise ModelError(f"{arg}: sampling times must be >= 0, got {t[0]:g}")
+        if np.any(np.diff(t) <= 0):
+            i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+            raise ModelError(f"{arg}: sampling times must be strictly increasing; {t[i + 1]:g} follows {t[i]:g}")
+        if self.horizon is not None and t[-1] > self.horizon:
+            raise ModelError(f"{arg}: sampling time {t[-1]:g} lies beyond the horizon {self.horizon:g}")
+        return t
+
+    def collocate(self, times, mesh=None, degree: int = 3, max_step: float | None = None, outputs=None):
+        """The static :class:`models.Model` of this model sampled at ``times`` (Radau IIA collocation).
+
+        See :func:`models.collocation.collocate`."""
+        from .collocation import collocate
+        return collocate(self, times, mesh=mesh, degree=degree, max_step=max_step, outputs=outputs)
+
+    def __repr__(self):
+        return (f"DynamicModel({self.name!r}, params={list(self.param_names)}, states={list(self.states)}, "
+                f"algebraic={list(self.algebraic)}, inputs={list(self.inputs)}, sensors={list(self.sensors)})")

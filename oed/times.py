@@ -1,0 +1,74 @@
+r"""Choosing sampling times of a dynamic model (optimal design over time).
+
+With F_{kt} the information of sensor k at time t summed over the experiments (planned at p,
+:func:`identification.information_contributions` with ``times``),
+
+.. math::
+
+    \min_{w \in \{0, 1\}^{n_t}} \Psi\Bigl(\bigl(\textstyle\sum_t w_t \sum_k F_{kt}\bigr)^{-1}\Bigr)
+
+chooses the times at which every instrument reads (``pairs=False``), or, over w in {0, 1}^{n_t n_S},
+the (time, sensor) pairs (``pairs=True``), by the engine of
+:func:`oed.select_sensors_from_information` (exact, with costs, budget, include/exclude and a proven
+bound).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identification import information_contributions
+from models.collocation import pair_name
+from models.dynamic import time_label
+from .design import DesignResult, select_sensors_from_information
+
+__all__ = ["time_information", "select_times"]
+
+
+def time_information(model, p, times, inputs, sigma, sensors=None, pairs: bool = False, n_series: int = 1):
+    """(F, names): the planned information per sampling time (all chosen instruments), shape (n_t, n_p, n_p),
+    or per (time, sensor) pair (``pairs=True``, time-major), and the candidates' names
+    (``0.5`` or ``cA@0.5``), summed over the experiments ``inputs``."""
+    if not getattr(model, "is_dynamic", False):
+        raise TypeError(f"model: expected a dynamic model (models.Model.ode), got {type(model).__name__}")
+    names = list(model.sensors) if sensors is None else list(sensors)
+    unknown = [s for s in names if s not in model.sensors]
+    if unknown or not names:
+        raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {', '.join(model.sensors)}")
+    t = np.asarray(times, float).ravel()
+    F, _ = information_contributions(model, None, p, inputs=inputs, times=t, sigma=sigma, n_series=n_series)
+    F = F.reshape(t.size, model.n_S, model.n_p, model.n_p)[:, [model.sensors.index(s) for s in names]]
+    if pairs:
+        return F.reshape(-1, model.n_p, model.n_p), [pair_name(s, v) for v in t for s in names]
+    return F.sum(axis=1), [time_label(v) for v in t]
+
+
+def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None, pairs: bool = False,
+                 sensors=None, criterion: str = "D", costs=None, budget=None, include=(), exclude=(),
+                 method: str = "auto", time_limit: float = 60.0, n_series: int = 1) -> DesignResult:
+    """The sampling times (or time x sensor pairs) minimising the A, D or E criterion of the planned
+    Gauss-Newton covariance of a dynamic model at p (see the module docstring).
+
+    Parameters
+    ----------
+    model : models.dynamic.DynamicModel
+    p : array_like (n_p,)          nominal parameters
+    times : array_like             candidate sampling times (strictly increasing, within the horizon)
+    inputs : array_like (n_q, d_q) the experiments (every one sampled at the chosen times)
+    sigma : float or array (n_S,)  one standard deviation per instrument
+    n_times, max_times : int       exact / largest number of chosen candidates
+    pairs : bool                   choose (time, sensor) pairs instead of times
+    sensors : sequence of str      instruments considered (default all)
+    criterion, costs, budget, include, exclude, method, time_limit
+                                   as in :func:`oed.select_sensors_from_information` (names are
+                                   ``0.5`` for times, ``cA@0.5`` for pairs)
+    n_series : int                 repeated series per experiment
+
+    Returns
+    -------
+    DesignResult
+    """
+    F, names = time_information(model, p, times, inputs, sigma, sensors, pairs, n_series)
+    return select_sensors_from_information(F, None, criterion=criterion, kind="gauss_newton", n_sensors=n_times,
+                                           max_sensors=max_times, costs=costs, budget=budget, include=include,
+                                           exclude=exclude, method=method, time_limit=time_limit,
+                                           sensor_names=names)
