@@ -53,7 +53,7 @@ from scipy.integrate import solve_ivp
 from identification import DynamicMeasurements, Measurements, identify
 from identification.dynamic_fit import collocated_problem, identify_dynamic
 from identification.errors import IdentificationError
-from identification.montecarlo import MonteCarloSettings, clopper_pearson, run_monte_carlo
+from identification.montecarlo import MonteCarloSettings, clopper_pearson, linearized_size, run_monte_carlo
 from identification.profile import ProfileError, profile_intervals
 from identification.regions import mahalanobis2
 from identification.splits import Split, early_late_split, series_split
@@ -231,6 +231,13 @@ def tabulate(out: str) -> None:
                 if c.size:
                     print(f"  ellipsoid 95 % coverage, {nm} {which}: {_rate(int(c.sum()), int(c.size))}")
         print(f"  failed split tests: {sum(int(x['n_errors']) for x in arr)}")
+        if study != "power":
+            cm, gen, splits, *_ = problem(study)
+            lin = linearized_size(cm, er.P_TRUE, INPUTS, gen.sigma, splits, n_M=N_M, tol=TOL)
+            print(f"  linearised model (no fits, {lin.n_draws} draws, se <= {100 * lin.mc_se:.2f} %): family-wise size of "
+                  f"the two-sample Wald = LR statistic {100 * lin.family_two_sample:.2f} %, per split at TOL/"
+                  f"{len(splits)}: {np.round(100 * lin.split_two_sample, 2).tolist()} %; paper statistic "
+                  f"{100 * lin.family_paper:.2f} %")
     path = f"{out}_coverage.jsonl"
     if os.path.exists(path):
         with open(path) as f:

@@ -7,7 +7,7 @@ from scipy import stats
 
 from identification import DynamicMeasurements, MonteCarloSettings, Split, detect, identify, validate
 from identification.detect import run_split_tests
-from identification.dynamic_fit import simulate_campaign
+from identification.dynamic_fit import DiscretisationSettings, simulate_campaign
 from identification.profile import lr_region
 from identification.splits import early_late_split, time_window_split
 from mudoe.example_reactor import P_TRUE, build
@@ -160,3 +160,32 @@ def test_dynamic_measurements_flat_is_what_detect_sees(fitted):
     _, data, est = fitted
     assert isinstance(data, DynamicMeasurements)
     np.testing.assert_array_equal(est.data.z, data.flat().z)
+
+
+def test_linearized_size_of_a_time_split_is_the_nominal_level(mc_problem):
+    # under the linearised model the two-sample Wald statistic of the early / late split is exactly
+    # chi2_{n_p}: its rejection rate at TOL / n_tests = 5 % is 5 % (a map ignoring the sensors would give
+    # identical calibration and validation estimates, p_val - p_cal = 0, and a rate of 0)
+    from identification import linearized_size
+    est, splits = mc_problem
+    lin = linearized_size(est.model, P_TRUE, est.data.inputs, est.data.sigma, splits[1:], n_draws=20000, seed=2)
+    assert abs(lin.split_two_sample[0] - 0.05) < 4 * lin.mc_se, lin
+
+
+def test_discretisation_error_is_not_reported_as_model_inadequacy_with_control_but_is_without():
+    # noise-free data of the correct model: the likelihood ratio of the early / late split is then its
+    # noncentrality (the mean of the statistic is n_p + that).  On the controlled mesh of identify it is
+    # negligible; with implicit Euler and one step between sampling times (a fixed coarse mesh, no
+    # control) the discretisation error alone makes it large: the correct model would be rejected
+    from identification.dynamic_fit import collocated_problem, predict
+    model = build()
+    h = predict(model, P_TRUE, Q, TIMES, SIGMA, DiscretisationSettings(tol_sigma=1e-4))
+    data = DynamicMeasurements(Q, TIMES, np.stack([h, h]), SIGMA, sensors=["cA", "cB"])
+    est = identify(model, data, P_TRUE)
+    pairs = [(s.split("@")[0], float(s.split("@")[1])) for s in est.data.sensors]
+    split = [early_late_split(pairs, len(Q))]
+    ok = run_split_tests(est.model, est.data, split, est.p)[0]
+    coarse, flat = collocated_problem(model, data, degree=1, elements=1)
+    bad = run_split_tests(coarse, flat, split, est.p)[0]
+    assert ok.ok and ok.lr < 0.01
+    assert bad.ok and bad.lr > 10.0 and bad.alpha_lr < 0.05
