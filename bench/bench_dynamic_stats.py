@@ -16,9 +16,10 @@ Studies (``--study``):
   two-sample Wald and paper statistics, and the coverage of the 95 % ellipsoids of every
   calibration and validation fit; the replication engine (:func:`identification.montecarlo.run_monte_carlo`,
   batched fits, ``--workers`` local processes).
-* ``coarse``: the same data tested with a deliberately coarse fixed mesh (Radau IIA degree 1 =
-  implicit Euler, one element between sampling times, no error control): evidence that the
-  control matters.
+* ``coarse``, ``deg2``, ``deg3``: the same data tested with a deliberately coarse fixed mesh (one
+  element between sampling times, no error control) of Radau IIA degree 1 (implicit Euler; output
+  error up to 31 sigma), 2 (2.8 sigma) and 3 (0.05 sigma): evidence that the control matters, and
+  how much error the tests tolerate.
 * ``power``: data from a second-order A consumption (dc_A/dt = -k1 c_A^2, k1_ref = 1.5 L/(mol h)),
   tested with the first-order model (its collocation controlled at its fit to a nominal
   second-order campaign).
@@ -53,6 +54,7 @@ from scipy.integrate import solve_ivp
 from identification import DynamicMeasurements, Measurements, identify
 from identification.dynamic_fit import collocated_problem, identify_dynamic
 from identification.errors import IdentificationError
+from identification.normality_gate import gate_fails
 from identification.montecarlo import MonteCarloSettings, clopper_pearson, linearized_size, run_monte_carlo
 from identification.profile import ProfileError, profile_intervals
 from identification.regions import mahalanobis2
@@ -64,7 +66,8 @@ INPUTS = np.array([[c, T] for T in (330.0, 350.0, 370.0) for c in (1.0, 2.0)])
 N_M = 2
 P_SECOND = np.array([1.5, 60.0, 0.8, 80.0])  # truth of the wrong-rate-law study (k1_ref in L/(mol h))
 TOL = 0.05
-STUDIES = ("size", "coarse", "power", "coverage")
+FIXED_MESH = {"coarse": 1, "deg2": 2, "deg3": 3}      # fixed-mesh studies: Radau degree on the sampling grid
+STUDIES = ("size", "power", "coverage") + tuple(FIXED_MESH)
 
 
 class ExactReactor:
@@ -115,9 +118,12 @@ def problem(study: str):
     nominal = gen.dynamic(np.random.default_rng(12345))
     if tuple(nominal.pairs) != tuple(pairs):
         raise RuntimeError(f"flat column order {nominal.pairs[:4]}... differs from the generator's {pairs[:4]}...")
-    if study == "coarse":
-        cm, _ = collocated_problem(model, nominal, degree=1, elements=1)
-        how = "fixed mesh: Radau IIA degree 1 (implicit Euler), elements at the sampling times only"
+    if study in FIXED_MESH:
+        deg = FIXED_MESH[study]
+        cm, _ = collocated_problem(model, nominal, degree=deg, elements=1)
+        err = np.abs(cm.integrated_outputs(gen.p, INPUTS) - gen.H).max() / SIGMA[0]
+        how = (f"fixed mesh: Radau IIA degree {deg}{' (implicit Euler)' if deg == 1 else ''}, elements between "
+               f"the sampling times only, no error control; largest output error at p* {err:.3g} sigma")
     else:
         est = identify_dynamic(model, nominal, er.P_TRUE)
         rec = est.extra["discretisation"]
@@ -204,7 +210,7 @@ def _rate(k: int, n: int) -> str:
 
 def tabulate(out: str) -> None:
     """Print the results found under the prefix ``out``."""
-    for study in ("size", "coarse", "power"):
+    for study in ("size",) + tuple(FIXED_MESH) + ("power",):
         blocks = sorted((p for p in os.listdir(os.path.dirname(out) or ".")
                          if p.startswith(os.path.basename(out) + f"_{study}_") and p.endswith(".npz")))
         if not blocks:
@@ -223,6 +229,13 @@ def tabulate(out: str) -> None:
                 fin = np.isfinite(col)
                 print(f"      split {nm!r}: rejected at TOL/{a.shape[1]} {_rate(int((col[fin] < TOL / a.shape[1]).sum()), int(fin.sum()))};"
                       f" at 5 %: {_rate(int((col[fin] < TOL).sum()), int(fin.sum()))}")
+        sh = np.concatenate([x["shapiro"] for x in arr])
+        fail = gate_fails(sh, 0.05, "holm", tuple(bool(g) for g in arr[0]["gated"]) or None)
+        a = np.concatenate([x["alpha_lr"][:, 0, :] for x in arr])
+        rej = np.any(a < TOL / a.shape[1], axis=1)
+        print(f"  normality gate (Shapiro-Wilk per sensor, Holm over {sh.shape[1]} sensors, 5 %): fails "
+              f"{_rate(int(fail.sum()), fail.size)}; LR family-wise rejection of the campaigns passing it: "
+              f"{_rate(int(rej[~fail].sum()), int((~fail).sum()))}")
         cov = np.concatenate([x["covered"][:, 0] for x in arr])
         for js, nm in enumerate(names):
             for i, which in enumerate(("cal", "val")):
