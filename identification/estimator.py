@@ -44,6 +44,7 @@ from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
+from models.trajectory import trajectory_numerics
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector"]
@@ -985,7 +986,9 @@ def _reduced_start(st: _Start, settings: IdentifySettings):
     """
     model = st.model
     min_inputs = settings.reduced_start_inputs
-    if (not model.n_y or min_inputs is None or st.data.n_q < min_inputs or not numerics(model).dense):
+    trajectory = trajectory_numerics(model) is not None     # a collocated ODE: any number of inputs
+    if (not model.n_y or min_inputs is None or
+            not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None
     x0 = st.p0 / st.s_p
     objective = ImplicitObjective(st.problem, x0, st.Y_init)
@@ -1038,6 +1041,13 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
         if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
                 np.all(got[1].p < model.upper - 1e-6 * s_p):
             warm = got[1], got[2]
+            if trajectory_numerics(model) is not None:
+                # a collocated ODE: the reduced optimum (states solved to round-off element by element,
+                # decrement at round-off) is the estimate, as for explicit models; no NLP is built
+                if clock is not None:
+                    clock.lap("reduced-space Newton (collocated trajectories)")
+                return _FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
+                                          got[2])
     if warm is not None:
         p_start, Y_start = warm[0].p, warm[0].states
     else:

@@ -27,7 +27,8 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.sensitivity import sensitivities
-from models.state import numerics
+from models.state import numerics, solve_states
+from models.trajectory import trajectory_numerics
 from .explicit_kernel import ExplicitTerms
 from .refinement import ReducedPoint, ReducedProblem
 
@@ -166,7 +167,9 @@ class ImplicitObjective:
         problem = self._problem
         p = x * self._sp
         Y = None
-        if near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
+        if trajectory_numerics(problem.model) is not None:      # a collocated ODE: no guess needed
+            Y = solve_states(problem.model, p, problem.data.inputs)
+        elif near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
             guess = near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
             try:
                 Y = solve_states_from(problem.model, p, problem.data.inputs, guess)

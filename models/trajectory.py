@@ -1,0 +1,202 @@
+r"""Trajectories of a collocated ODE model for all experiments at once, and their exact sensitivities.
+
+The collocation equations of :mod:`models.collocation` are block lower-triangular in the elements:
+element k's unknowns V_k = (x_k1, ..., x_kd) solve
+
+.. math::
+
+    R(V_k, x_{k0}, p, U_k, h_k) = \Bigl(\sum_{j=0}^{d} C_{jr} x_{kj} - h_k f(x_{kr}, p, u_{kr})\Bigr)_{r=1..d} = 0,
+    \qquad x_{k0} = x_{k-1,d}, \quad x_{00} = x_0(p, u(0)),
+
+so the state y = (x_00, V_0, ..., V_{N-1}) of one experiment is solved element after element
+(Newton on the n_x d unknowns of one element), and its exact sensitivity y'(p) = -(dE/dy)^{-1} dE/dp
+by forward substitution through the same blocks,
+
+.. math::
+
+    V_k'(p) = -R_V^{-1} (R_{x_0} x_{k0}'(p) + R_p),
+
+with R_V, R_{x_0}, R_p by CasADi's AD.  Every element is done for all experiments together: one
+mapped CasADi evaluation and one batched LAPACK solve of the (n_q, n_x d, n_x d) blocks per Newton
+iteration, instead of one sparse LU of the whole trajectory (n_y = n_x (1 + N d)) per experiment.
+The numbers are those of the whole-trajectory solve to round-off (the same equations, solved
+exactly).  Outputs and G = dh/dy y' + dh/dp come from one mapped evaluation.  ODEs only (no
+algebraic states): DAE models keep the generic solves of :mod:`models.state`.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .errors import StateSolveError
+from .state import batched_function
+
+__all__ = ["TrajectoryNumerics", "trajectory_numerics"]
+
+#: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
+#: :meth:`models.collocation.CollocatedModel._element_functions` allows the same)
+_MAX_ITER = 60
+
+
+def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
+    """f at n points: ``args`` are (n, d) arrays (one row a point) or (d,) arrays shared by all
+    points; returns one dense (n, r, c) array per output."""
+    fm = cache.get((f.name(), n))
+    if fm is None:
+        fm = cache[(f.name(), n)] = batched_function(f, n)
+    return fm(*args)
+
+
+class TrajectoryNumerics:
+    """The element functions of one collocated ODE model (see the module docstring).
+
+    Attributes
+    ----------
+    model : models.collocation.CollocatedModel
+    """
+
+    def __init__(self, cm):
+        dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
+        self.model, self.d, self.N = cm, d, N
+        n_x, n_p, n_u = dyn.n_x, dyn.n_p, dyn.n_u
+        b = np.asarray(cm.mesh.boundaries)
+        V, xs = ca.SX.sym("V", n_x * d), ca.SX.sym("xs", n_x)
+        p, U, hk = ca.SX.sym("p", n_p), ca.SX.sym("U", n_u * d), ca.SX.sym("h")
+        X = [xs] + [V[(r - 1) * n_x:r * n_x] for r in range(1, d + 1)]
+        R = ca.vertcat(*[sum(cm.C[j, r] * X[j] for j in range(d + 1))
+                         - hk * dyn.rhs_fun(X[r], ca.SX(0, 1), p, U[(r - 1) * n_u:r * n_u]) for r in range(1, d + 1)])
+        RV = ca.jacobian(R, V)
+        self.newton = ca.Function("traj_newton", [V, xs, p, U, hk], [R, RV])
+        self.blocks = ca.Function("traj_blocks", [V, xs, p, U, hk], [RV, ca.jacobian(R, xs), ca.jacobian(R, p)])
+        q = ca.SX.sym("q", dyn.n_q_dim)
+        x0 = dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.5 * b[1]))
+        self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
+        Uq = ca.vertcat(*[dyn.u_at(q, b[k] + cm.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+                          for k in range(N) for r in range(1, d + 1)])
+        self.Umap = np.asarray(ca.evalf(ca.jacobian(Uq, q))) if dyn.n_q_dim else np.zeros((Uq.size1(), 0))
+        y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
+        h = cm.h_fun(y, p, q)
+        G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
+        self.outputs = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
+        self.h_only = ca.Function("traj_h", [y, p, q], [h])
+        self.steps = np.diff(b)
+        self._maps = {}
+
+    # ------------------------------------------------------------------ states
+    def _controls(self, inputs: np.ndarray) -> np.ndarray:
+        """U of every experiment and element, shape (n_q, N, n_u d)."""
+        return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
+
+    def states(self, p, inputs) -> np.ndarray:
+        """The collocation solution y_j (n_q, n_y) of every experiment at p, element after element.
+
+        Raises StateSolveError naming the experiment and the element where Newton fails (the
+        trajectory blows up or is too stiff for the element)."""
+        p = np.asarray(p, float).ravel()
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        n, d, N = inputs.shape[0], self.d, self.N
+        x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
+        n_x = x0.shape[1]
+        U = self._controls(inputs)
+        Y = np.empty((n, n_x * (1 + N * d)))
+        Y[:, :n_x] = x0
+        xs = x0
+        for k in range(N):
+            V = self._element(xs, p, U[:, k], self.steps[k], inputs, k)
+            Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
+            xs = V[:, -n_x:]
+        return Y
+
+    def _element(self, xs, p, U, hk, inputs, k):
+        """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
+        stops when max |R| <= 1e-13 or its step is below 1e-12 (the tests of CasADi's rootfinder in
+        :meth:`models.collocation.CollocatedModel._element_functions`), and is then left as it is."""
+        n = xs.shape[0]
+        V = np.tile(xs, (1, self.d))
+        active = np.ones(n, bool)
+        h = np.array([hk])
+        for _ in range(_MAX_ITER + 1):
+            R, RV = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])
+            R = R[:, :, 0]
+            fresh = True
+            ok = np.all(np.isfinite(R), axis=1) & np.all(np.isfinite(RV), axis=(1, 2))
+            if np.any(active & ~ok):
+                self._fail(inputs, int(np.flatnonzero(active & ~ok)[0]), k, p)
+            active &= np.max(np.abs(R), axis=1) > 1e-13
+            if not np.any(active):
+                break
+            try:
+                step = np.linalg.solve(RV[active], R[active][:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                self._fail(inputs, int(np.flatnonzero(active)[0]), k, p)
+            V[active] -= step
+            fresh = False
+            tiny = np.zeros(n, bool)
+            tiny[active] = np.max(np.abs(step), axis=1) <= 1e-12
+            active &= ~tiny
+            if not np.any(active):
+                break
+        if not fresh:
+            R = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])[0][:, :, 0]
+        bad = ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(V), axis=1))))
+        if np.any(bad):
+            self._fail(inputs, int(np.flatnonzero(bad)[0]), k, p)
+        return V
+
+    def _fail(self, inputs, j, k, p):
+        b = np.asarray(self.model.mesh.boundaries)
+        raise StateSolveError(
+            f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
+            f"{inputs[j].tolist()} (experiment {j}): no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] "
+            "(the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
+
+    # ------------------------------------------------------------------ sensitivities
+    def state_derivatives(self, p, inputs, Y) -> np.ndarray:
+        """y'(p) = -(dE/dy)^{-1} dE/dp at the states Y of every experiment, shape (n_q, n_y, n_p)."""
+        p = np.asarray(p, float).ravel()
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.size
+        _, x0p = _mapped_call(self._maps, self.init, n, [p, inputs])
+        n_x = x0p.shape[1]
+        W = Y[:, n_x:].reshape(n, N, n_x * d)
+        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)      # element starts
+        U = self._controls(inputs)
+        m = n * N
+        RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
+                                  [W.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+                                   np.tile(self.steps, n)[:, None]])
+        RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
+        out = np.empty((n, Y.shape[1], n_p))
+        out[:, :n_x] = x0p
+        xsp = x0p
+        for k in range(N):
+            Vp = -np.linalg.solve(RV[:, k], Rx[:, k] @ xsp + Rp[:, k])
+            out[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = Vp
+            xsp = Vp[:, -n_x:]
+        return out
+
+    def outputs_and_sensitivities(self, p, inputs, Y, Yp):
+        """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""
+        p = np.asarray(p, float).ravel()
+        n = inputs.shape[0]
+        ypv = np.ascontiguousarray(Yp.transpose(0, 2, 1)).reshape(n, -1)     # column-major per experiment
+        h, G = _mapped_call(self._maps, self.outputs, n, [Y, ypv, p, inputs])
+        return h[:, :, 0], G
+
+    def outputs(self, p, inputs, Y=None) -> np.ndarray:
+        """h (n_q, n_S) at the states Y (solved at p when None)."""
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        Y = self.states(p, inputs) if Y is None else Y
+        return _mapped_call(self._maps, self.h_only, inputs.shape[0], [Y, np.asarray(p, float).ravel(), inputs])[0][:, :, 0]
+
+
+def trajectory_numerics(cm) -> TrajectoryNumerics | None:
+    """The :class:`TrajectoryNumerics` of a collocated model (kept in its cache), or None for a model
+    that is not a collocated ODE (DAE models and static models)."""
+    dyn = getattr(cm, "dynamic", None)
+    if dyn is None or dyn.n_z:
+        return None
+    num = cm.cache.get("trajectory", None)
+    if num is None:
+        num = cm.cache.put("trajectory", None, TrajectoryNumerics(cm))
+    return num
