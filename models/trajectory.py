@@ -147,7 +147,7 @@ class TrajectoryNumerics:
         b = np.asarray(self.model.mesh.boundaries)
         raise StateSolveError(
             f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
-            f"{inputs[j].tolist()} (experiment {j}): no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] "
+            f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j} "
             "(the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
 
     # ------------------------------------------------------------------ sensitivities
