@@ -36,6 +36,9 @@ __all__ = ["TrajectoryNumerics", "trajectory_numerics"]
 #: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
 #: :meth:`models.collocation.CollocatedModel._element_functions` allows the same)
 _MAX_ITER = 60
+#: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
+#: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
+MARCH_IN_CASADI_MAX = 8
 
 
 def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
@@ -98,6 +101,8 @@ class TrajectoryNumerics:
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
         n_x = x0.shape[1]
         U = self._controls(inputs)
+        if n <= MARCH_IN_CASADI_MAX:
+            return self._march(p, inputs, x0, U)
         Y = np.empty((n, n_x * (1 + N * d)))
         Y[:, :n_x] = x0
         xs = x0
@@ -106,6 +111,31 @@ class TrajectoryNumerics:
             Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
             xs = V[:, -n_x:]
         return Y
+
+    def _march(self, p, inputs, x0, U):
+        """The same element-by-element Newton solves in one CasADi call for all experiments: the
+        model's ``mapaccum`` of CasADi's rootfinder over the elements
+        (:meth:`models.collocation.CollocatedModel._march_functions`), mapped over the experiments;
+        then every element's residual checked as in :meth:`_element`."""
+        n, d, N, n_x = inputs.shape[0], self.d, self.N, x0.shape[1]
+        fm = self._maps.get(("march", n))
+        if fm is None:
+            march = self.model._march_functions()[0]
+            fm = self._maps[("march", n)] = march.map(n)
+        P = np.concatenate([np.broadcast_to(p, (n, N, p.size)), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
+                           axis=2)                                   # (n, N, n_par): column k of experiment j
+        _, V = fm(ca.DM(np.ascontiguousarray(x0.T)), ca.DM(np.ascontiguousarray(P.reshape(n * N, -1).T)))
+        V = np.asarray(V).T.reshape(n, N, n_x * d)
+        XS = np.concatenate([x0[:, None, :], V[:, :-1, -n_x:]], axis=1)
+        m = n * N
+        R = _mapped_call(self._maps, self.newton, m, [V.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+                                                      np.tile(self.steps, n)[:, None]])[0][:, :, 0]
+        Vf = V.reshape(m, -1)
+        bad = ~(np.all(np.isfinite(Vf), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(Vf), axis=1))))
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            self._fail(inputs, i // N, i % N, p)
+        return np.concatenate([x0, V.reshape(n, -1)], axis=1)
 
     def _element(self, xs, p, U, hk, inputs, k):
         """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
