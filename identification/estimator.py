@@ -719,7 +719,9 @@ def _start(model, data, p0, weights, Y0) -> _Start:
         except StateSolveError as exc:
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
-        s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
+        # a collocated ODE is solved in the reduced space (no NLP): its scalings are made when Ipopt needs them
+        s_y, e_scale = ((None, None) if trajectory_numerics(model) is not None
+                        else _scalings(model, p0, data.inputs, Y_init, Y0 is None))
     return _Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
                   ReducedProblem.of(model, data, w, sig, s_p))
 
@@ -1032,7 +1034,6 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
                 return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
-    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
     bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
     warm = None                                 # (reduced point, S) of the reduced-space optimum
@@ -1048,6 +1049,10 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
                     clock.lap("reduced-space Newton (collocated trajectories)")
                 return _FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
                                           got[2])
+    if s_y is None:                             # scalings left for the NLP (see _start)
+        s_y, e_scale = _scalings(model, st.p0, data.inputs, st.Y_init, False)
+        st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
+    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     if warm is not None:
         p_start, Y_start = warm[0].p, warm[0].states
     else:
