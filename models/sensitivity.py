@@ -175,11 +175,11 @@ class _TrajectorySensitivities(Sensitivities):
     """A collocated ODE (:mod:`models.trajectory`): h, G and y' of all inputs by forward substitution
     through the elements; the adjoints and second derivatives factor dE/dy per input when first asked."""
 
-    __slots__ = ("_yp", "_model")
+    __slots__ = ("_yp", "_model", "_blocks")
 
-    def __init__(self, h, G, model, p, inputs, Y, yp):
+    def __init__(self, h, G, model, p, inputs, Y, yp, blocks):
         super().__init__(h, G, None, p, inputs, Y, None)
-        self._yp, self._model = yp, model
+        self._yp, self._model, self._blocks = yp, model, blocks
 
     @property
     def state_derivatives(self) -> np.ndarray:
@@ -201,8 +201,8 @@ class _TrajectorySensitivities(Sensitivities):
         return super().adjoint(lam)
 
     def hessians(self, lam: np.ndarray) -> np.ndarray:
-        self._filled()
-        return super().hessians(lam)
+        return trajectory_numerics(self._model).hessians(self._p, self._inputs, self._Y, self._yp, *self._blocks,
+                                                         np.asarray(lam, float))
 
     def output_hessians(self) -> np.ndarray:
         self._filled()
@@ -216,9 +216,9 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
     traj = trajectory_numerics(model)
     if traj is not None:
         Y = np.asarray(Y, float)
-        yp = traj.state_derivatives(p, inputs, Y)
+        yp, RV, Rx = traj.sweep(p, inputs, Y)
         h, G = traj.outputs_and_sensitivities(p, inputs, Y, yp)
-        return _TrajectorySensitivities(h, G, model, p, inputs, Y, yp)
+        return _TrajectorySensitivities(h, G, model, p, inputs, Y, yp, (RV, Rx))
     num = numerics(model)
     n_q = inputs.shape[0]
     if num.dense:

@@ -82,6 +82,20 @@ class TrajectoryNumerics:
         G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
         self.outputs = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
         self.h_only = ca.Function("traj_h", [y, p, q], [h])
+        # second order: Z^T grad^2 L Z of L = lam^T h + mu^T E, term by term (see hessians)
+        lam = ca.SX.sym("lam", cm.n_S)
+        Zh = ca.vertcat(ca.reshape(yp, cm.n_y, n_p), ca.DM.eye(n_p))
+        Hh = ca.hessian(ca.dot(lam, h), ca.vertcat(y, p))[0]
+        self.h_terms = ca.Function("traj_h_terms", [y, yp, p, q, lam],
+                                   [ca.mtimes(ca.jacobian(h, y).T, lam), ca.mtimes(Zh.T, ca.mtimes(Hh, Zh))])
+        mu = ca.SX.sym("mu", n_x * d)
+        ze = ca.SX.sym("Z", (n_x * d + n_x) * n_p)
+        Ze = ca.vertcat(ca.reshape(ze, n_x * d + n_x, n_p), ca.DM.eye(n_p))
+        He = ca.hessian(ca.dot(mu, R), ca.vertcat(V, xs, p))[0]
+        self.element_hessian = ca.Function("traj_elem_hess", [V, xs, p, U, hk, mu, ze],
+                                           [ca.mtimes(Ze.T, ca.mtimes(He, Ze))])
+        mu0 = ca.SX.sym("mu0", n_x)
+        self.x0_hessian = ca.Function("traj_x0_hess", [p, q, mu0], [ca.hessian(ca.dot(mu0, x0), p)[0]])
         self.steps = np.diff(b)
         self._maps = {}
 
@@ -183,6 +197,10 @@ class TrajectoryNumerics:
     # ------------------------------------------------------------------ sensitivities
     def state_derivatives(self, p, inputs, Y) -> np.ndarray:
         """y'(p) = -(dE/dy)^{-1} dE/dp at the states Y of every experiment, shape (n_q, n_y, n_p)."""
+        return self.sweep(p, inputs, Y)[0]
+
+    def sweep(self, p, inputs, Y):
+        """(y'(p) (n_q, n_y, n_p), R_V (n_q, N, n_x d, n_x d), R_x0 (n_q, N, n_x d, n_x)) at the states Y."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
         n, d, N, n_p = inputs.shape[0], self.d, self.N, p.size
@@ -203,7 +221,44 @@ class TrajectoryNumerics:
             Vp = -np.linalg.solve(RV[:, k], Rx[:, k] @ xsp + Rp[:, k])
             out[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = Vp
             xsp = Vp[:, -n_x:]
-        return out
+        return out, RV, Rx
+
+    def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
+        r"""sum_j d^2/dp^2 [lam_j^T h(y_j(p), p, q_j)] for weight sets ``lam`` (m, n_q, n_S), shape (m, n_p, n_p):
+        Z^T grad^2 (lam^T h + mu^T E) Z with Z = (y', I) and the adjoint (dE/dy)^T mu = -(dh/dy)^T lam
+        solved backwards through the elements (R_V,k^T mu_k = b_k - R_x0,k+1^T mu_k+1 on element k's
+        end point; mu of x(0) - x_0(p, u(0)) = b_0 - R_x0,0^T mu_0); the Hessian of mu^T E is that of
+        every element's mu_k^T R_k in (V_k, x_k0, p) and of -mu_0^T x_0(p, u(0)) in p."""
+        p = np.asarray(p, float).ravel()
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.size
+        n_x = Rx.shape[3]
+        W = Y[:, n_x:].reshape(n, N, n_x * d)
+        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+        U = self._controls(inputs)
+        m = n * N
+        Vp = yp[:, n_x:].reshape(n, N, n_x * d, n_p)
+        XSp = np.concatenate([yp[:, None, :n_x], Vp[:, :-1, -n_x:]], axis=1)
+        Ze = np.ascontiguousarray(np.concatenate([Vp, XSp], axis=2).transpose(0, 1, 3, 2)).reshape(m, -1)
+        ypv = np.ascontiguousarray(yp.transpose(0, 2, 1)).reshape(n, -1)
+        out = np.zeros((lam.shape[0], n_p, n_p))
+        for a in range(lam.shape[0]):
+            hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
+            b = -hyl[:, :, 0]
+            bV = b[:, n_x:].reshape(n, N, n_x * d)
+            mu = np.empty((n, N, n_x * d))
+            nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
+            for k in range(N - 1, -1, -1):
+                rhs = bV[:, k].copy()
+                rhs[:, -n_x:] -= nxt
+                mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
+                nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
+            mu0 = b[:, :n_x] - nxt
+            He = _mapped_call(self._maps, self.element_hessian, m,
+                              [W.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+                               np.tile(self.steps, n)[:, None], mu.reshape(m, -1), Ze])[0]
+            H0 = _mapped_call(self._maps, self.x0_hessian, n, [p, inputs, mu0])[0]
+            out[a] = Hh.sum(axis=0) + He.sum(axis=0) - H0.sum(axis=0)
+        return 0.5 * (out + out.transpose(0, 2, 1))
 
     def outputs_and_sensitivities(self, p, inputs, Y, Yp):
         """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""

@@ -89,3 +89,16 @@ def test_a_bound_at_the_optimum_falls_back_to_ipopt():
                    h=lambda x, p, u: m.h_fun(x, ca.SX(0, 1), p, u), horizon=m.horizon)
     est = identify(m2, _campaign(1), [1.5, 50.0, 1.0, 70.0])
     assert est.extra["solver"] != "reduced Newton" and abs(est.p[3] - 75.0) <= 1e-6
+
+
+def test_second_derivatives_equal_the_generic_adjoint():
+    from models.sensitivity import Sensitivities, sensitivities
+    cm = collocate(build(), TIMES, max_step=0.25)
+    Y = trajectory_numerics(cm).states(P, Q)
+    fast = sensitivities(cm, P, Q, Y)
+    lam = np.random.default_rng(0).standard_normal((2, Q.shape[0], cm.n_S))
+    H = fast.hessians(lam)
+    fast._filled()                                       # the generic per-experiment adjoints (sparse LU)
+    Hg = Sensitivities.hessians(fast, lam)
+    assert np.abs(H - Hg).max() <= 1e-10 * np.abs(Hg).max()
+    assert np.allclose(fast.adjoint(lam[0]).shape, (Q.shape[0], cm.n_y))
