@@ -25,13 +25,19 @@ algebraic states): DAE models keep the generic solves of :mod:`models.state`.
 """
 from __future__ import annotations
 
+import threading
+from typing import Callable, Sequence
+
 import casadi as ca
 import numpy as np
 
 from .errors import StateSolveError
 from .state import batched_function
 
-__all__ = ["TrajectoryNumerics", "trajectory_numerics"]
+__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged"]
+
+#: the broker of this thread's member fit in :func:`run_merged` (None outside one)
+_LOCAL = threading.local()
 
 #: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
 #: :meth:`models.collocation.CollocatedModel._element_functions` allows the same)
@@ -39,6 +45,17 @@ _MAX_ITER = 60
 #: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
 #: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
 MARCH_IN_CASADI_MAX = 8
+
+
+def _params(p, n: int) -> np.ndarray:
+    """p shared by all n experiments, shape (n_p,), or one row per experiment, shape (n, n_p)."""
+    p = np.asarray(p, float)
+    return p.ravel() if p.ndim < 2 else p.reshape(n, -1)
+
+
+def _per_element(p: np.ndarray, N: int) -> np.ndarray:
+    """p at the n N (experiment, element) points, experiment-major."""
+    return p if p.ndim == 1 else np.repeat(p, N, axis=0)
 
 
 def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
@@ -105,12 +122,18 @@ class TrajectoryNumerics:
         return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
 
     def states(self, p, inputs) -> np.ndarray:
-        """The collocation solution y_j (n_q, n_y) of every experiment at p, element after element.
+        """The collocation solution y_j (n_q, n_y) of every experiment at p (shared, or a row per
+        experiment), element after element.
 
         Raises StateSolveError naming the experiment and the element where Newton fails (the
         trajectory blows up or is too stiff for the element)."""
-        p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "states", p, inputs)
+        return self._states(_params(p, inputs.shape[0]), inputs)
+
+    def _states(self, p, inputs) -> np.ndarray:
         n, d, N = inputs.shape[0], self.d, self.N
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
         n_x = x0.shape[1]
@@ -136,13 +159,14 @@ class TrajectoryNumerics:
         if fm is None:
             march = self.model._march_functions()[0]
             fm = self._maps[("march", n)] = march.map(n)
-        P = np.concatenate([np.broadcast_to(p, (n, N, p.size)), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
+        P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
                            axis=2)                                   # (n, N, n_par): column k of experiment j
         _, V = fm(ca.DM(np.ascontiguousarray(x0.T)), ca.DM(np.ascontiguousarray(P.reshape(n * N, -1).T)))
         V = np.asarray(V).T.reshape(n, N, n_x * d)
         XS = np.concatenate([x0[:, None, :], V[:, :-1, -n_x:]], axis=1)
         m = n * N
-        R = _mapped_call(self._maps, self.newton, m, [V.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+        R = _mapped_call(self._maps, self.newton, m, [V.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N),
+                                                      U.reshape(m, -1),
                                                       np.tile(self.steps, n)[:, None]])[0][:, :, 0]
         Vf = V.reshape(m, -1)
         bad = ~(np.all(np.isfinite(Vf), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(Vf), axis=1))))
@@ -189,6 +213,7 @@ class TrajectoryNumerics:
 
     def _fail(self, inputs, j, k, p):
         b = np.asarray(self.model.mesh.boundaries)
+        p = p if np.ndim(p) == 1 else p[j]
         raise StateSolveError(
             f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
             f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j} "
@@ -201,9 +226,14 @@ class TrajectoryNumerics:
 
     def sweep(self, p, inputs, Y):
         """(y'(p) (n_q, n_y, n_p), R_V (n_q, N, n_x d, n_x d), R_x0 (n_q, N, n_x d, n_x)) at the states Y."""
-        p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.size
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "sweep", p, inputs, np.asarray(Y, float))
+        return self._sweep(_params(p, inputs.shape[0]), inputs, np.asarray(Y, float))
+
+    def _sweep(self, p, inputs, Y):
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.shape[-1]
         _, x0p = _mapped_call(self._maps, self.init, n, [p, inputs])
         n_x = x0p.shape[1]
         W = Y[:, n_x:].reshape(n, N, n_x * d)
@@ -211,7 +241,7 @@ class TrajectoryNumerics:
         U = self._controls(inputs)
         m = n * N
         RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
-                                  [W.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+                                  [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
                                    np.tile(self.steps, n)[:, None]])
         RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
         out = np.empty((n, Y.shape[1], n_p))
@@ -224,13 +254,20 @@ class TrajectoryNumerics:
         return out, RV, Rx
 
     def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
+        """See :meth:`hessian_terms`: their sum over the experiments, shape (m, n_p, n_p)."""
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "hessians", p, inputs, Y, yp, RV, Rx, lam)
+        return self.hessian_terms(_params(p, inputs.shape[0]), inputs, Y, yp, RV, Rx, lam).sum(axis=1)
+
+    def hessian_terms(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
         r"""sum_j d^2/dp^2 [lam_j^T h(y_j(p), p, q_j)] for weight sets ``lam`` (m, n_q, n_S), shape (m, n_p, n_p):
         Z^T grad^2 (lam^T h + mu^T E) Z with Z = (y', I) and the adjoint (dE/dy)^T mu = -(dh/dy)^T lam
         solved backwards through the elements (R_V,k^T mu_k = b_k - R_x0,k+1^T mu_k+1 on element k's
         end point; mu of x(0) - x_0(p, u(0)) = b_0 - R_x0,0^T mu_0); the Hessian of mu^T E is that of
         every element's mu_k^T R_k in (V_k, x_k0, p) and of -mu_0^T x_0(p, u(0)) in p."""
-        p = np.asarray(p, float).ravel()
-        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.size
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, yp.shape[2]
+        p = _params(p, n)
         n_x = Rx.shape[3]
         W = Y[:, n_x:].reshape(n, N, n_x * d)
         XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
@@ -240,7 +277,7 @@ class TrajectoryNumerics:
         XSp = np.concatenate([yp[:, None, :n_x], Vp[:, :-1, -n_x:]], axis=1)
         Ze = np.ascontiguousarray(np.concatenate([Vp, XSp], axis=2).transpose(0, 1, 3, 2)).reshape(m, -1)
         ypv = np.ascontiguousarray(yp.transpose(0, 2, 1)).reshape(n, -1)
-        out = np.zeros((lam.shape[0], n_p, n_p))
+        out = np.zeros((lam.shape[0], n, n_p, n_p))
         for a in range(lam.shape[0]):
             hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
             b = -hyl[:, :, 0]
@@ -254,16 +291,22 @@ class TrajectoryNumerics:
                 nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
             mu0 = b[:, :n_x] - nxt
             He = _mapped_call(self._maps, self.element_hessian, m,
-                              [W.reshape(m, -1), XS.reshape(m, -1), p, U.reshape(m, -1),
+                              [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
                                np.tile(self.steps, n)[:, None], mu.reshape(m, -1), Ze])[0]
             H0 = _mapped_call(self._maps, self.x0_hessian, n, [p, inputs, mu0])[0]
-            out[a] = Hh.sum(axis=0) + He.sum(axis=0) - H0.sum(axis=0)
-        return 0.5 * (out + out.transpose(0, 2, 1))
+            out[a] = Hh + He.reshape(n, N, n_p, n_p).sum(axis=1) - H0
+        return 0.5 * (out + out.transpose(0, 1, 3, 2))
 
     def outputs_and_sensitivities(self, p, inputs, Y, Yp):
         """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""
-        p = np.asarray(p, float).ravel()
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "outputs_and_sensitivities", p, inputs, Y, Yp)
+        return self._outputs_and_sensitivities(p, inputs, Y, Yp)
+
+    def _outputs_and_sensitivities(self, p, inputs, Y, Yp):
         n = inputs.shape[0]
+        p = _params(p, n)
         ypv = np.ascontiguousarray(Yp.transpose(0, 2, 1)).reshape(n, -1)     # column-major per experiment
         h, G = _mapped_call(self._maps, self.outputs, n, [Y, ypv, p, inputs])
         return h[:, :, 0], G
@@ -272,7 +315,7 @@ class TrajectoryNumerics:
         """h (n_q, n_S) at the states Y (solved at p when None)."""
         inputs = np.atleast_2d(np.asarray(inputs, float))
         Y = self.states(p, inputs) if Y is None else Y
-        return _mapped_call(self._maps, self.h_only, inputs.shape[0], [Y, np.asarray(p, float).ravel(), inputs])[0][:, :, 0]
+        return _mapped_call(self._maps, self.h_only, inputs.shape[0], [Y, _params(p, inputs.shape[0]), inputs])[0][:, :, 0]
 
 
 def trajectory_numerics(cm) -> TrajectoryNumerics | None:
@@ -285,3 +328,122 @@ def trajectory_numerics(cm) -> TrajectoryNumerics | None:
     if num is None:
         num = cm.cache.put("trajectory", None, TrajectoryNumerics(cm))
     return num
+
+
+def _split(a: np.ndarray, sizes) -> list:
+    return np.split(a, np.cumsum(sizes)[:-1], axis=0)
+
+
+class _Broker:
+    """Merges the trajectory evaluations of the threads of :func:`run_merged`: a thread's call waits
+    until every running thread has one pending (or has finished); the calls are then evaluated
+    together, kind by kind, with each experiment at its own thread's p (one set of mapped calls and
+    batched solves for all), and each thread gets its own rows back.  A merged evaluation that fails
+    (a state solve of one thread's p) is redone thread by thread, so that the error reaches its own
+    thread only."""
+
+    def __init__(self, n_running: int):
+        self._cv = threading.Condition()
+        self._running = n_running
+        self._pending = []
+
+    def call(self, traj: "TrajectoryNumerics", kind: str, p, inputs, *rest):
+        slot = {}
+        with self._cv:
+            self._pending.append((traj, kind, p, inputs, rest, slot))
+            self._flush_if_ready()
+            while "out" not in slot and "error" not in slot:
+                self._cv.wait()
+        if "error" in slot:
+            raise slot["error"]
+        return slot["out"]
+
+    def finished(self) -> None:
+        with self._cv:
+            self._running -= 1
+            self._flush_if_ready()
+
+    def _flush_if_ready(self) -> None:
+        if not self._pending or len(self._pending) < self._running:
+            return
+        pending, self._pending = self._pending, []
+        groups = {}
+        for item in pending:
+            groups.setdefault((id(item[0]), item[1], _lam_sets(item)), []).append(item)
+        for items in groups.values():
+            try:
+                outs = _merged(items)
+            except Exception:                    # noqa: BLE001 - redone one by one: each error to its own thread
+                outs = None
+            for i, item in enumerate(items):
+                slot = item[5]
+                if outs is not None:
+                    slot["out"] = outs[i]
+                    continue
+                try:
+                    slot["out"] = _direct(*item[:5])
+                except Exception as exc:         # noqa: BLE001 - re-raised in the calling thread
+                    slot["error"] = exc
+        self._cv.notify_all()
+
+
+def _lam_sets(item) -> int:
+    return int(np.shape(item[4][-1])[0]) if item[1] == "hessians" else 0
+
+
+def _direct(traj, kind, p, inputs, rest):
+    n = inputs.shape[0]
+    if kind == "states":
+        return traj._states(_params(p, n), inputs)
+    if kind == "sweep":
+        return traj._sweep(_params(p, n), inputs, *rest)
+    if kind == "outputs_and_sensitivities":
+        return traj._outputs_and_sensitivities(p, inputs, *rest)
+    return traj.hessian_terms(_params(p, n), inputs, *rest).sum(axis=1)
+
+
+def _merged(items) -> list:
+    """The calls of one kind evaluated together (see :class:`_Broker`)."""
+    traj, kind = items[0][0], items[0][1]
+    sizes = [it[3].shape[0] for it in items]
+    n_p = traj.model.n_p
+    P = np.concatenate([np.broadcast_to(_params(it[2], n), (n, n_p)) for it, n in zip(items, sizes)])
+    Q = np.concatenate([it[3] for it in items])
+    if kind == "states":
+        return _split(traj._states(P, Q), sizes)
+    if kind == "sweep":
+        outs = traj._sweep(P, Q, np.concatenate([it[4][0] for it in items]))
+        return list(zip(*(_split(o, sizes) for o in outs)))
+    if kind == "outputs_and_sensitivities":
+        outs = traj._outputs_and_sensitivities(P, Q, *(np.concatenate([it[4][i] for it in items]) for i in range(2)))
+        return list(zip(*(_split(o, sizes) for o in outs)))
+    Y, yp, RV, Rx = (np.concatenate([it[4][i] for it in items]) for i in range(4))
+    lam = np.concatenate([it[4][4] for it in items], axis=1)
+    terms = traj.hessian_terms(P, Q, Y, yp, RV, Rx, lam)          # (m, n, n_p, n_p)
+    return [t.sum(axis=1) for t in np.split(terms, np.cumsum(sizes)[:-1], axis=1)]
+
+
+def run_merged(tasks: Sequence[Callable[[], object]]) -> list:
+    """Run the tasks (e.g. one fit of a collocated model per data set) each in its own thread, with
+    their evaluations of :class:`TrajectoryNumerics` merged (see :class:`_Broker`): the same
+    computations as running them one after the other, with one set of mapped CasADi calls and
+    batched solves per step for all of them.  Returns each task's result, or the exception it raised."""
+    broker = _Broker(len(tasks))
+    results = [None] * len(tasks)
+
+    def run(i):
+        _LOCAL.broker = broker
+        try:
+            results[i] = tasks[i]()
+        except Exception as exc:                 # noqa: BLE001 - handed back to the caller as the task's result
+            results[i] = exc
+        finally:
+            _LOCAL.broker = None
+            broker.finished()
+
+    threads = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(tasks))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return results

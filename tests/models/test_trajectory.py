@@ -102,3 +102,19 @@ def test_second_derivatives_equal_the_generic_adjoint():
     Hg = Sensitivities.hessians(fast, lam)
     assert np.abs(H - Hg).max() <= 1e-10 * np.abs(Hg).max()
     assert np.allclose(fast.adjoint(lam[0]).shape, (Q.shape[0], cm.n_y))
+
+
+def test_batch_members_of_a_collocated_model_equal_identify():
+    from identification import Measurements
+    from identification.batch import fit_batch
+    est = identify(build(), _campaign(2), P)
+    base = est.data
+    rng = np.random.default_rng(3)
+    sets = [Measurements(base.inputs, base.z + 0.01 * rng.standard_normal(base.z.shape), base.sigma,
+                         sensors=base.sensors) for _ in range(4)]
+    fit = fit_batch(est.model, sets, est.p)
+    assert est.model.n_y > 60 and fit.ok.all() and not fit.fallbacks
+    for r in range(4):
+        single = identify(est.model, sets[r], est.p)
+        assert np.all(np.abs(fit.p[r] - single.p) <= 1e-8 * single.stderr)
+        assert np.allclose(fit.cov[r], single.cov, rtol=1e-8)
