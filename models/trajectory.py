@@ -97,7 +97,7 @@ class TrajectoryNumerics:
         y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
         h = cm.h_fun(y, p, q)
         G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
-        self.outputs = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
+        self.output_terms = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
         self.h_only = ca.Function("traj_h", [y, p, q], [h])
         # second order: Z^T grad^2 L Z of L = lam^T h + mu^T E, term by term (see hessians)
         lam = ca.SX.sym("lam", cm.n_S)
@@ -187,10 +187,10 @@ class TrajectoryNumerics:
             R, RV = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])
             R = R[:, :, 0]
             fresh = True
-            ok = np.all(np.isfinite(R), axis=1) & np.all(np.isfinite(RV), axis=(1, 2))
-            if np.any(active & ~ok):
-                self._fail(inputs, int(np.flatnonzero(active & ~ok)[0]), k, p)
-            active &= np.max(np.abs(R), axis=1) > 1e-13
+            rmax = np.max(np.abs(R), axis=1)                # NaN or inf when R is not finite
+            if not np.all(np.isfinite(rmax[active])):
+                self._fail(inputs, int(np.flatnonzero(active & ~np.isfinite(rmax))[0]), k, p)
+            active &= rmax > 1e-13
             if not np.any(active):
                 break
             try:
@@ -308,7 +308,7 @@ class TrajectoryNumerics:
         n = inputs.shape[0]
         p = _params(p, n)
         ypv = np.ascontiguousarray(Yp.transpose(0, 2, 1)).reshape(n, -1)     # column-major per experiment
-        h, G = _mapped_call(self._maps, self.outputs, n, [Y, ypv, p, inputs])
+        h, G = _mapped_call(self._maps, self.output_terms, n, [Y, ypv, p, inputs])
         return h[:, :, 0], G
 
     def outputs(self, p, inputs, Y=None) -> np.ndarray:
