@@ -167,8 +167,10 @@ class ImplicitObjective:
         problem = self._problem
         p = x * self._sp
         Y = None
-        if trajectory_numerics(problem.model) is not None:      # a collocated ODE: no guess needed
-            Y = solve_states(problem.model, p, problem.data.inputs)
+        traj = trajectory_numerics(problem.model)
+        if traj is not None:          # a collocated ODE: Newton on all trajectories from the prediction, else marched
+            guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+            Y = traj.states(p, problem.data.inputs, guess)
         elif near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
             guess = near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
             try:

@@ -589,7 +589,7 @@ def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
     traj = trajectory_numerics(model)
     if traj is not None:
         try:
-            return traj.states(p, inputs)
+            return traj.states(p, inputs, Y0)
         except StateSolveError:
             if Y0 is None:
                 raise

@@ -30,6 +30,7 @@ from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
+import scipy.linalg as sla
 
 from .errors import StateSolveError
 from .state import batched_function
@@ -88,6 +89,7 @@ class TrajectoryNumerics:
         RV = ca.jacobian(R, V)
         self.newton = ca.Function("traj_newton", [V, xs, p, U, hk], [R, RV])
         self.blocks = ca.Function("traj_blocks", [V, xs, p, U, hk], [RV, ca.jacobian(R, xs), ca.jacobian(R, p)])
+        self.residual_blocks = ca.Function("traj_residual_blocks", [V, xs, p, U, hk], [R, RV, ca.jacobian(R, xs)])
         q = ca.SX.sym("q", dyn.n_q_dim)
         x0 = dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.5 * b[1]))
         self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
@@ -121,19 +123,24 @@ class TrajectoryNumerics:
         """U of every experiment and element, shape (n_q, N, n_u d)."""
         return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
 
-    def states(self, p, inputs) -> np.ndarray:
+    def states(self, p, inputs, guess=None) -> np.ndarray:
         """The collocation solution y_j (n_q, n_y) of every experiment at p (shared, or a row per
-        experiment), element after element.
+        experiment): with a ``guess`` of the states (e.g. predicted from a nearby p), Newton on all
+        trajectories at once (:meth:`_newton`); else, or when that fails, element after element.
 
         Raises StateSolveError naming the experiment and the element where Newton fails (the
         trajectory blows up or is too stiff for the element)."""
         inputs = np.atleast_2d(np.asarray(inputs, float))
         broker = getattr(_LOCAL, "broker", None)
         if broker is not None:
-            return broker.call(self, "states", p, inputs)
-        return self._states(_params(p, inputs.shape[0]), inputs)
+            return broker.call(self, "states", p, inputs, guess)
+        return self._states(_params(p, inputs.shape[0]), inputs, guess)
 
-    def _states(self, p, inputs) -> np.ndarray:
+    def _states(self, p, inputs, guess=None) -> np.ndarray:
+        if guess is not None:
+            Y = self._newton(p, inputs, np.asarray(guess, float))
+            if Y is not None:
+                return Y
         n, d, N = inputs.shape[0], self.d, self.N
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
         n_x = x0.shape[1]
@@ -148,6 +155,69 @@ class TrajectoryNumerics:
             Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
             xs = V[:, -n_x:]
         return Y
+
+    def _band(self, n: int, n_x: int):
+        """((l, u), flat positions in the (l + u + 1, n n_y) band storage of dE/dy's entries: the identity of
+        x(0), then R_V and R_x0 of every (experiment, element) in C order) for n stacked experiments."""
+        hit = self._maps.get(("band", n))
+        if hit is None:
+            d, N = self.d, self.N
+            nd, n_y = n_x * d, n_x * (1 + N * d)
+            l, u = nd + n_x - 1, nd - 1
+            o = (n_x + np.arange(N) * nd)[:, None, None]
+            a = np.arange(nd)[None, :, None]
+            rows = [np.broadcast_to(o + a, (N, nd, nd)), np.broadcast_to(o + a, (N, nd, n_x))]
+            cols = [np.broadcast_to(o + np.arange(nd)[None, None, :], (N, nd, nd)),
+                    np.broadcast_to(o - n_x + np.arange(n_x)[None, None, :], (N, nd, n_x))]
+            off = np.arange(n) * n_y
+            r = np.concatenate([(off[:, None] + np.arange(n_x)).ravel()] + [(off[:, None] + x.ravel()).ravel() for x in rows])
+            c = np.concatenate([(off[:, None] + np.arange(n_x)).ravel()] + [(off[:, None] + x.ravel()).ravel() for x in cols])
+            hit = self._maps[("band", n)] = ((l, u), (u + r - c) * (n * n_y) + c)
+        return hit
+
+    def _banded_solve(self, RV, Rx, B):
+        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)), by LAPACK's banded LU with partial pivoting."""
+        n_x = Rx.shape[-1]
+        n = B.shape[0] // (n_x * (1 + self.N * self.d))
+        (l, u), pos = self._band(n, n_x)
+        ab = np.zeros((l + u + 1) * B.shape[0])
+        ab[pos] = np.concatenate([np.ones(n * n_x), RV.ravel(), Rx.ravel()])
+        return sla.solve_banded((l, u), ab.reshape(l + u + 1, -1), B, overwrite_ab=True, overwrite_b=True,
+                                check_finite=False)
+
+    def _newton(self, p, inputs, Y):
+        """Newton on the whole collocation system of every experiment from the guess Y (one mapped
+        evaluation and one banded solve per iteration); the states, or None when it does not converge
+        (at most 8 iterations, the residual not decreasing, or non-finite values).  Converged when
+        the step satisfies |dy| <= 1e-12 (1 + |y|) at every experiment (the test of
+        :func:`models.state.solve_state`)."""
+        n, d, N = inputs.shape[0], self.d, self.N
+        x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
+        n_x = x0.shape[1]
+        U = self._controls(inputs).reshape(n * N, -1)
+        pe, steps = _per_element(p, N), np.tile(self.steps, n)[:, None]
+        Y = np.array(Y, float)
+        if Y.shape != (n, n_x * (1 + N * d)):
+            return None
+        Y[:, :n_x] = x0                                   # x(0) - x0(p, u(0)) = 0 exactly
+        prev = np.inf
+        for _ in range(8):
+            W = Y[:, n_x:].reshape(n, N, n_x * d)
+            XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+            R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
+                                     [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
+            norm = float(np.max(np.abs(R)))
+            if not (np.isfinite(norm) and np.all(np.isfinite(RV)) and norm <= prev):
+                return None
+            prev = norm
+            E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
+            dY = self._banded_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+            if not np.all(np.isfinite(dY)):
+                return None
+            Y -= dY
+            if np.all(np.max(np.abs(dY), axis=1) <= 1e-12 * (1 + np.max(np.abs(Y), axis=1))):
+                return Y
+        return None
 
     def _march(self, p, inputs, x0, U):
         """The same element-by-element Newton solves in one CasADi call for all experiments: the
@@ -244,13 +314,8 @@ class TrajectoryNumerics:
                                   [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
                                    np.tile(self.steps, n)[:, None]])
         RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
-        out = np.empty((n, Y.shape[1], n_p))
-        out[:, :n_x] = x0p
-        xsp = x0p
-        for k in range(N):
-            Vp = -np.linalg.solve(RV[:, k], Rx[:, k] @ xsp + Rp[:, k])
-            out[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = Vp
-            xsp = Vp[:, -n_x:]
+        B = np.concatenate([x0p, -Rp.reshape(n, N * n_x * d, n_p)], axis=1)      # -dE/dp
+        out = self._banded_solve(RV, Rx, B.reshape(-1, n_p)).reshape(n, -1, n_p)
         return out, RV, Rx
 
     def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
@@ -394,7 +459,7 @@ def _lam_sets(item) -> int:
 def _direct(traj, kind, p, inputs, rest):
     n = inputs.shape[0]
     if kind == "states":
-        return traj._states(_params(p, n), inputs)
+        return traj._states(_params(p, n), inputs, rest[0])
     if kind == "sweep":
         return traj._sweep(_params(p, n), inputs, *rest)
     if kind == "outputs_and_sensitivities":
@@ -410,7 +475,9 @@ def _merged(items) -> list:
     P = np.concatenate([np.broadcast_to(_params(it[2], n), (n, n_p)) for it, n in zip(items, sizes)])
     Q = np.concatenate([it[3] for it in items])
     if kind == "states":
-        return _split(traj._states(P, Q), sizes)
+        guesses = [it[4][0] for it in items]
+        guess = None if any(g is None for g in guesses) else np.concatenate(guesses)
+        return _split(traj._states(P, Q, guess), sizes)
     if kind == "sweep":
         outs = traj._sweep(P, Q, np.concatenate([it[4][0] for it in items]))
         return list(zip(*(_split(o, sizes) for o in outs)))
