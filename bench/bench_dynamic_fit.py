@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import resource
 import statistics
 import sys
 import time
@@ -129,9 +130,14 @@ def montecarlo(n_rep: int = 1000, workers: int = 2, seed: int = 0):
     est = identify(build(), data, P_TRUE)
     split = Split("early vs late experiments", [0, 2, 4], [1, 3, 5])
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers)
+    ch0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     res, w, c = _timed(lambda: size_study(est.model, est.p, Q, est.data.sigma, [split], n_M=2, settings=settings))
-    return {"n_rep": n_rep, "workers": workers, "wall_s": w, "cpu_s_parent": c, "n_y": est.model.n_y,
-            "summary": str(getattr(res, "summary", lambda: res)())[:2000]}
+    ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    children = (ch1.ru_utime + ch1.ru_stime) - (ch0.ru_utime + ch0.ru_stime)
+    return {"n_rep": n_rep, "workers": workers, "wall_s": w, "cpu_s_parent": c, "cpu_s_workers": children,
+            "n_y": est.model.n_y,
+            "rejection_rate": str(res.rejection_rate()), "gate_failure_rate": str(res.gate_failure_rate()),
+            "coverage": str(res.coverage()), "table": res.table()}
 
 
 def _machine():

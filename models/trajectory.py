@@ -46,6 +46,9 @@ _MAX_ITER = 60
 #: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
 #: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
 MARCH_IN_CASADI_MAX = 8
+#: up to this many stacked unknowns (experiments x states) dE/dy is solved by one banded LU, above by
+#: forward substitution through the elements (the banded LU's work grows with the band's square)
+BANDED_MAX = 20000
 
 
 def _params(p, n: int) -> np.ndarray:
@@ -176,9 +179,25 @@ class TrajectoryNumerics:
         return hit
 
     def _banded_solve(self, RV, Rx, B):
-        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)), by LAPACK's banded LU with partial pivoting."""
+        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)): by LAPACK's banded LU with partial
+        pivoting (one call) up to :data:`BANDED_MAX` unknowns, else by forward substitution through the
+        elements (a batched LU of the (n, n_x d, n_x d) blocks R_V per element: fewer operations, a
+        Python loop over the elements)."""
         n_x = Rx.shape[-1]
-        n = B.shape[0] // (n_x * (1 + self.N * self.d))
+        n_y = n_x * (1 + self.N * self.d)
+        n = B.shape[0] // n_y
+        if B.shape[0] > BANDED_MAX:
+            RV = RV.reshape((n, self.N) + RV.shape[-2:])
+            Rx = Rx.reshape((n, self.N) + Rx.shape[-2:])
+            B = B.reshape(n, n_y, -1)
+            out = np.empty_like(B)
+            out[:, :n_x] = B[:, :n_x]                       # the rows of x(0) - x0: identity
+            nd, prev = n_x * self.d, B[:, :n_x]
+            for k in range(self.N):
+                o = n_x + k * nd
+                out[:, o:o + nd] = np.linalg.solve(RV[:, k], B[:, o:o + nd] - Rx[:, k] @ prev)
+                prev = out[:, o + nd - n_x:o + nd]
+            return out.reshape(n * n_y, -1)
         (l, u), pos = self._band(n, n_x)
         ab = np.zeros((l + u + 1) * B.shape[0])
         ab[pos] = np.concatenate([np.ones(n * n_x), RV.ravel(), Rx.ravel()])
