@@ -160,6 +160,8 @@ def _run(args) -> int:
         return _init(args)
     out = check_out_dir(args.out)
     cfg = load_config(args.config)
+    from .limits import check_sizes
+    check_sizes(cfg, args.command, runs=getattr(args, "runs", None))
     chatter = Chatter()
     try:
         with chatter:

@@ -65,7 +65,7 @@ __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "Paramete
            "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
            "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
-           "settings_values"]
+           "settings_values", "config_error"]
 
 #: factor converting a declared length unit to the model's mm
 LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "m": 1e3}
@@ -961,6 +961,12 @@ def _check_names(ctx, cfg: StudyConfig) -> None:
                              ("simulate", cfg.simulate.variant)):
         if variant:
             _one_of(ctx, section, "variant", variant, cfg.model.variants, "variant", "the [model] variants")
+
+
+def config_error(cfg: StudyConfig, section: str, key: str, msg: str) -> ConfigError:
+    """A :class:`ConfigError` for a check made after parsing: names ``cfg``'s file, the line of ``key``
+    in ``[section]`` (when the key is in the file) and the key."""
+    return _Ctx(cfg.path, cfg.text).error(section, key, msg)
 
 
 def load_config(path: str | Path) -> StudyConfig:
