@@ -59,6 +59,7 @@ from identification.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.press import PRESS_SCENARIO_NAMES
 
+from .checks import check_config
 from .units import known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
@@ -930,6 +931,7 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
+    check_config(cfg, ctx.error)
     return cfg
 
 
