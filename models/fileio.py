@@ -5,7 +5,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_text"]
+__all__ = ["atomic_write_text", "create_text"]
 
 
 def atomic_write_text(path, text: str) -> Path:
@@ -25,8 +25,49 @@ def atomic_write_text(path, text: str) -> Path:
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
             fh.write(text)
         os.replace(tmp, path)
+    except OSError as exc:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        if exc.filename is None:         # e.g. [Errno 28] No space left on device: name the file
+            raise OSError(exc.errno, f"{exc.strerror} (writing {path})", str(path)) from None
+        raise
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    return path
+
+
+def create_text(path, text: str) -> Path:
+    """Create the new file ``path`` holding ``text``, complete or not at all, never replacing a file.
+
+    The text goes to a temporary file in the target folder, which is then hard-linked to ``path``
+    (``os.link`` fails if ``path`` exists, so of two concurrent writers exactly one succeeds and a
+    reader never sees a partial file); where hard links are not supported the file is opened with
+    mode ``"x"`` (exclusive creation).
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists.
+    """
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(17, "File exists", str(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+            fh.write(text)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise
+        except OSError:                  # no hard links on this file system
+            with open(path, "x", newline="", encoding="utf-8") as fh:
+                fh.write(text)
+    finally:
+        os.unlink(tmp)
     return path

@@ -451,7 +451,7 @@ def _tidy_block(path, b, cols, value_column, sensors, state) -> tuple:
     qa = (num(cols["actual_force"][0], cols["actual_force"][1], allow_missing=False) if "actual_force" in cols
           else np.full(qs.shape, np.nan))
     v = num(cols[value_column][0], cols[value_column][1])
-    return b.lines, s_code, idx, k_code, qs, qa, v
+    return b.lines, s_code.astype(np.int32), idx.astype(np.int32), k_code.astype(np.int32), qs, qa, v
 
 
 def _tidy_rows(path: Path, header: list, cols: dict, offset: int, value_column: str, sensors) -> _TidyTable:
@@ -462,7 +462,10 @@ def _tidy_rows(path: Path, header: list, cols: dict, offset: int, value_column: 
              for b in csv_stream.blocks(path, len(header), numeric, offset=offset)]
     if not parts:
         raise DataFileError(f"{path}: no data rows after the header")
-    arrays = [np.concatenate(a) for a in zip(*parts)]
+    arrays = []
+    for k in range(len(parts[0])):         # one column at a time, freeing the blocks' pieces
+        arrays.append(np.concatenate([p[k] for p in parts]))
+        parts = [p[:k] + (None,) + p[k + 1:] for p in parts]
     return _TidyTable(*arrays, series=list(state["series"]), sensors=list(state["sensors"]))
 
 
@@ -475,8 +478,8 @@ def _tidy_arrays(path: Path, t: _TidyTable, sens: tuple):
     """(q_set (n_q,), q_actual (n_M, n_q), z (n_M, n_q, n_S)) in the file's units; NaN where absent."""
     n_M, n_q, n_S = len(t.series), int(t.index.max()), len(sens)
     k = np.array([sens.index(s) for s in t.sensors], np.int64)[t.sensor_code]
-    j = t.index - 1
-    lin = (t.series_code * n_q + j) * n_S + k
+    j = t.index.astype(np.int64) - 1
+    lin = (t.series_code.astype(np.int64) * n_q + j) * n_S + k
     order = np.argsort(lin, kind="stable")
     dup = order[1:][lin[order][1:] == lin[order][:-1]]
     if dup.size:
@@ -492,7 +495,7 @@ def _tidy_arrays(path: Path, t: _TidyTable, sens: tuple):
         raise DataFileError(f"{path}:{t.line[r]}: set force {t.set_force[r]:g} of index {t.index[r]} differs from "
                             f"{q_set[j[r]]:g} given earlier for the same index")
     q_act = np.full(n_M * n_q, np.nan)
-    pair = t.series_code * n_q + j
+    pair = t.series_code.astype(np.int64) * n_q + j
     up, first = np.unique(pair, return_index=True)
     q_act[up] = t.actual_force[first]
     bad = np.flatnonzero(~_close(t.actual_force, q_act[pair]) & ~np.isnan(t.actual_force))

@@ -30,7 +30,7 @@ from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
 from .press import diagnosis_explanations, press_variant
 
-__all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
+__all__ = ["Study", "StudyResults", "prepare", "load_factory", "call_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
            "run_diagnosis", "Progress", "MissingPieceError", "FitFailedError",
            "PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate",
            "plan_discrimination"]
@@ -135,7 +135,7 @@ def _build_models(cfg: StudyConfig) -> dict:
         return out
     factory = _factory(cfg)
     for v in cfg.model.variants:
-        m = factory(v)
+        m = call_factory(factory, cfg.model.name, v, f"{cfg.path}: [model] name")
         if not isinstance(m, Model):
             raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
                               f"{type(m).__name__}, expected a models.Model")
@@ -145,6 +145,15 @@ def _build_models(cfg: StudyConfig) -> dict:
 
 def _factory(cfg: StudyConfig) -> Callable:
     return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
+
+
+def call_factory(factory: Callable, name: str, variant: str, where: str) -> Model:
+    """``factory(variant)``; a factory that calls ``sys.exit`` is a ConfigError (``where`` starts the message)."""
+    try:
+        return factory(variant)
+    except SystemExit as exc:
+        raise ConfigError(f"{where}: the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of "
+                          "returning a models.Model; raise an exception in the factory to report a problem") from None
 
 
 def load_factory(name: str, where: str) -> Callable:
