@@ -68,6 +68,10 @@ def create_text(path, text: str) -> Path:
         except OSError:                  # no hard links on this file system
             with open(path, "x", newline="", encoding="utf-8") as fh:
                 fh.write(text)
+    except OSError as exc:
+        if exc.filename is None:         # e.g. [Errno 28] No space left on device: name the file
+            raise OSError(exc.errno, f"{exc.strerror} (writing {path})", str(path)) from None
+        raise
     finally:
         os.unlink(tmp)
     return path

@@ -72,7 +72,7 @@ def check_config(cfg, error) -> None:
     both = sorted(set(o.include) & set(o.exclude))
     if both:
         raise error("oed", "exclude", f"sensor(s) {', '.join(both)} both included and excluded")
-    n_cand = len(o.candidate_points()) if (o.candidates or o.candidates_range) else None
+    n_cand = int(o.candidates_range[2]) if o.candidates_range else (len(o.candidates) if o.candidates else None)
     if n_cand is not None and o.n_points is not None and o.mode == "inputs" and o.n_points > n_cand:
         raise error("oed", "n_points", f"{o.n_points} input points chosen from {n_cand} candidates; give "
                     f"n_points <= {n_cand} or more candidates")
