@@ -135,7 +135,7 @@ def _build_models(cfg: StudyConfig) -> dict:
         return out
     factory = _factory(cfg)
     for v in cfg.model.variants:
-        m = call_factory(factory, cfg.model.name, v, f"{cfg.path}: [model] name")
+        m = call_factory(factory, cfg.model.name, v, lambda msg: config_error(cfg, "model", "name", msg))
         if not isinstance(m, Model):
             raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
                               f"{type(m).__name__}, expected a models.Model")
@@ -147,13 +147,14 @@ def _factory(cfg: StudyConfig) -> Callable:
     return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
 
 
-def call_factory(factory: Callable, name: str, variant: str, where: str) -> Model:
-    """``factory(variant)``; a factory that calls ``sys.exit`` is a ConfigError (``where`` starts the message)."""
+def call_factory(factory: Callable, name: str, variant: str, error: Callable) -> Model:
+    """``factory(variant)``; a factory that calls ``sys.exit`` raises ``error(message)`` (a ConfigError naming
+    the file and key) instead of ending the process silently."""
     try:
         return factory(variant)
     except SystemExit as exc:
-        raise ConfigError(f"{where}: the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of "
-                          "returning a models.Model; raise an exception in the factory to report a problem") from None
+        raise error(f"the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of returning a "
+                    "models.Model; raise an exception in the factory to report a problem") from None
 
 
 def load_factory(name: str, where: str) -> Callable:

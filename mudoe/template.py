@@ -127,7 +127,7 @@ def write_template(path, model_name: str | None = None) -> Path:
         text = template_text()
     else:
         factory = load_factory(model_name, "--model")
-        model = call_factory(factory, model_name, "default", "--model")
+        model = call_factory(factory, model_name, "default", lambda msg: ConfigError(f"--model: {msg}"))
         if not isinstance(model, Model):
             raise ConfigError(f"--model: {model_name}('default') returned {type(model).__name__}, expected a "
                               "models.Model")
