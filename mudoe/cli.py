@@ -94,6 +94,16 @@ def _bad_input_types():
     return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError)
 
 
+def _located(exc: Exception, args) -> str:
+    """The message of a bad-input error; a library error that names no file gets the study's config file."""
+    from identification.errors import DataError
+    from identification.splits import SplitError
+    msg, config = str(exc), getattr(args, "config", None)
+    if isinstance(exc, (DataError, SplitError)) and config and Path(config).name not in msg:
+        return f"{config}: {msg}"
+    return msg
+
+
 def _print_line(msg: str) -> None:
     print(" ".join(str(msg).split()), file=sys.stderr)
 
@@ -139,7 +149,7 @@ def _main(argv) -> int:
         from .study import MissingPieceError
         bad = _bad_input_types()
         if isinstance(exc, bad):
-            _print_line(f"mudoe {args.command}: error: {exc}")
+            _print_line(f"mudoe {args.command}: error: {_located(exc, args)}")
             return EXIT_BAD_INPUT
         if isinstance(exc, MissingPieceError):
             _print_line(f"mudoe {args.command}: not available: {exc}")
