@@ -21,7 +21,7 @@ import re
 
 import numpy as np
 
-__all__ = ["check_config", "check_model", "check_data", "table_line"]
+__all__ = ["check_config", "check_model", "check_data", "table_line", "call_factory", "study_splits"]
 
 
 def table_line(text: str, table: str, k: int, key: str) -> int | None:
@@ -150,3 +150,24 @@ def check_data(cfg, campaign, splits, n_p: int) -> None:
                 raise _custom_error(cfg, custom[sp.name], key, msg) from None
             section, key = ("splits.random", "n") if sp.name.startswith("random ") else ("splits", "scenarios")
             raise config_error(cfg, section, key, msg) from None
+
+
+def call_factory(factory, name: str, variant: str, error):
+    """``factory(variant)``; a factory that calls ``sys.exit`` raises ``error(message)`` (a ConfigError naming
+    the file and key) instead of ending the process silently."""
+    try:
+        return factory(variant)
+    except SystemExit as exc:
+        raise error(f"the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of returning a "
+                    "models.Model; raise an exception in the factory to report a problem") from None
+
+
+def study_splits(cfg, campaign, make) -> tuple:
+    """``make(cfg, n_q, q_set)``: the study's splits; a split the data cannot hold names the [splits] key."""
+    from identification.splits import SplitError
+    from .config import config_error
+    try:
+        return make(cfg, campaign.n_q, campaign.q_set)
+    except SplitError as exc:
+        section, key = ("splits.random", "n") if cfg.splits.random.n else ("splits", "scenarios")
+        raise config_error(cfg, section, key, f"{exc} (the data hold {campaign.n_q} inputs)") from None

@@ -24,13 +24,13 @@ from models.campaign import Campaign
 from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 
-from .checks import check_data, check_model
+from .checks import call_factory, check_data, check_model, study_splits
 from .config import ConfigError, StudyConfig, config_error
 from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
 from .press import diagnosis_explanations, press_variant
 
-__all__ = ["Study", "StudyResults", "prepare", "load_factory", "call_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
+__all__ = ["Study", "StudyResults", "prepare", "load_factory", "SimulatedCampaign", "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate",
            "run_diagnosis", "Progress", "MissingPieceError", "FitFailedError",
            "PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate",
            "plan_discrimination"]
@@ -145,16 +145,6 @@ def _build_models(cfg: StudyConfig) -> dict:
 
 def _factory(cfg: StudyConfig) -> Callable:
     return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
-
-
-def call_factory(factory: Callable, name: str, variant: str, error: Callable) -> Model:
-    """``factory(variant)``; a factory that calls ``sys.exit`` raises ``error(message)`` (a ConfigError naming
-    the file and key) instead of ending the process silently."""
-    try:
-        return factory(variant)
-    except SystemExit as exc:
-        raise error(f"the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of returning a "
-                    "models.Model; raise an exception in the factory to report a problem") from None
 
 
 def load_factory(name: str, where: str) -> Callable:
@@ -283,20 +273,9 @@ def _splits(cfg: StudyConfig, n_q: int, q_set) -> tuple:
         out.append(Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "user split"))
     names = [sp.name for sp in out]
     if len(set(names)) != len(names):
-        twice = next(n for n in names if names.count(n) > 1)
         raise config_error(cfg, "splits.custom" if s.custom else "splits", "name" if s.custom else "scenarios",
-                           f"split names must be unique: {twice!r} appears twice; rename the custom split")
+                           f"split names must be unique, got {names}; rename the custom split")
     return tuple(out)
-
-
-def _study_splits(cfg: StudyConfig, campaign: Campaign) -> tuple:
-    """The study's splits; a split the data cannot hold names the [splits] key."""
-    from identification.splits import SplitError
-    try:
-        return _splits(cfg, campaign.n_q, campaign.q_set)
-    except SplitError as exc:
-        section, key = ("splits.random", "n") if cfg.splits.random.n else ("splits", "scenarios")
-        raise config_error(cfg, section, key, f"{exc} (the data hold {campaign.n_q} inputs)") from None
 
 
 def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
@@ -324,7 +303,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         if bad:
             raise config_error(cfg, "data", "series", f"series {bad} out of range: the data hold {n_M} series "
                                "(0-based indices)")
-    splits = _study_splits(cfg, campaign)
+    splits = study_splits(cfg, campaign, _splits)
     check_data(cfg, campaign, splits, next(iter(built.values()))[0].n_p)
     m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
     norm = normality_check(m_all)

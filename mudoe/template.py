@@ -15,7 +15,8 @@ from models.contract import Model
 from .config import ConfigError
 from models.fileio import create_text
 
-from .study import call_factory, load_factory
+from .checks import call_factory
+from .study import load_factory
 from .units import UNITS
 
 __all__ = ["template_text", "write_template"]
