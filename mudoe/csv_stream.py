@@ -99,7 +99,10 @@ def _line_table(raw: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndar
         text_lines = raw.decode("utf-8").split("\n")[:-1]
     except UnicodeDecodeError as exc:
         raise DataFileError(f"{path}: cannot read ({exc})") from None
-    counts = np.array([len(next(csv.reader([ln]), [])) or 1 for ln in text_lines])
+    try:
+        counts = np.array([len(next(csv.reader([ln.rstrip("\r")]), [])) or 1 for ln in text_lines])
+    except csv.Error as exc:
+        raise DataFileError(f"{path}: malformed quoting ({exc})") from None
     return starts, ends, counts
 
 

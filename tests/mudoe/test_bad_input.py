@@ -117,6 +117,12 @@ def test_tidy_reader_blocks_agree_and_duplicates_name_the_line(tmp_path, monkeyp
     parts = read_tidy_layout(f, "um", "N", sensors=sensors)
     assert np.array_equal(whole.z, parts.z) and np.array_equal(whole.q_set, parts.q_set)
     assert whole.series == parts.series
+    text = f.read_text()
+    quoted = tmp_path / "q.csv"                # quoted labels and CRLF line ends: the csv-module count
+    quoted.write_bytes("\r\n".join(",".join(f'"{c}"' if not c[:1].isdigit() and c[:1] != "-" else c
+                                              for c in ln.split(",")) for ln in text.splitlines()).encode())
+    q_parts = read_tidy_layout(quoted, "um", "N", sensors=sensors)
+    assert np.array_equal(whole.z, q_parts.z) and whole.series == q_parts.series
     lines = f.read_text().splitlines()
     lines.append(lines[100])                   # the same reading twice
     f.write_text("\n".join(lines) + "\n")
