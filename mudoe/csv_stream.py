@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 from pathlib import Path
 from typing import Callable, Iterator, NamedTuple
@@ -26,7 +27,8 @@ __all__ = ["DataFileError", "Block", "read_header", "blocks", "numbers", "texts"
 BLOCK_BYTES = 1 << 23
 #: cells that mark a missing reading (compared after stripping blanks, case-insensitive)
 MISSING_MARKERS = ("", "nan", "na", "n/a", "null", "none")
-_NA_VALUES = sorted({v for m in MISSING_MARKERS for v in (m, m.upper(), m.capitalize())})
+#: every upper/lower-case spelling of the markers (pandas compares exactly)
+_NA_VALUES = sorted({"".join(p) for m in MISSING_MARKERS for p in itertools.product(*({c.lower(), c.upper()} for c in m))})
 
 
 class DataFileError(ValueError):
