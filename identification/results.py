@@ -228,9 +228,13 @@ class Estimate:
         raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")
 
     def ellipsoid(self, alpha: float = 0.05, kind: str = "second_order") -> Ellipsoid:
-        """The joint (1 - alpha) confidence ellipsoid G(alpha, p, C) (paper eq. 6)."""
-        if not (0 < alpha < 1):
-            raise ValueError(f"alpha must lie in (0, 1), got {alpha}")
+        """The joint (1 - alpha) confidence ellipsoid G(alpha, p, C) (paper eq. 6).
+
+        ``alpha`` in (0, 0.5) is the miss probability (0.05 gives the 95 % ellipsoid), as in
+        :meth:`conf_int`; anything else raises ValueError naming the argument.
+        """
+        from . import profile as profile_mod
+        alpha = profile_mod.validate_alpha(alpha)
         C = self.cov if kind == "second_order" else self.cov_gn if kind == "gauss_newton" else None
         if C is None:
             raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")

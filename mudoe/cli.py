@@ -95,6 +95,16 @@ def _bad_input_types():
     return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError)
 
 
+def _located(exc: Exception, args) -> str:
+    """The message of a bad-input error; a library error that names no file gets the study's config file."""
+    from identification.errors import DataError
+    from identification.splits import SplitError
+    msg, config = str(exc), getattr(args, "config", None)
+    if isinstance(exc, (DataError, SplitError)) and config and Path(config).name not in msg:
+        return f"{config}: {msg}"
+    return msg
+
+
 def _print_line(msg: str) -> None:
     print(" ".join(str(msg).split()), file=sys.stderr)
 
@@ -137,7 +147,7 @@ def _main(argv) -> int:
         from .study import MissingPieceError
         bad = _bad_input_types()
         if isinstance(exc, bad):
-            _print_line(f"mudoe {args.command}: error: {exc}")
+            _print_line(f"mudoe {args.command}: error: {_located(exc, args)}")
             return EXIT_BAD_INPUT
         if isinstance(exc, MissingPieceError):
             _print_line(f"mudoe {args.command}: not available: {exc}")
@@ -153,11 +163,15 @@ def _main(argv) -> int:
 
 def _run(args) -> int:
     from .config import load_config
-    from .console import Chatter, check_out_dir
+    from .console import Chatter
     if args.command == "init":
         return _init(args)
-    out = check_out_dir(args.out)
+    from .outdir import begin, check_out
+    out = check_out(args.out)
     cfg = load_config(args.config)
+    begin(out, cfg.path)
+    from .limits import check_sizes
+    check_sizes(cfg, args.command, runs=getattr(args, "runs", None))
     chatter = Chatter()
     try:
         with chatter:
@@ -197,8 +211,12 @@ def _emit(args, text: str, obj) -> None:
 def _write(out: Path, name: str, text: str) -> Path:
     from .console import INTERRUPT
     from .data_io import atomic_write_text
+    from .outdir import claim, record
     INTERRUPT.check()
-    return atomic_write_text(out / name, text)
+    claim(out)
+    path = atomic_write_text(out / name, text)
+    record(out, [path])
+    return path
 
 
 def _identify_diagnostics(est) -> dict:
@@ -351,8 +369,11 @@ def _report(study, results, args, progress, out) -> int:
     run_diagnosis(study, results, progress)
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
+    from .outdir import claim, record
     with progress.step("build report"):
+        claim(out)
         paths = build_report(results, out, progress=progress)
+        record(out, paths)
     text = "\n".join(str(p) for p in paths)
     obj = {"files": [str(p) for p in paths], "verdicts": {}}
     if results.detection is not None:
@@ -382,7 +403,10 @@ def _simulate(cfg, args, progress, out) -> int:
     with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
         camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
     _interrupt_check()
+    from .outdir import claim, record
+    claim(out)
     paths = write_campaign(camp, out)
+    record(out, paths)
     text = "\n".join(str(p) for p in paths)
     _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})
     return EXIT_OK
@@ -402,6 +426,8 @@ def _simulate_study(cfg, args, progress, out) -> int:
         sim = simulate_study(cfg, args.seed)
     c, u, d = sim.campaign, sim.units, cfg.data
     _interrupt_check()
+    from .outdir import claim, record as record_files
+    claim(out)
     if d.layout == "tidy":
         paths = [write_tidy_layout(out / Path(d.file).name, c.q_set, c.z, c.sensors, units=u)]
     else:
@@ -417,6 +443,7 @@ def _simulate_study(cfg, args, progress, out) -> int:
                   input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
                   files=[str(p) for p in paths])
     paths.append(atomic_write_text(out / "simulate.json", json.dumps(record, indent=1) + "\n"))
+    record_files(out, paths)
     _emit(args, "\n".join(str(p) for p in paths), record)
     return EXIT_OK
 
