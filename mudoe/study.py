@@ -326,15 +326,21 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
 
 # ---------------------------------------------------------------------------- runs
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
-    """Identify every variant on the study's data (all sensors); failures are recorded, not raised."""
+    """Identify every variant on the study's data (all sensors); failures are recorded, not raised (an
+    estimate the data do not bound is recorded as a failure with its reason, "not bounded: ...")."""
     from identification.errors import IdentificationError
     progress = progress or Progress(False)
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
-                results.estimates[v] = identify(m, study.data[v], study.p0)
+                est = identify(m, study.data[v], study.p0)
             except IdentificationError as exc:
                 results.estimate_errors[v] = f"{type(exc).__name__}: {exc}"
+                continue
+            if not est.bounded:      # no finite estimate: the pages of estimates need one; the reason is kept
+                results.estimate_errors[v] = f"not bounded: {est.unbounded.reason}"
+                continue
+            results.estimates[v] = est
     return results
 
 
