@@ -18,7 +18,7 @@ import threading
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_write_text", "create_text", "register_scratch", "release_scratch", "scratch", "publishing", "close_outputs", "reopen_outputs", "abandon_outputs"]
+__all__ = ["atomic_write_text", "atomic_write_texts", "create_text", "register_scratch", "release_scratch", "scratch", "publishing", "close_outputs", "reopen_outputs", "abandon_outputs"]
 
 _LOCK = threading.Lock()        # held while outputs are moved into place (publishing)
 _SCRATCH: set = set()           # temporary paths being written
@@ -123,6 +123,46 @@ def atomic_write_text(path, text: str) -> Path:
                 os.unlink(tmp)
             raise
     return path
+
+
+def atomic_write_texts(files: dict) -> list:
+    """Write several files as one: ``{path: text}``, each via a temporary file, all moved into place by
+    ``os.replace`` in one :func:`publishing` block once every one is complete.
+
+    A failure or an interrupt leaves none of them changed (or, for an interrupt during the moves,
+    which the block waits for, all of them written): never the first of a pair without the second.
+    Returns the paths in the order given.
+    """
+    for path in files:
+        if Path(path).is_dir():            # the moves below could then fail half-way: refuse before writing
+            raise IsADirectoryError(21, "Is a directory (cannot write a file there)", str(path))
+    pending = []
+    try:
+        for path, text in files.items():
+            path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = os.path.join(path.parent, f".{path.name}.{secrets.token_hex(6)}.tmp")
+            register_scratch(tmp)
+            pending.append((tmp, path))
+            umask = os.umask(0)
+            os.umask(umask)
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~umask)
+            try:
+                with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+                    fh.write(text)
+            except OSError as exc:
+                if exc.filename is None:     # e.g. [Errno 28] No space left on device: name the file
+                    raise OSError(exc.errno, f"{exc.strerror} (writing {path})", str(path)) from None
+                raise
+        with publishing():
+            for tmp, path in pending:
+                os.replace(tmp, path)
+    finally:
+        for tmp, _ in pending:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            release_scratch(tmp)
+    return [path for _, path in pending]
 
 
 def create_text(path, text: str) -> Path:

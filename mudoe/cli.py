@@ -208,15 +208,16 @@ def _emit(args, text: str, obj) -> None:
     stdout.flush()
 
 
-def _write(out: Path, name: str, text: str) -> Path:
+def _write(out: Path, files: dict) -> list:
+    """Write a command's outputs ``{name: text}`` into ``out`` as one (all or none, models.fileio)."""
+    from models.fileio import atomic_write_texts
     from .console import INTERRUPT
-    from .data_io import atomic_write_text
     from .outdir import claim, record
     INTERRUPT.check()
     claim(out)
-    path = atomic_write_text(out / name, text)
-    record(out, [path])
-    return path
+    paths = atomic_write_texts({out / name: text for name, text in files.items()})
+    record(out, paths)
+    return paths
 
 
 def _identify_diagnostics(est) -> dict:
@@ -249,8 +250,7 @@ def _identify(study, results, args, progress, out) -> int:
     obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
     text = "\n\n".join([e.summary() for e in results.estimates.values()]
                        + [f"{v}: identification failed: {e}" for v, e in results.estimate_errors.items()])
-    _write(out, "identify.json", dumps(obj))
-    _write(out, "identify.txt", text + "\n")
+    _write(out, {"identify.json": dumps(obj), "identify.txt": text + "\n"})
     _emit(args, text, obj)
     if failed:
         _print_line(f"mudoe identify: failed: {failed}; the other fits are in {out}/identify.json")
@@ -269,8 +269,7 @@ def _oed_planned(cfg, args, progress, out, t0) -> int:
     from .study import plan_without_data
     plan = plan_without_data(cfg, progress)
     text = plan.summary()
-    _write(out, "oed.json", dumps(plan.to_dict()))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(plan.to_dict()), "oed.txt": text + "\n"})
     _emit(args, text, plan.to_dict())
     if not args.quiet:
         print(f"mudoe: oed finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/", file=sys.stderr)
@@ -283,8 +282,7 @@ def _oed_inputs(study, results, args, progress, out) -> int:
     from .study import plan_at_estimate
     plan = plan_at_estimate(study, results, progress)
     text = plan.summary()
-    _write(out, "oed.json", dumps(plan.to_dict()))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(plan.to_dict()), "oed.txt": text + "\n"})
     _emit(args, text, plan.to_dict())
     return 0
 
@@ -297,8 +295,7 @@ def _oed(study, results, args, progress, out) -> int:
     run_oed(study, results, progress)
     obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
     text = _oed_text(results)
-    _write(out, "oed.json", dumps(obj))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(obj), "oed.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -313,8 +310,7 @@ def _detect(study, results, args, progress, out) -> int:
     labels = normality_labels(study)
     obj = dict(detection_dict(results.detection, **labels), diagnosis=diagnosis_dict(results.diagnosis))
     text = results.detection.summary(**labels) + "\n\n" + findings_text(results.diagnosis, results.detection.models)
-    _write(out, "detect.json", dumps(obj))
-    _write(out, "detect.txt", text + "\n")
+    _write(out, {"detect.json": dumps(obj), "detect.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -340,8 +336,7 @@ def _validate(study, results, args, progress, out) -> int:
     run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
     text = results.validation.table()
-    _write(out, "validate.json", dumps(obj))
-    _write(out, "validate.txt", text + "\n")
+    _write(out, {"validate.json": dumps(obj), "validate.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
