@@ -35,7 +35,7 @@ import scipy.linalg as sla
 from .errors import StateSolveError
 from .state import batched_function
 
-__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged"]
+__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states"]
 
 #: the broker of this thread's member fit in :func:`run_merged` (None outside one)
 _LOCAL = threading.local()
@@ -48,7 +48,7 @@ _MAX_ITER = 60
 MARCH_IN_CASADI_MAX = 8
 #: up to this many stacked unknowns (experiments x states) dE/dy is solved by one banded LU, above by
 #: forward substitution through the elements (the banded LU's work grows with the band's square)
-BANDED_MAX = 20000
+BANDED_MAX = 2000
 
 
 def _params(p, n: int) -> np.ndarray:
@@ -533,3 +533,26 @@ def run_merged(tasks: Sequence[Callable[[], object]]) -> list:
     for t in threads:
         t.join()
     return results
+
+
+def interpolate_states(coarse, fine, Y) -> np.ndarray:
+    """The trajectories Y (n_q, n_y) of the collocated model ``coarse`` at the collocation points of
+    ``fine`` (same dynamic model and horizon, e.g. every element halved), by coarse's collocation
+    polynomials (Lagrange on each element's d + 1 points): a start for :meth:`TrajectoryNumerics.states`
+    on the fine mesh within the discretisation error."""
+    b = np.asarray(coarse.mesh.boundaries)
+    d, N = coarse.mesh.degree, coarse.mesh.n_elements
+    tf = fine.point_times()
+    k = np.clip(np.searchsorted(b, tf, side="left") - 1, 0, N - 1)
+    s = (tf - b[k]) / (b[k + 1] - b[k])
+    tau = coarse.tau
+    basis = np.ones((tf.size, d + 1))
+    for j in range(d + 1):
+        for r in range(d + 1):
+            if r != j:
+                basis[:, j] *= (s - tau[r]) / (tau[j] - tau[r])
+    L = np.zeros((tf.size, 1 + N * d))
+    for j in range(d + 1):
+        np.add.at(L, (np.arange(tf.size), k * d + j), basis[:, j])
+    n, n_w = Y.shape[0], coarse.dynamic.n_x + coarse.dynamic.n_z
+    return np.einsum("fc,ncx->nfx", L, np.asarray(Y, float).reshape(n, -1, n_w)).reshape(n, -1)

@@ -125,3 +125,16 @@ def test_batch_members_of_a_collocated_model_equal_identify():
         single = identify(est.model, sets[r], est.p)
         assert np.all(np.abs(fit.p[r] - single.p) <= 1e-8 * single.stderr)
         assert np.allclose(fit.cov[r], single.cov, rtol=1e-8)
+
+
+def test_interpolated_trajectories_start_newton_on_the_halved_mesh():
+    from models.trajectory import interpolate_states
+    coarse = collocate(build(), TIMES, max_step=0.25)
+    fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
+    Yc = trajectory_numerics(coarse).states(P, Q)
+    guess = interpolate_states(coarse, fine, Yc)
+    traj = trajectory_numerics(fine)
+    exact = traj._states(P, Q)                                         # marched, no guess
+    # the guess is within the discretisation error, and Newton from it reaches the marched states
+    assert np.abs(guess - exact).max() < 1e-2 and np.abs(guess[:, :3] - exact[:, :3]).max() == 0
+    assert np.abs(traj._newton(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
