@@ -30,7 +30,6 @@ from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
-import scipy.linalg as sla
 
 from .errors import StateSolveError
 from .state import batched_function
@@ -46,9 +45,6 @@ _MAX_ITER = 60
 #: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
 #: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
 MARCH_IN_CASADI_MAX = 8
-#: up to this many stacked unknowns (experiments x states) dE/dy is solved by one banded LU, above by
-#: forward substitution through the elements (the banded LU's work grows with the band's square)
-BANDED_MAX = 2000
 
 
 def _params(p, n: int) -> np.ndarray:
@@ -159,54 +155,30 @@ class TrajectoryNumerics:
             xs = V[:, -n_x:]
         return Y
 
-    def _band(self, n: int, n_x: int):
-        """((l, u), flat positions in the (l + u + 1, n n_y) band storage of dE/dy's entries: the identity of
-        x(0), then R_V and R_x0 of every (experiment, element) in C order) for n stacked experiments."""
-        hit = self._maps.get(("band", n))
-        if hit is None:
-            d, N = self.d, self.N
-            nd, n_y = n_x * d, n_x * (1 + N * d)
-            l, u = nd + n_x - 1, nd - 1
-            o = (n_x + np.arange(N) * nd)[:, None, None]
-            a = np.arange(nd)[None, :, None]
-            rows = [np.broadcast_to(o + a, (N, nd, nd)), np.broadcast_to(o + a, (N, nd, n_x))]
-            cols = [np.broadcast_to(o + np.arange(nd)[None, None, :], (N, nd, nd)),
-                    np.broadcast_to(o - n_x + np.arange(n_x)[None, None, :], (N, nd, n_x))]
-            off = np.arange(n) * n_y
-            r = np.concatenate([(off[:, None] + np.arange(n_x)).ravel()] + [(off[:, None] + x.ravel()).ravel() for x in rows])
-            c = np.concatenate([(off[:, None] + np.arange(n_x)).ravel()] + [(off[:, None] + x.ravel()).ravel() for x in cols])
-            hit = self._maps[("band", n)] = ((l, u), (u + r - c) * (n * n_y) + c)
-        return hit
-
-    def _banded_solve(self, RV, Rx, B):
-        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)): by LAPACK's banded LU with partial
-        pivoting (one call) up to :data:`BANDED_MAX` unknowns, else by forward substitution through the
-        elements (a batched LU of the (n, n_x d, n_x d) blocks R_V per element: fewer operations, a
-        Python loop over the elements)."""
+    def _stacked_solve(self, RV, Rx, B):
+        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)) by forward substitution through the
+        block-bidiagonal dE/dy: one batched LAPACK solve gives R_V^{-1} R_x0 and R_V^{-1} B of every
+        (experiment, element), then v_k = R_V^{-1} B_k - R_V^{-1} R_x0 v_{k-1, end} element after element
+        (small batched products)."""
         n_x = Rx.shape[-1]
-        n_y = n_x * (1 + self.N * self.d)
-        n = B.shape[0] // n_y
-        if B.shape[0] > BANDED_MAX:
-            RV = RV.reshape((n, self.N) + RV.shape[-2:])
-            Rx = Rx.reshape((n, self.N) + Rx.shape[-2:])
-            B = B.reshape(n, n_y, -1)
-            out = np.empty_like(B)
-            out[:, :n_x] = B[:, :n_x]                       # the rows of x(0) - x0: identity
-            nd, prev = n_x * self.d, B[:, :n_x]
-            for k in range(self.N):
-                o = n_x + k * nd
-                out[:, o:o + nd] = np.linalg.solve(RV[:, k], B[:, o:o + nd] - Rx[:, k] @ prev)
-                prev = out[:, o + nd - n_x:o + nd]
-            return out.reshape(n * n_y, -1)
-        (l, u), pos = self._band(n, n_x)
-        ab = np.zeros((l + u + 1) * B.shape[0])
-        ab[pos] = np.concatenate([np.ones(n * n_x), RV.ravel(), Rx.ravel()])
-        return sla.solve_banded((l, u), ab.reshape(l + u + 1, -1), B, overwrite_ab=True, overwrite_b=True,
-                                check_finite=False)
+        nd, N = n_x * self.d, self.N
+        n_y = n_x * (1 + N * self.d)
+        n, k = B.shape[0] // n_y, B.shape[1]
+        B = B.reshape(n, n_y, k)
+        rhs = np.concatenate([Rx.reshape(n * N, nd, n_x), B[:, n_x:].reshape(n * N, nd, k)], axis=2)
+        X = np.linalg.solve(RV.reshape(n * N, nd, nd), rhs)
+        M, C = X[..., :n_x].reshape(n, N, nd, n_x), X[..., n_x:].reshape(n, N, nd, k)
+        out = np.empty_like(B)
+        out[:, :n_x] = prev = B[:, :n_x]                    # the rows of x(0) - x0: identity
+        for e in range(N):
+            v = C[:, e] - M[:, e] @ prev
+            out[:, n_x + e * nd:n_x + (e + 1) * nd] = v
+            prev = v[:, -n_x:]
+        return out.reshape(n * n_y, k)
 
     def _newton(self, p, inputs, Y):
         """Newton on the whole collocation system of every experiment from the guess Y (one mapped
-        evaluation and one banded solve per iteration); the states, or None when it does not converge
+        evaluation and one :meth:`_stacked_solve` per iteration); the states, or None when it does not converge
         (at most 8 iterations, the residual not decreasing, or non-finite values).  Converged when
         the step satisfies |dy| <= 1e-12 (1 + |y|) at every experiment (the test of
         :func:`models.state.solve_state`)."""
@@ -230,7 +202,7 @@ class TrajectoryNumerics:
                 return None
             prev = norm
             E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
-            dY = self._banded_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+            dY = self._stacked_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
             if not np.all(np.isfinite(dY)):
                 return None
             Y -= dY
@@ -334,7 +306,7 @@ class TrajectoryNumerics:
                                    np.tile(self.steps, n)[:, None]])
         RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
         B = np.concatenate([x0p, -Rp.reshape(n, N * n_x * d, n_p)], axis=1)      # -dE/dp
-        out = self._banded_solve(RV, Rx, B.reshape(-1, n_p)).reshape(n, -1, n_p)
+        out = self._stacked_solve(RV, Rx, B.reshape(-1, n_p)).reshape(n, -1, n_p)
         return out, RV, Rx
 
     def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:

@@ -44,12 +44,9 @@ def test_states_and_sensitivities_equal_the_whole_trajectory_solve(monkeypatch, 
     assert np.abs(Y - Yg).max() <= 1e-12 * np.abs(Yg).max()
     assert np.abs(Yp - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
     assert np.abs(h - hg).max() <= 1e-12 and np.abs(G - Gg).max() <= 1e-10 * np.abs(Gg).max()
-    # Newton on all trajectories at once from a perturbed guess (banded LU) converges to the same states
+    # Newton on all trajectories at once from a perturbed guess converges to the same states
     Yn = traj._newton(P, Q, Y * (1 + 1e-3))
     assert Yn is not None and np.abs(Yn - Yg).max() <= 1e-12 * np.abs(Yg).max()
-    monkeypatch.setattr(trajectory, "BANDED_MAX", 0)          # forward substitution instead of the banded LU
-    assert np.abs(traj._newton(P, Q, Y * (1 + 1e-3)) - Yg).max() <= 1e-12 * np.abs(Yg).max()
-    assert np.abs(traj.state_derivatives(P, Q, Y) - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
     assert traj._newton(P, Q, np.full_like(Y, np.nan)) is None          # a failed Newton is left to the march
     # the per-experiment integration of the collocated model (its state guess) is the same trajectory
     assert np.abs(Y[3] - cm._integrate(P, Q[3])).max() <= 1e-12
