@@ -54,7 +54,7 @@ class RefineSettings:
 
     n_starts: int = 4
     seed: int = 0
-    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500)
+    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
 
     def __post_init__(self):
         if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
