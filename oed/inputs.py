@@ -219,12 +219,12 @@ def input_information(model, p, candidates, sigma, n_series=1) -> np.ndarray:
 def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criterion="D", kind="gauss_newton",
                   costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
                   refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
-                  settings: DesignSettings = DesignSettings()) -> InputDesignResult:
+                  settings: DesignSettings = DesignSettings(), times=None, discretisation=None) -> InputDesignResult:
     r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs), optionally refined.
 
     Parameters
     ----------
-    model : models.Model
+    model : models.Model or models.dynamic.DynamicModel
     p : array_like, shape (n_p,)
         Nominal parameters (within the model's bounds).
     candidates : array_like, shape (n_candidates, d_q)
@@ -250,6 +250,13 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
     bounds : (array_like, array_like) or None
         Input bounds for the refinement, shape (d_q,) each; default the candidates' range.
 
+    times : array_like or None
+        Dynamic models (:meth:`models.Model.ode`) only: the sampling times of every experiment;
+        then ``sigma`` is one per instrument, ``sensors`` names instruments and the candidates are
+        input rows with the control profiles (:func:`oed.dynamic_inputs.select_dynamic_inputs`).
+    discretisation : identification.DiscretisationSettings or None
+        Dynamic models: the collocation's tolerance.
+
     Returns
     -------
     InputDesignResult
@@ -259,6 +266,18 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
     ValueError
         Bad input (the message names the argument).
     """
+    if getattr(model, "is_dynamic", False):
+        from .dynamic_inputs import select_dynamic_inputs      # same layer, built on this function
+        if times is None:
+            raise ValueError("times: a dynamic model needs the sampling times of its experiments")
+        return select_dynamic_inputs(model, p, times=times, candidates=candidates, sigma=sigma, n_points=n_points,
+                                     sensors=sensors, criterion=criterion, kind=kind, costs=costs, budget=budget,
+                                     include=include, exclude=exclude, n_series=n_series, method=method,
+                                     time_limit=time_limit, refine=refine, bounds=bounds,
+                                     refine_settings=refine_settings, settings=settings,
+                                     discretisation=discretisation)
+    if times is not None or discretisation is not None:
+        raise ValueError("times/discretisation: only for a dynamic model (models.Model.ode)")
     t_start = time.perf_counter()
     Q = _check_candidates(model, candidates)
     k_idx, joint = _measured(model, sensors)
