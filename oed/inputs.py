@@ -339,6 +339,13 @@ def _extras(crit: Criterion, M) -> np.ndarray:
     return np.array([t_init] + [Lc[i, j] for j in range(n_p) for i in range(j, n_p)])
 
 
+def _share(seconds: float) -> float:
+    """An equal share of the time per start, rounded down to 1, 2 or 5 x 10^k s: Ipopt's wall-time
+    limit is a solver setting, and few distinct values let the compiled solver be reused."""
+    e = 10.0 ** np.floor(np.log10(seconds))
+    return float(max(m for m in (1.0, 2.0, 5.0, 10.0) if m * e <= seconds * (1 + 1e-12)) * e)
+
+
 def _check_bounds(model, start, bounds):
     """(X0, lo, hi) checked: start rows within finite bounds lo <= hi."""
     X0 = np.atleast_2d(np.asarray(start, float))
@@ -359,8 +366,8 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     CasADi derivatives); the best start is returned.  D is reported as log det C
     (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.  ``time_limit``
     (seconds, None: none) bounds the whole refinement: each start's Ipopt run has an equal share
-    of it as its wall-time limit, no start begins after it, and the first start's levels are kept
-    if nothing better was reached.
+    of it (rounded down, :func:`_share`) as its wall-time limit, no start begins after it, and the
+    first start's levels are kept if nothing better was reached.
 
     Raises
     ------
@@ -394,8 +401,7 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
     ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
     zero = np.zeros(nlp.n_g)
-    # every start gets an equal share of the time (one setting: the compiled solver is reused)
-    share = None if time_limit is None else float(time_limit) / len(starts)
+    share = None if time_limit is None else _share(float(time_limit) / len(starts))
     for Xs in starts:
         left = deadline - time.perf_counter()
         if left <= 0:
