@@ -24,6 +24,7 @@ import numpy as np
 
 from identification.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.collocation import collocate, pair_name
+from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from .inputs import InputDesignResult, RefineSettings, input_information, refine_inputs, select_inputs
 
@@ -72,7 +73,10 @@ def _error_at(model, cm, p, inputs, sig) -> float:
     against every element halved, as :func:`identification.dynamic_fit.controlled_mesh`)."""
     half = collocate(model, cm.times, mesh=cm.mesh.refined(2), outputs=cm.outputs)
     order = 2 * cm.mesh.degree - 1
-    diff = half.integrated_outputs(p, inputs) - cm.integrated_outputs(p, inputs)
+    if model.n_z:
+        diff = half.integrated_outputs(p, inputs) - cm.integrated_outputs(p, inputs)
+    else:
+        diff = mapped_outputs(half, p, inputs) - mapped_outputs(cm, p, inputs)
     return float(np.max(np.abs(diff) / sig)) * 2 ** order / (2 ** order - 1)
 
 
@@ -81,7 +85,12 @@ def dynamic_input_information(model, p, candidates, times, sigma, n_series=1,
     r"""Per-experiment information :math:`F_j` (module docstring) of every candidate row, all
     instruments at all ``times``, shape (n_candidates, n_p, n_p)."""
     cm, sig, _ = dynamic_problem(model, p, candidates, times, sigma, discretisation)
-    return input_information(cm, p, candidates, sig, n_series).sum(axis=1)
+    if model.n_z:
+        return input_information(cm, p, candidates, sig, n_series).sum(axis=1)
+    if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+        raise ValueError(f"n_series: expected an integer >= 1, got {n_series!r}")
+    _, G = outputs_and_sensitivities(cm, p, candidates)        # one mapped call over the candidates
+    return float(n_series) * np.einsum("k,jkp,jkr->jpr", 1.0 / sig ** 2, G, G)
 
 
 def select_dynamic_inputs(model, p, *, times, candidates, sigma, n_points, sensors=None, refine=False, bounds=None,
