@@ -24,7 +24,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
-import casadi as ca
 import numpy as np
 
 from identification.errors import IdentificationError, StateSolveError
@@ -397,39 +396,20 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
     best, best_v = X0, _value(crit, nlp.matrix(nlp.start(model, p, X0, lo, span)))
     values, messages = [], []
-    n_var = nlp.n_u + nlp.n_y + nlp.n_s
     lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
     ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
-    zero = np.zeros(nlp.n_g)
     share = None if time_limit is None else _share(float(time_limit) / len(starts))
+    ipopt = settings.ipopt if share is None else replace(
+        settings.ipopt, extra=settings.ipopt.extra + (("max_wall_time", share),))
     for Xs in starts:
         left = deadline - time.perf_counter()
         if left <= 0:
             messages.append("not started: time limit reached")
             values.append(np.inf)
             continue
-        try:
-            x0 = nlp.start(model, p, Xs, lo, span)
-            x0[n_var:] = _extras(crit, nlp.matrix(x0))
-            ipopt = settings.ipopt if share is None else replace(
-                settings.ipopt, extra=settings.ipopt.extra + (("max_wall_time", share),))
-            r = solve_nlp(lambda: nlp.problem, x0, lbx, ubx, zero, zero, [], settings=ipopt,
-                          what="input refinement", key=key, cache=model.cache)
-        except (IdentificationError, StateSolveError) as exc:
-            values.append(np.inf)
-            messages.append(str(exc))
-            continue
-        # a stalled run's point is still a design: its value is re-evaluated exactly below
-        Ur = np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0)
-        Xr = lo + span * Ur * (hi > lo)
-        try:
-            v = _value(crit, nlp.matrix(nlp.start(model, p, Xr, lo, span)))
-        except StateSolveError as exc:
-            values.append(np.inf)
-            messages.append(f"the refined point has no state solution ({exc})")
-            continue
+        v, msg, Xr = _one_start(model, p, nlp, Xs, (lo, hi, span), crit, (lbx, ubx), ipopt, key)
         values.append(v)
-        messages.append(r.status if r.accepted else f"stalled ({r.status}); point re-evaluated")
+        messages.append(msg)
         if v < best_v:
             best, best_v = Xr, v
     if not any(np.isfinite(values)) and not any("time limit" in m for m in messages):
@@ -437,6 +417,27 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
                          n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
                          lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
+
+
+def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
+    """(criterion value, message, refined rows) of one Ipopt run of the refinement from the rows Xs
+    (value inf for a failed run; a stalled run's point is still a design, re-evaluated exactly)."""
+    lo, hi, span = box
+    n_pts, d = Xs.shape
+    zero = np.zeros(nlp.n_g)
+    try:
+        x0 = nlp.start(model, p, Xs, lo, span)
+        x0[nlp.n_u + nlp.n_y + nlp.n_s:] = _extras(crit, nlp.matrix(x0))
+        r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, [], settings=ipopt,
+                      what="input refinement", key=key, cache=model.cache)
+    except (IdentificationError, StateSolveError) as exc:
+        return np.inf, str(exc), Xs
+    Xr = lo + span * np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0) * (hi > lo)
+    try:
+        v = _value(crit, nlp.matrix(nlp.start(model, p, Xr, lo, span)))
+    except StateSolveError as exc:
+        return np.inf, f"the refined point has no state solution ({exc})", Xs
+    return v, (r.status if r.accepted else f"stalled ({r.status}); point re-evaluated"), Xr
 
 
 def _value(crit: Criterion, M) -> float:
