@@ -105,8 +105,8 @@ def select_dynamic_inputs(model, p, *, times, candidates, sigma, n_points, senso
     cm, sig, err = dynamic_problem(model, p, candidates, times, sigma, discretisation)
     pairs = _pair_sensors(model, cm, sensors)
     res = select_inputs(cm, p, candidates=candidates, sigma=sig, n_points=n_points, sensors=pairs,
-                        refine=refine, bounds=bounds, time_limit=time_limit, refine_settings=refine_settings,
-                        **kwargs)
+                        refine=refine, bounds=bounds, refine_settings=refine_settings, **kwargs,
+                        time_limit=max(time_limit - (time.perf_counter() - t0), 0.05 * time_limit))
     notes = [f"dynamic model: Radau IIA collocation of degree {cm.mesh.degree} on {cm.mesh.n_elements} elements, "
              f"output error at p within {err:.2g} sigma at every candidate"]
     refined = res.refined

@@ -63,3 +63,15 @@ def test_refinement_honours_its_time_limit():
 def test_share_rounds_down_to_few_values():
     assert _share(0.3) == pytest.approx(0.2) and _share(7.0) == 5.0 and _share(1.0) == 1.0
     assert _share(15.0) == 10.0
+
+
+def test_mesh_controlled_again_at_the_refined_design():
+    # a slow start (T0 = 340 K) needs 16 elements; the refined design (T0 ~ 473 K) needs 32: the
+    # refinement is repeated on the finer mesh and its value is the ODE's within the tolerance
+    start = np.r_[5.0, 340.0, [300.0] * 8]
+    res = select_inputs(reactor(), P, times=GRID, candidates=[start], sigma=0.01, n_points=1, refine=True,
+                        bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1))
+    assert any("the mesh was refined" in n for n in res.notes), res.notes
+    x = res.refined.inputs[0]
+    ode = dr.log10_det(dr.pyomo_doe_reactor_fim(x[0], x[1:]))
+    assert ode >= 19.2855 and abs(-res.refined.value / np.log(10) + 2 * np.sum(np.log10(P)) - ode) < 1e-4
