@@ -55,7 +55,8 @@ first sweep: the model is evaluated once and only the data terms differ, and ide
 rows (same q and the same state at p0) are evaluated once per member (their data terms are
 pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
-fitted by identify.
+fitted by identify; for a collocated ODE model the members' fits run together with their
+trajectory evaluations merged (:mod:`identification.batch_trajectory`: no state-size ceiling).
 
 A member that does not converge (or fails a check, or ends on or outside a parameter bound)
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
@@ -73,7 +74,10 @@ import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
+from models.trajectory import trajectory_numerics
 from .errors import DataError, IdentificationError, StateSolveError
+from .batch_trajectory import decrements, fit_members
+from .unbounded import not_bounded_reason
 from .estimator import IdentifySettings, as_start_vector, identify, param_scale
 from .factor import covariances, weighted_factor
 from .measurements import Measurements
@@ -122,7 +126,8 @@ class FallbackRecord:
     ----------
     member : int      index of the data set
     reason : str      why the batch iteration did not give its estimate
-    error : str       "" when identify succeeded, else its error ("ExceptionType: message")
+    error : str       "" when identify succeeded, else its error ("ExceptionType: message"), or
+                      "not bounded: ..." when identify returned an estimate the data do not bound
     """
 
     member: int
@@ -302,7 +307,8 @@ class BatchFit:
     decrement : ndarray (R,)             Newton decrements at the estimates (NaN for fallbacks)
     iterations : ndarray (R,) int        sweeps of the batch iteration (0 for fallbacks)
     converged : ndarray (R,) bool        the batch iteration gave the estimate
-    ok : ndarray (R,) bool               an estimate exists (batch or fallback)
+    ok : ndarray (R,) bool               an estimate exists (batch or fallback; False for an estimate
+                                         that is not bounded, kept in ``results``)
     fallbacks : tuple of FallbackRecord  members fitted by identify instead (which, why, outcome)
     results : tuple                      per member a BatchMember, an Estimate (fallback) or the
                                          exception identify raised (read with :meth:`result`)
@@ -1150,7 +1156,9 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                 use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
                 Y0_r = Y0 if Y0 is None or data.shared or not n_y else Y0[r]
                 est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
-                records.append(FallbackRecord(int(r), why))
+                # an estimate the data do not bound is kept (callers test Estimate.bounded) but is no
+                # estimate of p: ok False, its reason recorded
+                records.append(FallbackRecord(int(r), why, not_bounded_reason(est)))
                 results[r] = est
             except (IdentificationError, DataError) as exc:
                 records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
@@ -1176,6 +1184,15 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                 Y_ref = solve_states(model, p0, q.reshape(-1, q.shape[2])).reshape(R, n_q, -1)
         except StateSolveError:
             usable = False
+    if not usable and n_y and trajectory_numerics(model) is not None and fallback_on:
+        # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
+        results, errors = fit_members(model, [data.member(r) for r in range(R)], p0, weights, settings, starts)
+        # a failed fit, or an estimate the data do not bound (kept, ok False), is recorded with its reason
+        records = [FallbackRecord(int(r), "the fit failed", e) for r, e in sorted(errors.items())]
+        records += [FallbackRecord(r, "not bounded by the data", not_bounded_reason(res)) for r, res in enumerate(results)
+                    if r not in errors and not_bounded_reason(res)]
+        ok = np.array([r not in errors for r in range(R)])
+        return _collect(model, results, records, ok, decrements(results), np.zeros(R, int))
     if not usable:
         why = ("the batch engine handles states of at most 60 variables" if n_y and not numerics(model).dense
                else "the start or the problem is not valid for the batch engine")
@@ -1255,7 +1272,7 @@ def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps
     rss = np.full(R, np.nan)
     ok = np.zeros(R, bool)
     for r, res in enumerate(results):
-        if isinstance(res, Exception) or res is None:
+        if isinstance(res, Exception) or res is None or not_bounded_reason(res):
             continue
         ok[r] = True
         p[r], cov[r], cov_gn[r], info[r] = res.p, res.cov, res.cov_gn, res.information

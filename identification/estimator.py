@@ -32,7 +32,7 @@ import scipy.sparse as sps
 from scipy import special
 
 from models.contract import Model
-from . import dense
+from . import dense, unbounded
 from .factor import estimate_covariances
 from . import secondorder
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
@@ -44,6 +44,7 @@ from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
+from models.trajectory import trajectory_numerics
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector"]
@@ -718,7 +719,9 @@ def _start(model, data, p0, weights, Y0) -> _Start:
         except StateSolveError as exc:
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
-        s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
+        # a collocated ODE is solved in the reduced space (no NLP): its scalings are made when Ipopt needs them
+        s_y, e_scale = ((None, None) if trajectory_numerics(model) is not None
+                        else _scalings(model, p0, data.inputs, Y_init, Y0 is None))
     return _Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
                   ReducedProblem.of(model, data, w, sig, s_p))
 
@@ -985,7 +988,9 @@ def _reduced_start(st: _Start, settings: IdentifySettings):
     """
     model = st.model
     min_inputs = settings.reduced_start_inputs
-    if (not model.n_y or min_inputs is None or st.data.n_q < min_inputs or not numerics(model).dense):
+    trajectory = trajectory_numerics(model) is not None     # a collocated ODE: any number of inputs
+    if (not model.n_y or min_inputs is None or
+            not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None
     x0 = st.p0 / st.s_p
     objective = ImplicitObjective(st.problem, x0, st.Y_init)
@@ -1029,7 +1034,6 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
                 return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
-    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
     bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
     warm = None                                 # (reduced point, S) of the reduced-space optimum
@@ -1038,6 +1042,17 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
         if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
                 np.all(got[1].p < model.upper - 1e-6 * s_p):
             warm = got[1], got[2]
+            if trajectory_numerics(model) is not None:
+                # a collocated ODE: the reduced optimum (states solved to round-off element by element,
+                # decrement at round-off) is the estimate, as for explicit models; no NLP is built
+                if clock is not None:
+                    clock.lap("reduced-space Newton (collocated trajectories)")
+                return _FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
+                                          got[2])
+    if s_y is None:                             # scalings left for the NLP (see _start)
+        s_y, e_scale = _scalings(model, st.p0, data.inputs, st.Y_init, False)
+        st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
+    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     if warm is not None:
         p_start, Y_start = warm[0].p, warm[0].states
     else:
@@ -1305,7 +1320,10 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     IdentificationError
         Ipopt failed (carries Ipopt's status), or the state equation could not be solved.
     IdentifiabilityError
-        rank(Omega J) < n_p at the estimate (names the parameters and sensors).
+        rank(Omega J) < n_p at a finite estimate (structural; names the parameters and sensors).
+        When the data do not bound the parameters (the best fit runs off to infinity along a
+        direction, :mod:`identification.unbounded`) the result is returned instead, with
+        ``Estimate.bounded`` False and the direction in ``Estimate.unbounded``.
     ConvergenceError
         The solver stopped at a stationary point that is not a minimum (the reduced Hessian
         J^T Omega J + S is not positive definite) and no lower point was found along its negative
@@ -1322,11 +1340,38 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     clock = _PhaseClock()
     st = _start(model, data, p0, weights, Y0)
     clock.lap("validation, data, states at p0")
-    sol = _solve_full_space(st, settings, clock)
-    ref = _refine_solution(st, sol, settings)
-    st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
-    clock.lap("refinement (states, sensitivities, S at the estimate)")
-    return _estimate(st, sol, ref, settings, t_start, clock, escaped)
+    sol = ref = None
+    try:
+        sol = _solve_full_space(st, settings, clock)
+        ref = _refine_solution(st, sol, settings)
+        st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
+        clock.lap("refinement (states, sensitivities, S at the estimate)")
+        est = _estimate(st, sol, ref, settings, t_start, clock, escaped)
+    except (IdentificationError, np.linalg.LinAlgError) as exc:
+        # did the fit run off to infinity (the data do not bound p: a result) or is the rank
+        # deficiency structural (a finite point: the error, saying so)?  identification.unbounded
+        # follows the valley from where the fit stopped (from p0 when the solver failed on its way)
+        if ref is not None:
+            p_stop, y_stop = ref.point.p, ref.point.states
+        elif sol is not None:
+            p_stop, y_stop = sol.p, sol.states
+        else:
+            p_stop, y_stop = st.p0, (st.Y_init if model.n_y else None)
+        diag = unbounded.diagnose(st.problem, p_stop, y_stop)
+        if diag.kind == "unbounded":
+            return unbounded.estimate_not_bounded(st, diag, f"{type(exc).__name__}: {exc}", t_start)
+        if isinstance(exc, IdentifiabilityError):
+            raise unbounded.identifiability_error(exc, diag, p_stop, model.param_names) from None
+        raise
+    sloppy = est.sloppy_direction
+    if sloppy is not None and not np.any(sol.at_bound) and sloppy.ratio ** 2 > settings.ill_conditioned:
+        # an ill-conditioned "optimum" may be a point far out on a run-off where the steps became too small
+        diag = unbounded.diagnose(st.problem, est.p, est.states)
+        if diag.kind == "unbounded":
+            return unbounded.estimate_not_bounded(
+                st, diag, f"{est.status} at {', '.join(f'{n} = {v:.4g}' for n, v in zip(est.param_names, est.p))} "
+                "(ill-conditioned; the objective still decreased beyond it)", t_start)
+    return est
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
