@@ -42,6 +42,7 @@ import numpy as np
 from scipy import special, stats
 
 from models.contract import Model
+from models.dynamic import DynamicModel
 from . import cluster
 from .batch import BatchData, BatchFit, fit_batch
 from .detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
@@ -1166,6 +1167,9 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     defaults of :class:`MonteCarloSettings`, TOL 5 %) or ``settings`` with all of them; giving
     ``settings`` and one of those keywords raises TypeError.
     """
+    if isinstance(model, DynamicModel):
+        raise DataError("model: a dynamic model is validated on its collocation: est = identify(model, data, p0); "
+                        "validate(est.model, splits, p_true=..., inputs=est.data.inputs, sigma=est.data.sigma, ...)")
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
     if generator is None:
