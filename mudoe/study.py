@@ -137,6 +137,10 @@ def _build_models(cfg: StudyConfig) -> dict:
     factory = _factory(cfg)
     for v in cfg.model.variants:
         m = factory(v)
+        if getattr(m, "is_dynamic", False):           # an ODE/DAE model: mudoe.dynamic_study
+            m.origin = ModelSource(cfg.model.name, v)
+            out[v] = (m, None)
+            continue
         if not isinstance(m, Model):
             raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
                               f"{type(m).__name__}, expected a models.Model")
@@ -288,6 +292,9 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     progress = progress or Progress(False)
     with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
         built = _build_models(cfg)
+    if _dynamic(cfg, built):
+        from .dynamic_study import prepare_dynamic
+        return prepare_dynamic(cfg, {v: m for v, (m, _) in built.items()}, progress)
     sensors = tuple(next(iter(built.values()))[0].sensors)
     units = study_units(cfg, next(iter(built.values()))[0])
     built = {v: (_declare_units(m, units), fn) for v, (m, fn) in built.items()}
@@ -323,6 +330,22 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
                  campaign.notes, units, explanations)
 
 
+def start_values(study: Study, variant: str) -> np.ndarray:
+    """The start values of a variant's fits (a dynamic study's variants may differ in parameters)."""
+    return getattr(study, "p0s", {}).get(variant, study.p0)
+
+
+def _dynamic(cfg: StudyConfig, built: dict) -> bool:
+    """Whether the study's models are dynamic (ODE/DAE); a [dynamic] section needs one."""
+    dyn = [getattr(m, "is_dynamic", False) for m, _ in built.values()]
+    if any(dyn) and not all(dyn):
+        raise ConfigError(f"{cfg.path}: [model] variants mix dynamic (ODE/DAE) and static models")
+    if cfg.dynamic is not None and not any(dyn):
+        raise ConfigError(f"{cfg.path}: [dynamic] is for dynamic models (models.Model.ode); {cfg.model.name} "
+                          "returns a static model")
+    return any(dyn)
+
+
 # ---------------------------------------------------------------------------- runs
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Identify every variant on the study's data (all sensors); failures are recorded, not raised."""
@@ -331,7 +354,7 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
-                results.estimates[v] = identify(m, study.data[v], study.p0)
+                results.estimates[v] = identify(m, study.data[v], start_values(study, v))
             except IdentificationError as exc:
                 results.estimate_errors[v] = f"{type(exc).__name__}: {exc}"
     return results
@@ -357,6 +380,10 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
     except ImportError as exc:
         raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
     progress = progress or Progress(False)
+    if getattr(study, "is_dynamic", False):          # sampling times (mudoe.dynamic_runs)
+        from .dynamic_runs import run_oed_dynamic
+        run_oed_dynamic(study, results, progress)
+        return results
     v = _oed_variant(study)
     _require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     est = results.estimates[v]
@@ -398,7 +425,7 @@ def run_detect(study: Study, results: StudyResults, progress: Progress | None = 
     design = list(_design_sensors(study, results, progress))
     settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
-        results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
+        results.detection = detect(study.models, study.data, study.splits, {v: start_values(study, v) for v in study.models},
                                    design=design, settings=settings, progress=progress)
     return results
 
@@ -407,7 +434,7 @@ def run_diagnosis(study: Study, results: StudyResults, progress: Progress | None
     """The diagnostic split family on every variant (:func:`reports.diagnosis.diagnose`; needs detection)."""
     from reports.diagnosis import diagnose
     progress = progress or Progress(False)
-    if results.detection is None:
+    if results.detection is None or getattr(study, "is_dynamic", False):   # diagnostic splits: static models
         return results
     with progress.step(f"what the models miss: diagnostic splits of {len(study.models)} model(s)"):
         results.diagnosis = diagnose(results, progress=progress)
@@ -495,6 +522,9 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
         raise ConfigError(f"{cfg.path}: [simulate] give the set points: inputs = [...] or input_start, input_stop "
                           "and n_inputs (in the [data] input unit)")
     built = _build_models(cfg)
+    if _dynamic(cfg, built):                 # without [dynamic] (with it the CLI writes the long format)
+        from .dynamic_study import build_dynamic
+        build_dynamic(cfg, {v: m for v, (m, _) in built.items()})
     variant = sc.variant or next(iter(built))
     m, fn = built[variant]
     units = study_units(cfg, m)
@@ -620,6 +650,9 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> PlannedDesign:
     """``[oed] planned = true``: the design at the [[parameters]] start values, no data read."""
     built = _build_models(cfg)
+    if _dynamic(cfg, built):
+        from .dynamic_runs import plan_dynamic
+        return plan_dynamic(cfg, {k: m for k, (m, _) in built.items()}, progress or Progress(False))
     v = cfg.oed.variant or list(built)[-1]
     model, fn = built[v]
     sigma = _planned_sigma(cfg, model)
