@@ -29,7 +29,8 @@ from models.state import solve_states
 
 from .config import ConfigError
 
-__all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "plan_dynamic"]
+__all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "run_trajectories",
+           "plan_dynamic", "design_rows_text"]
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,7 @@ class Trajectories:
     half_new: np.ndarray
     level: float
     quantile: str
+    residuals: np.ndarray = None     # (n_M, n_q, n_t_data, n_S): (z - h) / sigma at the data's times
 
 
 def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 121) -> Trajectories:
@@ -155,7 +157,7 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 12
     model = study.models[variant]
     data = study.data[variant]
     horizon = model.horizon if model.horizon is not None else float(data.union_times[-1])
-    t = np.unique(np.r_[np.linspace(0.0, horizon, n_fine)[1:], data.union_times])
+    t = np.unique(np.r_[np.linspace(0.0, horizon, n_fine), data.union_times])
     sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
     cm, _ = controlled_mesh(model, est.p, study.inputs, t, sigma)
     Y = solve_states(cm, est.p, study.inputs)
@@ -169,4 +171,17 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 12
     else:
         q, name = float(stats.norm.ppf(0.5 + level / 2)), "normal"
     s2 = np.asarray(sigma, float)[None, None, :] ** 2
-    return Trajectories(t, h, q * np.sqrt(np.maximum(var, 0)), q * np.sqrt(np.maximum(var, 0) + s2), level, name)
+    res = np.full(data.z.shape, np.nan)
+    for j in range(n_q):
+        n = int(np.isfinite(data.times[j]).sum())
+        at = np.searchsorted(t, data.times[j, :n])
+        res[:, j, :n] = (data.z[:, j, :n] - h[j, at][None]) / np.asarray(sigma, float)
+    return Trajectories(t, h, q * np.sqrt(np.maximum(var, 0)), q * np.sqrt(np.maximum(var, 0) + s2), level, name,
+                        res)
+
+
+def run_trajectories(study, results, progress) -> None:
+    """``results.trajectories``: the trajectories of every fitted variant (for the report)."""
+    for v, est in results.estimates.items():
+        with progress.step(f"trajectories of {v} with prediction bands"):
+            results.trajectories[v] = trajectories(study, est, v)

@@ -121,6 +121,7 @@ class StudyResults:
     detection_error: str = ""
     diagnosis: object = None
     validation: object = None
+    trajectories: dict = field(default_factory=dict)     # dynamic studies: {variant: Trajectories}
     timing: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 

@@ -138,10 +138,11 @@ def _title_page(results, cfg):
     for v, par in verdict_paragraphs(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.campaign
+    dyn = getattr(s, "is_dynamic", False)
     meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
-            f"{c.n_M} series x {c.n_q} set points x {len(s.sensors)} sensors; study series: "
+            f"{c.n_M} series x {c.n_q} {'experiments' if dyn else 'set points'} x {len(s.sensors)} sensors; study series: "
             f"{'all' if cfg.data.series is None else ', '.join(str(i + 1) for i in cfg.data.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
@@ -152,9 +153,11 @@ def _title_page(results, cfg):
         y -= 0.03
         for k, nt in enumerate(notes, 1):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
-    _text(fig, 0.04, 0.045, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
+    _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
+          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if dyn else
+          "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model "
-          "misses.", width=165, size=8, color="0.4")
+          "misses."), width=165, size=8, color="0.4")
     return fig
 
 
@@ -659,6 +662,9 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
         pages.append(("misses", partial(_misses_pages, results, diagnosis)))
     if results.validation is not None:
         pages.append(("validation", partial(_validation_page, results)))
+    if getattr(results.study, "is_dynamic", False):      # time series: reports.dynamic_pages
+        from .dynamic_pages import dynamic_pages
+        pages = dynamic_pages(pages, results)
     return pages
 
 
@@ -723,7 +729,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     try:
         tmp.mkdir(mode=0o700)
         diagnosis = getattr(results, "diagnosis", None)
-        if diagnosis is None and diagnose:
+        if diagnosis is None and diagnose and not getattr(results.study, "is_dynamic", False):
             diagnosis = run_diagnosis(results, progress=progress)
         pages = report_pages(results, diagnosis, diagnose, uncertainty, progress)
         names, texts = [], []
