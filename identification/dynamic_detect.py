@@ -154,8 +154,11 @@ def _gate(settings, name, data: DynamicMeasurements, design, notes):
     if chk.passed:
         return chk
     bad = chk.failing()
+    pv = ", ".join(f"{100 * chk.adjusted[chk.sensors.index(s)]:.3g} %" for s in bad)
     msg = (f"normality gate (Algorithm 1, line 05, pooled per instrument) failed for {name}: instrument(s) "
-           f"{', '.join(bad)} ({chk.note}); acquire new data, or set normality = 'override' to continue on record")
+           f"{', '.join(bad)}, Shapiro-Wilk p-value(s) ({chk.correction}-adjusted) {pv} < {100 * chk.level:g} % on "
+           "the differences of repeated series over every (experiment, time) reading; acquire new data, or set "
+           "normality = 'override' to continue on record")
     if settings.normality == "check":
         raise NormalityError(msg, chk)
     notes.append(f"override: {msg}")
