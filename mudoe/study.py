@@ -377,7 +377,7 @@ def _require_fit(study: Study, results: StudyResults, v: str, progress: Progress
 def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Lines 02-03 of Algorithm 1: information of every sensor at the estimate, design table, chosen design."""
     try:
-        from oed.design import design_table, select_sensors_from_information
+        from oed.design import select_sensors_from_information
     except ImportError as exc:
         raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
     progress = progress or Progress(False)
@@ -392,18 +392,33 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
     with progress.step(f"optimal sensor design ({o.criterion}, {v})"):
         F, S = information_contributions(study.models[v], study.data[v], est.p, states=est.states)
         n_default = min(study.models[v].n_p, len(study.sensors))   # fewer sensors than parameters is allowed
-        table = design_table(F, S if o.kind == "second_order" else None, study.sensors,
-                             o.min_sensors or n_default, kind=o.kind)
         n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else n_default
         res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind, n_sensors=n,
                                               max_sensors=o.max_sensors, costs=list(o.costs) if o.costs else None,
                                               budget=o.budget, include=o.include, exclude=o.exclude,
                                               sensor_names=study.sensors)
+        table = _design_rows(F, S if o.kind == "second_order" else None, study, o, o.min_sensors or n_default, res)
     results.oed, results.oed_table, results.oed_variant = res, table, v
     results.design_sensors = tuple(res.sensors)
     results.design_how = (f"{o.criterion}-optimal ({o.kind} covariance) design of {len(res.sensors)} sensors "
                           f"at the {v} estimate")
     return results
+
+
+#: sensor combinations listed in full (the paper's table) up to this many; beyond, the ten best designs
+FULL_TABLE_ROWS = 25
+
+
+def _design_rows(F, S, study: Study, o, min_sensors: int, res):
+    """Every combination of at least ``min_sensors`` sensors while they fit one page, else the ten best
+    designs of the chosen size and the chosen one (:func:`oed.best_designs.best_designs`)."""
+    from oed.best_designs import best_designs
+    from oed.constraints import DesignConstraints
+    from oed.design import design_table
+    n_S, n_p = F.shape[0], F.shape[1]
+    if DesignConstraints(n_candidates=n_S, n_params=n_p, min_sensors=min_sensors).count_designs() <= FULL_TABLE_ROWS:
+        return design_table(F, S, study.sensors, min_sensors, kind=o.kind)
+    return best_designs(F, S, study.sensors, len(res.sensors), o.criterion, kind=o.kind, chosen=res.indices)
 
 
 def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> tuple:

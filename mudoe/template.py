@@ -126,6 +126,9 @@ def write_template(path, model_name: str | None = None) -> Path:
         return atomic_write_text(path, template_text())
     factory = load_factory(model_name, "--model")
     model = factory("default")
+    if getattr(model, "is_dynamic", False):          # an ODE/DAE model: a [dynamic] study
+        from .dynamic_template import dynamic_template_text
+        return atomic_write_text(path, dynamic_template_text(model, model_name))
     if not isinstance(model, Model):
         raise ConfigError(f"--model: {model_name}('default') returned {type(model).__name__}, expected a "
                           "models.Model")

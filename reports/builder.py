@@ -246,7 +246,9 @@ def _oed_page(results):
     names = ", ".join(results.study.models[results.oed_variant].param_names)
     value = f"log det C = {r.value:.4f}" if r.criterion == "D" else f"{r.criterion} = {r.value:.4e}"
     txt = (f"Criteria of the {results.oed_table.kind.replace('_', '-')} covariance C(w) of ({names}) "
-           f"({criteria_units(results.study)}) for every sensor combination, from the information of each sensor "
+           f"({criteria_units(results.study)}) for "
+           + (getattr(results.oed_table, "note", "") or "every sensor combination")
+           + ", from the information of each sensor "
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
            f"{len(r.sensors)} sensors): {', '.join(r.sensors)} (green), {value}, "
            f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "

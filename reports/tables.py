@@ -115,9 +115,13 @@ def oed_rows(results) -> tuple[list, list]:
     chosen = results.oed.sensors if results.oed is not None else ()
     head = ["combination", "sensors", "Psi_A (trace C)", "Psi_D (log det C)", "Psi_E (max eig C)", "flag"]
     rows = []
-    for r in t.rows:
+    ranked = getattr(t, "ranked", False)            # the ten best designs (oed.best_designs), not every one
+    if ranked:
+        head[0] = "rank"
+    for k, r in enumerate(t.rows, 1):
         mark = "  <= chosen" if tuple(r.sensors) == tuple(chosen) else ""
-        rows.append([r.mask + (" (all)" if "0" not in r.mask else ""), " ".join(r.sensors), f"{r.A:.4e}",
+        first = (str(k) if k <= 10 else "-") if ranked else r.mask + (" (all)" if "0" not in r.mask else "")
+        rows.append([first, " ".join(r.sensors), f"{r.A:.4e}",
                      f"{r.logdet:.4f}", f"{r.E:.4e}", (r.flag or "") + mark])
     return head, rows
 
@@ -130,7 +134,7 @@ def oed_table_text(results) -> str:
     crit = f"{r.criterion} = {r.value:.6g}" + (" (log det C)" if r.criterion == "D" else "")
     lines = [f"Optimal sensor design ({r.criterion}-criterion, {r.kind} covariance) from the {results.oed_variant} "
              f"estimate of ({names}); {criteria_units(results.study)}",
-             _text_table(head, rows), "",
+             getattr(results.oed_table, "note", "every combination") + ":", _text_table(head, rows), "",
              f"chosen: {', '.join(r.sensors)} ({crit}; method {r.method}, "
              f"{'proven optimal' if r.proven_optimal else 'not proven optimal'})"]
     lines += [f"note: {n}" for n in r.notes]
