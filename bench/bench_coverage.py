@@ -145,7 +145,7 @@ def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
         return out
     try:
         out["flagged"] = float(not est.curvature.trustworthy)
-    except (np.linalg.LinAlgError, ValueError) as exc:
+    except (np.linalg.LinAlgError, ValueError, IdentificationError) as exc:     # NotBoundedError: no curvature
         out["errors"].append(("curvature", str(exc).splitlines()[0][:200]))
     ci = est.conf_int(0.05)
     out["wald"] = ((ci[:, 0] <= c.p_true) & (c.p_true <= ci[:, 1])).astype(float)
@@ -154,7 +154,7 @@ def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
         pr = est.conf_int(0.05, method="profile", model=c.model, data=data)
         out["profile"] = ((pr.lower <= c.p_true) & (c.p_true <= pr.upper)).astype(float)
         out["inf"] = int(np.sum(~np.isfinite(pr.lower)) + np.sum(~np.isfinite(pr.upper)))
-    except ProfileError as exc:
+    except (ProfileError, IdentificationError) as exc:
         out["errors"].append(("profile", str(exc).splitlines()[0][:200]))
     out["t_profile"] = time.perf_counter() - t0
     if n_boot:

@@ -1,5 +1,6 @@
 """Identification: measurements, the full-space estimator, covariances, confidence regions."""
-from .errors import ConvergenceError, DataError, IdentifiabilityError, IdentificationError, StateSolveError
+from .errors import (ConvergenceError, DataError, IdentifiabilityError, IdentificationError, NotBoundedError,
+                     StateSolveError)
 from .measurements import Measurements
 from .dynamic_data import DynamicMeasurements
 from .estimator import IdentifySettings, identify, information_contributions, covariance_from_terms
@@ -13,7 +14,8 @@ from .montecarlo import (MonteCarloResult, MonteCarloSettings, clopper_pearson, 
                          size_study, validate)
 
 __all__ = [
-    "ConvergenceError", "DataError", "IdentifiabilityError", "IdentificationError", "StateSolveError", "Measurements",
+    "ConvergenceError", "DataError", "IdentifiabilityError", "IdentificationError", "NotBoundedError", "StateSolveError",
+    "Measurements",
     "IdentifySettings", "IpoptSettings", "identify", "information_contributions", "covariance_from_terms",
     "Ellipsoid", "alpha_min", "alpha_min_two_sample", "in_region", "mahalanobis2", "CovarianceError",
     "Estimate", "simulate", "solve_state", "solve_states",

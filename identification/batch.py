@@ -74,6 +74,7 @@ import numpy as np
 from models.contract import Model
 from models.state import numerics, solve_states
 from .errors import DataError, IdentificationError, StateSolveError
+from .unbounded import not_bounded_reason
 from .estimator import IdentifySettings, as_start_vector, identify, param_scale
 from .factor import covariances, weighted_factor
 from .measurements import Measurements
@@ -122,7 +123,8 @@ class FallbackRecord:
     ----------
     member : int      index of the data set
     reason : str      why the batch iteration did not give its estimate
-    error : str       "" when identify succeeded, else its error ("ExceptionType: message")
+    error : str       "" when identify succeeded, else its error ("ExceptionType: message"), or
+                      "not bounded: ..." when identify returned an estimate the data do not bound
     """
 
     member: int
@@ -302,7 +304,8 @@ class BatchFit:
     decrement : ndarray (R,)             Newton decrements at the estimates (NaN for fallbacks)
     iterations : ndarray (R,) int        sweeps of the batch iteration (0 for fallbacks)
     converged : ndarray (R,) bool        the batch iteration gave the estimate
-    ok : ndarray (R,) bool               an estimate exists (batch or fallback)
+    ok : ndarray (R,) bool               an estimate exists (batch or fallback; False for an estimate
+                                         that is not bounded, kept in ``results``)
     fallbacks : tuple of FallbackRecord  members fitted by identify instead (which, why, outcome)
     results : tuple                      per member a BatchMember, an Estimate (fallback) or the
                                          exception identify raised (read with :meth:`result`)
@@ -1150,7 +1153,9 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                 use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
                 Y0_r = Y0 if Y0 is None or data.shared or not n_y else Y0[r]
                 est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
-                records.append(FallbackRecord(int(r), why))
+                # an estimate the data do not bound is kept (callers test Estimate.bounded) but is no
+                # estimate of p: ok False, its reason recorded
+                records.append(FallbackRecord(int(r), why, not_bounded_reason(est)))
                 results[r] = est
             except (IdentificationError, DataError) as exc:
                 records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
@@ -1255,7 +1260,7 @@ def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps
     rss = np.full(R, np.nan)
     ok = np.zeros(R, bool)
     for r, res in enumerate(results):
-        if isinstance(res, Exception) or res is None:
+        if isinstance(res, Exception) or res is None or not_bounded_reason(res):
             continue
         ok[r] = True
         p[r], cov[r], cov_gn[r], info[r] = res.p, res.cov, res.cov_gn, res.information

@@ -35,7 +35,8 @@ from models.contract import Model
 from models.state import set_jit
 from . import cluster
 from .batch import BatchData, fit_batch
-from .errors import DataError, IdentificationError, StateSolveError
+from .errors import DataError, IdentificationError, NotBoundedError, StateSolveError
+from .unbounded import not_bounded_reason
 from .estimator import identify
 from .measurements import Measurements
 from .profile import ConfidenceIntervals, resolve_params, validate_alpha
@@ -106,6 +107,8 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
         est = identify(task.model, data, task.p0, weights=task.weights, Y0=task.states)
     except (IdentificationError, StateSolveError, DataError) as exc:
         return np.full(task.p0.size, np.nan), _error_text(exc)
+    if not_bounded_reason(est):             # no finite estimate: a failed refit, with its reason
+        return np.full(task.p0.size, np.nan), not_bounded_reason(est)[:200]
     return np.asarray(est.p, float), ""
 
 
@@ -140,6 +143,8 @@ def _replicate_batch(task: _Task, chunk: list) -> list:
         res = fit.results[k]
         if isinstance(res, Exception):
             out.append((i, np.full(task.p0.size, np.nan), _error_text(res), reasons.get(k, "")))
+        elif not_bounded_reason(res):
+            out.append((i, np.full(task.p0.size, np.nan), not_bounded_reason(res)[:200], reasons.get(k, "")))
         else:
             out.append((i, np.asarray(res.p, float), "", reasons.get(k, "")))
     return out
@@ -293,12 +298,17 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     ------
     BootstrapError
         Fewer than two refits succeeded.
+    NotBoundedError
+        The estimate is not bounded (``est.bounded`` False).
     """
     alpha = validate_alpha(alpha)
     idx = resolve_params(params, tuple(est.param_names))
     if model is None or data is None:
         raise ValueError("model, data: the bootstrap needs the model and the measurements the estimate was "
                          "fitted to (conf_int(..., model=model, data=data))")
+    if not_bounded_reason(est):
+        raise NotBoundedError(f"bootstrap intervals: the estimate is {not_bounded_reason(est)}; there is no finite "
+                              "estimate to simulate from and refit around: use conf_int(method=\"profile\")")
     reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, batch, jit)
     P, errors = reps.P, reps.errors
     ok = np.all(np.isfinite(P), axis=1)

@@ -66,6 +66,7 @@ from .normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction
 from .progress import Progress
 from .regions import CovarianceError, mahalanobis2
 from .splits import Split, SplitError
+from .unbounded import not_bounded_reason
 from models.state import solve_states
 
 __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
@@ -411,7 +412,11 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     (:attr:`SplitTest.trustworthy`; :func:`detect` does; Monte Carlo studies skip it for speed).
 
     A failed fit or a singular covariance is recorded in its :class:`SplitTest` (``ok=False``,
-    with the stage and the reason), never dropped and never raised.  ``states0`` (n_q, n_y),
+    with the stage and the reason), never dropped and never raised.  A fit whose data do not bound
+    the parameters (``Estimate.bounded`` False: the best fit runs off to infinity) has no estimate to
+    test: its split fails at that fit with the reason "not bounded: ..." (the verdict is "undecided"
+    unless another split rejects); a pooled fit that is not bounded leaves the likelihood ratio out
+    with that reason.  ``states0`` (n_q, n_y),
     the states at p0 for every input of ``data``, warm-starts the fits (same result, faster).
     ``bar`` (a tqdm bar, e.g. from :meth:`identification.progress.Progress.bar`) is advanced by
     one per split done.
@@ -439,11 +444,19 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
         except (IdentificationError, DataError) as exc:
             out.append(_failed(name, split, "calibration fit", f"{type(exc).__name__}: {exc}", model.n_p))
             continue
+        if not_bounded_reason(est_c):        # the data of this set do not bound p: no estimate to test
+            out.append(_failed(name, split, "calibration fit", not_bounded_reason(est_c), model.n_p,
+                               n_cal=est_c.n_data, notes=est_c.notes))
+            continue
         try:
             est_v, C_v = _fit(model, split.validation(data) if given[1] is None else None, p0, weights, settings,
                               None if states0 is None else states0[list(split.val_inputs)], given[1])
         except (IdentificationError, DataError) as exc:
             out.append(_failed(name, split, "validation fit", f"{type(exc).__name__}: {exc}", model.n_p,
+                               est_c.p, C_c, est_c.n_data, est_c.notes))
+            continue
+        if not_bounded_reason(est_v):
+            out.append(_failed(name, split, "validation fit", not_bounded_reason(est_v), model.n_p,
                                est_c.p, C_c, est_c.n_data, est_c.notes))
             continue
         notes = tuple(f"calibration fit: {n}" for n in est_c.notes) + tuple(f"validation fit: {n}" for n in est_v.notes)
@@ -536,6 +549,8 @@ def _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c,
                                  Y0=None if states0 is None else states0[qs])
             except (IdentificationError, DataError) as exc:
                 est_u = f"pooled fit failed: {type(exc).__name__}: {exc}"
+            if not_bounded_reason(est_u):
+                est_u = f"pooled fit {not_bounded_reason(est_u)}"
         pooled[key] = est_u
     if isinstance(est_u, str):
         return math.nan, math.nan, est_u

@@ -50,7 +50,8 @@ from models.state import set_jit
 from . import cluster
 from .bootstrap import simulated_campaign
 from .detect import STATISTICS, DetectSettings, run_split_tests
-from .errors import DataError, IdentificationError
+from .errors import DataError, IdentificationError, NotBoundedError
+from .unbounded import not_bounded_reason
 from .estimator import identify
 from .measurements import Measurements
 from .montecarlo import batched_split_tests
@@ -356,6 +357,9 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     except (IdentificationError, DataError) as exc:
         raise IdentificationError(f"bootstrap_detect: the null fit of the whole campaign failed: {exc}",
                                   status="null fit failed") from None
+    if not_bounded_reason(null):
+        raise NotBoundedError(f"bootstrap_detect: the null fit of the whole campaign is {not_bounded_reason(null)}; "
+                              "there is no null model to simulate campaigns from")
     task = _Task(model, name, splits, np.asarray(data.inputs), np.asarray(null.fitted, float), data.mask(),
                  np.asarray(null.sigma, float), None if data.sigma is None else np.asarray(data.sigma, float),
                  tuple(data.sensors), None if data.input_names is None else tuple(data.input_names),

@@ -1,7 +1,8 @@
 """Exceptions of the identification package (all subclass ValueError or RuntimeError)."""
 from models.errors import NumericsError, StateSolveError
 
-__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "StateSolveError", "ConvergenceError"]
+__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "NotBoundedError", "StateSolveError",
+           "ConvergenceError"]
 
 
 class DataError(ValueError):
@@ -19,7 +20,10 @@ class IdentificationError(NumericsError):
 
 
 class IdentifiabilityError(IdentificationError):
-    """Assumption 3 of the paper fails: rank(Omega J) < n_p.
+    """Assumption 3 of the paper fails: rank(Omega J) < n_p at a finite point (structural).
+
+    Data that do not bound the parameters (the best fit runs off to infinity) are not this error:
+    :func:`identification.identify` returns them as an Estimate with ``bounded`` False.
 
     Attributes
     ----------
@@ -51,3 +55,12 @@ class ConvergenceError(IdentificationError):
         self.p = p
         self.eigenvalue = eigenvalue
         self.direction = direction
+
+
+class NotBoundedError(IdentificationError):
+    """An operation needs a bounded estimate (a finite optimum) but the data do not bound the
+    parameters (``Estimate.bounded`` is False): e.g. a confidence ellipsoid, the curvature, a design
+    at the estimate.  The message names the parameters that run off."""
+
+    def __init__(self, message: str, status: str = "not bounded"):
+        super().__init__(message, status=status)

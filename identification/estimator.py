@@ -32,7 +32,7 @@ import scipy.sparse as sps
 from scipy import special
 
 from models.contract import Model
-from . import dense
+from . import dense, unbounded
 from .factor import estimate_covariances
 from . import secondorder
 from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
@@ -1305,7 +1305,10 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     IdentificationError
         Ipopt failed (carries Ipopt's status), or the state equation could not be solved.
     IdentifiabilityError
-        rank(Omega J) < n_p at the estimate (names the parameters and sensors).
+        rank(Omega J) < n_p at a finite estimate (structural; names the parameters and sensors).
+        When the data do not bound the parameters (the best fit runs off to infinity along a
+        direction, :mod:`identification.unbounded`) the result is returned instead, with
+        ``Estimate.bounded`` False and the direction in ``Estimate.unbounded``.
     ConvergenceError
         The solver stopped at a stationary point that is not a minimum (the reduced Hessian
         J^T Omega J + S is not positive definite) and no lower point was found along its negative
@@ -1322,11 +1325,38 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     clock = _PhaseClock()
     st = _start(model, data, p0, weights, Y0)
     clock.lap("validation, data, states at p0")
-    sol = _solve_full_space(st, settings, clock)
-    ref = _refine_solution(st, sol, settings)
-    st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
-    clock.lap("refinement (states, sensitivities, S at the estimate)")
-    return _estimate(st, sol, ref, settings, t_start, clock, escaped)
+    sol = ref = None
+    try:
+        sol = _solve_full_space(st, settings, clock)
+        ref = _refine_solution(st, sol, settings)
+        st, sol, ref, escaped = _second_order(st, sol, ref, settings, clock)
+        clock.lap("refinement (states, sensitivities, S at the estimate)")
+        est = _estimate(st, sol, ref, settings, t_start, clock, escaped)
+    except (IdentificationError, np.linalg.LinAlgError) as exc:
+        # did the fit run off to infinity (the data do not bound p: a result) or is the rank
+        # deficiency structural (a finite point: the error, saying so)?  identification.unbounded
+        # follows the valley from where the fit stopped (from p0 when the solver failed on its way)
+        if ref is not None:
+            p_stop, y_stop = ref.point.p, ref.point.states
+        elif sol is not None:
+            p_stop, y_stop = sol.p, sol.states
+        else:
+            p_stop, y_stop = st.p0, (st.Y_init if model.n_y else None)
+        diag = unbounded.diagnose(st.problem, p_stop, y_stop)
+        if diag.kind == "unbounded":
+            return unbounded.estimate_not_bounded(st, diag, f"{type(exc).__name__}: {exc}", t_start)
+        if isinstance(exc, IdentifiabilityError):
+            raise unbounded.identifiability_error(exc, diag, p_stop, model.param_names) from None
+        raise
+    sloppy = est.sloppy_direction
+    if sloppy is not None and not np.any(sol.at_bound) and sloppy.ratio ** 2 > settings.ill_conditioned:
+        # an ill-conditioned "optimum" may be a point far out on a run-off where the steps became too small
+        diag = unbounded.diagnose(st.problem, est.p, est.states)
+        if diag.kind == "unbounded":
+            return unbounded.estimate_not_bounded(
+                st, diag, f"{est.status} at {', '.join(f'{n} = {v:.4g}' for n, v in zip(est.param_names, est.p))} "
+                "(ill-conditioned; the objective still decreased beyond it)", t_start)
+    return est
 
 
 def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,

@@ -51,6 +51,7 @@ from .measurements import Measurements
 from .normality_gate import correction_text, gate_fails
 from .progress import Progress
 from .splits import Split, SplitError
+from .unbounded import not_bounded_reason
 from models.state import set_jit, simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
@@ -418,7 +419,8 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
         key = split.pooled_points(n_M)
         have = done_keys.setdefault(key, set())
         members = [r for r in range(R)
-                   if r not in have and not any(e is None or isinstance(e, Exception) for e in fits[r][js])]
+                   if r not in have and not any(e is None or isinstance(e, Exception) or not_bounded_reason(e)
+                                                for e in fits[r][js])]
         if not members:
             continue
         have.update(members)
@@ -431,7 +433,10 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
             continue                           # run_split_tests fits these pooled data itself
         for k, r in enumerate(members):
             e = _given(bf, k)
-            pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}" if isinstance(e, Exception) else e
+            if isinstance(e, Exception):
+                pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}"
+            else:
+                pooled[r][key] = f"pooled fit {not_bounded_reason(e)}" if not_bounded_reason(e) else e
     return fits, pooled, ok_split
 
 
@@ -866,6 +871,12 @@ class MonteCarloResult:
     def n_undecided(self, model=None, statistic: str = DEFAULT_STATISTIC) -> int:
         return int(np.sum(~np.isfinite(self.decisions(model, statistic))))
 
+    def n_not_bounded(self, model=None) -> int:
+        """Failed split fits whose data did not bound the parameters (the best fit ran off to infinity;
+        recorded in ``errors`` with a message starting "not bounded" or "pooled fit not bounded")."""
+        name = self.models[self._im(model)]
+        return sum(1 for e in self.errors if e[1] == name and "not bounded:" in e[4][:30])
+
     def split_rejection_rate(self, split: int, model=None, statistic: str = DEFAULT_STATISTIC,
                              level: float | None = None) -> Rate:
         """Rejection rate of one split's hypothesis at ``level`` (default TOL / n_tests)."""
@@ -923,6 +934,10 @@ class MonteCarloResult:
                       f"Normality gate (Shapiro-Wilk at {gate}) failure rate: {self.gate_failure_rate()}"]
         if self.errors:
             lines += ["", f"{len(self.errors)} failed split fits, e.g.: {self.errors[0]}"]
+            nb = {m: self.n_not_bounded(m) for m in self.models}
+            if any(nb.values()):
+                lines.append("of them, fits whose data did not bound the parameters (the best fit ran off to infinity; "
+                             "counted as undecided): " + ", ".join(f"{m} {k}" for m, k in nb.items()))
         return "\n".join(lines)
 
 

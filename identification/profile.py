@@ -346,6 +346,8 @@ class _Profiler:
                 LF = np.linalg.cholesky(Fs)
             except np.linalg.LinAlgError:
                 LF = None
+            if LF is None and not np.any(gs):
+                return solved              # exactly stationary where the free parameters have no influence (Vm = 0)
             if LF is not None:
                 w = np.linalg.solve(LF, gs)
                 if float(w @ w) < self.settings.newton_tol:
@@ -388,6 +390,9 @@ class _Profiler:
         fixed_model = self.model.with_bounds({names[k]: (float(v), float(v)) for k, v in zip(fixed, values)})
         try:
             est = identify(fixed_model, self.data, p0, weights=self.est.weights, Y0=base.point.states)
+            # a constrained fit that runs off to infinity (identify certified it, est.bounded False): its
+            # point lies on the run-off within the certified tolerance of the constrained infimum, which is
+            # the profile's value there
             point = self.problem.evaluate(np.asarray(est.p, float), est.states)
         except (IdentificationError, StateSolveError) as exc:
             raise ProfileError(f"reduced Newton failed ({reason}) and Ipopt failed too: {exc}",
@@ -589,8 +594,13 @@ def profile_intervals(model: Model, data: Measurements, est, alpha: float = 0.05
     idx = resolve_params(params, tuple(est.param_names))
     _check_pair(model, data, est)
     settings = settings or ProfileSettings()
-    prof = _Profiler(model, data, est, settings)
     c = profile_threshold(alpha, est.sigma_estimated, est.dof)
+    if getattr(est, "unbounded", None) is not None:      # the best fit runs off: D against the infimum
+        from .unbounded import profile_intervals_unbounded
+        lower, upper, notes = profile_intervals_unbounded(model, data, est, alpha, idx, c)
+        return ConfidenceIntervals(tuple(est.param_names[i] for i in idx), np.asarray(est.p)[idx], lower, upper,
+                                   "profile", alpha, tuple(notes))
+    prof = _Profiler(model, data, est, settings)
     restart_notes = []
     while True:
         profiles, notes = [], []
@@ -910,6 +920,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
             grid = "axes"
     valley_note = ""
     _check_pair(model, data, est)
+    if getattr(est, "unbounded", None) is not None:     # no finite minimum to grid around
+        est.require_bounded("lr_region")
     settings = settings or ProfileSettings()
     prof = _Profiler(model, data, est, settings)
     c = region_threshold(alpha, est.sigma_estimated, est.dof)

@@ -43,6 +43,10 @@ class Estimate:
     notes : tuple of str          numbered notes printed by summary()
     model, data                   the models.Model and the Measurements of the fit (None when the
                                   Estimate was built by hand; needed by :attr:`curvature`)
+    unbounded : Unbounded or None the data do not bound the parameters: the best fit runs off to
+                                  infinity along ``unbounded.direction`` (:mod:`identification.unbounded`);
+                                  p is then a point on that path, the standard errors of the parameters
+                                  that run off are inf, status is "Not_Bounded".  None: a finite optimum
     """
 
     p: np.ndarray
@@ -76,6 +80,7 @@ class Estimate:
     extra: dict = field(default_factory=dict)
     model: object = field(default=None, repr=False)
     data: object = field(default=None, repr=False)
+    unbounded: object = None
 
     def __post_init__(self):
         for name in ("p", "states", "fitted", "residuals", "weights", "sigma", "information", "S", "H",
@@ -88,6 +93,18 @@ class Estimate:
     @property
     def n_p(self) -> int:
         return self.p.size
+
+    @property
+    def bounded(self) -> bool:
+        """The data bound the parameters (a finite optimum); False: see :attr:`unbounded`."""
+        return self.unbounded is None
+
+    def require_bounded(self, what: str) -> None:
+        """Raise NotBoundedError naming ``what`` needs a bounded estimate (no-op when bounded)."""
+        if self.unbounded is not None:
+            from .errors import NotBoundedError
+            raise NotBoundedError(f"{what}: needs a bounded estimate, but {self.unbounded.reason}; use "
+                                  "conf_int(method=\"profile\") and summary() for what the data determine")
 
     @property
     def success(self) -> bool:
@@ -119,6 +136,7 @@ class Estimate:
         exact from the second derivatives of the model outputs (:mod:`identification.curvature`)."""
         if self.model is None or self.data is None:
             raise ValueError("curvature: this Estimate carries no model/data (build it with identify())")
+        self.require_bounded("curvature")
         return estimate_curvature(self, self.model, self.data, 0.05)
 
     @cached_property
@@ -186,6 +204,11 @@ class Estimate:
         address or Client, ``progress`` a :class:`identification.progress.Progress`); see
         :func:`identification.bootstrap.bootstrap_intervals`.
 
+        For an estimate that is not bounded (:attr:`bounded` False) the Wald intervals of the parameters
+        that run off are (-inf, inf) (infinite standard errors); the profile intervals have a finite end
+        (the likelihood ratio against the infimum of the objective) and an infinite one; the bootstrap
+        raises NotBoundedError.
+
         Both return a frozen :class:`identification.profile.ConfidenceIntervals` (``lower``,
         ``upper``, ``method``, ``notes``; ``.array`` is the (m, 2) layout of the Wald result); an
         unbounded side is -inf / +inf with a note.  They use the ``model`` and ``data`` the
@@ -228,9 +251,15 @@ class Estimate:
         raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")
 
     def ellipsoid(self, alpha: float = 0.05, kind: str = "second_order") -> Ellipsoid:
-        """The joint (1 - alpha) confidence ellipsoid G(alpha, p, C) (paper eq. 6)."""
-        if not (0 < alpha < 1):
-            raise ValueError(f"alpha must lie in (0, 1), got {alpha}")
+        """The joint (1 - alpha) confidence ellipsoid G(alpha, p, C) (paper eq. 6).
+
+        ``alpha`` in (0, 0.5) is the miss probability (0.05 gives the 95 % ellipsoid), as in
+        :meth:`conf_int`; anything else raises ValueError naming the argument.  NotBoundedError when
+        the data do not bound the parameters.
+        """
+        self.require_bounded("ellipsoid")
+        from . import profile as profile_mod
+        alpha = profile_mod.validate_alpha(alpha)
         C = self.cov if kind == "second_order" else self.cov_gn if kind == "gauss_newton" else None
         if C is None:
             raise ValueError(f"kind must be 'second_order' or 'gauss_newton', got {kind!r}")
@@ -242,7 +271,11 @@ class Estimate:
 
     # ------------------------------------------------------------------ report
     def summary(self, alpha: float = 0.05) -> str:
-        """A table of estimates, standard errors and intervals, ending with numbered notes."""
+        """A table of estimates, standard errors and intervals, ending with numbered notes (for an estimate
+        that is not bounded: where the parameters run off, the profile intervals and what the data determine)."""
+        if self.unbounded is not None:
+            from .unbounded import unbounded_summary
+            return unbounded_summary(self, alpha)
         ci = self.conf_int(alpha)
         lines = [f"Identification of {self.model_name or 'model'}",
                  f"  status: {self.status} ({self.message}); iterations {self.iterations}, "
@@ -275,5 +308,7 @@ class Estimate:
         return "\n".join(lines)
 
     def __repr__(self):
+        if self.unbounded is not None:
+            return f"Estimate(not bounded: {self.unbounded.reason})"
         vals = ", ".join(f"{n}={v:.6g}" for n, v in zip(self.param_names, self.p))
         return f"Estimate({vals}; status={self.status})"

@@ -352,8 +352,19 @@ def load_friction(path=FRICTION_JSON) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FrictionError(f"path: {path} does not exist; run mudoe.press.retrain()")
-    raw = json.loads(path.read_text())
-    return dict(coulomb=Coulomb(raw["q_c_N"]), network=PreisachNetwork.from_dict(raw["network"]), raw=raw)
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise FrictionError(f"{path}:{exc.lineno}: not valid JSON ({exc.msg}, column {exc.colno}); give the file "
+                            "written by mudoe.press.retrain()") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FrictionError(f"{path}: cannot read ({exc})") from None
+    try:
+        return dict(coulomb=Coulomb(raw["q_c_N"]), network=PreisachNetwork.from_dict(raw["network"]), raw=raw)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise FrictionError(f"{path}: not a friction constants file ({what}); give the file written by "
+                            "mudoe.press.retrain()") from None
 
 
 def candidate_models(path=FRICTION_JSON) -> dict:

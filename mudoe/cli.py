@@ -95,6 +95,16 @@ def _bad_input_types():
     return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError)
 
 
+def _located(exc: Exception, args) -> str:
+    """The message of a bad-input error; a library error that names no file gets the study's config file."""
+    from identification.errors import DataError
+    from identification.splits import SplitError
+    msg, config = str(exc), getattr(args, "config", None)
+    if isinstance(exc, (DataError, SplitError)) and config and Path(config).name not in msg:
+        return f"{config}: {msg}"
+    return msg
+
+
 def _print_line(msg: str) -> None:
     print(" ".join(str(msg).split()), file=sys.stderr)
 
@@ -137,7 +147,7 @@ def _main(argv) -> int:
         from .study import MissingPieceError
         bad = _bad_input_types()
         if isinstance(exc, bad):
-            _print_line(f"mudoe {args.command}: error: {exc}")
+            _print_line(f"mudoe {args.command}: error: {_located(exc, args)}")
             return EXIT_BAD_INPUT
         if isinstance(exc, MissingPieceError):
             _print_line(f"mudoe {args.command}: not available: {exc}")
@@ -153,11 +163,15 @@ def _main(argv) -> int:
 
 def _run(args) -> int:
     from .config import load_config
-    from .console import Chatter, check_out_dir
+    from .console import Chatter
     if args.command == "init":
         return _init(args)
-    out = check_out_dir(args.out)
+    from .outdir import begin, check_out
+    out = check_out(args.out)
     cfg = load_config(args.config)
+    begin(out, cfg.path)
+    from .limits import check_sizes
+    check_sizes(cfg, args.command, runs=getattr(args, "runs", None))
     chatter = Chatter()
     try:
         with chatter:
@@ -194,11 +208,16 @@ def _emit(args, text: str, obj) -> None:
     stdout.flush()
 
 
-def _write(out: Path, name: str, text: str) -> Path:
+def _write(out: Path, files: dict) -> list:
+    """Write a command's outputs ``{name: text}`` into ``out`` as one (all or none, models.fileio)."""
+    from models.fileio import atomic_write_texts
     from .console import INTERRUPT
-    from .data_io import atomic_write_text
+    from .outdir import claim, record
     INTERRUPT.check()
-    return atomic_write_text(out / name, text)
+    claim(out)
+    paths = atomic_write_texts({out / name: text for name, text in files.items()})
+    record(out, paths)
+    return paths
 
 
 def _identify_diagnostics(est) -> dict:
@@ -231,8 +250,7 @@ def _identify(study, results, args, progress, out) -> int:
     obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
     text = "\n\n".join([e.summary() for e in results.estimates.values()]
                        + [f"{v}: identification failed: {e}" for v, e in results.estimate_errors.items()])
-    _write(out, "identify.json", dumps(obj))
-    _write(out, "identify.txt", text + "\n")
+    _write(out, {"identify.json": dumps(obj), "identify.txt": text + "\n"})
     _emit(args, text, obj)
     if failed:
         _print_line(f"mudoe identify: failed: {failed}; the other fits are in {out}/identify.json")
@@ -251,8 +269,7 @@ def _oed_planned(cfg, args, progress, out, t0) -> int:
     from .study import plan_without_data
     plan = plan_without_data(cfg, progress)
     text = plan.summary()
-    _write(out, "oed.json", dumps(plan.to_dict()))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(plan.to_dict()), "oed.txt": text + "\n"})
     _emit(args, text, plan.to_dict())
     if not args.quiet:
         print(f"mudoe: oed finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/", file=sys.stderr)
@@ -265,8 +282,7 @@ def _oed_inputs(study, results, args, progress, out) -> int:
     from .study import plan_at_estimate
     plan = plan_at_estimate(study, results, progress)
     text = plan.summary()
-    _write(out, "oed.json", dumps(plan.to_dict()))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(plan.to_dict()), "oed.txt": text + "\n"})
     _emit(args, text, plan.to_dict())
     return 0
 
@@ -276,8 +292,7 @@ def _oed(study, results, args, progress, out) -> int:
     from .study import run_oed
     if getattr(study, "is_dynamic", False):  # a sampling-time design (mudoe.dynamic_runs)
         run_oed(study, results, progress)
-        _write(out, "oed.json", dumps(results.plan.to_dict()))
-        _write(out, "oed.txt", results.plan.summary() + "\n")
+        _write(out, {"oed.json": dumps(results.plan.to_dict()), "oed.txt": results.plan.summary() + "\n"})
         _emit(args, results.plan.summary(), results.plan.to_dict())
         return EXIT_OK
     if study.cfg.oed.mode != "sensors":
@@ -285,8 +300,7 @@ def _oed(study, results, args, progress, out) -> int:
     run_oed(study, results, progress)
     obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
     text = _oed_text(results)
-    _write(out, "oed.json", dumps(obj))
-    _write(out, "oed.txt", text + "\n")
+    _write(out, {"oed.json": dumps(obj), "oed.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -303,8 +317,7 @@ def _detect(study, results, args, progress, out) -> int:
     obj = dict(detection_dict(results.detection, **labels), diagnosis=None if diag is None else diagnosis_dict(diag))
     text = results.detection.summary(**labels) + ("" if diag is None else "\n\n" + findings_text(
         diag, results.detection.models))
-    _write(out, "detect.json", dumps(obj))
-    _write(out, "detect.txt", text + "\n")
+    _write(out, {"detect.json": dumps(obj), "detect.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -330,8 +343,7 @@ def _validate(study, results, args, progress, out) -> int:
     run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
     text = results.validation.table()
-    _write(out, "validate.json", dumps(obj))
-    _write(out, "validate.txt", text + "\n")
+    _write(out, {"validate.json": dumps(obj), "validate.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -362,8 +374,11 @@ def _report(study, results, args, progress, out) -> int:
         run_trajectories(study, results, progress)
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
+    from .outdir import claim, record
     with progress.step("build report"):
+        claim(out)
         paths = build_report(results, out, progress=progress)
+        record(out, paths)
     text = "\n".join(str(p) for p in paths)
     obj = {"files": [str(p) for p in paths], "verdicts": {}}
     if results.detection is not None:
@@ -394,7 +409,10 @@ def _simulate(cfg, args, progress, out) -> int:
     with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
         camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
     _interrupt_check()
+    from .outdir import claim, record
+    claim(out)
     paths = write_campaign(camp, out)
+    record(out, paths)
     text = "\n".join(str(p) for p in paths)
     _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})
     return EXIT_OK
@@ -412,14 +430,21 @@ def _simulate_study(cfg, args, progress, out) -> int:
     from .study import simulate_study
     if cfg.dynamic is not None:              # a dynamic study: the long-format CSV (mudoe.dynamic_study)
         from .dynamic_study import write_simulation
+        from .outdir import claim, record as record_files
         with progress.step(f"simulate {cfg.model.name}", announce=False):
-            paths, record = write_simulation(cfg, args.seed, out)
+            sim_text = write_simulation(cfg, args.seed, None)
+        _interrupt_check()
+        claim(out)
+        paths, record = write_simulation(cfg, args.seed, out, sim_text)
+        record_files(out, paths)
         _emit(args, "\n".join(str(p) for p in paths), record)
         return EXIT_OK
     with progress.step(f"simulate {cfg.model.name}", announce=False):
         sim = simulate_study(cfg, args.seed)
     c, u, d = sim.campaign, sim.units, cfg.data
     _interrupt_check()
+    from .outdir import claim, record as record_files
+    claim(out)
     if d.layout == "tidy":
         paths = [write_tidy_layout(out / Path(d.file).name, c.q_set, c.z, c.sensors, units=u)]
     else:
@@ -435,6 +460,7 @@ def _simulate_study(cfg, args, progress, out) -> int:
                   input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
                   files=[str(p) for p in paths])
     paths.append(atomic_write_text(out / "simulate.json", json.dumps(record, indent=1) + "\n"))
+    record_files(out, paths)
     _emit(args, "\n".join(str(p) for p in paths), record)
     return EXIT_OK
 

@@ -61,13 +61,14 @@ from identification.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.press import PRESS_SCENARIO_NAMES
 
+from .checks import check_config
 from .units import UnitError, check_unit, convert, dimension, known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
            "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
-           "settings_values"]
+           "settings_values", "config_error"]
 
 #: examples of declared length units and their factor to the model's mm (any pint length unit is accepted)
 LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "m": 1e3}
@@ -971,6 +972,7 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
+    check_config(cfg, ctx.error)
     return cfg
 
 
@@ -1002,6 +1004,12 @@ def _check_names(ctx, cfg: StudyConfig) -> None:
                              ("simulate", cfg.simulate.variant)):
         if variant:
             _one_of(ctx, section, "variant", variant, cfg.model.variants, "variant", "the [model] variants")
+
+
+def config_error(cfg: StudyConfig, section: str, key: str, msg: str) -> ConfigError:
+    """A :class:`ConfigError` for a check made after parsing: names ``cfg``'s file, the line of ``key``
+    in ``[section]`` (when the key is in the file) and the key."""
+    return _Ctx(cfg.path, cfg.text).error(section, key, msg)
 
 
 def load_config(path: str | Path) -> StudyConfig:

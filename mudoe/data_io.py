@@ -23,11 +23,10 @@ must be known.  Everything is converted once to the model's units (mm, N).
 """
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import math
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Sequence
 
@@ -36,7 +35,9 @@ import numpy as np
 from models.campaign import Campaign
 from models.fileio import atomic_write_text
 
+from . import csv_stream
 from .config import StudyConfig
+from .csv_stream import DataFileError
 from .data_checks import absurd_reading_message
 from .units import UnitError, check_unit, convert, dimension, same_dimension, unit_name
 
@@ -48,10 +49,6 @@ _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 #: largest magnitude accepted in a numeric cell; larger values (1e300, ...) are export or unit
 #: errors and would overflow the squared residuals of a fit
 MAX_MAGNITUDE = 1e15
-
-
-class DataFileError(ValueError):
-    """A data file is missing or malformed; the message names the file and the line."""
 
 
 @dataclass(frozen=True)
@@ -202,21 +199,6 @@ def sha256_files(paths: Sequence) -> str:
     return h.hexdigest()
 
 
-def _read_rows(path: Path) -> list[list[str]]:
-    if not path.exists():
-        raise DataFileError(f"{path}: data file not found; check [data] directory/files in the config")
-    if not path.is_file():
-        raise DataFileError(f"{path}: is not a file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataFileError(f"{path}: cannot read ({exc})") from None
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows or not any(c.strip() for c in rows[0]):
-        raise DataFileError(f"{path}:1: empty file; expected a header line")
-    return rows
-
-
 def _split_unit(name: str, bases=()) -> tuple[str, str | None]:
     """'set_force_kN' -> ('set_force', 'kN'): a known column name ``bases`` (lower case) and the unit
     after it ("_unit", " unit", "[unit]" or "(unit)"); other names -> (name lower-cased, None).
@@ -283,19 +265,13 @@ def _number(path, line, col, cell, allow_missing=True):
     return v
 
 
-def _body(rows):
-    """(line number, row) of the data rows, blank lines skipped."""
-    return [(i + 1, r) for i, r in enumerate(rows) if i > 0 and any(c.strip() for c in r)]
-
-
 def _with_unit(name: str, unit: str) -> str:
     return f"{name}_{unit}" if unit else name
 
 
 # ---------------------------------------------------------------------------- paper layout
 def _read_paper_file(path: Path, units: DataUnits):
-    rows = _read_rows(path)
-    header = [h.strip() for h in rows[0]]
+    header, offset = csv_stream.read_header(path)
     base, unit = _split_unit(header[0], units.input_names() | {"force"})
     if not base.startswith("force") and base not in units.input_names():
         example = f"{units.input_name}_{units.input_file}" if units.input_file else units.input_name
@@ -307,18 +283,19 @@ def _read_paper_file(path: Path, units: DataUnits):
                             f"got only {header!r}")
     if any(not h for h in header):
         raise DataFileError(f"{path}:1: wrong header: empty column name in {header!r}")
-    body = _body(rows)
-    if not body:
+    twice = [h for h in dict.fromkeys(header[1:]) if header[1:].count(h) > 1]
+    if twice:
+        raise DataFileError(f"{path}:1: wrong header: series column {twice[0]!r} appears twice; name every "
+                            "series once")
+    cell = partial(_number, path)
+    qs, zs = [], []
+    for b in csv_stream.blocks(path, len(header), dict.fromkeys(range(len(header)), True), offset=offset):
+        qs.append(csv_stream.numbers(b, 0, header[0], cell, allow_missing=False, max_magnitude=MAX_MAGNITUDE))
+        zs.append(np.stack([csv_stream.numbers(b, i, header[i], cell, max_magnitude=MAX_MAGNITUDE)
+                            for i in range(1, len(header))]))
+    if not qs:
         raise DataFileError(f"{path}: no data rows after the header")
-    q = np.empty(len(body))
-    z = np.empty((len(header) - 1, len(body)))
-    for j, (line, r) in enumerate(body):
-        if len(r) != len(header):
-            raise DataFileError(f"{path}:{line}: ragged row: {len(r)} fields but the header has {len(header)}")
-        q[j] = _number(path, line, header[0], r[0], allow_missing=False)
-        for i in range(1, len(header)):
-            z[i - 1, j] = _number(path, line, header[i], r[i])
-    return convert(q, q_unit, units.input_file), z, tuple(header[1:])
+    return convert(np.concatenate(qs), q_unit, units.input_file), np.concatenate(zs, axis=1), tuple(header[1:])
 
 
 def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: str = "N",
@@ -420,20 +397,6 @@ def write_paper_layout(directory, q_set, z, sensors: Sequence[str], displacement
 
 
 # ---------------------------------------------------------------------------- tidy layout
-@dataclass(frozen=True)
-class _TidyRow:
-    """One data row of the tidy table: file line, series label, 1-based set-point index, sensor,
-    set force, actual force (NaN when absent) and reading, in the file's units."""
-
-    line: int
-    series: str
-    index: int
-    sensor: str
-    set_force: float
-    actual_force: float
-    value: float
-
-
 def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits) -> dict:
     """{role: (column index, header text, unit)} of the tidy header; units must agree with the declared ones.
 
@@ -472,65 +435,121 @@ def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits)
     return cols
 
 
-def _tidy_rows(path: Path, header: list, cols: dict, body: list, value_column: str, sensors) -> list:
-    """The data rows as :class:`_TidyRow` (errors name the file and line)."""
-    recs = []
-    counter = {}
-    for line, r in body:
-        if len(r) != len(header):
-            raise DataFileError(f"{path}:{line}: ragged row: {len(r)} fields but the header has {len(header)}")
-        ser = r[cols["series"][0]].strip()
-        sen = r[cols["sensor"][0]].strip()
-        if not ser:
-            raise DataFileError(f"{path}:{line}: column 'series' is empty")
-        if not sen:
-            raise DataFileError(f"{path}:{line}: column 'sensor' is empty")
-        if sensors is not None and sen not in sensors:
-            raise DataFileError(f"{path}:{line}: unknown sensor {sen!r}; the model has {', '.join(sensors)}")
-        if "index" in cols:
-            c = r[cols["index"][0]].strip()
-            try:
-                idx = int(c)
-            except ValueError:
-                raise DataFileError(f"{path}:{line}: column 'index': {c!r} is not an integer") from None
-            if idx < 1:
-                raise DataFileError(f"{path}:{line}: column 'index' is 1-based, got {idx}")
-        else:
-            idx = counter.get((ser, sen), 0) + 1
-            counter[(ser, sen)] = idx
-        qs = _number(path, line, cols["set_force"][1], r[cols["set_force"][0]], allow_missing=False)
-        qa = (_number(path, line, cols["actual_force"][1], r[cols["actual_force"][0]], allow_missing=False)
-              if "actual_force" in cols else math.nan)
-        v = _number(path, line, cols[value_column][1], r[cols[value_column][0]])
-        recs.append(_TidyRow(line=line, series=ser, index=idx, sensor=sen, set_force=qs, actual_force=qa, value=v))
-    return recs
+@dataclass(frozen=True)
+class _TidyTable:
+    """The tidy table's rows as arrays in file order (file units): line, series and sensor codes (in order
+    of first appearance: ``series`` / ``sensors`` hold the labels), 1-based set-point index, set force,
+    actual force (NaN when absent) and reading."""
+
+    line: np.ndarray
+    series_code: np.ndarray
+    index: np.ndarray
+    sensor_code: np.ndarray
+    set_force: np.ndarray
+    actual_force: np.ndarray
+    value: np.ndarray
+    series: list
+    sensors: list
 
 
-def _tidy_arrays(path: Path, recs: list, order_series: list, sens: tuple):
+def _codes(labels: np.ndarray, known: dict) -> np.ndarray:
+    """Integer codes of ``labels``, new labels appended to ``known`` ({label: code}) in order of appearance."""
+    import pandas as pd
+    inv, uniq = pd.factorize(labels)
+    return np.array([known.setdefault(u, len(known)) for u in uniq], np.int64)[inv]
+
+
+def _first_bad(path, b, bad, msg) -> None:
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataFileError(f"{path}:{int(b.lines[i])}: {msg(i)}")
+
+
+def _tidy_block(path, b, cols, value_column, sensors, state) -> tuple:
+    """One block of the tidy table as arrays (errors name the file and line); ``state`` carries the codes
+    and the running per-(series, sensor) counters across blocks."""
+    import pandas as pd
+    ser, sen = csv_stream.texts(b, cols["series"][0]), csv_stream.texts(b, cols["sensor"][0])
+    _first_bad(path, b, ser == "", lambda i: "column 'series' is empty")
+    _first_bad(path, b, sen == "", lambda i: "column 'sensor' is empty")
+    if sensors is not None:
+        _first_bad(path, b, ~pd.Series(sen).isin(list(sensors)).to_numpy(),
+                   lambda i: f"unknown sensor {sen[i]!r}; the model has {', '.join(sensors)}")
+    s_code, k_code = _codes(ser, state["series"]), _codes(sen, state["sensors"])
+    if "index" in cols:
+        t = csv_stream.texts(b, cols["index"][0])
+        _first_bad(path, b, ~pd.Series(t).str.fullmatch(r"[+-]?\d+").to_numpy(bool),
+                   lambda i: f"column 'index': {t[i]!r} is not an integer")
+        idx = t.astype(np.int64)
+        _first_bad(path, b, idx < 1, lambda i: f"column 'index' is 1-based, got {idx[i]}")
+    else:                                  # order of appearance per (series, sensor)
+        keys = s_code * (1 << 24) + k_code
+        uk, inv, cnt = np.unique(keys, return_inverse=True, return_counts=True)
+        before = np.array([state["count"].get(k, 0) for k in uk.tolist()], np.int64)
+        idx = pd.Series(keys).groupby(keys).cumcount().to_numpy() + before[inv] + 1
+        state["count"].update(zip(uk.tolist(), (before + cnt).tolist()))
+    cell = partial(_number, path)
+    num = partial(csv_stream.numbers, b, cell=cell, max_magnitude=MAX_MAGNITUDE)
+    qs = num(cols["set_force"][0], cols["set_force"][1], allow_missing=False)
+    qa = (num(cols["actual_force"][0], cols["actual_force"][1], allow_missing=False) if "actual_force" in cols
+          else np.full(qs.shape, np.nan))
+    v = num(cols[value_column][0], cols[value_column][1])
+    return b.lines, s_code.astype(np.int32), idx.astype(np.int32), k_code.astype(np.int32), qs, qa, v
+
+
+def _tidy_rows(path: Path, header: list, cols: dict, offset: int, value_column: str, sensors) -> _TidyTable:
+    """The data rows of the tidy table, read block by block (:mod:`mudoe.csv_stream`)."""
+    numeric = {cols[r][0]: True for r in ("set_force", "actual_force", value_column) if r in cols}
+    state = dict(series={}, sensors={}, count={})
+    parts = [_tidy_block(path, b, cols, value_column, sensors, state)
+             for b in csv_stream.blocks(path, len(header), numeric, offset=offset)]
+    if not parts:
+        raise DataFileError(f"{path}: no data rows after the header")
+    arrays = []
+    for k in range(len(parts[0])):         # one column at a time, freeing the blocks' pieces
+        arrays.append(np.concatenate([p[k] for p in parts]))
+        parts = [p[:k] + (None,) + p[k + 1:] for p in parts]
+    return _TidyTable(*arrays, series=list(state["series"]), sensors=list(state["sensors"]))
+
+
+def _close(a, b) -> np.ndarray:
+    """math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9) elementwise."""
+    return np.abs(a - b) <= np.maximum(1e-9 * np.maximum(np.abs(a), np.abs(b)), 1e-9)
+
+
+def _tidy_arrays(path: Path, t: _TidyTable, sens: tuple):
     """(q_set (n_q,), q_actual (n_M, n_q), z (n_M, n_q, n_S)) in the file's units; NaN where absent."""
-    n_M, n_q = len(order_series), max(rec.index for rec in recs)
-    z = np.full((n_M, n_q, len(sens)), np.nan)
-    seen = np.zeros(z.shape, bool)
+    n_M, n_q, n_S = len(t.series), int(t.index.max()), len(sens)
+    k = np.array([sens.index(s) for s in t.sensors], np.int64)[t.sensor_code]
+    j = t.index.astype(np.int64) - 1
+    lin = (t.series_code.astype(np.int64) * n_q + j) * n_S + k
+    order = np.argsort(lin, kind="stable")
+    dup = order[1:][lin[order][1:] == lin[order][:-1]]
+    if dup.size:
+        r = int(dup.min())
+        raise DataFileError(f"{path}:{t.line[r]}: duplicate row for series {t.series[t.series_code[r]]!r}, index "
+                            f"{t.index[r]}, sensor {sens[k[r]]!r}")
     q_set = np.full(n_q, np.nan)
-    q_act = np.full((n_M, n_q), np.nan)
-    for rec in recs:
-        i, j, k = order_series.index(rec.series), rec.index - 1, sens.index(rec.sensor)
-        if seen[i, j, k]:
-            raise DataFileError(f"{path}:{rec.line}: duplicate row for series {rec.series!r}, index {rec.index}, "
-                                f"sensor {rec.sensor!r}")
-        seen[i, j, k] = True
-        if np.isnan(q_set[j]):
-            q_set[j] = rec.set_force
-        elif not math.isclose(q_set[j], rec.set_force, rel_tol=1e-9, abs_tol=1e-9):
-            raise DataFileError(f"{path}:{rec.line}: set force {rec.set_force:g} of index {rec.index} differs from "
-                                f"{q_set[j]:g} given earlier for the same index")
-        if not np.isnan(q_act[i, j]) and not math.isclose(q_act[i, j], rec.actual_force, rel_tol=1e-9,
-                                                          abs_tol=1e-9):
-            raise DataFileError(f"{path}:{rec.line}: actual force {rec.actual_force:g} differs from {q_act[i, j]:g} "
-                                f"given for another sensor of series {rec.series!r}, index {rec.index}")
-        q_act[i, j] = rec.actual_force
-        z[i, j, k] = rec.value
-    return q_set, q_act, z
+    uj, first = np.unique(j, return_index=True)
+    q_set[uj] = t.set_force[first]
+    bad = np.flatnonzero(~_close(t.set_force, q_set[j]))
+    if bad.size:
+        r = int(bad[0])
+        raise DataFileError(f"{path}:{t.line[r]}: set force {t.set_force[r]:g} of index {t.index[r]} differs from "
+                            f"{q_set[j[r]]:g} given earlier for the same index")
+    q_act = np.full(n_M * n_q, np.nan)
+    pair = t.series_code.astype(np.int64) * n_q + j
+    up, first = np.unique(pair, return_index=True)
+    q_act[up] = t.actual_force[first]
+    bad = np.flatnonzero(~_close(t.actual_force, q_act[pair]) & ~np.isnan(t.actual_force))
+    if bad.size:
+        r = int(bad[0])
+        raise DataFileError(f"{path}:{t.line[r]}: actual force {t.actual_force[r]:g} differs from "
+                            f"{q_act[pair[r]]:g} given for another sensor of series {t.series[t.series_code[r]]!r}, "
+                            f"index {t.index[r]}")
+    z = np.full(n_M * n_q * n_S, np.nan)
+    z[lin] = t.value
+    return q_set, q_act.reshape(n_M, n_q), z.reshape(n_M, n_q, n_S)
 
 
 def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N", value_column: str = "value",
@@ -556,25 +575,20 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
         rows, unknown sensor, set forces that differ between series.
     """
     path = Path(path)
-    rows = _read_rows(path)
-    header = [h.strip() for h in rows[0]]
+    header, offset = csv_stream.read_header(path)
     legacy = units is None
     if legacy:
         units = DataUnits.legacy(displacement_unit, force_unit, 1)
     cols = _tidy_columns(path, header, value_column, units)
-    body = _body(rows)
-    if not body:
-        raise DataFileError(f"{path}: no data rows after the header")
-    recs = _tidy_rows(path, header, cols, body, value_column, sensors)
-    order_series = list(dict.fromkeys(rec.series for rec in recs))
-    order_sensors = list(dict.fromkeys(rec.sensor for rec in recs))
+    table = _tidy_rows(path, header, cols, offset, value_column, sensors)
+    order_series, order_sensors = table.series, table.sensors
     sens = tuple(sensors) if sensors is not None else tuple(order_sensors)
     if legacy:
         units = DataUnits.legacy(displacement_unit, force_unit, len(sens))
     absent = [s for s in sens if s not in order_sensors]
     if absent:
         raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
-    q_set, q_act, z = _tidy_arrays(path, recs, order_series, sens)
+    q_set, q_act, z = _tidy_arrays(path, table, sens)
     q_set = convert(q_set, cols["set_force"][2], units.input_file)           # a header in lbf, K, ...: pint
     if "actual_force" in cols:
         q_act = convert(q_act, cols["actual_force"][2], units.input_file)

@@ -291,19 +291,26 @@ def factory_models(cfg: StudyConfig) -> dict:
     return {v: factory(v) for v in cfg.model.variants}
 
 
-def write_simulation(cfg: StudyConfig, seed: int | None, out) -> tuple:
-    """``mudoe simulate`` of a dynamic study: the long-format CSV ([data] file) and simulate.json in ``out``."""
+def write_simulation(cfg: StudyConfig, seed: int | None, out, texts: dict | None = None):
+    """``mudoe simulate`` of a dynamic study.  ``out=None``: the simulated files' texts {name: text} (the
+    long-format CSV of [data] file, simulate.json); else those ``texts`` written into ``out`` as one
+    (all or none), returning (paths, record)."""
     import json
+    import tempfile
     from pathlib import Path
-    from models.fileio import atomic_write_text
+    from models.fileio import atomic_write_texts
     from .dynamic_io import write_long_csv
+    if out is not None:
+        paths = atomic_write_texts({Path(out) / name: text for name, text in texts.items() if name != "record"})
+        return paths, json.loads(texts["record"])
     sim = simulate_dynamic(cfg, factory_models(cfg), seed)
-    d = sim.data
-    paths = [write_long_csv(Path(out) / Path(cfg.data.file).name, d, units=sim.units)]
+    d, name = sim.data, Path(cfg.data.file).name
+    with tempfile.TemporaryDirectory() as tmp:
+        csv_text = write_long_csv(Path(tmp) / name, d, units=sim.units).read_text()
     record = dict(model=cfg.model.name, variant=sim.variant, seed=sim.seed, n_series=d.n_M, n_experiments=d.n_q,
                   times=[float(t) for t in d.union_times], truth=sim.truth,
                   sigma_model_units=dict(zip(d.sensors, (float(s) for s in d.sigma))),
                   units=dict(zip(d.sensors, sim.units)), layout="long (series, experiment, time, sensor, value, unit)",
-                  files=[str(p) for p in paths])
-    paths.append(atomic_write_text(Path(out) / "simulate.json", json.dumps(record, indent=1) + "\n"))
-    return paths, record
+                  files=[name, "simulate.json"])
+    text = json.dumps(record, indent=1) + "\n"
+    return {name: csv_text, "simulate.json": text, "record": text}

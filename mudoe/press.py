@@ -38,7 +38,7 @@ from models.press import K_NOMINAL, press_model
 from models.prototype import CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, read_campaign
 from reports.diagnosis import Explanation
 
-from .config import ConfigError, StudyConfig
+from .config import StudyConfig, config_error
 
 __all__ = ["campaign_measurements", "friction_samples", "train_preisach", "retrain", "fit_candidates",
            "press_variant", "diagnosis_explanations", "M3_INPUT_RANGE_BENCH", "TRAINING_DEFAULTS", "CampaignError"]
@@ -308,7 +308,7 @@ def press_variant(variant: str, cfg: StudyConfig) -> tuple[Model, object]:
     try:
         consts = load_friction(path)
     except FrictionError as exc:
-        raise ConfigError(f"{cfg.path}: [model] friction_file: {exc}") from None
+        raise config_error(cfg, "model", "friction_file", str(exc)) from None
     fric = consts["coulomb"] if variant == "M2" else consts["network"]
     return press_model(extra_sensors=cfg.model.extra_sensors, friction=fric), partial(model_inputs, variant)
 

@@ -25,7 +25,8 @@ from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
 from models.shipping import ModelSource
 
-from .config import ConfigError, StudyConfig
+from .checks import call_factory, check_data, check_model, study_splits
+from .config import ConfigError, StudyConfig, config_error
 from .console import INTERRUPT
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
 from .parameter_units import model_parameters
@@ -137,7 +138,7 @@ def _build_models(cfg: StudyConfig) -> dict:
         return out
     factory = _factory(cfg)
     for v in cfg.model.variants:
-        m = factory(v)
+        m = call_factory(factory, cfg.model.name, v, lambda msg: config_error(cfg, "model", "name", msg))
         if getattr(m, "is_dynamic", False):           # an ODE/DAE model: mudoe.dynamic_study
             m.origin = ModelSource(cfg.model.name, v)
             out[v] = (m, None)
@@ -276,7 +277,8 @@ def _splits(cfg: StudyConfig, n_q: int, q_set) -> tuple:
         out.append(Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "user split"))
     names = [sp.name for sp in out]
     if len(set(names)) != len(names):
-        raise ConfigError(f"{cfg.path}: [splits] split names must be unique, got {names}")
+        raise config_error(cfg, "splits.custom" if s.custom else "splits", "name" if s.custom else "scenarios",
+                           f"split names must be unique, got {names}; rename the custom split")
     return tuple(out)
 
 
@@ -297,6 +299,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         from .dynamic_study import prepare_dynamic
         return prepare_dynamic(cfg, {v: m for v, (m, _) in built.items()}, progress)
     sensors = tuple(next(iter(built.values()))[0].sensors)
+    check_model(cfg, next(iter(built.values()))[0])
     units = study_units(cfg, next(iter(built.values()))[0])
     built = {v: (_declare_units(m, units), fn) for v, (m, fn) in built.items()}
     with progress.step(f"load data ({cfg.data.source})", announce=cfg.data.source == "prototype"):
@@ -305,8 +308,10 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     if cfg.data.series is not None:
         bad = [i for i in cfg.data.series if i >= n_M]
         if bad:
-            raise ConfigError(f"{cfg.path}: [data] series {bad} out of range: the data hold {n_M} series "
-                              "(0-based indices)")
+            raise config_error(cfg, "data", "series", f"series {bad} out of range: the data hold {n_M} series "
+                               "(0-based indices)")
+    splits = study_splits(cfg, campaign, _splits)
+    check_data(cfg, campaign, splits, next(iter(built.values()))[0].n_p)
     m_all = Measurements(campaign.q_set[:, None], campaign.z, None, sensors=sensors, series=campaign.series)
     det = cfg.detect.settings()
     norm = normality_check(m_all, det.normality_level, correction=det.normality_correction)
@@ -322,10 +327,6 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         data[v] = full if cfg.data.series is None else full.subset(series=list(cfg.data.series))
     first = next(iter(models.values()))
     p0 = _p0(cfg, first)
-    splits = _splits(cfg, campaign.n_q, campaign.q_set)
-    n_study = n_M if cfg.data.series is None else len(cfg.data.series)
-    for sp in splits:
-        sp.check(campaign.n_q, n_study, first.n_p, 1)
     explanations = diagnosis_explanations(campaign, tuple(models)) if cfg.model.name == "press" else ()
     return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
                  campaign.notes, units, explanations)
@@ -349,15 +350,21 @@ def _dynamic(cfg: StudyConfig, built: dict) -> bool:
 
 # ---------------------------------------------------------------------------- runs
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
-    """Identify every variant on the study's data (all sensors); failures are recorded, not raised."""
+    """Identify every variant on the study's data (all sensors); failures are recorded, not raised (an
+    estimate the data do not bound is recorded as a failure with its reason, "not bounded: ...")."""
     from identification.errors import IdentificationError
     progress = progress or Progress(False)
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
-                results.estimates[v] = identify(m, study.data[v], start_values(study, v))
+                est = identify(m, study.data[v], start_values(study, v))
             except IdentificationError as exc:
                 results.estimate_errors[v] = f"{type(exc).__name__}: {exc}"
+                continue
+            if not est.bounded:      # no finite estimate: the pages of estimates need one; the reason is kept
+                results.estimate_errors[v] = f"not bounded: {est.unbounded.reason}"
+                continue
+            results.estimates[v] = est
     return results
 
 
@@ -671,6 +678,7 @@ def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> Pla
         return plan_dynamic(cfg, {k: m for k, (m, _) in built.items()}, progress or Progress(False))
     v = cfg.oed.variant or list(built)[-1]
     model, fn = built[v]
+    check_model(cfg, model)
     sigma = _planned_sigma(cfg, model)
     p = _p0(cfg, model)
     bad = (p < model.lower) | (p > model.upper)

@@ -13,7 +13,9 @@ from pathlib import Path
 from models.contract import Model
 
 from .config import ConfigError
-from .data_io import atomic_write_text
+from models.fileio import create_text
+
+from .checks import call_factory
 from .study import load_factory
 from .units import UNITS
 
@@ -123,13 +125,22 @@ def write_template(path, model_name: str | None = None) -> Path:
     if path.exists():
         raise ConfigError(f"{path}: exists; mudoe init never overwrites a file, choose a new name")
     if model_name is None:
-        return atomic_write_text(path, template_text())
-    factory = load_factory(model_name, "--model")
-    model = factory("default")
-    if getattr(model, "is_dynamic", False):          # an ODE/DAE model: a [dynamic] study
-        from .dynamic_template import dynamic_template_text
-        return atomic_write_text(path, dynamic_template_text(model, model_name))
-    if not isinstance(model, Model):
-        raise ConfigError(f"--model: {model_name}('default') returned {type(model).__name__}, expected a "
-                          "models.Model")
-    return atomic_write_text(path, template_text(model, model_name))
+        text = template_text()
+    else:
+        factory = load_factory(model_name, "--model")
+        model = call_factory(factory, model_name, "default", lambda msg: ConfigError(f"--model: {msg}"))
+        if getattr(model, "is_dynamic", False):      # an ODE/DAE model: a [dynamic] study
+            from .dynamic_template import dynamic_template_text
+            text = dynamic_template_text(model, model_name)
+        elif not isinstance(model, Model):
+            raise ConfigError(f"--model: {model_name}('default') returned {type(model).__name__}, expected a "
+                              "models.Model")
+        else:
+            text = template_text(model, model_name)
+    if not path.parent.is_dir():
+        raise ConfigError(f"{path}: the folder {path.parent} does not exist; create it or choose another path")
+    try:
+        return create_text(path, text)
+    except FileExistsError:
+        raise ConfigError(f"{path}: exists (written meanwhile by another process); mudoe init never overwrites "
+                          "a file, choose a new name") from None

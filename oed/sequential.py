@@ -83,6 +83,8 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
     ------
     ValueError
         When ``experiments`` is empty.  Identification and design errors propagate unchanged.
+    identification.NotBoundedError
+        When the data of an experiment do not bound the parameters (no estimate to design at).
     """
     from identification import identify, information_contributions   # identification sits above oed
 
@@ -98,6 +100,8 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
         design = select_sensors_from_information(F, S, criterion=criterion, kind=kind, n_sensors=n_sensors,
                                                  sensor_names=model.sensors, **design_kw)
         est = identify(model, data, p_nominal, weights=np.asarray(design.weights, float))
+        est.require_bounded(f"sequential design, experiment {len(steps) + 1} (the next design is computed at its "
+                            "estimate)")
         steps.append(SequentialStep(p_design=p_design.copy(), design=design, p=est.p.copy(),
                                     stderr=est.stderr.copy(), cov=est.cov.copy(),
                                     ellipsoid_volume=est.ellipsoid(alpha).volume()))

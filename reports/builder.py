@@ -6,7 +6,8 @@ versions, timing, every number of the report).  Everything is first written into
 temporary folder inside ``out_dir`` and moved into place with ``os.replace`` only when
 all files are complete: a failure leaves no partial file behind (earlier reports stay), and
 an interrupted process removes the folder and never moves part of the files
-(:mod:`models.fileio`).
+(:mod:`models.fileio`).  Pages of an earlier report in the folder (its ``results.json`` lists
+them) that the new one does not have are then removed, so no stale page stays beside the new ones.
 
 Pages (:func:`report_pages`): verdict table and verdicts; measured data and model outputs;
 normality and sigma; optimal sensor design; estimates; confidence regions of every parameter
@@ -670,6 +671,17 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
     return pages
 
 
+def _previous_pages(out: Path) -> set:
+    """The page PNGs of the report in ``out`` (the ``files`` of its results.json; empty if none)."""
+    import json
+    try:
+        files = json.loads((out / "results.json").read_text(encoding="utf-8")).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return set()
+    return {f for f in files if isinstance(f, str) and f.startswith("page") and f.endswith(".png")
+            and Path(f).name == f}
+
+
 def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True, uncertainty: str | None = None,
                  progress=None) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
@@ -725,6 +737,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     dpi = int(dpi or cfg.report.dpi)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    previous = _previous_pages(out)
     tmp = out / f".report-{secrets.token_hex(6)}"
     register_scratch(tmp)           # before it exists: an interrupted process removes it (models.fileio)
     written = []
@@ -764,6 +777,12 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
             for name in ["report.pdf"] + names + ["results.json"]:
                 os.replace(tmp / name, out / name)
                 written.append(out / name)
+            for name in sorted(previous - set(names)):      # pages of the previous report this one does not have
+                (out / name).unlink(missing_ok=True)
+    except OSError as exc:
+        if exc.filename is None:           # e.g. [Errno 28] from a buffered write: name the folder
+            raise OSError(exc.errno, f"{exc.strerror} (writing the report into {out})", str(out)) from None
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         release_scratch(tmp)

@@ -505,14 +505,18 @@ def test_many_inputs_states_are_solved_at_once_and_equal_the_per_input_solve():
     np.testing.assert_allclose(Y, Y_ref, rtol=1e-11, atol=1e-12 * np.abs(Y_ref).max())
 
 
-def test_estimate_at_absurd_values_is_a_failed_fit():
+def test_estimate_at_absurd_values_is_not_bounded():
     """Data that do not bound k (y = c + 1/(1 + k x) with constant data: k runs to infinity) used to
-    return an accepted estimate k ~ 1e12 with NaN standard errors; it is now an IdentificationError."""
+    return an accepted estimate k ~ 1e12 with NaN standard errors, then an IdentificationError
+    ("absurd values"); it is now a result that says so (issue 20 item 4): k -> +inf, c finite."""
     model = Model.explicit(["c", "k"], ["x"], ["y"], h=lambda p, q: p[0] + 1 / (1 + p[1] * q[0]))
     x = np.linspace(0.5, 5, 20)
     data = Measurements(x, (1.0 + 0.01 * np.sin(7 * x)).reshape(1, -1, 1), [0.01])
-    with pytest.raises(IdentificationError, match=r"absurd values \(k = .*scale 1\)"):
-        identify(model, data, p0=[1.0, 1.0])
+    est = identify(model, data, p0=[1.0, 1.0])
+    assert not est.bounded and est.status == "Not_Bounded" and not est.success
+    assert est.unbounded.involved == ("k",) and est.unbounded.ends() == {"k": "+inf"}
+    assert np.isinf(est.stderr[1]) and np.isfinite(est.stderr[0])
+    assert any("absurd values" in n for n in est.notes)          # where the solver stopped, kept as a note
     good = Measurements(x, (1.0 + 1 / (1 + 2.0 * x) + 0.001 * np.sin(7 * x)).reshape(1, -1, 1), [0.01])
     est = identify(model, good, p0=[1.0, 1.0])
     assert np.all(np.isfinite(est.stderr)) and abs(est.p[1] - 2.0) < 0.1

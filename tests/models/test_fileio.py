@@ -71,3 +71,22 @@ def test_abandon_removes_registered_files_and_folders(tmp_path):
     with pytest.raises(KeyboardInterrupt):          # abandoned outputs are closed too
         with publishing():
             pass
+
+
+def test_a_pair_of_outputs_is_written_whole_or_not_at_all(tmp_path):
+    """identify.json and identify.txt: both new, or (failure, interrupt) both old, never one of each."""
+    from models.fileio import atomic_write_texts
+    a, b = tmp_path / "x.json", tmp_path / "x.txt"
+    assert atomic_write_texts({a: "1\n", b: "one\n"}) == [a, b]
+    assert a.read_text() == "1\n" and b.read_text() == "one\n"
+    (tmp_path / "sub").mkdir()
+    with pytest.raises(IsADirectoryError):            # the second cannot be written: the first stays old
+        atomic_write_texts({a: "2\n", tmp_path / "sub": "two\n"})
+    with pytest.raises(UnicodeEncodeError):           # fails while writing the second
+        atomic_write_texts({a: "2\n", b: "\ud800"})
+    assert a.read_text() == "1\n" and b.read_text() == "one\n"
+    close_outputs()                                    # an interrupt: nothing moved
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_texts({a: "3\n", b: "three\n"})
+    assert a.read_text() == "1\n" and b.read_text() == "one\n"
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["sub", "x.json", "x.txt"] and not fileio._SCRATCH

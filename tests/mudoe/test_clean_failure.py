@@ -217,10 +217,12 @@ def absurd_study(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("command", ["identify", "detect"])
 def test_absurd_estimate_is_a_failed_computation(capsys, tmp_path, absurd_study, command):
-    """The issue's "Solve_Succeeded with k1 = -8e12 and NaN standard errors": exit 1, one line naming
-    the absurd value, no traceback, no result file that could be read as a success."""
+    """The issue's "Solve_Succeeded with k1 = -8e12 and NaN standard errors": exit 1, one line saying
+    the data do not bound k (issue 20: the run-off is certified, no longer "absurd values"), no
+    traceback, no result file that could be read as a success."""
     out = tmp_path / "out"
-    line = _one_line(capsys, [command, str(absurd_study), "--out", str(out), "--quiet"], 1, "absurd values")
+    line = _one_line(capsys, [command, str(absurd_study), "--out", str(out), "--quiet"], 1, "not bounded",
+                     "k -> +inf")
     assert line.startswith(f"mudoe {command}: failed:"), line
     assert not (out / f"{command}.json").exists()
 

@@ -10,6 +10,7 @@ from mudoe.config import ConfigError, parse_config
 from mudoe.data_io import DataFileError, DataUnits, read_paper_layout, read_tidy_layout, study_units, \
     write_paper_layout, write_tidy_layout
 from mudoe.example_cstr import build
+from mudoe.outdir import MARKER
 from mudoe.units import UnitError, convert
 
 
@@ -144,7 +145,7 @@ def test_simulate_own_study_writes_its_own_layout_not_press_data(tmp_path, capsy
     out = tmp_path / "data"
     assert main(["simulate", str(cfg), "--out", str(out), "--quiet", "--json", "--seed", "3"]) == 0
     rec = json.loads(capsys.readouterr().out)
-    names = sorted(p.name for p in out.iterdir())
+    names = sorted(p.name for p in out.iterdir() if p.name != MARKER)
     assert names == ["measurements_C_A.csv", "measurements_C_B.csv", "measurements_C_C.csv", "measurements_X_A.csv",
                      "simulate.json"]
     assert rec["truth"] == {"k_ref": 0.08, "E_a": 60.0, "k_2": 0.04} and rec["seed"] == 3

@@ -21,12 +21,18 @@ from pathlib import Path
 import psutil
 import pytest
 
+from mudoe.outdir import MARKER
+
 REPO = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(REPO))
-#: the requirement: the process ends within this many seconds of the signal
-EXIT_WITHIN_S = 1.0
-#: what the resource tracker may take to notice that its processes are gone, after the exit (s)
-TRACKER_S = 2.0
+#: The process must end this soon after the signal.  The requirement (within a second) is a speed
+#: goal measured by ``python -m bench signals`` (bench/RESULTS.md); here the bound only has to tell an
+#: acted-on signal from a lost one (the run then goes on to its end: a minute or more for these
+#: commands) on a loaded machine, where starting a process alone can take seconds.
+EXIT_WITHIN_S = 10.0
+#: how long the processes left may take to notice that their parent is gone, after the exit (s):
+#: polled, so a passing run does not wait for it
+TRACKER_S = 15.0
 COMPILERS = {"gcc", "cc", "cc1", "as", "collect2", "ld"}
 
 
@@ -114,7 +120,8 @@ def _check(run: _Run, dt: float, code: int, word: str, out: Path) -> None:
     assert dt < EXIT_WITHIN_S, f"exit {dt:.2f} s after the signal"
     assert "Traceback" not in err and f"mudoe: {word}" in err.splitlines()[-1], err[-2000:]
     assert run.left_over() == [], f"processes left: {run.left_over()}"
-    assert not out.exists() or sorted(p.name for p in out.iterdir()) == [], sorted(out.iterdir())
+    # no output: at most the folder's ownership marker (complete, written before any work)
+    assert not out.exists() or sorted(p.name for p in out.iterdir() if p.name != MARKER) == [], sorted(out.iterdir())
 
 
 @pytest.mark.parametrize("group", [False, True], ids=["kill -INT", "terminal Ctrl-C"])

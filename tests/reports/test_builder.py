@@ -78,3 +78,18 @@ def test_figures_return_figures_with_units(results):
     f3 = residuals_plot(s, results.estimates["M1"], "M1")
     assert "(-)" in f3.axes[0].get_ylabel()
     plt.close("all")
+
+
+def test_pages_of_an_earlier_report_are_removed(results, tmp_path):
+    """A report with fewer pages than the one before it in the same folder leaves no stale page."""
+    from reports.builder import build_report
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("page98_old.png", "page99_older.png", "notes.txt"):
+        (out / name).write_text("old")
+    (out / "results.json").write_text(json.dumps({"files": ["report.pdf", "page98_old.png", "page99_older.png",
+                                                            "results.json"]}))
+    paths = build_report(results, out, diagnose=False)
+    left = sorted(p.name for p in out.iterdir())
+    assert left == sorted({p.name for p in paths} | {"notes.txt"})
+    assert "page98_old.png" not in left and "page99_older.png" not in left
