@@ -36,7 +36,7 @@ def _small(tmp_path, name, edits, data_dir=None):
 def test_shipped_data_regenerate_identically(tmp_path, capsys, name):
     cfg = REPO / "configs" / f"{name}.toml"
     rc, _, _ = _run(capsys, "simulate", str(cfg), "--out", str(tmp_path))
-    shipped = next((REPO / "data" / name).glob("*_long.csv"))
+    shipped = REPO / "data" / name / "campaign_long.csv"
     assert rc == 0 and (tmp_path / shipped.name).read_bytes() == shipped.read_bytes()
     rec = json.loads((tmp_path / "simulate.json").read_text())
     assert rec["seed"] == json.loads((REPO / "data" / name / "simulate.json").read_text())["seed"]
@@ -54,7 +54,7 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
         (r"\[report\]\n", "[report]\ndpi = 30\nuncertainty = \"none\"\n")], data_dir=tmp_path / "data")
     out = tmp_path / "out"
     assert _run(capsys, "simulate", str(cfg), "--out", str(tmp_path / "data"))[0] == 0
-    lines = (tmp_path / "data" / "reactor_long.csv").read_text().splitlines()
+    lines = (tmp_path / "data" / "campaign_long.csv").read_text().splitlines()
     assert lines[0] == "series,experiment,time,sensor,value,unit" and len(lines) == 1 + 2 * 3 * 5 * 2
     rc, text, _ = _run(capsys, "identify", str(cfg), "--out", str(out), "--json")
     est = json.loads(text)["isothermal"]
