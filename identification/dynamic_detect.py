@@ -13,11 +13,12 @@ Normality gate (line 05): pooled per instrument over all (experiment, time) read
 one test per instrument), not per (sensor, time) pair, whose few differences each would make the
 gate blind and its multiplicity correction over hundreds of pairs meaningless.
 
-Discretisation: at every split's estimates p_cal and p_val the output error of the mesh is
-estimated against every element halved (Richardson, as in the fit).  While some exceeds the
-tolerance the mesh is refined and the splits are tested again (at most ``max_refinements``
-times); a split whose error still exceeds it is *undecided* (stage "discretisation"), never a
-rejection: detect does not report discretisation error as model inadequacy.
+Discretisation: every fit of a split (calibration, validation, pooled) is a dynamic fit with its own
+error control (:func:`identification.dynamic_fit.identify_dynamic`: the mesh is refined until the
+output error at the readings is below ``tol_sigma`` sigmas and the estimate's shift below ``tol_se``
+standard errors).  A split one of whose fits could not bound the error is *undecided* (stage
+"discretisation", its reason recorded), never a rejection: detect does not report discretisation
+error as model inadequacy.
 """
 from __future__ import annotations
 
@@ -207,12 +208,13 @@ def _readings(data: DynamicMeasurements, mask: np.ndarray) -> DynamicMeasurement
                                data.sigma, data.sensors, f.input_names, f.series)
 
 
-def _fit(model, data, p0, weights, settings):
+def _fit(model, data, p0, weights, settings, discretisation=None):
     """A dynamic fit, or the error it raised (recorded by the split test, never raised)."""
+    from .dynamic_fit import identify_dynamic
     from .errors import IdentificationError
-    from .estimator import identify
     try:
-        return identify(model, data, p0, weights=weights, settings=settings.identify)
+        return identify_dynamic(model, data, p0, weights=weights, settings=settings.identify,
+                                discretisation=discretisation)
     except (IdentificationError, DataError) as exc:
         return exc
 
@@ -222,16 +224,16 @@ def _unbounded(est) -> str:
     return "" if rec is None or rec.bounded else rec.reason or "not bounded"
 
 
-def _split_fits(model, data, splits, p0, weights, settings):
+def _split_fits(model, data, splits, p0, weights, settings, ds):
     """(fits [(cal, val)], pooled {points: fit}, unbounded {split: reason}) of every split."""
     fits, pooled, unbounded = [], {}, {}
     for sp, st in splits:
         masks = [_mask(data, sp.cal_experiments, sp.cal_window), _mask(data, sp.val_experiments, sp.val_window)]
-        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings) for mk in masks)
+        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings, ds) for mk in masks)
         fits.append(pair)
         key = st.pooled_points(data.n_M)
         if key not in pooled:
-            est_u = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings)
+            est_u = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings, ds)
             pooled[key] = f"pooled fit failed: {type(est_u).__name__}: {est_u}" if isinstance(est_u, Exception) \
                 else est_u
         why = [f"{what} fit: {_unbounded(e)}" for what, e in zip(("calibration", "validation", "pooled"),
@@ -264,10 +266,12 @@ def _weights(model, design):
     return np.array([1.0 if s in design else 0.0 for s in model.sensors])
 
 
-def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, design_how=None, progress=None):
+def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, design_how=None, progress=None,
+                   discretisation: DiscretisationSettings | None = None):
     """Algorithm 1 on dynamic models and their time series (see the module docstring); the arguments
     are those of :func:`identification.detect.detect` (``design``: instrument names, each measured at
-    every sampling time); splits are :class:`DynamicSplit` or :class:`Split` (by experiment)."""
+    every sampling time); splits are :class:`DynamicSplit` or :class:`Split` (by experiment);
+    ``discretisation`` the error control of every fit (default :class:`DiscretisationSettings`)."""
     from .detect import DetectionResult, model_decisions, run_split_tests
     models = dict(model) if isinstance(model, Mapping) else {model.name: model}
     names = tuple(models)
@@ -291,10 +295,11 @@ def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, de
         rows, flat = _expanded(data, edges)
         static = tuple(_static_split(sp, rows, edges, data.n_q) for sp in splits)
         p_start = p0[n] if isinstance(p0, Mapping) else p0
-        whole = _fit(m, data, p_start, w, settings)
+        whole = _fit(m, data, p_start, w, settings, discretisation)
         if isinstance(whole, Exception):
             raise whole
-        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, w, settings)
+        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, w, settings,
+                                              discretisation)
         res = run_split_tests(whole.model, flat, static, whole.p, settings=settings, model_name=n,
                               curvature=True, fits=fits, pooled=pooled)
         labels = {sp.name: (_label(sp.cal_experiments, sp.cal_window), _label(sp.val_experiments, sp.val_window))
