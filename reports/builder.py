@@ -214,8 +214,10 @@ def _normality_page(results):
                     + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
                     + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else "")
                     + (f" (failing: {', '.join(chk.failing())})" if chk.failing() else ""))
+    over = "every (experiment, time) reading, pooled per instrument" if getattr(s, "is_dynamic", False) else \
+        "all set points"
     txt = (f"Normality gate: {(gate or s.normality).gate_text()} (one test per sensor, on the differences of "
-           f"consecutive series over {'every (experiment, time) reading, pooled per instrument' if getattr(s, 'is_dynamic', False) else 'all set points'}), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
+           f"consecutive series over {over}), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
            "fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2) with sigma_rep on all series, unless "
            "given directly in the config. The terminal (mudoe detect) prints the gate of Algorithm 1 (line 05) on "
            "the study series, in the same unit.")
