@@ -35,12 +35,23 @@ from .parameter_units import model_parameters
 from .study import Study
 from .units import UnitError, convert
 
-__all__ = ["DynamicCampaign", "DynamicStudy", "is_dynamic", "experiment_rows", "prepare_dynamic", "dynamic_splits",
-           "simulate_dynamic"]
+__all__ = ["DynamicCampaign", "DynamicStudy", "is_dynamic", "is_dynamic_study", "experiment_rows", "prepare_dynamic",
+           "dynamic_splits", "simulate_dynamic", "build_dynamic", "instrument_sigma", "write_simulation"]
 
 
 def is_dynamic(model) -> bool:
     return bool(getattr(model, "is_dynamic", False))
+
+
+def is_dynamic_study(cfg: StudyConfig, built: dict) -> bool:
+    """Whether the study's models ({variant: (model, inputs_fn)}) are dynamic; [dynamic] needs one."""
+    dyn = [is_dynamic(m) for m, _ in built.values()]
+    if any(dyn) and not all(dyn):
+        raise ConfigError(f"{cfg.path}: [model] variants mix dynamic (ODE/DAE) and static models")
+    if cfg.dynamic is not None and not any(dyn):
+        raise ConfigError(f"{cfg.path}: [dynamic] is for dynamic models (models.Model.ode); {cfg.model.name} "
+                          "returns a static model")
+    return any(dyn)
 
 
 @dataclass(frozen=True)

@@ -88,6 +88,7 @@ times = [{', '.join(f'{t:g}' for t in times)}]   # sampling times{unit}
                      f'{" (" + u + ")" if u else ""}, not per time\n' + (f'unit = "{u}"\n' if u else ""))
     for p in model.params:
         start = p.scale or ((p.lower + p.upper) / 2 if math.isfinite(p.lower) and math.isfinite(p.upper) else 1.0)
+        unit = f'unit = "{p.unit}"\n' if p.unit else ""
         parts.append(f'[[parameters]]\nname = "{p.name}"\nstart = {_num(start)}               # start value'
-                     f'\nlower = {_num(p.lower)}\nupper = {_num(p.upper)}\n' + (f'unit = "{p.unit}"\n' if p.unit else ""))
+                     f'\nlower = {_num(p.lower)}\nupper = {_num(p.upper)}\n' + unit)
     return "\n".join(parts) + _TAIL.format(mid=f"{times[len(times) // 2]:g}")

@@ -338,14 +338,8 @@ def start_values(study: Study, variant: str) -> np.ndarray:
 
 
 def _dynamic(cfg: StudyConfig, built: dict) -> bool:
-    """Whether the study's models are dynamic (ODE/DAE); a [dynamic] section needs one."""
-    dyn = [getattr(m, "is_dynamic", False) for m, _ in built.values()]
-    if any(dyn) and not all(dyn):
-        raise ConfigError(f"{cfg.path}: [model] variants mix dynamic (ODE/DAE) and static models")
-    if cfg.dynamic is not None and not any(dyn):
-        raise ConfigError(f"{cfg.path}: [dynamic] is for dynamic models (models.Model.ode); {cfg.model.name} "
-                          "returns a static model")
-    return any(dyn)
+    from .dynamic_study import is_dynamic_study
+    return is_dynamic_study(cfg, built)
 
 
 # ---------------------------------------------------------------------------- runs
@@ -384,6 +378,7 @@ def _require_fit(study: Study, results: StudyResults, v: str, progress: Progress
 def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Lines 02-03 of Algorithm 1: information of every sensor at the estimate, design table, chosen design."""
     try:
+        from oed.best_designs import design_rows
         from oed.design import select_sensors_from_information
     except ImportError as exc:
         raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
@@ -404,28 +399,13 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
                                               max_sensors=o.max_sensors, costs=list(o.costs) if o.costs else None,
                                               budget=o.budget, include=o.include, exclude=o.exclude,
                                               sensor_names=study.sensors)
-        table = _design_rows(F, S if o.kind == "second_order" else None, study, o, o.min_sensors or n_default, res)
+        table = design_rows(F, S if o.kind == "second_order" else None, study.sensors, o.min_sensors or n_default,
+                            res, o.criterion, kind=o.kind)
     results.oed, results.oed_table, results.oed_variant = res, table, v
     results.design_sensors = tuple(res.sensors)
     results.design_how = (f"{o.criterion}-optimal ({o.kind} covariance) design of {len(res.sensors)} sensors "
                           f"at the {v} estimate")
     return results
-
-
-#: sensor combinations listed in full (the paper's table) up to this many; beyond, the ten best designs
-FULL_TABLE_ROWS = 25
-
-
-def _design_rows(F, S, study: Study, o, min_sensors: int, res):
-    """Every combination of at least ``min_sensors`` sensors while they fit one page, else the ten best
-    designs of the chosen size and the chosen one (:func:`oed.best_designs.best_designs`)."""
-    from oed.best_designs import best_designs
-    from oed.constraints import DesignConstraints
-    from oed.design import design_table
-    n_S, n_p = F.shape[0], F.shape[1]
-    if DesignConstraints(n_candidates=n_S, n_params=n_p, min_sensors=min_sensors).count_designs() <= FULL_TABLE_ROWS:
-        return design_table(F, S, study.sensors, min_sensors, kind=o.kind)
-    return best_designs(F, S, study.sensors, len(res.sensors), o.criterion, kind=o.kind, chosen=res.indices)
 
 
 def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> tuple:

@@ -17,7 +17,10 @@ import numpy as np
 from .criteria import Kind, batch_criteria, validate_information
 from .design import DesignRow, DesignTable
 
-__all__ = ["RankedDesignTable", "best_designs"]
+__all__ = ["RankedDesignTable", "best_designs", "design_rows", "FULL_TABLE_ROWS"]
+
+#: sensor combinations listed in full (the paper's table) up to this many; beyond, the ten best designs
+FULL_TABLE_ROWS = 25
 
 _BATCH = 4096
 
@@ -95,3 +98,16 @@ def best_designs(F, S, sensor_names, size: int, criterion: str, *, kind: str = "
             f"the best of the chosen design and its {len(found) - 1} neighbours (one candidate exchanged); the "
             f"{total:.3g} designs of {size} are too many to rank")
     return RankedDesignTable(kind=kind_e.value, rows=tuple(rows), note=what)
+
+
+def design_rows(F, S, sensor_names, min_sensors: int, chosen, criterion: str, *, kind: str = "gauss_newton",
+                full_rows: int = FULL_TABLE_ROWS) -> DesignTable:
+    """Every combination of at least ``min_sensors`` candidates (:func:`oed.design.design_table`) while they
+    number at most ``full_rows``, else the ten best designs of the size of ``chosen`` (a DesignResult) and
+    the chosen one (:func:`best_designs`)."""
+    from .constraints import DesignConstraints
+    from .design import design_table
+    n_S, n_p = np.shape(F)[0], np.shape(F)[1]
+    if DesignConstraints(n_candidates=n_S, n_params=n_p, min_sensors=min_sensors).count_designs() <= full_rows:
+        return design_table(F, S, sensor_names, min_sensors, kind=kind)
+    return best_designs(F, S, sensor_names, len(chosen.sensors), criterion, kind=kind, chosen=chosen.indices)

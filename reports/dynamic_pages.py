@@ -133,7 +133,8 @@ def _trajectory_pages(results):
         model, data = s.models[v], s.data[v]
         rows = [range(a, min(a + _ROWS, data.n_q)) for a in range(0, data.n_q, _ROWS)]
         for n, part in enumerate(rows):
-            fig = _page(f"Trajectories of model {v} against time" + (f" ({n + 1}/{len(rows)})" if len(rows) > 1 else ""))
+            part_of = f" ({n + 1}/{len(rows)})" if len(rows) > 1 else ""
+            fig = _page(f"Trajectories of model {v} against time{part_of}")
             axes = fig.subplots(len(part), min(model.n_S, _COLS), squeeze=False)
             for r, j in enumerate(part):
                 for k in range(min(model.n_S, _COLS)):
@@ -197,8 +198,9 @@ def _design_page(results):
         f"{plan.table.note[0].upper() + plan.table.note[1:]} ({'readings' if plan.pairs else 'sampling times'}), by "
         f"the {r.criterion}-criterion of the Gauss-Newton covariance C of ({names}) planned at the {plan.variant} "
         f"estimate for the study's {len(results.study.inputs)} experiments, every instrument reading at each chosen "
-        f"time. Chosen: {', '.join(r.sensors)} (green), {value}, {'proven optimal' if r.proven_optimal else 'not proven optimal'} "
-        f"({r.method}). The tests of Algorithm 1 use every reading of the data; the design is for the next campaign."),
+        f"time. Chosen: {', '.join(r.sensors)} (green), {value}, "
+        f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). The tests of "
+        "Algorithm 1 use every reading of the data; the design is for the next campaign."),
         size=9)
     ax2 = fig.add_axes([0.08, 0.1, 0.84, 0.16])
     time_design_plot(plan, model, ax=ax2)

@@ -1,4 +1,5 @@
 """The ten-best design table (oed.best_designs) and the figures of the dynamic report pages."""
+import itertools
 from math import comb
 
 import matplotlib
@@ -21,7 +22,7 @@ def test_best_designs_are_the_best_of_every_combination():
     F = _info()
     names = [f"s{k}" for k in range(12)]
     t = best_designs(F, None, names, 3, "D", chosen=(0, 1, 2))
-    W = np.array([[1.0 if k in c else 0.0 for k in range(12)] for c in __import__("itertools").combinations(range(12), 3)])
+    W = np.array([[1.0 if k in c else 0.0 for k in range(12)] for c in itertools.combinations(range(12), 3)])
     every = np.sort(batch_criteria(F, None, W).logdet)
     assert [r.logdet for r in t.rows[:10]] == pytest.approx(list(every[:10]))
     assert "of all 220 designs of 3" in t.note and len(t.rows) <= 11
