@@ -30,7 +30,7 @@ from models.state import solve_states
 from .config import ConfigError
 
 __all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "run_trajectories",
-           "plan_dynamic", "design_rows_text"]
+           "plan_dynamic", "design_rows_text", "validation_problem"]
 
 
 @dataclass(frozen=True)
@@ -185,3 +185,19 @@ def run_trajectories(study, results, progress) -> None:
     for v, est in results.estimates.items():
         with progress.step(f"trajectories of {v} with prediction bands"):
             results.trajectories[v] = trajectories(study, est, v)
+
+
+def validation_problem(study, results, est, used) -> tuple:
+    """(model, splits, weights) of ``mudoe validate`` on a dynamic study: the collocated model of the
+    estimate (mesh controlled at p̂) over its (sensor, time) outputs, the splits by experiment (the
+    time-window splits are not simulated; a note says so), the instruments ``used`` at every time."""
+    from identification.splits import Split
+    splits = tuple(sp for sp in study.splits if isinstance(sp, Split))
+    if not splits:
+        raise ConfigError(f"{study.cfg.path}: [splits] `mudoe validate` on a dynamic study simulates the splits by "
+                          "experiment ([[splits.custom]], [splits.random]); the study has only splits by time")
+    skipped = [sp.name for sp in study.splits if not isinstance(sp, Split)]
+    if skipped:
+        results.notes.append(f"validate: the splits by time ({', '.join(skipped)}) are not in the Monte Carlo study")
+    w = np.array([1.0 if n.split("@")[0] in used else 0.0 for n in est.sensors])
+    return est.model, splits, w

@@ -472,11 +472,14 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         data = study.data[v]
         used = _design_sensors(study, results, progress)
         w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
+        model, splits, inputs, p0 = study.models[v], study.splits, data.inputs, start_values(study, v)
+        if getattr(study, "is_dynamic", False):      # on the collocation at the estimate (mudoe.dynamic_runs)
+            from .dynamic_runs import validation_problem
+            model, splits, w = validation_problem(study, results, est, used)
         where = "" if address is None else f" on the Dask scheduler {address}"
         with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications{where}"):
-            results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p,
-                                          inputs=data.inputs, sigma=est.sigma, n_M=data.n_M, weights=w, name=v,
-                                          settings=settings)
+            results.validation = validate(model, splits, p0, p_true=est.p, inputs=inputs, sigma=est.sigma,
+                                          n_M=data.n_M, weights=w, name=v, settings=settings)
     return results
 
 

@@ -70,6 +70,8 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
     det = res["detection"]
     assert [t["split"] for t in det["tests"]] == ["cool vs hot", "t < 0.7 vs t >= 0.7"]
     assert det["verdicts"]["isothermal"] in ("not rejected", "rejected", "undecided")
+    rc, text, _ = _run(capsys, "validate", str(cfg), "--out", str(out), "--runs", "3", "--json")
+    assert rc == 0 and json.loads(text)["n_rep"] == 3          # the split by experiment, on the collocation
     pages = json.loads((out / "results.json").read_text())["pages"]
     words = " ".join(" ".join(p["texts"]) for p in pages)
     assert "chosen sampling times" in words and "time (h)" in words and "cA (mol/L)" in words
@@ -108,3 +110,13 @@ def test_bad_dynamic_input_exits_2(tmp_path, capsys, what, edits, key, words):
     assert rc == 2 and len(err.strip().splitlines()) == 1, err
     assert str(cfg) in err and key in err and words in err, err
     assert not any(out.iterdir())
+
+
+def test_init_writes_a_dynamic_template(tmp_path, capsys):
+    from mudoe.config import load_config
+    path = tmp_path / "study.toml"
+    assert main(["init", "--model", "mudoe.example_reactor:build", str(path)]) == 0
+    cfg = load_config(path)
+    assert cfg.dynamic is not None and len(cfg.dynamic.experiments) == 2
+    assert cfg.sensor_names() == ("cA", "cB") and [p.name for p in cfg.parameters] == ["k1_ref", "E1", "k2_ref", "E2"]
+    assert set(cfg.dynamic.experiments[0]) == {"cA0", "T"} and max(cfg.dynamic.times) <= 2.0    # within the horizon
