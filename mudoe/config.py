@@ -864,8 +864,6 @@ def _parse_oed(ctx, t):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs n_points (how many to choose)")
         if not (o.candidates or o.candidates_range):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
-    if o.planned and not (o.candidates or o.candidates_range):
-        raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     if o.refine and o.mode != "inputs":
         raise ctx.error("oed", "refine", f"the continuous refinement is for mode = \"inputs\" (mode is {o.mode!r})")
     _check_discrimination_keys(ctx, o)
@@ -972,6 +970,9 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
+    o = cfg.oed
+    if o.planned and not (o.candidates or o.candidates_range) and cfg.dynamic is None:   # dynamic: its experiments
+        raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     check_config(cfg, ctx.error)
     return cfg
 

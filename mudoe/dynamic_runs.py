@@ -57,7 +57,8 @@ class DynamicDesign:
     def summary(self) -> str:
         head = (f"sampling-time design of variant {self.variant} at p = {list(self.p)} "
                 + ("(planned before data: Gauss-Newton)" if self.planned else "(at the estimate)"))
-        return head + "\n" + self.result.summary() + "\n" + self.table.note + ":\n" + design_rows_text(self.table)
+        text = self.result.summary().replace("  sensors (", "  readings (" if self.pairs else "  sampling times (", 1)
+        return head + "\n" + text + "\n" + self.table.note + ":\n" + design_rows_text(self.table)
 
     def to_dict(self) -> dict:
         r = self.result

@@ -120,3 +120,11 @@ def test_init_writes_a_dynamic_template(tmp_path, capsys):
     assert cfg.dynamic is not None and len(cfg.dynamic.experiments) == 2
     assert cfg.sensor_names() == ("cA", "cB") and [p.name for p in cfg.parameters] == ["k1_ref", "E1", "k2_ref", "E2"]
     assert set(cfg.dynamic.experiments[0]) == {"cA0", "T"} and max(cfg.dynamic.times) <= 2.0    # within the horizon
+
+
+def test_planned_time_design_reads_no_data(tmp_path, capsys):
+    cfg = _small(tmp_path, "reactor", [(r"^\[oed\]\n", "[oed]\nplanned = true\n")], data_dir=tmp_path / "nowhere")
+    rc, text, _ = _run(capsys, "oed", str(cfg), "--out", str(tmp_path / "out"), "--json")
+    plan = json.loads(text)
+    assert rc == 0 and plan["planned"] and plan["p"] == [1.5, 50.0, 1.0, 70.0] and len(plan["chosen_times"]) == 4
+    assert "sampling times (4)" in (tmp_path / "out" / "oed.txt").read_text()
