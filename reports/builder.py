@@ -277,7 +277,7 @@ def _estimate_pages(results):
             h = min(0.03 * (len(chunk) + 1), 0.82)
             ax = fig.add_axes([0.04, 0.90 - h, 0.92, h])
             n_rest = len(head) - 4
-            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.30, 0.10] + [0.40 / n_rest] * n_rest + [0.14])
+            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.24, 0.06] + [0.50 / n_rest] * n_rest + [0.14])
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)

@@ -118,6 +118,7 @@ def _page(title):
 
 
 def _text(fig, x, y, text, width=175, size=8):
+    width = min(width, int(175 * 8 / size))          # the page's width at this font size
     fig.text(x, y, "\n".join(textwrap.wrap(text, width)), va="top", ha="left", fontsize=size)
 
 
@@ -169,7 +170,7 @@ def _residual_pages(results):
         _text(fig, 0.04, 0.08, "Standardized residuals (z - h)/sigma of every reading against its sampling time, one "
               "colour per experiment (filled: series 1, open: later series). Dashed: +-2. A trend over time shared "
               "by the experiments shows dynamics the model misses (a rate law, a delay, a missing state); residuals "
-              "growing with time point at an error that accumulates.")
+              "growing with time point at an error that accumulates. Red triangles: the chosen sampling times.")
         figs.append(fig)
     return figs
 
