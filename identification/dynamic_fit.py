@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.collocation import Mesh, collocate, DEFAULT_ELEMENTS
+from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from models.dynamic import DynamicModel
 from .dynamic_data import DynamicMeasurements
@@ -251,6 +252,13 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     return dataclasses.replace(est, notes=est.notes + (rec.note(),), extra={**est.extra, "discretisation": rec})
 
 
+def _outputs(cm, p, inputs) -> np.ndarray:
+    """The collocation solution's outputs (n_q, n_S): one mapped CasADi call for an ODE."""
+    if cm.dynamic.n_z:
+        return cm.integrated_outputs(p, inputs)
+    return mapped_outputs(cm, p, inputs)
+
+
 def controlled_mesh(model: DynamicModel, p, inputs, times, sigma, outputs=None,
                     discretisation: DiscretisationSettings | None = None):
     """The collocated model at ``times`` whose outputs at p are within ``tol_sigma`` sigmas of the
@@ -266,7 +274,7 @@ def controlled_mesh(model: DynamicModel, p, inputs, times, sigma, outputs=None,
     order = 2 * ds.degree - 1
     for _ in range(ds.max_refinements + 1):
         fine = collocate(model, t, mesh=cm.mesh.refined(2), outputs=cm.outputs)
-        diff = fine.integrated_outputs(p, inputs) - cm.integrated_outputs(p, inputs)
+        diff = _outputs(fine, p, inputs) - _outputs(cm, p, inputs)
         err = float(np.max(np.abs(diff) / sig)) * 2 ** order / (2 ** order - 1)
         if err <= ds.tol_sigma:
             return cm, err
@@ -304,7 +312,13 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
         except ModelError as exc:
             raise DataError(str(exc)) from None
         sig = np.tile(np.broadcast_to(np.asarray(sigma, float), (model.n_S,)), cm.times.size)
-        return information_contributions(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
+        if model.n_z:
+            return information_contributions(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
+        if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+            raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
+        _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.collocation_map)
+        F = float(n_series) * np.einsum("k,jkp,jkr->kpr", 1.0 / sig ** 2, G, G)
+        return F, np.zeros_like(F)
     if times is not None or inputs is not None or sigma is not None:
         raise DataError("inputs/times/sigma: give them only when data is None (the data carry their own)")
     data = _dynamic_data(model, data)

@@ -14,8 +14,9 @@ nominal ``p`` is 0, so the second-order term vanishes and the design is Gauss-Ne
 
 Refinement: the chosen input levels are then moved continuously within bounds to minimise
 the same criterion, by Ipopt with exact CasADi derivatives of the criterion of the
-information matrix built symbolically from the model's sensitivities (implicit models:
-:math:`y' = -E_y^{-1}E_p`, with the states as NLP variables tied by :math:`E(y, p, q)=0`).
+information matrix built symbolically from the model's sensitivities (implicit models: the
+states and sensitivities as NLP variables tied by E(y, p, q) = 0 and E_y y' + E_p = 0,
+:mod:`oed.input_nlp`).
 The E criterion is stated smoothly as :math:`\max t` s.t. :math:`M - tI = LL^T`.
 """
 from __future__ import annotations
@@ -23,15 +24,15 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
-import casadi as ca
 import numpy as np
 
-from identification.errors import IdentificationError
+from identification.errors import IdentificationError, StateSolveError
 from identification.ipopt_solver import IpoptSettings, solve_nlp
 from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
+from .input_nlp import information_nlp
 
 __all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "input_information", "select_inputs",
            "refine_inputs"]
@@ -52,7 +53,7 @@ class RefineSettings:
 
     n_starts: int = 4
     seed: int = 0
-    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500)
+    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
 
     def __post_init__(self):
         if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
@@ -217,12 +218,12 @@ def input_information(model, p, candidates, sigma, n_series=1) -> np.ndarray:
 def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criterion="D", kind="gauss_newton",
                   costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
                   refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
-                  settings: DesignSettings = DesignSettings()) -> InputDesignResult:
+                  settings: DesignSettings = DesignSettings(), times=None, discretisation=None) -> InputDesignResult:
     r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs), optionally refined.
 
     Parameters
     ----------
-    model : models.Model
+    model : models.Model or models.dynamic.DynamicModel
     p : array_like, shape (n_p,)
         Nominal parameters (within the model's bounds).
     candidates : array_like, shape (n_candidates, d_q)
@@ -248,6 +249,13 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
     bounds : (array_like, array_like) or None
         Input bounds for the refinement, shape (d_q,) each; default the candidates' range.
 
+    times : array_like or None
+        Dynamic models (:meth:`models.Model.ode`) only: the sampling times of every experiment;
+        then ``sigma`` is one per instrument, ``sensors`` names instruments and the candidates are
+        input rows with the control profiles (:func:`oed.dynamic_inputs.select_dynamic_inputs`).
+    discretisation : identification.DiscretisationSettings or None
+        Dynamic models: the collocation's tolerance.
+
     Returns
     -------
     InputDesignResult
@@ -257,6 +265,19 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
     ValueError
         Bad input (the message names the argument).
     """
+    if getattr(model, "is_dynamic", False):
+        from .dynamic_inputs import select_dynamic_inputs      # same layer, built on this function
+        if times is None:
+            raise ValueError("times: a dynamic model needs the sampling times of its experiments")
+        return select_dynamic_inputs(model, p, times=times, candidates=candidates, sigma=sigma, n_points=n_points,
+                                     sensors=sensors, criterion=criterion, kind=kind, costs=costs, budget=budget,
+                                     include=include, exclude=exclude, n_series=n_series, method=method,
+                                     time_limit=time_limit, refine=refine, bounds=bounds,
+                                     refine_settings=refine_settings, settings=settings,
+                                     discretisation=discretisation)
+    if times is not None or discretisation is not None:
+        raise ValueError("times/discretisation: only for a dynamic model (models.Model.ode)")
+    t_start = time.perf_counter()
     Q = _check_candidates(model, candidates)
     k_idx, joint = _measured(model, sensors)
     n_cand = Q.shape[0] * (len(k_idx) if joint else 1)
@@ -298,7 +319,8 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
                              "not for joint input-sensor designs")
         refined = refine_inputs(model, p, Q[list(rows)], sigma, criterion=criterion, sensors=sensors,
                                 n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
-                                settings=refine_settings)
+                                settings=refine_settings,
+                                time_limit=max(time_limit - (time.perf_counter() - t_start), 0.05 * time_limit))
     return InputDesignResult(indices=rows, pairs=pairs, inputs=_readonly(Q[list(rows)].reshape(len(rows), -1)),
                              value=res.value, lower_bound=res.lower_bound, gap=res.gap,
                              proven_optimal=res.proven_optimal, criterion=res.criterion, method=res.method,
@@ -306,58 +328,52 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
 
 
 # ---------------------------------------------------------------------------- continuous refinement
-def _sym(model):
-    """CasADi symbol class: SX for explicit or small-state SX models, else MX (linear solves stay MX)."""
-    return ca.SX if model.symbolic == "SX" and model.n_y <= 4 else ca.MX
+def _extras(crit: Criterion, M) -> np.ndarray:
+    """Start values of the E criterion's extra variables (t, L with M - t I = L L^T); none otherwise."""
+    if crit is not Criterion.E:
+        return np.zeros(0)
+    n_p = M.shape[0]
+    t_init = 0.5 * float(np.linalg.eigvalsh(M)[0])
+    Lc = np.linalg.cholesky(M - t_init * np.eye(n_p) + 1e-14 * np.eye(n_p))
+    return np.array([t_init] + [Lc[i, j] for j in range(n_p) for i in range(j, n_p)])
 
 
-def _symbolic_information(model, p, sig, k_idx, n_series, Qs, Ys):
-    """M(q) = n_series sum_i sum_k G_ik^T G_ik / sigma_k^2 with G from CasADi (implicit: y' = -E_y^-1 E_p)."""
-    X = _sym(model)
-    pp = X(ca.DM(p))
-    ysym, psym, qsym = X.sym("y", model.n_y), X.sym("p", model.n_p), X.sym("q", model.n_q_dim)
-    h = model.h_fun(ysym, psym, qsym)
-    Gp = ca.jacobian(h, psym)
-    if model.n_y:
-        E = model.E_fun(ysym, psym, qsym)
-        Gp = Gp + ca.mtimes(ca.jacobian(h, ysym), -ca.solve(ca.jacobian(E, ysym), ca.jacobian(E, psym)))
-    G_fun = ca.Function("G", [ysym, psym, qsym], [Gp])
-    W = ca.DM(np.diag([float(n_series) / sig[k] ** 2 if k in k_idx else 0.0 for k in range(model.n_S)]))
-    M = X.zeros(model.n_p, model.n_p)
-    for q_i, y_i in zip(Qs, Ys):
-        G = G_fun(y_i, pp, q_i)
-        M = M + ca.mtimes([G.T, W, G])
-    return M
+def _share(seconds: float) -> float:
+    """An equal share of the time per start, rounded down to 1, 2 or 5 x 10^k s: Ipopt's wall-time
+    limit is a solver setting, and few distinct values let the compiled solver be reused."""
+    e = 10.0 ** np.floor(np.log10(seconds))
+    return float(max(m for m in (1.0, 2.0, 5.0, 10.0) if m * e <= seconds * (1 + 1e-12)) * e)
 
 
-def _criterion_nlp(X, crit: Criterion, M, n_p):
-    """(objective, extra variables, extra equality constraints) of Psi(M^-1) (D: log det C)."""
-    if crit is Criterion.A:
-        return ca.trace(ca.solve(M, X.eye(n_p))), [], []
-    if crit is Criterion.D:
-        return -ca.log(ca.det(M)), [], []
-    t = X.sym("t")
-    L = X.sym("L", n_p * (n_p + 1) // 2)
-    Lm = X(ca.Sparsity.lower(n_p), L)
-    R = M - t * X.eye(n_p) - ca.mtimes(Lm, Lm.T)
-    cons = [R[i, j] for i in range(n_p) for j in range(i + 1)]
-    return -t, [t, L], cons
+def _check_bounds(model, start, bounds):
+    """(X0, lo, hi) checked: start rows within finite bounds lo <= hi."""
+    X0 = np.atleast_2d(np.asarray(start, float))
+    lo, hi = (np.broadcast_to(np.asarray(b, float).ravel(), (model.n_q_dim,)) for b in bounds)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+        raise ValueError(f"bounds: expected finite lower <= upper of shape ({model.n_q_dim},), got {bounds!r}")
+    if X0.shape[1] != model.n_q_dim or np.any(X0 < lo - 1e-12) or np.any(X0 > hi + 1e-12):
+        raise ValueError("start: input rows must lie within the bounds")
+    return X0, lo, hi
 
 
 def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_series=1, bounds,
-                  settings: RefineSettings = RefineSettings()) -> RefinedInputs:
+                  settings: RefineSettings = RefineSettings(), time_limit: float | None = None) -> RefinedInputs:
     r"""Move ``n_points`` input rows continuously within ``bounds`` to minimise :math:`\Psi(M(q)^{-1})`.
 
-    Multi-start Ipopt (the exact design's levels, then random points in the bounds) with exact
-    CasADi derivatives; the best accepted start is returned.  D is reported as log det C
-    (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.
+    Multi-start Ipopt (the exact design's levels, then random points in the bounds) on the
+    full-space NLP of :mod:`oed.input_nlp` (states and sensitivities as variables, exact sparse
+    CasADi derivatives); the best start is returned.  D is reported as log det C
+    (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.  ``time_limit``
+    (seconds, None: none) bounds the whole refinement: each start's Ipopt run has an equal share
+    of it (rounded down, :func:`_share`) as its wall-time limit, no start begins after it, and the
+    first start's levels are kept if nothing better was reached.
 
     Raises
     ------
     ValueError
         Bad bounds or start.
     RuntimeError
-        When every start fails (Ipopt's messages are given).
+        When every start fails for another reason than the time limit (Ipopt's messages are given).
     """
     crit = Criterion.parse(criterion)
     p = _check_p(model, p)
@@ -365,66 +381,63 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     k_idx, joint = _measured(model, sensors)
     if joint:
         raise ValueError("sensors: the refinement takes None or sensor names, not 'joint'")
-    X0 = np.atleast_2d(np.asarray(start, float))
-    lo, hi = (np.broadcast_to(np.asarray(b, float).ravel(), (model.n_q_dim,)) for b in bounds)
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
-        raise ValueError(f"bounds: expected finite lower <= upper of shape ({model.n_q_dim},), got {bounds!r}")
-    if X0.shape[1] != model.n_q_dim or np.any(X0 < lo - 1e-12) or np.any(X0 > hi + 1e-12):
-        raise ValueError("start: input rows must lie within the bounds")
+    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
+        raise ValueError(f"time_limit: expected a positive number of seconds or None, got {time_limit!r}")
+    X0, lo, hi = _check_bounds(model, start, bounds)
     t0 = time.perf_counter()
+    deadline = np.inf if time_limit is None else t0 + float(time_limit)
     n_pts, d = X0.shape
-    X = _sym(model)
     span = np.where(hi > lo, hi - lo, 1.0)
-    Us = [X.sym(f"u{i}", d) for i in range(n_pts)]                 # scaled inputs q = lo + span * u
-    Qs = [ca.DM(lo) + ca.DM(span) * u for u in Us]
-    Ys = [X.sym(f"y{i}", model.n_y) for i in range(n_pts)]
-    M = _symbolic_information(model, p, sig, k_idx, n_series, Qs, Ys)
-    f, extra, cons = _criterion_nlp(X, crit, M, model.n_p)
-    pp = ca.DM(p)
-    g = [model.E_fun(y, pp, q) for y, q in zip(Ys, Qs)] if model.n_y else []
-    x = ca.vertcat(*Us, *Ys, *extra)
-    gg = ca.vertcat(*g, *cons) if (g or cons) else X.zeros(0, 1)
-    n_e, n_c = model.n_y * n_pts, len(cons)
-    nlp = (x, f, gg, X.sym("par", 0))
-    ipopt = settings.ipopt if X is ca.SX else replace(settings.ipopt, expand=False)   # MX linear solves stay MX
-    G_val = ca.Function("Mval", [ca.vertcat(*Us, *Ys)], [M])
+    weights = np.array([float(n_series) / sig[k] ** 2 if k in k_idx else 0.0 for k in range(model.n_S)])
+    key = ("refine_nlp", np.asarray(p).tobytes(), weights.tobytes(), n_pts, lo.tobytes(), span.tobytes(), crit)
+    nlp = model.cache.get_or_make("refine_nlp", key, lambda: information_nlp(model, p, weights, n_pts, lo, span,
+                                                                             crit), maxsize=4)
     rng = np.random.default_rng(settings.seed)
     starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
-    best, best_v, values, messages = None, np.inf, [], []
-    lbe = np.zeros(n_e + n_c)
+    best, best_v = X0, _value(crit, nlp.matrix(nlp.start(model, p, X0, lo, span)))
+    values, messages = [], []
+    lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
+    ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
+    share = None if time_limit is None else _share(float(time_limit) / len(starts))
+    ipopt = settings.ipopt if share is None else replace(
+        settings.ipopt, extra=settings.ipopt.extra + (("max_wall_time", share),))
     for Xs in starts:
-        Y = solve_states(model, p, Xs) if model.n_y else np.zeros((n_pts, 0))
-        Mv = np.array(G_val(np.concatenate([((Xs - lo) / span).ravel(), Y.ravel()])))
-        ex0 = []
-        if crit is Criterion.E:
-            t_init = 0.5 * float(np.linalg.eigvalsh(Mv)[0])
-            Lc = np.linalg.cholesky(Mv - t_init * np.eye(model.n_p) + 1e-14 * np.eye(model.n_p))
-            ex0 = [t_init] + [Lc[i, j] for j in range(model.n_p) for i in range(j, model.n_p)]
-        x0 = np.concatenate([((Xs - lo) / span).ravel(), Y.ravel(), np.asarray(ex0, float)])
-        lbx = np.concatenate([np.zeros(n_pts * d), np.full(Y.size + len(ex0), -np.inf)])
-        ubx = np.concatenate([np.where(hi > lo, 1.0, 0.0).repeat(1)[None].repeat(n_pts, 0).ravel(),
-                              np.full(Y.size + len(ex0), np.inf)])
-        try:
-            r = solve_nlp(lambda: nlp, x0, lbx, ubx, lbe, lbe, [], settings=ipopt, what="input refinement")
-        except IdentificationError as exc:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            messages.append("not started: time limit reached")
             values.append(np.inf)
-            messages.append(str(exc))
             continue
-        # a stalled run's point is still a design: its value is re-evaluated exactly below
-        Ur = np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0)
-        Xr = lo + span * Ur * (hi > lo)
-        Yr = solve_states(model, p, Xr) if model.n_y else np.zeros((n_pts, 0))
-        Mr = np.array(G_val(np.concatenate([Ur.ravel(), Yr.ravel()])))
-        v = _value(crit, Mr)
+        v, msg, Xr = _one_start(model, p, nlp, Xs, (lo, hi, span), crit, (lbx, ubx), ipopt, key)
         values.append(v)
-        messages.append(r.status if r.accepted else f"stalled ({r.status}); point re-evaluated")
+        messages.append(msg)
         if v < best_v:
             best, best_v = Xr, v
-    if best is None:
+    if not any(np.isfinite(values)) and not any("time limit" in m for m in messages):
         raise RuntimeError(f"refine: every Ipopt start failed: {'; '.join(messages)}")
     return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
                          n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
                          lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
+
+
+def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
+    """(criterion value, message, refined rows) of one Ipopt run of the refinement from the rows Xs
+    (value inf for a failed run; a stalled run's point is still a design, re-evaluated exactly)."""
+    lo, hi, span = box
+    n_pts, d = Xs.shape
+    zero = np.zeros(nlp.n_g)
+    try:
+        x0 = nlp.start(model, p, Xs, lo, span)
+        x0[nlp.n_u + nlp.n_y + nlp.n_s:] = _extras(crit, nlp.matrix(x0))
+        r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, [], settings=ipopt,
+                      what="input refinement", key=key, cache=model.cache)
+    except (IdentificationError, StateSolveError) as exc:
+        return np.inf, str(exc), Xs
+    Xr = lo + span * np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0) * (hi > lo)
+    try:
+        v = _value(crit, nlp.matrix(nlp.start(model, p, Xr, lo, span)))
+    except StateSolveError as exc:
+        return np.inf, f"the refined point has no state solution ({exc})", Xs
+    return v, (r.status if r.accepted else f"stalled ({r.status}); point re-evaluated"), Xr
 
 
 def _value(crit: Criterion, M) -> float:
