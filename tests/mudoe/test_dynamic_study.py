@@ -65,6 +65,7 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
     assert any(n.endswith("_time_design.png") for n in names) and any(n.endswith("_residuals.png") for n in names)
     assert not any("bands" in n or "misses" in n for n in names)
     res = json.loads((out / "results.json").read_text())["results"]
+    assert res["time_design"]["chosen_times"] == sorted(float(t) for t in res["oed"]["chosen"]["sensors"])
     chosen = res["oed"]["chosen"]["sensors"]
     assert len(chosen) == 4 and set(chosen) <= {"0.4", "0.8", "1.2", "1.6", "2"} and len(res["oed"]["table"]) == 5
     det = res["detection"]

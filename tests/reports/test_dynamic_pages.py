@@ -64,3 +64,18 @@ def test_dynamic_figures_label_time_and_units_and_return_the_figure():
     assert "chosen sampling times" in [t.get_label() for t in ax.lines]
     fig2 = residual_time_plot(_Traj, _Data, _Model, 1)
     assert fig2.axes[0].get_ylabel() == "(z - h) / sigma of a"
+
+
+def test_design_rows_lists_every_combination_only_while_it_fits_a_page():
+    """The static study's design table (run_oed): the paper's full table for few sensors, the ten best
+    designs of the chosen size beyond (60 candidates never enumerate 2^60 combinations)."""
+    from oed.best_designs import design_rows
+    from oed.design import select_sensors_from_information
+    F = _info(4, 2, 2)
+    res = select_sensors_from_information(F, None, criterion="D", kind="gauss_newton", n_sensors=2)
+    full = design_rows(F, None, ["a", "b", "c", "d"], 2, res, "D")
+    assert not getattr(full, "ranked", False) and len(full.rows) == 11          # C(4,2)+C(4,3)+C(4,4)
+    F = _info(60, 3, 3)
+    res = select_sensors_from_information(F, None, criterion="D", kind="gauss_newton", n_sensors=3)
+    top = design_rows(F, None, [f"s{k}" for k in range(60)], 1, res, "D")
+    assert top.ranked and len(top.rows) == 10 and top.rows[0].sensors == tuple(res.sensors)
