@@ -55,7 +55,8 @@ first sweep: the model is evaluated once and only the data terms differ, and ide
 rows (same q and the same state at p0) are evaluated once per member (their data terms are
 pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
-fitted by identify.
+fitted by identify; for a collocated ODE model the members' fits run together with their
+trajectory evaluations merged (:mod:`identification.batch_trajectory`: no state-size ceiling).
 
 A member that does not converge (or fails a check, or ends on or outside a parameter bound)
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
@@ -73,7 +74,9 @@ import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
+from models.trajectory import trajectory_numerics
 from .errors import DataError, IdentificationError, StateSolveError
+from .batch_trajectory import decrements, fit_members
 from .unbounded import not_bounded_reason
 from .estimator import IdentifySettings, as_start_vector, identify, param_scale
 from .factor import covariances, weighted_factor
@@ -1181,6 +1184,15 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                 Y_ref = solve_states(model, p0, q.reshape(-1, q.shape[2])).reshape(R, n_q, -1)
         except StateSolveError:
             usable = False
+    if not usable and n_y and trajectory_numerics(model) is not None and fallback_on:
+        # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
+        results, errors = fit_members(model, [data.member(r) for r in range(R)], p0, weights, settings, starts)
+        # a failed fit, or an estimate the data do not bound (kept, ok False), is recorded with its reason
+        records = [FallbackRecord(int(r), "the fit failed", e) for r, e in sorted(errors.items())]
+        records += [FallbackRecord(r, "not bounded by the data", not_bounded_reason(res)) for r, res in enumerate(results)
+                    if r not in errors and not_bounded_reason(res)]
+        ok = np.array([r not in errors for r in range(R)])
+        return _collect(model, results, records, ok, decrements(results), np.zeros(R, int))
     if not usable:
         why = ("the batch engine handles states of at most 60 variables" if n_y and not numerics(model).dense
                else "the start or the problem is not valid for the batch engine")

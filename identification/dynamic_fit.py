@@ -31,6 +31,7 @@ from models.collocation import Mesh, collocate, DEFAULT_ELEMENTS
 from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from models.dynamic import DynamicModel
+from models.trajectory import interpolate_states, trajectory_numerics
 from .dynamic_data import DynamicMeasurements
 from .errors import DataError, StateSolveError
 
@@ -184,7 +185,13 @@ def _error(model, data, est, mesh, w):
     halved, o = 2 d - 1 the order at the element boundaries."""
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
     order = 2 * mesh.degree - 1
-    dh = (fine.integrated_outputs(est.p, data.inputs) - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
+    traj = trajectory_numerics(fine)
+    if traj is not None and est.states is not None:       # Newton from the fit's trajectories interpolated
+        h_fine = traj.outputs(est.p, data.inputs, traj.states(est.p, data.inputs,
+                                                             interpolate_states(est.model, fine, est.states)))
+    else:
+        h_fine = fine.integrated_outputs(est.p, data.inputs)
+    dh = (h_fine - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
     e = np.where(counts > 0, np.abs(dh) / est.sigma[None, :], 0.0)

@@ -44,6 +44,7 @@ from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
 from .results import Estimate
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
+from models.trajectory import trajectory_numerics
 
 __all__ = ["identify", "IdentifySettings", "information_contributions", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector"]
@@ -718,7 +719,9 @@ def _start(model, data, p0, weights, Y0) -> _Start:
         except StateSolveError as exc:
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
-        s_y, e_scale = _scalings(model, p0, data.inputs, Y_init, Y0 is None)
+        # a collocated ODE is solved in the reduced space (no NLP): its scalings are made when Ipopt needs them
+        s_y, e_scale = ((None, None) if trajectory_numerics(model) is not None
+                        else _scalings(model, p0, data.inputs, Y_init, Y0 is None))
     return _Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
                   ReducedProblem.of(model, data, w, sig, s_p))
 
@@ -985,7 +988,9 @@ def _reduced_start(st: _Start, settings: IdentifySettings):
     """
     model = st.model
     min_inputs = settings.reduced_start_inputs
-    if (not model.n_y or min_inputs is None or st.data.n_q < min_inputs or not numerics(model).dense):
+    trajectory = trajectory_numerics(model) is not None     # a collocated ODE: any number of inputs
+    if (not model.n_y or min_inputs is None or
+            not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None
     x0 = st.p0 / st.s_p
     objective = ImplicitObjective(st.problem, x0, st.Y_init)
@@ -1029,7 +1034,6 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
                 return _FullSpaceSolution(r0, 1, point.p, None, np.zeros(model.n_p, bool), point, S)
             newton_passes = 2                   # outside the bounds: solve the bounded problem
     zbar, cw = st.problem.zbar, st.problem.cw
-    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     par_value = np.concatenate([zbar.ravel(), (cw / st.sig[None, :] ** 2).ravel()])  # column-major of (n_S, n_q)
     bounded = np.any(np.isfinite(model.lower)) or np.any(np.isfinite(model.upper))
     warm = None                                 # (reduced point, S) of the reduced-space optimum
@@ -1038,6 +1042,17 @@ def _solve_full_space(st: _Start, settings: IdentifySettings, clock: _PhaseClock
         if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
                 np.all(got[1].p < model.upper - 1e-6 * s_p):
             warm = got[1], got[2]
+            if trajectory_numerics(model) is not None:
+                # a collocated ODE: the reduced optimum (states solved to round-off element by element,
+                # decrement at round-off) is the estimate, as for explicit models; no NLP is built
+                if clock is not None:
+                    clock.lap("reduced-space Newton (collocated trajectories)")
+                return _FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
+                                          got[2])
+    if s_y is None:                             # scalings left for the NLP (see _start)
+        s_y, e_scale = _scalings(model, st.p0, data.inputs, st.Y_init, False)
+        st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
+    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     if warm is not None:
         p_start, Y_start = warm[0].p, warm[0].states
     else:

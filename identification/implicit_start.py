@@ -27,7 +27,8 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.sensitivity import sensitivities
-from models.state import numerics
+from models.state import numerics, solve_states
+from models.trajectory import trajectory_numerics
 from .explicit_kernel import ExplicitTerms
 from .refinement import ReducedPoint, ReducedProblem
 
@@ -166,7 +167,11 @@ class ImplicitObjective:
         problem = self._problem
         p = x * self._sp
         Y = None
-        if near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
+        traj = trajectory_numerics(problem.model)
+        if traj is not None:          # a collocated ODE: Newton on all trajectories from the prediction, else marched
+            guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+            Y = traj.states(p, problem.data.inputs, guess)
+        elif near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
             guess = near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
             try:
                 Y = solve_states_from(problem.model, p, problem.data.inputs, guess)

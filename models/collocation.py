@@ -207,6 +207,10 @@ class CollocatedModel(Model):
         element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
+        from .trajectory import trajectory_numerics      # an ODE: all experiments at once, element by element
+        traj = trajectory_numerics(self)
+        if traj is not None:
+            return traj.outputs(p, inputs)
         return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])
 
     # ------------------------------------------------------------------ state guess

@@ -19,6 +19,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from .state import numerics
+from .trajectory import trajectory_numerics
 
 __all__ = ["Sensitivities", "sensitivities"]
 
@@ -170,11 +171,55 @@ def _dense(a) -> np.ndarray:
     return a.toarray() if sps.issparse(a) else np.asarray(a, float)
 
 
+class _TrajectorySensitivities(Sensitivities):
+    """A collocated ODE (:mod:`models.trajectory`): h, G and y' of all inputs by forward substitution
+    through the elements; the adjoints and second derivatives factor dE/dy per input when first asked."""
+
+    __slots__ = ("_yp", "_model", "_blocks")
+
+    def __init__(self, h, G, model, p, inputs, Y, yp, blocks):
+        super().__init__(h, G, None, p, inputs, Y, None)
+        self._yp, self._model, self._blocks = yp, model, blocks
+
+    @property
+    def state_derivatives(self) -> np.ndarray:
+        return self._yp
+
+    def _filled(self) -> None:
+        if self._cache is not None:
+            return
+        num = numerics(self._model)
+        n_p = self.G.shape[2]
+        cache = []
+        for j in range(self._inputs.shape[0]):
+            _, Ey, _, hy, _ = num.point("sens")(self._Y[j], self._p, self._inputs[j])
+            cache.append((num.factor(Ey), hy, np.vstack([self._yp[j], np.eye(n_p)])))
+        self._num, self._cache = num, cache
+
+    def adjoint(self, lam: np.ndarray) -> np.ndarray:
+        self._filled()
+        return super().adjoint(lam)
+
+    def hessians(self, lam: np.ndarray) -> np.ndarray:
+        return trajectory_numerics(self._model).hessians(self._p, self._inputs, self._Y, self._yp, *self._blocks,
+                                                         np.asarray(lam, float))
+
+    def output_hessians(self) -> np.ndarray:
+        self._filled()
+        return super().output_hessians()
+
+
 def sensitivities(model, p, inputs, Y) -> Sensitivities:
     """Outputs h and total sensitivities G = dh/dp at every input (exact, by AD + IFT)."""
-    num = numerics(model)
     p = np.asarray(p, float).ravel()
     inputs = np.atleast_2d(np.asarray(inputs, float))
+    traj = trajectory_numerics(model)
+    if traj is not None:
+        Y = np.asarray(Y, float)
+        yp, RV, Rx = traj.sweep(p, inputs, Y)
+        h, G = traj.outputs_and_sensitivities(p, inputs, Y, yp)
+        return _TrajectorySensitivities(h, G, model, p, inputs, Y, yp, (RV, Rx))
+    num = numerics(model)
     n_q = inputs.shape[0]
     if num.dense:
         Y = np.zeros((n_q, 0)) if not model.n_y else np.asarray(Y, float)

@@ -25,7 +25,7 @@ from .errors import StateSolveError
 from .jit_cache import JitCache, JitCompileError, JitStats
 from .vectorised import VectorisedSX, vectorisable
 
-__all__ = ["numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
+__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
 
 _DENSE_LIMIT = 60
 
@@ -424,6 +424,13 @@ class _Batched:
         return [o.transpose(0, 2, 1) for o in outs]
 
 
+def batched_function(f: ca.Function, n: int) -> "_Batched":
+    """Evaluator of a CasADi function of column vectors at n points at once through a FunctionBuffer:
+    ``batched_function(f, n)(a_1, ..., a_k)`` takes (n, d_i) arrays (or (d_i,) arrays shared by all
+    points) and returns one dense (n, r, c) array per output (see :meth:`Numerics.batched`)."""
+    return _Batched(f, n)
+
+
 def numerics(model) -> Numerics:
     """The :class:`Numerics` of a model, built once and kept in ``model.cache``."""
     num = model.cache.get("numerics", None)
@@ -578,6 +585,14 @@ def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
     p = np.asarray(p, float).ravel()
     if not model.n_y:
         return np.zeros((inputs.shape[0], 0))
+    from .trajectory import trajectory_numerics       # a collocated ODE: element after element, all inputs at once
+    traj = trajectory_numerics(model)
+    if traj is not None:
+        try:
+            return traj.states(p, inputs, Y0)
+        except StateSolveError:
+            if Y0 is None:
+                raise
     dense = numerics(model).dense
     if Y0 is not None and dense:
         Y = _solve_states_batched(model, p, inputs, Y0)

@@ -1,0 +1,530 @@
+r"""Trajectories of a collocated ODE model for all experiments at once, and their exact sensitivities.
+
+The collocation equations of :mod:`models.collocation` are block lower-triangular in the elements:
+element k's unknowns V_k = (x_k1, ..., x_kd) solve
+
+.. math::
+
+    R(V_k, x_{k0}, p, U_k, h_k) = \Bigl(\sum_{j=0}^{d} C_{jr} x_{kj} - h_k f(x_{kr}, p, u_{kr})\Bigr)_{r=1..d} = 0,
+    \qquad x_{k0} = x_{k-1,d}, \quad x_{00} = x_0(p, u(0)),
+
+so the state y = (x_00, V_0, ..., V_{N-1}) of one experiment is solved element after element
+(Newton on the n_x d unknowns of one element), and its exact sensitivity y'(p) = -(dE/dy)^{-1} dE/dp
+by forward substitution through the same blocks,
+
+.. math::
+
+    V_k'(p) = -R_V^{-1} (R_{x_0} x_{k0}'(p) + R_p),
+
+with R_V, R_{x_0}, R_p by CasADi's AD.  Every element is done for all experiments together: one
+mapped CasADi evaluation and one batched LAPACK solve of the (n_q, n_x d, n_x d) blocks per Newton
+iteration, instead of one sparse LU of the whole trajectory (n_y = n_x (1 + N d)) per experiment.
+The numbers are those of the whole-trajectory solve to round-off (the same equations, solved
+exactly).  Outputs and G = dh/dy y' + dh/dp come from one mapped evaluation.  ODEs only (no
+algebraic states): DAE models keep the generic solves of :mod:`models.state`.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .errors import StateSolveError
+from .state import batched_function
+
+__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states"]
+
+#: the broker of this thread's member fit in :func:`run_merged` (None outside one)
+_LOCAL = threading.local()
+
+#: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
+#: :meth:`models.collocation.CollocatedModel._element_functions` allows the same)
+_MAX_ITER = 60
+#: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
+#: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
+MARCH_IN_CASADI_MAX = 8
+
+
+def _params(p, n: int) -> np.ndarray:
+    """p shared by all n experiments, shape (n_p,), or one row per experiment, shape (n, n_p)."""
+    p = np.asarray(p, float)
+    return p.ravel() if p.ndim < 2 else p.reshape(n, -1)
+
+
+def _per_element(p: np.ndarray, N: int) -> np.ndarray:
+    """p at the n N (experiment, element) points, experiment-major."""
+    return p if p.ndim == 1 else np.repeat(p, N, axis=0)
+
+
+def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
+    """f at n points: ``args`` are (n, d) arrays (one row a point) or (d,) arrays shared by all
+    points; returns one dense (n, r, c) array per output."""
+    fm = cache.get((f.name(), n))
+    if fm is None:
+        fm = cache[(f.name(), n)] = batched_function(f, n)
+    return fm(*args)
+
+
+class TrajectoryNumerics:
+    """The element functions of one collocated ODE model (see the module docstring).
+
+    Attributes
+    ----------
+    model : models.collocation.CollocatedModel
+    """
+
+    def __init__(self, cm):
+        dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
+        self.model, self.d, self.N = cm, d, N
+        n_x, n_p, n_u = dyn.n_x, dyn.n_p, dyn.n_u
+        b = np.asarray(cm.mesh.boundaries)
+        V, xs = ca.SX.sym("V", n_x * d), ca.SX.sym("xs", n_x)
+        p, U, hk = ca.SX.sym("p", n_p), ca.SX.sym("U", n_u * d), ca.SX.sym("h")
+        X = [xs] + [V[(r - 1) * n_x:r * n_x] for r in range(1, d + 1)]
+        R = ca.vertcat(*[sum(cm.C[j, r] * X[j] for j in range(d + 1))
+                         - hk * dyn.rhs_fun(X[r], ca.SX(0, 1), p, U[(r - 1) * n_u:r * n_u]) for r in range(1, d + 1)])
+        RV = ca.jacobian(R, V)
+        self.newton = ca.Function("traj_newton", [V, xs, p, U, hk], [R, RV])
+        self.blocks = ca.Function("traj_blocks", [V, xs, p, U, hk], [RV, ca.jacobian(R, xs), ca.jacobian(R, p)])
+        self.residual_blocks = ca.Function("traj_residual_blocks", [V, xs, p, U, hk], [R, RV, ca.jacobian(R, xs)])
+        q = ca.SX.sym("q", dyn.n_q_dim)
+        x0 = dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.5 * b[1]))
+        self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
+        Uq = ca.vertcat(*[dyn.u_at(q, b[k] + cm.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+                          for k in range(N) for r in range(1, d + 1)])
+        self.Umap = np.asarray(ca.evalf(ca.jacobian(Uq, q))) if dyn.n_q_dim else np.zeros((Uq.size1(), 0))
+        y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
+        h = cm.h_fun(y, p, q)
+        G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
+        self.output_terms = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
+        self.h_only = ca.Function("traj_h", [y, p, q], [h])
+        # second order: Z^T grad^2 L Z of L = lam^T h + mu^T E, term by term (see hessians)
+        lam = ca.SX.sym("lam", cm.n_S)
+        Zh = ca.vertcat(ca.reshape(yp, cm.n_y, n_p), ca.DM.eye(n_p))
+        Hh = ca.hessian(ca.dot(lam, h), ca.vertcat(y, p))[0]
+        self.h_terms = ca.Function("traj_h_terms", [y, yp, p, q, lam],
+                                   [ca.mtimes(ca.jacobian(h, y).T, lam), ca.mtimes(Zh.T, ca.mtimes(Hh, Zh))])
+        mu = ca.SX.sym("mu", n_x * d)
+        ze = ca.SX.sym("Z", (n_x * d + n_x) * n_p)
+        Ze = ca.vertcat(ca.reshape(ze, n_x * d + n_x, n_p), ca.DM.eye(n_p))
+        He = ca.hessian(ca.dot(mu, R), ca.vertcat(V, xs, p))[0]
+        self.element_hessian = ca.Function("traj_elem_hess", [V, xs, p, U, hk, mu, ze],
+                                           [ca.mtimes(Ze.T, ca.mtimes(He, Ze))])
+        mu0 = ca.SX.sym("mu0", n_x)
+        self.x0_hessian = ca.Function("traj_x0_hess", [p, q, mu0], [ca.hessian(ca.dot(mu0, x0), p)[0]])
+        self.steps = np.diff(b)
+        self._maps = {}
+
+    # ------------------------------------------------------------------ states
+    def _controls(self, inputs: np.ndarray) -> np.ndarray:
+        """U of every experiment and element, shape (n_q, N, n_u d)."""
+        return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
+
+    def states(self, p, inputs, guess=None) -> np.ndarray:
+        """The collocation solution y_j (n_q, n_y) of every experiment at p (shared, or a row per
+        experiment): with a ``guess`` of the states (e.g. predicted from a nearby p), Newton on all
+        trajectories at once (:meth:`_newton`); else, or when that fails, element after element.
+
+        Raises StateSolveError naming the experiment and the element where Newton fails (the
+        trajectory blows up or is too stiff for the element)."""
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "states", p, inputs, guess)
+        return self._states(_params(p, inputs.shape[0]), inputs, guess)
+
+    def _states(self, p, inputs, guess=None) -> np.ndarray:
+        if guess is not None:
+            Y = self._newton(p, inputs, np.asarray(guess, float))
+            if Y is not None:
+                return Y
+        n, d, N = inputs.shape[0], self.d, self.N
+        x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
+        n_x = x0.shape[1]
+        U = self._controls(inputs)
+        if n <= MARCH_IN_CASADI_MAX:
+            return self._march(p, inputs, x0, U)
+        Y = np.empty((n, n_x * (1 + N * d)))
+        Y[:, :n_x] = x0
+        xs = x0
+        for k in range(N):
+            V = self._element(xs, p, U[:, k], self.steps[k], inputs, k)
+            Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
+            xs = V[:, -n_x:]
+        return Y
+
+    def _stacked_solve(self, RV, Rx, B):
+        """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)) by forward substitution through the
+        block-bidiagonal dE/dy: one batched LAPACK solve gives R_V^{-1} R_x0 and R_V^{-1} B of every
+        (experiment, element), then v_k = R_V^{-1} B_k - R_V^{-1} R_x0 v_{k-1, end} element after element
+        (small batched products)."""
+        n_x = Rx.shape[-1]
+        nd, N = n_x * self.d, self.N
+        n_y = n_x * (1 + N * self.d)
+        n, k = B.shape[0] // n_y, B.shape[1]
+        B = B.reshape(n, n_y, k)
+        rhs = np.concatenate([Rx.reshape(n * N, nd, n_x), B[:, n_x:].reshape(n * N, nd, k)], axis=2)
+        X = np.linalg.solve(RV.reshape(n * N, nd, nd), rhs)
+        M, C = X[..., :n_x].reshape(n, N, nd, n_x), X[..., n_x:].reshape(n, N, nd, k)
+        out = np.empty_like(B)
+        out[:, :n_x] = prev = B[:, :n_x]                    # the rows of x(0) - x0: identity
+        for e in range(N):
+            v = C[:, e] - M[:, e] @ prev
+            out[:, n_x + e * nd:n_x + (e + 1) * nd] = v
+            prev = v[:, -n_x:]
+        return out.reshape(n * n_y, k)
+
+    def _newton(self, p, inputs, Y):
+        """Newton on the whole collocation system of every experiment from the guess Y (one mapped
+        evaluation and one :meth:`_stacked_solve` per iteration); the states, or None when it does not converge
+        (at most 8 iterations, the residual not decreasing, or non-finite values).  Converged when
+        the step satisfies |dy| <= 1e-12 (1 + |y|) at every experiment (the test of
+        :func:`models.state.solve_state`)."""
+        n, d, N = inputs.shape[0], self.d, self.N
+        x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
+        n_x = x0.shape[1]
+        U = self._controls(inputs).reshape(n * N, -1)
+        pe, steps = _per_element(p, N), np.tile(self.steps, n)[:, None]
+        Y = np.array(Y, float)
+        if Y.shape != (n, n_x * (1 + N * d)):
+            return None
+        Y[:, :n_x] = x0                                   # x(0) - x0(p, u(0)) = 0 exactly
+        prev = np.inf
+        for _ in range(8):
+            W = Y[:, n_x:].reshape(n, N, n_x * d)
+            XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+            R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
+                                     [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
+            norm = float(np.max(np.abs(R)))
+            if not (np.isfinite(norm) and np.all(np.isfinite(RV)) and norm <= prev):
+                return None
+            prev = norm
+            E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
+            dY = self._stacked_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+            if not np.all(np.isfinite(dY)):
+                return None
+            Y -= dY
+            if np.all(np.max(np.abs(dY), axis=1) <= 1e-12 * (1 + np.max(np.abs(Y), axis=1))):
+                return Y
+        return None
+
+    def _march(self, p, inputs, x0, U):
+        """The same element-by-element Newton solves in one CasADi call for all experiments: the
+        model's ``mapaccum`` of CasADi's rootfinder over the elements
+        (:meth:`models.collocation.CollocatedModel._march_functions`), mapped over the experiments;
+        then every element's residual checked as in :meth:`_element`."""
+        n, d, N, n_x = inputs.shape[0], self.d, self.N, x0.shape[1]
+        fm = self._maps.get(("march", n))
+        if fm is None:
+            march = self.model._march_functions()[0]
+            fm = self._maps[("march", n)] = march.map(n)
+        P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
+                           axis=2)                                   # (n, N, n_par): column k of experiment j
+        _, V = fm(ca.DM(np.ascontiguousarray(x0.T)), ca.DM(np.ascontiguousarray(P.reshape(n * N, -1).T)))
+        V = np.asarray(V).T.reshape(n, N, n_x * d)
+        XS = np.concatenate([x0[:, None, :], V[:, :-1, -n_x:]], axis=1)
+        m = n * N
+        R = _mapped_call(self._maps, self.newton, m, [V.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N),
+                                                      U.reshape(m, -1),
+                                                      np.tile(self.steps, n)[:, None]])[0][:, :, 0]
+        Vf = V.reshape(m, -1)
+        bad = ~(np.all(np.isfinite(Vf), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(Vf), axis=1))))
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            self._fail(inputs, i // N, i % N, p)
+        return np.concatenate([x0, V.reshape(n, -1)], axis=1)
+
+    def _element(self, xs, p, U, hk, inputs, k):
+        """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
+        stops when max |R| <= 1e-13 or its step is below 1e-12 (the tests of CasADi's rootfinder in
+        :meth:`models.collocation.CollocatedModel._element_functions`), and is then left as it is."""
+        n = xs.shape[0]
+        V = np.tile(xs, (1, self.d))
+        active = np.ones(n, bool)
+        h = np.array([hk])
+        for _ in range(_MAX_ITER + 1):
+            R, RV = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])
+            R = R[:, :, 0]
+            fresh = True
+            rmax = np.max(np.abs(R), axis=1)                # NaN or inf when R is not finite
+            if not np.all(np.isfinite(rmax[active])):
+                self._fail(inputs, int(np.flatnonzero(active & ~np.isfinite(rmax))[0]), k, p)
+            active &= rmax > 1e-13
+            if not np.any(active):
+                break
+            try:
+                step = np.linalg.solve(RV[active], R[active][:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                self._fail(inputs, int(np.flatnonzero(active)[0]), k, p)
+            V[active] -= step
+            fresh = False
+            tiny = np.zeros(n, bool)
+            tiny[active] = np.max(np.abs(step), axis=1) <= 1e-12
+            active &= ~tiny
+            if not np.any(active):
+                break
+        if not fresh:
+            R = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])[0][:, :, 0]
+        bad = ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(V), axis=1))))
+        if np.any(bad):
+            self._fail(inputs, int(np.flatnonzero(bad)[0]), k, p)
+        return V
+
+    def _fail(self, inputs, j, k, p):
+        b = np.asarray(self.model.mesh.boundaries)
+        p = p if np.ndim(p) == 1 else p[j]
+        raise StateSolveError(
+            f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
+            f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j} "
+            "(the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
+
+    # ------------------------------------------------------------------ sensitivities
+    def state_derivatives(self, p, inputs, Y) -> np.ndarray:
+        """y'(p) = -(dE/dy)^{-1} dE/dp at the states Y of every experiment, shape (n_q, n_y, n_p)."""
+        return self.sweep(p, inputs, Y)[0]
+
+    def sweep(self, p, inputs, Y):
+        """(y'(p) (n_q, n_y, n_p), R_V (n_q, N, n_x d, n_x d), R_x0 (n_q, N, n_x d, n_x)) at the states Y."""
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "sweep", p, inputs, np.asarray(Y, float))
+        return self._sweep(_params(p, inputs.shape[0]), inputs, np.asarray(Y, float))
+
+    def _sweep(self, p, inputs, Y):
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, p.shape[-1]
+        _, x0p = _mapped_call(self._maps, self.init, n, [p, inputs])
+        n_x = x0p.shape[1]
+        W = Y[:, n_x:].reshape(n, N, n_x * d)
+        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)      # element starts
+        U = self._controls(inputs)
+        m = n * N
+        RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
+                                  [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
+                                   np.tile(self.steps, n)[:, None]])
+        RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
+        B = np.concatenate([x0p, -Rp.reshape(n, N * n_x * d, n_p)], axis=1)      # -dE/dp
+        out = self._stacked_solve(RV, Rx, B.reshape(-1, n_p)).reshape(n, -1, n_p)
+        return out, RV, Rx
+
+    def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
+        """See :meth:`hessian_terms`: their sum over the experiments, shape (m, n_p, n_p)."""
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "hessians", p, inputs, Y, yp, RV, Rx, lam)
+        return self.hessian_terms(_params(p, inputs.shape[0]), inputs, Y, yp, RV, Rx, lam).sum(axis=1)
+
+    def hessian_terms(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
+        r"""sum_j d^2/dp^2 [lam_j^T h(y_j(p), p, q_j)] for weight sets ``lam`` (m, n_q, n_S), shape (m, n_p, n_p):
+        Z^T grad^2 (lam^T h + mu^T E) Z with Z = (y', I) and the adjoint (dE/dy)^T mu = -(dh/dy)^T lam
+        solved backwards through the elements (R_V,k^T mu_k = b_k - R_x0,k+1^T mu_k+1 on element k's
+        end point; mu of x(0) - x_0(p, u(0)) = b_0 - R_x0,0^T mu_0); the Hessian of mu^T E is that of
+        every element's mu_k^T R_k in (V_k, x_k0, p) and of -mu_0^T x_0(p, u(0)) in p."""
+        n, d, N, n_p = inputs.shape[0], self.d, self.N, yp.shape[2]
+        p = _params(p, n)
+        n_x = Rx.shape[3]
+        W = Y[:, n_x:].reshape(n, N, n_x * d)
+        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+        U = self._controls(inputs)
+        m = n * N
+        Vp = yp[:, n_x:].reshape(n, N, n_x * d, n_p)
+        XSp = np.concatenate([yp[:, None, :n_x], Vp[:, :-1, -n_x:]], axis=1)
+        Ze = np.ascontiguousarray(np.concatenate([Vp, XSp], axis=2).transpose(0, 1, 3, 2)).reshape(m, -1)
+        ypv = np.ascontiguousarray(yp.transpose(0, 2, 1)).reshape(n, -1)
+        out = np.zeros((lam.shape[0], n, n_p, n_p))
+        for a in range(lam.shape[0]):
+            hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
+            b = -hyl[:, :, 0]
+            bV = b[:, n_x:].reshape(n, N, n_x * d)
+            mu = np.empty((n, N, n_x * d))
+            nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
+            for k in range(N - 1, -1, -1):
+                rhs = bV[:, k].copy()
+                rhs[:, -n_x:] -= nxt
+                mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
+                nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
+            mu0 = b[:, :n_x] - nxt
+            He = _mapped_call(self._maps, self.element_hessian, m,
+                              [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
+                               np.tile(self.steps, n)[:, None], mu.reshape(m, -1), Ze])[0]
+            H0 = _mapped_call(self._maps, self.x0_hessian, n, [p, inputs, mu0])[0]
+            out[a] = Hh + He.reshape(n, N, n_p, n_p).sum(axis=1) - H0
+        return 0.5 * (out + out.transpose(0, 1, 3, 2))
+
+    def outputs_and_sensitivities(self, p, inputs, Y, Yp):
+        """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""
+        broker = getattr(_LOCAL, "broker", None)
+        if broker is not None:
+            return broker.call(self, "outputs_and_sensitivities", p, inputs, Y, Yp)
+        return self._outputs_and_sensitivities(p, inputs, Y, Yp)
+
+    def _outputs_and_sensitivities(self, p, inputs, Y, Yp):
+        n = inputs.shape[0]
+        p = _params(p, n)
+        ypv = np.ascontiguousarray(Yp.transpose(0, 2, 1)).reshape(n, -1)     # column-major per experiment
+        h, G = _mapped_call(self._maps, self.output_terms, n, [Y, ypv, p, inputs])
+        return h[:, :, 0], G
+
+    def outputs(self, p, inputs, Y=None) -> np.ndarray:
+        """h (n_q, n_S) at the states Y (solved at p when None)."""
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        Y = self.states(p, inputs) if Y is None else Y
+        return _mapped_call(self._maps, self.h_only, inputs.shape[0], [Y, _params(p, inputs.shape[0]), inputs])[0][:, :, 0]
+
+
+def trajectory_numerics(cm) -> TrajectoryNumerics | None:
+    """The :class:`TrajectoryNumerics` of a collocated model (kept in its cache), or None for a model
+    that is not a collocated ODE (DAE models and static models)."""
+    dyn = getattr(cm, "dynamic", None)
+    if dyn is None or dyn.n_z:
+        return None
+    num = cm.cache.get("trajectory", None)
+    if num is None:
+        num = cm.cache.put("trajectory", None, TrajectoryNumerics(cm))
+    return num
+
+
+def _split(a: np.ndarray, sizes) -> list:
+    return np.split(a, np.cumsum(sizes)[:-1], axis=0)
+
+
+class _Broker:
+    """Merges the trajectory evaluations of the threads of :func:`run_merged`: a thread's call waits
+    until every running thread has one pending (or has finished); the calls are then evaluated
+    together, kind by kind, with each experiment at its own thread's p (one set of mapped calls and
+    batched solves for all), and each thread gets its own rows back.  A merged evaluation that fails
+    (a state solve of one thread's p) is redone thread by thread, so that the error reaches its own
+    thread only."""
+
+    def __init__(self, n_running: int):
+        self._cv = threading.Condition()
+        self._running = n_running
+        self._pending = []
+
+    def call(self, traj: "TrajectoryNumerics", kind: str, p, inputs, *rest):
+        slot = {}
+        with self._cv:
+            self._pending.append((traj, kind, p, inputs, rest, slot))
+            self._flush_if_ready()
+            while "out" not in slot and "error" not in slot:
+                self._cv.wait()
+        if "error" in slot:
+            raise slot["error"]
+        return slot["out"]
+
+    def finished(self) -> None:
+        with self._cv:
+            self._running -= 1
+            self._flush_if_ready()
+
+    def _flush_if_ready(self) -> None:
+        if not self._pending or len(self._pending) < self._running:
+            return
+        pending, self._pending = self._pending, []
+        groups = {}
+        for item in pending:
+            groups.setdefault((id(item[0]), item[1], _lam_sets(item)), []).append(item)
+        for items in groups.values():
+            try:
+                outs = _merged(items)
+            except Exception:                    # noqa: BLE001 - redone one by one: each error to its own thread
+                outs = None
+            for i, item in enumerate(items):
+                slot = item[5]
+                if outs is not None:
+                    slot["out"] = outs[i]
+                    continue
+                try:
+                    slot["out"] = _direct(*item[:5])
+                except Exception as exc:         # noqa: BLE001 - re-raised in the calling thread
+                    slot["error"] = exc
+        self._cv.notify_all()
+
+
+def _lam_sets(item) -> int:
+    return int(np.shape(item[4][-1])[0]) if item[1] == "hessians" else 0
+
+
+def _direct(traj, kind, p, inputs, rest):
+    n = inputs.shape[0]
+    if kind == "states":
+        return traj._states(_params(p, n), inputs, rest[0])
+    if kind == "sweep":
+        return traj._sweep(_params(p, n), inputs, *rest)
+    if kind == "outputs_and_sensitivities":
+        return traj._outputs_and_sensitivities(p, inputs, *rest)
+    return traj.hessian_terms(_params(p, n), inputs, *rest).sum(axis=1)
+
+
+def _merged(items) -> list:
+    """The calls of one kind evaluated together (see :class:`_Broker`)."""
+    traj, kind = items[0][0], items[0][1]
+    sizes = [it[3].shape[0] for it in items]
+    n_p = traj.model.n_p
+    P = np.concatenate([np.broadcast_to(_params(it[2], n), (n, n_p)) for it, n in zip(items, sizes)])
+    Q = np.concatenate([it[3] for it in items])
+    if kind == "states":
+        guesses = [it[4][0] for it in items]
+        guess = None if any(g is None for g in guesses) else np.concatenate(guesses)
+        return _split(traj._states(P, Q, guess), sizes)
+    if kind == "sweep":
+        outs = traj._sweep(P, Q, np.concatenate([it[4][0] for it in items]))
+        return list(zip(*(_split(o, sizes) for o in outs)))
+    if kind == "outputs_and_sensitivities":
+        outs = traj._outputs_and_sensitivities(P, Q, *(np.concatenate([it[4][i] for it in items]) for i in range(2)))
+        return list(zip(*(_split(o, sizes) for o in outs)))
+    Y, yp, RV, Rx = (np.concatenate([it[4][i] for it in items]) for i in range(4))
+    lam = np.concatenate([it[4][4] for it in items], axis=1)
+    terms = traj.hessian_terms(P, Q, Y, yp, RV, Rx, lam)          # (m, n, n_p, n_p)
+    return [t.sum(axis=1) for t in np.split(terms, np.cumsum(sizes)[:-1], axis=1)]
+
+
+def run_merged(tasks: Sequence[Callable[[], object]]) -> list:
+    """Run the tasks (e.g. one fit of a collocated model per data set) each in its own thread, with
+    their evaluations of :class:`TrajectoryNumerics` merged (see :class:`_Broker`): the same
+    computations as running them one after the other, with one set of mapped CasADi calls and
+    batched solves per step for all of them.  Returns each task's result, or the exception it raised."""
+    broker = _Broker(len(tasks))
+    results = [None] * len(tasks)
+
+    def run(i):
+        _LOCAL.broker = broker
+        try:
+            results[i] = tasks[i]()
+        except Exception as exc:                 # noqa: BLE001 - handed back to the caller as the task's result
+            results[i] = exc
+        finally:
+            _LOCAL.broker = None
+            broker.finished()
+
+    threads = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(tasks))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return results
+
+
+def interpolate_states(coarse, fine, Y) -> np.ndarray:
+    """The trajectories Y (n_q, n_y) of the collocated model ``coarse`` at the collocation points of
+    ``fine`` (same dynamic model and horizon, e.g. every element halved), by coarse's collocation
+    polynomials (Lagrange on each element's d + 1 points): a start for :meth:`TrajectoryNumerics.states`
+    on the fine mesh within the discretisation error."""
+    b = np.asarray(coarse.mesh.boundaries)
+    d, N = coarse.mesh.degree, coarse.mesh.n_elements
+    tf = fine.point_times()
+    k = np.clip(np.searchsorted(b, tf, side="left") - 1, 0, N - 1)
+    s = (tf - b[k]) / (b[k + 1] - b[k])
+    tau = coarse.tau
+    basis = np.ones((tf.size, d + 1))
+    for j in range(d + 1):
+        for r in range(d + 1):
+            if r != j:
+                basis[:, j] *= (s - tau[r]) / (tau[j] - tau[r])
+    L = np.zeros((tf.size, 1 + N * d))
+    for j in range(d + 1):
+        np.add.at(L, (np.arange(tf.size), k * d + j), basis[:, j])
+    n, n_w = Y.shape[0], coarse.dynamic.n_x + coarse.dynamic.n_z
+    return np.einsum("fc,ncx->nfx", L, np.asarray(Y, float).reshape(n, -1, n_w)).reshape(n, -1)

@@ -1,0 +1,137 @@
+"""models.trajectory: trajectories and sensitivities of collocated ODEs for all experiments at once,
+against the generic whole-trajectory solves (sparse LU of dE/dy), and identify's reduced-space path."""
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import models.trajectory as trajectory
+from identification import DynamicMeasurements, IdentifySettings, identify
+from identification.dynamic_fit import simulate_campaign
+from models import Model
+from models.collocation import collocate
+from models.state import numerics, solve_state
+from models.trajectory import trajectory_numerics
+from mudoe.example_reactor import P_TRUE, TIMES, build
+
+Q = np.array([[1.0, 330.0], [1.0, 340.0], [1.5, 345.0], [2.0, 350.0], [2.0, 360.0], [2.0, 370.0],
+              [1.2, 335.0], [1.8, 355.0], [0.8, 365.0], [1.1, 350.0]])
+P = np.array([1.5, 50.0, 1.0, 70.0])
+
+
+def generic(cm, p, inputs):
+    """States by damped Newton on the whole trajectory and y' = -(dE/dy)^{-1} dE/dp, h, G by sparse LU."""
+    num = numerics(cm)
+    Y, Yp, H, G = [], [], [], []
+    for q in inputs:
+        y = solve_state(cm, p, q)
+        h, Ey, Ep, hy, hp = num.point("sens")(y, p, q)
+        yp = -num.factor(Ey)(Ep.toarray())
+        Y.append(y), Yp.append(yp), H.append(h), G.append(hy @ yp + hp.toarray())
+    return np.array(Y), np.array(Yp), np.array(H), np.array(G)
+
+
+@pytest.mark.parametrize("in_casadi", [True, False])
+def test_states_and_sensitivities_equal_the_whole_trajectory_solve(monkeypatch, in_casadi):
+    cm = collocate(build(), TIMES, max_step=0.25)
+    traj = trajectory_numerics(cm)
+    monkeypatch.setattr(trajectory, "MARCH_IN_CASADI_MAX", 100 if in_casadi else 0)
+    Y = traj.states(P, Q)
+    Yp = traj.state_derivatives(P, Q, Y)
+    h, G = traj.outputs_and_sensitivities(P, Q, Y, Yp)
+    Yg, Ypg, hg, Gg = generic(cm, P, Q)
+    assert np.abs(Y - Yg).max() <= 1e-12 * np.abs(Yg).max()
+    assert np.abs(Yp - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+    assert np.abs(h - hg).max() <= 1e-12 and np.abs(G - Gg).max() <= 1e-10 * np.abs(Gg).max()
+    # Newton on all trajectories at once from a perturbed guess converges to the same states
+    Yn = traj._newton(P, Q, Y * (1 + 1e-3))
+    assert Yn is not None and np.abs(Yn - Yg).max() <= 1e-12 * np.abs(Yg).max()
+    assert traj._newton(P, Q, np.full_like(Y, np.nan)) is None          # a failed Newton is left to the march
+    # the per-experiment integration of the collocated model (its state guess) is the same trajectory
+    assert np.abs(Y[3] - cm._integrate(P, Q[3])).max() <= 1e-12
+
+
+def test_blow_up_names_the_experiment_and_element(monkeypatch):
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, horizon=2.0)
+    cm = collocate(m, [0.5, 1.0, 2.0])
+    for limit in (100, 0):
+        monkeypatch.setattr(trajectory, "MARCH_IN_CASADI_MAX", limit)
+        with pytest.raises(Exception, match=r"inputs \[1.0\]: no collocation solution on the element .* of experiment 1"):
+            trajectory_numerics(cm).states([1.0], [[0.1], [1.0]])
+
+
+def test_dae_models_keep_the_generic_solves():
+    m = Model.ode(["k"], ["x"], ["x0"], ["w"], rhs=lambda x, z, p, u: -p[0] * z[0],
+                  alg=lambda x, z, p, u: z[0] - x[0] ** 2, algebraic=["w"], x0=lambda p, u: u[0],
+                  h=lambda x, z, p, u: z, horizon=1.0)
+    assert trajectory_numerics(collocate(m, [0.5, 1.0])) is None
+    assert trajectory_numerics(build()) is None          # not collocated
+
+
+def _campaign(seed):
+    return simulate_campaign(build(), P_TRUE, Q[:6], TIMES, [0.01, 0.008], n_series=1, seed=seed)
+
+
+def test_identify_by_reduced_newton_equals_the_ipopt_fit():
+    data = _campaign(0)
+    est = identify(build(), data, P)
+    assert est.extra["solver"] == "reduced Newton"
+    ipopt = identify(build(), data, P, settings=IdentifySettings(reduced_start_inputs=None))
+    assert ipopt.extra["solver"] == "ipopt"
+    assert np.all(np.abs(est.p - ipopt.p) <= 1e-8 * ipopt.stderr)
+    assert np.allclose(est.cov, ipopt.cov, rtol=1e-7)
+
+
+def test_a_bound_at_the_optimum_falls_back_to_ipopt():
+    # E2 held below its estimate: the reduced optimum lies outside the bounds, Ipopt solves the bounded problem
+    m = build()
+    bounded = [dataclasses.replace(p, upper=75.0) if p.name == "E2" else p for p in m.params]
+    m2 = Model.ode(bounded, states=list(m.states), inputs=list(m.inputs), sensors=list(m.sensors),
+                   rhs=lambda x, p, u: m.rhs_fun(x, ca.SX(0, 1), p, u), x0=lambda p, u: m.x0_fun(p, u),
+                   h=lambda x, p, u: m.h_fun(x, ca.SX(0, 1), p, u), horizon=m.horizon)
+    est = identify(m2, _campaign(1), [1.5, 50.0, 1.0, 70.0])
+    assert est.extra["solver"] != "reduced Newton" and abs(est.p[3] - 75.0) <= 1e-6
+
+
+def test_second_derivatives_equal_the_generic_adjoint():
+    from models.sensitivity import Sensitivities, sensitivities
+    cm = collocate(build(), TIMES, max_step=0.25)
+    Y = trajectory_numerics(cm).states(P, Q)
+    fast = sensitivities(cm, P, Q, Y)
+    lam = np.random.default_rng(0).standard_normal((2, Q.shape[0], cm.n_S))
+    H = fast.hessians(lam)
+    fast._filled()                                       # the generic per-experiment adjoints (sparse LU)
+    Hg = Sensitivities.hessians(fast, lam)
+    assert np.abs(H - Hg).max() <= 1e-10 * np.abs(Hg).max()
+    assert np.allclose(fast.adjoint(lam[0]).shape, (Q.shape[0], cm.n_y))
+
+
+def test_batch_members_of_a_collocated_model_equal_identify():
+    from identification import Measurements
+    from identification.batch import fit_batch
+    est = identify(build(), _campaign(2), P)
+    base = est.data
+    rng = np.random.default_rng(3)
+    sets = [Measurements(base.inputs, base.z + 0.01 * rng.standard_normal(base.z.shape), base.sigma,
+                         sensors=base.sensors) for _ in range(4)]
+    fit = fit_batch(est.model, sets, est.p)
+    assert est.model.n_y > 60 and fit.ok.all() and not fit.fallbacks
+    for r in range(4):
+        single = identify(est.model, sets[r], est.p)
+        assert np.all(np.abs(fit.p[r] - single.p) <= 1e-8 * single.stderr)
+        assert np.allclose(fit.cov[r], single.cov, rtol=1e-8)
+
+
+def test_interpolated_trajectories_start_newton_on_the_halved_mesh():
+    from models.trajectory import interpolate_states
+    coarse = collocate(build(), TIMES, max_step=0.25)
+    fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
+    Yc = trajectory_numerics(coarse).states(P, Q)
+    guess = interpolate_states(coarse, fine, Yc)
+    traj = trajectory_numerics(fine)
+    exact = traj._states(P, Q)                                         # marched, no guess
+    # the guess is within the discretisation error, and Newton from it reaches the marched states
+    assert np.abs(guess - exact).max() < 1e-2 and np.abs(guess[:, :3] - exact[:, :3]).max() == 0
+    assert np.abs(traj._newton(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
