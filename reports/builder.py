@@ -264,7 +264,7 @@ def _oed_page(results):
 
 def _estimate_pages(results):
     from .tables import PARAMS_PER_TABLE, draw_table, estimate_rows
-    n_p = next(iter(results.study.models.values())).n_p
+    n_p = len({n for m in results.study.models.values() for n in m.param_names})   # variants may differ
     pparts = _chunks(n_p, PARAMS_PER_TABLE)
     figs = []
     for pk, pp in enumerate(pparts):

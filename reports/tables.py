@@ -166,19 +166,24 @@ def estimate_rows(results, params: slice | None = None) -> tuple[list, list]:
     header (omitted when undeclared), and the largest correlation of the fit with its pair.
     ``params`` selects the parameter columns (all by default).
     """
-    first = next(iter(results.study.models.values()))
-    names, units = first.param_names, param_units(results.study)
+    models = results.study.models
+    names, units = _union_parameters(models, param_units(results.study))
     sel = list(range(len(names)))[params or slice(None)]
     head = ["model", "data", "sensors"] + [f"{names[i]}{unit_suffix(units[i])}" for i in sel] + ["largest |corr|"]
 
     def row(model, data, sensors, p, C):
+        own = list(models[model].param_names) if model in models else list(names)
         ok = np.all(np.isfinite(C)) and np.all(np.isfinite(p))
         se = np.sqrt(np.clip(np.diag(C), 0, None)) if ok else np.full(len(p), np.nan)
         cells = []
         for i in sel:
-            v, s = fmt_value(p[i], se[i])
+            if names[i] not in own:              # a variant without this parameter
+                cells.append("-")
+                continue
+            k = own.index(names[i])
+            v, s = fmt_value(p[k], se[k])
             cells.append(v if s == "n/a" else f"{v} +- {s}")
-        return [model, data, sensors] + cells + [_largest_corr(names, np.asarray(C, float))]
+        return [model, data, sensors] + cells + [_largest_corr(tuple(own), np.asarray(C, float))]
 
     rows = []
     for v, e in results.estimates.items():
@@ -191,6 +196,17 @@ def estimate_rows(results, params: slice | None = None) -> tuple[list, list]:
             rows.append(row(t.model, f"{t.split}: calibration", sens, t.p_cal, t.C_cal))
             rows.append(row(t.model, f"{t.split}: validation", sens, t.p_val, t.C_val))
     return head, rows
+
+
+def _union_parameters(models: dict, first_units) -> tuple:
+    """(names, units) of every variant's parameters, the first variant's first (variants may differ)."""
+    names, units = [], []
+    for k, m in enumerate(models.values()):
+        for j, p in enumerate(m.params):
+            if p.name not in names:
+                names.append(p.name)
+                units.append(first_units[j] if k == 0 else p.unit)
+    return tuple(names), tuple(units)
 
 
 def smallest_alpha(det, model: str, statistic: str | None = None):

@@ -83,11 +83,18 @@ def test_oscillator_study_end_to_end(tmp_path, capsys):
         (r"^times = \[.*?\]\s*# s", "times = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]"),
         (r"^seed = 5", "seed = 7"),       # a campaign whose normality gate passes (it fails 5 % of them)
         (r"\[\[splits\.custom\]\]\nname = \"odd vs even steps\".*?val_inputs = \[1, 3\]\n", ""),
+        (r"\[\[dynamic\.experiments\]\]\nF = 8\.0\n", ""),                              # three experiments
+        (r"cal_inputs = \[0, 1\]\nval_inputs = \[2, 3\]", "cal_inputs = [0, 1]\nval_inputs = [2]"),
+        (r"^early_late = true", "early_late = false"),
         (r"\[report\]\n", "[report]\ndpi = 30\nuncertainty = \"none\"\n")], data_dir=tmp_path / "data")
     out = tmp_path / "out"
     assert _run(capsys, "simulate", str(cfg), "--out", str(tmp_path / "data"))[0] == 0
     rc, text, _ = _run(capsys, "report", str(cfg), "--out", str(out), "--json")
-    assert rc == 0 and set(json.loads(text)["verdicts"]) == {"cubic"}
+    verdicts = json.loads(text)["verdicts"]
+    assert rc == 0 and verdicts["linear"] == "rejected"          # a linear spring for a hardening one
+    assert verdicts["cubic"] in ("not rejected", "rejected", "undecided")
+    est = json.loads((out / "results.json").read_text())["results"]["estimates"]
+    assert est["cubic"]["params"] == ["k", "c", "k3"] and est["linear"]["params"] == ["k", "c"]
     oed = json.loads((out / "results.json").read_text())["results"]["oed"]["chosen"]
     assert len(oed["sensors"]) == 3 and all(float(t) in (0.1, 0.2, 0.3, 0.4, 0.5, 0.6) for t in oed["sensors"])
 
