@@ -180,8 +180,8 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
         raw = path.read_bytes()
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read ({exc})") from None
-    camp = DynamicCampaign("long-format CSV (series, experiment, time, sensor, value, unit)", (str(path),), hashlib.sha256(raw).hexdigest(),
-                           data.n_M, data.n_q)
+    camp = DynamicCampaign("long-format CSV (series, experiment, time, sensor, value, unit)", (str(path),),
+                           hashlib.sha256(raw).hexdigest(), data.n_M, data.n_q)
     if d.series is not None:
         bad = [i for i in d.series if i >= data.n_M]
         if bad:
