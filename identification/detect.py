@@ -1041,6 +1041,17 @@ def _split_tests_shown(progress: Progress | None, model: Model, data: Measuremen
         return run_split_tests(model, data, splits, *args, model_name=model_name, bar=bar, **kwargs)
 
 
+def _dynamic(model) -> bool:
+    ms = model.values() if isinstance(model, Mapping) else (model,)
+    return any(getattr(m, "is_dynamic", False) for m in ms)
+
+
+def model_decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
+    """(primary decision per model, every model x statistic x correction decision) of split tests
+    (lines 09-17; :mod:`identification.dynamic_detect` after marking undecided splits)."""
+    return _decisions(tests, names, settings)
+
+
 def _decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
     """(primary decision per model, every model x statistic x correction decision) (lines 09-17)."""
     all_dec, primary = [], []
@@ -1149,6 +1160,12 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         unless another split rejects it.
     """
     settings = _detect_settings(settings, tol=tol, statistic=statistic, correction=correction, normality=normality)
+    if _dynamic(model):           # ODE/DAE models: their collocation, splits by experiment and time window
+        from .dynamic_detect import detect_dynamic
+        if weights is not None:
+            raise DataError("weights: a dynamic model takes design= (instrument or sensor@time names)")
+        return detect_dynamic(model, measurements, splits, p0, settings=settings, design=design,
+                              design_how=design_how, progress=progress)
     splits = _checked_splits(splits)
     if isinstance(model, DynamicModel):
         model, measurements = _collocated(model, measurements, p0, weights, design)

@@ -290,6 +290,11 @@ def _oed_inputs(study, results, args, progress, out) -> int:
 def _oed(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, oed_dict
     from .study import run_oed
+    if getattr(study, "is_dynamic", False):  # a sampling-time design (mudoe.dynamic_runs)
+        run_oed(study, results, progress)
+        _write(out, {"oed.json": dumps(results.plan.to_dict()), "oed.txt": results.plan.summary() + "\n"})
+        _emit(args, results.plan.summary(), results.plan.to_dict())
+        return EXIT_OK
     if study.cfg.oed.mode != "sensors":
         return _oed_inputs(study, results, args, progress, out)
     run_oed(study, results, progress)
@@ -308,8 +313,10 @@ def _detect(study, results, args, progress, out) -> int:
     run_detect(study, results, progress)
     run_diagnosis(study, results, progress)
     labels = normality_labels(study)
-    obj = dict(detection_dict(results.detection, **labels), diagnosis=diagnosis_dict(results.diagnosis))
-    text = results.detection.summary(**labels) + "\n\n" + findings_text(results.diagnosis, results.detection.models)
+    diag = results.diagnosis               # None for a dynamic study (no diagnostic split family)
+    obj = dict(detection_dict(results.detection, **labels), diagnosis=None if diag is None else diagnosis_dict(diag))
+    text = results.detection.summary(**labels) + ("" if diag is None else "\n\n" + findings_text(
+        diag, results.detection.models))
     _write(out, {"detect.json": dumps(obj), "detect.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
@@ -362,6 +369,9 @@ def _report(study, results, args, progress, out) -> int:
         results.detection_error = f"{type(exc).__name__}: {exc}"
         results.notes.append(f"detection stopped: {exc}")
     run_diagnosis(study, results, progress)
+    if getattr(study, "is_dynamic", False):  # what the dynamic pages draw (mudoe.dynamic_runs)
+        from .dynamic_runs import run_trajectories
+        run_trajectories(study, results, progress)
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0
     from .outdir import claim, record
@@ -372,10 +382,11 @@ def _report(study, results, args, progress, out) -> int:
     text = "\n".join(str(p) for p in paths)
     obj = {"files": [str(p) for p in paths], "verdicts": {}}
     if results.detection is not None:
+        diag = results.diagnosis
         text = ("\n".join(f"{m}: {d}" for m, d in results.detection.verdicts.items()) + "\n\n"
-                + findings_text(results.diagnosis, results.detection.models) + "\n\n" + text)
+                + ("" if diag is None else findings_text(diag, results.detection.models) + "\n\n") + text)
         obj.update(verdicts=dict(results.detection.verdicts),
-                   misses={m: results.diagnosis.misses(m) for m in results.detection.models})
+                   misses={} if diag is None else {m: diag.misses(m) for m in results.detection.models})
     _emit(args, text, obj)
     return EXIT_OK
 
@@ -417,6 +428,17 @@ def _simulate_study(cfg, args, progress, out) -> int:
     import json
     from .data_io import atomic_write_text, write_paper_layout, write_tidy_layout
     from .study import simulate_study
+    if cfg.dynamic is not None:              # a dynamic study: the long-format CSV (mudoe.dynamic_study)
+        from .dynamic_study import write_simulation
+        from .outdir import claim, record as record_files
+        with progress.step(f"simulate {cfg.model.name}", announce=False):
+            sim_text = write_simulation(cfg, args.seed, None)
+        _interrupt_check()
+        claim(out)
+        paths, record = write_simulation(cfg, args.seed, out, sim_text)
+        record_files(out, paths)
+        _emit(args, "\n".join(str(p) for p in paths), record)
+        return EXIT_OK
     with progress.step(f"simulate {cfg.model.name}", announce=False):
         sim = simulate_study(cfg, args.seed)
     c, u, d = sim.campaign, sim.units, cfg.data

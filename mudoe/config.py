@@ -333,6 +333,10 @@ class SplitsConfig:
     scenarios: tuple[str, ...] = ("paper",)
     random: RandomSplitConfig = field(default_factory=RandomSplitConfig)
     custom: tuple = ()
+    #: dynamic studies: one split per time e, the readings at t < e against t >= e
+    time_windows: tuple[float, ...] = ()
+    #: dynamic studies: the readings before the median sampling time against the later ones
+    early_late: bool = False
 
 
 @dataclass(frozen=True)
@@ -512,6 +516,7 @@ class StudyConfig:
     oed: OEDConfig = field(default_factory=OEDConfig)
     validate: ValidateConfig = field(default_factory=ValidateConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
+    dynamic: Any = None              # mudoe.dynamic_config.DynamicConfig of a dynamic study
     path: str = "<string>"
     base_dir: str = "."
     text: str = ""
@@ -827,9 +832,9 @@ def _parse_splits(ctx, t):
     if "custom" in t:
         kw["custom"] = tuple(_parse_custom_split(ctx, c) for c in _tables(ctx, "splits", "custom", t["custom"]))
     cfg = SplitsConfig(**kw)
-    if not cfg.scenarios and not cfg.custom and cfg.random.n == 0:
+    if not cfg.scenarios and not cfg.custom and cfg.random.n == 0 and not cfg.time_windows and not cfg.early_late:
         raise ctx.error("splits", "scenarios", "no split defined: give scenarios, [splits.random] n > 0 or "
-                        "[[splits.custom]]")
+                        "[[splits.custom]] (dynamic studies: time_windows or early_late)")
     return cfg
 
 
@@ -859,8 +864,6 @@ def _parse_oed(ctx, t):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs n_points (how many to choose)")
         if not (o.candidates or o.candidates_range):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
-    if o.planned and not (o.candidates or o.candidates_range):
-        raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     if o.refine and o.mode != "inputs":
         raise ctx.error("oed", "refine", f"the continuous refinement is for mode = \"inputs\" (mode is {o.mode!r})")
     _check_discrimination_keys(ctx, o)
@@ -919,9 +922,20 @@ def _parse_report(ctx, t):
     return ReportConfig(**_read_table(ctx, "report", ReportConfig, t))
 
 
+def _parse_dynamic(ctx, t):
+    from .dynamic_config import parse_dynamic
+    return parse_dynamic(ctx, t)
+
+
+def config_error(cfg: StudyConfig, section: str, key: str, msg: str) -> ConfigError:
+    """A ConfigError naming the config file, the line of ``key`` in ``[section]`` and the key."""
+    return _Ctx(cfg.path, cfg.text).error(section, key, msg)
+
+
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,
              "parameters": _parse_parameters, "splits": _parse_splits, "detect": _parse_detect,
-             "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate, "report": _parse_report}
+             "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate, "report": _parse_report,
+             "dynamic": _parse_dynamic}
 
 
 def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None = None) -> StudyConfig:
@@ -956,6 +970,9 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
+    o = cfg.oed
+    if o.planned and not (o.candidates or o.candidates_range) and cfg.dynamic is None:   # dynamic: its experiments
+        raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     check_config(cfg, ctx.error)
     return cfg
 

@@ -122,6 +122,7 @@ class StudyResults:
     detection_error: str = ""
     diagnosis: object = None
     validation: object = None
+    trajectories: dict = field(default_factory=dict)     # dynamic studies: {variant: Trajectories}
     timing: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 
@@ -138,6 +139,10 @@ def _build_models(cfg: StudyConfig) -> dict:
     factory = _factory(cfg)
     for v in cfg.model.variants:
         m = call_factory(factory, cfg.model.name, v, lambda msg: config_error(cfg, "model", "name", msg))
+        if getattr(m, "is_dynamic", False):           # an ODE/DAE model: mudoe.dynamic_study
+            m.origin = ModelSource(cfg.model.name, v)
+            out[v] = (m, None)
+            continue
         if not isinstance(m, Model):
             raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
                               f"{type(m).__name__}, expected a models.Model")
@@ -290,6 +295,9 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     progress = progress or Progress(False)
     with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
         built = _build_models(cfg)
+    if _dynamic(cfg, built):
+        from .dynamic_study import prepare_dynamic
+        return prepare_dynamic(cfg, {v: m for v, (m, _) in built.items()}, progress)
     sensors = tuple(next(iter(built.values()))[0].sensors)
     check_model(cfg, next(iter(built.values()))[0])
     units = study_units(cfg, next(iter(built.values()))[0])
@@ -324,6 +332,16 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
                  campaign.notes, units, explanations)
 
 
+def start_values(study: Study, variant: str) -> np.ndarray:
+    """The start values of a variant's fits (a dynamic study's variants may differ in parameters)."""
+    return getattr(study, "p0s", {}).get(variant, study.p0)
+
+
+def _dynamic(cfg: StudyConfig, built: dict) -> bool:
+    from .dynamic_study import is_dynamic_study
+    return is_dynamic_study(cfg, built)
+
+
 # ---------------------------------------------------------------------------- runs
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Identify every variant on the study's data (all sensors); failures are recorded, not raised (an
@@ -333,7 +351,7 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
-                est = identify(m, study.data[v], study.p0)
+                est = identify(m, study.data[v], start_values(study, v))
             except IdentificationError as exc:
                 results.estimate_errors[v] = f"{type(exc).__name__}: {exc}"
                 continue
@@ -360,10 +378,15 @@ def _require_fit(study: Study, results: StudyResults, v: str, progress: Progress
 def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Lines 02-03 of Algorithm 1: information of every sensor at the estimate, design table, chosen design."""
     try:
-        from oed.design import design_table, select_sensors_from_information
+        from oed.best_designs import design_rows
+        from oed.design import select_sensors_from_information
     except ImportError as exc:
         raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
     progress = progress or Progress(False)
+    if getattr(study, "is_dynamic", False):          # sampling times (mudoe.dynamic_runs)
+        from .dynamic_runs import run_oed_dynamic
+        run_oed_dynamic(study, results, progress)
+        return results
     v = _oed_variant(study)
     _require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     est = results.estimates[v]
@@ -371,13 +394,13 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
     with progress.step(f"optimal sensor design ({o.criterion}, {v})"):
         F, S = information_contributions(study.models[v], study.data[v], est.p, states=est.states)
         n_default = min(study.models[v].n_p, len(study.sensors))   # fewer sensors than parameters is allowed
-        table = design_table(F, S if o.kind == "second_order" else None, study.sensors,
-                             o.min_sensors or n_default, kind=o.kind)
         n = o.n_sensors if o.n_sensors is not None or o.max_sensors is not None else n_default
         res = select_sensors_from_information(F, S, criterion=o.criterion, kind=o.kind, n_sensors=n,
                                               max_sensors=o.max_sensors, costs=list(o.costs) if o.costs else None,
                                               budget=o.budget, include=o.include, exclude=o.exclude,
                                               sensor_names=study.sensors)
+        table = design_rows(F, S if o.kind == "second_order" else None, study.sensors, o.min_sensors or n_default,
+                            res, o.criterion, kind=o.kind)
     results.oed, results.oed_table, results.oed_variant = res, table, v
     results.design_sensors = tuple(res.sensors)
     results.design_how = (f"{o.criterion}-optimal ({o.kind} covariance) design of {len(res.sensors)} sensors "
@@ -405,7 +428,7 @@ def run_detect(study: Study, results: StudyResults, progress: Progress | None = 
     design = list(_design_sensors(study, results, progress))
     settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
-        results.detection = detect(study.models, study.data, study.splits, {v: study.p0 for v in study.models},
+        results.detection = detect(study.models, study.data, study.splits, {v: start_values(study, v) for v in study.models},
                                    design=design, settings=settings, progress=progress)
     return results
 
@@ -414,7 +437,7 @@ def run_diagnosis(study: Study, results: StudyResults, progress: Progress | None
     """The diagnostic split family on every variant (:func:`reports.diagnosis.diagnose`; needs detection)."""
     from reports.diagnosis import diagnose
     progress = progress or Progress(False)
-    if results.detection is None:
+    if results.detection is None or getattr(study, "is_dynamic", False):   # diagnostic splits: static models
         return results
     with progress.step(f"what the models miss: diagnostic splits of {len(study.models)} model(s)"):
         results.diagnosis = diagnose(results, progress=progress)
@@ -449,11 +472,14 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         data = study.data[v]
         used = _design_sensors(study, results, progress)
         w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
+        model, splits, inputs, p0 = study.models[v], study.splits, data.inputs, start_values(study, v)
+        if getattr(study, "is_dynamic", False):      # on the collocation at the estimate (mudoe.dynamic_runs)
+            from .dynamic_runs import validation_problem
+            model, splits, w = validation_problem(study, results, est, used)
         where = "" if address is None else f" on the Dask scheduler {address}"
         with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications{where}"):
-            results.validation = validate(study.models[v], study.splits, study.p0, p_true=est.p,
-                                          inputs=data.inputs, sigma=est.sigma, n_M=data.n_M, weights=w, name=v,
-                                          settings=settings)
+            results.validation = validate(model, splits, p0, p_true=est.p, inputs=inputs, sigma=est.sigma,
+                                          n_M=data.n_M, weights=w, name=v, settings=settings)
     return results
 
 
@@ -502,6 +528,9 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
         raise ConfigError(f"{cfg.path}: [simulate] give the set points: inputs = [...] or input_start, input_stop "
                           "and n_inputs (in the [data] input unit)")
     built = _build_models(cfg)
+    if _dynamic(cfg, built):                 # without [dynamic] (with it the CLI writes the long format)
+        from .dynamic_study import build_dynamic
+        build_dynamic(cfg, {v: m for v, (m, _) in built.items()})
     variant = sc.variant or next(iter(built))
     m, fn = built[variant]
     units = study_units(cfg, m)
@@ -627,6 +656,9 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> PlannedDesign:
     """``[oed] planned = true``: the design at the [[parameters]] start values, no data read."""
     built = _build_models(cfg)
+    if _dynamic(cfg, built):
+        from .dynamic_runs import plan_dynamic
+        return plan_dynamic(cfg, {k: m for k, (m, _) in built.items()}, progress or Progress(False))
     v = cfg.oed.variant or list(built)[-1]
     model, fn = built[v]
     check_model(cfg, model)

@@ -129,10 +129,14 @@ def write_template(path, model_name: str | None = None) -> Path:
     else:
         factory = load_factory(model_name, "--model")
         model = call_factory(factory, model_name, "default", lambda msg: ConfigError(f"--model: {msg}"))
-        if not isinstance(model, Model):
+        if getattr(model, "is_dynamic", False):      # an ODE/DAE model: a [dynamic] study
+            from .dynamic_template import dynamic_template_text
+            text = dynamic_template_text(model, model_name)
+        elif not isinstance(model, Model):
             raise ConfigError(f"--model: {model_name}('default') returned {type(model).__name__}, expected a "
                               "models.Model")
-        text = template_text(model, model_name)
+        else:
+            text = template_text(model, model_name)
     if not path.parent.is_dir():
         raise ConfigError(f"{path}: the folder {path.parent} does not exist; create it or choose another path")
     try:

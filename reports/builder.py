@@ -139,10 +139,11 @@ def _title_page(results, cfg):
     for v, par in verdict_paragraphs(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.campaign
+    dyn = getattr(s, "is_dynamic", False)
     meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
-            f"{c.n_M} series x {c.n_q} set points x {len(s.sensors)} sensors; study series: "
+            f"{c.n_M} series x {c.n_q} {'experiments' if dyn else 'set points'} x {len(s.sensors)} sensors; study series: "
             f"{'all' if cfg.data.series is None else ', '.join(str(i + 1) for i in cfg.data.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
@@ -153,9 +154,11 @@ def _title_page(results, cfg):
         y -= 0.03
         for k, nt in enumerate(notes, 1):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
-    _text(fig, 0.04, 0.045, "Contents: measurement data and model outputs, normality and sigma, optimal sensor design, "
+    _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
+          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if dyn else
+          "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model "
-          "misses.", width=165, size=8, color="0.4")
+          "misses."), width=165, size=8, color="0.4")
     return fig
 
 
@@ -211,8 +214,10 @@ def _normality_page(results):
                     + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
                     + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else "")
                     + (f" (failing: {', '.join(chk.failing())})" if chk.failing() else ""))
+    over = "every (experiment, time) reading, pooled per instrument" if getattr(s, "is_dynamic", False) else \
+        "all set points"
     txt = (f"Normality gate: {(gate or s.normality).gate_text()} (one test per sensor, on the differences of "
-           f"consecutive series over all set points), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
+           f"consecutive series over {over}), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
            "fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2) with sigma_rep on all series, unless "
            "given directly in the config. The terminal (mudoe detect) prints the gate of Algorithm 1 (line 05) on "
            "the study series, in the same unit.")
@@ -244,7 +249,9 @@ def _oed_page(results):
     names = ", ".join(results.study.models[results.oed_variant].param_names)
     value = f"log det C = {r.value:.4f}" if r.criterion == "D" else f"{r.criterion} = {r.value:.4e}"
     txt = (f"Criteria of the {results.oed_table.kind.replace('_', '-')} covariance C(w) of ({names}) "
-           f"({criteria_units(results.study)}) for every sensor combination, from the information of each sensor "
+           f"({criteria_units(results.study)}) for "
+           + (getattr(results.oed_table, "note", "") or "every sensor combination")
+           + ", from the information of each sensor "
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
            f"{len(r.sensors)} sensors): {', '.join(r.sensors)} (green), {value}, "
            f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "
@@ -257,7 +264,7 @@ def _oed_page(results):
 
 def _estimate_pages(results):
     from .tables import PARAMS_PER_TABLE, draw_table, estimate_rows
-    n_p = next(iter(results.study.models.values())).n_p
+    n_p = len({n for m in results.study.models.values() for n in m.param_names})   # variants may differ
     pparts = _chunks(n_p, PARAMS_PER_TABLE)
     figs = []
     for pk, pp in enumerate(pparts):
@@ -270,7 +277,7 @@ def _estimate_pages(results):
             h = min(0.03 * (len(chunk) + 1), 0.82)
             ax = fig.add_axes([0.04, 0.90 - h, 0.92, h])
             n_rest = len(head) - 4
-            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.30, 0.10] + [0.40 / n_rest] * n_rest + [0.14])
+            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.24, 0.06] + [0.50 / n_rest] * n_rest + [0.14])
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)
@@ -660,6 +667,9 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
         pages.append(("misses", partial(_misses_pages, results, diagnosis)))
     if results.validation is not None:
         pages.append(("validation", partial(_validation_page, results)))
+    if getattr(results.study, "is_dynamic", False):      # time series: reports.dynamic_pages
+        from .dynamic_pages import dynamic_pages
+        pages = dynamic_pages(pages, results)
     return pages
 
 
@@ -736,7 +746,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     try:
         tmp.mkdir(mode=0o700)
         diagnosis = getattr(results, "diagnosis", None)
-        if diagnosis is None and diagnose:
+        if diagnosis is None and diagnose and not getattr(results.study, "is_dynamic", False):
             diagnosis = run_diagnosis(results, progress=progress)
         pages = report_pages(results, diagnosis, diagnose, uncertainty, progress)
         names, texts = [], []

@@ -115,9 +115,13 @@ def oed_rows(results) -> tuple[list, list]:
     chosen = results.oed.sensors if results.oed is not None else ()
     head = ["combination", "sensors", "Psi_A (trace C)", "Psi_D (log det C)", "Psi_E (max eig C)", "flag"]
     rows = []
-    for r in t.rows:
+    ranked = getattr(t, "ranked", False)            # the ten best designs (oed.best_designs), not every one
+    if ranked:
+        head[0] = "rank"
+    for k, r in enumerate(t.rows, 1):
         mark = "  <= chosen" if tuple(r.sensors) == tuple(chosen) else ""
-        rows.append([r.mask + (" (all)" if "0" not in r.mask else ""), " ".join(r.sensors), f"{r.A:.4e}",
+        first = (str(k) if k <= 10 else "-") if ranked else r.mask + (" (all)" if "0" not in r.mask else "")
+        rows.append([first, " ".join(r.sensors), f"{r.A:.4e}",
                      f"{r.logdet:.4f}", f"{r.E:.4e}", (r.flag or "") + mark])
     return head, rows
 
@@ -130,7 +134,7 @@ def oed_table_text(results) -> str:
     crit = f"{r.criterion} = {r.value:.6g}" + (" (log det C)" if r.criterion == "D" else "")
     lines = [f"Optimal sensor design ({r.criterion}-criterion, {r.kind} covariance) from the {results.oed_variant} "
              f"estimate of ({names}); {criteria_units(results.study)}",
-             _text_table(head, rows), "",
+             getattr(results.oed_table, "note", "every combination") + ":", _text_table(head, rows), "",
              f"chosen: {', '.join(r.sensors)} ({crit}; method {r.method}, "
              f"{'proven optimal' if r.proven_optimal else 'not proven optimal'})"]
     lines += [f"note: {n}" for n in r.notes]
@@ -162,19 +166,24 @@ def estimate_rows(results, params: slice | None = None) -> tuple[list, list]:
     header (omitted when undeclared), and the largest correlation of the fit with its pair.
     ``params`` selects the parameter columns (all by default).
     """
-    first = next(iter(results.study.models.values()))
-    names, units = first.param_names, param_units(results.study)
+    models = results.study.models
+    names, units = _union_parameters(models, param_units(results.study))
     sel = list(range(len(names)))[params or slice(None)]
     head = ["model", "data", "sensors"] + [f"{names[i]}{unit_suffix(units[i])}" for i in sel] + ["largest |corr|"]
 
     def row(model, data, sensors, p, C):
+        own = list(models[model].param_names) if model in models else list(names)
         ok = np.all(np.isfinite(C)) and np.all(np.isfinite(p))
         se = np.sqrt(np.clip(np.diag(C), 0, None)) if ok else np.full(len(p), np.nan)
         cells = []
         for i in sel:
-            v, s = fmt_value(p[i], se[i])
+            if names[i] not in own:              # a variant without this parameter
+                cells.append("-")
+                continue
+            k = own.index(names[i])
+            v, s = fmt_value(p[k], se[k])
             cells.append(v if s == "n/a" else f"{v} +- {s}")
-        return [model, data, sensors] + cells + [_largest_corr(names, np.asarray(C, float))]
+        return [model, data, sensors] + cells + [_largest_corr(tuple(own), np.asarray(C, float))]
 
     rows = []
     for v, e in results.estimates.items():
@@ -187,6 +196,17 @@ def estimate_rows(results, params: slice | None = None) -> tuple[list, list]:
             rows.append(row(t.model, f"{t.split}: calibration", sens, t.p_cal, t.C_cal))
             rows.append(row(t.model, f"{t.split}: validation", sens, t.p_val, t.C_val))
     return head, rows
+
+
+def _union_parameters(models: dict, first_units) -> tuple:
+    """(names, units) of every variant's parameters, the first variant's first (variants may differ)."""
+    names, units = [], []
+    for k, m in enumerate(models.values()):
+        for j, p in enumerate(m.params):
+            if p.name not in names:
+                names.append(p.name)
+                units.append(first_units[j] if k == 0 else p.unit)
+    return tuple(names), tuple(units)
 
 
 def smallest_alpha(det, model: str, statistic: str | None = None):
