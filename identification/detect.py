@@ -59,7 +59,6 @@ import numpy as np
 from scipy import special, stats
 
 from models.contract import Model
-from models.dynamic import DynamicModel
 from .errors import DataError, IdentificationError
 from .estimator import IdentifySettings, identify
 from .measurements import Measurements
@@ -905,16 +904,6 @@ def _checked_models(model) -> dict:
     return models
 
 
-def _collocated(model: DynamicModel, data, p0, weights, design) -> tuple:
-    """(collocated model, flat data) of a dynamic model: the mesh that identify's discretisation error
-    control chose on the whole campaign (splits index its ``sensor@time`` columns)."""
-    if weights is not None or design is not None:
-        raise DataError("weights, design: for a dynamic model give them per sensor@time column of the flat data: "
-                        "est = identify(model, data, p0); detect(est.model, est.data, splits, est.p, weights=...)")
-    est = identify(model, data, p0)
-    return est.model, est.data
-
-
 def _as_mapping(what, value, names):
     if isinstance(value, Mapping):
         missing = [n for n in names if n not in value]
@@ -1107,11 +1096,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
 
     Parameters
     ----------
-    model : models.Model or mapping {name: Model}, or a models.dynamic.DynamicModel
-        One candidate, or several (e.g. M1, M2, M3) tested on the same splits.  A dynamic model
-        (with DynamicMeasurements) is tested on its collocation controlled at the fit to the whole
-        campaign (``identify(model, data, p0).model``); the splits index the flat ``sensor@time``
-        columns (e.g. :func:`identification.splits.early_late_split`).
+    model : models.Model or mapping {name: Model}
+        One candidate, or several (e.g. M1, M2, M3) tested on the same splits.
     measurements : Measurements or mapping {name: Measurements}
         The campaign (per model when their inputs differ).  sigma per sensor should be known
         (the paper fixes it); with sigma=None it is estimated and the chi^2 law is approximate.
@@ -1167,8 +1153,6 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         return detect_dynamic(model, measurements, splits, p0, settings=settings, design=design,
                               design_how=design_how, progress=progress)
     splits = _checked_splits(splits)
-    if isinstance(model, DynamicModel):
-        model, measurements = _collocated(model, measurements, p0, weights, design)
     models = _checked_models(model)
     names = tuple(models)
     datas = _as_mapping("measurements", measurements, names)

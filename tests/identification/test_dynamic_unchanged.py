@@ -191,15 +191,8 @@ def test_discretisation_error_is_not_reported_as_model_inadequacy_with_control_b
     assert bad.ok and bad.lr > 10.0 and bad.alpha_lr < 0.05
 
 
-def test_detect_takes_the_dynamic_model_itself_and_validate_says_what_to_do(fitted):
+def test_validate_on_a_dynamic_model_says_what_to_do(fitted):
     from identification import DataError
-    model, data, est = fitted
-    direct = detect(model, data, [BY_EXPERIMENT], P_TRUE * 1.1)
-    flat = detect(est.model, est.data, [BY_EXPERIMENT], P_TRUE * 1.1)
-    assert direct.tests[0].ok
-    np.testing.assert_allclose(direct.tests[0].p_cal, flat.tests[0].p_cal, rtol=1e-8)
-    assert direct.tests[0].alpha_lr == pytest.approx(flat.tests[0].alpha_lr, rel=1e-6, abs=1e-10)
-    with pytest.raises(DataError, match="weights, design: for a dynamic model"):
-        detect(model, data, [BY_EXPERIMENT], P_TRUE, weights=[1, 1])
+    model, _, _ = fitted
     with pytest.raises(DataError, match="model: a dynamic model is validated on its collocation"):
         validate(model, [BY_EXPERIMENT], p_true=P_TRUE, inputs=Q, sigma=SIGMA, n_rep=2)
