@@ -421,7 +421,7 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     ``bar`` (a tqdm bar, e.g. from :meth:`identification.progress.Progress.bar`) is advanced by
     one per split done.
 
-    ``fits`` (one (calibration, validation) pair per split) and ``pooled`` ({split.pooled_points:
+    ``fits`` (one (calibration, validation) pair per split) and ``pooled`` ({split.pooled_key:
     pooled fit}) give fits computed elsewhere (e.g. by :func:`identification.batch.fit_batch` for
     many replications at once): an entry is an estimate (the fields of :class:`Estimate` the tests
     read), the IdentificationError/DataError its fit raised, or (pooled) a failure text.
@@ -537,10 +537,10 @@ def _likelihood_ratio(model, data, split, p0, weights, settings, states0, est_c,
     the statistic is >= 0 up to the solver tolerance; a clearly negative value means a fit
     missed its optimum and is reported instead of used.
     """
-    key = split.pooled_points(data.n_M)
+    key = split.pooled_key(data.n_M)
     est_u = pooled.get(key)
     if est_u is None:
-        qs = sorted({j for j, _ in key})
+        qs = sorted({j for j, _ in split.pooled_points(data.n_M)})
         data_u = split.pooled(data)
         est_u = _pooled_newton(model, data_u, split, est_c, est_v, weights)
         if est_u is None:

@@ -59,6 +59,9 @@ class Measurements:
     input_names : sequence of str, optional
     series : sequence of str, optional
         Labels of the series (default ``"1"..."n_M"``).
+    allow_empty_sensors : bool
+        Accept sensors without any finite value (the subsets of a split over sensors, e.g. the
+        early times of :func:`identification.splits.early_late_split`); default False: an error.
 
     Raises
     ------
@@ -68,10 +71,11 @@ class Measurements:
         the argument).
     """
 
-    __slots__ = ("inputs", "z", "sigma", "sensors", "input_names", "series")
+    __slots__ = ("inputs", "z", "sigma", "sensors", "input_names", "series", "allow_empty_sensors")
 
     def __init__(self, inputs, z, sigma=None, sensors: Sequence[str] | None = None,
-                 input_names: Sequence[str] | None = None, series: Sequence[str] | None = None):
+                 input_names: Sequence[str] | None = None, series: Sequence[str] | None = None,
+                 allow_empty_sensors: bool = False):
         try:
             q = np.asarray(inputs, dtype=float)
         except (TypeError, ValueError) as exc:
@@ -103,7 +107,7 @@ class Measurements:
             raise DataError(f"sensors: {len(names)} names given but z has {n_S} sensors")
         finite_per_sensor = np.isfinite(zz).reshape(-1, n_S).sum(axis=0)
         for k in range(n_S):
-            if finite_per_sensor[k] == 0:
+            if finite_per_sensor[k] == 0 and not allow_empty_sensors:
                 raise DataError(f"z: sensor {names[k]!r} (index {k}) has no finite value (NaN only); "
                                 "drop it or supply data")
         if sigma is not None:
@@ -135,13 +139,15 @@ class Measurements:
         object.__setattr__(self, "sensors", names)
         object.__setattr__(self, "input_names", in_names)
         object.__setattr__(self, "series", ser)
+        object.__setattr__(self, "allow_empty_sensors", bool(allow_empty_sensors))
 
     def __setattr__(self, name, value):
         raise AttributeError("Measurements is immutable; use subset(), with_sigma() or select()")
 
     def __reduce__(self):
         """Pickle through the constructor (the immutable slots cannot be set by pickle's default)."""
-        return (Measurements, (self.inputs, self.z, self.sigma, self.sensors, self.input_names, self.series))
+        return (Measurements, (self.inputs, self.z, self.sigma, self.sensors, self.input_names, self.series,
+                               self.allow_empty_sensors))
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -202,7 +208,8 @@ class Measurements:
             raise DataError("series: the selection is empty")
         z = self.z[np.ix_(si, qi, np.arange(self.n_S))]
         return Measurements(self.inputs[qi], z, self.sigma, sensors=self.sensors,
-                            input_names=self.input_names, series=[self.series[i] for i in si])
+                            input_names=self.input_names, series=[self.series[i] for i in si],
+                            allow_empty_sensors=self.allow_empty_sensors)
 
     def select(self, sensors) -> "Measurements":
         """A new campaign with only the named (or indexed) sensors, in that order."""
@@ -222,12 +229,16 @@ class Measurements:
     def with_sigma(self, sigma) -> "Measurements":
         """The same data with other sensor sigmas (``None``: unknown, estimated)."""
         return Measurements(self.inputs, self.z, sigma, sensors=self.sensors,
-                            input_names=self.input_names, series=self.series)
+                            input_names=self.input_names, series=self.series,
+                            allow_empty_sensors=self.allow_empty_sensors)
 
-    def with_z(self, z) -> "Measurements":
-        """The same inputs, sigma and labels with other values z (e.g. simulated noise)."""
+    def with_z(self, z, allow_empty_sensors: bool | None = None) -> "Measurements":
+        """The same inputs, sigma and labels with other values z (e.g. simulated noise); sensors without
+        a value are accepted when ``allow_empty_sensors`` (None: as this campaign)."""
         return Measurements(self.inputs, z, self.sigma, sensors=self.sensors,
-                            input_names=self.input_names, series=None if np.shape(z)[0] != self.n_M else self.series)
+                            input_names=self.input_names, series=None if np.shape(z)[0] != self.n_M else self.series,
+                            allow_empty_sensors=self.allow_empty_sensors if allow_empty_sensors is None
+                            else allow_empty_sensors)
 
     def __repr__(self):
         sig = "unknown" if self.sigma is None else np.array2string(self.sigma, precision=4)

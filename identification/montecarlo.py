@@ -42,6 +42,7 @@ import numpy as np
 from scipy import special, stats
 
 from models.contract import Model
+from models.dynamic import DynamicModel
 from . import cluster
 from .batch import BatchData, BatchFit, fit_batch
 from .detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
@@ -355,22 +356,25 @@ class _Subsets:
         return self.subset(self.ds[r])
 
 
-def _split_batch(ds: list, Z: np.ndarray, sig, inputs, series, subset: Callable) -> BatchData:
-    """The stacked data of one subset (inputs, series) of every replication (as Split.calibration etc.)."""
+def _split_batch(ds: list, Z: np.ndarray, sig, inputs, series, subset: Callable, sensors=None) -> BatchData:
+    """The stacked data of one subset (inputs, series[, sensors]) of every replication (as Split.calibration
+    etc.: the values of the other sensors missing)."""
     ser = list(range(Z.shape[1])) if series is None else list(series)
     rows = list(inputs)
-    return BatchData(ds[0].inputs[rows], Z[:, ser][:, :, rows], sig, _Subsets(ds, subset))
+    z = Z[:, ser][:, :, rows]
+    if sensors is not None:
+        z = z.copy()
+        z[..., [k for k in range(Z.shape[3]) if k not in set(sensors)]] = np.nan
+    return BatchData(ds[0].inputs[rows], z, sig, _Subsets(ds, subset))
 
 
 def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> BatchData:
-    """The stacked pooled data of a split for ``members`` (as Split.pooled: NaN outside the pooled points)."""
+    """The stacked pooled data of a split for ``members`` (as Split.pooled: NaN outside the pooled values)."""
     pts = split.pooled_points(Z.shape[1])
     qs = sorted({j for j, _ in pts})
     series = sorted({i for _, i in pts})
-    zp = np.full((len(members), len(series), len(qs), Z.shape[3]), np.nan)
-    jj = np.array([j for j, _ in pts])
-    ii = np.array([i for _, i in pts])
-    zp[:, np.searchsorted(series, ii), np.searchsorted(qs, jj)] = Z[members][:, ii, jj]
+    mask = split.pooled_mask(Z.shape[1], Z.shape[2], Z.shape[3])[np.ix_(series, qs, range(Z.shape[3]))]
+    zp = np.where(mask[None], Z[members][:, series][:, :, qs], np.nan)
     return BatchData(ds[0].inputs[qs], zp, None if sig is None else sig[members],
                      _Subsets([ds[r] for r in members], split.pooled))
 
@@ -400,10 +404,10 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
             continue
         ok_split.append(True)
         got = []
-        for sub, rows, series in ((split.calibration, split.cal_inputs, split.cal_series),
-                                  (split.validation, split.val_inputs, split.val_series)):
+        for sub, rows, series, sens in ((split.calibration, split.cal_inputs, split.cal_series, split.cal_sensors),
+                                        (split.validation, split.val_inputs, split.val_series, split.val_sensors)):
             try:
-                bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub), p0, weights, det.identify,
+                bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub, sens), p0, weights, det.identify,
                                Y0=None if st0 is None else st0[list(rows)])
             except np.linalg.LinAlgError:
                 got.append([None] * R)         # singular batch (e.g. rank-deficient subset): identify per member
@@ -416,7 +420,7 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
     for js, split in enumerate(splits):
         if not ok_split[js]:
             continue
-        key = split.pooled_points(n_M)
+        key = split.pooled_key(n_M)
         have = done_keys.setdefault(key, set())
         members = [r for r in range(R)
                    if r not in have and not any(e is None or isinstance(e, Exception) or not_bounded_reason(e)
@@ -424,7 +428,7 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
         if not members:
             continue
         have.update(members)
-        qs = sorted({j for j, _ in key})
+        qs = sorted({j for j, _ in split.pooled_points(n_M)})
         P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
         try:
             bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
@@ -511,7 +515,7 @@ def _split_statistics(model: Model, name: str, splits: tuple, det: DetectSetting
         d2p, okp = _wald_d2(D, C[:, 0])
         d2t, okt = _wald_d2(D, C[:, 0] + C[:, 1])
         reg &= okp & okt
-        key = split.pooled_points(n_M)
+        key = split.pooled_key(n_M)
         stat = np.full(R, np.nan)
         sig_est = np.zeros(R, bool)
         num, scale, dof = np.zeros(R), np.ones(R), np.zeros(R)
@@ -999,19 +1003,21 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
 
     n_q, n_S = q.shape[0], model.n_S
 
-    def est_map(qi, si):
+    def est_map(qi, si, ki):
         """(M, C): p_hat - p* = vec(eps)^T M for eps (n_M, n_q, n_S); C the covariance of p_hat."""
         ser = list(range(n_M)) if si is None else list(si)
         qi = list(qi)
         Gq = G[qi]
-        F = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, w / sig ** 2)
-        F2 = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, w ** 2 / sig ** 2)
+        wk = w if ki is None else w * np.isin(np.arange(n_S), ki)       # a sensor split: the set's sensors only
+        F = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, wk / sig ** 2)
+        F2 = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, wk ** 2 / sig ** 2)
         A = np.linalg.solve(F, np.eye(n_p))
         M = np.zeros((n_M, n_q, n_S, n_p))
-        M[np.ix_(ser, qi)] = (Gq * (w / sig ** 2)[None, :, None]) @ A
+        M[np.ix_(ser, qi)] = (Gq * (wk / sig ** 2)[None, :, None]) @ A
         return M.reshape(-1, n_p), A @ F2 @ A
 
-    maps = [(est_map(sp.cal_inputs, sp.cal_series), est_map(sp.val_inputs, sp.val_series)) for sp in splits]
+    maps = [(est_map(sp.cal_inputs, sp.cal_series, sp.cal_sensors),
+             est_map(sp.val_inputs, sp.val_series, sp.val_sensors)) for sp in splits]
     eig = tuple(np.sort(np.linalg.eigvals(np.linalg.solve(Cc, Cc + Cv)).real) for (_, Cc), (_, Cv) in maps)
     Dmaps = [(Mv - Mc, np.linalg.inv(Cc), np.linalg.inv(Cc + Cv)) for (Mc, Cc), (Mv, Cv) in maps]
     rej_p = np.zeros((n_draws, len(splits)), bool)
@@ -1161,6 +1167,9 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     defaults of :class:`MonteCarloSettings`, TOL 5 %) or ``settings`` with all of them; giving
     ``settings`` and one of those keywords raises TypeError.
     """
+    if isinstance(model, DynamicModel):
+        raise DataError("model: a dynamic model is validated on its collocation: est = identify(model, data, p0); "
+                        "validate(est.model, splits, p_true=..., inputs=est.data.inputs, sigma=est.data.sigma, ...)")
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
     if generator is None:

@@ -12,10 +12,18 @@ with Q the input (load) indices and M the series indices; every sensor of a sele
 point belongs to the set.  Indices are **0-based** (the paper's loads q^d_1..q^d_29 are
 indices 0..28 here).  ``series=None`` means "all series of the campaign".
 
+A split may also divide the sensors (``cal_sensors`` / ``val_sensors``: column indices of
+the campaign's sensors); a value (series i, input j, sensor k) then belongs to a set when i, j
+and k all do, the other values of the subset being missing (NaN).  On the flat data of a dynamic
+model (columns ``sensor@time``) this expresses a split over sampling times:
+:func:`time_window_split` (calibrate on one time window, validate on another) and
+:func:`early_late_split` (early against late sampling times).
+
 Constructors: :func:`splits_from_scenarios` (a model's named scenario table, e.g. the
 paper's four press scenarios :func:`models.press.press_scenario_rows`), :func:`random_splits`
 (Monte Carlo cross-validation), :func:`input_range_split` (by the magnitude of an input),
-:func:`series_split` (series against series) and :class:`Split` itself for user-defined
+:func:`series_split` (series against series), :func:`time_window_split` /
+:func:`early_late_split` (by sampling time) and :class:`Split` itself for user-defined
 index sets.
 """
 from __future__ import annotations
@@ -27,7 +35,8 @@ from typing import Sequence
 import numpy as np
 
 
-__all__ = ["Split", "SplitError", "splits_from_scenarios", "random_splits", "input_range_split", "series_split"]
+__all__ = ["Split", "SplitError", "splits_from_scenarios", "random_splits", "input_range_split", "series_split",
+           "time_window_split", "early_late_split"]
 
 
 class SplitError(ValueError):
@@ -89,11 +98,14 @@ class Split:
         0-based series indices (None: every series of the campaign).
     description : str
         Free text for reports.
+    cal_sensors, val_sensors : sequence of int or None
+        0-based sensor (column) indices of each set (None: every sensor); on the flat data of a
+        dynamic model a column is one (sensor, sampling time) pair.
 
     Raises
     ------
     SplitError
-        Empty set, repeated or negative index, or a data point (input, series) in both sets.
+        Empty set, repeated or negative index, or a value (series, input, sensor) in both sets.
     """
 
     name: str
@@ -102,6 +114,8 @@ class Split:
     cal_series: tuple | None = None
     val_series: tuple | None = None
     description: str = ""
+    cal_sensors: tuple | None = None
+    val_sensors: tuple | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.strip():
@@ -111,14 +125,20 @@ class Split:
         object.__setattr__(self, "val_inputs", _indices(n, "val_inputs (validation inputs)", self.val_inputs, False))
         object.__setattr__(self, "cal_series", _indices(n, "cal_series (calibration series)", self.cal_series, True))
         object.__setattr__(self, "val_series", _indices(n, "val_series (validation series)", self.val_series, True))
+        object.__setattr__(self, "cal_sensors", _indices(n, "cal_sensors (calibration sensors)", self.cal_sensors, True))
+        object.__setattr__(self, "val_sensors", _indices(n, "val_sensors (validation sensors)", self.val_sensors, True))
         common_q = sorted(set(self.cal_inputs) & set(self.val_inputs))
         if self.cal_series is None or self.val_series is None:
-            common_s = "all" if (self.cal_series is None or self.val_series is None) else ()
+            common_s = "all"
         else:
             common_s = sorted(set(self.cal_series) & set(self.val_series))
-        if common_q and common_s:
+        if self.cal_sensors is None or self.val_sensors is None:
+            common_k = "all"
+        else:
+            common_k = sorted(set(self.cal_sensors) & set(self.val_sensors))
+        if common_q and common_s and common_k:
             raise SplitError(f"split {n!r}: calibration and validation overlap: inputs {common_q} appear in both "
-                             f"for series {common_s}; a data point may belong to one set only")
+                             f"for series {common_s} and sensors {common_k}; a value may belong to one set only")
 
     # ------------------------------------------------------------------ checks against a campaign
     def check(self, n_q: int, n_M: int, n_p: int | None = None, n_sensors: int = 1) -> None:
@@ -133,21 +153,53 @@ class Split:
                 raise SplitError(f"split {self.name!r}: {what} index {max(idx)} is out of range for a campaign "
                                  f"with {n} {'inputs' if 'inputs' in what else 'series'} (0-based)")
         if n_p is not None:
-            for what, qi, si in (("calibration", self.cal_inputs, self.cal_series),
-                                 ("validation", self.val_inputs, self.val_series)):
+            for what, qi, si, ki in (("calibration", self.cal_inputs, self.cal_series, self.cal_sensors),
+                                     ("validation", self.val_inputs, self.val_series, self.val_sensors)):
                 n_pts = len(qi) * (n_M if si is None else len(si))
-                if n_pts * n_sensors < n_p:
-                    raise SplitError(f"split {self.name!r}: the {what} set has {n_pts} points x {n_sensors} "
-                                     f"sensor(s) = {n_pts * n_sensors} values for {n_p} parameters; it needs at "
+                n_k = n_sensors if ki is None else min(n_sensors, len(ki))
+                if n_pts * n_k < n_p:
+                    raise SplitError(f"split {self.name!r}: the {what} set has {n_pts} points x {n_k} "
+                                     f"sensor(s) = {n_pts * n_k} values for {n_p} parameters; it needs at "
                                      "least as many values as parameters")
 
+    def check_sensors(self, n_S: int) -> None:
+        """Raise :class:`SplitError` when a sensor index is out of range for a campaign of n_S sensors."""
+        for what, idx in (("cal_sensors", self.cal_sensors), ("val_sensors", self.val_sensors)):
+            if idx is not None and max(idx) >= n_S:
+                raise SplitError(f"split {self.name!r}: {what} index {max(idx)} is out of range for a campaign "
+                                 f"with {n_S} sensors (0-based columns)")
+
+    def value_mask(self, n_M: int, n_q: int, n_S: int, which: str) -> np.ndarray:
+        """Boolean (n_M, n_q, n_S): the values of the ``which`` ("calibration" or "validation") set."""
+        qi, si, ki = ((self.cal_inputs, self.cal_series, self.cal_sensors) if which == "calibration"
+                      else (self.val_inputs, self.val_series, self.val_sensors))
+        self.check_sensors(n_S)
+        m = np.zeros((n_M, n_q, n_S), bool)
+        m[np.ix_(range(n_M) if si is None else list(si), list(qi), range(n_S) if ki is None else list(ki))] = True
+        return m
+
+    def sensors_of(self, which: str) -> tuple | None:
+        """The sensor indices of the ``which`` set (None: all)."""
+        return self.cal_sensors if which == "calibration" else self.val_sensors
+
+    def _restricted(self, sub, which: str):
+        ki = self.sensors_of(which)
+        if ki is None:
+            return sub
+        self.check_sensors(sub.n_S)
+        z = np.array(sub.z, float, copy=True)
+        z[:, :, [k for k in range(sub.n_S) if k not in set(ki)]] = np.nan
+        return sub.with_z(z, allow_empty_sensors=True)
+
     def calibration(self, data):
-        """The calibration subset of a :class:`Measurements`."""
-        return data.subset(inputs=list(self.cal_inputs), series=None if self.cal_series is None else list(self.cal_series))
+        """The calibration subset of a :class:`Measurements` (values of other sensors missing)."""
+        sub = data.subset(inputs=list(self.cal_inputs), series=None if self.cal_series is None else list(self.cal_series))
+        return self._restricted(sub, "calibration")
 
     def validation(self, data):
-        """The validation subset of a :class:`Measurements`."""
-        return data.subset(inputs=list(self.val_inputs), series=None if self.val_series is None else list(self.val_series))
+        """The validation subset of a :class:`Measurements` (values of other sensors missing)."""
+        sub = data.subset(inputs=list(self.val_inputs), series=None if self.val_series is None else list(self.val_series))
+        return self._restricted(sub, "validation")
 
     def pooled_points(self, n_M: int) -> tuple:
         """The sorted (input, series) pairs of calibration and validation together (0-based)."""
@@ -168,23 +220,36 @@ class Split:
         pts = self.pooled_points(data.n_M)
         qs = sorted({j for j, _ in pts})
         series = sorted({i for _, i in pts})
-        z = np.full((len(series), len(qs), data.n_S), np.nan)
-        for j, i in pts:
-            z[series.index(i), qs.index(j)] = data.z[i, j]
+        mask = self.pooled_mask(data.n_M, data.n_q, data.n_S)[np.ix_(series, qs, range(data.n_S))]
+        z = np.where(mask, data.z[np.ix_(series, qs, range(data.n_S))], np.nan)
         sub = data.subset(inputs=qs, series=series)
-        return sub.with_z(z)
+        return sub.with_z(z, allow_empty_sensors=self.cal_sensors is not None or self.val_sensors is not None)
+
+    def pooled_mask(self, n_M: int, n_q: int, n_S: int) -> np.ndarray:
+        """Boolean (n_M, n_q, n_S): the values of calibration or validation."""
+        return self.value_mask(n_M, n_q, n_S, "calibration") | self.value_mask(n_M, n_q, n_S, "validation")
+
+    def pooled_key(self, n_M: int) -> tuple:
+        """A hashable key of the pooled data: splits with equal keys share their pooled fit."""
+        pts = self.pooled_points(n_M)
+        if self.cal_sensors is None and self.val_sensors is None:
+            return pts
+        return pts, ("sensors", self.cal_inputs, self.cal_series, self.cal_sensors, self.val_inputs,
+                     self.val_series, self.val_sensors)
 
     def label(self, one_based: bool = True) -> tuple[str, str]:
         """Short texts of the calibration and validation sets (1-based like the paper by default)."""
-        def one(qi, si):
+        def one(qi, si, ki):
             s = _fmt(qi, one_based)
-            return s if si is None else f"{s} [series {_fmt(si, one_based, '')}]"
-        return one(self.cal_inputs, self.cal_series), one(self.val_inputs, self.val_series)
+            s = s if si is None else f"{s} [series {_fmt(si, one_based, '')}]"
+            return s if ki is None else f"{s} [sensors {_fmt(ki, one_based, 's')}]"
+        return (one(self.cal_inputs, self.cal_series, self.cal_sensors),
+                one(self.val_inputs, self.val_series, self.val_sensors))
 
     def swapped(self) -> "Split":
         """The same split with calibration and validation exchanged."""
         return Split(f"{self.name} (swapped)", self.val_inputs, self.cal_inputs, self.val_series, self.cal_series,
-                     self.description)
+                     self.description, self.val_sensors, self.cal_sensors)
 
 
 # ---------------------------------------------------------------------------- constructors
@@ -293,3 +358,74 @@ def series_split(n_q: int, cal_series: Sequence[int], val_series: Sequence[int],
     qi = list(range(int(n_q))) if inputs is None else list(inputs)
     label = name or f"series {[i + 1 for i in cal_series]} vs {[i + 1 for i in val_series]}"
     return Split(label, qi, qi, list(cal_series), list(val_series), "repeatability: series against series")
+
+
+def _pair_times(pairs) -> np.ndarray:
+    """The sampling time of every (sensor, time) column of a dynamic model's flat data."""
+    try:
+        t = np.array([float(tp) for _, tp in pairs])
+    except (TypeError, ValueError):
+        raise SplitError("pairs: expected the (sensor, time) pairs of the flat data (DynamicMeasurements.pairs "
+                         "or the collocated model's outputs)") from None
+    if t.size == 0:
+        raise SplitError("pairs: no (sensor, time) column")
+    return t
+
+
+def time_window_split(pairs, n_q: int, cal_window, val_window, inputs: Sequence[int] | None = None,
+                      series: Sequence[int] | None = None, name: str | None = None) -> Split:
+    r"""Calibrate on the sampling times in one window, validate on those in another.
+
+    A column k of the flat data of a dynamic model is the pair (sensor, t_k); the calibration
+    set is {t_k in [a_c, b_c]}, the validation set {t_k in [a_v, b_v]} (closed windows in the
+    model's time unit, which must not share a column), at the inputs (experiments) ``inputs``
+    (default all) and the series ``series`` (default all) for both sets.
+
+    Parameters
+    ----------
+    pairs : sequence of (sensor, time)
+        The flat columns in order (``DynamicMeasurements.pairs``).
+    n_q : int
+        Experiments of the campaign.
+    cal_window, val_window : (float, float)
+        Time windows (a, b) of the two sets.
+    """
+    t = _pair_times(pairs)
+    sets = []
+    for what, win in (("cal_window", cal_window), ("val_window", val_window)):
+        try:
+            a, b = (float(v) for v in win)
+        except (TypeError, ValueError):
+            raise SplitError(f"{what}: expected a time window (start, end), got {win!r}") from None
+        if not a <= b:
+            raise SplitError(f"{what}: the window ({a:g}, {b:g}) ends before it starts")
+        k = np.flatnonzero((t >= a) & (t <= b))
+        if k.size == 0:
+            raise SplitError(f"{what}: no sampling time lies in ({a:g}, {b:g}); the times are "
+                             f"{np.unique(t).tolist()}")
+        sets.append((k, a, b))
+    (kc, ac, bc), (kv, av, bv) = sets
+    qi = list(range(int(n_q))) if inputs is None else list(inputs)
+    s = None if series is None else list(series)
+    label = name or f"t in [{ac:g}, {bc:g}] vs [{av:g}, {bv:g}]"
+    return Split(label, qi, qi, s, s, f"calibrate on the sampling times in [{ac:g}, {bc:g}], validate on those in "
+                 f"[{av:g}, {bv:g}]", kc, kv)
+
+
+def early_late_split(pairs, n_q: int, t_split: float | None = None, inputs: Sequence[int] | None = None,
+                     series: Sequence[int] | None = None, name: str | None = None) -> Split:
+    """Calibrate on the early sampling times t <= ``t_split``, validate on the late ones t > t_split.
+
+    ``t_split`` defaults to the median of the distinct sampling times (about half of the
+    times in each set)."""
+    t = _pair_times(pairs)
+    times = np.unique(t)
+    if times.size < 2:
+        raise SplitError("pairs: an early / late split needs at least two sampling times")
+    cut = float(times[(times.size - 1) // 2]) if t_split is None else float(t_split)
+    late = times[times > cut]
+    if late.size == 0 or not np.any(times <= cut):
+        raise SplitError(f"t_split: {cut:g} leaves the {'late' if late.size == 0 else 'early'} set empty; the "
+                         f"sampling times are {times.tolist()}")
+    return time_window_split(pairs, n_q, (float(times[0]), cut), (float(late[0]), float(times[-1])), inputs,
+                             series, name or f"early t <= {cut:g} vs late t > {cut:g}")
