@@ -157,7 +157,7 @@ class Trajectories:
     tol_sigma: float = math.nan      # its tolerance
 
 
-def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 121) -> Trajectories:
+def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 401) -> Trajectories:
     """The trajectories of ``variant`` at its estimate (see the module docstring)."""
     model = study.models[variant]
     data = study.data[variant]

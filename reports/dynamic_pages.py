@@ -211,12 +211,12 @@ def _design_page(results):
     value = f"log det C = {r.value:.4f}" if r.criterion == "D" else f"{r.criterion} = {r.value:.4e}"
     _text(fig, 0.04, 0.86 - h, (
         f"{plan.table.note[0].upper() + plan.table.note[1:]} ({'readings' if plan.pairs else 'sampling times'}), by "
-        f"the {r.criterion}-criterion of the Gauss-Newton covariance C of ({names}; {criteria_units(results.study)}) "
-        f"planned at the {plan.variant} "
+        f"the {r.criterion}-criterion of the Gauss-Newton covariance C of ({names}) planned at the {plan.variant} "
         f"estimate for the study's {len(results.study.inputs)} experiments, every instrument reading at each chosen "
         f"time. Chosen: {', '.join(r.sensors)} (green), {value}, "
         f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). The tests of "
-        "Algorithm 1 use every reading of the data; the design is for the next campaign."),
+        f"Algorithm 1 use every reading of the data; the design is for the next campaign. Criteria: "
+        f"{criteria_units(results.study)}."),
         size=9)
     ax2 = fig.add_axes([0.08, 0.1, 0.84, 0.16])
     time_design_plot(plan, model, ax=ax2)
