@@ -162,7 +162,9 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 40
     model = study.models[variant]
     data = study.data[variant]
     horizon = model.horizon if model.horizon is not None else float(data.union_times[-1])
-    t = np.unique(np.r_[np.linspace(0.0, horizon, n_fine), data.union_times])
+    fine, d = np.linspace(0.0, horizon, n_fine), np.asarray(data.union_times, float)
+    near = np.min(np.abs(fine[:, None] - d[None, :]), axis=1) <= 1e-9 * max(horizon, 1.0)   # 1.4000000000000001
+    t = np.unique(np.r_[fine[~near], d])
     sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
     cm, err = controlled_mesh(model, est.p, study.inputs, t, sigma)
     Y = solve_states(cm, est.p, study.inputs)

@@ -101,3 +101,17 @@ def test_a_fit_whose_error_is_not_bounded_says_so_in_red(reactor):
         assert red and all(matplotlib.colors.to_hex(t.get_color()) == matplotlib.colors.to_hex("tab:red")
                            for t in red)
     plt.close("all")
+
+
+def test_trajectory_grid_merges_times_that_differ_by_rounding_and_states_its_error(reactor):
+    """401 points over 2 h put 1.4000000000000001 next to the sampling time 1.4: one time, not a
+    collocation error; the caption reads the grid's discretisation error the study computed."""
+    import matplotlib.pyplot as plt
+    from mudoe.dynamic_runs import trajectories
+    from reports.dynamic_pages import _trajectory_pages
+    tr = trajectories(reactor.study, reactor.estimates["isothermal"], "isothermal", n_fine=401)
+    assert 1.4 in tr.t and tr.t.size == 401 and 0 <= tr.error_sigma <= tr.tol_sigma
+    r = dataclasses.replace(reactor, trajectories={"isothermal": tr})
+    words = " ".join(t.get_text() for t in _trajectory_pages(r)[0].texts).replace("\n", " ")
+    assert f"discretisation error at most {100 * tr.error_sigma:.2g} % of sigma, below 1 %" in words
+    plt.close("all")
