@@ -108,8 +108,7 @@ def _text(fig, x, y, text, width=150, size=9, **kw):
 
 
 def _chunks(n: int, size: int) -> list[range]:
-    """range(0, n) cut into the fewest pieces of at most ``size``, as even as possible (27 rows of at
-    most 25: 14 + 13, never 25 + 2); one empty piece when n = 0."""
+    """range(0, n) in the fewest, most even pieces of at most ``size`` (27 by 25: 14 + 13); [range(0)] if n = 0."""
     k = -(-n // size)
     edges = [round(i * n / k) for i in range(k + 1)] if k else []
     return [range(a, b) for a, b in zip(edges, edges[1:])] or [range(0)]
@@ -269,6 +268,7 @@ def _oed_page(results):
 
 
 def _estimate_pages(results):
+    from .dynamic_pages import discretisation_lines
     from .tables import PARAMS_PER_TABLE, content_widths, draw_table, estimate_rows
     n_p = len({n for m in results.study.models.values() for n in m.param_names})   # variants may differ
     pparts = _chunks(n_p, PARAMS_PER_TABLE)
@@ -284,29 +284,12 @@ def _estimate_pages(results):
             ax = fig.add_axes([0.04, 0.90 - h, 0.92, h])
             widths, size = content_widths(head, rows, 8, 0.92 * PAGE_SIZE[0])     # every page of a part alike
             draw_table(ax, head, chunk, fontsize=size, col_widths=widths)
-            _mesh_lines(fig, results, 0.90 - h - 0.03)
+            discretisation_lines(fig, results, 0.90 - h - 0.03)
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)
             figs.append(fig)
     return figs
-
-
-def _mesh_lines(fig, results, y):
-    """Under the estimates of a dynamic study: the discretisation of each fit on all study data (red when
-    its error is not bounded), as the study recorded it (``results.discretisation``)."""
-    mesh = getattr(results, "discretisation", None) or {}
-    if not mesh:
-        return
-    fig.text(0.04, y, "Discretisation of the fits on all study data", fontsize=9, weight="bold", va="top")
-    y -= 0.025
-    for v, m in mesh.items():
-        bad = not m.bounded
-        y -= 0.019 * _text(fig, 0.04, y, f"{v}: {m.text()}", width=170, size=8.5,
-                           **(dict(color="tab:red", weight="bold") if bad else {})) + 0.006
-    _text(fig, 0.04, y, "Every fit of a split (calibration, validation, pooled) controls its own mesh the same "
-          "way; a split one of whose fits could not bound its error is undecided, never a rejection.",
-          width=170, size=8, color="0.3")
 
 
 def _ellipse_pages(results):

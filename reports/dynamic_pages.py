@@ -15,7 +15,7 @@ from functools import partial
 
 import numpy as np
 
-__all__ = ["trajectory_plot", "residual_time_plot", "time_design_plot", "dynamic_pages"]
+__all__ = ["trajectory_plot", "residual_time_plot", "time_design_plot", "dynamic_pages", "discretisation_lines"]
 
 #: experiments (rows) per trajectory page and instruments (columns)
 _ROWS, _COLS = 3, 4
@@ -117,9 +117,28 @@ def _page(title):
     return fig
 
 
-def _text(fig, x, y, text, width=175, size=8):
+def _text(fig, x, y, text, width=175, size=8, **kw) -> int:
+    """Wrapped text from (x, y) down; returns its number of lines."""
     width = min(width, int(175 * 8 / size))          # the page's width at this font size
-    fig.text(x, y, "\n".join(textwrap.wrap(text, width)), va="top", ha="left", fontsize=size)
+    lines = textwrap.wrap(text, width)
+    fig.text(x, y, "\n".join(lines), va="top", ha="left", fontsize=size, **kw)
+    return len(lines)
+
+
+def discretisation_lines(fig, results, y) -> None:
+    """Under the estimates of a dynamic study, from ``y`` down: the discretisation of each fit on all study
+    data as the study recorded it (``results.discretisation``), in red when its error is not bounded."""
+    mesh = getattr(results, "discretisation", None) or {}
+    if not mesh:
+        return
+    fig.text(0.04, y, "Discretisation of the fits on all study data", fontsize=9, weight="bold", va="top")
+    y -= 0.025
+    for v, m in mesh.items():
+        red = {} if m.bounded else dict(color="tab:red", weight="bold")
+        y -= 0.019 * _text(fig, 0.04, y, f"{v}: {m.text()}", width=170, size=8.5, **red) + 0.006
+    _text(fig, 0.04, y, "Every fit of a split (calibration, validation, pooled) controls its own mesh the same "
+          "way; a split one of whose fits could not bound its error is undecided, never a rejection.",
+          width=170, size=8, color="0.3")
 
 
 def _chosen(results) -> tuple:
