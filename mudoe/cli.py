@@ -370,7 +370,8 @@ def _report(study, results, args, progress, out) -> int:
         results.notes.append(f"detection stopped: {exc}")
     run_diagnosis(study, results, progress)
     if getattr(study, "is_dynamic", False):  # what the dynamic pages draw (mudoe.dynamic_runs)
-        from .dynamic_runs import run_trajectories
+        from .dynamic_runs import run_discretisation, run_trajectories
+        run_discretisation(study, results)
         run_trajectories(study, results, progress)
     results.timing = dict(progress.timing)
     results.timing["analysis_total"] = time.perf_counter() - t0

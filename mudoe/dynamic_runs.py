@@ -18,19 +18,21 @@ Student t when sigma was estimated) quantile.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
-from identification.dynamic_fit import controlled_mesh
+from identification.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
 from .config import ConfigError
 
 __all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "run_trajectories",
-           "plan_dynamic", "design_rows_text", "validation_problem"]
+           "plan_dynamic", "design_rows_text", "validation_problem", "MeshSummary", "mesh_summary",
+           "run_discretisation"]
 
 
 @dataclass(frozen=True)
@@ -151,16 +153,20 @@ class Trajectories:
     level: float
     quantile: str
     residuals: np.ndarray = None     # (n_M, n_q, n_t_data, n_S): (z - h) / sigma at the data's times
+    error_sigma: float = math.nan    # largest discretisation error of h on the fine grid, in sigmas
+    tol_sigma: float = math.nan      # its tolerance
 
 
-def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 121) -> Trajectories:
+def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 401) -> Trajectories:
     """The trajectories of ``variant`` at its estimate (see the module docstring)."""
     model = study.models[variant]
     data = study.data[variant]
     horizon = model.horizon if model.horizon is not None else float(data.union_times[-1])
-    t = np.unique(np.r_[np.linspace(0.0, horizon, n_fine), data.union_times])
+    fine, d = np.linspace(0.0, horizon, n_fine), np.asarray(data.union_times, float)
+    near = np.min(np.abs(fine[:, None] - d[None, :]), axis=1) <= 1e-9 * max(horizon, 1.0)   # 1.4000000000000001
+    t = np.unique(np.r_[fine[~near], d])
     sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
-    cm, _ = controlled_mesh(model, est.p, study.inputs, t, sigma)
+    cm, err = controlled_mesh(model, est.p, study.inputs, t, sigma)
     Y = solve_states(cm, est.p, study.inputs)
     sens = sensitivities(cm, est.p, study.inputs, Y)
     n_q, n_S = study.inputs.shape[0], model.n_S
@@ -178,7 +184,7 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 12
         at = np.searchsorted(t, data.times[j, :n])
         res[:, j, :n] = (data.z[:, j, :n] - h[j, at][None]) / np.asarray(sigma, float)
     return Trajectories(t, h, q * np.sqrt(np.maximum(var, 0)), q * np.sqrt(np.maximum(var, 0) + s2), level, name,
-                        res)
+                        res, float(err), DiscretisationSettings().tol_sigma)
 
 
 def run_trajectories(study, results, progress) -> None:
@@ -186,6 +192,59 @@ def run_trajectories(study, results, progress) -> None:
     for v, est in results.estimates.items():
         with progress.step(f"trajectories of {v} with prediction bands"):
             results.trajectories[v] = trajectories(study, est, v)
+
+
+@dataclass(frozen=True)
+class MeshSummary:
+    """What a report shows of the discretisation of a dynamic fit (from its
+    :class:`identification.dynamic_fit.DiscretisationRecord`).
+
+    degree, n_elements : the Radau IIA mesh; error_pct : largest estimated output error at the
+    readings, % of sigma (tol_pct its tolerance); shift_se : largest linearised shift of the estimate
+    without discretisation error, in standard errors (tol_se its tolerance); bounded : both within
+    their tolerances; reason : why not ("" when bounded).
+    """
+
+    degree: int
+    n_elements: int
+    error_pct: float
+    tol_pct: float
+    shift_se: float
+    tol_se: float
+    bounded: bool
+    reason: str = ""
+    method: str = "Radau IIA collocation"
+
+    def text(self) -> str:
+        """One line: mesh, largest output error in % of sigma, bounded or NOT bounded (and why)."""
+        head = (f"{self.method}, degree {self.degree}, {self.n_elements} elements; largest discretisation error "
+                f"{self.error_pct:.2g} % of sigma")
+        if self.bounded:
+            return (f"{head} (bounded below {self.tol_pct:.2g} %), estimate shifted by at most {self.shift_se:.2g} "
+                    f"standard errors (below {self.tol_se:.2g})")
+        why = self.reason or "no finer mesh was tried"
+        return (f"{head}, estimate shift {self.shift_se:.3g} standard errors: discretisation error NOT bounded "
+                f"(tolerances {self.tol_pct:.2g} % of sigma, {self.tol_se:.2g} standard errors: {why}); the "
+                "estimate and its verdicts may reflect the discretisation, not the model")
+
+
+def mesh_summary(est) -> MeshSummary | None:
+    """The :class:`MeshSummary` of a dynamic estimate (None for an estimate without a discretisation record)."""
+    rec = getattr(est, "extra", {}).get("discretisation")
+    if rec is None:
+        return None
+    shift = np.abs(np.asarray(rec.shift_se, float))
+    return MeshSummary(int(rec.degree), int(rec.n_elements), 100 * float(rec.error_sigma), 100 * float(rec.tol_sigma),
+                       float(shift.max()) if shift.size and np.all(np.isfinite(shift)) else math.nan,
+                       float(rec.tol_se), bool(rec.bounded), rec.reason)
+
+
+def run_discretisation(study, results) -> None:
+    """``results.discretisation``: {variant: MeshSummary} of every fit on all study data (for the report)."""
+    for v, est in results.estimates.items():
+        m = mesh_summary(est)
+        if m is not None:
+            results.discretisation[v] = m
 
 
 def validation_problem(study, results, est, used) -> tuple:

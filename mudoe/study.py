@@ -123,6 +123,7 @@ class StudyResults:
     diagnosis: object = None
     validation: object = None
     trajectories: dict = field(default_factory=dict)     # dynamic studies: {variant: Trajectories}
+    discretisation: dict = field(default_factory=dict)   # dynamic studies: {variant: dynamic_runs.MeshSummary}
     timing: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 

@@ -108,8 +108,10 @@ def _text(fig, x, y, text, width=150, size=9, **kw):
 
 
 def _chunks(n: int, size: int) -> list[range]:
-    """range(0, n) cut into pieces of at most ``size`` (one empty piece when n = 0)."""
-    return [range(a, min(a + size, n)) for a in range(0, n, size)] or [range(0)]
+    """range(0, n) in the fewest, most even pieces of at most ``size`` (27 by 25: 14 + 13); [range(0)] if n = 0."""
+    k = -(-n // size)
+    edges = [round(i * n / k) for i in range(k + 1)] if k else []
+    return [range(a, b) for a, b in zip(edges, edges[1:])] or [range(0)]
 
 
 def _part(k: int, n: int) -> str:
@@ -117,15 +119,15 @@ def _part(k: int, n: int) -> str:
 
 
 def _title_page(results, cfg):
-    from .tables import draw_table, verdict_rows
+    from .tables import content_widths, draw_table, verdict_rows
     fig = _page()
     s = results.study
     fig.text(0.04, 0.95, cfg.report.title, fontsize=18, weight="bold", va="top")
     head, rows, flags = verdict_rows(results)
     h = 0.03 * (len(rows) + 1)
     ax = fig.add_axes([0.04, 0.87 - h, 0.92, h])
-    draw_table(ax, head, rows, flags=flags, fontsize=9, col_widths=[0.10, 0.12, 0.18, 0.24, 0.20, 0.16],
-               title="Verdicts (Algorithm 1)")
+    widths, size = content_widths(head, rows, 9, 0.92 * PAGE_SIZE[0])
+    draw_table(ax, head, rows, flags=flags, fontsize=size, col_widths=widths, title="Verdicts (Algorithm 1)")
     y = 0.87 - h - 0.01
     det = results.detection
     if det is not None:
@@ -148,12 +150,15 @@ def _title_page(results, cfg):
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
     y -= 0.02 * _text(fig, 0.04, y, meta, width=175, size=7.5, color="0.35") + 0.015
-    notes = list(results.notes) + list(s.notes)
+    mesh = getattr(results, "discretisation", None) or {}       # dynamic studies: {variant: MeshSummary}
+    notes = [(nt, False) for nt in list(results.notes) + list(s.notes)]
+    notes += [(f"{v}: {m.text()}", not m.bounded) for v, m in mesh.items()]
     if notes:
         fig.text(0.04, y, "Notes", fontsize=10, weight="bold", va="top")
         y -= 0.03
-        for k, nt in enumerate(notes, 1):
-            y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5) + 0.004
+        for k, (nt, bad) in enumerate(notes, 1):
+            y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5,
+                              **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
           "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if dyn else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
@@ -263,7 +268,8 @@ def _oed_page(results):
 
 
 def _estimate_pages(results):
-    from .tables import PARAMS_PER_TABLE, draw_table, estimate_rows
+    from .dynamic_pages import discretisation_lines
+    from .tables import PARAMS_PER_TABLE, content_widths, draw_table, estimate_rows
     n_p = len({n for m in results.study.models.values() for n in m.param_names})   # variants may differ
     pparts = _chunks(n_p, PARAMS_PER_TABLE)
     figs = []
@@ -276,8 +282,9 @@ def _estimate_pages(results):
             chunk = [rows[i] for i in rp]
             h = min(0.03 * (len(chunk) + 1), 0.82)
             ax = fig.add_axes([0.04, 0.90 - h, 0.92, h])
-            n_rest = len(head) - 4
-            draw_table(ax, head, chunk, fontsize=8, col_widths=[0.06, 0.24, 0.06] + [0.50 / n_rest] * n_rest + [0.14])
+            widths, size = content_widths(head, rows, 8, 0.92 * PAGE_SIZE[0])     # every page of a part alike
+            draw_table(ax, head, chunk, fontsize=size, col_widths=widths)
+            discretisation_lines(fig, results, 0.90 - h - 0.03)
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)

@@ -15,7 +15,7 @@ from functools import partial
 
 import numpy as np
 
-__all__ = ["trajectory_plot", "residual_time_plot", "time_design_plot", "dynamic_pages"]
+__all__ = ["trajectory_plot", "residual_time_plot", "time_design_plot", "dynamic_pages", "discretisation_lines"]
 
 #: experiments (rows) per trajectory page and instruments (columns)
 _ROWS, _COLS = 3, 4
@@ -117,9 +117,28 @@ def _page(title):
     return fig
 
 
-def _text(fig, x, y, text, width=175, size=8):
+def _text(fig, x, y, text, width=175, size=8, **kw) -> int:
+    """Wrapped text from (x, y) down; returns its number of lines."""
     width = min(width, int(175 * 8 / size))          # the page's width at this font size
-    fig.text(x, y, "\n".join(textwrap.wrap(text, width)), va="top", ha="left", fontsize=size)
+    lines = textwrap.wrap(text, width)
+    fig.text(x, y, "\n".join(lines), va="top", ha="left", fontsize=size, **kw)
+    return len(lines)
+
+
+def discretisation_lines(fig, results, y) -> None:
+    """Under the estimates of a dynamic study, from ``y`` down: the discretisation of each fit on all study
+    data as the study recorded it (``results.discretisation``), in red when its error is not bounded."""
+    mesh = getattr(results, "discretisation", None) or {}
+    if not mesh:
+        return
+    fig.text(0.04, y, "Discretisation of the fits on all study data", fontsize=9, weight="bold", va="top")
+    y -= 0.025
+    for v, m in mesh.items():
+        red = {} if m.bounded else dict(color="tab:red", weight="bold")
+        y -= 0.019 * _text(fig, 0.04, y, f"{v}: {m.text()}", width=170, size=8.5, **red) + 0.006
+    _text(fig, 0.04, y, "Every fit of a split (calibration, validation, pooled) controls its own mesh the same "
+          "way; a split one of whose fits could not bound its error is undecided, never a rejection.",
+          width=170, size=8, color="0.3")
 
 
 def _chosen(results) -> tuple:
@@ -132,11 +151,15 @@ def _trajectory_pages(results):
     s = results.study
     for v, traj in results.trajectories.items():
         model, data = s.models[v], s.data[v]
-        rows = [range(a, min(a + _ROWS, data.n_q)) for a in range(0, data.n_q, _ROWS)]
+        k = -(-data.n_q // _ROWS)                       # pages, the experiments shared evenly (4: 2 + 2)
+        edges = [round(i * data.n_q / k) for i in range(k + 1)]
+        rows = [range(a, b) for a, b in zip(edges, edges[1:])]
         for n, part in enumerate(rows):
             part_of = f" ({n + 1}/{len(rows)})" if len(rows) > 1 else ""
             fig = _page(f"Trajectories of model {v} against time{part_of}")
-            axes = fig.subplots(len(part), min(model.n_S, _COLS), squeeze=False)
+            axes = fig.subplots(max(len(p) for p in rows), min(model.n_S, _COLS), squeeze=False)
+            for ax in axes[len(part):].ravel():         # every page's panels the same height
+                ax.axis("off")
             for r, j in enumerate(part):
                 for k in range(min(model.n_S, _COLS)):
                     trajectory_plot(traj, data, model, j, k, _chosen(results), ax=axes[r, k])
@@ -146,12 +169,21 @@ def _trajectory_pages(results):
                        bbox_to_anchor=(0.5, 0.075))
             fig.subplots_adjust(left=0.07, right=0.98, top=0.9, bottom=0.2, wspace=0.22, hspace=0.55)
             _text(fig, 0.04, 0.06, f"Measured readings and the outputs h(x(t)) of {v} at its estimate on a fine time "
-                  f"grid (Radau IIA collocation, error below 1 % of sigma). Bands at {100 * traj.level:g} %: h +- q "
+                  f"grid ({_grid_error(traj)}). Bands at {100 * traj.level:g} %: h +- q "
                   "sqrt(g^T C g) for the mean (shaded) and h +- q sqrt(g^T C g + sigma^2) for a new reading "
                   f"(dashed), g = dh/dp exact, C the second-order covariance, q the {traj.quantile} quantile. Red "
                   "triangles: the sampling times chosen by the design (for the next campaign).")
             figs.append(fig)
     return figs
+
+
+def _grid_error(traj) -> str:
+    """How accurate the drawn outputs are, as the study computed it (``Trajectories.error_sigma``)."""
+    err, tol = getattr(traj, "error_sigma", np.nan), getattr(traj, "tol_sigma", np.nan)
+    if not np.isfinite(err):
+        return "Radau IIA collocation"
+    return (f"Radau IIA collocation, discretisation error at most {100 * err:.2g} % of sigma"
+            + (f", below {100 * tol:.2g} %" if np.isfinite(tol) and err <= tol else ""))
 
 
 def _residual_pages(results):
@@ -176,14 +208,15 @@ def _residual_pages(results):
 
 
 def _design_page(results):
-    from .tables import draw_table
+    from .tables import criteria_units, draw_table
     fig = _page("Sampling-time design")
     plan = getattr(results, "plan", None)
     if plan is None or getattr(plan, "mode", "") != "times":
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig
     r, model = plan.result, results.study.models[plan.variant]
-    head = ["rank", "log det C", "trace C", "max eig C", "sampling times" if not plan.pairs else "readings", ""]
+    head = ["rank", "log det C", "trace C", "max eig C",
+            f"sampling times{_unit(model.time_unit)}" if not plan.pairs else "readings", ""]
     rows, chosen = [], []
     for k, row in enumerate(plan.table.rows, 1):
         is_c = tuple(row.sensors) == tuple(r.sensors)
@@ -201,7 +234,8 @@ def _design_page(results):
         f"estimate for the study's {len(results.study.inputs)} experiments, every instrument reading at each chosen "
         f"time. Chosen: {', '.join(r.sensors)} (green), {value}, "
         f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). The tests of "
-        "Algorithm 1 use every reading of the data; the design is for the next campaign."),
+        f"Algorithm 1 use every reading of the data; the design is for the next campaign. Criteria: "
+        f"{criteria_units(results.study)}."),
         size=9)
     ax2 = fig.add_axes([0.08, 0.1, 0.84, 0.16])
     time_design_plot(plan, model, ax=ax2)

@@ -14,7 +14,8 @@ from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, goodness_of_fit, 
 
 __all__ = ["fmt_alpha", "normality_rows", "normality_widths", "normality_checks", "normality_labels",
            "sigma_display", "STUDY_SERIES", "ALL_SERIES", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
-           "draw_table", "sigma_rows", "verdict_rows", "smallest_alpha", "criteria_units", "PARAMS_PER_TABLE"]
+           "draw_table", "sigma_rows", "verdict_rows", "smallest_alpha", "criteria_units", "PARAMS_PER_TABLE",
+           "content_widths"]
 
 
 def fmt_alpha(a: float) -> str:
@@ -283,6 +284,47 @@ def alpha_rows(det, statistic: str, start: int = 0, stop: int | None = None) -> 
         rows.append(verdict)
         flags.append(vf)
     return head, rows, flags
+
+
+#: left padding of a matplotlib table cell as a fraction of its width (matplotlib.table.Cell.PAD)
+_CELL_PAD = 0.1
+#: smallest font size content_widths shrinks to before it lets the widest columns share the rest
+_MIN_FONT = 6.5
+
+
+def _text_width_pt(text: str, size: float, bold: bool = False) -> float:
+    """Width in points of one line of ``text`` in the default sans-serif font at ``size`` points."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextToPath
+    prop = FontProperties(size=size, weight="bold" if bold else "normal")
+    return TextToPath().get_text_width_height_descent(text, prop, ismath=False)[0]
+
+
+def content_widths(head, rows, fontsize: float, width_in: float) -> tuple[list, float]:
+    """(column widths as fractions of the table, font size) that show every cell in full.
+
+    Each column gets w_c = (widest line of its header (bold) and cells + 6 pt) / (1 - PAD), PAD
+    the cell's left padding; the room left over is shared equally.  When the columns need more
+    than ``width_in`` inches, the font shrinks (not below 6.5 pt) until they fit; below that the
+    widths are scaled down proportionally (the widest cells then touch their border).
+    """
+    def natural(size):
+        w = []
+        for c in range(len(head)):
+            lines = [(ln, True) for ln in str(head[c]).split("\n")]
+            lines += [(ln, False) for r in rows for ln in str(r[c]).split("\n")]
+            w.append((max(_text_width_pt(t, size, b) for t, b in lines) + 6.0) / (1 - _CELL_PAD))
+        return np.array(w)
+
+    total = 72.0 * width_in
+    size = float(fontsize)
+    w = natural(size)
+    while w.sum() > total and size > _MIN_FONT:
+        size = max(_MIN_FONT, size - 0.5)
+        w = natural(size)
+    if w.sum() <= total:
+        w = w + (total - w.sum()) / len(w)
+    return list(w / w.sum()), size
 
 
 def _text_table(head, rows) -> str:
