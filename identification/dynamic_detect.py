@@ -36,7 +36,7 @@ from .errors import DataError
 from .measurements import Measurements
 from .splits import Split, SplitError
 
-__all__ = ["DynamicSplit", "time_window_splits", "early_late_split", "detect_dynamic", "flat_split"]
+__all__ = ["DynamicSplit", "time_window_splits", "early_late_dynamic_split", "detect_dynamic", "flat_split"]
 
 
 @dataclass(frozen=True)
@@ -85,8 +85,15 @@ def time_window_splits(edges) -> tuple:
                  for v in e)
 
 
-def early_late_split(data: DynamicMeasurements) -> DynamicSplit:
-    """Early against late: the readings before the median sampling time against the others."""
+def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
+    """Early against late: the readings at t < t_c against those at t >= t_c, t_c the sampling time at
+    index n_t // 2 of the campaign's (union of) sampling times, as a :class:`DynamicSplit` for
+    :func:`detect_dynamic` on the DynamicModel (each fit with its own discretisation control).
+
+    Not :func:`identification.splits.early_late_split`, which masks the (sensor, time) columns of the flat
+    data for the static tests on a collocated model, and cuts at t <= the time at index (n_t - 1) // 2
+    (the same partition for an even number of sampling times, one time more in the early set for an odd one).
+    """
     t = data.union_times
     cut = float(t[(t.size) // 2])
     return DynamicSplit(f"early (t < {cut:g}) vs late", None, None, (-math.inf, cut), (cut, math.inf),

@@ -191,7 +191,7 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
 
 def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
     """The splits of [splits]: custom and random over the experiments, time windows, early vs late."""
-    from identification.dynamic_detect import early_late_split, time_window_splits
+    from identification.dynamic_detect import early_late_dynamic_split, time_window_splits
     s = cfg.splits
     if s.scenarios:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
@@ -208,7 +208,7 @@ def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
                                f"(the sampling times run from {t[0]:g} to {t[-1]:g})")
         out += list(time_window_splits(s.time_windows))
     if s.early_late:
-        out.append(early_late_split(data))
+        out.append(early_late_dynamic_split(data))
     for sp in out:
         if isinstance(sp, Split):
             sp.check(data.n_q, data.n_M)
