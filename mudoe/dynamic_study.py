@@ -197,6 +197,10 @@ def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
                            "scenarios = [] and use [[splits.custom]] (experiments), [splits.random], time_windows "
                            "or early_late")
+    cols = [c.name for c in s.custom if c.cal_sensors is not None or c.val_sensors is not None]
+    if cols:
+        raise config_error(cfg, "splits.custom", "cal_sensors", f"split {cols[0]!r}: a dynamic study splits the "
+                           "sampling times with [splits] time_windows or early_late, not by sensor columns")
     out = [Split(c.name, c.cal_inputs, c.val_inputs, description="experiments") for c in s.custom]
     if s.random.n:
         out += list(random_splits(data.n_q, s.random.n, s.random.cal_fraction, s.random.seed))
