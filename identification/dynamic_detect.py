@@ -36,7 +36,7 @@ from .errors import DataError
 from .measurements import Measurements
 from .splits import Split, SplitError
 
-__all__ = ["DynamicSplit", "time_window_splits", "early_late_split", "detect_dynamic"]
+__all__ = ["DynamicSplit", "time_window_splits", "early_late_dynamic_split", "detect_dynamic", "flat_split"]
 
 
 @dataclass(frozen=True)
@@ -85,12 +85,49 @@ def time_window_splits(edges) -> tuple:
                  for v in e)
 
 
-def early_late_split(data: DynamicMeasurements) -> DynamicSplit:
-    """Early against late: the readings before the median sampling time against the others."""
+def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
+    """Early against late: the readings at t < t_c against those at t >= t_c, t_c the sampling time at
+    index n_t // 2 of the campaign's (union of) sampling times, as a :class:`DynamicSplit` for
+    :func:`detect_dynamic` on the DynamicModel (each fit with its own discretisation control).
+
+    Not :func:`identification.splits.early_late_split`, which masks the (sensor, time) columns of the flat
+    data for the static tests on a collocated model, and cuts at t <= the time at index (n_t - 1) // 2
+    (the same partition for an even number of sampling times, one time more in the early set for an odd one).
+    """
     t = data.union_times
     cut = float(t[(t.size) // 2])
     return DynamicSplit(f"early (t < {cut:g}) vs late", None, None, (-math.inf, cut), (cut, math.inf),
                         "early vs late")
+
+
+def flat_split(sp, pairs, n_q: int) -> Split:
+    """The split ``sp`` (:class:`DynamicSplit`, or a :class:`Split` returned unchanged) as a split of the
+    flat data of a dynamic model (columns ``pairs`` = (sensor, time), rows the ``n_q`` experiments): the
+    calibration columns are the pairs with t in ``cal_window`` (lo <= t < hi), likewise validation.
+
+    Raises
+    ------
+    SplitError
+        A window holds no sampling time, or an experiment index is out of range.
+    """
+    if isinstance(sp, Split):
+        return sp
+    if not isinstance(sp, DynamicSplit):
+        raise TypeError(f"splits: expected Split or DynamicSplit objects, got {type(sp).__name__}")
+    t = np.array([float(tp) for _, tp in pairs])
+    sets = []
+    for what, exps, win in (("calibration", sp.cal_experiments, sp.cal_window),
+                            ("validation", sp.val_experiments, sp.val_window)):
+        bad = [j for j in exps or () if not 0 <= j < n_q]
+        if bad:
+            raise SplitError(f"split {sp.name!r}: {what} experiment(s) {bad} out of range (0-based, {n_q} experiments)")
+        cols = None if win is None else np.flatnonzero((t >= win[0]) & (t < win[1])).tolist()
+        if cols is not None and not cols:
+            raise SplitError(f"split {sp.name!r}: the {what} window {list(win)} holds no sampling time; the times "
+                             f"are {np.unique(t).tolist()}")
+        sets.append((list(range(n_q)) if exps is None else list(exps), cols))
+    (qc, kc), (qv, kv) = sets
+    return Split(sp.name, qc, qv, None, None, sp.description or "dynamic split", kc, kv)
 
 
 def _windows(splits) -> np.ndarray:

@@ -1152,7 +1152,7 @@ def _validate_settings(settings: MonteCarloSettings | None, tol: float | None, *
 def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=None, sigma=None, n_M: int = 2,
              generator: Callable | None = None, weights=None, n_rep: int | None = None, tol: float | None = None,
              seed: int | None = None, workers: int | None = None, scheduler=None, progress: bool | None = None,
-             settings: MonteCarloSettings | None = None, name: str | None = None) -> MonteCarloResult:
+             settings: MonteCarloSettings | None = None, name: str | None = None, data=None) -> MonteCarloResult:
     """Front door (``mudoe validate``): a size study without ``generator``, a power study with one.
 
     ``name`` labels the model in tables (size study; default the model's own name).
@@ -1166,12 +1166,22 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     ``n_rep``, ``tol``, ``seed``, ``workers``, ``scheduler`` and ``progress`` (None: the
     defaults of :class:`MonteCarloSettings`, TOL 5 %) or ``settings`` with all of them; giving
     ``settings`` and one of those keywords raises TypeError.
+
+    A dynamic model (:class:`models.dynamic.DynamicModel`) takes its campaign ``data``
+    (DynamicMeasurements) instead of ``inputs`` / ``sigma``, instrument ``weights``, and splits by
+    experiment, time window or early against late; the size study runs on its collocation at the
+    campaign fit (:func:`identification.dynamic_validate.validate_dynamic`; ``p_true`` defaults to
+    that fit).
     """
-    if isinstance(model, DynamicModel):
-        raise DataError("model: a dynamic model is validated on its collocation: est = identify(model, data, p0); "
-                        "validate(est.model, splits, p_true=..., inputs=est.data.inputs, sigma=est.data.sigma, ...)")
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
+    if isinstance(model, DynamicModel):
+        if generator is not None or inputs is not None or sigma is not None:
+            raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
+                            "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")
+        from .dynamic_validate import validate_dynamic
+        return validate_dynamic(model, data, splits, p0, p_true=p_true, n_M=n_M, weights=weights, settings=settings,
+                                name=name)
     if generator is None:
         if isinstance(model, Mapping):
             raise DataError("model: a size study takes one model (the data generator itself)")

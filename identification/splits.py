@@ -417,7 +417,11 @@ def early_late_split(pairs, n_q: int, t_split: float | None = None, inputs: Sequ
     """Calibrate on the early sampling times t <= ``t_split``, validate on the late ones t > t_split.
 
     ``t_split`` defaults to the median of the distinct sampling times (about half of the
-    times in each set)."""
+    times in each set).
+
+    A :class:`Split` of the columns of the flat data (tests on the collocated model ``est.model``);
+    for :func:`identification.detect` on the DynamicModel itself (a fit per set with its own
+    discretisation control) use :func:`identification.dynamic_detect.early_late_dynamic_split`."""
     t = _pair_times(pairs)
     times = np.unique(t)
     if times.size < 2:

@@ -43,6 +43,9 @@ def table_line(text: str, table: str, k: int, key: str) -> int | None:
     return None
 
 
+_SPLIT_KEYS = ("cal_inputs", "val_inputs", "cal_series", "val_series", "cal_sensors", "val_sensors")
+
+
 def _custom_error(cfg, k: int, key: str, msg: str):
     """A ConfigError naming the k-th [[splits.custom]] table and ``key``."""
     from .config import ConfigError
@@ -79,10 +82,9 @@ def check_config(cfg, error) -> None:
     from identification.splits import Split, SplitError
     for k, c in enumerate(cfg.splits.custom):
         try:
-            Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series)
+            Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "", c.cal_sensors, c.val_sensors)
         except SplitError as exc:
-            key = next((f for f in ("cal_inputs", "val_inputs", "cal_series", "val_series") if f in str(exc)),
-                       "val_inputs")
+            key = next((f for f in _SPLIT_KEYS if f in str(exc)), "val_inputs")
             raise _custom_error(cfg, k, key, str(exc)) from None
 
 
@@ -142,11 +144,11 @@ def check_data(cfg, campaign, splits, n_p: int) -> None:
     for sp in splits:
         try:
             sp.check(campaign.n_q, len(series), n_p, 1)
+            sp.check_sensors(len(campaign.sensors))
         except SplitError as exc:
             msg = f"{exc} (the data: {campaign.n_q} inputs, {len(series)} series)"
             if sp.name in custom:
-                key = next((f for f in ("cal_inputs", "val_inputs", "cal_series", "val_series") if f in str(exc)),
-                           "cal_inputs")
+                key = next((f for f in _SPLIT_KEYS if f in str(exc)), "cal_inputs")
                 raise _custom_error(cfg, custom[sp.name], key, msg) from None
             section, key = ("splits.random", "n") if sp.name.startswith("random ") else ("splits", "scenarios")
             raise config_error(cfg, section, key, msg) from None

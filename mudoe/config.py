@@ -304,13 +304,16 @@ class ParameterConfig:
 
 @dataclass(frozen=True)
 class CustomSplitConfig:
-    """A user split: 0-based input (and optionally series) indices of both sets."""
+    """A user split: 0-based input (and optionally series and sensor column) indices of both sets
+    (:class:`identification.splits.Split`)."""
 
     name: str
     cal_inputs: tuple[int, ...]
     val_inputs: tuple[int, ...]
     cal_series: tuple[int, ...] | None = None
     val_series: tuple[int, ...] | None = None
+    cal_sensors: tuple[int, ...] | None = None
+    val_sensors: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)

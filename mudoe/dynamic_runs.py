@@ -249,15 +249,14 @@ def run_discretisation(study, results) -> None:
 
 def validation_problem(study, results, est, used) -> tuple:
     """(model, splits, weights) of ``mudoe validate`` on a dynamic study: the collocated model of the
-    estimate (mesh controlled at p̂) over its (sensor, time) outputs, the splits by experiment (the
-    time-window splits are not simulated; a note says so), the instruments ``used`` at every time."""
-    from identification.splits import Split
-    splits = tuple(sp for sp in study.splits if isinstance(sp, Split))
-    if not splits:
-        raise ConfigError(f"{study.cfg.path}: [splits] `mudoe validate` on a dynamic study simulates the splits by "
-                          "experiment ([[splits.custom]], [splits.random]); the study has only splits by time")
-    skipped = [sp.name for sp in study.splits if not isinstance(sp, Split)]
-    if skipped:
-        results.notes.append(f"validate: the splits by time ({', '.join(skipped)}) are not in the Monte Carlo study")
+    estimate (mesh controlled at p̂) over its (sensor, time) outputs, every split of the study (by
+    experiment; by time window and early against late as splits of the (sensor, time) columns,
+    :func:`identification.dynamic_detect.flat_split`), the instruments ``used`` at every time."""
+    from identification.dynamic_detect import flat_split
+    from identification.splits import SplitError
+    try:
+        splits = tuple(flat_split(sp, est.model.outputs, est.data.n_q) for sp in study.splits)
+    except SplitError as exc:
+        raise ConfigError(f"{study.cfg.path}: [splits] {exc}") from None
     w = np.array([1.0 if n.split("@")[0] in used else 0.0 for n in est.sensors])
     return est.model, splits, w

@@ -191,12 +191,16 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
 
 def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
     """The splits of [splits]: custom and random over the experiments, time windows, early vs late."""
-    from identification.dynamic_detect import early_late_split, time_window_splits
+    from identification.dynamic_detect import early_late_dynamic_split, time_window_splits
     s = cfg.splits
     if s.scenarios:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
                            "scenarios = [] and use [[splits.custom]] (experiments), [splits.random], time_windows "
                            "or early_late")
+    cols = [c.name for c in s.custom if c.cal_sensors is not None or c.val_sensors is not None]
+    if cols:
+        raise config_error(cfg, "splits.custom", "cal_sensors", f"split {cols[0]!r}: a dynamic study splits the "
+                           "sampling times with [splits] time_windows or early_late, not by sensor columns")
     out = [Split(c.name, c.cal_inputs, c.val_inputs, description="experiments") for c in s.custom]
     if s.random.n:
         out += list(random_splits(data.n_q, s.random.n, s.random.cal_fraction, s.random.seed))
@@ -208,7 +212,7 @@ def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
                                f"(the sampling times run from {t[0]:g} to {t[-1]:g})")
         out += list(time_window_splits(s.time_windows))
     if s.early_late:
-        out.append(early_late_split(data))
+        out.append(early_late_dynamic_split(data))
     for sp in out:
         if isinstance(sp, Split):
             sp.check(data.n_q, data.n_M)

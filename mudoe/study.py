@@ -275,7 +275,8 @@ def _splits(cfg: StudyConfig, n_q: int, q_set) -> tuple:
         excl = tuple(int(j) for j in np.flatnonzero(np.asarray(q_set) == 0)) if s.random.exclude_zero_force else ()
         out += list(random_splits(n_q, s.random.n, s.random.cal_fraction, s.random.seed, exclude=excl))
     for c in s.custom:
-        out.append(Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "user split"))
+        out.append(Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "user split", c.cal_sensors,
+                         c.val_sensors))
     names = [sp.name for sp in out]
     if len(set(names)) != len(names):
         raise config_error(cfg, "splits.custom" if s.custom else "splits", "name" if s.custom else "scenarios",

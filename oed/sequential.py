@@ -57,15 +57,30 @@ class SequentialResult:
         return "\n".join(lines)
 
 
+def _per_instrument(model, data, F, S):
+    r"""F_l = \sum_t F_{(l, t)}, S_l = \sum_t S_{(l, t)}: the (sensor, time) contributions of a dynamic
+    model's data (``data.pairs`` order) summed per instrument l (n_S, n_p, n_p)."""
+    idx = np.array([model.sensors.index(s) for s, _ in data.pairs])
+    out = []
+    for M in (F, S):
+        acc = np.zeros((model.n_S,) + M.shape[1:])
+        np.add.at(acc, idx, M)
+        out.append(acc)
+    return tuple(out)
+
+
 def sequential_design(model, experiments: Sequence, p_nominal, initial=None, criterion="E",
                       kind="gauss_newton", n_sensors=None, alpha: float = 0.05, **design_kw) -> SequentialResult:
     """Re-solve the sensor selection with the parameters identified from each experiment.
 
     Parameters
     ----------
-    model : models.Model
-    experiments : sequence of identification.Measurements
+    model : models.Model or models.dynamic.DynamicModel
+    experiments : sequence of identification.Measurements (DynamicMeasurements for a dynamic model)
         The experiments in the order they are made (known sigma, all candidate sensors present).
+        A dynamic model is designed per instrument (each measured at every sampling time of the
+        experiment): F_l = sum_t F_(l, t) over the (sensor, time) contributions of its collocation
+        (exact, since the weight of every (l, t) pair is w_l), and identified with those weights.
     p_nominal : array_like (n_p,)
         Parameters for the first design (and the start value of every identification).
     initial : Measurements, optional
@@ -97,6 +112,8 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
     steps = []
     for data in experiments:
         F, S = information_contributions(model, info_data, p_design)
+        if getattr(model, "is_dynamic", False):
+            F, S = _per_instrument(model, info_data, F, S)
         design = select_sensors_from_information(F, S, criterion=criterion, kind=kind, n_sensors=n_sensors,
                                                  sensor_names=model.sensors, **design_kw)
         est = identify(model, data, p_nominal, weights=np.asarray(design.weights, float))

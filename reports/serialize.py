@@ -15,8 +15,8 @@ import numpy as np
 
 from .tables import ALL_SERIES, normality_labels, sigma_display
 
-__all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "normality_dict", "oed_dict", "validation_dict", "study_dict",
-           "results_dict", "package_versions", "diagnosis_dict"]
+__all__ = ["jsonable", "dumps", "estimate_dict", "detection_dict", "split_dict", "normality_dict", "oed_dict",
+           "validation_dict", "study_dict", "results_dict", "package_versions", "diagnosis_dict"]
 
 
 def package_versions() -> dict:
@@ -83,6 +83,15 @@ def normality_dict(chk, units=None, data_name: str = "series") -> dict:
                 note=chk.note)
 
 
+def split_dict(s) -> dict:
+    """A :class:`identification.splits.Split` as a dict of its fields (``Split(**d)`` rebuilds it);
+    ``cal_sensors`` / ``val_sensors`` are the 0-based sensor columns of each set (None: all), e.g. the
+    (sensor, time) columns of a split by sampling time."""
+    return dict(name=s.name, cal_inputs=s.cal_inputs, val_inputs=s.val_inputs, cal_series=s.cal_series,
+                val_series=s.val_series, description=s.description, cal_sensors=s.cal_sensors,
+                val_sensors=s.val_sensors)
+
+
 def detection_dict(det, units=None, data_name: str = "series") -> dict:
     """Every split test and every decision of a :class:`identification.detect.DetectionResult`.
 
@@ -99,8 +108,7 @@ def detection_dict(det, units=None, data_name: str = "series") -> dict:
         dd["primary"] = (d.statistic == det.settings.statistic and d.correction == det.settings.correction)
     norm = [dict(model=m, **normality_dict(c, units, data_name)) for m, c in det.normality]
     return dict(settings=jsonable(det.settings), models=list(det.models),
-                splits=[dict(name=s.name, cal_inputs=s.cal_inputs, val_inputs=s.val_inputs, cal_series=s.cal_series,
-                             val_series=s.val_series, description=s.description) for s in det.splits],
+                splits=[split_dict(s) for s in det.splits],
                 verdicts=dict(det.verdicts), tests=tests, decisions=decisions, normality=norm,
                 design=[dict(model=m, sensors=u, how=h) for m, u, h in det.design], notes=list(det.notes))
 

@@ -194,5 +194,7 @@ def test_discretisation_error_is_not_reported_as_model_inadequacy_with_control_b
 def test_validate_on_a_dynamic_model_says_what_to_do(fitted):
     from identification import DataError
     model, _, _ = fitted
-    with pytest.raises(DataError, match="model: a dynamic model is validated on its collocation"):
+    with pytest.raises(DataError, match="a dynamic model is validated by a size study on its campaign: give data="):
         validate(model, [BY_EXPERIMENT], p_true=P_TRUE, inputs=Q, sigma=SIGMA, n_rep=2)
+    with pytest.raises(DataError, match="data: validate on a dynamic model needs the campaign"):
+        validate(model, [BY_EXPERIMENT], p_true=P_TRUE, n_rep=2)

@@ -73,6 +73,17 @@ def test_custom_and_random_splits_parse():
     assert cfg.splits.custom[0].cal_series is None
 
 
+def test_custom_splits_take_sensor_columns_and_check_them():
+    text = ("[splits]\nscenarios = []\n[[splits.custom]]\nname = \"a\"\ncal_inputs = [1, 2]\nval_inputs = [1, 2]\n"
+            "cal_sensors = [0, 1]\nval_sensors = [2]\n")
+    c = parse_config(text, "s.toml").splits.custom[0]
+    assert (c.cal_sensors, c.val_sensors) == ((0, 1), (2,))
+    with pytest.raises(ConfigError, match=r"s.toml:\d+: \[\[splits.custom\]\] val_inputs: .*overlap"):
+        parse_config(text.replace("val_sensors = [2]", "val_sensors = [1, 2]"), "s.toml")
+    with pytest.raises(ConfigError, match=r"s.toml:7: \[splits.custom\] cal_sensors: indices are 0-based"):
+        parse_config(text.replace("cal_sensors = [0, 1]", "cal_sensors = [-1]"), "s.toml")
+
+
 def test_missing_config_file(tmp_path):
     with pytest.raises(ConfigError, match="config file not found"):
         load_config(tmp_path / "nope.toml")

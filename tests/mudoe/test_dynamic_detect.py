@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 
 from identification.detect import detect
-from identification.dynamic_detect import early_late_split, time_window_splits
+from identification.dynamic_detect import early_late_dynamic_split, time_window_splits
 from identification.dynamic_fit import simulate_campaign
 from identification.splits import Split
 from mudoe import example_reactor as R
@@ -20,7 +20,7 @@ def _campaign(seed=3):
 
 def test_detect_dispatches_on_a_dynamic_model():
     m, d = _campaign()
-    splits = [Split("exp 1-2 vs 3-4", [0, 1], [2, 3]), early_late_split(d)] + list(time_window_splits([0.75]))
+    splits = [Split("exp 1-2 vs 3-4", [0, 1], [2, 3]), early_late_dynamic_split(d)] + list(time_window_splits([0.75]))
     res = detect(m, d, splits, R.P_TRUE * 1.1)
     assert [t.cal_label for t in res.tests] == ["experiment(s) 1, 2", "all experiments; t < 1",
                                                 "all experiments; t < 0.75"]

@@ -72,7 +72,9 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
     assert [t["split"] for t in det["tests"]] == ["cool vs hot", "t < 0.7 vs t >= 0.7"]
     assert det["verdicts"]["isothermal"] in ("not rejected", "rejected", "undecided")
     rc, text, _ = _run(capsys, "validate", str(cfg), "--out", str(out), "--runs", "3", "--json")
-    assert rc == 0 and json.loads(text)["n_rep"] == 3          # the split by experiment, on the collocation
+    assert rc == 0 and json.loads(text)["n_rep"] == 3          # every split, on the collocation
+    # both splits of the study: by experiment, and the time window as a split of the (sensor, time) columns
+    assert "2 splits" in json.loads(text)["table"]
     pages = json.loads((out / "results.json").read_text())["pages"]
     words = " ".join(" ".join(p["texts"]) for p in pages)
     assert "chosen sampling times" in words and "time (h)" in words and "cA (mol/L)" in words

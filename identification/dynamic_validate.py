@@ -1,0 +1,74 @@
+r"""Monte Carlo validation (size study) of Algorithm 1 on a dynamic model and its time series.
+
+The campaign is fitted once (:func:`identification.dynamic_fit.identify_dynamic`: Radau IIA collocation
+with the discretisation error controlled at p̂); the size study then runs on that collocated model
+(``est.model``, a static model over the (sensor, time) outputs) with its flat data, as
+:func:`identification.dynamic_detect.detect_dynamic` tests on it:
+
+.. math::
+
+    z^{(r)}_{ijk} = h_{k}(y_j(p^*), p^*, q_j) + \sigma_k \varepsilon^{(r)}_{ijk},\qquad k = (l, t),
+
+every experiment simulated at every sampling time of the campaign (the union of the experiments' times).
+Splits by experiment (:class:`Split`) apply to the rows; splits by time window or early against late
+(:class:`identification.dynamic_detect.DynamicSplit`) become splits of the (sensor, time) columns
+(:func:`identification.dynamic_detect.flat_split`); :class:`Split` objects with sensor columns
+(:func:`identification.splits.time_window_split`) are used as they are.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .dynamic_data import DynamicMeasurements
+from .dynamic_detect import flat_split
+from .dynamic_fit import DiscretisationSettings, identify_dynamic
+from .errors import DataError
+
+__all__ = ["validate_dynamic"]
+
+
+def validate_dynamic(model, data, splits, p0=None, *, p_true=None, n_M: int = 2, weights=None, settings,
+                     name: str | None = None, discretisation: DiscretisationSettings | None = None):
+    """Size study of a dynamic model (see the module docstring).
+
+    Parameters
+    ----------
+    model : models.dynamic.DynamicModel
+    data : DynamicMeasurements          the campaign (known sigma): inputs, sampling times, mesh
+    splits : sequence of Split or DynamicSplit
+    p0 : array_like (n_p,), optional     start values of the campaign fit and of every replication
+                                         (default ``p_true``)
+    p_true : array_like (n_p,), optional truth of the simulated campaigns (default: the campaign fit p̂)
+    n_M : int                            series per simulated campaign
+    weights : array_like (n_S,), optional  instrument weights (each instrument at every sampling time)
+    settings : MonteCarloSettings
+    name : str, optional                 the model's label in tables
+    discretisation : DiscretisationSettings, optional
+
+    Returns
+    -------
+    MonteCarloResult
+    """
+    from .montecarlo import size_study        # same layer; montecarlo.validate dispatches here
+    if not isinstance(data, DynamicMeasurements):
+        raise DataError(f"data: validate on a dynamic model needs the campaign as identification."
+                        f"DynamicMeasurements (inputs, sampling times, sigma), got {type(data).__name__}")
+    if data.sigma is None:
+        raise DataError("data.sigma: a size study simulates noise of known sigma; give sigma with the data")
+    start = p0 if p0 is not None else p_true
+    if start is None:
+        raise DataError("p0, p_true: give start values (p0) or the truth (p_true) of the dynamic model")
+    w = None
+    if weights is not None:
+        w = np.asarray(weights, float).ravel()
+        if w.shape != (model.n_S,):
+            raise DataError(f"weights: expected {model.n_S} instrument weights ({', '.join(model.sensors)}), got "
+                            f"shape {w.shape}")
+    est = identify_dynamic(model, data, start, weights=w, settings=settings.detect.identify,
+                           discretisation=discretisation)
+    cm, flat = est.model, est.data
+    flat_splits = [flat_split(sp, cm.outputs, flat.n_q) for sp in splits]
+    w_flat = None if w is None else np.array([w[model.sensors.index(s)] for s, _ in cm.outputs])
+    truth = est.p if p_true is None else np.asarray(p_true, float).ravel()
+    return size_study(cm, truth, flat.inputs, flat.sigma, flat_splits, None if p0 is None else p0, n_M, w_flat,
+                      settings, name=name or model.name)
