@@ -399,9 +399,14 @@ class _Broker:
     thread only."""
 
     def __init__(self, n_running: int):
-        self._cv = threading.Condition()
+        self._cv = threading.Condition(threading.RLock())
         self._running = n_running
         self._pending = []
+
+    @property
+    def turn(self):
+        """The lock a task of :func:`run_merged` holds while it runs (released while it waits here)."""
+        return self._cv
 
     def call(self, traj: "TrajectoryNumerics", kind: str, p, inputs, *rest):
         slot = {}
@@ -491,13 +496,19 @@ def run_merged(tasks: Sequence[Callable[[], object]]) -> list:
 
     def run(i):
         _LOCAL.broker = broker
-        try:
-            results[i] = tasks[i]()
-        except Exception as exc:                 # noqa: BLE001 - handed back to the caller as the task's result
-            results[i] = exc
-        finally:
-            _LOCAL.broker = None
-            broker.finished()
+        # One thread runs at a time: a task holds the broker's (re-entrant) lock from start to end and
+        # gives it up only while it waits in Broker.call for the merged evaluation.  CasADi is not
+        # thread-safe (building a Function or an Ipopt solver, or calling one, from two threads at
+        # once crashed the process: exit 139/134 in validate on a collocated model), and the merge
+        # needs no concurrency, only a pending call of every running task.
+        with broker.turn:
+            try:
+                results[i] = tasks[i]()
+            except Exception as exc:             # noqa: BLE001 - handed back to the caller as the task's result
+                results[i] = exc
+            finally:
+                _LOCAL.broker = None
+                broker.finished()
 
     threads = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(tasks))]
     for t in threads:
