@@ -73,6 +73,10 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
     assert det["verdicts"]["isothermal"] in ("not rejected", "rejected", "undecided")
     rc, text, _ = _run(capsys, "validate", str(cfg), "--out", str(out), "--runs", "3", "--json")
     assert rc == 0 and json.loads(text)["n_rep"] == 3          # every split, on the collocation
+    # the time-window split's replications are decided (its coverage is a number); the "cool vs hot"
+    # split of this three-experiment config validates on one temperature, where E1, E2 are not identifiable
+    cov = json.loads(text)["coverage"]["isothermal/t < 0.7 vs t >= 0.7"]
+    assert 0.0 <= cov["cal"] <= 1.0 and 0.0 <= cov["val"] <= 1.0, cov
     # both splits of the study: by experiment, and the time window as a split of the (sensor, time) columns
     assert "2 splits" in json.loads(text)["table"]
     pages = json.loads((out / "results.json").read_text())["pages"]
