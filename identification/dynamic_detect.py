@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.collocation import collocate
 from .dynamic_data import DynamicMeasurements
 from .dynamic_fit import DiscretisationSettings
 from .errors import DataError
@@ -118,9 +117,7 @@ def flat_split(sp, pairs, n_q: int) -> Split:
     sets = []
     for what, exps, win in (("calibration", sp.cal_experiments, sp.cal_window),
                             ("validation", sp.val_experiments, sp.val_window)):
-        bad = [j for j in exps or () if not 0 <= j < n_q]
-        if bad:
-            raise SplitError(f"split {sp.name!r}: {what} experiment(s) {bad} out of range (0-based, {n_q} experiments)")
+        _check_experiments(sp, what, exps, n_q)
         cols = None if win is None else np.flatnonzero((t >= win[0]) & (t < win[1])).tolist()
         if cols is not None and not cols:
             raise SplitError(f"split {sp.name!r}: the {what} window {list(win)} holds no sampling time; the times "
@@ -164,13 +161,18 @@ def _in_window(window, edges, w) -> bool:
     return window[0] <= lo and hi <= window[1]
 
 
+def _check_experiments(sp, what: str, exps, n_q: int) -> None:
+    """Raise SplitError when an experiment index of ``sp``'s ``what`` set is outside 0..n_q-1."""
+    bad = [j for j in exps or () if not 0 <= j < n_q]
+    if bad:
+        raise SplitError(f"split {sp.name!r}: {what} experiment(s) {bad} out of range (0-based, {n_q} experiments)")
+
+
 def _static_split(sp, rows, edges, n_q) -> Split:
     sets = []
     for what, exps, win in (("calibration", sp.cal_experiments, sp.cal_window),
                             ("validation", sp.val_experiments, sp.val_window)):
-        bad = [j for j in exps or () if not 0 <= j < n_q]
-        if bad:
-            raise SplitError(f"split {sp.name!r}: {what} experiment(s) {bad} out of range (0-based, {n_q} experiments)")
+        _check_experiments(sp, what, exps, n_q)
         r = [k for k, (j, w) in enumerate(rows) if (exps is None or j in exps) and _in_window(win, edges, w)]
         if not r:
             raise SplitError(f"split {sp.name!r}: the {what} set holds no reading")

@@ -23,7 +23,7 @@ import numpy as np
 
 from .cache import Cache
 
-__all__ = ["Parameter", "Model", "ModelError"]
+__all__ = ["Parameter", "LabelledModel", "Model", "ModelError"]
 
 
 class ModelError(ValueError):
@@ -139,7 +139,29 @@ def _as_column(expr, what: str, symbolic):
 as_parameters, check_names, as_column = _as_parameters, _check_names, _as_column
 
 
-class Model:
+class LabelledModel:
+    """The labels every model shares (static :class:`Model`, :class:`models.dynamic.DynamicModel`):
+    ``params`` (Parameter tuple), ``inputs`` (names of one input row) and ``sensors`` (names)."""
+
+    @property
+    def n_p(self) -> int:
+        return len(self.params)
+
+    @property
+    def n_S(self) -> int:
+        return len(self.sensors)
+
+    @property
+    def n_q_dim(self) -> int:
+        """Length d_q of one input row q."""
+        return len(self.inputs)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+
+class Model(LabelledModel):
     """A parametrised quasi-static model ``E(y, p, q) = 0``, ``z ~ h(y, p, q)``.
 
     Parameters
@@ -245,24 +267,7 @@ class Model:
         from .dynamic import DynamicModel
         return DynamicModel(params, states, inputs, sensors, rhs, x0, h, **kw)
 
-    # ------------------------------------------------------------------ sizes
-    @property
-    def n_p(self) -> int:
-        return len(self.params)
-
-    @property
-    def n_S(self) -> int:
-        return len(self.sensors)
-
-    @property
-    def n_q_dim(self) -> int:
-        """Dimension d_q of one input vector q."""
-        return len(self.inputs)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.params)
-
+    # ------------------------------------------------------------------ sizes (n_p, n_S, n_q_dim, param_names: LabelledModel)
     @property
     def lower(self) -> np.ndarray:
         return np.array([p.lower for p in self.params])

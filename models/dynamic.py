@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from .cache import Cache
-from .contract import ModelError, as_column, as_parameters, check_names
+from .contract import LabelledModel, ModelError, as_column, as_parameters, check_names
 
 __all__ = ["Control", "DynamicModel", "time_label"]
 
@@ -120,7 +120,7 @@ def _units(arg: str, units, n: int) -> tuple:
     return units
 
 
-class DynamicModel:
+class DynamicModel(LabelledModel):
     r"""A parametrised ODE / index-1 DAE model with experiment inputs (see the module docstring).
 
     Build it with :meth:`models.Model.ode`; the arguments are documented there.
@@ -221,10 +221,6 @@ class DynamicModel:
 
     # ------------------------------------------------------------------ sizes
     @property
-    def n_p(self) -> int:
-        return len(self.params)
-
-    @property
     def n_x(self) -> int:
         return len(self.states)
 
@@ -236,19 +232,6 @@ class DynamicModel:
     def n_u(self) -> int:
         """Length of u(t): the constants and one value per control."""
         return len(self.constants) + len(self.controls)
-
-    @property
-    def n_S(self) -> int:
-        return len(self.sensors)
-
-    @property
-    def n_q_dim(self) -> int:
-        """Length of one experiment's input row."""
-        return len(self.inputs)
-
-    @property
-    def param_names(self) -> tuple:
-        return tuple(p.name for p in self.params)
 
     def u_at(self, q, t: float, t_ref: float):
         """u(t) = (constants, control values at t) from the input row q (an expression or array);
