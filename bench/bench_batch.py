@@ -1,4 +1,4 @@
-"""The batch engine (identification.batch.fit_batch) against one identify call per fit (issue 15).
+"""The batch engine (identification.fit.batch.fit_batch) against one identify call per fit (issue 15).
 
 R simulated press campaigns (the paper's 29 loads, n_M = 2, sensors D_y and F_x, the paper's
 sigma) are fitted on the calibration points of each of the paper's four scenarios, once with
@@ -23,8 +23,8 @@ import numpy as np  # noqa: E402
 
 from bench.bench_detect import P0, PAPER_SPLITS, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
 from identification import Measurements, identify  # noqa: E402
-from identification.batch import fit_batch  # noqa: E402
-from identification.montecarlo import ModelCampaign  # noqa: E402
+from identification.fit.batch import fit_batch  # noqa: E402
+from identification.studies.montecarlo import ModelCampaign  # noqa: E402
 from models.press import Q_PAPER, press_model  # noqa: E402
 from models.state import set_jit  # noqa: E402
 

@@ -22,8 +22,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from bench.bench_detect import P0, PAPER_SPLITS, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
-from identification import montecarlo as mc  # noqa: E402
-from identification.detect import DetectSettings  # noqa: E402
+from identification.studies import montecarlo as mc  # noqa: E402
+from identification.studies.detect import DetectSettings  # noqa: E402
 from models.press import Q_PAPER, press_model  # noqa: E402
 from models.state import set_jit  # noqa: E402
 

@@ -2,7 +2,7 @@
 
 For each problem the estimate of one data set is bootstrapped twice in this process, serially,
 with the same seed: ``bootstrap_replicates(..., batch=True)`` (the replicates of a chunk refitted
-together by :func:`identification.batch.fit_batch`) and ``batch=False`` (one
+together by :func:`identification.fit.batch.fit_batch`) and ``batch=False`` (one
 :func:`identification.identify` per replicate).  The two runs alternate (``--repeats`` times,
 medians reported), so both see the same load on a shared machine.  Reported per problem: CPU
 and wall time per replicate of each path, the CPU ratio, the largest relative difference of the
@@ -13,11 +13,11 @@ sigma, known), Michaelis-Menten (8 points, n_M = 2, sigma known) and Rooney-Bieg
 sigma estimated).
 
 ``--profiles`` adds a second table: likelihood-ratio regions
-(:func:`identification.profile.lr_region`, ``grid="valley"`` by default, the pair fixed at every
+(:func:`identification.inference.profile.lr_region`, ``grid="valley"`` by default, the pair fixed at every
 grid point, the third parameter re-optimised) computed with ``batch=False`` (one reduced Newton
 per point, warm started from its neighbour) and ``batch=True`` (every row but the centre one as
-one :func:`identification.batch.fit_batch` call on the derived model of
-:func:`identification.fixed.fixed_model`, per-member inputs), alternating in one process: CPU
+one :func:`identification.fit.batch.fit_batch` call on the derived model of
+:func:`identification.fit.fixed.fixed_model`, per-member inputs), alternating in one process: CPU
 and wall per grid point, the largest difference of the statistic D between the paths and the
 batched points redone point by point, on a 3-parameter explicit model and the implicit spring
 chain (4 states, 3 parameters), 11 x 11 and 25 x 25 grids.
@@ -39,9 +39,9 @@ import numpy as np  # noqa: E402
 
 from bench.bench_detect import P0, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
 from identification import Measurements, identify  # noqa: E402
-from identification.bootstrap import bootstrap_replicates  # noqa: E402
-from identification.profile import lr_region  # noqa: E402
-from identification.montecarlo import ModelCampaign  # noqa: E402
+from identification.inference.bootstrap import bootstrap_replicates  # noqa: E402
+from identification.inference.profile import lr_region  # noqa: E402
+from identification.studies.montecarlo import ModelCampaign  # noqa: E402
 from models import Model  # noqa: E402
 from models.library import spring_chain  # noqa: E402
 from models.press import Q_PAPER, press_model  # noqa: E402

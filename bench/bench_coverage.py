@@ -5,7 +5,7 @@ For every case, ``--reps`` campaigns are simulated from the model at the true pa
 and the 95 % intervals of every parameter are computed by
 
 * ``wald``: p_i -+ z_0.975 se_i (second-order covariance, the default ``conf_int``);
-* ``profile``: {theta : D_i(theta) <= chi2_1(0.95)} (:mod:`identification.profile`);
+* ``profile``: {theta : D_i(theta) <= chi2_1(0.95)} (:mod:`identification.inference.profile`);
 * ``bootstrap`` (``--boot=N`` > 0): percentile interval of N parametric-bootstrap refits.
 
 Coverage = share of campaigns whose interval holds p*_i, with its Clopper-Pearson 95 %
@@ -41,8 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification import IdentificationError, Measurements, identify
-from identification.montecarlo import clopper_pearson
-from identification.profile import ProfileError
+from identification.studies.montecarlo import clopper_pearson
+from identification.inference.profile import ProfileError
 from models import Model
 
 CASES = ("mm", "mm_deep", "truss_Px", "truss_Py", "press")
@@ -147,7 +147,7 @@ def replicate(name: str, seed: np.random.SeedSequence, n_boot: int) -> dict:
         out["flagged"] = float(not est.curvature.trustworthy)
     except (np.linalg.LinAlgError, ValueError, IdentificationError) as exc:     # NotBoundedError: no curvature
         out["errors"].append(("curvature", str(exc).splitlines()[0][:200]))
-    ci = est.conf_int(0.05)
+    ci = np.asarray(est.conf_int(0.05))
     out["wald"] = ((ci[:, 0] <= c.p_true) & (c.p_true <= ci[:, 1])).astype(float)
     t0 = time.perf_counter()
     try:
@@ -250,7 +250,7 @@ def press_timing(repeat: int = 5) -> str:
         t0 = time.perf_counter()
         ci = est.conf_int(0.05, method="profile", model=model, data=data)
         times.append(time.perf_counter() - t0)
-    wald = est.conf_int(0.05)
+    wald = np.asarray(est.conf_int(0.05))
     return (f"press, shipped campaign (series {TEST_SERIES}), M1: both 95 % profile intervals in "
             f"median {np.median(times):.3f} s (min {min(times):.3f}, max {max(times):.3f}, {repeat} runs); "
             f"k5 [{ci.lower[0]:.2f}, {ci.upper[0]:.2f}] (Wald [{wald[0, 0]:.2f}, {wald[0, 1]:.2f}]), "

@@ -19,7 +19,7 @@ Well conditioned (target: trustworthy for >= 90 %):
 * ``MM good``: the same Michaelis-Menten model at x = 1, 2.5, 5, 15, 50 (around and above K);
 * ``press``: the press model M1 (k5 = k7 = 500 N/mm), the paper's 29 loads, 2 series, sensors
   D_y and F_x, the paper's sigmas.  With ``--splits`` (default) also every calibration and
-  validation fit of the paper's four scenarios (what :func:`identification.detect` checks).
+  validation fit of the paper's four scenarios (what :func:`identification.studies.detect` checks).
 
 Then the summary of one truss-with-one-sensor fit is printed (it must say "NOT trustworthy"
 and name the profile intervals).
@@ -40,9 +40,9 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from identification import Measurements, identify  # noqa: E402
-from identification.detect import run_split_tests  # noqa: E402
+from identification.studies.detect import run_split_tests  # noqa: E402
 from identification.errors import DataError, IdentificationError  # noqa: E402
-from identification.splits import splits_from_scenarios  # noqa: E402
+from identification.studies.splits import splits_from_scenarios  # noqa: E402
 from models import Model  # noqa: E402
 from models.library import two_bar_truss  # noqa: E402
 from models.press import PRESS_SCENARIOS, Q_PAPER, press_model  # noqa: E402

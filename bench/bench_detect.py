@@ -9,7 +9,7 @@ Studies (``--study``):
   the paper's statistic and of the two-sample statistic with Clopper-Pearson 95 %
   intervals, and the coverage of the 95 % ellipsoids of every fit.
 * ``timing``: the same four-scenario test, ``--n-rep`` replications on ``--workers``
-  processes with the batch engine (:func:`identification.batch.fit_batch`, a chunk of
+  processes with the batch engine (:func:`identification.fit.batch.fit_batch`, a chunk of
   replications fitted together), then ``--compare-rep`` replications (default min(n_rep, 200))
   on the same workers with one :func:`identification.identify` call per fit (the per-fit
   path); prints wall and CPU time (this process and its workers) per replication, the ratio,
@@ -35,9 +35,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from identification.detect import DetectSettings  # noqa: E402
-from identification.montecarlo import MonteCarloSettings, size_study  # noqa: E402
-from identification.splits import splits_from_scenarios  # noqa: E402
+from identification.studies.detect import DetectSettings  # noqa: E402
+from identification.studies.montecarlo import MonteCarloSettings, size_study  # noqa: E402
+from identification.studies.splits import splits_from_scenarios  # noqa: E402
 from models.press import PRESS_SCENARIOS, Q_PAPER, press_model  # noqa: E402
 
 #: the paper's sensor sigmas (section 5), m -> mm
@@ -234,7 +234,7 @@ def generation_cost(generator: PrototypeCampaign, n: int, seed: int, jit: bool) 
 
 
 def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, batch=True):
-    from identification.montecarlo import power_study
+    from identification.studies.montecarlo import power_study
     try:
         from models.friction import candidate_models
         models = candidate_models()
@@ -266,7 +266,7 @@ def report_power_split(res, cpu_all: float, n_gen: int, seed: int) -> None:
 
 def run_press():
     """Algorithm 1 on the press campaign: the two held-out series, M1 (and M2/M3 when available)."""
-    from identification.detect import detect, normality_check
+    from identification.studies.detect import detect, normality_check
     from models import prototype as pt
     files = sorted(pt.CAMPAIGN_DIR.glob("*")) if pt.CAMPAIGN_DIR.exists() else []
     if files:

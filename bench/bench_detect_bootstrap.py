@@ -3,7 +3,7 @@
 Model (cheap, nonlinear): Michaelis-Menten y = Vm x / (K + x), Vm = 1, K = 5, observed at 8 inputs
 x = 0.5 .. 8 (around K), 2 series, sigma = 0.01 known.  Splits: "low/high" (inputs 0-3 vs 4-7) and
 "odd/even" (alternate inputs).  Each of ``--n-rep`` campaigns is simulated from the model at the truth
-(the null hypothesis holds) and given to :func:`identification.detect_bootstrap.bootstrap_detect`
+(the null hypothesis holds) and given to :func:`identification.studies.detect_bootstrap.bootstrap_detect`
 with ``--n-boot`` B bootstrap campaigns.
 
 Reported per statistic (likelihood ratio, two-sample Wald, paper) and for the family-wise min-p:
@@ -44,10 +44,10 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from identification import Measurements  # noqa: E402
-from identification.detect import STATISTICS  # noqa: E402
-from identification.detect_bootstrap import bootstrap_detect  # noqa: E402
-from identification.montecarlo import clopper_pearson  # noqa: E402
-from identification.splits import Split  # noqa: E402
+from identification.studies.detect import STATISTICS  # noqa: E402
+from identification.studies.detect_bootstrap import bootstrap_detect  # noqa: E402
+from identification.studies.montecarlo import clopper_pearson  # noqa: E402
+from identification.studies.splits import Split  # noqa: E402
 from models import Model  # noqa: E402
 from models.state import set_jit  # noqa: E402
 
@@ -85,7 +85,7 @@ def _cpu() -> float:
 def compare_cases(seed: int) -> list:
     """[(label, model, data, splits, p0, weights), ...] of the ``--compare`` study."""
     from bench.bench_detect import P0, PAPER_SPLITS, SIGMA_PAPER_MM, WEIGHTS_110
-    from identification.montecarlo import ModelCampaign
+    from identification.studies.montecarlo import ModelCampaign
     from models.press import Q_PAPER, press_model
     rng = np.random.default_rng(seed)
     h = P_TRUE[0] * X / (P_TRUE[1] + X)

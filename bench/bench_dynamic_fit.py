@@ -121,11 +121,11 @@ def scale(n_exp: int = 200, n_times: int = 100, seed: int = 1):
 def montecarlo(n_rep: int = 1000, workers: int = 2, seed: int = 0):
     """size_study of the reactor's detection study on est.model (2 series, split by experiment)."""
     from identification import DynamicMeasurements, Split, identify
-    from identification.montecarlo import MonteCarloSettings, size_study
+    from identification.studies.montecarlo import MonteCarloSettings, size_study
     from mudoe.example_reactor import P_TRUE, TIMES, build
     Q = np.array([[1.0, 330.0], [1.0, 340.0], [1.0, 350.0], [2.0, 350.0], [2.0, 360.0], [2.0, 370.0]])
     sigma = np.array([0.01, 0.008])
-    from identification.dynamic_fit import simulate_campaign
+    from identification.fit.dynamic_fit import simulate_campaign
     data = simulate_campaign(build(), P_TRUE, Q, TIMES, sigma, n_series=2, seed=seed)
     est = identify(build(), data, P_TRUE)
     split = Split("early vs late experiments", [0, 2, 4], [1, 3, 5])

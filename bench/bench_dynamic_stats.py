@@ -5,7 +5,7 @@ The batch reactor A -> B -> C (:mod:`mudoe.example_reactor`, isothermal, Arrheni
 370 K), 10 sampling times 0.2..2 h, sensors c_A and c_B (sigma 0.01 mol/L), n_M = 2 series.  The
 data of every replication come from the **exact ODE** (scipy ``solve_ivp``, DOP853, rtol 1e-10,
 atol 1e-12), never from the collocated model, so the discretisation error of the fits is part of
-what is measured.  The model tested is the collocation of :func:`identification.dynamic_fit.identify_dynamic`
+what is measured.  The model tested is the collocation of :func:`identification.fit.dynamic_fit.identify_dynamic`
 at the default discretisation settings (the mesh its error control chose on a nominal campaign).
 
 Studies (``--study``):
@@ -14,7 +14,7 @@ Studies (``--study``):
   c_A0 = 1 vs 2, series 1 vs 2, early t <= 1 h vs late t > 1 h on the flat ``sensor@time`` columns);
   family-wise rejection rate at TOL = 5 % (Bonferroni over the splits) of the likelihood ratio,
   two-sample Wald and paper statistics, and the coverage of the 95 % ellipsoids of every
-  calibration and validation fit; the replication engine (:func:`identification.montecarlo.run_monte_carlo`,
+  calibration and validation fit; the replication engine (:func:`identification.studies.montecarlo.run_monte_carlo`,
   batched fits, ``--workers`` local processes).
 * ``coarse``, ``deg2``, ``deg3``: the same data tested with a deliberately coarse fixed mesh (one
   element between sampling times, no error control) of Radau IIA degree 1 (implicit Euler; output
@@ -25,7 +25,7 @@ Studies (``--study``):
   second-order campaign).
 * ``coverage``: full-campaign fits (:func:`identification.identify` on the collocated model):
   coverage of the 95 % ellipsoid (second-order and Gauss-Newton covariances) and of the 95 %
-  profile-likelihood intervals of every parameter (:func:`identification.profile.profile_intervals`,
+  profile-likelihood intervals of every parameter (:func:`identification.inference.profile.profile_intervals`,
   for the first ``--profile-reps`` replications).
 
 Every study is seeded and resumable: the engine studies run in blocks of ``--block`` replications
@@ -52,13 +52,13 @@ from scipy import stats
 from scipy.integrate import solve_ivp
 
 from identification import DynamicMeasurements, Measurements, identify
-from identification.dynamic_fit import collocated_problem, identify_dynamic
+from identification.fit.dynamic_fit import collocated_problem, identify_dynamic
 from identification.errors import IdentificationError
-from identification.normality_gate import gate_fails
-from identification.montecarlo import MonteCarloSettings, clopper_pearson, linearized_size, run_monte_carlo
-from identification.profile import ProfileError, profile_intervals
-from identification.regions import mahalanobis2
-from identification.splits import Split, early_late_split, series_split
+from identification.studies.normality_gate import gate_fails
+from identification.studies.montecarlo import MonteCarloSettings, clopper_pearson, linearized_size, run_monte_carlo
+from identification.inference.profile import ProfileError, profile_intervals
+from identification.inference.regions import mahalanobis2
+from identification.studies.splits import Split, early_late_split, series_split
 from mudoe import example_reactor as er
 
 SIGMA = np.array([0.01, 0.01])               # mol/L, c_A and c_B

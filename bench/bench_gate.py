@@ -2,13 +2,13 @@
 
 For each number of sensors m in ``--sensors`` (default 3, 20, 60), ``--sets`` data sets
 (default 2000) of exactly Gaussian readings are drawn: 4 series x 12 inputs x m sensors,
-z ~ N(0, 1) independently.  The gate is :func:`identification.detect.normality_check` (Shapiro-Wilk
+z ~ N(0, 1) independently.  The gate is :func:`identification.studies.detect.normality_check` (Shapiro-Wilk
 on the differences z2 - z1, z4 - z3 of every sensor, 24 differences per sensor) at 5 % with each
 multiplicity correction; it fails when some sensor's adjusted p-value is below 5 %.  Reported:
 the failure rate with its binomial standard error sqrt(r (1 - r) / N) and Clopper-Pearson 95 %
 interval, against 1 - (1 - 0.05 / m)^m (Holm/Bonferroni with uniform p-values) and 1 - 0.95^m
 (no correction).  Every data set's gate is also recomputed from the Monte Carlo's batched
-p-values (:func:`identification.montecarlo.shapiro_pvalues` + :func:`identification.normality_gate.gate_fails`)
+p-values (:func:`identification.studies.montecarlo.shapiro_pvalues` + :func:`identification.studies.normality_gate.gate_fails`)
 and must give the same decision.
 
 Run ``python -m bench gate`` (``--sets=N --sensors=3,20,60 --seed=S``).
@@ -21,9 +21,9 @@ import time
 import numpy as np
 
 from identification import Measurements
-from identification.detect import normality_check
-from identification.montecarlo import clopper_pearson, shapiro_pvalues
-from identification.normality_gate import GATE_CORRECTIONS, gate_fails
+from identification.studies.detect import normality_check
+from identification.studies.montecarlo import clopper_pearson, shapiro_pvalues
+from identification.studies.normality_gate import GATE_CORRECTIONS, gate_fails
 
 LEVEL = 0.05
 

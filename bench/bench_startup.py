@@ -5,7 +5,7 @@ runs the worker's stages one after the other and records wall and CPU time (``re
 this process plus its finished children, i.e. the C compiler) of each:
 
 1. **interpreter**: from the parent's ``Popen`` to the child's first statement;
-2. **imports**: what a worker imports to unpickle its task (``identification.montecarlo``,
+2. **imports**: what a worker imports to unpickle its task (``identification.studies.montecarlo``,
    ``models.press``, ``bench.bench_detect``);
 3. **model build**: unpickling the press model and building its CasADi functions (``numerics``);
 4. **compile/load**: the JIT work of the first chunk (``models.state.JIT.stats``: compilation with
@@ -37,7 +37,7 @@ def clock():
     return time.time(), s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
 marks = [("interpreter",) + clock()]
 import pickle
-import identification.montecarlo, models.press, bench.bench_detect as bd
+import identification.studies.montecarlo, models.press, bench.bench_detect as bd
 marks.append(("imports",) + clock())
 from models.state import JIT, numerics
 JIT.cache = MODE != "nocache"

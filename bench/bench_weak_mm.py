@@ -34,7 +34,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from identification import IdentificationError, Measurements, identify
-from identification.montecarlo import clopper_pearson
+from identification.studies.montecarlo import clopper_pearson
 from models import Model
 
 VM, K, SIGMA = 10.0, 20.0, 0.1

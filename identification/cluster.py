@@ -1,7 +1,7 @@
 """Dask execution of replication chunks: connect to a scheduler, ship one task, collect the chunks.
 
-The Monte Carlo studies (:mod:`identification.montecarlo`) and the bootstrap
-(:mod:`identification.bootstrap`) split their replications into chunks ``[(index,
+The Monte Carlo studies (:mod:`identification.studies.montecarlo`) and the bootstrap
+(:mod:`identification.inference.bootstrap`) split their replications into chunks ``[(index,
 SeedSequence), ...]``; every chunk is one Dask task ``fn(task, chunk) -> [(index, ...), ...]``.
 The task (models, data, settings) is sent once to every worker, serialised by
 :func:`models.shipping.dumps` (cloudpickle: a model whose factory defines local functions is

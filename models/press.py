@@ -230,7 +230,7 @@ def press_scenario_rows(n_q: int = len(Q_PAPER), peak: int | None = None) -> Map
     loading+unloading         q3, q5, .., q27          q2, q4, .., q28
     ========================= ======================== ========================
 
-    Build the splits with ``identification.splits.splits_from_scenarios(press_scenario_rows, n_q)``.
+    Build the splits with ``identification.studies.splits.splits_from_scenarios(press_scenario_rows, n_q)``.
 
     Raises
     ------

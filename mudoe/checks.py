@@ -79,7 +79,7 @@ def check_config(cfg, error) -> None:
     if n_cand is not None and o.n_points is not None and o.mode == "inputs" and o.n_points > n_cand:
         raise error("oed", "n_points", f"{o.n_points} input points chosen from {n_cand} candidates; give "
                     f"n_points <= {n_cand} or more candidates")
-    from identification.splits import Split, SplitError
+    from identification.studies.splits import Split, SplitError
     for k, c in enumerate(cfg.splits.custom):
         try:
             Split(c.name, c.cal_inputs, c.val_inputs, c.cal_series, c.val_series, "", c.cal_sensors, c.val_sensors)
@@ -128,7 +128,7 @@ def check_data(cfg, campaign, splits, n_p: int) -> None:
     DataFileError
         A sensor has no reading in the study's series (names the data file).
     """
-    from identification.splits import SplitError
+    from identification.studies.splits import SplitError
     from .config import config_error
     from .data_io import DataFileError
     series = list(range(campaign.n_M)) if cfg.data.series is None else list(cfg.data.series)
@@ -166,7 +166,7 @@ def call_factory(factory, name: str, variant: str, error):
 
 def study_splits(cfg, campaign, make) -> tuple:
     """``make(cfg, n_q, q_set)``: the study's splits; a split the data cannot hold names the [splits] key."""
-    from identification.splits import SplitError
+    from identification.studies.splits import SplitError
     from .config import config_error
     try:
         return make(cfg, campaign.n_q, campaign.q_set)

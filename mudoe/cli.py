@@ -87,7 +87,7 @@ def _version() -> str:
 
 def _bad_input_types():
     from identification.errors import DataError
-    from identification.splits import SplitError
+    from identification.studies.splits import SplitError
     from models.contract import ModelError
     from .config import ConfigError
     from .console import OutDirError
@@ -98,7 +98,7 @@ def _bad_input_types():
 def _located(exc: Exception, args) -> str:
     """The message of a bad-input error; a library error that names no file gets the study's config file."""
     from identification.errors import DataError
-    from identification.splits import SplitError
+    from identification.studies.splits import SplitError
     msg, config = str(exc), getattr(args, "config", None)
     if isinstance(exc, (DataError, SplitError)) and config and Path(config).name not in msg:
         return f"{config}: {msg}"

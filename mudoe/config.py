@@ -10,7 +10,7 @@ and the line.  Units are declared once (any unit pint knows, :mod:`mudoe.units`;
 is an error naming the key) and converted once, by pint, to the model's units (the press: mm, N).
 ``[simulate]`` drives ``mudoe simulate`` for an own model.
 
-Indices (series, inputs in splits) are **0-based**, like :mod:`identification.splits`.
+Indices (series, inputs in splits) are **0-based**, like :mod:`identification.studies.splits`.
 
 One schema
 ----------
@@ -56,8 +56,8 @@ from typing import Any
 
 import numpy as np
 
-from identification.detect import DetectSettings
-from identification.montecarlo import MonteCarloSettings
+from identification.studies.detect import DetectSettings
+from identification.studies.montecarlo import MonteCarloSettings
 from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.press import PRESS_SCENARIO_NAMES
 
@@ -80,7 +80,7 @@ MODEL_VARIANTS = {"press": FRICTION_VARIANTS}
 #: The study's own defaults where they differ from the settings dataclass's, keyed by
 #: (settings dataclass, field); every other settings-backed key takes the dataclass's default.
 #: ``mudoe validate`` has always run a quick size study, 200 replications from seed 1, while
-#: :class:`identification.montecarlo.MonteCarloSettings` defaults to 2000 replications from
+#: :class:`identification.studies.montecarlo.MonteCarloSettings` defaults to 2000 replications from
 #: seed 20261121; a config without these keys keeps giving the numbers it gave before.
 STUDY_DEFAULTS = {(MonteCarloSettings, "n_rep"): 200, (MonteCarloSettings, "seed"): 1}
 
@@ -305,7 +305,7 @@ class ParameterConfig:
 @dataclass(frozen=True)
 class CustomSplitConfig:
     """A user split: 0-based input (and optionally series and sensor column) indices of both sets
-    (:class:`identification.splits.Split`)."""
+    (:class:`identification.studies.splits.Split`)."""
 
     name: str
     cal_inputs: tuple[int, ...]
@@ -384,7 +384,7 @@ class SimulateConfig:
 class DetectConfig:
     """Algorithm 1: test level, statistic, correction, normality gate, covariance, sensors used.
 
-    The first five keys are fields of :class:`identification.detect.DetectSettings` (same
+    The first five keys are fields of :class:`identification.studies.detect.DetectSettings` (same
     names, same defaults, validated there).  ``sensors`` (study only): ``"oed"`` (the design
     chosen by the [oed] section), ``"all"``, or a list of names.
     """
@@ -468,7 +468,7 @@ class OEDConfig:
 
 @dataclass(frozen=True)
 class ValidateConfig:
-    """Monte Carlo check of covariance and test size (:mod:`identification.montecarlo`).
+    """Monte Carlo check of covariance and test size (:mod:`identification.studies.montecarlo`).
 
     ``n_runs``, ``seed`` and ``scheduler`` are ``MonteCarloSettings.n_rep``, ``.seed`` and
     ``.scheduler`` (defaults: :data:`STUDY_DEFAULTS`; ``scheduler`` absent: local processes,
@@ -488,7 +488,7 @@ class ValidateConfig:
 
         The tests run at level ``tol`` with the normality gate recorded, not enforced (its failure
         rate counted with ``normality_correction``, ``[detect]``), and every other field at its
-        default: the settings :func:`identification.montecarlo.validate` builds from its keyword arguments.
+        default: the settings :func:`identification.studies.montecarlo.validate` builds from its keyword arguments.
         """
         det = DetectSettings(tol=tol, normality="override", normality_correction=normality_correction)
         return MonteCarloSettings(**settings_values(self), workers=workers, progress=progress, detect=det)

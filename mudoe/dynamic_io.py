@@ -20,7 +20,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from identification.dynamic_data import DynamicMeasurements
+from identification.fit.dynamic_data import DynamicMeasurements
 from models.fileio import atomic_write_text
 
 from .data_io import DataFileError

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from identification.dynamic_fit import DiscretisationSettings, controlled_mesh
+from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
@@ -197,7 +197,7 @@ def run_trajectories(study, results, progress) -> None:
 @dataclass(frozen=True)
 class MeshSummary:
     """What a report shows of the discretisation of a dynamic fit (from its
-    :class:`identification.dynamic_fit.DiscretisationRecord`).
+    :class:`identification.fit.dynamic_fit.DiscretisationRecord`).
 
     degree, n_elements : the Radau IIA mesh; error_pct : largest estimated output error at the
     readings, % of sigma (tol_pct its tolerance); shift_se : largest linearised shift of the estimate
@@ -251,9 +251,9 @@ def validation_problem(study, results, est, used) -> tuple:
     """(model, splits, weights) of ``mudoe validate`` on a dynamic study: the collocated model of the
     estimate (mesh controlled at p̂) over its (sensor, time) outputs, every split of the study (by
     experiment; by time window and early against late as splits of the (sensor, time) columns,
-    :func:`identification.dynamic_detect.flat_split`), the instruments ``used`` at every time."""
-    from identification.dynamic_detect import flat_split
-    from identification.splits import SplitError
+    :func:`identification.studies.dynamic_detect.flat_split`), the instruments ``used`` at every time."""
+    from identification.studies.dynamic_detect import flat_split
+    from identification.studies.splits import SplitError
     try:
         splits = tuple(flat_split(sp, est.model.outputs, est.data.n_q) for sp in study.splits)
     except SplitError as exc:

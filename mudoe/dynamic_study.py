@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from identification.detect import normality_check
-from identification.dynamic_data import DynamicMeasurements
-from identification.splits import Split, random_splits
+from identification.studies.detect import normality_check
+from identification.fit.dynamic_data import DynamicMeasurements
+from identification.studies.splits import Split, random_splits
 from models.cache import Cache
 from models.contract import ModelError, Parameter
 
@@ -191,7 +191,7 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
 
 def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
     """The splits of [splits]: custom and random over the experiments, time windows, early vs late."""
-    from identification.dynamic_detect import early_late_dynamic_split, time_window_splits
+    from identification.studies.dynamic_detect import early_late_dynamic_split, time_window_splits
     s = cfg.splits
     if s.scenarios:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
@@ -278,8 +278,8 @@ class SimulatedDynamic:
 
 def simulate_dynamic(cfg: StudyConfig, built: dict, seed: int | None = None) -> SimulatedDynamic:
     """A campaign z = h(x(t), p_true, u) + sigma e at the [dynamic] times of every experiment
-    (:func:`identification.dynamic_fit.simulate_campaign`; [simulate] truth, n_series, seed)."""
-    from identification.dynamic_fit import simulate_campaign
+    (:func:`identification.fit.dynamic_fit.simulate_campaign`; [simulate] truth, n_series, seed)."""
+    from identification.fit.dynamic_fit import simulate_campaign
     models, p0s, Q = build_dynamic(cfg, built)
     sc = cfg.simulate
     variant = sc.variant or next(iter(models))

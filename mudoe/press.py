@@ -27,7 +27,7 @@ import numpy as np
 
 from identification import Measurements, identify
 from identification.errors import IdentificationError
-from identification.ipopt_solver import IpoptSettings, solve_nlp
+from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from models.campaign import Campaign
 from models.contract import Model
 from models.fileio import atomic_write_text
@@ -145,7 +145,7 @@ class _PreisachObjective:
         J(x) = \frac{n_M}{2} \sum_j \Bigl(\frac{\mu(u_j) - \bar f_j}{\sigma_f}\Bigr)^2
             + \frac{\lambda}{2}\bigl(\|W\|_F^2 + \|c\|^2\bigr)
 
-    Called by :func:`identification.ipopt_solver.solve_nlp`; returns (x, objective, no
+    Called by :func:`identification.fit.ipopt_solver.solve_nlp`; returns (x, objective, no
     constraints, parameter).
     """
 

@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 
 from identification import Measurements, identify, information_contributions
-from identification.detect import NormalityCheck, normality_check
+from identification.studies.detect import NormalityCheck, normality_check
 from identification.progress import Progress as BaseProgress
-from identification.splits import Split, random_splits, splits_from_scenarios
+from identification.studies.splits import Split, random_splits, splits_from_scenarios
 from models.campaign import Campaign
 from models.contract import Model, ModelError
 from models.press import PRESS_SCENARIO_NAMES, press_scenario_rows
@@ -289,7 +289,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
 
     Raises
     ------
-    ConfigError, DataFileError, identification.DataError, identification.splits.SplitError
+    ConfigError, DataFileError, identification.DataError, identification.studies.splits.SplitError
         Bad config or data (the message names the file / key).
     MissingPieceError
         A model variant needs a package that is not available yet.
@@ -425,7 +425,7 @@ def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> 
 
 def run_detect(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Algorithm 1 (lines 05-17) on every variant with the chosen sensors."""
-    from identification.detect import detect
+    from identification.studies.detect import detect
     progress = progress or Progress(False)
     design = list(_design_sensors(study, results, progress))
     settings = study.cfg.detect.settings()
@@ -454,9 +454,9 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     ``scheduler`` (an address; None: ``[validate] scheduler`` of the config, absent: local).
     """
     try:
-        from identification.montecarlo import validate
+        from identification.studies.montecarlo import validate
     except ImportError as exc:
-        raise MissingPieceError(f"validate: identification.montecarlo is not available ({exc})") from None
+        raise MissingPieceError(f"validate: identification.studies.montecarlo is not available ({exc})") from None
     from identification.cluster import connect
     progress = progress or Progress(False)
     vc = study.cfg.validate

@@ -8,7 +8,7 @@ its grid points), measured by every instrument k at the sampling times t; its in
 
 computed exactly on the Radau IIA collocation (:mod:`models.collocation`) of a mesh whose output
 error at p is within the discretisation tolerance at every candidate
-(:func:`identification.dynamic_fit.controlled_mesh`).  The exact design over the candidates and
+(:func:`identification.fit.dynamic_fit.controlled_mesh`).  The exact design over the candidates and
 its continuous refinement are those of :func:`oed.inputs.select_inputs` on the collocated model
 (the refinement's NLP holds every trajectory and its sensitivities as variables, sparse, see
 :mod:`oed.input_nlp`).  After the refinement the mesh is controlled again at the refined rows;
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from identification.dynamic_fit import DiscretisationSettings, controlled_mesh
+from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.collocation import collocate, pair_name
 from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
@@ -70,7 +70,7 @@ def _pair_sensors(model, cm, sensors):
 
 def _error_at(model, cm, p, inputs, sig) -> float:
     """Richardson's estimate of the output error of ``cm`` at p and ``inputs``, in sigmas (the mesh
-    against every element halved, as :func:`identification.dynamic_fit.controlled_mesh`)."""
+    against every element halved, as :func:`identification.fit.dynamic_fit.controlled_mesh`)."""
     half = collocate(model, cm.times, mesh=cm.mesh.refined(2), outputs=cm.outputs)
     order = 2 * cm.mesh.degree - 1
     if model.n_z:

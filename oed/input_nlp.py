@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from identification.ipopt_solver import NlpProblem
+from identification.fit.ipopt_solver import NlpProblem
 from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion
@@ -38,7 +38,7 @@ class InformationNlp:
 
     Attributes
     ----------
-    problem : NlpProblem       for :func:`identification.ipopt_solver.solve_nlp` (with its Hessian)
+    problem : NlpProblem       for :func:`identification.fit.ipopt_solver.solve_nlp` (with its Hessian)
     n_u, n_y, n_s, n_extra, n_g : int
         sizes of the blocks of x = (u, y, S, criterion extras) and of g
     information : casadi.Function

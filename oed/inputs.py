@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from identification.errors import IdentificationError, StateSolveError
-from identification.ipopt_solver import IpoptSettings, solve_nlp
+from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion, Kind

@@ -9,7 +9,7 @@ drifted or the series are not repeats.
 
 :func:`diagnostic_splits` builds the family from a study (input range low vs high, every
 pair of declared phases, first vs second half of the study series); :func:`diagnose` runs
-the split tests of :mod:`identification.detect` on it for every model and corrects the
+the split tests of :mod:`identification.studies.detect` on it for every model and corrects the
 p-values (alpha_min) of the whole family -- the study's own splits and the diagnostic
 ones -- with Holm's step-down procedure.  The report shows the result on the page
 "What the model misses".
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identification.detect import run_split_tests
+from identification.studies.detect import run_split_tests
 from identification.progress import Progress
-from identification.splits import Split, SplitError, input_range_split, series_split
+from identification.studies.splits import Split, SplitError, input_range_split, series_split
 
 from .view import phase_labels
 

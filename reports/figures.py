@@ -101,7 +101,7 @@ def confidence_ellipses(test, level: float, param_names=None, units=None, ax=Non
 
     Parameters
     ----------
-    test : identification.detect.SplitTest
+    test : identification.studies.detect.SplitTest
     level : float
         Confidence level of the drawn regions, e.g. 1 - TOL / n_tests.
     param_names : sequence of str, optional

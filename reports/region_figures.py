@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identification.regions import Ellipsoid
+from identification.inference.regions import Ellipsoid
 
 __all__ = ["lr_region_figure", "profile_figure"]
 
@@ -29,10 +29,10 @@ def lr_region_figure(region, units=("", ""), profiles=(), ax=None, title: str | 
 
     Parameters
     ----------
-    region : identification.profile.LikelihoodRegion
+    region : identification.inference.profile.LikelihoodRegion
         D on the grid (the other parameters re-optimised), the threshold c and the covariance block.
     units : (str, str)   units of the two parameters (axis labels)
-    profiles : sequence of identification.profile.ParameterProfile, optional
+    profiles : sequence of identification.inference.profile.ParameterProfile, optional
         Profiles of the two parameters (``conf_int(method="profile").profiles``): their traces
         (the other parameter re-optimised along each profile) are drawn; they follow the valley of
         the objective even where the region is thinner than the grid.
@@ -84,7 +84,7 @@ def profile_figure(profile, stderr: float, unit: str = "", ax=None, title: str |
 
     Parameters
     ----------
-    profile : identification.profile.ParameterProfile
+    profile : identification.inference.profile.ParameterProfile
     stderr : float          the Wald standard error of the parameter (for the straight line
                             (theta - theta_hat) / se of the linearised picture)
     unit : str              the parameter's unit (axis label)

@@ -64,7 +64,7 @@ def estimate_dict(est) -> dict:
     """The essentials of an :class:`identification.Estimate`."""
     return dict(model=est.model_name, params=list(est.param_names), units=list(est.param_units), p=est.p,
                 stderr=est.stderr, stderr_gn=est.stderr_gn, cov=est.cov, cov_gn=est.cov_gn,
-                correlation=est.correlation, conf_int_95=est.conf_int(0.05), status=est.status,
+                correlation=est.correlation, conf_int_95=np.asarray(est.conf_int(0.05)), status=est.status,
                 message=est.message, iterations=est.iterations, solve_time=est.solve_time, n_data=est.n_data,
                 dof=est.dof, objective=est.objective, rss=est.rss, reduced_chi2=est.reduced_chi2,
                 sigma=est.sigma, sigma_estimated=est.sigma_estimated, sensors=list(est.sensors),
@@ -84,7 +84,7 @@ def normality_dict(chk, units=None, data_name: str = "series") -> dict:
 
 
 def split_dict(s) -> dict:
-    """A :class:`identification.splits.Split` as a dict of its fields (``Split(**d)`` rebuilds it);
+    """A :class:`identification.studies.splits.Split` as a dict of its fields (``Split(**d)`` rebuilds it);
     ``cal_sensors`` / ``val_sensors`` are the 0-based sensor columns of each set (None: all), e.g. the
     (sensor, time) columns of a split by sampling time."""
     return dict(name=s.name, cal_inputs=s.cal_inputs, val_inputs=s.val_inputs, cal_series=s.cal_series,
@@ -93,7 +93,7 @@ def split_dict(s) -> dict:
 
 
 def detection_dict(det, units=None, data_name: str = "series") -> dict:
-    """Every split test and every decision of a :class:`identification.detect.DetectionResult`.
+    """Every split test and every decision of a :class:`identification.studies.detect.DetectionResult`.
 
     ``units`` and ``data_name`` label the normality gate (:func:`normality_dict`)."""
     tests = []

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.errors import IdentificationError
-from identification.profile import ConfidenceIntervals, LikelihoodRegion, lr_region
+from identification.inference.profile import ConfidenceIntervals, LikelihoodRegion, lr_region
 from .view import fmt_value, linearisation_trust, unit_suffix
 
 __all__ = ["UNCERTAINTY_CHOICES", "PairRegion", "ModelUncertainty", "uncertainty_models", "model_uncertainty",
@@ -178,7 +178,7 @@ def region_alpha(alpha: float, sigma_estimated: bool, dof: int) -> float:
     alpha' = P(chi2_1 > chi2_2(1 - alpha)) (sigma known) or P(F(1, dof) > 2 F(2, dof; 1 - alpha)).
     """
     from scipy import stats
-    from identification.profile import region_threshold
+    from identification.inference.profile import region_threshold
     c2 = region_threshold(alpha, sigma_estimated, dof)
     return float(stats.f.sf(c2, 1, dof) if sigma_estimated else stats.chi2.sf(c2, 1))
 
@@ -225,7 +225,7 @@ def model_uncertainty(results, variant: str, alpha: float = 0.05, n_grid: int | 
 
     A failed profile or region is recorded with its reason (shown on the page), never dropped.
     """
-    from identification.profile import ProfileError
+    from identification.inference.profile import ProfileError
     t0 = time.perf_counter()
     e = results.estimates[variant]
     n = e.n_p

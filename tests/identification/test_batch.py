@@ -1,4 +1,4 @@
-"""The batch engine (identification.batch.fit_batch) against identify, member by member.
+"""The batch engine (identification.fit.batch.fit_batch) against identify, member by member.
 
 Agreement targets: estimates to 1e-8 relative, covariances to 1e-6 relative (identify itself
 stops at a Newton decrement of 1e-18 chi^2 units, i.e. within 1e-9 standard errors of the
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from identification import DataError, IdentifySettings, Measurements, identify
-from identification.batch import BatchFit, BatchMember, fit_batch
-from identification.montecarlo import ModelCampaign, MonteCarloSettings, size_study
-from identification.detect import DetectSettings
-from identification.splits import splits_from_scenarios
+from identification.fit.batch import BatchFit, BatchMember, fit_batch
+from identification.studies.montecarlo import ModelCampaign, MonteCarloSettings, size_study
+from identification.studies.detect import DetectSettings
+from identification.studies.splits import splits_from_scenarios
 from models.contract import Model, Parameter
 from models.press import PRESS_SCENARIOS, Q_PAPER, press_model
 from models.state import simulate, solve_states
@@ -118,7 +118,7 @@ def test_members_with_a_singular_information_fall_back_one_by_one(monkeypatch):
     """Every member's J^T W J singular (b2 has no effect): no LinAlgError for the batch, each member
     is handed to identify with its reason; a member that left the bounds is refitted by identify
     with the bounds from the start (lazy_bounds off: the unbounded pass may run to max_iter)."""
-    import identification.batch as batch
+    import identification.fit.batch as batch
     model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"], h=lambda p, q: p[0] * q[0] + 0 * p[1])
     x = np.linspace(1.0, 5.0, 6)
     rng = np.random.default_rng(3)
@@ -133,7 +133,7 @@ def test_members_with_a_singular_information_fall_back_one_by_one(monkeypatch):
         seen.append(settings.lazy_bounds)
         return identify(model, data, p0, weights=weights, settings=settings, Y0=Y0)
 
-    monkeypatch.setattr(batch, "identify", spy)
+    monkeypatch.setattr(batch, "fit_static", spy)
     bounded = Model.explicit(params=[Parameter("b1", 0.0, 300.0), Parameter("b2", 0.0, 1.0)], inputs=["x"],
                              sensors=["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
     xs = np.linspace(50.0, 800.0, 10)
@@ -243,8 +243,8 @@ class _ExpCampaign:
 def test_monte_carlo_batched_statistics_equal_per_fit_with_failures_and_unknown_sigma():
     # the batched statistics (F test of the pooled fit, Wald distances, coverage, Shapiro-Wilk) and
     # the replications they leave to run_split_tests (a failed fit: same error records)
-    from identification.montecarlo import run_monte_carlo
-    from identification.splits import Split
+    from identification.studies.montecarlo import run_monte_carlo
+    from identification.studies.splits import Split
     model = Model.explicit(params=["b1", "b2"], inputs=["x"], sensors=["y"],
                            h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))
     splits = (Split("halves", [0, 1, 2, 3], [4, 5, 6, 7]), Split("odd/even", [0, 2, 4, 6], [1, 3, 5, 7]),

@@ -1,4 +1,4 @@
-"""Parametric bootstrap intervals (identification.bootstrap, issue 12)."""
+"""Parametric bootstrap intervals (identification.inference.bootstrap, issue 12)."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from identification import Measurements, identify
-from identification.bootstrap import bootstrap_intervals, bootstrap_replicates
+from identification.inference.bootstrap import bootstrap_intervals, bootstrap_replicates
 from identification.progress import Progress
 from models import Model
 

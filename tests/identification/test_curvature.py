@@ -1,11 +1,11 @@
-"""Bates-Watts relative curvature (identification.curvature, Estimate.curvature)."""
+"""Bates-Watts relative curvature (identification.inference.curvature, Estimate.curvature)."""
 import casadi as ca
 import numpy as np
 import pytest
 from scipy import linalg, stats
 
 from identification import Measurements, identify
-from identification.curvature import relative_curvature
+from identification.inference.curvature import relative_curvature
 from models import Model
 from models.sensitivity import sensitivities
 
@@ -125,7 +125,7 @@ def test_bad_input_names_the_argument():
 
 
 def test_sloppy_direction_names_the_confounded_combination():
-    from identification.identifiability import sloppy_direction
+    from identification.fit.identifiability import sloppy_direction
     # information of y = a (k1 + k2) measured precisely plus k1 - k2 measured poorly: relative scale 1
     u, v = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
     F = 1e6 * np.outer(u, u) + 1.0 * np.outer(v, v)
@@ -150,7 +150,8 @@ def test_summary_shows_the_weakest_direction():
 
 
 def test_summary_of_an_untrusted_fit_shows_the_profile_intervals():
-    # the same weak Michaelis-Menten fit: the summary states the profile-likelihood intervals themselves
+    # the same weak Michaelis-Menten fit: summary() only reads; it says how to get the profile intervals and
+    # shows them when given
     model = Model.explicit(params=["Vm", "K"], inputs=["x"], sensors=["y"],
                            h=lambda p, q: p[0] * q[0] / (p[1] + q[0]))
     x = np.linspace(0.5, 2.0, 5)
@@ -158,6 +159,7 @@ def test_summary_of_an_untrusted_fit_shows_the_profile_intervals():
     z = truth[0] * x / (truth[1] + x) + 0.01 * np.random.default_rng(3).standard_normal((2, x.size))
     est = identify(model, Measurements(inputs=x, z=z[:, :, None], sigma=[0.01]), p0=truth)
     ci = est.conf_int(method="profile")
-    text = est.summary()
-    assert "95 % profile-likelihood intervals" in text
+    assert "est.summary(intervals=ci)" in est.summary() and "Vm [" not in est.summary()
+    text = est.summary(intervals=ci)
+    assert "95 % profile intervals (trust these, not the Wald columns)" in text
     assert f"Vm [{ci.lower[0]:.5g}, {ci.upper[0]:.5g}]" in text and f"K [{ci.lower[1]:.5g}, {ci.upper[1]:.5g}]" in text

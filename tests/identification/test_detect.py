@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from identification import DataError, Measurements, alpha_min, alpha_min_two_sample, identify, simulate
-from identification.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check,
+from identification.studies.detect import (DetectSettings, NormalityError, SplitTest, decide, detect, normality_check,
                                    run_split_tests)
-from identification.splits import Split, input_range_split, splits_from_scenarios
+from identification.studies.splits import Split, input_range_split, splits_from_scenarios
 from models.contract import Model
 from models.library import linear_model
 from models.press import PRESS_SCENARIOS
@@ -254,8 +254,8 @@ def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
 
 def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
     """The likelihood ratio's pooled minimum (reduced Newton from p_bar) is the full-space fit's."""
-    from identification.detect import _pooled_newton
-    from identification.montecarlo import ModelCampaign
+    from identification.studies.detect import _pooled_newton
+    from identification.studies.montecarlo import ModelCampaign
     from models.press import Q_PAPER, press_model
     model = press_model()
     sigma = np.array([1.518e-02, 4.895e-03, 3.904e-03])

@@ -1,4 +1,4 @@
-"""Bootstrap p-values of the split tests (identification.detect_bootstrap, issue 12 item 6).
+"""Bootstrap p-values of the split tests (identification.studies.detect_bootstrap, issue 12 item 6).
 
 The uniformity of the bootstrap p-values under the null is a Monte Carlo study in
 ``bench/bench_detect_bootstrap.py`` (too long for a unit test); here: the definition on a
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from identification import Measurements
-from identification.detect import STATISTICS, run_split_tests
-from identification.detect_bootstrap import bootstrap_detect
+from identification.studies.detect import STATISTICS, run_split_tests
+from identification.studies.detect_bootstrap import bootstrap_detect
 from identification.progress import Progress
-from identification.splits import Split
+from identification.studies.splits import Split
 from models import Model
 
 X = np.linspace(0.0, 2.0, 8)

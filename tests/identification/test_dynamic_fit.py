@@ -1,12 +1,12 @@
-"""identify on dynamic models: collocation with discretisation error control (identification.dynamic_fit)."""
+"""identify on dynamic models: collocation with discretisation error control (identification.fit.dynamic_fit)."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
-from identification import (DataError, DynamicMeasurements, Measurements, Split, detect, identify,
+from identification import (DataError, DynamicMeasurements, Estimate, Measurements, Split, detect, identify,
                             information_contributions)
-from identification.dynamic_fit import (DiscretisationRecord, DiscretisationSettings, collocated_problem,
+from identification.fit.dynamic_fit import (DiscretisationRecord, DiscretisationSettings, collocated_problem,
                                        identify_dynamic)
 from mudoe.example_reactor import HORIZON, P_TRUE, R_KJ, T_REF, TIMES, build
 
@@ -78,7 +78,7 @@ def test_error_control_refines_a_coarse_mesh():
                                                                                     max_refinements=0))
     rec = est.extra["discretisation"]
     assert not rec.bounded and rec.error_sigma > 0.01
-    assert "discretisation error NOT bounded" in est.summary()
+    assert "discretisation error NOT bounded" in Estimate.from_record(est).summary()
 
 
 def test_ragged_times_and_missing_values():
@@ -301,7 +301,7 @@ def test_normality_gate_pooled_per_instrument():
 
 
 def test_predict_and_simulate_campaign():
-    from identification.dynamic_fit import predict, simulate_campaign
+    from identification.fit.dynamic_fit import predict, simulate_campaign
     h = predict(build(), P_TRUE, Q, TIMES, SIGMA, DiscretisationSettings(tol_sigma=1e-3))
     ref = np.array([ivp(P_TRUE, q, TIMES) for q in Q])
     assert h.shape == (6, 10, 2) and np.max(np.abs(h - ref) / SIGMA) < 1e-3

@@ -6,10 +6,10 @@ import pytest
 from scipy import stats
 
 from identification import DynamicMeasurements, MonteCarloSettings, Split, detect, identify, validate
-from identification.detect import run_split_tests
-from identification.dynamic_fit import DiscretisationSettings, simulate_campaign
-from identification.profile import lr_region
-from identification.splits import early_late_split, time_window_split
+from identification.studies.detect import run_split_tests
+from identification.fit.dynamic_fit import DiscretisationSettings, simulate_campaign
+from identification.inference.profile import lr_region
+from identification.studies.splits import early_late_split, time_window_split
 from mudoe.example_reactor import P_TRUE, build
 
 Q = np.array([[1.0, 330.0], [2.0, 330.0], [1.0, 370.0], [2.0, 370.0]])     # mol/L, K
@@ -177,7 +177,7 @@ def test_discretisation_error_is_not_reported_as_model_inadequacy_with_control_b
     # noncentrality (the mean of the statistic is n_p + that).  On the controlled mesh of identify it is
     # negligible; with implicit Euler and one step between sampling times (a fixed coarse mesh, no
     # control) the discretisation error alone makes it large: the correct model would be rejected
-    from identification.dynamic_fit import collocated_problem, predict
+    from identification.fit.dynamic_fit import collocated_problem, predict
     model = build()
     h = predict(model, P_TRUE, Q, TIMES, SIGMA, DiscretisationSettings(tol_sigma=1e-4))
     data = DynamicMeasurements(Q, TIMES, np.stack([h, h]), SIGMA, sensors=["cA", "cB"])

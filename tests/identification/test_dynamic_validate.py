@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from identification import MonteCarloSettings, Split, identify, validate
-from identification.dynamic_detect import DynamicSplit, flat_split
-from identification.dynamic_fit import simulate_campaign
-from identification.splits import SplitError, time_window_split
+from identification.studies.dynamic_detect import DynamicSplit, flat_split
+from identification.fit.dynamic_fit import simulate_campaign
+from identification.studies.splits import SplitError, time_window_split
 from mudoe.example_reactor import P_TRUE, build
 
 Q = np.array([[1.0, 330.0], [2.0, 330.0], [1.0, 370.0], [2.0, 370.0]])     # mol/L, K
@@ -56,8 +56,8 @@ BATCH_SCRIPT = """
 import json, sys
 import numpy as np
 from identification import MonteCarloSettings, Split, identify, validate
-from identification.dynamic_fit import simulate_campaign
-from identification.splits import time_window_split
+from identification.fit.dynamic_fit import simulate_campaign
+from identification.studies.splits import time_window_split
 from mudoe.example_reactor import P_TRUE, build
 Q = np.array(json.loads(sys.argv[1]))
 model = build()

@@ -179,7 +179,7 @@ def test_summary_has_table_and_numbered_notes():
     est = identify(model, data.with_sigma(None), p0=[1.0, 0.1])
     text = est.summary()
     assert "k" in text and "std err" in text and "[1] sigma unknown" in text
-    ci = est.conf_int(0.05)
+    ci = np.asarray(est.conf_int(0.05))
     assert ci.shape == (2, 2) and np.all(ci[:, 0] < est.p) and np.all(est.p < ci[:, 1])
     ell = est.ellipsoid(0.05)
     assert ell.contains(est.p) and ell.boundary().shape == (200, 2)
@@ -277,7 +277,7 @@ def test_predictor_changes_only_the_start_point():
 @pytest.mark.parametrize("which", ["press", "chain"])
 def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
     """The NLP's stage Hessian, assembled from the model's lag_hess and dh/d(p, y), is exact."""
-    from identification.estimator import _stage_hessian
+    from identification.fit.estimator import _stage_hessian
     from models.press import press_model
     model = press_model() if which == "press" else spring_chain(7, n_sensors=4, n_groups=2)
     n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
@@ -313,7 +313,7 @@ def _coupled_model():
 @pytest.mark.parametrize("which", ["chain", "coupled"])
 def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
     """The constraint Jacobian and Lagrangian Hessian handed to Ipopt equal CasADi's AD of (f, g)."""
-    import identification.estimator as est_mod
+    import identification.fit.estimator as est_mod
     model = spring_chain(9, n_sensors=4, n_groups=3) if which == "chain" else _coupled_model()
     rng = np.random.default_rng(3)
     n_q = 4
@@ -335,7 +335,7 @@ def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
 
 def test_large_state_model_uses_the_glued_nlp_and_agrees_with_the_reduced_fit(monkeypatch):
     """Models with more than 60 states take the MX-glued NLP; the estimate matches the reduced space."""
-    import identification.estimator as est_mod
+    import identification.fit.estimator as est_mod
     calls = []
     orig = est_mod._build_nlp_glued
     monkeypatch.setattr(est_mod, "_build_nlp_glued", lambda *a: calls.append(1) or orig(*a))
@@ -391,9 +391,9 @@ def test_model_stated_in_mx_gives_the_same_estimate_as_in_sx():
 
 
 def test_public_refinement_reproduces_the_estimate_and_converges_from_a_nearby_point():
-    """identification.refinement: at the estimate no step is taken and the terms are the
+    """identification.fit.refinement: at the estimate no step is taken and the terms are the
     estimate's; from a perturbed point the exact Newton steps return to it."""
-    from identification.refinement import ReducedProblem, refine
+    from identification.fit.refinement import ReducedProblem, refine
     model, data = _press_data(8, 4)
     est = identify(model, data, p0=[450.0, 550.0])
     problem = ReducedProblem.of(model, data, est.weights, est.sigma, np.abs(est.p))
@@ -448,7 +448,7 @@ def test_set_jit_switches_the_documented_configuration():
 def test_explicit_nlp_is_over_p_only_and_its_hessian_equals_casadi_ad():
     """An explicit model's NLP has the parameters as its only variables, no constraints, and the
     mapped (reduced) stage Hessian equals CasADi's AD of the mapped objective."""
-    import identification.estimator as est_mod
+    import identification.fit.estimator as est_mod
     model = Model.explicit(["a", "b", "c"], ["x", "u"], ["y1", "y2"],
                            h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]) + p[2] * q[1],
                                                      p[1] ** 2 * ca.sin(q[0])))

@@ -1,4 +1,4 @@
-"""Covariances from the QR factor of the weighted Jacobian (identification.factor, issue 20 item 3),
+"""Covariances from the QR factor of the weighted Jacobian (identification.fit.factor, issue 20 item 3),
 checked against exact rational arithmetic (fractions.Fraction) on the stored double matrices."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from identification.estimator import covariance_from_terms
-from identification.factor import estimate_covariances, weighted_factor, weighted_rows
+from identification.fit.estimator import covariance_from_terms
+from identification.fit.factor import estimate_covariances, weighted_factor, weighted_rows
 
 
 def _exact_inverse(A):

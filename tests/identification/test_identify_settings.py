@@ -4,7 +4,7 @@ import pytest
 
 from identification import IdentificationError, IdentifySettings, Measurements, identify
 from models.contract import Model
-from identification.ipopt_solver import IpoptSettings
+from identification.fit.ipopt_solver import IpoptSettings
 
 
 @pytest.mark.parametrize("kw, field", [
@@ -50,7 +50,7 @@ def test_unbounded_first_pass_is_capped_when_the_optimum_lies_at_infinity(monkey
     b2 -> 0 on data linear in x) stops after LAZY_PASS_MAX_ITER Ipopt iterations, not max_iter
     (3000, about 1 s here and 5-7 s on the press), and pass 2 gives the bounded solution."""
     import casadi as ca
-    import identification.estimator as est_mod
+    import identification.fit.estimator as est_mod
     from models.contract import Parameter
     model = Model.explicit(params=[Parameter("b1", 0.0, 300.0), Parameter("b2", 0.0, 1.0)], inputs=["x"],
                            sensors=["y"], h=lambda p, q: p[0] * (1 - ca.exp(-p[1] * q[0])))

@@ -5,7 +5,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from identification import IdentifySettings, Measurements, StateSolveError, identify
-from identification.implicit_start import solve_states_from
+from identification.fit.implicit_start import solve_states_from
 from models import Model
 from models.state import solve_states
 from optimum import assert_same_optimum

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from identification.detect import DetectSettings
-from identification.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
+from identification.studies.detect import DetectSettings
+from identification.studies.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
                                        run_monte_carlo, size_study, validate)
-from identification.normality_gate import gate_fails
-from identification.splits import splits_from_scenarios
+from identification.studies.normality_gate import gate_fails
+from identification.studies.splits import splits_from_scenarios
 from models.library import linear_model
 from models.press import PRESS_SCENARIOS
 
@@ -48,7 +48,7 @@ def test_linearized_size_is_exact_for_equal_information(model):
     # calibration and validation at the same loads (loading vs unloading without the peak is
     # the same set of loads mirrored): C_cal = C_val, so d2_paper = 2 chi2_2 and
     # P(2 chi2_2 > chi2_2(1 - a)) = exp(-chi2_2(1 - a) / 4)
-    from identification.splits import Split
+    from identification.studies.splits import Split
     sp = Split("mirror", range(1, 14), range(15, 28))
     r = linearized_size(model, P_TRUE, Q, SIGMA, [sp], tol=0.05, n_draws=200_000)
     thr = stats.chi2.ppf(0.95, 2)
@@ -181,9 +181,9 @@ def _mm_campaigns(n, known=True, seed=11):
 def test_batched_split_tests_are_run_split_tests_of_each_data_set(known):
     """Every field of every SplitTest as run_split_tests gives it (estimates 1e-7, statistics 1e-8 relative),
     and a rank-deficient split fails in both with the same stage and message."""
-    from identification.detect import run_split_tests
-    from identification.montecarlo import batched_split_tests
-    from identification.splits import Split
+    from identification.studies.detect import run_split_tests
+    from identification.studies.montecarlo import batched_split_tests
+    from identification.studies.splits import Split
     mm, ds = _mm_campaigns(6, known)
     splits = (Split("low/high", range(0, 4), range(4, 8)), Split("odd/even", range(0, 8, 2), range(1, 8, 2)))
     one = Split("one input", range(0, 7), [7])          # Vm, K not identifiable from one input
@@ -208,8 +208,8 @@ def test_batched_split_tests_are_run_split_tests_of_each_data_set(known):
 
 def test_batched_split_tests_bad_input_names_the_argument():
     from identification import Measurements
-    from identification.montecarlo import batched_split_tests
-    from identification.splits import Split
+    from identification.studies.montecarlo import batched_split_tests
+    from identification.studies.splits import Split
     mm, ds = _mm_campaigns(2)
     sp = [Split("low/high", range(0, 4), range(4, 8))]
     other = Measurements(ds[0].inputs + 1.0, ds[0].z, [0.01])

@@ -182,7 +182,8 @@ def test_mgh10_with_declared_scales_leaves_the_saddle_and_reaches_the_certified_
 def test_a_saddle_without_descent_raises_convergence_error(monkeypatch):
     """When no lower point is found along the negative curvature the fit raises a ConvergenceError
     naming the point, the eigenvalue and what to try (never a success)."""
-    from identification import ConvergenceError, secondorder
+    from identification import ConvergenceError
+    from identification.fit import secondorder
     Model, Measurements, identify, _ = _estimator()
     d = dataset("MGH10")
     monkeypatch.setattr(secondorder, "escape", lambda problem, point, so: None)

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from identification import Measurements
-from identification.detect import DetectSettings, NormalityError, detect, normality_check
-from identification.montecarlo import shapiro_pvalues   # the batched gate p-values of the Monte Carlo
-from identification.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, correction_text, gate_fails
+from identification.studies.detect import DetectSettings, NormalityError, detect, normality_check
+from identification.studies.montecarlo import shapiro_pvalues   # the batched gate p-values of the Monte Carlo
+from identification.studies.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, correction_text, gate_fails
 
 P = np.array([0.01, 0.04, 0.03, 0.5])
 
@@ -79,8 +79,8 @@ def test_normality_check_applies_the_correction_and_names_it():
 
 
 def test_detect_gate_message_gives_adjusted_pvalues():
-    from identification.montecarlo import ModelCampaign
-    from identification.splits import Split
+    from identification.studies.montecarlo import ModelCampaign
+    from identification.studies.splits import Split
     from models.library import linear_model
     model = linear_model(np.array([[1.0, 0.3], [0.2, 1.0]]))
     data = ModelCampaign(model, [1.0, 2.0], np.linspace(0.1, 1.5, 12)[:, None], [0.01, 0.01], n_M=4)(

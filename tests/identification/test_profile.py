@@ -1,4 +1,4 @@
-"""Profile-likelihood intervals and likelihood-ratio regions (identification.profile, issue 12).
+"""Profile-likelihood intervals and likelihood-ratio regions (identification.inference.profile, issue 12).
 
 Checked against independent computations: scipy.optimize.minimize of the objective with the
 parameter fixed (small explicit model, sigma known) and lmfit's ``conf_interval`` (F test,
@@ -18,7 +18,7 @@ import pytest
 from scipy import optimize, stats
 
 from identification import Measurements, identify
-from identification.profile import (ConfidenceIntervals, ProfileError, ProfileSettings, lr_region,
+from identification.inference.profile import (ConfidenceIntervals, ProfileError, ProfileSettings, lr_region,
                                     profile_intervals)
 from models import Model
 
@@ -63,9 +63,14 @@ def test_conf_int_wald_default_unchanged_and_validated():
     model, data, est = _exp_problem()
     c = stats.norm.ppf(0.975)
     ci = est.conf_int()
-    assert isinstance(ci, np.ndarray) and ci.shape == (2, 2)
+    # one result type whatever the method: ConfidenceIntervals, an (m, 2) array through np.asarray, a DataFrame
+    assert isinstance(ci, ConfidenceIntervals) and ci.method == "wald" and np.asarray(ci).shape == (2, 2)
+    frame = ci.to_frame()
+    assert list(frame.index) == ["b1", "b2"] and list(frame.columns) == ["estimate", "lower", "upper"]
+    np.testing.assert_array_equal(frame[["lower", "upper"]].to_numpy(), np.asarray(ci))
+    assert ci["b2"] == (ci.lower[1], ci.upper[1]) and ci[1, 0] == ci.lower[1]
     np.testing.assert_allclose(ci, np.column_stack([est.p - c * est.stderr, est.p + c * est.stderr]), rtol=1e-14)
-    np.testing.assert_array_equal(est.conf_int(0.05, params=["b2"]), ci[[1]])
+    np.testing.assert_array_equal(est.conf_int(0.05, params=["b2"]), np.asarray(ci)[[1]])
     with pytest.raises(ValueError, match="alpha is the miss probability: 0.05 gives a 95 % interval"):
         est.conf_int(0.95)
     with pytest.raises(ValueError, match="alpha"):

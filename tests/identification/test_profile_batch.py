@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from identification import Measurements, identify
-from identification.montecarlo import ModelCampaign
-from identification.profile import lr_region
+from identification.studies.montecarlo import ModelCampaign
+from identification.inference.profile import lr_region
 from models import Model
 from models.library import spring_chain
 

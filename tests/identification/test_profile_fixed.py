@@ -1,4 +1,4 @@
-"""The derived model with fixed parameters as input columns (identification.fixed, issue 15)."""
+"""The derived model with fixed parameters as input columns (identification.fit.fixed, issue 15)."""
 from __future__ import annotations
 
 import pickle
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from identification import Measurements, identify
-from identification.batch import BatchData, fit_batch
-from identification.fixed import fixed_batch, fixed_model, full_parameters
-from identification.profile import lr_region
+from identification.fit.batch import BatchData, fit_batch
+from identification.fit.fixed import fixed_batch, fixed_model, full_parameters
+from identification.inference.profile import lr_region
 from models import Model
 from models.library import spring_chain
 
@@ -75,7 +75,7 @@ def _rise_and_slope():
 
 
 def _spring():
-    from identification.montecarlo import ModelCampaign
+    from identification.studies.montecarlo import ModelCampaign
     model = spring_chain(n_y=4, n_sensors=2, n_groups=2)
     p_true = np.array([2.0, 3.0, 0.05])
     gen = ModelCampaign(model, p_true, np.column_stack([np.linspace(0.5, 3.0, 10), np.linspace(1.0, -1.0, 10)]), 0.01, 2)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from identification import Measurements
-from identification.refinement import ReducedProblem, refine
+from identification.fit.refinement import ReducedProblem, refine
 from models import Model
 
 

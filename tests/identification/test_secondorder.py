@@ -1,4 +1,4 @@
-"""The second-order test and the escape along negative curvature (identification.secondorder)."""
+"""The second-order test and the escape along negative curvature (identification.fit.secondorder)."""
 from __future__ import annotations
 
 import importlib.util
@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification import ConvergenceError, Measurements, secondorder
-from identification.refinement import ReducedProblem, refine
+from identification import ConvergenceError, Measurements
+from identification.fit import secondorder
+from identification.fit.refinement import ReducedProblem, refine
 from models import Model
 
 

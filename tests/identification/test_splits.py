@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from identification import Measurements
-from identification.splits import (Split, SplitError, input_range_split, random_splits, series_split,
+from identification.studies.splits import (Split, SplitError, input_range_split, random_splits, series_split,
                                    splits_from_scenarios)
 from models.press import PRESS_SCENARIO_NAMES, PRESS_SCENARIOS, Q_PAPER, press_scenario_rows
 

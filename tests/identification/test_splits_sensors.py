@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from identification import DataError, Measurements
-from identification.splits import Split, SplitError, early_late_split, time_window_split
+from identification.studies.splits import Split, SplitError, early_late_split, time_window_split
 
 PAIRS = [(s, t) for t in (0.5, 1.0, 1.5, 2.0) for s in ("cA", "cB")]      # time-major flat columns
 

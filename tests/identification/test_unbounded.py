@@ -1,4 +1,4 @@
-"""Practical non-identifiability as a result (issue 20 item 4, :mod:`identification.unbounded`).
+"""Practical non-identifiability as a result (issue 20 item 4, :mod:`identification.fit.unbounded`).
 
 The weak Michaelis-Menten study of ``bench/bench_weak_mm.py``: y = Vm x / (K + x), Vm = 10,
 K = 20, x = 0.5..4 (far below saturation), 2 series, sigma = 0.1 known.  Campaigns 3, 5 and 12
@@ -15,9 +15,9 @@ import pytest
 from scipy import optimize, stats
 
 from identification import (IdentifiabilityError, Measurements, NotBoundedError, identify)
-from identification.detect import DetectSettings, run_split_tests
-from identification.montecarlo import MonteCarloSettings, size_study
-from identification.splits import series_split
+from identification.studies.detect import DetectSettings, run_split_tests
+from identification.studies.montecarlo import MonteCarloSettings, size_study
+from identification.studies.splits import series_split
 from models import Model
 
 VM, K, SIGMA = 10.0, 20.0, 0.1
@@ -100,7 +100,7 @@ def _unbounded_series_seed():
 
 
 def test_detect_counts_a_fit_that_is_not_bounded_as_undecided_with_its_reason():
-    from identification.detect import decide
+    from identification.studies.detect import decide
     data = _campaign(_unbounded_series_seed())
     split = series_split(X.size, [0], [1], name="series 1 vs 2")
     t, = run_split_tests(_model(), data, [split], [VM, K], settings=DetectSettings(normality="override"))
@@ -135,7 +135,7 @@ def test_sigma_unknown_run_off_is_not_bounded_with_the_F_profile():
 
 
 def test_batch_keeps_an_unbounded_member_as_not_ok_with_its_reason():
-    from identification.batch import fit_batch
+    from identification.fit.batch import fit_batch
     fit = fit_batch(_model(), [_campaign(s) for s in (0, 3, 1)], [VM, K])
     assert list(fit.ok) == [True, False, True] and np.all(np.isnan(fit.p[1]))
     rec, = [f for f in fit.fallbacks if f.member == 1]

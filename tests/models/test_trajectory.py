@@ -8,7 +8,7 @@ import pytest
 
 import models.trajectory as trajectory
 from identification import DynamicMeasurements, IdentifySettings, identify
-from identification.dynamic_fit import simulate_campaign
+from identification.fit.dynamic_fit import simulate_campaign
 from models import Model
 from models.collocation import collocate
 from models.state import numerics, solve_state
@@ -110,7 +110,7 @@ def test_second_derivatives_equal_the_generic_adjoint():
 
 def test_batch_members_of_a_collocated_model_equal_identify():
     from identification import Measurements
-    from identification.batch import fit_batch
+    from identification.fit.batch import fit_batch
     est = identify(build(), _campaign(2), P)
     base = est.data
     rng = np.random.default_rng(3)

@@ -186,7 +186,7 @@ def test_silently_accepted_inputs_are_refused(capsys, campaign_dirs):
     line = _one_line(capsys, ["identify", str(campaign_dirs["paper_cfg"]), "--out", ""])
     assert "--out: empty" in line, line
 
-    from identification.results import Estimate
+    from identification.inference.results import Estimate
     est = Estimate.__new__(Estimate)
     for bad in (0.95, 0.5, 0.0):
         with pytest.raises(ValueError, match="alpha: must lie in"):

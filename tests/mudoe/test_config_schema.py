@@ -3,8 +3,8 @@ import dataclasses
 
 import pytest
 
-from identification.detect import DetectSettings
-from identification.montecarlo import MonteCarloSettings
+from identification.studies.detect import DetectSettings
+from identification.studies.montecarlo import MonteCarloSettings
 from mudoe.config import (DEFAULT_CONFIG, STUDY_DEFAULTS, ConfigError, DetectConfig, ValidateConfig, known_scenarios,
                           known_variants, load_config, parse_config, settings_keys, settings_values)
 

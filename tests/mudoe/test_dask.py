@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from identification.cluster import SchedulerError, connect
-from identification.montecarlo import MonteCarloSettings
+from identification.studies.montecarlo import MonteCarloSettings
 from mudoe.cli import main
 from mudoe.config import ConfigError, parse_config
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from identification import information_contributions
-from identification.dynamic_fit import simulate_campaign
+from identification.fit.dynamic_fit import simulate_campaign
 from mudoe.example_reactor import P_TRUE, build
 from oed.sequential import sequential_design
 

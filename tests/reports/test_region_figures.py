@@ -8,7 +8,7 @@ import numpy as np
 matplotlib.use("Agg")
 
 from identification import Measurements, identify  # noqa: E402
-from identification.profile import lr_region  # noqa: E402
+from identification.inference.profile import lr_region  # noqa: E402
 from models import Model  # noqa: E402
 from reports.region_figures import lr_region_figure, profile_figure  # noqa: E402
 

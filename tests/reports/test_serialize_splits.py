@@ -2,7 +2,7 @@
 import json
 from types import SimpleNamespace
 
-from identification.splits import Split, time_window_split
+from identification.studies.splits import Split, time_window_split
 from reports.serialize import detection_dict, dumps, split_dict
 
 PAIRS = [("cA", 0.5), ("cB", 0.5), ("cA", 1.0), ("cB", 1.0), ("cA", 2.0), ("cB", 2.0)]

@@ -17,7 +17,7 @@ from scipy import optimize
 matplotlib.use("Agg")
 
 from identification import Measurements, identify  # noqa: E402
-from identification.profile import lr_region  # noqa: E402
+from identification.inference.profile import lr_region  # noqa: E402
 from models import Model  # noqa: E402
 from reports.view import fmt_value  # noqa: E402
 
@@ -95,9 +95,11 @@ def test_truss_one_sensor_region_is_resolved_and_longer_than_the_ellipse(truss):
 
 
 def test_truss_one_sensor_summary_warns_and_gives_profile_intervals(truss):
-    s = truss.estimates["linear"].summary()
+    est = truss.estimates["linear"]
+    assert "est.summary(intervals=ci)" in est.summary()
+    s = est.summary(intervals=est.conf_int(method="profile"))
     assert "NOT trustworthy" in s and "conf_int(method=\"profile\")" in s
-    assert "95 % profile-likelihood intervals (trust these, not the Wald columns): k1 [" in s and "k2 [" in s
+    assert "95 % profile intervals (trust these, not the Wald columns): k1 [" in s and "k2 [" in s
     assert "weakest direction" in s
 
 

@@ -1,7 +1,7 @@
 r"""Identification of a dynamic model with discretisation error control.
 
 The model is collocated on a mesh (:mod:`models.collocation`) and fitted as any static model
-(:func:`identification.estimator.identify`).  At the estimate p̂ the outputs at the sampling
+(:func:`identification.fit.estimator.identify`).  At the estimate p̂ the outputs at the sampling
 times are recomputed on the mesh with every element halved; Radau IIA of degree d converges
 with order 2d - 1 at element boundaries, so the difference
 
@@ -32,8 +32,9 @@ from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from models.dynamic import DynamicModel
 from models.trajectory import interpolate_states, trajectory_numerics
-from .dynamic_data import DynamicMeasurements
-from .errors import DataError, StateSolveError
+from identification.fit.dynamic_data import DynamicMeasurements
+from identification.errors import DataError, StateSolveError
+from identification.fit.estimator import fit_static, static_information
 
 __all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem",
            "controlled_mesh", "dynamic_information", "predict", "simulate_campaign"]
@@ -221,7 +222,6 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
         Of the collocated model (``est.model``) on the flat data (``est.data``), with
         ``est.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note.
     """
-    from .estimator import identify          # same layer; the estimator dispatches here
     ds = discretisation or DiscretisationSettings()
     if not isinstance(ds, DiscretisationSettings):
         raise TypeError(f"discretisation: expected DiscretisationSettings, got {type(ds).__name__}")
@@ -231,7 +231,7 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     mesh, p_start, history, order = cm.mesh, p0, [], 2 * ds.degree - 1
     while True:
         cm = collocate(model, data.union_times, mesh=mesh, outputs=data.pairs)
-        est = identify(cm, flat, p_start, weights=w, settings=settings)
+        est = fit_static(cm, flat, p_start, weights=w, settings=settings)
         reason = ""
         try:
             by_sensor, err, shift = _error(model, data, est, mesh, w)
@@ -304,7 +304,6 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
     per instrument; the pairs are time-major (every sensor at the first time, then the next).  With
     DynamicMeasurements: the pairs of ``data.pairs``.
     """
-    from .estimator import information_contributions      # same layer; it dispatches here
     p = np.asarray(p, float).ravel()
     if data is None:
         if inputs is None or times is None or sigma is None:
@@ -320,7 +319,7 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
             raise DataError(str(exc)) from None
         sig = np.tile(np.broadcast_to(np.asarray(sigma, float), (model.n_S,)), cm.times.size)
         if model.n_z:
-            return information_contributions(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
+            return static_information(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
         if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
             raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
         _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.collocation_map)
@@ -333,7 +332,7 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
         raise DataError("data.sigma: information contributions need known sensor sigmas")
     cm, _ = controlled_mesh(model, p, data.inputs, data.union_times, data.sigma, outputs=data.pairs,
                             discretisation=discretisation)
-    return information_contributions(cm, data.flat(), p)
+    return static_information(cm, data.flat(), p)
 
 
 def predict(model: DynamicModel, p, inputs, times, sigma, discretisation: DiscretisationSettings | None = None):

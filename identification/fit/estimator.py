@@ -15,7 +15,7 @@ covariance
 is evaluated exactly by AD and the implicit function theorem.
 
 For implicit models with many inputs Ipopt is started at the reduced-space optimum
-(:mod:`identification.implicit_start`) with its multipliers, so that it verifies that point
+(:mod:`identification.fit.implicit_start`) with its multipliers, so that it verifies that point
 (at iteration 0, or after one step at round-off) instead of iterating on the n_q n_y states.
 """
 from __future__ import annotations
@@ -32,16 +32,17 @@ import scipy.sparse as sps
 from scipy import special
 
 from models.contract import Model
-from . import dense, unbounded
-from .factor import estimate_covariances
-from . import secondorder
-from .errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
-from .implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
-from .ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
-from .measurements import Measurements
-from .explicit_kernel import ExplicitTerms, explicit_terms
-from .refinement import ReducedPoint, ReducedProblem, Refinement, refine
-from .results import Estimate
+from identification.fit import dense
+from identification.fit import unbounded
+from identification.fit.factor import estimate_covariances
+from identification.fit import secondorder
+from identification.errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
+from identification.fit.implicit_start import ImplicitObjective, nlp_multipliers, solve_states_from
+from identification.fit.ipopt_solver import IpoptResult, IpoptSettings, NlpProblem, solve_nlp, warm_start
+from identification.fit.measurements import Measurements
+from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms
+from identification.fit.refinement import ReducedPoint, ReducedProblem, Refinement, refine
+from identification.fit.record import FitRecord
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
 from models.trajectory import trajectory_numerics
@@ -599,7 +600,7 @@ def check_identifiability(model, G, cw, sig, s_p, rtol, selected, sv=None):
     """Assumption 3: rank(sqrt(Omega) J) = n_p, checked on the column-normalised matrix.
 
     ``sv``: its singular values when the caller has them (the QR factor of
-    :mod:`identification.factor`); a full rank is then confirmed without another pass over the data.
+    :mod:`identification.fit.factor`); a full rank is then confirmed without another pass over the data.
     Returns the condition number of the normalised matrix; raises IdentifiabilityError.
     """
     if sv is not None and sv.size == model.n_p and sv[-1] > 0 and sv[-1] >= rtol * sv[0]:
@@ -753,7 +754,7 @@ _GN_MAX_HALVINGS = 5
 
 class _ExplicitObjective:
     """Phi(s_p ⊙ x) of an explicit model with the sums of its derivatives w.r.t. the scaled
-    parameters x (an :class:`identification.explicit_kernel.ExplicitTerms` with Phi_0 included
+    parameters x (an :class:`identification.fit.explicit_kernel.ExplicitTerms` with Phi_0 included
     in ``f``): one evaluation of the least-squares kernel for models stated in SX, else the
     reduced point of :class:`ReducedProblem` and NumPy sums (models stated in MX)."""
 
@@ -861,7 +862,7 @@ def _solve_explicit_newton(st: _Start, settings: IdentifySettings):
     exact Gauss-Newton model (:func:`_levenberg_marquardt`) bring p closer and the iteration
     restarts from there; when that fails too, the iteration runs once more from p0 with the full
     line search (40 halvings).  Every evaluation is one call of the least-squares kernel over the data
-    (:mod:`identification.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
+    (:mod:`identification.fit.explicit_kernel`: Phi, g, F and, in the Newton phase, S together), so
     an iteration costs O(n) with a small constant and no NLP is built.
 
     Returns (result, point, S): the solution as an :class:`IpoptResult` (status
@@ -979,7 +980,7 @@ def _reduced_start(st: _Start, settings: IdentifySettings):
 
     The Gauss-Newton/Newton iteration of explicit models (:func:`_newton_from`, the same line
     search and convergence test) on the reduced objective Phi(p) with the states eliminated
-    (:class:`identification.implicit_start.ImplicitObjective`: states by batched damped Newton
+    (:class:`identification.fit.implicit_start.ImplicitObjective`: states by batched damped Newton
     from the nearest point evaluated, sensitivities by the implicit function theorem, S by
     adjoints, all inputs at once).  Used for models with at least
     ``settings.reduced_start_inputs`` inputs.  Returns (result, point, S) as
@@ -1138,7 +1139,7 @@ def _refine_solution(st: _Start, sol: _FullSpaceSolution, settings: IdentifySett
 
 def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
                   clock: _PhaseClock | None = None) -> tuple:
-    """Second-order optimality before success (:func:`identification.secondorder.ensure_minimum`):
+    """Second-order optimality before success (:func:`identification.fit.secondorder.ensure_minimum`):
     from a point found below a saddle along its negative curvature the problem is solved again
     (:func:`_solve_full_space`, :func:`_refine_solution`).  Returns (st, sol, ref, escaped);
     raises ConvergenceError when no descent is found."""
@@ -1155,7 +1156,7 @@ def _second_order(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings
 
 
 def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: IdentifySettings,
-              t_start: float, clock: _PhaseClock | None = None, escaped: tuple = ()) -> Estimate:
+              t_start: float, clock: _PhaseClock | None = None, escaped: tuple = ()) -> FitRecord:
     """Step 4 of :func:`identify`: identifiability, covariance (eq. 7) and the result.
 
     With sigma unknown the covariance, information and objective are rescaled by
@@ -1198,7 +1199,7 @@ def _estimate(st: _Start, sol: _FullSpaceSolution, ref: Refinement, settings: Id
     if clock is not None:
         clock.lap("identifiability, covariance, notes")
         extra["timing"] = dict(clock.phases)
-    return Estimate(
+    return FitRecord(
         p=point.p, param_names=model.param_names, param_units=tuple(par.unit for par in model.params),
         sensors=model.sensors, states=point.states, fitted=sens.h, residuals=resid, weights=st.w, sigma=sig_used,
         sigma_estimated=data.sigma is None, n_data=st.n, dof=dof, rss=rss, objective=objective,
@@ -1285,20 +1286,20 @@ def _notes(st, sol, ref, settings, cond, H, H_ok, objective, rss, dof) -> tuple:
     return tuple(notes)
 
 
-def identify(model: Model, data: Measurements, p0, weights=None,
-             settings: IdentifySettings | None = None, Y0=None) -> Estimate:
+def fit_static(model: Model, data: Measurements, p0, weights=None,
+               settings: IdentifySettings | None = None, Y0=None) -> FitRecord:
     """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7).
 
     The pipeline: validate and start (:func:`_start`), solve the scaled full-space NLP with
     Ipopt (:func:`_solve_full_space`), refine by exact reduced Newton steps
-    (:func:`identification.refinement.refine`), then identifiability, covariance and the
+    (:func:`identification.fit.refinement.refine`), then identifiability, covariance and the
     result (:func:`_estimate`).
 
     Parameters
     ----------
     model : models.Model
-        Or a dynamic model (:meth:`models.Model.ode`) with :class:`DynamicMeasurements`: fitted by
-        :func:`identification.dynamic_fit.identify_dynamic` (collocation with error control).
+        A static model; a dynamic one (:meth:`models.Model.ode`) goes through
+        :func:`identification.fit.entry.fit_model` (collocation with error control).
     data : Measurements
         z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
     p0 : array_like (n_p,)
@@ -1311,7 +1312,9 @@ def identify(model: Model, data: Measurements, p0, weights=None,
 
     Returns
     -------
-    Estimate
+    FitRecord
+        The plain record; :func:`identification.identify` returns it as an :class:`identification.Estimate`
+        (intervals, regions, summary).
 
     Raises
     ------
@@ -1322,19 +1325,14 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     IdentifiabilityError
         rank(Omega J) < n_p at a finite estimate (structural; names the parameters and sensors).
         When the data do not bound the parameters (the best fit runs off to infinity along a
-        direction, :mod:`identification.unbounded`) the result is returned instead, with
+        direction, :mod:`identification.fit.unbounded`) the result is returned instead, with
         ``Estimate.bounded`` False and the direction in ``Estimate.unbounded``.
     ConvergenceError
         The solver stopped at a stationary point that is not a minimum (the reduced Hessian
         J^T Omega J + S is not positive definite) and no lower point was found along its negative
         curvature (names the point and the eigenvalue); from such a point with descent the problem
-        is solved again (:mod:`identification.secondorder`; ``extra["saddle_escapes"]`` and a note).
+        is solved again (:mod:`identification.fit.secondorder`; ``extra["saddle_escapes"]`` and a note).
     """
-    if getattr(model, "is_dynamic", False):    # an ODE/DAE model: collocation with error control
-        from .dynamic_fit import identify_dynamic
-        if Y0 is not None:
-            raise TypeError("Y0: not used for a dynamic model (its trajectories start from an integration at p0)")
-        return identify_dynamic(model, data, p0, weights=weights, settings=settings)
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()
     clock = _PhaseClock()
@@ -1349,7 +1347,7 @@ def identify(model: Model, data: Measurements, p0, weights=None,
         est = _estimate(st, sol, ref, settings, t_start, clock, escaped)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         # did the fit run off to infinity (the data do not bound p: a result) or is the rank
-        # deficiency structural (a finite point: the error, saying so)?  identification.unbounded
+        # deficiency structural (a finite point: the error, saying so)?  identification.fit.unbounded
         # follows the valley from where the fit stopped (from p0 when the solver failed on its way)
         if ref is not None:
             p_stop, y_stop = ref.point.p, ref.point.states
@@ -1374,8 +1372,8 @@ def identify(model: Model, data: Measurements, p0, weights=None,
     return est
 
 
-def information_contributions(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
-                              sigma=None, n_series=1, times=None):
+def static_information(model: Model, data: Measurements | None, p, states=None, *, inputs=None,
+                       sigma=None, n_series=1):
     """Per-sensor Gauss-Newton information and second-order terms at p.
 
     F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2,
@@ -1388,18 +1386,12 @@ def information_contributions(model: Model, data: Measurements | None, p, states
     planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
     nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
 
-    A dynamic model (:class:`models.dynamic.DynamicModel`) takes ``times`` (sampling times) and
-    returns one matrix per (sensor, time) pair (:func:`identification.dynamic_fit.dynamic_information`).
+    A dynamic model goes through :func:`identification.fit.entry.information_contributions`.
 
     Returns
     -------
     F, S : ndarray (n_S, n_p, n_p)
     """
-    if getattr(model, "is_dynamic", False):
-        from .dynamic_fit import dynamic_information
-        if states is not None:
-            raise TypeError("states: not used for a dynamic model")
-        return dynamic_information(model, data, p, inputs=inputs, times=times, sigma=sigma, n_series=n_series)
     p = np.asarray(p, float).ravel()
     if p.shape != (model.n_p,):
         raise DataError(f"p: expected {model.n_p} values, got {p.size}")

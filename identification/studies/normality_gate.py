@@ -12,8 +12,8 @@ The gate therefore controls its family-wise level a over the m gated sensors:
 The gate fails when some gated sensor has p~_k < a or no p-value (NaN: not computable).
 Holm and Bonferroni fail the gate for exactly the same data (both fail it when the smallest
 p-value is below a / m); Holm flags at least as many sensors as Bonferroni, never more than the
-uncorrected gate.  One function serves :func:`identification.detect.normality_check` and the
-batched gate of :mod:`identification.montecarlo`, so that both apply the same correction.
+uncorrected gate.  One function serves :func:`identification.studies.detect.normality_check` and the
+batched gate of :mod:`identification.studies.montecarlo`, so that both apply the same correction.
 """
 from __future__ import annotations
 

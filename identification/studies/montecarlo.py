@@ -1,7 +1,7 @@
 r"""Monte Carlo validation of Algorithm 1: size, power and ellipsoid coverage.
 
 Replication r draws a campaign z^(r) (n_M x n_q x n_S) and runs every split test of
-:func:`identification.detect.run_split_tests`.  Estimated quantities (each a binomial
+:func:`identification.studies.detect.run_split_tests`.  Estimated quantities (each a binomial
 proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 95 %):
 
 * **size** (data from the candidate model itself, z = h(y(p*), p*, q) + sigma eps):
@@ -15,14 +15,14 @@ proportion k / n with a Clopper-Pearson interval at level 1 - ci_level, default 
   of each calibration and validation fit.
 
 The replications of a chunk are fitted together by the batch engine
-(:func:`identification.batch.fit_batch`: one batch per split and fit, same estimates as
+(:func:`identification.fit.batch.fit_batch`: one batch per split and fit, same estimates as
 :func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
-the statistics are those of :func:`identification.detect.run_split_tests` on these fits,
+the statistics are those of :func:`identification.studies.detect.run_split_tests` on these fits,
 computed for all replications of a chunk at once with the same formulas (run_split_tests
 itself for a replication with a failed fit or an invalid covariance, which records the
 failure; ``MonteCarloSettings.batch=False``: one identify call per fit).  The same batched
 split tests serve other loops over many campaigns of one design (the parametric bootstrap of
-:mod:`identification.detect_bootstrap`) through :func:`batched_split_tests`.
+:mod:`identification.studies.detect_bootstrap`) through :func:`batched_split_tests`.
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
@@ -43,16 +43,16 @@ from scipy import special, stats
 
 from models.contract import Model
 from models.dynamic import DynamicModel
-from . import cluster
-from .batch import BatchData, BatchFit, fit_batch
-from .detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
+from identification import cluster
+from identification.fit.batch import BatchData, BatchFit, fit_batch
+from identification.studies.detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
                      run_split_tests)
-from .errors import DataError, IdentificationError
-from .measurements import Measurements
-from .normality_gate import correction_text, gate_fails
-from .progress import Progress
-from .splits import Split, SplitError
-from .unbounded import not_bounded_reason
+from identification.errors import DataError, IdentificationError
+from identification.fit.measurements import Measurements
+from identification.studies.normality_gate import correction_text, gate_fails
+from identification.progress import Progress
+from identification.studies.splits import Split, SplitError
+from identification.fit.unbounded import not_bounded_reason
 from models.state import set_jit, simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
@@ -117,7 +117,7 @@ class MonteCarloSettings:
                              same numbers, faster per replication); the libraries are compiled
                              once per machine and loaded from models.jit_cache by every worker
     batch : bool             fit the replications of a chunk together with the batch engine
-                             (identification.batch.fit_batch: same estimates to ~1e-10, identify as
+                             (identification.fit.batch.fit_batch: same estimates to ~1e-10, identify as
                              per-member fallback); False: one identify call per fit
     """
 
@@ -382,7 +382,7 @@ def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> 
 def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: DetectSettings, ds: list,
                   st0) -> tuple:
     """The fits of run_split_tests for R data sets of one model with the same inputs: every
-    calibration, validation and pooled fit of a split is one :func:`identification.batch.fit_batch`
+    calibration, validation and pooled fit of a split is one :func:`identification.fit.batch.fit_batch`
     call over the data sets.  Returns (fits, pooled, ok_split): per data set the (calibration,
     validation) estimates of every split and {pooled points: pooled estimate or failure text} (the
     ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data.
@@ -482,7 +482,7 @@ def _batched_cholesky(C: np.ndarray) -> tuple:
 
 def _wald_d2(D: np.ndarray, C: np.ndarray) -> tuple:
     """(d2, ok) with d2 = D^T C^{-1} D for stacks D (m, n), C (m, n, n), as
-    :func:`identification.regions.mahalanobis2` (Cholesky of (C + C^T)/2); ok False where it would raise
+    :func:`identification.inference.regions.mahalanobis2` (Cholesky of (C + C^T)/2); ok False where it would raise
     CovarianceError (C not finite, not symmetric to rtol 1e-8 / atol 1e-14 max|C|, not positive definite)."""
     Ct = C.swapaxes(1, 2)
     with np.errstate(invalid="ignore"):
@@ -497,7 +497,7 @@ def _wald_d2(D: np.ndarray, C: np.ndarray) -> tuple:
 def _split_statistics(model: Model, name: str, splits: tuple, det: DetectSettings, n_M: int, fits: list,
                       pooled: list, ok_split: list) -> list:
     """The split tests of R data sets from their batched fits, computed together: per data set the
-    tuple of :class:`identification.detect.SplitTest` that :func:`run_split_tests` gives with these
+    tuple of :class:`identification.studies.detect.SplitTest` that :func:`run_split_tests` gives with these
     fits (same formulas: Wald distances by Cholesky of the symmetrised covariance, the likelihood
     ratio 2 (Phi_pooled - Phi_cal - Phi_val) or, sigma estimated, the F (Chow) test).
 
@@ -589,11 +589,11 @@ def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequen
     data set d of ``datasets``, the fits of all data sets done together by the batch engine.
 
     Every calibration, validation and pooled fit of a split is one
-    :func:`identification.batch.fit_batch` call over the data sets (same estimates as
+    :func:`identification.fit.batch.fit_batch` call over the data sets (same estimates as
     :func:`identification.identify` to ~1e-10; identify as recorded per-member fallback), and the
     statistics (Wald distances d2 and the likelihood ratio or F statistic, chi^2 / F units, with
     their p-values alpha_min) are computed for all data sets at once with the formulas of
-    :func:`identification.detect.run_split_tests`.  A data set with a failed fit, a covariance that
+    :func:`identification.studies.detect.run_split_tests`.  A data set with a failed fit, a covariance that
     is not symmetric positive definite or a likelihood ratio that cannot be computed goes through
     run_split_tests itself (with the batch's fits), which records each failure with its stage and
     message, so failures are named exactly as there.
@@ -626,7 +626,7 @@ def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequen
     ds = _same_design(datasets)
     splits = tuple(splits)
     if not splits or not all(isinstance(sp, Split) for sp in splits):
-        raise SplitError("splits: give at least one identification.splits.Split")
+        raise SplitError("splits: give at least one identification.studies.splits.Split")
     det = detect_settings or DetectSettings()
     if not isinstance(det, DetectSettings):
         raise TypeError(f"detect_settings: expected DetectSettings, got {type(det).__name__}")
@@ -657,7 +657,7 @@ def shapiro_pvalues(ds: list) -> list:
     """``normality_check(d).pvalue`` of every data set: the Shapiro-Wilk p-values per sensor of the
     differences of pairs of series.  Data sets without missing values and of a common shape are
     tested in one ``scipy.stats.shapiro(..., axis=0)`` call (the same test per column); the others
-    by :func:`identification.detect.normality_check`."""
+    by :func:`identification.studies.detect.normality_check`."""
     out = [None] * len(ds)
     groups = {}
     for r, d in enumerate(ds):
@@ -862,7 +862,7 @@ class MonteCarloResult:
 
     def gate_failure_rate(self) -> Rate:
         """Fraction of the campaigns failing the normality gate (its correction over the gated sensors;
-        :func:`identification.normality_gate.gate_fails`, as :func:`identification.detect.normality_check`)."""
+        :func:`identification.studies.normality_gate.gate_fails`, as :func:`identification.studies.detect.normality_check`)."""
         fail = gate_fails(self.shapiro, self.normality_level, self.normality_correction, self.gated or None)
         return clopper_pearson(int(np.sum(fail)), int(fail.size), self.ci_level)
 
@@ -1170,7 +1170,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     A dynamic model (:class:`models.dynamic.DynamicModel`) takes its campaign ``data``
     (DynamicMeasurements) instead of ``inputs`` / ``sigma``, instrument ``weights``, and splits by
     experiment, time window or early against late; the size study runs on its collocation at the
-    campaign fit (:func:`identification.dynamic_validate.validate_dynamic`; ``p_true`` defaults to
+    campaign fit (:func:`identification.studies.dynamic_validate.validate_dynamic`; ``p_true`` defaults to
     that fit).
     """
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
@@ -1179,7 +1179,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")
-        from .dynamic_validate import validate_dynamic
+        from identification.studies.dynamic_validate import validate_dynamic
         return validate_dynamic(model, data, splits, p0, p_true=p_true, n_M=n_M, weights=weights, settings=settings,
                                 name=name)
     if generator is None:

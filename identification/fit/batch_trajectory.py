@@ -1,6 +1,6 @@
 r"""Batched fits of a collocated ODE model (no state-size ceiling): every member by identify, merged.
 
-The batch engine (:mod:`identification.batch`) advances members of models with small dense states
+The batch engine (:mod:`identification.fit.batch`) advances members of models with small dense states
 by its own full-space Newton sweeps.  A collocated dynamic model (:mod:`models.collocation`) has
 hundreds of states per experiment, but its state Jacobian is block lower-triangular in the
 elements: :mod:`models.trajectory` solves the trajectories and their exact first and second
@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from models.trajectory import run_merged
-from .errors import DataError, IdentificationError
-from .estimator import identify
+from identification.errors import DataError, IdentificationError
+from identification.fit.estimator import fit_static
 
 __all__ = ["fit_members"]
 
@@ -31,7 +31,7 @@ def fit_members(model, members, p0, weights, settings, starts=None) -> tuple:
     starts = None if starts is None else np.asarray(starts, float).reshape(len(members), -1)
     first = [s if starts is not None and np.all(np.isfinite(s)) else p0
              for s in (starts if starts is not None else [None] * len(members))]
-    tasks = [lambda d=d, s=s: identify(model, d, s, weights=weights, settings=settings) for d, s in zip(members, first)]
+    tasks = [lambda d=d, s=s: fit_static(model, d, s, weights=weights, settings=settings) for d, s in zip(members, first)]
     results = run_merged(tasks)
     errors = {}
     for r, res in enumerate(results):

@@ -23,7 +23,7 @@ both").  With sigma unknown the likelihood ratio becomes the F (Chow) test
 The calibration and validation sets hold disjoint data points, so under a correct model
 p_v - p_c has covariance C_c + C_v; the paper's statistic ignores C_v and, for sets of
 equal size, is about twice a chi^2_{n_p} variable, which inflates its size (measured by
-:mod:`identification.montecarlo`).  The two-sample Wald statistic is exact for models
+:mod:`identification.studies.montecarlo`).  The two-sample Wald statistic is exact for models
 linear in p but, like every Wald test, depends on the parametrisation: for the press,
 whose displacements are nearly linear in the compliances 1/k rather than in k, it is
 conservative (family-wise size 2.95 % at TOL = 5 %).  The likelihood ratio is invariant
@@ -34,7 +34,7 @@ reported alongside (its model-level decision coincides with Bonferroni's, since 
 reject the family exactly when the smallest p-value is below TOL / n_tests; they differ
 in which individual splits are flagged).
 
-When a fit of a split is not trustworthy (Bates-Watts curvature, :mod:`identification.curvature`;
+When a fit of a split is not trustworthy (Bates-Watts curvature, :mod:`identification.inference.curvature`;
 checked by :func:`detect`), its Wald p-values (two-sample, paper) rest on a linearisation that
 fails: they are marked in the summary and the verdict is taken from the likelihood ratio
 (invariant under reparametrisation) whatever ``statistic`` was chosen, saying so.  Statistics
@@ -42,7 +42,7 @@ that disagree by more than a factor 100 across the decision line get a numbered 
 
 Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
 series z_2 - z_1, z_4 - z_3, ... over all inputs, at the family-wise level over the gated
-sensors (Holm by default; :mod:`identification.normality_gate`); the repeatability standard deviation
+sensors (Holm by default; :mod:`identification.studies.normality_gate`); the repeatability standard deviation
 of a sensor is std(differences) / sqrt(2) (same unit as z).
 """
 from __future__ import annotations
@@ -59,14 +59,15 @@ import numpy as np
 from scipy import special, stats
 
 from models.contract import Model
-from .errors import DataError, IdentificationError
-from .estimator import IdentifySettings, identify
-from .measurements import Measurements
-from .normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction, correction_text
-from .progress import Progress
-from .regions import CovarianceError, mahalanobis2
-from .splits import Split, SplitError
-from .unbounded import not_bounded_reason
+from identification.errors import DataError, IdentificationError
+from identification.fit.estimator import IdentifySettings
+from identification.inference.identify import identify
+from identification.fit.measurements import Measurements
+from identification.studies.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction, correction_text
+from identification.progress import Progress
+from identification.inference.regions import CovarianceError, mahalanobis2
+from identification.studies.splits import Split, SplitError
+from identification.fit.unbounded import not_bounded_reason
 from models.state import solve_states
 
 __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
@@ -165,7 +166,7 @@ class NormalityCheck:
     note : str
     series : tuple of str          labels of the series the test ran on (``Measurements.series``)
     correction : str               multiplicity correction over the gated sensors ("holm", "bonferroni",
-                                   "none"; :mod:`identification.normality_gate`)
+                                   "none"; :mod:`identification.studies.normality_gate`)
     adjusted : ndarray (n_S,)      adjusted p-values of the gated sensors (NaN for the others; derived)
     """
 
@@ -260,7 +261,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None,
     repeatability sigma std(tilde z_k) / sqrt(2) (unit of z); never raises on a failed test.
     The gate passes when every gated sensor (weight > 0) has an adjusted p-value >= ``level``;
     ``correction`` ("holm", "bonferroni" or "none", the paper's per-sensor gate) adjusts over the
-    gated sensors (:func:`identification.normality_gate.adjusted_pvalues`).
+    gated sensors (:func:`identification.studies.normality_gate.adjusted_pvalues`).
     """
     if not isinstance(data, Measurements):
         raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
@@ -422,7 +423,7 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     one per split done.
 
     ``fits`` (one (calibration, validation) pair per split) and ``pooled`` ({split.pooled_key:
-    pooled fit}) give fits computed elsewhere (e.g. by :func:`identification.batch.fit_batch` for
+    pooled fit}) give fits computed elsewhere (e.g. by :func:`identification.fit.batch.fit_batch` for
     many replications at once): an entry is an estimate (the fields of :class:`Estimate` the tests
     read), the IdentificationError/DataError its fit raised, or (pooled) a failure text.
     """
@@ -493,12 +494,12 @@ def _pooled_newton(model, data_u, split, est_c, est_v, weights, max_steps: int =
     Starts at the precision-weighted mean p_bar = (F_c + F_v)^{-1} (F_c p_c + F_v p_v) of the
     two estimates (within O(|p_v - p_c|^2) of the pooled optimum) with the states of the two
     fits, and takes the estimator's own exact Newton steps (J^T W J + S, see
-    :func:`identification.refinement.refine`).  The result is used only when the Newton decrement
+    :func:`identification.fit.refinement.refine`).  The result is used only when the Newton decrement
     g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6 standard errors of the optimum); otherwise
     (None) the caller runs the full-space :func:`identify` on the pooled data.
     """
-    from .errors import StateSolveError
-    from .refinement import ReducedProblem, refine
+    from identification.errors import StateSolveError
+    from identification.fit.refinement import ReducedProblem, refine
     w = data_u.sensor_weights(weights)
     sig = (np.asarray(data_u.sigma, float) if data_u.sigma is not None
            else np.full(model.n_S, float(np.sqrt(est_c.rss / max(est_c.n_data, 1))) or 1.0))
@@ -785,7 +786,7 @@ class DetectionResult:
                      "R = hypothesis of the split rejected (LR, 2-sample, paper); >> = the decision")
         if s.statistic == "paper":
             notes.add("the paper's statistic ignores the validation estimate's covariance C_val; under a correct "
-                      "model its size exceeds TOL (see identification.montecarlo)")
+                      "model its size exceeds TOL (see identification.studies.montecarlo)")
         if notes.texts:
             lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes.texts, 1)]
         return "\n".join(lines)
@@ -1037,7 +1038,7 @@ def _dynamic(model) -> bool:
 
 def model_decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
     """(primary decision per model, every model x statistic x correction decision) of split tests
-    (lines 09-17; :mod:`identification.dynamic_detect` after marking undecided splits)."""
+    (lines 09-17; :mod:`identification.studies.dynamic_detect` after marking undecided splits)."""
     return _decisions(tests, names, settings)
 
 
@@ -1147,7 +1148,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     """
     settings = _detect_settings(settings, tol=tol, statistic=statistic, correction=correction, normality=normality)
     if _dynamic(model):           # ODE/DAE models: their collocation, splits by experiment and time window
-        from .dynamic_detect import detect_dynamic
+        from identification.studies.dynamic_detect import detect_dynamic
         if weights is not None:
             raise DataError("weights: a dynamic model takes design= (instrument or sensor@time names)")
         return detect_dynamic(model, measurements, splits, p0, settings=settings, design=design,

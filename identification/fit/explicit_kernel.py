@@ -15,7 +15,7 @@ wt_jk = c_jk / sigma_k^2 (c_jk the weighted counts), one call returns the sums o
 i.e. the reduced objective (without the within-group scatter), its gradient, the Gauss-Newton
 information J^T Omega J, the bound of the gradient's round-off and the second-order term of the
 exact Hessian J^T Omega J + S, all exact by CasADi AD (the model's cached ``sens`` and
-``lag_hess``).  These are the terms of :class:`identification.refinement.ReducedProblem` in one
+``lag_hess``).  These are the terms of :class:`identification.fit.refinement.ReducedProblem` in one
 evaluation instead of a mapped call, four NumPy sums and a second mapped call for S.
 
 Few inputs (below :data:`models.state.VECTORISE_MIN`): the per-input function mapped over the

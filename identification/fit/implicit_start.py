@@ -7,7 +7,7 @@ input, and the objective
 .. math:: \Phi(p) = \tfrac12 \sum_{jk} c_{jk} (\bar z_{jk} - h_k(y_j(p), p, q_j))^2 / \sigma_k^2 + \Phi_0
 
 is a function of p alone with the exact gradient J^T lambda and Hessian J^T Omega J + S
-(:mod:`identification.refinement`).  :class:`ImplicitObjective` evaluates Phi and its terms in
+(:mod:`identification.fit.refinement`).  :class:`ImplicitObjective` evaluates Phi and its terms in
 the scaled parameters x = p / s_p with every input at once: the states by damped Newton from the
 states of the nearest point evaluated so far (:func:`solve_states_from`, one mapped evaluation
 of E and dE/dy per trial, batched NumPy solves of the n_q small blocks), the sensitivities by
@@ -29,8 +29,8 @@ from models.errors import StateSolveError
 from models.sensitivity import sensitivities
 from models.state import numerics, solve_states
 from models.trajectory import trajectory_numerics
-from .explicit_kernel import ExplicitTerms
-from .refinement import ReducedPoint, ReducedProblem
+from identification.fit.explicit_kernel import ExplicitTerms
+from identification.fit.refinement import ReducedPoint, ReducedProblem
 
 __all__ = ["ImplicitObjective", "solve_states_from", "nlp_multipliers"]
 
@@ -135,7 +135,7 @@ def solve_states_from(model, p: np.ndarray, inputs: np.ndarray, Y0: np.ndarray,
 
 class ImplicitObjective:
     """Phi(s_p ⊙ x) of an implicit model with dense states and its terms w.r.t. the scaled
-    parameters x, as an :class:`identification.explicit_kernel.ExplicitTerms` (the call of the
+    parameters x, as an :class:`identification.fit.explicit_kernel.ExplicitTerms` (the call of the
     estimator's explicit objective), with the states solved from the nearest point evaluated
     so far (the last few are kept; the first guess is the states at p0), predicted to first
     order by its state sensitivities y'(p) (else from its states as they are).

@@ -420,8 +420,8 @@ def early_late_split(pairs, n_q: int, t_split: float | None = None, inputs: Sequ
     times in each set).
 
     A :class:`Split` of the columns of the flat data (tests on the collocated model ``est.model``);
-    for :func:`identification.detect` on the DynamicModel itself (a fit per set with its own
-    discretisation control) use :func:`identification.dynamic_detect.early_late_dynamic_split`."""
+    for :func:`identification.studies.detect` on the DynamicModel itself (a fit per set with its own
+    discretisation control) use :func:`identification.studies.dynamic_detect.early_late_dynamic_split`."""
     t = _pair_times(pairs)
     times = np.unique(t)
     if times.size < 2:

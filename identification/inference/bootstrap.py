@@ -13,7 +13,7 @@ warm-started at (p_hat, y_hat), and the (1 - alpha) percentile interval of param
 [q_{alpha/2}, q_{1 - alpha/2}] of the refitted p_i.
 
 The replicates of a chunk are refitted together by the batch engine
-(:func:`identification.batch.fit_batch`: the estimates of :func:`identification.identify` to
+(:func:`identification.fit.batch.fit_batch`: the estimates of :func:`identification.identify` to
 ~1e-10, with identify as per-replicate fallback, recorded: which replicate and why);
 ``batch=False`` refits every replicate with identify.
 
@@ -33,14 +33,14 @@ import numpy as np
 
 from models.contract import Model
 from models.state import set_jit
-from . import cluster
-from .batch import BatchData, fit_batch
-from .errors import DataError, IdentificationError, NotBoundedError, StateSolveError
-from .unbounded import not_bounded_reason
-from .estimator import identify
-from .measurements import Measurements
-from .profile import ConfidenceIntervals, resolve_params, validate_alpha
-from .progress import Progress
+from identification import cluster
+from identification.fit.batch import BatchData, fit_batch
+from identification.errors import DataError, IdentificationError, NotBoundedError, StateSolveError
+from identification.fit.unbounded import not_bounded_reason
+from identification.fit.entry import fit_model
+from identification.fit.measurements import Measurements
+from identification.inference.intervals import ConfidenceIntervals, resolve_params, validate_alpha
+from identification.progress import Progress
 
 __all__ = ["BootstrapError", "BootstrapReplicates", "bootstrap_intervals", "bootstrap_replicates",
            "simulated_campaign"]
@@ -104,7 +104,7 @@ def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
     """(p (n_p,) or NaN, error text or "") of one simulated campaign."""
     try:
         data = simulated_campaign(task, seed)
-        est = identify(task.model, data, task.p0, weights=task.weights, Y0=task.states)
+        est = fit_model(task.model, data, task.p0, weights=task.weights, Y0=task.states)
     except (IdentificationError, StateSolveError, DataError) as exc:
         return np.full(task.p0.size, np.nan), _error_text(exc)
     if not_bounded_reason(est):             # no finite estimate: a failed refit, with its reason
@@ -123,7 +123,7 @@ class _Campaigns:
 
 
 def _replicate_batch(task: _Task, chunk: list) -> list:
-    """The replicates of a chunk refitted together by :func:`identification.batch.fit_batch`:
+    """The replicates of a chunk refitted together by :func:`identification.fit.batch.fit_batch`:
     [(index, p or NaN, error or "", fallback reason or ""), ...].  A replicate the batch iteration
     did not fit was refitted by identify (its reason is kept); when the batch as a whole cannot be
     formed, every replicate is refitted by identify and says why."""
@@ -205,7 +205,7 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
     chunk_size : int, optional   replicates per task (default: about 4 tasks per worker, at most 20
                                  refitted one by one or 100 refitted as one batch)
     batch : bool                 refit the replicates of a chunk together with the batch engine
-                                 (identification.batch.fit_batch); False: one identify call per replicate
+                                 (identification.fit.batch.fit_batch); False: one identify call per replicate
     jit : bool                   evaluate small models' CasADi functions as compiled C during the refits
                                  (models.state.set_jit, as Monte Carlo does; compiled once per machine
                                  and kept in models.jit_cache; without a C compiler the virtual machine)

@@ -21,7 +21,7 @@ J^T Omega J and inverts it: the error of C_GN grows with cond(A D) instead of it
 Bennett5, cond 3e8: 6.4 correct digits from the normal equations, 10+ from R).  K is the
 Hessian in the metric of the Gauss-Newton information: its eigenvalues are the curvatures of
 Phi along the directions of unit Gauss-Newton norm (1 where S = 0); a negative one is a
-direction of negative curvature (:mod:`identification.secondorder`).  The singular values of
+direction of negative curvature (:mod:`identification.fit.secondorder`).  The singular values of
 A D (those of R) are the rank test's (Assumption 3) and are reported with the estimate.
 
 All functions work on stacks: a leading axis of m problems (the batch engine's members);
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import dense
+from identification.fit import dense
 
 __all__ = ["WeightedFactor", "weighted_factor", "normalised_hessian", "covariances", "weighted_rows",
            "estimate_covariances", "NewtonSystem", "newton_system"]

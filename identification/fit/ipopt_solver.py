@@ -16,7 +16,7 @@ import casadi as ca
 import numpy as np
 
 from models.cache import Cache
-from .errors import IdentificationError
+from identification.errors import IdentificationError
 
 __all__ = ["IpoptSettings", "IpoptResult", "NlpProblem", "solve_nlp", "warm_start", "STATUS_MESSAGES", "SOLVER_CACHE"]
 

@@ -2,7 +2,7 @@ r"""Second-order optimality of a stationary point of the reduced objective (issu
 
 A solver's "success" is a stationary point, g = 0 to its tolerance.  It is a minimum only where
 the reduced Hessian H = J^T Omega J + S is positive definite (on the parameters not at a bound).
-In the metric of the Gauss-Newton information (:mod:`identification.factor`),
+In the metric of the Gauss-Newton information (:mod:`identification.fit.factor`),
 
 .. math::
 
@@ -25,9 +25,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from models.errors import StateSolveError
-from .errors import ConvergenceError
-from .factor import WeightedFactor, normalised_hessian, weighted_factor, weighted_rows
-from .refinement import ReducedPoint, ReducedProblem, Refinement
+from identification.errors import ConvergenceError
+from identification.fit.factor import WeightedFactor, normalised_hessian, weighted_factor, weighted_rows
+from identification.fit.refinement import ReducedPoint, ReducedProblem, Refinement
 
 __all__ = ["SecondOrder", "check", "escape", "ensure_minimum", "MAX_SADDLE_ESCAPES"]
 

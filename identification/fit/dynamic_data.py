@@ -14,8 +14,8 @@ from typing import Sequence
 import numpy as np
 
 from models.collocation import pair_name
-from .errors import DataError
-from .measurements import Measurements
+from identification.errors import DataError
+from identification.fit.measurements import Measurements
 
 __all__ = ["DynamicMeasurements"]
 

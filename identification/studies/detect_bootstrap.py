@@ -1,6 +1,6 @@
-r"""Parametric-bootstrap p-values of the split tests of Algorithm 1 (:mod:`identification.detect`).
+r"""Parametric-bootstrap p-values of the split tests of Algorithm 1 (:mod:`identification.studies.detect`).
 
-The asymptotic p-values alpha_min of :func:`identification.detect.run_split_tests` compare each
+The asymptotic p-values alpha_min of :func:`identification.studies.detect.run_split_tests` compare each
 statistic T (likelihood ratio, two-sample Wald, paper) with its chi^2 (or F) law, which holds
 when the model is linear enough in its parameters.  The bootstrap estimates the law of T under
 the null hypothesis "one parameter vector explains the whole campaign" directly:
@@ -29,7 +29,7 @@ local processes and a Dask scheduler (:mod:`identification.cluster`) give identi
 the same chunks, and numbers equal to round-off with other chunks (the batched reductions sum in
 another order: estimates a few units in the last place apart).
 The campaigns of a chunk share their inputs, so their split tests run together
-(:func:`identification.montecarlo.batched_split_tests`: every calibration, validation and
+(:func:`identification.studies.montecarlo.batched_split_tests`: every calibration, validation and
 pooled fit of a split one batch over the campaigns, the statistics computed together), which
 gives the statistics of one run_split_tests per campaign (``batch=False``) to ~1e-8 relative
 (measured <= 9.3e-9 on 200 campaigns; the estimates agree to ~1e-10, and a Wald statistic of two
@@ -47,20 +47,20 @@ import numpy as np
 
 from models.contract import Model
 from models.state import set_jit
-from . import cluster
-from .bootstrap import simulated_campaign
-from .detect import STATISTICS, DetectSettings, run_split_tests
-from .errors import DataError, IdentificationError, NotBoundedError
-from .unbounded import not_bounded_reason
-from .estimator import identify
-from .measurements import Measurements
-from .montecarlo import batched_split_tests
-from .progress import Progress
-from .splits import Split, SplitError
+from identification import cluster
+from identification.inference.bootstrap import simulated_campaign
+from identification.studies.detect import STATISTICS, DetectSettings, run_split_tests
+from identification.errors import DataError, IdentificationError, NotBoundedError
+from identification.fit.unbounded import not_bounded_reason
+from identification.inference.identify import identify
+from identification.fit.measurements import Measurements
+from identification.studies.montecarlo import batched_split_tests
+from identification.progress import Progress
+from identification.studies.splits import Split, SplitError
 
 __all__ = ["BootstrapDetection", "bootstrap_detect"]
 
-#: the statistic of each column (chi^2 or F units), in the order of :data:`identification.detect.STATISTICS`
+#: the statistic of each column (chi^2 or F units), in the order of :data:`identification.studies.detect.STATISTICS`
 _STAT_FIELDS = {"likelihood_ratio": "lr", "two_sample": "d2_two_sample", "paper": "d2_paper"}
 
 
@@ -127,7 +127,7 @@ def _run_chunk(task: _Task | None, chunk: list) -> list:
     """Campaigns [(index, SeedSequence), ...] -> [(index, T, alpha, errors), ...] (task None: this process's).
 
     With ``task.batch`` the split tests of the chunk's campaigns (same inputs) run together
-    (:func:`identification.montecarlo.batched_split_tests`), else one run_split_tests per campaign."""
+    (:func:`identification.studies.montecarlo.batched_split_tests`), else one run_split_tests per campaign."""
     t = _Worker.task if task is None else task
     prev = set_jit(t.jit)
     try:
@@ -178,7 +178,7 @@ def _exceedance_pvalue(boot: np.ndarray, observed: float) -> tuple:
 class BootstrapDetection:
     """Bootstrap and asymptotic p-values of every split test of one model (immutable).
 
-    Columns follow :data:`identification.detect.STATISTICS` ("likelihood_ratio", "two_sample", "paper").
+    Columns follow :data:`identification.studies.detect.STATISTICS` ("likelihood_ratio", "two_sample", "paper").
 
     Attributes
     ----------
@@ -305,7 +305,7 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
                                     not depend on it)
     model_name : str, optional      label (default the model's name)
     batch : bool                    fit the campaigns of a chunk together with the batch engine
-                                    (:func:`identification.montecarlo.batched_split_tests`: the same
+                                    (:func:`identification.studies.montecarlo.batched_split_tests`: the same
                                     statistics to ~1e-8 relative, failures named as run_split_tests
                                     names them); False: one run_split_tests (identify per fit) per campaign
     jit : bool                      small models' CasADi functions as compiled C during the campaigns'
@@ -343,7 +343,7 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
         raise TypeError(f"settings: expected DetectSettings, got {type(settings).__name__}")
     splits = tuple(splits)
     if not splits or not all(isinstance(sp, Split) for sp in splits):
-        raise SplitError("splits: give at least one identification.splits.Split")
+        raise SplitError("splits: give at least one identification.studies.splits.Split")
     try:
         np.random.SeedSequence(seed)
     except (TypeError, ValueError):

@@ -1,7 +1,7 @@
 r"""Algorithm 1 on a dynamic model: splits by experiment, by time window, early against late.
 
 A dynamic campaign (:class:`DynamicMeasurements`) is tested on its collocation (:mod:`models.collocation`)
-on the mesh of the fit of the whole campaign (:func:`identification.dynamic_fit.identify_dynamic`,
+on the mesh of the fit of the whole campaign (:func:`identification.fit.dynamic_fit.identify_dynamic`,
 discretisation error controlled at p̂).  Every experiment j is cut into the windows
 [b_{w-1}, b_w) of the union of the splits' window edges; the row (j, w) of the static problem holds
 experiment j's readings in window w (the others NaN, i.e. missing) with experiment j's inputs, so
@@ -14,7 +14,7 @@ one test per instrument), not per (sensor, time) pair, whose few differences eac
 gate blind and its multiplicity correction over hundreds of pairs meaningless.
 
 Discretisation: every fit of a split (calibration, validation, pooled) is a dynamic fit with its own
-error control (:func:`identification.dynamic_fit.identify_dynamic`: the mesh is refined until the
+error control (:func:`identification.fit.dynamic_fit.identify_dynamic`: the mesh is refined until the
 output error at the readings is below ``tol_sigma`` sigmas and the estimate's shift below ``tol_se``
 standard errors).  A split one of whose fits could not bound the error is *undecided* (stage
 "discretisation", its reason recorded), never a rejection: detect does not report discretisation
@@ -29,11 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamic_data import DynamicMeasurements
-from .dynamic_fit import DiscretisationSettings
-from .errors import DataError
-from .measurements import Measurements
-from .splits import Split, SplitError
+from identification.fit.dynamic_data import DynamicMeasurements
+from identification.fit.dynamic_fit import DiscretisationSettings
+from identification.errors import DataError
+from identification.fit.measurements import Measurements
+from identification.studies.splits import Split, SplitError
 
 __all__ = ["DynamicSplit", "time_window_splits", "early_late_dynamic_split", "detect_dynamic", "flat_split"]
 
@@ -89,7 +89,7 @@ def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
     index n_t // 2 of the campaign's (union of) sampling times, as a :class:`DynamicSplit` for
     :func:`detect_dynamic` on the DynamicModel (each fit with its own discretisation control).
 
-    Not :func:`identification.splits.early_late_split`, which masks the (sensor, time) columns of the flat
+    Not :func:`identification.studies.splits.early_late_split`, which masks the (sensor, time) columns of the flat
     data for the static tests on a collocated model, and cuts at t <= the time at index (n_t - 1) // 2
     (the same partition for an even number of sampling times, one time more in the early set for an odd one).
     """
@@ -182,7 +182,7 @@ def _static_split(sp, rows, edges, n_q) -> Split:
 
 def _gate(settings, name, data: DynamicMeasurements, design, notes):
     """Line 05 pooled per instrument (see the module docstring)."""
-    from .detect import NormalityError, normality_check
+    from identification.studies.detect import NormalityError, normality_check
     inst = data.by_instrument()
     w = None
     if design is not None and all(isinstance(x, str) for x in design):
@@ -249,11 +249,10 @@ def _readings(data: DynamicMeasurements, mask: np.ndarray) -> DynamicMeasurement
 
 def _fit(model, data, p0, weights, settings, discretisation=None):
     """A dynamic fit, or the error it raised (recorded by the split test, never raised)."""
-    from .dynamic_fit import identify_dynamic
-    from .errors import IdentificationError
+    from identification.inference.identify import identify
+    from identification.errors import IdentificationError
     try:
-        return identify_dynamic(model, data, p0, weights=weights, settings=settings.identify,
-                                discretisation=discretisation)
+        return identify(model, data, p0, weights=weights, settings=settings.identify, discretisation=discretisation)
     except (IdentificationError, DataError) as exc:
         return exc
 
@@ -308,10 +307,10 @@ def _weights(model, design):
 def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, design_how=None, progress=None,
                    discretisation: DiscretisationSettings | None = None):
     """Algorithm 1 on dynamic models and their time series (see the module docstring); the arguments
-    are those of :func:`identification.detect.detect` (``design``: instrument names, each measured at
+    are those of :func:`identification.studies.detect.detect` (``design``: instrument names, each measured at
     every sampling time); splits are :class:`DynamicSplit` or :class:`Split` (by experiment);
     ``discretisation`` the error control of every fit (default :class:`DiscretisationSettings`)."""
-    from .detect import DetectionResult, model_decisions, run_split_tests
+    from identification.studies.detect import DetectionResult, model_decisions, run_split_tests
     models = dict(model) if isinstance(model, Mapping) else {model.name: model}
     names = tuple(models)
     splits = tuple(_as_dynamic(sp) for sp in ((splits,) if isinstance(splits, (Split, DynamicSplit)) else splits))

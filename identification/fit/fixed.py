@@ -14,7 +14,7 @@ so values agree to the last bit and derivatives are exact (CasADi AD of the same
 
 A constrained fit min over p_R of Phi(P(p_R, c)) (a profile point) is then an ordinary fit of
 the derived model to data whose input rows carry c; fits with different fixed values are fits
-of one model to different inputs: a batch for :func:`identification.batch.fit_batch` with
+of one model to different inputs: a batch for :func:`identification.fit.batch.fit_batch` with
 per-member inputs (:func:`fixed_batch`: K fits cost K n_q row evaluations per sweep; stacking
 the rows of all members as common inputs instead cost K^2 n_q and was 4-20x slower than
 separate fits, bench/RESULTS.md).
@@ -27,8 +27,8 @@ import casadi as ca
 import numpy as np
 
 from models.contract import Model
-from .batch import BatchData
-from .errors import DataError
+from identification.fit.batch import BatchData
+from identification.errors import DataError
 
 __all__ = ["fixed_model", "full_parameters", "fixed_batch"]
 

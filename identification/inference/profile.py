@@ -1,6 +1,6 @@
 r"""Profile-likelihood intervals and likelihood-ratio regions of a weighted least-squares estimate.
 
-With the reduced-space objective Phi(p) of :mod:`identification.refinement` (chi^2 / 2 units
+With the reduced-space objective Phi(p) of :mod:`identification.fit.refinement` (chi^2 / 2 units
 with the sigmas of the estimate) and its minimum Phi(p_hat), the profile of parameter i is
 
 .. math::
@@ -32,8 +32,8 @@ the value where the path stopped.
 
 The grid's constrained fits are fits of one model with different fixed values: with
 ``batch=True`` (default) the rows of the grid but the centre one are solved in batches of a few rows
-(:func:`identification.batch.fit_batch` on the derived model of
-:func:`identification.fixed.fixed_model`, the fixed values as per-member input columns, so K
+(:func:`identification.fit.batch.fit_batch` on the derived model of
+:func:`identification.fit.fixed.fixed_model`, the fixed values as per-member input columns, so K
 points cost K n_q row evaluations per sweep), each point started from its solved neighbour in
 the row before the block; points the batch does not converge are solved by the per-point Newton.
 ``python -m bench.bench_bootstrap_batch --profiles-only`` measured 2.1-4.2x less CPU per grid
@@ -50,12 +50,15 @@ from scipy import optimize, stats
 
 from models.contract import Model
 from models.errors import StateSolveError
-from .errors import IdentificationError
-from .batch import fit_batch
-from .estimator import identify
-from .fixed import fixed_batch, fixed_model, full_parameters
-from .measurements import Measurements
-from .refinement import ReducedPoint, ReducedProblem
+from identification.errors import IdentificationError
+from identification.fit.batch import fit_batch
+from identification.fit.entry import fit_model
+from identification.fit.fixed import fixed_batch, fixed_model, full_parameters
+from identification.fit.measurements import Measurements
+from identification.fit.refinement import ReducedPoint, ReducedProblem
+from identification.inference.unbounded_intervals import profile_intervals_unbounded
+from identification.inference.intervals import (ConfidenceIntervals, profile_threshold, region_threshold,
+                                                 resolve_params, validate_alpha)
 
 __all__ = ["ProfileError", "ProfileSettings", "ParameterProfile", "ConfidenceIntervals", "LikelihoodRegion",
            "profile_intervals", "lr_region", "profile_threshold", "region_threshold", "resolve_params",
@@ -69,53 +72,6 @@ GRID_BLOCK_ROWS = 4
 
 class ProfileError(IdentificationError):
     """A profile could not be followed (the message names the parameter, the value and the reason)."""
-
-
-def validate_alpha(alpha) -> float:
-    """alpha as a float in (0, 0.5); anything else raises ValueError naming the argument."""
-    try:
-        a = float(alpha)
-    except (TypeError, ValueError):
-        raise ValueError(f"alpha: expected a number in (0, 0.5), got {alpha!r}") from None
-    if not (0.0 < a < 0.5):
-        raise ValueError(f"alpha: must lie in (0, 0.5), got {alpha!r}; alpha is the miss probability: "
-                         "0.05 gives a 95 % interval")
-    return a
-
-
-def resolve_params(params, names: tuple) -> list:
-    """Indices of ``params`` (None: all; names or 0-based indices) in ``names``."""
-    if params is None:
-        return list(range(len(names)))
-    if isinstance(params, (str, int, np.integer)):
-        params = [params]
-    idx = []
-    for q in params:
-        if isinstance(q, (int, np.integer)) and not isinstance(q, bool):
-            if not 0 <= int(q) < len(names):
-                raise ValueError(f"params: index {q} out of range; the parameters are {', '.join(names)}")
-            idx.append(int(q))
-        elif isinstance(q, str) and q in names:
-            idx.append(names.index(q))
-        else:
-            raise ValueError(f"params: unknown parameter {q!r}; the parameters are {', '.join(names)}")
-    if len(set(idx)) != len(idx):
-        raise ValueError(f"params: a parameter is named twice in {list(params)}")
-    return idx
-
-
-def profile_threshold(alpha: float, sigma_estimated: bool, dof: int) -> float:
-    """c of a single-parameter profile: chi2_1(1 - alpha), or F(1, dof; 1 - alpha) when sigma was estimated."""
-    if sigma_estimated:
-        return float(stats.f.ppf(1 - alpha, 1, dof))
-    return float(stats.chi2.ppf(1 - alpha, 1))
-
-
-def region_threshold(alpha: float, sigma_estimated: bool, dof: int) -> float:
-    """c of a two-parameter region: chi2_2(1 - alpha), or 2 F(2, dof; 1 - alpha) when sigma was estimated."""
-    if sigma_estimated:
-        return 2.0 * float(stats.f.ppf(1 - alpha, 2, dof))
-    return float(stats.chi2.ppf(1 - alpha, 2))
 
 
 @dataclass(frozen=True)
@@ -186,61 +142,6 @@ class ParameterProfile:
     def __post_init__(self):
         for name in ("values", "statistic", "tau", "params"):
             object.__setattr__(self, name, _readonly(getattr(self, name)))
-
-
-@dataclass(frozen=True)
-class ConfidenceIntervals:
-    """Marginal (1 - alpha) confidence intervals of selected parameters.
-
-    Attributes
-    ----------
-    param_names : tuple of str     the selected parameters
-    estimate : ndarray (m,)        their estimates
-    lower, upper : ndarray (m,)    interval ends (same unit as the parameter; +-inf: unbounded side)
-    method : str                   "profile" or "bootstrap"
-    alpha : float                  miss probability
-    notes : tuple of str           unbounded sides, failed refits, fallbacks
-    profiles : tuple               ParameterProfile per parameter (method "profile")
-    replicates : ndarray (k, n_p)  successful bootstrap estimates (method "bootstrap")
-    n_failed : int                 failed bootstrap refits (counted, excluded from the percentiles)
-    fallbacks : tuple of (int, str)   bootstrap refits the batch engine left to identify (replicate, why)
-    """
-
-    param_names: tuple
-    estimate: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    method: str
-    alpha: float
-    notes: tuple = ()
-    profiles: tuple = ()
-    replicates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    n_failed: int = 0
-    fallbacks: tuple = ()
-
-    def __post_init__(self):
-        for name in ("estimate", "lower", "upper", "replicates"):
-            object.__setattr__(self, name, _readonly(getattr(self, name)))
-
-    @property
-    def array(self) -> np.ndarray:
-        """(m, 2) array [lower, upper], the layout of the Wald ``Estimate.conf_int``."""
-        return _readonly(np.column_stack([self.lower, self.upper]))
-
-    def __getitem__(self, name: str) -> tuple:
-        """(lower, upper) of a parameter by name."""
-        if name not in self.param_names:
-            raise KeyError(f"unknown parameter {name!r}; the intervals are of {', '.join(self.param_names)}")
-        i = self.param_names.index(name)
-        return float(self.lower[i]), float(self.upper[i])
-
-    def __str__(self):
-        pct = f"{100 * (1 - self.alpha):g} %"
-        lines = [f"{pct} {self.method} intervals"]
-        for n, e, lo, up in zip(self.param_names, self.estimate, self.lower, self.upper):
-            lines.append(f"  {n}: {e:.7g} in [{lo:.7g}, {up:.7g}]")
-        lines += [f"  [{k}] {note}" for k, note in enumerate(self.notes, 1)]
-        return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------- the constrained solver
@@ -389,7 +290,7 @@ class _Profiler:
         names = self.model.param_names
         fixed_model = self.model.with_bounds({names[k]: (float(v), float(v)) for k, v in zip(fixed, values)})
         try:
-            est = identify(fixed_model, self.data, p0, weights=self.est.weights, Y0=base.point.states)
+            est = fit_model(fixed_model, self.data, p0, weights=self.est.weights, Y0=base.point.states)
             # a constrained fit that runs off to infinity (identify certified it, est.bounded False): its
             # point lies on the run-off within the certified tolerance of the constrained infimum, which is
             # the profile's value there
@@ -596,7 +497,6 @@ def profile_intervals(model: Model, data: Measurements, est, alpha: float = 0.05
     settings = settings or ProfileSettings()
     c = profile_threshold(alpha, est.sigma_estimated, est.dof)
     if getattr(est, "unbounded", None) is not None:      # the best fit runs off: D against the infimum
-        from .unbounded import profile_intervals_unbounded
         lower, upper, notes = profile_intervals_unbounded(model, data, est, alpha, idx, c)
         return ConfidenceIntervals(tuple(est.param_names[i] for i in idx), np.asarray(est.p)[idx], lower, upper,
                                    "profile", alpha, tuple(notes))
@@ -895,8 +795,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
 
     ``batch=True`` (default): the row through the point nearest the estimate is solved point by
     point as above; the other rows, in blocks of :data:`GRID_BLOCK_ROWS` outwards from it, are one
-    :func:`identification.batch.fit_batch` call per block on the derived model
-    :func:`identification.fixed.fixed_model` (the pair's values as per-member input columns), each
+    :func:`identification.fit.batch.fit_batch` call per block on the derived model
+    :func:`identification.fit.fixed.fixed_model` (the pair's values as per-member input columns), each
     point started from its column's solved point in the row before the block (towards the
     centre); a point the batch does not converge (or ends on a bound) is solved point by point
     from its neighbour, counted in ``notes``.  ``batch=False``, or a model of two parameters (no

@@ -1,9 +1,9 @@
 r"""Monte Carlo validation (size study) of Algorithm 1 on a dynamic model and its time series.
 
-The campaign is fitted once (:func:`identification.dynamic_fit.identify_dynamic`: Radau IIA collocation
+The campaign is fitted once (:func:`identification.fit.dynamic_fit.identify_dynamic`: Radau IIA collocation
 with the discretisation error controlled at p̂); the size study then runs on that collocated model
 (``est.model``, a static model over the (sensor, time) outputs) with its flat data, as
-:func:`identification.dynamic_detect.detect_dynamic` tests on it:
+:func:`identification.studies.dynamic_detect.detect_dynamic` tests on it:
 
 .. math::
 
@@ -11,18 +11,19 @@ with the discretisation error controlled at p̂); the size study then runs on th
 
 every experiment simulated at every sampling time of the campaign (the union of the experiments' times).
 Splits by experiment (:class:`Split`) apply to the rows; splits by time window or early against late
-(:class:`identification.dynamic_detect.DynamicSplit`) become splits of the (sensor, time) columns
-(:func:`identification.dynamic_detect.flat_split`); :class:`Split` objects with sensor columns
-(:func:`identification.splits.time_window_split`) are used as they are.
+(:class:`identification.studies.dynamic_detect.DynamicSplit`) become splits of the (sensor, time) columns
+(:func:`identification.studies.dynamic_detect.flat_split`); :class:`Split` objects with sensor columns
+(:func:`identification.studies.splits.time_window_split`) are used as they are.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .dynamic_data import DynamicMeasurements
-from .dynamic_detect import flat_split
-from .dynamic_fit import DiscretisationSettings, identify_dynamic
-from .errors import DataError
+from identification.fit.dynamic_data import DynamicMeasurements
+from identification.studies.dynamic_detect import flat_split
+from identification.fit.dynamic_fit import DiscretisationSettings
+from identification.inference.identify import identify
+from identification.errors import DataError
 
 __all__ = ["validate_dynamic"]
 
@@ -49,7 +50,7 @@ def validate_dynamic(model, data, splits, p0=None, *, p_true=None, n_M: int = 2,
     -------
     MonteCarloResult
     """
-    from .montecarlo import size_study        # same layer; montecarlo.validate dispatches here
+    from identification.studies.montecarlo import size_study        # same layer; montecarlo.validate dispatches here
     if not isinstance(data, DynamicMeasurements):
         raise DataError(f"data: validate on a dynamic model needs the campaign as identification."
                         f"DynamicMeasurements (inputs, sampling times, sigma), got {type(data).__name__}")
@@ -64,8 +65,7 @@ def validate_dynamic(model, data, splits, p0=None, *, p_true=None, n_M: int = 2,
         if w.shape != (model.n_S,):
             raise DataError(f"weights: expected {model.n_S} instrument weights ({', '.join(model.sensors)}), got "
                             f"shape {w.shape}")
-    est = identify_dynamic(model, data, start, weights=w, settings=settings.detect.identify,
-                           discretisation=discretisation)
+    est = identify(model, data, start, weights=w, settings=settings.detect.identify, discretisation=discretisation)
     cm, flat = est.model, est.data
     flat_splits = [flat_split(sp, cm.outputs, flat.n_q) for sp in splits]
     w_flat = None if w is None else np.array([w[model.sensors.index(s)] for s, _ in cm.outputs])

@@ -13,12 +13,12 @@ lambda_jk = dPhi/dh_jk = -c_jk (zbar_jk - h_jk) / sigma_k^2, and its exact Hessi
 H = J^T Omega J + S with S the second-order term (by AD and the implicit function theorem,
 :meth:`models.sensitivity.Sensitivities.hessians`).  :func:`refine` takes Newton steps
 p <- p - H^{-1} g, solved through the QR factor of the weighted Jacobian
-(H = D^{-1} R^T K R D^{-1}, :mod:`identification.factor`), while they decrease Phi (or, where
+(H = D^{-1} R^T K R D^{-1}, :mod:`identification.fit.factor`), while they decrease Phi (or, where
 Phi cannot resolve the decrease, while the decrement falls) down to the stated tolerance or to
 round-off, and says why it stopped.
 
 The estimator (:func:`identification.identify`) refines Ipopt's solution with it, and the
-likelihood-ratio test of :mod:`identification.detect` finds the pooled minimum with it.
+likelihood-ratio test of :mod:`identification.studies.detect` finds the pooled minimum with it.
 """
 from __future__ import annotations
 
@@ -30,9 +30,9 @@ from models.contract import Model
 from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
-from . import dense
-from .factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
-from .measurements import Measurements
+from identification.fit import dense
+from identification.fit.factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
+from identification.fit.measurements import Measurements
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
            "newton_decrement"]
@@ -171,7 +171,7 @@ class Refinement:
     steps : int                   Newton steps taken
     stop_reason : str             why the refinement stopped (see :func:`refine`)
     factor : WeightedFactor       QR factor of the column-normalised sqrt(Omega) J at ``point.p``
-                                  (:mod:`identification.factor`; None if not computed)
+                                  (:mod:`identification.fit.factor`; None if not computed)
     """
 
     point: ReducedPoint

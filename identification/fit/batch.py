@@ -3,7 +3,7 @@ r"""Batched weighted least squares: many data sets of one model fitted together.
 Monte Carlo replications, bootstrap samples and profile points fit the SAME model with the
 same sensors and weights to R data sets z^(r), with common inputs or with each member's own
 inputs of one shape (n_q, d_q) (profile points: the fixed parameter values are input columns of
-:func:`identification.fixed.fixed_model`).  States and sensitivities depend on
+:func:`identification.fit.fixed.fixed_model`).  States and sensitivities depend on
 p only, never on the data, so the R fits are advanced together: every sweep evaluates the
 model at all (member, input) points in one mapped CasADi call and does the linear algebra
 as batched NumPy.  Member r minimises the reduced objective of paper eq. 3,
@@ -13,7 +13,7 @@ as batched NumPy.  Member r minimises the reduced objective of paper eq. 3,
     \Phi_r(p) = \tfrac12 \sum_{j,k} c^{(r)}_{jk} (\bar z^{(r)}_{jk} - h_k(y_j(p), p, q_j))^2 / \sigma_k^2
                 + \Phi_{0,r},
 
-(the terms of :class:`identification.refinement.ReducedProblem`), by Newton steps on the
+(the terms of :class:`identification.fit.refinement.ReducedProblem`), by Newton steps on the
 equality-constrained problem in (p, y_1..y_nq) (the problem Ipopt solves in the first,
 bound-free pass of :func:`identification.identify`).  Per sweep and point one factorisation of
 E_y gives the state correction dy_E = -E_y^{-1} E, the state derivatives y' = -E_y^{-1} E_p and
@@ -28,7 +28,7 @@ with M = J^T Omega J (Gauss-Newton, far from the optimum) or J^T Omega J + S (ex
 S by AD and the implicit function theorem as :meth:`models.sensitivity.Sensitivities.hessians`),
 and lambda_lin evaluated at the Newton-corrected states.  Once the states are converged (the
 state solver's test |dy_E| <= 1e-12 (1 + |y|) at every input) the point is an exact reduced
-point and the test of :func:`identification.refinement.refine` applies: a member has converged
+point and the test of :func:`identification.fit.refinement.refine` applies: a member has converged
 when its Newton decrement g^T (J^T Omega J + S)^{-1} g is below ``refine_decrement`` (chi^2
 units; or below the round-off of the gradient's sum), or the Newton step is below 1e-13
 parameter scales.  A step that increases Phi is halved back towards the last exact point
@@ -38,7 +38,7 @@ falls, else the last exact point is the optimum, as in ``refine``.  The estimate
 checked as :func:`identification.identify` checks its own (Assumption 3 on the column-
 normalised sqrt(Omega) J, |p| below 1e6 parameter scales, finite standard errors), and the
 second-order (Bard) covariance C = H^{-1} J^T Omega^2 J H^{-T} comes from the same exact terms
-and the same QR factor of sqrt(Omega) J as identify's (:mod:`identification.factor`, batched).
+and the same QR factor of sqrt(Omega) J as identify's (:mod:`identification.fit.factor`, batched).
 
 Evaluation: for a model in SX with JIT compilation on (:func:`models.state.set_jit`, as in
 the Monte Carlo workers) one compiled CasADi function, mapped over all (member, input)
@@ -56,7 +56,7 @@ rows (same q and the same state at p0) are evaluated once per member (their data
 pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
 fitted by identify; for a collocated ODE model the members' fits run together with their
-trajectory evaluations merged (:mod:`identification.batch_trajectory`: no state-size ceiling).
+trajectory evaluations merged (:mod:`identification.fit.batch_trajectory`: no state-size ceiling).
 
 A member that does not converge (or fails a check, or ends on or outside a parameter bound)
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
@@ -75,12 +75,12 @@ import numpy as np
 from models.contract import Model
 from models.state import numerics, solve_states
 from models.trajectory import trajectory_numerics
-from .errors import DataError, IdentificationError, StateSolveError
-from .batch_trajectory import decrements, fit_members
-from .unbounded import not_bounded_reason
-from .estimator import IdentifySettings, as_start_vector, identify, param_scale
-from .factor import covariances, weighted_factor
-from .measurements import Measurements
+from identification.errors import DataError, IdentificationError, StateSolveError
+from identification.fit.batch_trajectory import decrements, fit_members
+from identification.fit.unbounded import not_bounded_reason
+from identification.fit.estimator import IdentifySettings, as_start_vector, fit_static, param_scale
+from identification.fit.factor import covariances, weighted_factor
+from identification.fit.measurements import Measurements
 
 __all__ = ["fit_batch", "BatchData", "BatchFit", "BatchMember", "FallbackRecord", "BatchSettings"]
 
@@ -149,7 +149,7 @@ class BatchData:
     ----------
     inputs : ndarray (n_q, d_q)      the common inputs, or (R, n_q, d_q): each member's own inputs
                                      (same shape; e.g. profile points, whose fixed parameter values
-                                     are input columns, :func:`identification.fixed.fixed_model`)
+                                     are input columns, :func:`identification.fit.fixed.fixed_model`)
     z : ndarray (R, n_M, n_q, n_S)   values (NaN: missing)
     sigma : ndarray (R, n_S) or None sensor sigmas (None: a common unknown sigma for every member)
     make : callable or None          member -> its Measurements (the data of a fallback fit; None:
@@ -595,7 +595,7 @@ class _Prepared:
 
 
 def _prepare(model, data: BatchData, w, Y_ref) -> _Prepared:
-    """Data terms of every member, as :meth:`identification.refinement.ReducedProblem.of` computes them
+    """Data terms of every member, as :meth:`identification.fit.refinement.ReducedProblem.of` computes them
     (c_jk = n_jk w_k, zbar the per-(input, sensor) means, Phi_0 the within-group scatter) and the
     objective's sigmas as identify chooses them, pooled over identical input rows:
     sum_{j in u} c_j (zbar_j - h)^2 = C_u (zbar_u - h)^2 + sum_{j in u} c_j (zbar_j - zbar_u)^2 with
@@ -900,7 +900,7 @@ def _evaluate(model, prep: _Prepared, points: _Points, it: _Iteration, a: np.nda
 
 def _advance(model, prep: _Prepared, it: _Iteration, sw: _Sweep, s_p: np.ndarray, settings: IdentifySettings,
              bs: BatchSettings, sigma_unknown: bool) -> None:
-    """Convergence test (that of identification.refinement.refine) and the next step of every member."""
+    """Convergence test (that of identification.fit.refinement.refine) and the next step of every member."""
     n_p = model.n_p
     a = sw.a
     unit = 2 * sw.obj / np.maximum(prep.n_data[a] - n_p, 1) if sigma_unknown else np.ones(a.size)
@@ -1019,7 +1019,7 @@ def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndar
              sigma_unknown: bool) -> list:
     """The estimates of converged members (local indices ``k`` with their final points in ``it``):
     Assumption 3, the covariance of eq. 7 and plausibility, each the test identify applies
-    (:func:`identification.estimator.check_identifiability`, :mod:`identification.factor`, |p| and
+    (:func:`identification.fit.estimator.check_identifiability`, :mod:`identification.fit.factor`, |p| and
     finite standard errors), batched.  Returns per member a BatchMember or the reason text of a
     failed check (the caller falls back to identify)."""
     n_p = model.n_p
@@ -1028,7 +1028,7 @@ def _members(model, prep: _Prepared, it: _Iteration, k: np.ndarray, s_p: np.ndar
     cw, sig = prep.cw[k], prep.sig[k]
     out = [""] * m
     # Assumption 3 and the covariances (eq. 7) from the QR factor of the column-normalised
-    # sqrt(Omega) J, as identify (identification.factor)
+    # sqrt(Omega) J, as identify (identification.fit.factor)
     rows = ((np.sqrt(cw) / sig[:, None, :])[..., None] * G).reshape(m, -1, n_p)
     fac = weighted_factor(rows)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -1155,7 +1155,7 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
                 # unbounded first pass of identify (lazy_bounds) may run to Ipopt's max_iter first
                 use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
                 Y0_r = Y0 if Y0 is None or data.shared or not n_y else Y0[r]
-                est = identify(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
+                est = fit_static(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
                 # an estimate the data do not bound is kept (callers test Estimate.bounded) but is no
                 # estimate of p: ok False, its reason recorded
                 records.append(FallbackRecord(int(r), why, not_bounded_reason(est)))

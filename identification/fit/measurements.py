@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import DataError
+from identification.errors import DataError
 
 __all__ = ["Measurements"]
 
@@ -61,7 +61,7 @@ class Measurements:
         Labels of the series (default ``"1"..."n_M"``).
     allow_empty_sensors : bool
         Accept sensors without any finite value (the subsets of a split over sensors, e.g. the
-        early times of :func:`identification.splits.early_late_split`); default False: an error.
+        early times of :func:`identification.studies.splits.early_late_split`); default False: an error.
 
     Raises
     ------

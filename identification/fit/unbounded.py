@@ -43,12 +43,13 @@ import numpy as np
 from scipy import optimize
 
 from models.errors import StateSolveError
-from . import dense
-from .errors import IdentifiabilityError, NotBoundedError
-from .refinement import ReducedPoint, ReducedProblem
-from .results import Estimate
+from identification.fit import dense
+from identification.errors import IdentifiabilityError, NotBoundedError
+from identification.fit.refinement import ReducedPoint, ReducedProblem
+from identification.fit.record import FitRecord
 
-__all__ = ["Unbounded", "Diagnosis", "diagnose", "estimate_not_bounded", "identifiability_error", "profile_intervals_unbounded", "unbounded_summary", "not_bounded_reason"]
+__all__ = ["Unbounded", "Diagnosis", "diagnose", "estimate_not_bounded", "identifiability_error", "not_bounded_reason",
+           "constrained_minimum", "relative_scale", "move_along", "MAX_DECADES"]
 
 #: the valley has converged when its last decade lowers Phi by less than this (chi^2 / 2 units)
 TAIL_TOL = 1e-8
@@ -115,7 +116,7 @@ def not_bounded_reason(est) -> str:
 
 
 # ---------------------------------------------------------------------------- the valley
-def _rel(p: np.ndarray, s_p: np.ndarray) -> np.ndarray:
+def relative_scale(p: np.ndarray, s_p: np.ndarray) -> np.ndarray:
     """Relative scales |p_i| (s_p,i where p_i = 0)."""
     return np.where(np.abs(p) > 0, np.abs(p), s_p)
 
@@ -139,7 +140,7 @@ def constrained_minimum(problem: ReducedProblem, p: np.ndarray, states, fixed: i
     if not free:
         return point
     for _ in range(max_iter):
-        d = _rel(point.p, problem.p_scale)[free]
+        d = relative_scale(point.p, problem.p_scale)[free]
         F = problem.information(point)[np.ix_(free, free)] * np.outer(d, d)
         S = point.sens.hessians(point.lam[None])[0][np.ix_(free, free)] * np.outer(d, d)
         L = dense.cholesky_lower(F + S)
@@ -172,7 +173,7 @@ def constrained_minimum(problem: ReducedProblem, p: np.ndarray, states, fixed: i
     return None
 
 
-def _move(p: np.ndarray, expo: np.ndarray, j: int, decades: float, lo, up) -> np.ndarray:
+def move_along(p: np.ndarray, expo: np.ndarray, j: int, decades: float, lo, up) -> np.ndarray:
     """The predictor: |p_i| scaled by 10^(decades expo_i / expo_j) (log-linear), p_j by 10^(+-decades)."""
     q = p * 10.0 ** (decades * expo / expo[j])
     return np.clip(q, lo, up)
@@ -190,7 +191,7 @@ def _walk(problem, start: ReducedPoint, j: int, expo: np.ndarray, sign: int, n: 
     lo, up = problem.model.lower, problem.model.upper
     pts, cur, e = [], start, np.array(expo, float)
     for _ in range(n):
-        q = _move(cur.p, e, j, sign * 1.0, lo, up)
+        q = move_along(cur.p, e, j, sign * 1.0, lo, up)
         target = cur.p[j] * 10.0 ** sign
         if not (lo[j] <= target <= up[j]) or not np.isfinite(target):
             break
@@ -230,7 +231,7 @@ def _sloppy(problem: ReducedProblem, p_stop: np.ndarray, states):
         return Diagnosis("none", "the state equation cannot be solved at the point where the fit stopped")
     if not (math.isfinite(point.objective) and np.all(np.isfinite(point.p))):
         return Diagnosis("none", "the objective is not finite where the fit stopped")
-    d = _rel(point.p, problem.p_scale)
+    d = relative_scale(point.p, problem.p_scale)
     Fr = problem.information(point) * np.outer(d, d)
     if not np.all(np.isfinite(Fr)):
         return Diagnosis("none", "the information is not finite where the fit stopped")
@@ -334,7 +335,7 @@ def restricted_covariance(information: np.ndarray, p: np.ndarray, s_p: np.ndarra
     Sigma = Q (Q^T D F D Q)^{-1} Q^T, Q an orthonormal basis of u^perp (D = diag |p|); a^T Sigma a is
     the variance of a^T log|p| for a orthogonal to u (the combinations that stay finite)."""
     n = p.size
-    d = _rel(p, s_p)
+    d = relative_scale(p, s_p)
     Fr = information * np.outer(d, d)
     Q = np.linalg.svd(u.reshape(1, -1))[2][1:].T          # (n, n - 1), orthonormal, orthogonal to u
     if Q.shape[1] == 0:
@@ -391,7 +392,7 @@ def estimate_not_bounded(st, diag: Diagnosis, stopped: str, t_start: float):
     involved = tuple(n for n, ui in zip(names, u) if abs(ui) >= 0.05 * np.abs(u).max())
     Sigma = restricted_covariance(F / factor, point.p, st.s_p, u)
     combos = combinations(names, diag.limit.p, u, involved, Sigma)
-    d = _rel(point.p, st.s_p)
+    d = relative_scale(point.p, st.s_p)
     cov = Sigma * np.outer(d, d)
     for i, n in enumerate(names):
         if n in involved:
@@ -408,7 +409,7 @@ def estimate_not_bounded(st, diag: Diagnosis, stopped: str, t_start: float):
     other = _other_side(model, info)
     if other:
         notes.append(other)
-    return Estimate(
+    return FitRecord(
         p=point.p, param_names=names, param_units=tuple(par.unit for par in model.params), sensors=model.sensors,
         states=point.states, fitted=point.sens.h, residuals=resid, weights=st.w, sigma=sig_used,
         sigma_estimated=data.sigma is None, n_data=st.n, dof=dof, rss=rss, objective=point.objective / factor,
@@ -417,7 +418,7 @@ def estimate_not_bounded(st, diag: Diagnosis, stopped: str, t_start: float):
         iterations=0, solve_time=time.perf_counter() - t_start, refinement_steps=0,
         grad_norm=float(np.linalg.norm(point.gradient * st.s_p)),
         notes=tuple(notes),
-        model_name=model.name, extra={"solver": "valley walk (identification.unbounded)"}, model=model, data=data,
+        model_name=model.name, extra={"solver": "valley walk (identification.fit.unbounded)"}, model=model, data=data,
         unbounded=info)
 
 
@@ -447,146 +448,3 @@ def identifiability_error(exc: IdentifiabilityError, diag: Diagnosis, p_stop, na
         text = (f"{exc}; at the point where the fit stopped ({where}) no run-off to infinity could be certified "
                 f"({diag.text}): try other start values or bounds on the parameters")
     return IdentifiabilityError(text, getattr(exc, "params", ()), getattr(exc, "sensors", ()))
-
-
-# ---------------------------------------------------------------------------- profile intervals
-def _side(problem, est, i: int, c: float, f_inf: float) -> tuple:
-    """(end, note) of the finite (inward) side of parameter i's profile."""
-    u = est.unbounded
-    name = est.param_names[i]
-    lo, up = problem.model.lower, problem.model.upper
-    inward = -1 if u.direction[i] > 0 else +1        # decades of |theta|
-    start = constrained_minimum(problem, np.asarray(est.p, float), est.states, i)
-    if start is None:
-        raise NotBoundedError(f"profile of {name}: the valley cannot be followed from the estimate")
-    expo = np.where(np.abs(u.direction) >= 1e-3 * abs(u.direction[i]), u.direction, 0.0) * np.sign(u.direction[i])
-    cur = start
-    for _k in range(4 * MAX_DECADES):
-        theta = cur.p[i] * 10.0 ** inward
-        at_bound = not (lo[i] <= theta <= up[i])
-        theta = float(np.clip(theta, lo[i], up[i]))
-        q = _move(cur.p, expo, i, float(inward), lo, up)
-        q[i] = theta
-        new = constrained_minimum(problem, q, cur.states, i)
-        if new is None:
-            raise NotBoundedError(f"profile of {name}: the constrained fit failed at {name} = {theta:.8g}")
-        D = 2.0 * (new.objective - f_inf)
-        if D >= c:
-            return _crossing(problem, i, cur, new, c, f_inf, expo), None
-        if at_bound or theta == 0:
-            return inward * math.copysign(math.inf, cur.p[i]), (
-                f"{name}: the profile statistic stays below the threshold ({D:.3g} < {c:.3g}) up to the bound "
-                f"{theta:g}; that end is unbounded too")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step = np.log10(np.abs(new.p)) - np.log10(np.abs(cur.p))
-        expo = np.where(np.isfinite(step), step, 0.0) * inward
-        cur = new
-    return inward * math.copysign(math.inf, cur.p[i]), (
-        f"{name}: the profile statistic stays below the threshold over {4 * MAX_DECADES} decades; treated as unbounded")
-
-
-def _crossing(problem, i, out_pt, in_pt, c, f_inf, expo) -> float:
-    """theta in [in_pt.p[i], out_pt.p[i]] where sqrt(D) = sqrt(c) (brentq, warm starts from the outer point)."""
-    lo, up = problem.model.lower, problem.model.upper
-    known = {float(out_pt.p[i]): out_pt}
-
-    def g(theta):
-        near = known[min(known, key=lambda t: abs(t - theta))]
-        ratio = theta / near.p[i] if near.p[i] != 0 and theta / near.p[i] > 0 else 1.0
-        q = _move(near.p, expo, i, math.log10(ratio), lo, up) if ratio != 1.0 else np.array(near.p, float)
-        q[i] = theta
-        pt = constrained_minimum(problem, q, near.states, i)
-        if pt is None:
-            raise NotBoundedError(f"profile of {problem.model.param_names[i]}: the constrained fit failed at "
-                                  f"{theta:.8g}")
-        known[float(theta)] = pt
-        return math.sqrt(max(2.0 * (pt.objective - f_inf), 0.0)) - math.sqrt(c)
-
-    a, b = float(in_pt.p[i]), float(out_pt.p[i])
-    return float(optimize.brentq(g, a, b, xtol=1e-12 * max(abs(a), abs(b)), rtol=1e-10))
-
-
-def profile_intervals_unbounded(model, data, est, alpha: float, idx: list, c: float):
-    """Profile-likelihood intervals of an estimate that is not bounded (see the module docstring):
-    D_i(theta) = 2 (min_{p_i = theta} Phi - Phi_inf) <= c, with c the threshold of
-    :func:`identification.profile.profile_threshold`.
-
-    Returns (lower, upper, notes): per parameter of ``idx`` the ends (+-inf on the side the fit runs
-    off to, 0 for a parameter whose magnitude goes to 0) and the notes; the caller
-    (:func:`identification.profile.profile_intervals`) makes the ConfidenceIntervals.
-
-    Raises
-    ------
-    NotBoundedError
-        A constrained fit of the finite side failed (the message names the parameter and value).
-    """
-    u = est.unbounded
-    problem = ReducedProblem.of(model, data, est.weights, est.sigma, _rel(np.asarray(est.p, float),
-                                                                            np.ones(est.p.size)))
-    try:
-        f_inf = problem.evaluate(np.asarray(u.p_limit, float), est.states).objective
-    except StateSolveError as exc:
-        raise NotBoundedError(f"profile: the limit point cannot be evaluated: {exc}") from None
-    f_inf = min(f_inf, problem.evaluate(np.asarray(est.p, float), est.states).objective)
-    lower, upper, notes = [], [], []
-    ends = u.ends()
-    for i in idx:
-        name = est.param_names[i]
-        if name not in u.involved:
-            se = math.sqrt(est.cov[i, i]) if est.cov[i, i] >= 0 else math.nan
-            z = math.sqrt(c)
-            lower.append(est.p[i] - z * se)
-            upper.append(est.p[i] + z * se)
-            notes.append(f"{name}: not involved in the run-off; its interval is the Wald interval of the limiting "
-                         "model (information restricted to the directions the data determine)")
-            continue
-        end, note = _side(problem, est, i, c, f_inf)
-        far = {"+inf": math.inf, "-inf": -math.inf, "0": 0.0}[ends[name]]
-        lo_, hi_ = sorted((end, far))
-        lower.append(lo_)
-        upper.append(hi_)
-        notes.append(f"{name}: the data do not bound it {'from above' if far == math.inf else 'from below' if far < 0 else 'away from 0'} "
-                     f"(the best fit runs off to {ends[name]})")
-        if note:
-            notes.append(note)
-    return lower, upper, notes
-
-
-# ---------------------------------------------------------------------------- summary
-def unbounded_summary(est, alpha: float = 0.05) -> str:
-    """The summary of an estimate that is not bounded: what runs off, the profile intervals, what the
-    data determine."""
-    u = est.unbounded
-    lines = [f"Identification of {est.model_name or 'model'}",
-             f"  status: NOT BOUNDED ({est.message})",
-             f"  data: n = {est.n_data} values, dof = {est.dof}; sensors used: "
-             f"{', '.join(s for s, w in zip(est.sensors, est.weights) if w > 0)}",
-             f"  objective {est.objective:.6g} (infimum {u.objective_limit:.6g}, approached at infinity), "
-             f"RSS {est.rss:.6g}" + (" (sigma estimated)" if est.sigma_estimated else ""), ""]
-    pct = f"{100 * (1 - alpha):g}%"
-    try:
-        ci = est.conf_int(alpha, method="profile")
-        lo, hi, ci_notes = ci.lower, ci.upper, list(ci.notes)
-    except (NotBoundedError, ValueError, np.linalg.LinAlgError) as exc:
-        lo = hi = np.full(est.n_p, np.nan)
-        ci_notes = [f"profile intervals could not be computed: {exc}"]
-    w = max(9, max(len(n) for n in est.param_names))
-    ends = u.ends()
-    lines.append(f"{'parameter':<{w}} {'estimate':>14} {pct + ' profile lower':>20} {pct + ' profile upper':>20}  unit")
-    for i, n in enumerate(est.param_names):
-        val = f"-> {ends[n]}" if n in ends else f"{est.p[i]:.7g}"
-        lines.append(f"{n:<{w}} {val:>14} {lo[i]:>20.7g} {hi[i]:>20.7g}  {est.param_units[i]}")
-    lines += ["", "what the data determine (finite along the run-off):"]
-    for text, value, rse in u.combinations:
-        lines.append(f"  {text} = {value:.7g} (relative std err {100 * rse:.3g} %)")
-    for i, n in enumerate(est.param_names):
-        if n not in u.involved:
-            lines.append(f"  {n} = {est.p[i]:.7g} (std err {est.stderr[i]:.4g}, information restricted to the "
-                         "directions the data determine)")
-    if not u.combinations and len(u.involved) == est.n_p:
-        lines.append("  (no combination of the parameters that run off)")
-    lines += ["", "direction the data do not determine (d log|p|): "
-              + ", ".join(f"{u.direction[i]:+.3f} {n}" for i, n in enumerate(est.param_names) if n in u.involved)]
-    notes = list(est.notes) + ci_notes
-    lines += ["", "Notes:"] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)]
-    return "\n".join(lines)

@@ -1,0 +1,1 @@
+"""Inference: intervals, profiles, bootstrap and the Estimate users get."""

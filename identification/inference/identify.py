@@ -1,0 +1,35 @@
+"""identify: the fit (:func:`identification.fit.entry.fit_model`) returned as the Estimate users get."""
+from __future__ import annotations
+
+from identification.fit.entry import fit_model
+from identification.fit.estimator import IdentifySettings
+from identification.inference.results import Estimate
+
+__all__ = ["identify"]
+
+
+def identify(model, data, p0, weights=None, settings: IdentifySettings | None = None, Y0=None,
+             discretisation=None) -> Estimate:
+    """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7):
+    min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 subject to E(y_j, p, q_j) = 0.
+
+    The numbers are those of :func:`identification.fit.entry.fit_model` (see it for the
+    parameters, the pipeline and the errors raised); the result is an :class:`Estimate`, which adds
+    the intervals (:meth:`Estimate.conf_int`), the ellipsoid, the curvature and :meth:`Estimate.summary`.
+
+    Parameters
+    ----------
+    model : models.Model (static, or dynamic with DynamicMeasurements)
+    data : Measurements or DynamicMeasurements
+    p0 : array_like (n_p,)       start values (inside the bounds), in the parameters' units
+    weights : array_like (n_S,), optional   sensor weights (0/1 selects sensors)
+    settings : IdentifySettings, optional
+    Y0 : array (n_q, n_y), optional         initial guess of the states (static models)
+    discretisation : DiscretisationSettings, optional   collocation settings (dynamic models)
+
+    Returns
+    -------
+    Estimate
+    """
+    return Estimate.from_record(fit_model(model, data, p0, weights=weights, settings=settings, Y0=Y0,
+                                         discretisation=discretisation))

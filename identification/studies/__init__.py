@@ -1,0 +1,1 @@
+"""Studies: Algorithm 1 (detection), Monte Carlo, bootstrap detection, splits."""
