@@ -43,6 +43,7 @@ Run (the tree under test first on the path; the file itself may come from anothe
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 import os
 import platform
@@ -57,14 +58,18 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 #: the fields of an Estimate saved for every fit (arrays and scalars, compared bitwise)
-ARRAY_FIELDS = ("p", "cov", "cov_gn", "information", "S", "H", "objective", "rss", "grad_norm", "iterations")
+ARRAY_FIELDS = ("p", "cov", "cov_gn", "information", "S", "H", "objective", "rss", "grad_norm", "iterations",
+                "sigma", "n_data", "dof")
 #: the Monte Carlo arrays of a MonteCarloResult saved per replication
 MC_FIELDS = ("alpha_paper", "alpha_two_sample", "alpha_lr", "covered", "shapiro")
 MC_SEED, MC_REP, MC_CHUNK = 20261121, 100, 50
 BOOT_N, BOOT_SEED = 20, 7
-#: results.json keys never compared (run-dependent): matched against each key of a leaf's path
-IGNORED_KEY = re.compile(r"time|timing|created|timestamp|date|duration|elapsed|wall|cpu|version|host|machine|"
-                         r"platform|^path$|base_dir|^pid$", re.IGNORECASE)
+#: results.json keys never compared (run-dependent): a key of a leaf's path holding one of these words
+#: (split at "_" and non-letters: "solve_time", "timing_s", "versions", "base_dir"; not "validate", "times")
+IGNORED_WORDS = frozenset({"time", "timing", "created", "timestamp", "date", "duration", "elapsed", "wall", "cpu",
+                           "version", "versions", "host", "hostname", "machine", "platform", "path", "dir", "pid"})
+#: date-times inside text leaves (the report's "Built 2026-11-25 18:19 UTC" line) are masked before comparing
+TIMESTAMP = re.compile(r"\d{4}-\d{2}-\d{2}[ T]\d{2}:\d{2}(:\d{2}(\.\d+)?)?( ?UTC|Z|[+-]\d{2}:?\d{2})?")
 #: press study (the paper's setting, bench_detect): sensor sigmas (mm), D_y + F_x, start values (N/mm)
 SIGMA_PAPER_MM = np.array([1.518e-05, 4.895e-06, 3.904e-06]) * 1e3
 WEIGHTS_110 = np.array([1.0, 1.0, 0.0])
@@ -73,10 +78,13 @@ P0_PRESS = np.array([450.0, 550.0])
 
 # ---------------------------------------------------------------------------- conversions
 def intervals_array(ci) -> np.ndarray:
-    """(n_p, 2) float array [lower, upper] of a conf_int result: an ndarray as is, else its lower/upper."""
+    """(n_p, 2) float array [lower, upper] of a conf_int result: an ndarray as is, else its lower/upper
+    (a ConfidenceIntervals), else ``np.asarray`` of it."""
     if isinstance(ci, np.ndarray):
         return np.array(ci, dtype=float)
-    return np.column_stack([np.asarray(ci.lower, float), np.asarray(ci.upper, float)])
+    if hasattr(ci, "lower") and hasattr(ci, "upper"):
+        return np.column_stack([np.asarray(ci.lower, float), np.asarray(ci.upper, float)])
+    return np.array(np.asarray(ci), dtype=float)
 
 
 def masked_summary(est) -> str:
@@ -299,9 +307,11 @@ def leaves(x, path=()):
         yield path, x
 
 
-def _ignored(path: tuple, value) -> bool:
-    keyed = any(isinstance(k, str) and IGNORED_KEY.search(k) for k in path)
-    return keyed or (isinstance(value, str) and os.path.isabs(value))
+def _ignored(path: tuple, value) -> str:
+    """Why a results.json leaf is not compared ("" when it is)."""
+    if any(isinstance(k, str) and IGNORED_WORDS.intersection(re.split(r"[^a-z0-9]+|_", k.lower())) for k in path):
+        return "key"
+    return "absolute path" if isinstance(value, str) and os.path.isabs(value) else ""
 
 
 def _pattern(path: tuple) -> str:
@@ -321,23 +331,31 @@ def compare_json_leaves(name: str, pa: Path, pb: Path) -> bool:
         return False
     la = dict(leaves(json.loads(pa.read_text())))
     lb = dict(leaves(json.loads(pb.read_text())))
-    ignored, differing, n = set(), [], 0
+    ignored, masked, differing, n = set(), set(), [], 0
     for path in sorted(set(la) | set(lb), key=lambda p: tuple(map(str, p))):
         x, y = la.get(path, "<absent>"), lb.get(path, "<absent>")
-        if _ignored(path, x) or _ignored(path, y):
-            ignored.add(_pattern(path))
+        why = _ignored(path, x) or _ignored(path, y)
+        if why:
+            ignored.add(_pattern(path) + (" (absolute path)" if why == "absolute path" else ""))
             continue
         n += 1
+        if isinstance(x, str) and isinstance(y, str) and (TIMESTAMP.search(x) or TIMESTAMP.search(y)):
+            masked.add(_pattern(path))
+            x, y = TIMESTAMP.sub("<date-time>", x), TIMESTAMP.sub("<date-time>", y)
         if not _same_leaf(x, y):
             differing.append((path, x, y))
     print(f"{name}: {n} leaves compared, {len(differing)} differ; ignored keys: "
-          f"{', '.join(sorted(ignored)) or 'none'}")
+          f"{', '.join(sorted(ignored)) or 'none'}; date-times masked in: {', '.join(sorted(masked)) or 'none'}")
     for path, x, y in differing[:200]:
         extra = ""
         if isinstance(x, (int, float)) and isinstance(y, (int, float)) and not isinstance(x, bool):
             d = abs(x - y)
             extra = f" (abs {d:.3e}, rel {d / max(abs(x), abs(y)):.3e})" if d else ""
-        print(f"  {'/'.join(map(str, path))}: A {x!r} B {y!r}{extra}")
+        if isinstance(x, str) and isinstance(y, str) and "\n" in x + y:
+            lines = difflib.unified_diff(x.splitlines(), y.splitlines(), "A", "B", lineterm="", n=0)
+            print(f"  {'/'.join(map(str, path))}: text differs\n    " + "\n    ".join(lines))
+        else:
+            print(f"  {'/'.join(map(str, path))}: A {x!r} B {y!r}{extra}")
     if len(differing) > 200:
         print(f"  ... and {len(differing) - 200} more")
     return not differing
@@ -357,20 +375,24 @@ def compare(a: Path, b: Path) -> int:
 
 # ---------------------------------------------------------------------------- timing
 def _cpu(fn) -> float:
-    c0 = time.process_time()
+    """CPU seconds (time.process_time) of this process and of its finished children (JIT compilers) in fn()."""
+    import resource
+    c0, k0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN)
     fn()
-    return time.process_time() - c0
+    k1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() - c0 + (k1.ru_utime + k1.ru_stime) - (k0.ru_utime + k0.ru_stime)
 
 
-def time_press_warm(n: int = 30) -> float:
-    """Median CPU seconds of a warm press M1 fit (one fit first builds and caches the solver)."""
-    from identification import identify
+def _median_cpu(fn, n: int) -> float:
+    return float(np.median([_cpu(fn) for _ in range(n)]))
+
+
+def _press_m1():
+    """(model, data, p0) of the press M1 fit of ``mudoe identify configs/press.toml``."""
     from mudoe.config import DEFAULT_CONFIG, load_config
     from mudoe.study import prepare
     study = prepare(load_config(DEFAULT_CONFIG))
-    m, data = study.models["M1"], study.data["M1"]
-    identify(m, data, study.p0)
-    return float(np.median([_cpu(lambda: identify(m, data, study.p0)) for _ in range(n)]))
+    return study.models["M1"], study.data["M1"], study.p0
 
 
 def time_bnb() -> float:
@@ -385,20 +407,54 @@ def time_bnb() -> float:
     return _cpu(lambda: branch_and_bound(F, cons, "D", settings=BnBSettings(time_limit=30.0)))
 
 
-def timing() -> None:
-    """One line per workload: CPU seconds of this process."""
+def timing() -> dict:
+    """CPU seconds per workload (this process plus its finished children), printed one line each."""
     from identification import identify
     print(f"machine: {_machine()}; OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}", flush=True)
-    print(f"press M1 warm fit, median of 30: {time_press_warm():.4f} s CPU", flush=True)
-    print(f"Monte Carlo 30 replications serial (batch engine): "
-          f"{_cpu(lambda: press_size_study(30, chunk_size=None)):.2f} s CPU", flush=True)
-    print(f"branch-and-bound D 50x10 m=10: {time_bnb():.2f} s CPU", flush=True)
-    model, data, p0 = small_problem("SX")
-    est = identify(model, data, p0)
-    print(f"profile conf_int (SX small fit): {_cpu(lambda: est.conf_int(0.05, method='profile')):.3f} s CPU",
-          flush=True)
-    t = _cpu(lambda: est.conf_int(0.05, method="bootstrap", n=200, seed=BOOT_SEED, workers=1))
-    print(f"bootstrap conf_int n=200 (SX small fit, serial): {t:.2f} s CPU", flush=True)
+    out = {}
+
+    def record(name, seconds):
+        out[name] = seconds
+        print(f"{name}: {seconds:.4f} s CPU", flush=True)
+
+    m, data, p0 = _press_m1()
+    press = identify(m, data, p0)                        # builds and caches the solver: the fits below are warm
+    record("press M1 warm fit (median of 30)", _median_cpu(lambda: identify(m, data, p0), 30))
+    record("Monte Carlo 30 replications serial (bench_detect --study timing --n-rep 30 --workers 1)",
+           _cpu(lambda: press_size_study(30, chunk_size=None)))
+    record("branch-and-bound D 50x10 m=10", time_bnb())
+    model, sdata, sp0 = small_problem("SX")
+    small = identify(model, sdata, sp0)
+    record("profile conf_int, SX small fit (median of 20)",
+           _median_cpu(lambda: small.conf_int(0.05, method="profile"), 20))
+    record("profile conf_int, press M1 (median of 5)", _median_cpu(lambda: press.conf_int(0.05, method="profile"), 5))
+    record("bootstrap conf_int n=200 serial, SX small fit (median of 5)",
+           _median_cpu(lambda: small.conf_int(0.05, method="bootstrap", n=200, seed=BOOT_SEED, workers=1), 5))
+    record("bootstrap conf_int n=200 serial, press M1",
+           _cpu(lambda: press.conf_int(0.05, method="bootstrap", n=200, seed=BOOT_SEED, workers=1)))
+    return out
+
+
+def timing_ab(tree_a: Path, tree_b: Path, rounds: int) -> int:
+    """Run ``--timing`` in fresh processes on tree A and tree B in turn (A B A B ...) and print the medians
+    and B / A per workload: both trees see the same machine load."""
+    runs = {"A": [], "B": []}
+    for r in range(rounds):
+        for label, tree in (("A", tree_a), ("B", tree_b)):
+            env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1")
+            p = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--timing", "--json"], cwd=tree,
+                               env=env, capture_output=True, text=True)
+            if p.returncode != 0:
+                print(f"timing on {tree} failed (exit {p.returncode}): {p.stderr.strip()[-2000:]}", file=sys.stderr)
+                return 1
+            runs[label].append(json.loads(p.stdout.strip().splitlines()[-1]))
+            print(f"round {r + 1} {label} ({tree}) done; {_machine()}", flush=True)
+    print(f"\n| workload | A CPU s (median of {rounds}) | B CPU s | B / A |\n|---|---|---|---|")
+    for name in runs["A"][0]:
+        a = float(np.median([x[name] for x in runs["A"]]))
+        b = float(np.median([x[name] for x in runs["B"]]))
+        print(f"| {name} | {a:.4f} | {b:.4f} | {b / a:.3f} |")
+    return 0
 
 
 # ---------------------------------------------------------------------------- command line
@@ -421,12 +477,20 @@ def main(argv=None) -> int:
     g.add_argument("--save", metavar="DIR", help="write fits.npz, fits.json, mc.npz, press_report/ into DIR")
     g.add_argument("--compare", nargs=2, metavar=("A", "B"), help="compare two --save folders")
     g.add_argument("--timing", action="store_true", help="CPU seconds of the A/B workloads (the default)")
+    g.add_argument("--ab", nargs=2, metavar=("TREE_A", "TREE_B"),
+                   help="--timing on two source trees in turn, in fresh processes; medians and B / A")
+    ap.add_argument("--rounds", type=int, default=3, help="with --ab: runs per tree (default 3)")
+    ap.add_argument("--json", action="store_true", help="with --timing: end with one JSON line of the times")
     ap.add_argument("--items", default="fits,mc,report", help="with --save: a subset of fits,mc,report")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     if args.compare:
         return compare(Path(args.compare[0]), Path(args.compare[1]))
+    if args.ab:
+        return timing_ab(Path(args.ab[0]).resolve(), Path(args.ab[1]).resolve(), args.rounds)
     if not args.save:
-        timing()
+        times = timing()
+        if args.json:
+            print(json.dumps(times))
         return 0
     items = set(args.items.split(","))
     unknown = items - {"fits", "mc", "report"}
