@@ -1,7 +1,7 @@
 r"""Identification of a dynamic model with discretisation error control.
 
 The model is collocated on a mesh (:mod:`models.collocation`) and fitted as any static model
-(:func:`identification.fit.estimator.identify`).  At the estimate p̂ the outputs at the sampling
+(:func:`identification.fit.entry.fit_model`).  At the estimate p̂ the outputs at the sampling
 times are recomputed on the mesh with every element halved; Radau IIA of degree d converges
 with order 2d - 1 at element boundaries, so the difference
 
