@@ -234,11 +234,8 @@ class _StartStates:
     def __init__(self):
         self.cache = {}
 
-    def __getstate__(self):
-        return {}
-
-    def __setstate__(self, state):
-        self.cache = {}
+    def __reduce__(self):
+        return _StartStates, ()                 # sent empty: every process solves its own
 
     def __call__(self, name: str, model: Model, p0: np.ndarray, inputs: np.ndarray):
         key = (name, inputs.tobytes())
