@@ -25,7 +25,7 @@ from bench.bench_detect import P0, PAPER_SPLITS, SIGMA_PAPER_MM, WEIGHTS_110, _m
 from identification.studies import montecarlo as mc  # noqa: E402
 from identification.studies.detect import DetectSettings  # noqa: E402
 from models.press import Q_PAPER, press_model  # noqa: E402
-from models.state import set_jit  # noqa: E402
+from identification.replicate import run_chunk  # noqa: E402
 
 
 def _cpu() -> float:
@@ -37,35 +37,31 @@ def make_task(jit: bool = True) -> "mc._Task":
     """The task of bench_detect's size/timing study (M1 on its own campaigns, the paper's splits)."""
     model = press_model()
     gen = mc.ModelCampaign(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, 2)
-    return mc._Task(token="bench", names=("M1",), models=(model,), p0s=(np.asarray(P0, float),),
+    return mc._Task(names=("M1",), models=(model,), p0s=(np.asarray(P0, float),),
                     weights=(WEIGHTS_110,), splits=tuple(PAPER_SPLITS), generator=gen, truth=(gen.p_true,),
-                    detect=DetectSettings(tol=0.05, normality="override"), coverage_alpha=0.05, jit=jit, batch=True)
+                    detect=DetectSettings(tol=0.05, normality="override"), coverage_alpha=0.05, fits=mc.BATCHED,
+                    jit=jit)
 
 
 def run(n_rep: int, chunk: int, seed: int, profile: str | None = None, jit: bool = True):
-    """(CPU seconds per replication, the per-replication results) of ``n_rep`` replications after a warm-up."""
+    """(CPU seconds per replication, the per-replication records) of ``n_rep`` replications after a warm-up
+    (the chunks run by :func:`identification.replicate.run_chunk`, the task's JIT setting around each)."""
     task = make_task(jit)
-    prev = set_jit(task.jit)
-    try:
-        mc.WORKER.install(task)
-        children = np.random.SeedSequence(seed).spawn(n_rep + chunk)
-        items = list(enumerate(children))
-        mc._run_chunk(None, items[n_rep:])                      # warm-up (other seeds)
-        chunks = [items[i:i + chunk] for i in range(0, n_rep, chunk)]
-        prof = None
-        if profile:
-            import cProfile
-            prof = cProfile.Profile()
-            prof.enable()
-        c0, t0 = _cpu(), time.perf_counter()
-        out = [r for ch in chunks for r in mc._run_chunk(None, ch)]
-        cpu, wall = _cpu() - c0, time.perf_counter() - t0
-        if prof is not None:
-            prof.disable()
-            prof.dump_stats(profile)
-    finally:
-        set_jit(prev)
-        mc.WORKER.clear()
+    children = np.random.SeedSequence(seed).spawn(n_rep + chunk)
+    items = list(enumerate(children))
+    run_chunk(task, items[n_rep:])                              # warm-up (other seeds)
+    chunks = [items[i:i + chunk] for i in range(0, n_rep, chunk)]
+    prof = None
+    if profile:
+        import cProfile
+        prof = cProfile.Profile()
+        prof.enable()
+    c0, t0 = _cpu(), time.perf_counter()
+    out = [r for ch in chunks for r in run_chunk(task, ch)]
+    cpu, wall = _cpu() - c0, time.perf_counter() - t0
+    if prof is not None:
+        prof.disable()
+        prof.dump_stats(profile)
     return cpu / n_rep, wall / n_rep, out
 
 
@@ -82,10 +78,10 @@ def main(argv=None):
     print(f"| replications | chunk | CPU per replication | wall per replication |\n|---|---|---|---|\n"
           f"| {args.n_rep} | {args.chunk} | {cpu * 1e3:.1f} ms | {wall * 1e3:.1f} ms |")
     if args.save:
-        res = [r for _, r in out]
-        np.savez(args.save, errors=np.array([repr(e) for r in res for e in r["errors"]], dtype=str),
-                 **{f: np.stack([r[f] for r in res]) for f in ("alpha_lr", "alpha_two_sample", "alpha_paper",
-                                                               "covered", "shapiro")})
+        np.savez(args.save, errors=np.array([repr((f.model, f.split, f.stage, f.message)) for r in out
+                                             for f in r.failures], dtype=str),
+                 **{f: np.stack([getattr(r, f) for r in out]) for f in ("alpha_lr", "alpha_two_sample", "alpha_paper",
+                                                                        "covered", "shapiro")})
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """The parametric bootstrap with the batch engine against one identify call per refit (issue 15).
 
 For each problem the estimate of one data set is bootstrapped twice in this process, serially,
-with the same seed: ``bootstrap_replicates(..., batch=True)`` (the replicates of a chunk refitted
-together by :func:`identification.fit.batch.fit_batch`) and ``batch=False`` (one
+with the same seed: ``bootstrap_replicates(..., refits=BATCH_REFITS)`` (the replicates of a chunk refitted
+together by :func:`identification.fit.batch.fit_batch`) and ``refits=ONE_BY_ONE_REFITS`` (one
 :func:`identification.identify` per replicate).  The two runs alternate (``--repeats`` times,
 medians reported), so both see the same load on a shared machine.  Reported per problem: CPU
 and wall time per replicate of each path, the CPU ratio, the largest relative difference of the
@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 
 from bench.bench_detect import P0, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
 from identification import Measurements, identify  # noqa: E402
-from identification.inference.bootstrap import bootstrap_replicates  # noqa: E402
+from identification.inference.bootstrap import BATCH_REFITS, ONE_BY_ONE_REFITS, bootstrap_replicates  # noqa: E402
 from identification.inference.profile import lr_region  # noqa: E402
 from identification.studies.montecarlo import ModelCampaign  # noqa: E402
 from models import Model  # noqa: E402
@@ -145,13 +145,14 @@ def main(argv=None):
     for label, model, data, est in problems():
         jit = bool(args.jit)
         bootstrap_replicates(model, data, est, n=4, seed=0, jit=jit)         # build (and compile) once
-        bootstrap_replicates(model, data, est, n=2, seed=0, batch=False, jit=jit)
+        bootstrap_replicates(model, data, est, n=2, seed=0, refits=ONE_BY_ONE_REFITS, jit=jit)
         times = {True: [], False: []}
         got = {}
         for _ in range(args.repeats):
             for batch in (False, True):
                 got[batch], w, c = _timed(lambda: bootstrap_replicates(model, data, est, n=args.n, seed=args.seed,
-                                                                       batch=batch, jit=jit))
+                                                                       refits=BATCH_REFITS if batch
+                                                                       else ONE_BY_ONE_REFITS, jit=jit))
                 times[batch].append((w, c))
         (wi, ci), (wb, cb) = (np.median(np.array(times[b]), axis=0) for b in (False, True))
         Pf, Pb = got[False].P, got[True].P

@@ -67,9 +67,11 @@ def _cpu() -> float:
 
 
 def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progress=True, batch=True):
+    from identification.studies.split_fits import BATCHED, ONE_BY_ONE
     model = press_model()
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
-                                  detect=DetectSettings(tol=0.05, normality="override"), batch=batch)
+                                  detect=DetectSettings(tol=0.05, normality="override"),
+                                  fits=BATCHED if batch else ONE_BY_ONE)
     return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, PAPER_SPLITS,
                       p0=P0, n_M=2, weights=WEIGHTS_110, settings=settings, name="M1")
 
@@ -234,6 +236,7 @@ def generation_cost(generator: PrototypeCampaign, n: int, seed: int, jit: bool) 
 
 
 def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, batch=True):
+    from identification.studies.split_fits import BATCHED, ONE_BY_ONE
     from identification.studies.montecarlo import power_study
     try:
         from models.friction import candidate_models
@@ -241,7 +244,8 @@ def run_power(n_rep: int, workers, seed: int, scheduler=None, progress=True, bat
     except ImportError:
         models = {"M1": press_model()}
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler, progress=progress,
-                                  detect=DetectSettings(tol=0.05, normality="override"), batch=batch)
+                                  detect=DetectSettings(tol=0.05, normality="override"),
+                                  fits=BATCHED if batch else ONE_BY_ONE)
     return power_study(models, PrototypeCampaign(names=tuple(models)), PAPER_SPLITS, P0, WEIGHTS_110, settings,
                        description="data: virtual prototype campaigns (models.prototype.generate_campaign, 2 series "
                                    "after a run-in cycle, seed per replication), sigma = the paper's fixed values")

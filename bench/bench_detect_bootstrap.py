@@ -16,13 +16,13 @@ bootstrap is exact.  Campaigns whose observed test failed are counted apart.
 Run ``python -m bench.bench_detect_bootstrap --n-rep 200 --n-boot 39 --workers 2``.
 
 ``--compare`` instead measures the CPU per bootstrap campaign of one-fit-at-a-time
-(``bootstrap_detect(batch=False)``: one run_split_tests, i.e. identify per fit, per campaign) against
-the batch engine (``batch=True``: the campaigns of a chunk fitted together), in this process and in
+(``bootstrap_detect(fits=ONE_BY_ONE)``: one run_split_tests, i.e. identify per fit, per campaign) against
+the batch engine (``fits=BATCHED``: the campaigns of a chunk fitted together), in this process and in
 the same run, on two cases: the Michaelis-Menten campaign above (2 splits) and the press model M1 of
 the paper on a campaign simulated at its nominal stiffnesses (29 loads, 2 series, sensors D_y and
 F_x, the paper's four scenarios).  Each case runs once untimed with another seed (compilation, caches,
 the batch engine's functions mapped once per batch size), then
-``batch=False`` and ``batch=True`` with ``--n-boot`` campaigns each and the same seed; the CPU
+``fits=ONE_BY_ONE`` and ``fits=BATCHED`` with ``--n-boot`` campaigns each and the same seed; the CPU
 (user + system, ``resource.getrusage``) of the whole call divided by B is reported (the observed
 split tests and the null fit, one campaign's worth, are included in both), with the largest
 relative difference of the bootstrap statistics T* and whether p-values and failures agree.  Both
@@ -46,6 +46,7 @@ from scipy import stats  # noqa: E402
 from identification import Measurements  # noqa: E402
 from identification.studies.detect import STATISTICS  # noqa: E402
 from identification.studies.detect_bootstrap import bootstrap_detect  # noqa: E402
+from identification.studies.split_fits import BATCHED, ONE_BY_ONE  # noqa: E402
 from identification.studies.montecarlo import clopper_pearson  # noqa: E402
 from identification.studies.splits import Split  # noqa: E402
 from models import Model  # noqa: E402
@@ -98,8 +99,8 @@ def compare_cases(seed: int) -> list:
 
 
 def compare(n_boot: int, seed: int) -> None:
-    """Print the CPU per bootstrap campaign of batch=False vs batch=True (markdown table)."""
-    print(f"CPU per bootstrap campaign, one identify per fit (batch=False) vs the batch engine (batch=True), "
+    """Print the CPU per bootstrap campaign of ONE_BY_ONE vs BATCHED (markdown table)."""
+    print(f"CPU per bootstrap campaign, one identify per fit (ONE_BY_ONE) vs the batch engine (BATCHED), "
           f"B = {n_boot}, seed {seed}, serial in one process; {platform.node()}, {os.cpu_count()} CPUs, "
           f"load average {os.getloadavg()[0]:.1f}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print()
@@ -111,13 +112,13 @@ def compare(n_boot: int, seed: int) -> None:
         try:
             for label, model, data, splits, p0, w in compare_cases(seed):
                 # warm-up (compilation, caches; the batch engine maps its functions once per batch size)
-                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, batch=False, jit=jit)
+                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, fits=ONE_BY_ONE, jit=jit)
                 bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1, jit=jit)
                 res, cpu = {}, {}
                 for batch in (False, True):
                     c0 = _cpu()
-                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed, batch=batch,
-                                                  jit=jit)
+                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed,
+                                                  fits=BATCHED if batch else ONE_BY_ONE, jit=jit)
                     cpu[batch] = (_cpu() - c0) / n_boot
                 a, b = res[False].boot_statistics, res[True].boot_statistics
                 both = np.isfinite(a) & np.isfinite(b)
@@ -139,7 +140,7 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=20261123)
     ap.add_argument("--compare", action="store_true",
-                    help="CPU per bootstrap campaign of batch=False vs batch=True (Michaelis-Menten, press M1)")
+                    help="CPU per bootstrap campaign of fits=ONE_BY_ONE vs BATCHED (Michaelis-Menten, press M1)")
     args = ap.parse_args(argv)
     if args.compare:
         compare(args.n_boot, args.seed)

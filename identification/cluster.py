@@ -2,7 +2,8 @@
 
 The Monte Carlo studies (:mod:`identification.studies.montecarlo`) and the bootstrap
 (:mod:`identification.inference.bootstrap`) split their replications into chunks ``[(index,
-SeedSequence), ...]``; every chunk is one Dask task ``fn(task, chunk) -> [(index, ...), ...]``.
+SeedSequence), ...]`` (:mod:`identification.replicate` drives them); every chunk is one Dask task
+``fn(task, chunk) -> [record, ...]``.
 The task (models, data, settings) is sent once to every worker, serialised by
 :func:`models.shipping.dumps` (cloudpickle: a model whose factory defines local functions is
 sent by value; a model that cannot be is rebuilt from its factory in the worker); ``fn`` must
@@ -21,13 +22,14 @@ import os
 import signal
 import threading
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from models import shipping
 
-__all__ = ["SchedulerError", "Shipped", "call_locked", "check_scheduler", "connect", "execute", "n_workers",
+__all__ = ["Backend", "SchedulerError", "Shipped", "call_locked", "check_scheduler", "connect", "execute", "n_workers",
            "run_chunks", "run_local", "seed_chunks", "unpack", "worker_start"]
 
 #: how long :func:`connect` waits for at least one worker to join the scheduler (s)
@@ -36,6 +38,28 @@ WORKER_WAIT_S = 30.0
 
 class SchedulerError(ConnectionError):
     """The Dask scheduler cannot be used: not installed, unreachable, or without workers."""
+
+
+@dataclass(frozen=True)
+class Backend:
+    """Where :func:`execute` ran the chunks.
+
+    Attributes
+    ----------
+    kind : str       "serial" (this process), "local" (this process and spawned ones) or "dask"
+    workers : int    processes (serial 1; local: this one included; dask: the scheduler's workers)
+    address : str    the Dask scheduler's address ("" otherwise)
+    """
+
+    kind: str
+    workers: int
+    address: str = ""
+
+    def __str__(self) -> str:
+        """The backend in words: serial, 2 local processes, dask (tcp://..., 4 workers)."""
+        if self.kind == "dask":
+            return f"dask ({self.address}, {self.workers} workers)"
+        return "serial" if self.kind == "serial" else f"{self.workers} local processes"
 
 
 def check_scheduler(scheduler, name: str = "scheduler"):
@@ -157,7 +181,7 @@ def run_chunks(client, fn: Callable, task, chunks: list, on_result: Callable) ->
 
 
 def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, workers: int | None = 1,
-            scheduler=None, install: Callable | None = None) -> str:
+            scheduler=None, install: Callable | None = None) -> Backend:
     """Run every chunk ``fn(task, chunk)`` serially, on local processes or on a Dask scheduler.
 
     Parameters
@@ -175,23 +199,23 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
 
     Returns
     -------
-    str : the backend used, e.g. "serial", "2 local processes" (this one and 1 spawned),
-    "dask (tcp://..., 4 workers)".
+    Backend : the backend used (``str()``: "serial", "2 local processes" (this one and 1 spawned),
+    "dask (tcp://..., 4 workers)").
     """
     if scheduler is not None:
         with connect(scheduler) as client:
             n_w = n_workers(client)
             run_chunks(client, fn, task, make_chunks(n_w), on_result)
-            return f"dask ({client.scheduler.address}, {n_w} workers)"
+            return Backend("dask", n_w, str(client.scheduler.address))
     n_w = int(workers or os.cpu_count() or 1)
     if n_w == 1:
         for ch in make_chunks(1):
             on_result(fn(task, ch))
-        return "serial"
+        return Backend("serial", 1)
     if install is None:
         raise ValueError("install: local processes need the function that stores the task in a worker")
     run_local(fn, task, make_chunks(n_w), on_result, n_w, install)
-    return f"{n_w} local processes"
+    return Backend("local", n_w)
 
 
 def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: int, install: Callable) -> None:

@@ -15,7 +15,8 @@ warm-started at (p_hat, y_hat), and the (1 - alpha) percentile interval of param
 The replicates of a chunk are refitted together by the batch engine
 (:func:`identification.fit.batch.fit_batch`: the estimates of :func:`identification.identify` to
 ~1e-10, with identify as per-replicate fallback, recorded: which replicate and why);
-``batch=False`` refits every replicate with identify.
+``refits=ONE_BY_ONE_REFITS`` refits every replicate with identify.  The replicates run on the
+replication engine (:mod:`identification.replicate`).
 
 Replicate r draws from ``numpy.random.default_rng(SeedSequence(seed).spawn(n)[r])``: the
 numbers do not depend on the backend (serial, local processes, a Dask scheduler), the number
@@ -26,14 +27,14 @@ notes say.
 from __future__ import annotations
 
 import functools
-import os
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
 
 from models.contract import Model
-from models.state import set_jit
 from identification import cluster
+from identification.replicate import ReplicationTask, replicate
 from identification.fit.batch import BatchData, fit_batch
 from identification.errors import DataError, IdentificationError, NotBoundedError, StateSolveError
 from identification.fit.unbounded import not_bounded_reason
@@ -42,8 +43,8 @@ from identification.fit.measurements import Measurements
 from identification.inference.intervals import ConfidenceIntervals, resolve_params, validate_alpha
 from identification.progress import Progress
 
-__all__ = ["BootstrapError", "BootstrapReplicates", "bootstrap_intervals", "bootstrap_replicates",
-           "simulated_campaign"]
+__all__ = ["BATCH_REFITS", "ONE_BY_ONE_REFITS", "BatchRefits", "BootstrapError", "BootstrapReplicates",
+           "OneByOneRefits", "Refit", "Refits", "bootstrap_intervals", "bootstrap_replicates", "simulated_campaign"]
 
 
 class BootstrapError(IdentificationError):
@@ -51,8 +52,84 @@ class BootstrapError(IdentificationError):
 
 
 @dataclass(frozen=True, eq=False)
-class _Task:
-    """Everything a replicate needs (pickled once per worker process)."""
+class Refit:
+    """The refit of one bootstrap replicate (the record of :class:`_Task.run_chunk`).
+
+    Attributes
+    ----------
+    index : int          the replicate
+    p : ndarray (n_p,)   refitted parameters (NaN: the refit failed)
+    error : str          why the refit failed ("" when it did not)
+    fallback : str       why the batch engine left it to identify ("" when it did not)
+    """
+
+    index: int
+    p: np.ndarray
+    error: str = ""
+    fallback: str = ""
+
+
+class Refits(ABC):
+    """How the replicates of a chunk are refitted (a strategy chosen once per bootstrap).
+
+    Attributes
+    ----------
+    max_chunk : int   most replicates per chunk when ``chunk_size`` is not given
+    """
+
+    max_chunk: int
+
+    @abstractmethod
+    def refit(self, task: "_Task", chunk: list) -> list:
+        """Replicates [(index, SeedSequence), ...] -> [Refit, ...]."""
+
+
+class BatchRefits(Refits):
+    """The replicates of a chunk refitted together by :func:`identification.fit.batch.fit_batch`; a replicate
+    the batch iteration did not fit is refitted by identify (its reason kept), and when the batch as a whole
+    cannot be formed every replicate is refitted by identify and says why."""
+
+    max_chunk = 100
+
+    def refit(self, task: "_Task", chunk: list) -> list:
+        seeds = [s for _, s in chunk]
+        R = len(chunk)
+        try:
+            data = BatchData(task.inputs, np.stack([_simulated_values(task, s) for s in seeds]),
+                             None if task.sigma_data is None else np.tile(task.sigma_data, (R, 1)),
+                             _Campaigns(task, seeds))
+            fit = fit_batch(task.model, data, task.p0, task.weights, Y0=task.states)
+        except (IdentificationError, StateSolveError, DataError) as exc:
+            why = f"the batch engine could not take the chunk ({_error_text(exc)})"
+            return [_replicate(task, i, s, why) for i, s in chunk]
+        reasons = {f.member: f.reason for f in fit.fallbacks}
+        return [_refit_record(i, fit.results[k], task.p0.size, reasons.get(k, "")) for k, (i, _) in enumerate(chunk)]
+
+    def __repr__(self) -> str:
+        return "BATCH_REFITS"
+
+
+class OneByOneRefits(Refits):
+    """Every replicate refitted by its own :func:`identification.fit.entry.fit_model` call."""
+
+    max_chunk = 20
+
+    def refit(self, task: "_Task", chunk: list) -> list:
+        return [_replicate(task, i, s) for i, s in chunk]
+
+    def __repr__(self) -> str:
+        return "ONE_BY_ONE_REFITS"
+
+
+#: the replicates of a chunk refitted together by the batch engine (the default; identify as fallback)
+BATCH_REFITS = BatchRefits()
+#: one identify call per replicate
+ONE_BY_ONE_REFITS = OneByOneRefits()
+
+
+@dataclass(frozen=True, eq=False)
+class _Task(ReplicationTask):
+    """Everything a replicate needs (sent once to every worker process)."""
 
     model: Model
     inputs: np.ndarray
@@ -65,19 +142,12 @@ class _Task:
     p0: np.ndarray
     weights: np.ndarray
     states: object
-    batch: bool = True
-    jit: bool = False
+    refits: Refits
+    jit: bool
 
-
-class _Worker:
-    """The task of this process (set once per spawned worker by the pool initializer)."""
-
-    task: _Task | None = None
-
-
-def _install(task: _Task) -> None:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    _Worker.task = task
+    def run_chunk(self, chunk: list) -> list:
+        """Replicates [(index, SeedSequence), ...] -> [Refit, ...]."""
+        return self.refits.refit(self, chunk)
 
 
 def simulated_campaign(task, seed: np.random.SeedSequence) -> Measurements:
@@ -100,16 +170,23 @@ def _error_text(exc: Exception) -> str:
     return f"{type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else ''}"
 
 
-def _replicate(task: _Task, seed: np.random.SeedSequence) -> tuple:
-    """(p (n_p,) or NaN, error text or "") of one simulated campaign."""
+def _refit_record(index: int, res, n_p: int, fallback: str = "") -> Refit:
+    """The Refit of an estimate, or of the exception its fit raised (NaN p and the reason)."""
+    if isinstance(res, Exception):
+        return Refit(index, np.full(n_p, np.nan), _error_text(res), fallback)
+    if not_bounded_reason(res):             # no finite estimate: a failed refit, with its reason
+        return Refit(index, np.full(n_p, np.nan), not_bounded_reason(res)[:200], fallback)
+    return Refit(index, np.asarray(res.p, float), "", fallback)
+
+
+def _replicate(task: _Task, index: int, seed: np.random.SeedSequence, fallback: str = "") -> Refit:
+    """The Refit of one simulated campaign by identify (:func:`identification.fit.entry.fit_model`)."""
     try:
         data = simulated_campaign(task, seed)
         est = fit_model(task.model, data, task.p0, weights=task.weights, Y0=task.states)
     except (IdentificationError, StateSolveError, DataError) as exc:
-        return np.full(task.p0.size, np.nan), _error_text(exc)
-    if not_bounded_reason(est):             # no finite estimate: a failed refit, with its reason
-        return np.full(task.p0.size, np.nan), not_bounded_reason(est)[:200]
-    return np.asarray(est.p, float), ""
+        return _refit_record(index, exc, task.p0.size, fallback)
+    return _refit_record(index, est, task.p0.size, fallback)
 
 
 class _Campaigns:
@@ -120,47 +197,6 @@ class _Campaigns:
 
     def __call__(self, k: int) -> Measurements:
         return simulated_campaign(self.task, self.seeds[k])
-
-
-def _replicate_batch(task: _Task, chunk: list) -> list:
-    """The replicates of a chunk refitted together by :func:`identification.fit.batch.fit_batch`:
-    [(index, p or NaN, error or "", fallback reason or ""), ...].  A replicate the batch iteration
-    did not fit was refitted by identify (its reason is kept); when the batch as a whole cannot be
-    formed, every replicate is refitted by identify and says why."""
-    seeds = [s for _, s in chunk]
-    R = len(chunk)
-    try:
-        data = BatchData(task.inputs, np.stack([_simulated_values(task, s) for s in seeds]),
-                         None if task.sigma_data is None else np.tile(task.sigma_data, (R, 1)),
-                         _Campaigns(task, seeds))
-        fit = fit_batch(task.model, data, task.p0, task.weights, Y0=task.states)
-    except (IdentificationError, StateSolveError, DataError) as exc:
-        why = f"the batch engine could not take the chunk ({_error_text(exc)})"
-        return [(i, *_replicate(task, s), why) for i, s in chunk]
-    reasons = {f.member: f.reason for f in fit.fallbacks}
-    out = []
-    for k, (i, _) in enumerate(chunk):
-        res = fit.results[k]
-        if isinstance(res, Exception):
-            out.append((i, np.full(task.p0.size, np.nan), _error_text(res), reasons.get(k, "")))
-        elif not_bounded_reason(res):
-            out.append((i, np.full(task.p0.size, np.nan), not_bounded_reason(res)[:200], reasons.get(k, "")))
-        else:
-            out.append((i, np.asarray(res.p, float), "", reasons.get(k, "")))
-    return out
-
-
-def _run_chunk(task: _Task | None, chunk: list) -> list:
-    """Replicates [(index, SeedSequence), ...] -> [(index, p, error, fallback reason), ...]
-    (task None: this process's)."""
-    t = _Worker.task if task is None else task
-    prev = set_jit(t.jit)
-    try:
-        if t.batch:
-            return _replicate_batch(t, chunk)
-        return [(i, *_replicate(t, s), "") for i, s in chunk]
-    finally:
-        set_jit(prev)
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,7 +225,7 @@ class BootstrapReplicates:
 
 def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, seed=0, workers: int | None = 1,
                          progress: Progress | None = None, scheduler=None, chunk_size: int | None = None,
-                         batch: bool = True, jit: bool = True) -> BootstrapReplicates:
+                         refits: Refits = BATCH_REFITS, jit: bool = True) -> BootstrapReplicates:
     """Refitted parameters of ``n`` campaigns simulated from ``est`` (see the module docstring).
 
     Parameters
@@ -204,14 +240,15 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
         :mod:`identification.cluster`.
     chunk_size : int, optional   replicates per task (default: about 4 tasks per worker, at most 20
                                  refitted one by one or 100 refitted as one batch)
-    batch : bool                 refit the replicates of a chunk together with the batch engine
-                                 (identification.fit.batch.fit_batch); False: one identify call per replicate
+    refits : Refits              BATCH_REFITS: the replicates of a chunk refitted together by the batch
+                                 engine (identification.fit.batch.fit_batch); ONE_BY_ONE_REFITS: one
+                                 identify call per replicate
     jit : bool                   evaluate small models' CasADi functions as compiled C during the refits
                                  (models.state.set_jit, as Monte Carlo does; compiled once per machine
                                  and kept in models.jit_cache; without a C compiler the virtual machine)
 
     The numbers depend on ``seed`` only, not on the backend, the workers or the chunks (and agree
-    between ``batch`` True and False to the estimator's tolerance, ~1e-10 relative).
+    between the two ``refits`` to the estimator's tolerance, ~1e-10 relative).
 
     Returns
     -------
@@ -228,8 +265,9 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
         raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
     if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
         raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
-    if not isinstance(batch, (bool, np.bool_)):
-        raise ValueError(f"batch: expected True (batch engine) or False (identify per refit), got {batch!r}")
+    if not isinstance(refits, Refits):
+        raise TypeError(f"refits: expected BATCH_REFITS (batch engine) or ONE_BY_ONE_REFITS (identify per refit) "
+                        f"of identification.inference.bootstrap, got {refits!r}")
     if not isinstance(jit, (bool, np.bool_)):
         raise ValueError(f"jit: expected True (compiled model functions) or False, got {jit!r}")
     scheduler = cluster.check_scheduler(scheduler)
@@ -238,39 +276,22 @@ def bootstrap_replicates(model: Model, data: Measurements, est, n: int = 200, se
                  None if data.sigma is None else np.asarray(data.sigma, float), tuple(data.sensors),
                  None if data.input_names is None else tuple(data.input_names), np.asarray(est.p, float),
                  np.asarray(est.weights, float), None if est.states is None or est.states.size == 0
-                 else np.asarray(est.states, float), bool(batch), bool(jit))
-    got = _Collector(int(n), model.n_p, (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits"))
-    chunks = functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size,
-                               max_size=100 if batch else 20)
+                 else np.asarray(est.states, float), refits, bool(jit))
+    chunks = functools.partial(cluster.seed_chunks, int(n), seed, chunk_size=chunk_size, max_size=refits.max_chunk)
+    bar = (progress or Progress(enabled=False)).bar(int(n), "bootstrap refits")
     try:
-        backend = cluster.execute(_run_chunk, task, chunks, got.add, workers, scheduler, _install)
+        reps = replicate(task, int(n), chunks, workers=workers, scheduler=scheduler, bar=bar)
     finally:
-        got.bar.close()
-    return BootstrapReplicates(got.P, tuple(sorted(got.errors)), tuple(sorted(got.fallbacks)), backend)
-
-
-class _Collector:
-    """Refits by replicate index (``P``, NaN rows until filled) and their errors; advances the bar."""
-
-    def __init__(self, n: int, n_p: int, bar):
-        self.P = np.full((n, n_p), np.nan)
-        self.errors = []
-        self.fallbacks = []
-        self.bar = bar
-
-    def add(self, results: list) -> None:
-        for i, p, err, why in results:
-            self.P[i] = p
-            if err:
-                self.errors.append((i, err))
-            if why:
-                self.fallbacks.append((i, why))
-        self.bar.update(len(results))
+        bar.close()
+    return BootstrapReplicates(np.array([r.p for r in reps.records]).reshape(int(n), model.n_p),
+                               tuple((r.index, r.error) for r in reps.records if r.error),
+                               tuple((r.index, r.fallback) for r in reps.records if r.fallback), str(reps.backend))
 
 
 def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.05, params=None, n: int = 200,
                         seed=0, workers: int | None = 1, progress: Progress | None = None, scheduler=None,
-                        chunk_size: int | None = None, batch: bool = True, jit: bool = True) -> ConfidenceIntervals:
+                        chunk_size: int | None = None, refits: Refits = BATCH_REFITS,
+                        jit: bool = True) -> ConfidenceIntervals:
     """Parametric bootstrap percentile (1 - alpha) intervals (see the module docstring).
 
     Parameters
@@ -285,7 +306,7 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     progress : Progress, optional   a tqdm bar over the replicates
     scheduler : str or distributed.Client, optional   run the refits on a Dask cluster instead
     chunk_size : int, optional  replicates per task (see :func:`bootstrap_replicates`)
-    batch : bool                refit with the batch engine (False: identify per refit)
+    refits : Refits             BATCH_REFITS (the batch engine) or ONE_BY_ONE_REFITS (identify per refit)
     jit : bool                  compiled model functions during the refits (see :func:`bootstrap_replicates`)
 
     Returns
@@ -309,7 +330,7 @@ def bootstrap_intervals(model: Model, data: Measurements, est, alpha: float = 0.
     if not_bounded_reason(est):
         raise NotBoundedError(f"bootstrap intervals: the estimate is {not_bounded_reason(est)}; there is no finite "
                               "estimate to simulate from and refit around: use conf_int(method=\"profile\")")
-    reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, batch, jit)
+    reps = bootstrap_replicates(model, data, est, n, seed, workers, progress, scheduler, chunk_size, refits, jit)
     P, errors = reps.P, reps.errors
     ok = np.all(np.isfinite(P), axis=1)
     if ok.sum() < 2:

@@ -29,9 +29,9 @@ local processes and a Dask scheduler (:mod:`identification.cluster`) give identi
 the same chunks, and numbers equal to round-off with other chunks (the batched reductions sum in
 another order: estimates a few units in the last place apart).
 The campaigns of a chunk share their inputs, so their split tests run together
-(:func:`identification.studies.montecarlo.batched_split_tests`: every calibration, validation and
+(:func:`identification.studies.split_fits.batched_split_tests`: every calibration, validation and
 pooled fit of a split one batch over the campaigns, the statistics computed together), which
-gives the statistics of one run_split_tests per campaign (``batch=False``) to ~1e-8 relative
+gives the statistics of one run_split_tests per campaign (``fits=ONE_BY_ONE``) to ~1e-8 relative
 (measured <= 9.3e-9 on 200 campaigns; the estimates agree to ~1e-10, and a Wald statistic of two
 near-equal estimates keeps less of that relative precision the smaller it is).
 """
@@ -39,22 +39,21 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from models.contract import Model
-from models.state import set_jit
 from identification import cluster
+from identification.replicate import replicate, ReplicationTask
 from identification.inference.bootstrap import simulated_campaign
 from identification.studies.detect import STATISTICS, DetectSettings, run_split_tests
 from identification.errors import DataError, IdentificationError, NotBoundedError
 from identification.fit.unbounded import not_bounded_reason
 from identification.inference.identify import identify
 from identification.fit.measurements import Measurements
-from identification.studies.montecarlo import batched_split_tests
+from identification.studies.split_fits import BATCHED, SplitFits
 from identification.progress import Progress
 from identification.studies.splits import Split, SplitError
 
@@ -83,8 +82,26 @@ def _statistics(tests) -> tuple:
 
 # ---------------------------------------------------------------------------- one bootstrap campaign
 @dataclass(frozen=True, eq=False)
-class _Task:
-    """Everything a bootstrap campaign needs (pickled once per worker)."""
+class CampaignStatistics:
+    """The split tests of one bootstrap campaign (the record of :meth:`_Task.run_chunk`).
+
+    Attributes
+    ----------
+    index : int                         the campaign b
+    T : ndarray (n_splits, 3)           its statistics (NaN: not computed)
+    A : ndarray (n_splits, 3)           their asymptotic p-values
+    errors : tuple of (split, text)     failed fits or statistics
+    """
+
+    index: int
+    T: np.ndarray
+    A: np.ndarray
+    errors: tuple
+
+
+@dataclass(frozen=True, eq=False)
+class _Task(ReplicationTask):
+    """Everything a bootstrap campaign needs (sent once to every worker; see :mod:`identification.replicate`)."""
 
     model: Model
     model_name: str
@@ -100,69 +117,29 @@ class _Task:
     weights: object
     settings: DetectSettings
     states: object              # (n_q, n_y) states of the null fit, or None
-    batch: bool = True          # the campaigns of a chunk fitted together (montecarlo.batched_split_tests)
-    jit: bool = False           # small models' CasADi functions as compiled C (models.state.set_jit)
+    fits: SplitFits             # the campaigns of a chunk fitted together (BATCHED) or one by one
+    jit: bool                   # small models' CasADi functions as compiled C (models.state.set_jit)
+
+    def run_chunk(self, chunk: list) -> list:
+        """Campaigns [(index, SeedSequence), ...] -> [CampaignStatistics, ...]: the split tests of the chunk's
+        campaigns (same inputs) by ``self.fits``."""
+        datas = [simulated_campaign(self, s) for _, s in chunk]
+        got = self.fits.split_tests(self.model, self.model_name, datas, self.splits, self.p0, self.weights,
+                                    self.settings, self.states)
+        out = []
+        for (b, _), tests in zip(chunk, got):
+            T, A, errors = _statistics(tests)
+            out.append(CampaignStatistics(b, T, A, tuple(errors)))
+        return out
 
 
-class _Worker:
-    """The task of this process (set once per spawned worker by the pool initializer)."""
-
-    task: _Task | None = None
-
-
-def _install(task: _Task) -> None:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    _Worker.task = task
-
-
-def _campaign(task: _Task, seed: np.random.SeedSequence) -> tuple:
-    """(T (n_splits, 3), asymptotic alpha (n_splits, 3), errors) of one simulated campaign."""
-    data = simulated_campaign(task, seed)
-    tests = run_split_tests(task.model, data, task.splits, task.p0, task.weights, task.settings, task.model_name,
-                            task.states)
-    return _statistics(tests)
-
-
-def _run_chunk(task: _Task | None, chunk: list) -> list:
-    """Campaigns [(index, SeedSequence), ...] -> [(index, T, alpha, errors), ...] (task None: this process's).
-
-    With ``task.batch`` the split tests of the chunk's campaigns (same inputs) run together
-    (:func:`identification.studies.montecarlo.batched_split_tests`), else one run_split_tests per campaign."""
-    t = _Worker.task if task is None else task
-    prev = set_jit(t.jit)
-    try:
-        if not t.batch:
-            return [(b, *_campaign(t, s)) for b, s in chunk]
-        datas = [simulated_campaign(t, s) for _, s in chunk]
-        got = batched_split_tests(t.model, t.model_name, datas, t.splits, t.p0, t.weights, t.settings, t.states)
-        return [(b, *_statistics(tests)) for (b, _), tests in zip(chunk, got)]
-    finally:
-        set_jit(prev)
-
-
-def _seed_chunks(n: int, seed, chunk_size: int | None, batch: bool, n_workers: int) -> list:
-    """The campaigns cut into chunks (:func:`identification.cluster.seed_chunks`).  With ``batch`` and no
-    ``chunk_size``, min(n, 16) to 50 campaigns per chunk (about 4 per worker): the batch engine pays a
-    per-call cost once per chunk, which outweighs one identify per fit below about 4 campaigns."""
-    if chunk_size is None and batch:
-        chunk_size = max(min(n, 16), min(50, math.ceil(n / (4 * max(1, n_workers)))))
+def _seed_chunks(n: int, seed, chunk_size: int | None, fits: SplitFits, n_workers: int) -> list:
+    """The campaigns cut into chunks (:func:`identification.cluster.seed_chunks`): without ``chunk_size``,
+    about 4 per worker, min(n, fits.min_chunk) to fits.max_chunk campaigns each (the batch engine pays a
+    per-call cost once per chunk, which outweighs one identify per fit below about 4 campaigns)."""
+    if chunk_size is None:
+        chunk_size = max(min(n, fits.min_chunk), min(fits.max_chunk, math.ceil(n / (4 * max(1, n_workers)))))
     return cluster.seed_chunks(n, seed, n_workers, chunk_size)
-
-
-class _Collector:
-    """Bootstrap statistics by campaign index (NaN until filled) and their errors; advances the bar."""
-
-    def __init__(self, n: int, n_splits: int, bar):
-        self.T = np.full((n, n_splits, len(STATISTICS)), np.nan)
-        self.A = np.full_like(self.T, np.nan)
-        self.errors = []
-        self.bar = bar
-
-    def add(self, results: list) -> None:
-        for b, T, A, errs in results:
-            self.T[b], self.A[b] = T, A
-            self.errors.extend((b,) + e for e in errs)
-        self.bar.update(len(results))
 
 
 # ---------------------------------------------------------------------------- result
@@ -280,11 +257,72 @@ class BootstrapDetection:
 
 
 # ---------------------------------------------------------------------------- front door
+def _check_arguments(model, data, n_boot, workers, chunk_size, fits, jit, settings, splits, seed) -> tuple:
+    """(settings, splits) of :func:`bootstrap_detect` once its arguments are checked (the error names the
+    argument)."""
+    if not isinstance(model, Model):
+        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    if not (isinstance(n_boot, (int, np.integer)) and not isinstance(n_boot, bool) and n_boot >= 1):
+        raise ValueError(f"n_boot: the number of bootstrap campaigns must be an integer >= 1, got {n_boot!r}")
+    if workers is not None and not (isinstance(workers, (int, np.integer)) and workers >= 1):
+        raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
+    if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
+        raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
+    if not isinstance(fits, SplitFits):
+        raise TypeError(f"fits: expected BATCHED (batched fits) or ONE_BY_ONE (one identify per fit) of "
+                        f"identification.studies.split_fits, got {fits!r}")
+    if not isinstance(jit, (bool, np.bool_)):
+        raise TypeError(f"jit: expected True (compiled model functions) or False, got {jit!r}")
+    settings = settings or DetectSettings()
+    if not isinstance(settings, DetectSettings):
+        raise TypeError(f"settings: expected DetectSettings, got {type(settings).__name__}")
+    splits = tuple(splits)
+    if not splits or not all(isinstance(sp, Split) for sp in splits):
+        raise SplitError("splits: give at least one identification.studies.splits.Split")
+    try:
+        np.random.SeedSequence(seed)
+    except (TypeError, ValueError):
+        raise ValueError(f"seed: expected a non-negative integer (or a sequence of them), got {seed!r}") from None
+    return settings, splits
+
+
+def _null_fit(model: Model, data: Measurements, p0, weights, settings: DetectSettings):
+    """The fit of the whole campaign the bootstrap campaigns are simulated from (IdentificationError or
+    NotBoundedError when there is none)."""
+    try:
+        null = identify(model, data, p0, weights=weights, settings=settings.identify)
+    except (IdentificationError, DataError) as exc:
+        raise IdentificationError(f"bootstrap_detect: the null fit of the whole campaign failed: {exc}",
+                                  status="null fit failed") from None
+    if not_bounded_reason(null):
+        raise NotBoundedError(f"bootstrap_detect: the null fit of the whole campaign is {not_bounded_reason(null)}; "
+                              "there is no null model to simulate campaigns from")
+    return null
+
+
+def _pvalues(T_obs: np.ndarray, A_obs: np.ndarray, T: np.ndarray, A: np.ndarray) -> tuple:
+    """(p-values (n_s, n_k), B_s (n_s, n_k), family-wise asymptotic (n_k,), family-wise p-values (n_k,))
+    of the observed statistics against the bootstrap ones T, A (n_boot, n_s, n_k)."""
+    n_s, n_k = T_obs.shape
+    pv = np.full((n_s, n_k), np.nan)
+    nv = np.zeros((n_s, n_k), int)
+    for s in range(n_s):
+        for k in range(n_k):
+            pv[s, k], nv[s, k] = _exceedance_pvalue(T[:, s, k], T_obs[s, k])
+    # family-wise min-p: campaigns with every split computed; a smaller min alpha is more extreme
+    fam_obs = np.where(np.all(np.isfinite(A_obs), axis=0), np.min(A_obs, axis=0), np.nan)
+    fam_boot = np.where(np.all(np.isfinite(A), axis=1), np.min(A, axis=1), np.nan)    # (n_boot, 3)
+    fam_p = np.array([_exceedance_pvalue(-fam_boot[:, k], -fam_obs[k])[0] for k in range(n_k)])
+    return pv, nv, fam_obs, fam_p
+
+
 def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None, *,
                      n_boot: int = 199, seed=0, settings: DetectSettings | None = None,
                      workers: int | None = 1, scheduler=None, progress: Progress | None = None,
                      chunk_size: int | None = None, model_name: str | None = None,
-                     batch: bool = True, jit: bool = True) -> BootstrapDetection:
+                     fits: SplitFits = BATCHED, jit: bool = True) -> BootstrapDetection:
     """Bootstrap p-values of the split tests of ``model`` on ``data`` (see the module docstring).
 
     Parameters
@@ -300,14 +338,15 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     workers : int or None           local processes (1: serial; None: all cores)
     scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
     progress : Progress, optional   a tqdm bar over the campaigns
-    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, with ``batch``
-                                    min(n_boot, 16) to 50 campaigns, without at most 20; the numbers do
-                                    not depend on it)
+    chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, with BATCHED
+                                    min(n_boot, 16) to 50 campaigns, with ONE_BY_ONE at most 20; the
+                                    numbers do not depend on it)
     model_name : str, optional      label (default the model's name)
-    batch : bool                    fit the campaigns of a chunk together with the batch engine
-                                    (:func:`identification.studies.montecarlo.batched_split_tests`: the same
+    fits : SplitFits                BATCHED: fit the campaigns of a chunk together with the batch engine
+                                    (:func:`identification.studies.split_fits.batched_split_tests`: the same
                                     statistics to ~1e-8 relative, failures named as run_split_tests
-                                    names them); False: one run_split_tests (identify per fit) per campaign
+                                    names them); ONE_BY_ONE: one run_split_tests (identify per fit) per
+                                    campaign (:mod:`identification.studies.split_fits`)
     jit : bool                      small models' CasADi functions as compiled C during the campaigns'
                                     fits (models.state.set_jit, as Monte Carlo does: the press 6.9 instead
                                     of 57.9 ms CPU per campaign; compiled once per machine, kept in
@@ -323,72 +362,34 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
         Dask is not installed or the scheduler cannot be reached.
     """
     import time
-    if not isinstance(model, Model):
-        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
-    if not isinstance(data, Measurements):
-        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
-    if not (isinstance(n_boot, (int, np.integer)) and not isinstance(n_boot, bool) and n_boot >= 1):
-        raise ValueError(f"n_boot: the number of bootstrap campaigns must be an integer >= 1, got {n_boot!r}")
-    if workers is not None and not (isinstance(workers, (int, np.integer)) and workers >= 1):
-        raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
-    if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
-        raise ValueError(f"chunk_size: must be an integer >= 1 or None (automatic), got {chunk_size!r}")
-    if not isinstance(batch, (bool, np.bool_)):
-        raise TypeError(f"batch: expected True (batched fits) or False (one identify per fit), got {batch!r}")
-    if not isinstance(jit, (bool, np.bool_)):
-        raise TypeError(f"jit: expected True (compiled model functions) or False, got {jit!r}")
+    settings, splits = _check_arguments(model, data, n_boot, workers, chunk_size, fits, jit, settings, splits, seed)
     scheduler = cluster.check_scheduler(scheduler)
-    settings = settings or DetectSettings()
-    if not isinstance(settings, DetectSettings):
-        raise TypeError(f"settings: expected DetectSettings, got {type(settings).__name__}")
-    splits = tuple(splits)
-    if not splits or not all(isinstance(sp, Split) for sp in splits):
-        raise SplitError("splits: give at least one identification.studies.splits.Split")
-    try:
-        np.random.SeedSequence(seed)
-    except (TypeError, ValueError):
-        raise ValueError(f"seed: expected a non-negative integer (or a sequence of them), got {seed!r}") from None
     name = model_name or model.name
     t0 = time.perf_counter()
     tests = run_split_tests(model, data, splits, p0, weights, settings, name)
     T_obs, A_obs, obs_err = _statistics(tests)
-    try:
-        null = identify(model, data, p0, weights=weights, settings=settings.identify)
-    except (IdentificationError, DataError) as exc:
-        raise IdentificationError(f"bootstrap_detect: the null fit of the whole campaign failed: {exc}",
-                                  status="null fit failed") from None
-    if not_bounded_reason(null):
-        raise NotBoundedError(f"bootstrap_detect: the null fit of the whole campaign is {not_bounded_reason(null)}; "
-                              "there is no null model to simulate campaigns from")
+    null = _null_fit(model, data, p0, weights, settings)
     task = _Task(model, name, splits, np.asarray(data.inputs), np.asarray(null.fitted, float), data.mask(),
                  np.asarray(null.sigma, float), None if data.sigma is None else np.asarray(data.sigma, float),
                  tuple(data.sensors), None if data.input_names is None else tuple(data.input_names),
                  np.asarray(null.p, float), None if weights is None else np.asarray(weights, float), settings,
                  None if null.states is None or null.states.size == 0 else np.asarray(null.states, float),
-                 bool(batch), bool(jit))
-    got = _Collector(int(n_boot), len(splits), (progress or Progress(enabled=False)).bar(int(n_boot),
-                                                                                        "bootstrap campaigns"))
+                 fits, bool(jit))
+    bar = (progress or Progress(enabled=False)).bar(int(n_boot), "bootstrap campaigns")
     try:
-        backend = cluster.execute(_run_chunk, task, functools.partial(_seed_chunks, int(n_boot), seed, chunk_size,
-                                                                      bool(batch)),
-                                  got.add, workers, scheduler, _install)
+        reps = replicate(task, int(n_boot), functools.partial(_seed_chunks, int(n_boot), seed, chunk_size, fits),
+                         workers=workers, scheduler=scheduler, bar=bar)
     finally:
-        got.bar.close()
-    n_s, n_k = T_obs.shape
-    pv = np.full((n_s, n_k), np.nan)
-    nv = np.zeros((n_s, n_k), int)
-    for s in range(n_s):
-        for k in range(n_k):
-            pv[s, k], nv[s, k] = _exceedance_pvalue(got.T[:, s, k], T_obs[s, k])
-    # family-wise min-p: campaigns with every split computed; a smaller min alpha is more extreme
-    fam_obs = np.where(np.all(np.isfinite(A_obs), axis=0), np.min(A_obs, axis=0), np.nan)
-    fam_boot = np.where(np.all(np.isfinite(got.A), axis=1), np.min(got.A, axis=1), np.nan)    # (n_boot, 3)
-    fam_p = np.array([_exceedance_pvalue(-fam_boot[:, k], -fam_obs[k])[0] for k in range(n_k)])
+        bar.close()
+    T = np.stack([r.T for r in reps.records])
+    A = np.stack([r.A for r in reps.records])
+    pv, nv, fam_obs, fam_p = _pvalues(T_obs, A_obs, T, A)
+    errors = [(r.index,) + e for r in reps.records for e in r.errors]
     return BootstrapDetection(
         model=name, splits=tuple(sp.name for sp in splits), statistics=STATISTICS, observed=T_obs,
         asymptotic=A_obs, pvalue=pv, n_valid=nv, family_asymptotic=fam_obs, family_pvalue=fam_p,
-        boot_statistics=got.T, boot_asymptotic=got.A, n_boot=int(n_boot),
+        boot_statistics=T, boot_asymptotic=A, n_boot=int(n_boot),
         seed=seed if isinstance(seed, (int, np.integer)) else str(seed), p_null=np.asarray(null.p, float),
         sigma=np.asarray(null.sigma, float), sigma_estimated=data.sigma is None,
-        errors=tuple(sorted(got.errors, key=lambda e: (e[0], str(e[1])))), observed_errors=tuple(obs_err),
-        backend=backend, wall_time=time.perf_counter() - t0, tests=tests)
+        errors=tuple(sorted(errors, key=lambda e: (e[0], str(e[1])))), observed_errors=tuple(obs_err),
+        backend=str(reps.backend), wall_time=time.perf_counter() - t0, tests=tests)

@@ -18,46 +18,46 @@ The replications of a chunk are fitted together by the batch engine
 (:func:`identification.fit.batch.fit_batch`: one batch per split and fit, same estimates as
 :func:`identification.identify` to ~1e-10, identify as recorded per-member fallback), and
 the statistics are those of :func:`identification.studies.detect.run_split_tests` on these fits,
-computed for all replications of a chunk at once with the same formulas (run_split_tests
-itself for a replication with a failed fit or an invalid covariance, which records the
-failure; ``MonteCarloSettings.batch=False``: one identify call per fit).  The same batched
-split tests serve other loops over many campaigns of one design (the parametric bootstrap of
-:mod:`identification.studies.detect_bootstrap`) through :func:`batched_split_tests`.
+computed for all replications of a chunk at once with the same formulas
+(:func:`identification.studies.split_fits.batched_split_tests`; run_split_tests itself for a
+replication with a failed fit or an invalid covariance, which records the failure;
+``MonteCarloSettings.fits=ONE_BY_ONE``: one identify call per fit).
 
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
-depend on the number of workers or on the backend (serial, local processes, Dask).
+depend on the number of workers or on the backend (serial, local processes, Dask: the
+replication engine :mod:`identification.replicate`).
 """
 from __future__ import annotations
 
+import functools
 import math
-import os
 import time
-import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import special, stats
+from scipy import stats
 
 from models.contract import Model
 from models.dynamic import DynamicModel
 from identification import cluster
-from identification.fit.batch import BatchData, BatchFit, fit_batch
-from identification.studies.detect import (DEFAULT_STATISTIC, DetectSettings, SplitTest, alpha_field, normality_check,
-                     run_split_tests)
+from identification.replicate import ReplicationTask, replicate
+from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field
+from identification.studies.dynamic_validate import dynamic_size_study
 from identification.errors import DataError, IdentificationError
 from identification.fit.measurements import Measurements
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
+from identification.studies.split_fits import (BATCHED, ONE_BY_ONE, SplitFits, batched_split_tests,
+                                               shapiro_pvalues)
 from identification.studies.splits import Split, SplitError
-from identification.fit.unbounded import not_bounded_reason
-from models.state import set_jit, simulate, solve_states
+from models.state import simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
            "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests",
-           "shapiro_pvalues"]
+           "shapiro_pvalues", "BATCHED", "ONE_BY_ONE", "Replication", "SplitFailure"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -116,9 +116,10 @@ class MonteCarloSettings:
     jit : bool               compile small models' CasADi functions to C (models.state.set_jit;
                              same numbers, faster per replication); the libraries are compiled
                              once per machine and loaded from models.jit_cache by every worker
-    batch : bool             fit the replications of a chunk together with the batch engine
+    fits : SplitFits         BATCHED: fit the replications of a chunk together with the batch engine
                              (identification.fit.batch.fit_batch: same estimates to ~1e-10, identify as
-                             per-member fallback); False: one identify call per fit
+                             per-member fallback); ONE_BY_ONE: one identify call per fit
+                             (:mod:`identification.studies.split_fits`)
     """
 
     n_rep: int = 2000
@@ -131,7 +132,7 @@ class MonteCarloSettings:
     ci_level: float = 0.95
     detect: DetectSettings = field(default_factory=lambda: DetectSettings(normality="override"))
     jit: bool = True
-    batch: bool = True
+    fits: SplitFits = BATCHED
 
     def __post_init__(self):
         if int(self.n_rep) < 1:
@@ -146,6 +147,9 @@ class MonteCarloSettings:
             raise ValueError(f"ci_level: must lie in (0, 1), got {self.ci_level}")
         if not isinstance(self.detect, DetectSettings):
             raise TypeError(f"detect: expected DetectSettings, got {type(self.detect).__name__}")
+        if not isinstance(self.fits, SplitFits):
+            raise TypeError(f"fits: expected BATCHED or ONE_BY_ONE of identification.studies.split_fits, got "
+                            f"{self.fits!r}")
         object.__setattr__(self, "scheduler", cluster.check_scheduler(self.scheduler))
 
 
@@ -189,12 +193,64 @@ class ModelCampaign:
                             input_names=self.input_names)
 
 
-# ---------------------------------------------------------------------------- the replication
-@dataclass(frozen=True, eq=False)
-class _Task:
-    """Everything a replication needs (pickled once per worker; ``token`` identifies it)."""
 
-    token: str
+# ---------------------------------------------------------------------------- the replication
+@dataclass(frozen=True)
+class SplitFailure:
+    """A split test of one model that gave no statistic (or no likelihood ratio), and why."""
+
+    model: str
+    split: str
+    stage: str
+    message: str
+
+
+@dataclass(frozen=True, eq=False)
+class Replication:
+    """The split tests of every model on one simulated campaign (the record of :meth:`_Task.run_chunk`).
+
+    Attributes
+    ----------
+    index : int
+    alpha_paper, alpha_two_sample, alpha_lr : ndarray (n_models, n_splits)   NaN where not computed
+    covered : ndarray (n_models, n_splits, 2)   1/0 p* in the cal/val ellipsoid, NaN if n/a
+    shapiro : ndarray (n_S,)                    normality-gate p-values of the campaign
+    failures : tuple of SplitFailure
+    """
+
+    index: int
+    alpha_paper: np.ndarray
+    alpha_two_sample: np.ndarray
+    alpha_lr: np.ndarray
+    covered: np.ndarray
+    shapiro: np.ndarray
+    failures: tuple
+
+
+class _StartStates:
+    """States at p0 per (model name, campaign inputs), solved once per process (the warm start of every fit;
+    None when the state solve failed).  Sent empty to a worker."""
+
+    def __init__(self):
+        self.cache = {}
+
+    def __reduce__(self):
+        return _StartStates, ()                 # sent empty: every process solves its own
+
+    def __call__(self, name: str, model: Model, p0: np.ndarray, inputs: np.ndarray):
+        key = (name, inputs.tobytes())
+        if key not in self.cache:
+            try:
+                self.cache[key] = solve_states(model, p0, inputs)
+            except IdentificationError:
+                self.cache[key] = None
+        return self.cache[key]
+
+
+@dataclass(frozen=True, eq=False)
+class _Task(ReplicationTask):
+    """Everything a replication needs (sent once to every worker; see :mod:`identification.replicate`)."""
+
     names: tuple
     models: tuple
     p0s: tuple
@@ -204,67 +260,35 @@ class _Task:
     truth: tuple          # per model: p* or None
     detect: DetectSettings
     coverage_alpha: float
-    jit: bool = False
-    batch: bool = False
+    fits: SplitFits
+    jit: bool
+    start_states: _StartStates = field(default_factory=_StartStates)
 
-
-@dataclass(eq=False)
-class WorkerState:
-    """What one Monte Carlo worker process keeps between the replications it runs.
-
-    Attributes
-    ----------
-    task : _Task or None
-        The worker's copy of the task: its models (and their compiled CasADi functions) are
-        unpickled once per worker and reused by every replication.
-    states : dict {(model name, inputs bytes): ndarray (n_q, n_y) or None}
-        States at p0 per model and campaign inputs (warm start of every fit; None when the
-        state solve failed).
-    """
-
-    task: _Task | None = None
-    states: dict = field(default_factory=dict)
-
-    def install(self, task: _Task) -> None:
-        """Make ``task`` the worker's task (fresh state cache, JIT as the task asks)."""
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-        self.task = task
-        self.states = {}
-        set_jit(task.jit)
-
-    def task_for(self, task: _Task | None) -> _Task:
-        """The worker's copy of ``task`` (installed on first sight); None: the installed task."""
-        if task is not None and (self.task is None or self.task.token != task.token):
-            self.install(task)
-        return self.task
-
-    def start_states(self, name: str, model: Model, p0: np.ndarray, inputs: np.ndarray):
-        """States at p0 for ``inputs`` (n_q, n_y), solved once per model and inputs, or None."""
-        key = (name, inputs.tobytes())
-        if key not in self.states:
-            try:
-                self.states[key] = solve_states(model, p0, inputs)
-            except IdentificationError:
-                self.states[key] = None
-        return self.states[key]
-
-    def clear(self) -> None:
-        self.task, self.states = None, {}
-
-
-#: this process's worker state.  Module level because a process pool initializer
-#: (:func:`_init_worker`, run once per spawned process) and the chunks it runs can only
-#: reach module-level objects; the serial backend installs and clears it around its run.
-WORKER = WorkerState()
-
-
-def _init_worker(task: _Task) -> None:
-    """Process pool initializer: install ``task`` in this process's :data:`WORKER`."""
-    WORKER.install(task)
+    def run_chunk(self, chunk: list) -> list:
+        """Replications [(index, SeedSequence), ...] -> [Replication, ...]: the data sets of each model are
+        grouped by their inputs and every group's split tests run together (``self.fits``)."""
+        datas = [self.generator(np.random.default_rng(seed)) for _, seed in chunk]
+        outs = [_empty_result(self) for _ in chunk]
+        for im, name in enumerate(self.names):
+            ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
+            todo = [r for r in range(len(ds)) if outs[r]["shapiro"] is None]
+            for r, pv in zip(todo, self.fits.shapiro([ds[r] for r in todo])):
+                outs[r]["shapiro"] = pv
+            groups = {}
+            for r, d in enumerate(ds):
+                groups.setdefault((d.inputs.tobytes(), d.inputs.shape, d.n_M, d.sigma is None), []).append(r)
+            model, p0 = self.models[im], self.p0s[im]
+            for rows in groups.values():
+                sub = [ds[r] for r in rows]
+                st0 = self.start_states(name, model, p0, sub[0].inputs)
+                for r, tests in zip(rows, self.fits.split_tests(model, name, sub, self.splits, p0, self.weights[im],
+                                                                self.detect, st0)):
+                    _record(self, outs[r], im, tests)
+        return [Replication(index=i, failures=tuple(out.pop("errors")), **out) for (i, _), out in zip(chunk, outs)]
 
 
 def _empty_result(task: _Task) -> dict:
-    """The result dict of one replication before its tests (NaN everywhere, no errors)."""
+    """The fields of one replication's record before its tests (NaN everywhere, no failures)."""
     n_m, n_s = len(task.names), len(task.splits)
     return {"alpha_paper": np.full((n_m, n_s), np.nan), "alpha_two_sample": np.full((n_m, n_s), np.nan),
             "alpha_lr": np.full((n_m, n_s), np.nan), "covered": np.full((n_m, n_s, 2), np.nan), "errors": [],
@@ -272,7 +296,7 @@ def _empty_result(task: _Task) -> dict:
 
 
 def _record(task: _Task, out: dict, im: int, tests) -> None:
-    """Enter the split tests of model ``im`` into a replication's result dict ``out``."""
+    """Enter the split tests of model ``im`` into a replication's fields ``out``."""
     name, model, truth = task.names[im], task.models[im], task.truth[im]
     g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p) if truth is not None else None
     for js, t in enumerate(tests):
@@ -281,9 +305,9 @@ def _record(task: _Task, out: dict, im: int, tests) -> None:
             out["alpha_two_sample"][im, js] = t.alpha_two_sample
             out["alpha_lr"][im, js] = t.alpha_lr
             if t.lr_error:
-                out["errors"].append((name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
+                out["errors"].append(SplitFailure(name, t.split, "pooled fit", t.lr_error.splitlines()[0][:300]))
         else:
-            out["errors"].append((name, t.split, t.stage, t.error.splitlines()[0][:300]))
+            out["errors"].append(SplitFailure(name, t.split, t.stage, t.error.splitlines()[0][:300]))
         if truth is not None:
             for kk, (p, C) in enumerate(((t.p_cal, t.C_cal), (t.p_val, t.C_val))):
                 if np.all(np.isfinite(p)) and np.all(np.isfinite(C)):
@@ -295,499 +319,33 @@ def _record(task: _Task, out: dict, im: int, tests) -> None:
                     out["covered"][im, js, kk] = float(v @ v <= g2)
 
 
-def _replicate(task: _Task, seed: np.random.SeedSequence) -> dict:
-    """One replication, one identify call per fit."""
-    data = task.generator(np.random.default_rng(seed))
-    out = _empty_result(task)
-    for im, name in enumerate(task.names):
-        model = task.models[im]
-        d = data[name] if isinstance(data, Mapping) else data
-        if out["shapiro"] is None:
-            out["shapiro"] = normality_check(d).pvalue
-        st0 = WORKER.start_states(name, model, task.p0s[im], d.inputs)
-        tests = run_split_tests(model, d, task.splits, task.p0s[im], task.weights[im], task.detect, name, st0)
-        _record(task, out, im, tests)
-    return out
-
-
-def _given(fit: BatchFit, member: int):
-    """A member's estimate for run_split_tests(fits=...): the estimate, or the exception of its fit."""
-    try:
-        return fit.result(member)
-    except (IdentificationError, DataError) as exc:
-        return exc
-
-
-def _pooled_starts(model: Model, split: Split, fits: list, n_q_u: int) -> tuple:
-    """Start values of the pooled fits: the precision-weighted mean (F_c + F_v)^{-1} (F_c p_c + F_v p_v)
-    of each member's two estimates with their states (as detect's pooled Newton; moved to p by the
-    tangent y' (p - p_est) when the fit is a batch member); NaN (start at p0)
-    where it is singular or outside the bounds."""
-    qs_c, qs_v = list(split.cal_inputs), list(split.val_inputs)
-    qs = sorted(set(qs_c) | set(qs_v))
-    P = np.full((len(fits), model.n_p), np.nan)
-    Y = np.zeros((len(fits), n_q_u, model.n_y))
-    for k, (ec, ev) in enumerate(fits):
-        Fc, Fv = ec.information, ev.information
-        try:
-            p = np.linalg.solve(Fc + Fv, Fc @ ec.p + Fv @ ev.p)
-        except np.linalg.LinAlgError:
-            continue
-        if not (np.all(p > model.lower) and np.all(p < model.upper)):
-            continue
-        if model.n_y:
-            for j_list, est in ((qs_c, ec), (qs_v, ev)):
-                rows = [qs.index(j) for j in j_list]
-                Y[k, rows] = est.states
-                yp = getattr(est, "state_derivatives", None)       # tangent predictor y(p) ~ y + y' (p - p_est)
-                if yp is not None:
-                    Y[k, rows] += yp @ (p - est.p)
-        P[k] = p
-    return P, Y
-
-
-class _Subsets:
-    """Picklable member -> Measurements of a split's subset (the data of a fallback fit)."""
-
-    def __init__(self, ds: list, subset: Callable):
-        self.ds, self.subset = ds, subset
-
-    def __call__(self, r: int) -> Measurements:
-        return self.subset(self.ds[r])
-
-
-def _split_batch(ds: list, Z: np.ndarray, sig, inputs, series, subset: Callable, sensors=None) -> BatchData:
-    """The stacked data of one subset (inputs, series[, sensors]) of every replication (as Split.calibration
-    etc.: the values of the other sensors missing)."""
-    ser = list(range(Z.shape[1])) if series is None else list(series)
-    rows = list(inputs)
-    z = Z[:, ser][:, :, rows]
-    if sensors is not None:
-        z = z.copy()
-        z[..., [k for k in range(Z.shape[3]) if k not in set(sensors)]] = np.nan
-    return BatchData(ds[0].inputs[rows], z, sig, _Subsets(ds, subset))
-
-
-def _pooled_batch(ds: list, Z: np.ndarray, sig, split: Split, members: list) -> BatchData:
-    """The stacked pooled data of a split for ``members`` (as Split.pooled: NaN outside the pooled values)."""
-    pts = split.pooled_points(Z.shape[1])
-    qs = sorted({j for j, _ in pts})
-    series = sorted({i for _, i in pts})
-    mask = split.pooled_mask(Z.shape[1], Z.shape[2], Z.shape[3])[np.ix_(series, qs, range(Z.shape[3]))]
-    zp = np.where(mask[None], Z[members][:, series][:, :, qs], np.nan)
-    return BatchData(ds[0].inputs[qs], zp, None if sig is None else sig[members],
-                     _Subsets([ds[r] for r in members], split.pooled))
-
-
-def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: DetectSettings, ds: list,
-                  st0) -> tuple:
-    """The fits of run_split_tests for R data sets of one model with the same inputs: every
-    calibration, validation and pooled fit of a split is one :func:`identification.fit.batch.fit_batch`
-    call over the data sets.  Returns (fits, pooled, ok_split): per data set the (calibration,
-    validation) estimates of every split and {pooled points: pooled estimate or failure text} (the
-    ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data.
-
-    A fit_batch call that raises LinAlgError (a singular system for the batch as a whole, e.g. a
-    subset that cannot identify the parameters) leaves its fits out (None): run_split_tests then
-    runs identify on each of them, which names the failure as it does without the batch engine."""
-    R, n_q, n_M = len(ds), ds[0].n_q, ds[0].n_M
-    n_sel = int(np.count_nonzero(ds[0].sensor_weights(weights) > 0))
-    fits = [[(None, None)] * len(splits) for _ in range(R)]
-    Z = np.stack([d.z for d in ds])
-    sig = None if ds[0].sigma is None else np.stack([np.asarray(d.sigma, float) for d in ds])
-    ok_split = []
-    for js, split in enumerate(splits):
-        try:
-            split.check(n_q, n_M, model.n_p, n_sel)
-        except SplitError:
-            ok_split.append(False)
-            continue
-        ok_split.append(True)
-        got = []
-        for sub, rows, series, sens in ((split.calibration, split.cal_inputs, split.cal_series, split.cal_sensors),
-                                        (split.validation, split.val_inputs, split.val_series, split.val_sensors)):
-            try:
-                bf = fit_batch(model, _split_batch(ds, Z, sig, rows, series, sub, sens), p0, weights, det.identify,
-                               Y0=None if st0 is None else st0[list(rows)])
-            except np.linalg.LinAlgError:
-                got.append([None] * R)         # singular batch (e.g. rank-deficient subset): identify per member
-                continue
-            got.append([_given(bf, r) for r in range(R)])
-        for r in range(R):
-            fits[r][js] = (got[0][r], got[1][r])
-    pooled = [{} for _ in range(R)]
-    done_keys = {}
-    for js, split in enumerate(splits):
-        if not ok_split[js]:
-            continue
-        key = split.pooled_key(n_M)
-        have = done_keys.setdefault(key, set())
-        members = [r for r in range(R)
-                   if r not in have and not any(e is None or isinstance(e, Exception) or not_bounded_reason(e)
-                                                for e in fits[r][js])]
-        if not members:
-            continue
-        have.update(members)
-        qs = sorted({j for j, _ in split.pooled_points(n_M)})
-        P, Y = _pooled_starts(model, split, [fits[r][js] for r in members], len(qs))
-        try:
-            bf = fit_batch(model, _pooled_batch(ds, Z, sig, split, members), p0, weights, det.identify,
-                           Y0=None if st0 is None else st0[qs], starts=P, start_states=Y if model.n_y else None)
-        except np.linalg.LinAlgError:
-            continue                           # run_split_tests fits these pooled data itself
-        for k, r in enumerate(members):
-            e = _given(bf, k)
-            if isinstance(e, Exception):
-                pooled[r][key] = f"pooled fit failed: {type(e).__name__}: {e}"
-            else:
-                pooled[r][key] = f"pooled fit {not_bounded_reason(e)}" if not_bounded_reason(e) else e
-    return fits, pooled, ok_split
-
-
-def _covariances(fits: list, det: DetectSettings, n_p: int) -> tuple:
-    """(p (R, 2, n_p), C (R, 2, n_p, n_p), regular (R,)) of the calibration and validation fits of one
-    split; regular False where a fit failed."""
-    R = len(fits)
-    P = np.full((R, 2, n_p), np.nan)
-    C = np.full((R, 2, n_p, n_p), np.nan)
-    regular = np.ones(R, bool)
-    second = det.covariance == "second_order"
-    for r, pair in enumerate(fits):
-        for i, est in enumerate(pair):
-            if isinstance(est, Exception) or est is None:
-                regular[r] = False
-                continue
-            P[r, i] = est.p
-            C[r, i] = est.cov if second else est.cov_gn
-    return P, C, regular
-
-
-def _batched_cholesky(C: np.ndarray) -> tuple:
-    """(L, ok): the lower Cholesky factors of a stack (m, n, n) (numpy.linalg.cholesky), ok False (L the
-    identity) where a matrix is not finite or not positive definite."""
-    m, n = C.shape[0], C.shape[-1]
-    ok = np.all(np.isfinite(C), axis=(1, 2))
-    A = np.where(ok[:, None, None], C, np.eye(n))
-    try:
-        return np.linalg.cholesky(A), ok
-    except np.linalg.LinAlgError:
-        L = np.broadcast_to(np.eye(n), A.shape).copy()
-        for i in np.flatnonzero(ok):
-            try:
-                L[i] = np.linalg.cholesky(A[i])
-            except np.linalg.LinAlgError:
-                ok[i] = False
-        return L, ok
-
-
-def _wald_d2(D: np.ndarray, C: np.ndarray) -> tuple:
-    """(d2, ok) with d2 = D^T C^{-1} D for stacks D (m, n), C (m, n, n), as
-    :func:`identification.inference.regions.mahalanobis2` (Cholesky of (C + C^T)/2); ok False where it would raise
-    CovarianceError (C not finite, not symmetric to rtol 1e-8 / atol 1e-14 max|C|, not positive definite)."""
-    Ct = C.swapaxes(1, 2)
-    with np.errstate(invalid="ignore"):
-        atol = 1e-14 * np.abs(C).max(axis=(1, 2))
-        sym = np.all(np.abs(C - Ct) <= atol[:, None, None] + 1e-8 * np.abs(Ct), axis=(1, 2))
-    L, ok = _batched_cholesky(0.5 * (C + Ct))
-    ok &= sym
-    v = np.linalg.solve(L, np.where(ok[:, None], D, 0.0)[:, :, None])[:, :, 0]
-    return np.einsum("mi,mi->m", v, v), ok
-
-
-def _split_statistics(model: Model, name: str, splits: tuple, det: DetectSettings, n_M: int, fits: list,
-                      pooled: list, ok_split: list) -> list:
-    """The split tests of R data sets from their batched fits, computed together: per data set the
-    tuple of :class:`identification.studies.detect.SplitTest` that :func:`run_split_tests` gives with these
-    fits (same formulas: Wald distances by Cholesky of the symmetrised covariance, the likelihood
-    ratio 2 (Phi_pooled - Phi_cal - Phi_val) or, sigma estimated, the F (Chow) test).
-
-    None for a data set that is not regular (a failed fit or pooled fit, a covariance that is not
-    symmetric positive definite, a likelihood ratio that is not computable or clearly negative): the
-    caller runs run_split_tests on it, which records the failures with their messages."""
-    n_p, R = model.n_p, len(fits)
-    regular = np.ones(R, bool)
-    res = []
-    for js, split in enumerate(splits):
-        if not ok_split[js]:
-            return [None] * R
-        P, C, reg = _covariances([f[js] for f in fits], det, n_p)
-        D = P[:, 1] - P[:, 0]
-        d2p, okp = _wald_d2(D, C[:, 0])
-        d2t, okt = _wald_d2(D, C[:, 0] + C[:, 1])
-        reg &= okp & okt
-        key = split.pooled_key(n_M)
-        stat = np.full(R, np.nan)
-        sig_est = np.zeros(R, bool)
-        num, scale, dof = np.zeros(R), np.ones(R), np.zeros(R)
-        for r in np.flatnonzero(reg):
-            est_c, est_v = fits[r][js]
-            est_u = pooled[r].get(key)
-            if est_u is None or isinstance(est_u, str):
-                reg[r] = False
-                continue
-            sig_est[r] = est_c.sigma_estimated
-            if sig_est[r]:
-                dof[r] = est_c.n_data + est_v.n_data - 2 * n_p
-                rss_sep = est_c.rss + est_v.rss
-                if dof[r] <= 0 or not rss_sep > 0:
-                    reg[r] = False
-                    continue
-                num[r], scale[r] = est_u.rss - rss_sep, rss_sep
-                stat[r] = (num[r] / n_p) / (rss_sep / dof[r])
-            else:
-                num[r] = 2.0 * (est_u.objective - est_c.objective - est_v.objective)
-                scale[r] = 2.0 * max(est_u.objective, 1.0)
-                stat[r] = num[r]
-        reg &= ~(num < -1e-7 * scale)
-        stat = np.maximum(stat, 0.0)
-        a_lr = np.where(sig_est, stats.f.sf(stat, n_p, np.maximum(dof, 1)), special.chdtrc(n_p, stat))
-        regular &= reg
-        res.append((P, C, d2p, d2t, special.chdtrc(n_p, d2p), special.chdtrc(n_p, d2t), stat, a_lr))
-    out = [None] * R
-    for r in np.flatnonzero(regular):
-        tests = []
-        for js, (split, (P, C, d2p, d2t, a_p, a_t, stat, a_lr)) in enumerate(zip(splits, res)):
-            est_c, est_v = fits[r][js]
-            notes = (tuple(f"calibration fit: {n}" for n in est_c.notes)
-                     + tuple(f"validation fit: {n}" for n in est_v.notes))
-            c, v = split.label()
-            tests.append(SplitTest(name, split.name, c, v, True, "", "", P[r, 0], P[r, 1], C[r, 0], C[r, 1],
-                                   float(d2p[r]), float(d2t[r]), float(a_p[r]), float(a_t[r]), est_c.n_data,
-                                   est_v.n_data, notes, float(stat[r]), float(a_lr[r]), ""))
-        out[r] = tuple(tests)
-    return out
-
-
-def _same_design(datasets) -> list:
-    """``datasets`` as a list of Measurements with the same inputs, series count and kind of sigma
-    (DataError naming the argument otherwise)."""
-    if isinstance(datasets, Measurements):
-        raise TypeError("datasets: expected a sequence of Measurements, got one Measurements (wrap it in a list)")
-    ds = list(datasets)
-    if not ds:
-        raise DataError("datasets: give at least one data set")
-    bad = [type(d).__name__ for d in ds if not isinstance(d, Measurements)]
-    if bad:
-        raise TypeError(f"datasets: expected identification.Measurements, got {bad[0]}")
-    d0 = ds[0]
-    for r, d in enumerate(ds[1:], 1):
-        if d.inputs.shape != d0.inputs.shape or not np.array_equal(d.inputs, d0.inputs):
-            raise DataError(f"datasets: data set {r} has other inputs than data set 0; group the data sets by their "
-                            "inputs and call once per group")
-        if d.n_M != d0.n_M or d.z.shape != d0.z.shape:
-            raise DataError(f"datasets: data set {r} has values of shape {d.z.shape}, data set 0 {d0.z.shape}; "
-                            "give data sets of one shape")
-        if (d.sigma is None) != (d0.sigma is None):
-            raise DataError(f"datasets: data set {r} and data set 0 differ in whether sigma is known; give "
-                            "sigma for all or for none")
-    return ds
-
-
-def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequence[Split], p0, weights=None,
-                        detect_settings: DetectSettings | None = None, start_states=None) -> list:
-    """``run_split_tests(model, d, splits, p0, weights, detect_settings, name, start_states)`` for every
-    data set d of ``datasets``, the fits of all data sets done together by the batch engine.
-
-    Every calibration, validation and pooled fit of a split is one
-    :func:`identification.fit.batch.fit_batch` call over the data sets (same estimates as
-    :func:`identification.identify` to ~1e-10; identify as recorded per-member fallback), and the
-    statistics (Wald distances d2 and the likelihood ratio or F statistic, chi^2 / F units, with
-    their p-values alpha_min) are computed for all data sets at once with the formulas of
-    :func:`identification.studies.detect.run_split_tests`.  A data set with a failed fit, a covariance that
-    is not symmetric positive definite or a likelihood ratio that cannot be computed goes through
-    run_split_tests itself (with the batch's fits), which records each failure with its stage and
-    message, so failures are named exactly as there.
-
-    Parameters
-    ----------
-    model : Model
-    name : str or None               model label in the SplitTest records (None: the model's name)
-    datasets : sequence of Measurements
-        The R data sets: the same inputs, the same shape of values (n_M, n_q, n_S) and sigma known
-        for all or for none (missing values may differ).  Group data sets by their inputs first.
-    splits : sequence of Split
-    p0 : array_like (n_p,)           start of every fit
-    weights : array_like (n_S,), optional   sensor weights (0/1 selects sensors)
-    detect_settings : DetectSettings, optional   covariance kind and identify settings
-    start_states : array (n_q, n_y), optional   states at p0 for every input (warm start)
-
-    Returns
-    -------
-    list of tuple of SplitTest
-        One tuple (one SplitTest per split) per data set, in the order of ``datasets``.
-
-    Raises
-    ------
-    TypeError, DataError, SplitError
-        A bad argument (the message names it).
-    """
-    if not isinstance(model, Model):
-        raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
-    ds = _same_design(datasets)
-    splits = tuple(splits)
-    if not splits or not all(isinstance(sp, Split) for sp in splits):
-        raise SplitError("splits: give at least one identification.studies.splits.Split")
-    det = detect_settings or DetectSettings()
-    if not isinstance(det, DetectSettings):
-        raise TypeError(f"detect_settings: expected DetectSettings, got {type(det).__name__}")
-    p0 = np.asarray(p0, float).ravel()
-    if p0.shape != (model.n_p,):
-        raise DataError(f"p0: expected {model.n_p} values ({', '.join(model.param_names)}), got {p0.size}")
-    if start_states is not None:
-        start_states = np.asarray(start_states, float)
-        if start_states.shape != (ds[0].n_q, model.n_y):
-            raise DataError(f"start_states: expected the states at p0 of shape {(ds[0].n_q, model.n_y)}, got "
-                            f"{start_states.shape}")
-    name = name or model.name
-    fits, pooled, ok_split = _batched_fits(model, splits, p0, weights, det, ds, start_states)
-    out = _split_statistics(model, name, splits, det, ds[0].n_M, fits, pooled, ok_split)
-    for r, tests in enumerate(out):
-        if tests is None:
-            out[r] = run_split_tests(model, ds[r], splits, p0, weights, det, name, start_states, fits=fits[r],
-                                     pooled=pooled[r])
-    return out
-
-
 def _first(data, names):
     """The first model's Measurements of a generator's output (a Measurements or a mapping of them)."""
     return data[names[0]] if isinstance(data, Mapping) else data
 
 
-def shapiro_pvalues(ds: list) -> list:
-    """``normality_check(d).pvalue`` of every data set: the Shapiro-Wilk p-values per sensor of the
-    differences of pairs of series.  Data sets without missing values and of a common shape are
-    tested in one ``scipy.stats.shapiro(..., axis=0)`` call (the same test per column); the others
-    by :func:`identification.studies.detect.normality_check`."""
-    out = [None] * len(ds)
-    groups = {}
-    for r, d in enumerate(ds):
-        if d.n_M >= 2 and np.all(np.isfinite(d.z)):
-            groups.setdefault(d.z.shape, []).append(r)
-        else:
-            out[r] = normality_check(d).pvalue
-    for (n_M, n_q, n_S), rows in groups.items():
-        n_pairs = n_M // 2
-        Z = np.stack([ds[r].z for r in rows])                                   # (m, n_M, n_q, n_S)
-        D = (Z[:, 1:2 * n_pairs:2] - Z[:, 0:2 * n_pairs:2]).reshape(len(rows), n_pairs * n_q, n_S)
-        cols = D.transpose(1, 0, 2).reshape(n_pairs * n_q, -1)
-        pv = np.full(cols.shape[1], np.nan)
-        ok = np.ptp(cols, axis=0) > 0 if cols.shape[0] >= 3 else np.zeros(cols.shape[1], bool)
-        if np.any(ok):
-            pv[ok] = stats.shapiro(cols[:, ok], axis=0).pvalue
-        for k, r in enumerate(pv.reshape(len(rows), n_S)):
-            out[rows[k]] = r
-    return out
-
-
-def _replicate_chunk(task: _Task, chunk: list) -> list:
-    """The replications of a chunk with the batch engine: the data sets of each model are grouped by
-    their inputs and every group's split tests run together (:func:`batched_split_tests`)."""
-    datas = [task.generator(np.random.default_rng(seed)) for _, seed in chunk]
-    outs = [_empty_result(task) for _ in chunk]
-    for im, name in enumerate(task.names):
-        ds = [d[name] if isinstance(d, Mapping) else d for d in datas]
-        todo = [r for r in range(len(ds)) if outs[r]["shapiro"] is None]
-        for r, pv in zip(todo, shapiro_pvalues([ds[r] for r in todo])):
-            outs[r]["shapiro"] = pv
-        groups = {}
-        for r, d in enumerate(ds):
-            groups.setdefault((d.inputs.tobytes(), d.inputs.shape, d.n_M, d.sigma is None), []).append(r)
-        for rows in groups.values():
-            sub = [ds[r] for r in rows]
-            model = task.models[im]
-            st0 = WORKER.start_states(name, model, task.p0s[im], sub[0].inputs)
-            for r, tests in zip(rows, batched_split_tests(model, name, sub, task.splits, task.p0s[im],
-                                                          task.weights[im], task.detect, st0)):
-                _record(task, outs[r], im, tests)
-    return [(i, out) for (i, _), out in zip(chunk, outs)]
-
-
-def _run_chunk(task, chunk):
-    """Replications [(index, SeedSequence), ...] -> [(index, result dict), ...]."""
-    t = WORKER.task_for(task)
-    if t.batch:
-        return _replicate_chunk(t, chunk)
-    return [(i, _replicate(t, s)) for i, s in chunk]
-
-
-# ---------------------------------------------------------------------------- execution backends
-def _chunks(n_rep, seed, n_workers, chunk_size):
-    children = np.random.SeedSequence(seed).spawn(n_rep)
-    size = chunk_size or max(1, min(50, math.ceil(n_rep / (8 * max(1, n_workers)))))
-    items = list(enumerate(children))
-    return [items[i:i + size] for i in range(0, n_rep, size)]
-
-
-class _Collector:
-    """Replication results by index; every chunk advances the progress bar."""
-
-    def __init__(self, n_rep: int, bar):
-        self.out = [None] * n_rep
-        self.bar = bar
-
-    def add(self, res: list) -> None:
-        for i, r in res:
-            self.out[i] = r
-        self.bar.update(len(res))
-
-
-def _run_dask(task: _Task, settings: MonteCarloSettings, got: _Collector) -> tuple:
-    """Chunks on a Dask cluster (the task scattered once to every worker); returns (backend text, workers).
-
-    Raises :class:`identification.cluster.SchedulerError` when Dask is missing or the scheduler
-    cannot be reached.
-    """
-    with cluster.connect(settings.scheduler) as client:
-        n_w = cluster.n_workers(client)
-        chunks = _chunks(len(got.out), settings.seed, n_w, settings.chunk_size)
-        cluster.run_chunks(client, _run_chunk, task, chunks, got.add)
-        return f"dask ({client.scheduler.address}, {n_w} workers)", n_w
-
-
-def _run_serial(task: _Task, chunks: list, got: _Collector) -> str:
-    """Chunks in this process (worker state installed for the run, JIT restored after)."""
-    prev = set_jit(task.jit)
-    try:
-        WORKER.install(task)
-        for ch in chunks:
-            got.add(_run_chunk(None, ch))
-    finally:
-        set_jit(prev)
-        WORKER.clear()
-    return "serial (this process)"
-
-
-def _run_processes(task: _Task, chunks: list, n_w: int, got: _Collector) -> str:
-    """Chunks on this process and ``n_w - 1`` spawned ones (:func:`identification.cluster.run_local`; each
-    spawned process installs the task once, :func:`_init_worker`; this one's state is restored after)."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    prev = set_jit(task.jit)
-    try:
-        cluster.run_local(_run_chunk, task, chunks, got.add, n_w, _init_worker)
-    finally:
-        set_jit(prev)
-        WORKER.clear()
-    return f"local processes ({n_w} workers: this one and {n_w - 1} spawned)"
+def _backend_text(backend: cluster.Backend) -> str:
+    """The backend as a Monte Carlo result names it."""
+    if backend.kind == "serial":
+        return "serial (this process)"
+    if backend.kind == "local":
+        return f"local processes ({backend.workers} workers: this one and {backend.workers - 1} spawned)"
+    return str(backend)
 
 
 def _execute(task: _Task, settings: MonteCarloSettings, desc: str) -> tuple:
-    """Run every replication; returns (results ordered by index, backend text, workers)."""
+    """Run every replication on the replication engine; returns (records by index, backend text, workers).
+
+    Chunks of about 8 per worker, at most 50 replications (the numbers do not depend on them)."""
     n_rep = int(settings.n_rep)
+    chunks = functools.partial(cluster.seed_chunks, n_rep, settings.seed, chunk_size=settings.chunk_size,
+                               per_worker=8, max_size=50)
     bar = Progress(settings.progress).bar(n_rep, desc)
-    got = _Collector(n_rep, bar)
     try:
-        if settings.scheduler is not None:
-            backend, n_w = _run_dask(task, settings, got)
-        else:
-            n_w = int(settings.workers or os.cpu_count() or 1)
-            chunks = _chunks(n_rep, settings.seed, n_w, settings.chunk_size)
-            if n_w == 1:
-                backend = _run_serial(task, chunks, got)
-            else:
-                backend = _run_processes(task, chunks, n_w, got)
+        reps = replicate(task, n_rep, chunks, workers=settings.workers, scheduler=settings.scheduler, bar=bar)
     finally:
         bar.close()
-    return got.out, backend, n_w
+    return reps.records, _backend_text(reps.backend), reps.backend.workers
 
 
 # ---------------------------------------------------------------------------- result
@@ -1080,10 +638,9 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
         if v.shape != (m.n_p,):
             raise DataError(f"p0[{n!r}]: expected {m.n_p} values, got {v.size}")
     tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
-    task = _Task(token=uuid.uuid4().hex, names=names, models=tuple(models.values()), p0s=p0s,
-                 weights=_per_model("weights", weights, names), splits=splits, generator=generator, truth=tr,
-                 detect=settings.detect, coverage_alpha=float(settings.coverage_alpha), jit=bool(settings.jit),
-                 batch=bool(settings.batch))
+    task = _Task(names=names, models=tuple(models.values()), p0s=p0s, weights=_per_model("weights", weights, names),
+                 splits=splits, generator=generator, truth=tr, detect=settings.detect,
+                 coverage_alpha=float(settings.coverage_alpha), fits=settings.fits, jit=bool(settings.jit))
     # fail early (in this process) on a generator or split that does not fit the models
     probe = generator(np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(1)[0]))
     for n, m in zip(names, models.values()):
@@ -1095,13 +652,13 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     t0 = time.perf_counter()
     out, backend, n_w = _execute(task, settings, f"{kind} study")
     wall = time.perf_counter() - t0
-    errors = tuple((i,) + e for i, r in enumerate(out) for e in r["errors"])
+    errors = tuple((r.index, f.model, f.split, f.stage, f.message) for r in out for f in r.failures)
     return MonteCarloResult(
         kind=kind, models=names, splits=splits, tol=settings.detect.tol, n_rep=int(settings.n_rep),
-        alpha_paper=np.stack([r["alpha_paper"] for r in out]),
-        alpha_two_sample=np.stack([r["alpha_two_sample"] for r in out]),
-        alpha_lr=np.stack([r["alpha_lr"] for r in out]),
-        covered=np.stack([r["covered"] for r in out]), shapiro=np.stack([r["shapiro"] for r in out]),
+        alpha_paper=np.stack([r.alpha_paper for r in out]),
+        alpha_two_sample=np.stack([r.alpha_two_sample for r in out]),
+        alpha_lr=np.stack([r.alpha_lr for r in out]),
+        covered=np.stack([r.covered for r in out]), shapiro=np.stack([r.shapiro for r in out]),
         errors=errors, seed=int(settings.seed), backend=backend, workers=n_w, wall_time=wall,
         coverage_alpha=float(settings.coverage_alpha), ci_level=float(settings.ci_level), description=description,
         gated=tuple(bool(x) for x in _first(probe, names).sensor_weights(task.weights[0]) > 0),
@@ -1170,7 +727,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     A dynamic model (:class:`models.dynamic.DynamicModel`) takes its campaign ``data``
     (DynamicMeasurements) instead of ``inputs`` / ``sigma``, instrument ``weights``, and splits by
     experiment, time window or early against late; the size study runs on its collocation at the
-    campaign fit (:func:`identification.studies.dynamic_validate.validate_dynamic`; ``p_true`` defaults to
+    campaign fit (:func:`identification.studies.dynamic_validate.dynamic_size_study`; ``p_true`` defaults to
     that fit).
     """
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
@@ -1179,9 +736,10 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")
-        from identification.studies.dynamic_validate import validate_dynamic
-        return validate_dynamic(model, data, splits, p0, p_true=p_true, n_M=n_M, weights=weights, settings=settings,
-                                name=name)
+        dyn = dynamic_size_study(model, data, splits, p0, p_true=p_true, weights=weights,
+                                 identify_settings=settings.detect.identify, name=name)
+        return size_study(dyn.model, dyn.p_true, dyn.inputs, dyn.sigma, dyn.splits, dyn.p0, n_M, dyn.weights,
+                          settings, name=dyn.name)
     if generator is None:
         if isinstance(model, Mapping):
             raise DataError("model: a size study takes one model (the data generator itself)")

@@ -12,7 +12,7 @@ import pytest
 
 from identification import DataError, IdentifySettings, Measurements, identify
 from identification.fit.batch import BatchFit, BatchMember, fit_batch
-from identification.studies.montecarlo import ModelCampaign, MonteCarloSettings, size_study
+from identification.studies.montecarlo import BATCHED, ONE_BY_ONE, ModelCampaign, MonteCarloSettings, size_study
 from identification.studies.detect import DetectSettings
 from identification.studies.splits import splits_from_scenarios
 from models.contract import Model, Parameter
@@ -158,7 +158,8 @@ def test_monte_carlo_decisions_batch_equal_per_fit(press):
     # scenarios 3 and 4 pool the same points: one pooled batch serves both
     res = {}
     for batch in (True, False):
-        s = MonteCarloSettings(n_rep=2, seed=9, workers=1, progress=False, jit=False, batch=batch,
+        s = MonteCarloSettings(n_rep=2, seed=9, workers=1, progress=False, jit=False,
+                               fits=BATCHED if batch else ONE_BY_ONE,
                                detect=DetectSettings(tol=0.05, normality="override"))
         res[batch] = size_study(press, press.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_MM, SPLITS[2:],
                                 p0=P0, weights=W, settings=s, name="M1")
@@ -251,7 +252,8 @@ def test_monte_carlo_batched_statistics_equal_per_fit_with_failures_and_unknown_
               Split("series", list(range(8)), list(range(8)), [0], [1]))
     res = {}
     for batch in (True, False):
-        s = MonteCarloSettings(n_rep=12, seed=3, workers=1, progress=False, jit=False, batch=batch,
+        s = MonteCarloSettings(n_rep=12, seed=3, workers=1, progress=False, jit=False,
+                               fits=BATCHED if batch else ONE_BY_ONE,
                                detect=DetectSettings(tol=0.05, normality="override"))
         res[batch] = run_monte_carlo(model, _ExpCampaign(), splits, [200.0, 4e-4], truth=[230.0, 5e-4],
                                      kind="size", settings=s)

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from identification import Measurements, identify
-from identification.inference.bootstrap import bootstrap_intervals, bootstrap_replicates
+from identification.inference.bootstrap import ONE_BY_ONE_REFITS, bootstrap_intervals, bootstrap_replicates
 from identification.progress import Progress
 from models import Model
 
@@ -78,7 +78,7 @@ def test_failed_refits_are_counted_and_named():
     assert any(n.startswith(f"{len(reps.fallbacks)} of 16 bootstrap refits were not converged by the batch engine")
                for n in ci.notes)
     # the per-refit path fails on the same replicates, with no fallbacks
-    per_fit = bootstrap_replicates(model, data, est, n=16, seed=0, batch=False)
+    per_fit = bootstrap_replicates(model, data, est, n=16, seed=0, refits=ONE_BY_ONE_REFITS)
     assert [i for i, _ in per_fit.errors] == [i for i, _ in errors] and per_fit.fallbacks == ()
 
 
@@ -122,8 +122,8 @@ def test_bad_scheduler_and_chunk_size_name_the_argument():
         bootstrap_replicates(model, data, est, n=4, scheduler="")
     with pytest.raises(ValueError, match="chunk_size"):
         bootstrap_replicates(model, data, est, n=4, chunk_size=0)
-    with pytest.raises(ValueError, match="batch: expected True"):
-        bootstrap_replicates(model, data, est, n=4, batch="yes")
+    with pytest.raises(TypeError, match="refits: expected BATCH_REFITS"):
+        bootstrap_replicates(model, data, est, n=4, refits="yes")
 
 
 def _michaelis_menten(known: bool):
@@ -141,7 +141,7 @@ def test_batch_engine_gives_the_refits_of_identify(known):
     """The batch engine's refits equal identify's per-refit ones to 1e-8 relative (same seeds), whatever
     the chunks; so do the percentile intervals."""
     model, data, est = _michaelis_menten(known)
-    per_fit = bootstrap_replicates(model, data, est, n=24, seed=5, batch=False)
+    per_fit = bootstrap_replicates(model, data, est, n=24, seed=5, refits=ONE_BY_ONE_REFITS)
     batched = bootstrap_replicates(model, data, est, n=24, seed=5, chunk_size=10)
     whole = bootstrap_replicates(model, data, est, n=24, seed=5)
     assert per_fit.errors == batched.errors == () and batched.fallbacks == ()
@@ -149,5 +149,5 @@ def test_batch_engine_gives_the_refits_of_identify(known):
     np.testing.assert_allclose(batched.P, per_fit.P, rtol=1e-8, atol=0)
     np.testing.assert_array_equal(batched.P, whole.P)
     ci_b = bootstrap_intervals(model, data, est, 0.1, n=24, seed=5)
-    ci_f = bootstrap_intervals(model, data, est, 0.1, n=24, seed=5, batch=False)
+    ci_f = bootstrap_intervals(model, data, est, 0.1, n=24, seed=5, refits=ONE_BY_ONE_REFITS)
     np.testing.assert_allclose([ci_b.lower, ci_b.upper], [ci_f.lower, ci_f.upper], rtol=1e-8, atol=0)

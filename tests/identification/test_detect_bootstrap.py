@@ -16,6 +16,7 @@ from identification import Measurements
 from identification.studies.detect import STATISTICS, run_split_tests
 from identification.studies.detect_bootstrap import bootstrap_detect
 from identification.progress import Progress
+from identification.studies.split_fits import ONE_BY_ONE
 from identification.studies.splits import Split
 from models import Model
 
@@ -112,13 +113,13 @@ def _mm(known=True, seed=4):
 
 @pytest.mark.parametrize("known", [True, False])
 def test_batched_campaigns_give_the_numbers_of_one_fit_at_a_time(known):
-    """batch=True (the chunk's campaigns fitted together) vs batch=False (identify per fit), same seed:
+    """fits=BATCHED (the chunk's campaigns fitted together) vs fits=ONE_BY_ONE (identify per fit), same seed:
     T* to 1e-8 relative with the same NaN pattern, identical p-values, failures counted and named alike
     (a split whose validation input cannot identify Vm and K fails in every campaign)."""
     mm, data = _mm(known)
     splits = SPLITS + (Split("one input", range(0, 7), [7]),)
     kw = dict(n_boot=12, seed=9, chunk_size=6)
-    a = bootstrap_detect(mm, data, splits, [1.0, 5.0], batch=False, **kw)
+    a = bootstrap_detect(mm, data, splits, [1.0, 5.0], fits=ONE_BY_ONE, **kw)
     b = bootstrap_detect(mm, data, splits, [1.0, 5.0], **kw)
     assert np.array_equal(np.isnan(a.boot_statistics), np.isnan(b.boot_statistics))
     assert np.all(np.isfinite(b.boot_statistics[:, :2])) and np.all(np.isnan(b.boot_statistics[:, 2]))
@@ -131,10 +132,10 @@ def test_batched_campaigns_give_the_numbers_of_one_fit_at_a_time(known):
     assert all(sp == "one input" and text.startswith("validation fit: ") for _, sp, text in b.errors)
 
 
-def test_batch_must_be_a_bool():
+def test_fits_must_be_a_strategy():
     mm, data = _mm()
-    with pytest.raises(TypeError, match="batch"):
-        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, batch="yes")
+    with pytest.raises(TypeError, match="fits: expected BATCHED"):
+        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, fits=True)
 
 
 def test_jit_gives_the_same_numbers_and_restores_the_setting():

@@ -6,6 +6,7 @@ import pytest
 from scipy import stats
 
 from identification import DynamicMeasurements, MonteCarloSettings, Split, detect, identify, validate
+from identification.studies.split_fits import BATCHED, ONE_BY_ONE
 from identification.studies.detect import run_split_tests
 from identification.fit.dynamic_fit import DiscretisationSettings, simulate_campaign
 from identification.inference.profile import lr_region
@@ -138,8 +139,8 @@ def test_monte_carlo_batched_fits_equal_identify_per_fit_on_the_time_split(mc_pr
     common = dict(n_rep=2, seed=7, workers=1, progress=False, jit=False, chunk_size=2)
     args = (est.model, P_TRUE, est.data.inputs, est.data.sigma)
     from identification import size_study
-    batched = size_study(*args, splits[1:], settings=MonteCarloSettings(batch=True, **common))
-    single = size_study(*args, splits[1:], settings=MonteCarloSettings(batch=False, **common))
+    batched = size_study(*args, splits[1:], settings=MonteCarloSettings(fits=BATCHED, **common))
+    single = size_study(*args, splits[1:], settings=MonteCarloSettings(fits=ONE_BY_ONE, **common))
     np.testing.assert_allclose(batched.alpha_lr, single.alpha_lr, rtol=1e-5, atol=1e-8)
     np.testing.assert_allclose(batched.alpha_two_sample, single.alpha_two_sample, rtol=1e-5, atol=1e-8)
 

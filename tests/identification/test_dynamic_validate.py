@@ -6,6 +6,7 @@ import pytest
 from identification import MonteCarloSettings, Split, identify, validate
 from identification.studies.dynamic_detect import DynamicSplit, flat_split
 from identification.fit.dynamic_fit import simulate_campaign
+from identification.studies.split_fits import ONE_BY_ONE
 from identification.studies.splits import SplitError, time_window_split
 from mudoe.example_reactor import P_TRUE, build
 
@@ -39,7 +40,7 @@ def test_validate_takes_the_dynamic_model_and_its_campaign(campaign):
     splits = [Split("cA0 = 1 vs 2", [0, 2], [1, 3]), EARLY_LATE,
               time_window_split(data.pairs, data.n_q, (0.4, 0.8), (1.6, 2.0))]
     # the per-fit path is what this test is about (the merged batch path: the test below)
-    mc = dict(n_rep=3, seed=5, workers=1, progress=False, jit=False, chunk_size=3, batch=False)
+    mc = dict(n_rep=3, seed=5, workers=1, progress=False, jit=False, chunk_size=3, fits=ONE_BY_ONE)
     res = validate(model, splits, P_TRUE, p_true=P_TRUE, data=data, n_M=2, settings=MonteCarloSettings(**mc))
     assert not res.errors and res.alpha_lr.shape[-1] == 3 and np.all(np.isfinite(res.alpha_lr))
     # the same numbers as the size study written by hand on the collocation of the campaign fit
@@ -92,6 +93,6 @@ def test_merged_batch_fits_of_a_collocated_model_run_and_equal_the_per_fit_path(
               time_window_split(data.pairs, 4, (0.4, 0.8), (1.6, 2.0))]
     per_fit = validate(est.model, splits, P_TRUE, p_true=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma,
                        n_M=2, settings=MonteCarloSettings(n_rep=3, seed=5, workers=1, progress=False, jit=False,
-                                                          chunk_size=3, batch=False))
+                                                          chunk_size=3, fits=ONE_BY_ONE))
     # the same fits to round-off (1.4e-13 relative measured): 1e-9 leaves room for other BLAS kernels
     np.testing.assert_allclose(batched, per_fit.alpha_lr, rtol=1e-9, atol=1e-14)

@@ -16,7 +16,7 @@ from scipy import optimize, stats
 
 from identification import (IdentifiabilityError, Measurements, NotBoundedError, identify)
 from identification.studies.detect import DetectSettings, run_split_tests
-from identification.studies.montecarlo import MonteCarloSettings, size_study
+from identification.studies.montecarlo import BATCHED, ONE_BY_ONE, MonteCarloSettings, size_study
 from identification.studies.splits import series_split
 from models import Model
 
@@ -109,10 +109,10 @@ def test_detect_counts_a_fit_that_is_not_bounded_as_undecided_with_its_reason():
     assert d.decision == "undecided" and "not bounded" in d.reason and d.failed == ("series 1 vs 2",)
 
 
-@pytest.mark.parametrize("batch", [True, False])
-def test_monte_carlo_counts_fits_that_are_not_bounded(batch):
+@pytest.mark.parametrize("fits", [BATCHED, ONE_BY_ONE])
+def test_monte_carlo_counts_fits_that_are_not_bounded(fits):
     split = series_split(X.size, [0], [1], name="series 1 vs 2")
-    settings = MonteCarloSettings(n_rep=40, seed=3, workers=1, progress=False, batch=batch,
+    settings = MonteCarloSettings(n_rep=40, seed=3, workers=1, progress=False, fits=fits,
                                   detect=DetectSettings(normality="override"))
     res = size_study(_model(), [VM, K], X[:, None], [SIGMA], [split], settings=settings)
     nb = res.n_not_bounded()
