@@ -254,7 +254,7 @@ def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
 
 def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
     """The likelihood ratio's pooled minimum (reduced Newton from p_bar) is the full-space fit's."""
-    from identification.studies.detect import _pooled_newton
+    from identification.studies.split_tests import pooled_newton
     from identification.studies.montecarlo import ModelCampaign
     from models.press import Q_PAPER, press_model
     model = press_model()
@@ -266,7 +266,7 @@ def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
         for sp in PAPER_SPLITS:
             ec = identify(model, sp.calibration(data), [450.0, 550.0], w)
             ev = identify(model, sp.validation(data), [450.0, 550.0], w)
-            pm = _pooled_newton(model, sp.pooled(data), sp, ec, ev, w)
+            pm = pooled_newton(model, sp.pooled(data), sp, ec, ev, w)
             eu = identify(model, sp.pooled(data), [450.0, 550.0], w)
             assert pm is not None
             np.testing.assert_allclose(pm.p, eu.p, rtol=1e-7)
