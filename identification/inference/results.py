@@ -128,8 +128,9 @@ class Estimate(FitRecord):
         if method == "wald":
             se = self._se(kind)
             c = self._quantile(alpha)
-            return ConfidenceIntervals(tuple(self.param_names[i] for i in idx), self.p[idx], (self.p - c * se)[idx],
-                                       (self.p + c * se)[idx], "wald", alpha)
+            return ConfidenceIntervals(param_names=tuple(self.param_names[i] for i in idx), estimate=self.p[idx],
+                                       lower=(self.p - c * se)[idx], upper=(self.p + c * se)[idx], method="wald",
+                                       alpha=alpha)
         model = self.model if model is None else model
         data = self.data if data is None else data
         if method == "profile":

@@ -360,7 +360,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
             notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
                          "approximate")
         p0v = _start_values(name, p0s[name], m)
-        tests.extend(_split_tests_shown(progress, m, data, splits, p0v, w, settings, model_name=name,
+        tests.extend(_split_tests_shown(progress, m, data, splits, p0v, weights=w, settings=settings, model_name=name,
                                         states0=_start_states(m, p0v, data), curvature=True))
     primary, all_decisions = model_decisions(tuple(tests), names, settings)
     return DetectionResult(settings=settings, models=names, splits=splits, tests=tuple(tests), decisions=primary,

@@ -85,8 +85,8 @@ def time_window_splits(edges) -> tuple:
     e = sorted({float(x) for x in edges})
     if not e:
         raise SplitError("time_windows: give at least one edge (a time cutting the experiments)")
-    return tuple(DynamicSplit(f"t < {v:g} vs t >= {v:g}", None, None, (-math.inf, v), (v, math.inf), "time window")
-                 for v in e)
+    return tuple(DynamicSplit(f"t < {v:g} vs t >= {v:g}", cal_window=(-math.inf, v), val_window=(v, math.inf),
+                              description="time window") for v in e)
 
 
 def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
@@ -100,8 +100,8 @@ def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
     """
     t = data.union_times
     cut = float(t[(t.size) // 2])
-    return DynamicSplit(f"early (t < {cut:g}) vs late", None, None, (-math.inf, cut), (cut, math.inf),
-                        "early vs late")
+    return DynamicSplit(f"early (t < {cut:g}) vs late", cal_window=(-math.inf, cut), val_window=(cut, math.inf),
+                        description="early vs late")
 
 
 def flat_split(sp, pairs, n_q: int) -> Split:
@@ -248,7 +248,7 @@ def _readings(data: DynamicMeasurements, mask: np.ndarray) -> DynamicMeasurement
         z[:, r, :len(times[r])] = data.z[:, j, mask[j]]
     f = data.flat()
     return DynamicMeasurements(data.inputs[rows], times if len({len(t) for t in times}) > 1 else np.array(times), z,
-                               data.sigma, data.sensors, f.input_names, f.series)
+                               sigma=data.sigma, sensors=data.sensors, input_names=f.input_names, series=f.series)
 
 
 def _fit(model, data, p0, weights, settings, discretisation=None, failed: str = ""):
@@ -266,16 +266,16 @@ def _unbounded(est) -> str:
     return "" if rec is None or rec.bounded else rec.reason or "not bounded"
 
 
-def _split_fits(model, data, splits, p0, weights, settings, ds):
+def _split_fits(model, data, splits, p0, *, weights, settings, ds):
     """(fits [(cal, val)], pooled {points: fit}, unbounded {split: reason}) of every split."""
     fits, pooled, unbounded = [], {}, {}
     for sp, st in splits:
         masks = [_mask(data, sp.cal_experiments, sp.cal_window), _mask(data, sp.val_experiments, sp.val_window)]
-        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings, ds) for mk in masks)
+        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings, discretisation=ds) for mk in masks)
         fits.append(pair)
         key = st.pooled_points(data.n_M)
         if key not in pooled:
-            pooled[key] = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings, ds,
+            pooled[key] = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings, discretisation=ds,
                                failed="pooled fit failed: ")
         why = [f"{what} fit: {_unbounded(e)}" for what, e in zip(("calibration", "validation", "pooled"),
                                                                pair + (pooled[key],)) if _unbounded(e)]
@@ -335,8 +335,8 @@ def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, de
         static = tuple(_static_split(sp, rows, edges, data.n_q) for sp in splits)
         p_start = p0[n] if isinstance(p0, Mapping) else p0
         whole = identify(m, data, p_start, weights=w, settings=settings.identify, discretisation=discretisation)
-        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, w, settings,
-                                              discretisation)
+        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, weights=w,
+                                              settings=settings, ds=discretisation)
         res = run_split_tests(whole.model, flat, static, whole.p, settings=settings, model_name=n,
                               curvature=True, fits=fits, pooled=pooled)
         labels = {sp.name: (_label(sp.cal_experiments, sp.cal_window), _label(sp.val_experiments, sp.val_window))

@@ -144,20 +144,6 @@ def _failed(model_name: str, split: Split, stage: str, msg: str, n_p: int, p_cal
                      n_val=0, notes=tuple(notes))
 
 
-def _set_fit(model, data, p0, weights, settings, Y0, given) -> tuple:
-    """(estimate, covariance of the settings' kind) of one set of a split, or (FitFailure, None) when its
-    fit raised; ``given`` (an entry of ``run_split_tests(fits=...)``) replaces the fit when not None."""
-    if given is None:
-        try:
-            given = identify(model, data, p0, weights=weights, settings=settings.identify, Y0=Y0)
-        except _FIT_ERRORS as exc:
-            return FitFailure.from_error(exc), None
-    est = FitFailure.of_entry(given)
-    if isinstance(est, FitFailure):
-        return est, None
-    return est, (est.cov if settings.covariance == "second_order" else est.cov_gn)
-
-
 def _linearisation(est_c, est_v) -> tuple:
     """(trustworthy, note) of a split from the Bates-Watts curvature of its two fits; trustworthy is
     None when a curvature cannot be computed (no dof, rank-deficient sensitivities)."""
@@ -216,8 +202,9 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     settings = settings or DetectSettings()
     w = data.sensor_weights(weights)                # validated once, read by every split
     n_sel = int(np.count_nonzero(w > 0))
-    run = _Run(model, data, p0, weights, w, settings, model_name or model.name, states0, curvature,
-               {} if pooled is None else {k: FitFailure.of_entry(e) for k, e in pooled.items()})
+    run = _Run(model=model, data=data, p0=p0, weights=weights, w=w, settings=settings, name=model_name or model.name,
+               states0=states0, curvature=curvature,
+               pooled={} if pooled is None else {k: FitFailure.of_entry(e) for k, e in pooled.items()})
     out = []
     for js, split in enumerate(_counted(splits, bar)):
         try:
@@ -248,23 +235,37 @@ class _Run:
         """The states at p0 of the input rows ``inputs`` (warm start of a fit), or None."""
         return None if self.states0 is None else self.states0[list(inputs)]
 
+    def fit(self, data: Measurements | None, inputs, given) -> tuple:
+        """(estimate, covariance of the settings' kind) of one set of a split (``data``, its input rows
+        ``inputs``), or (FitFailure, None) when the fit raised; ``given`` (an entry of
+        ``run_split_tests(fits=...)``) replaces the fit when not None."""
+        if given is None:
+            try:
+                given = identify(self.model, data, self.p0, weights=self.weights, settings=self.settings.identify,
+                                 Y0=self.start(inputs))
+            except _FIT_ERRORS as exc:
+                return FitFailure.from_error(exc), None
+        est = FitFailure.of_entry(given)
+        if isinstance(est, FitFailure):
+            return est, None
+        return est, (est.cov if self.settings.covariance == "second_order" else est.cov_gn)
+
 
 def _split_test(run: _Run, split: Split, given: tuple) -> SplitTest:
     """The fits and the three statistics of one split (``given``: its (calibration, validation) fits
     computed elsewhere, None entries fitted here)."""
-    m, n_p, name = run.model, run.model.n_p, run.name
-    est_c, C_c = _set_fit(m, split.calibration(run.data) if given[0] is None else None, run.p0, run.weights,
-                          run.settings, run.start(split.cal_inputs), given[0])
+    n_p, name = run.model.n_p, run.name
+    est_c, C_c = run.fit(split.calibration(run.data) if given[0] is None else None, split.cal_inputs, given[0])
     if isinstance(est_c, FitFailure):
         return _failed(name, split, "calibration fit", est_c.reason, n_p)
     if not_bounded_reason(est_c):        # the data of this set do not bound p: no estimate to test
         return _failed(name, split, "calibration fit", not_bounded_reason(est_c), n_p, n_cal=est_c.n_data,
                        notes=est_c.notes)
-    est_v, C_v = _set_fit(m, split.validation(run.data) if given[1] is None else None, run.p0, run.weights,
-                          run.settings, run.start(split.val_inputs), given[1])
+    est_v, C_v = run.fit(split.validation(run.data) if given[1] is None else None, split.val_inputs, given[1])
     why = est_v.reason if isinstance(est_v, FitFailure) else not_bounded_reason(est_v)
     if why:
-        return _failed(name, split, "validation fit", why, n_p, est_c.p, C_c, est_c.n_data, est_c.notes)
+        return _failed(name, split, "validation fit", why, n_p, p_cal=est_c.p, C_cal=C_c, n_cal=est_c.n_data,
+                       notes=est_c.notes)
     notes = tuple(f"calibration fit: {n}" for n in est_c.notes) + tuple(f"validation fit: {n}" for n in est_v.notes)
     c, v = split.label()
     fits = dict(model=name, split=split.name, cal_label=c, val_label=v, p_cal=est_c.p, p_val=est_v.p, C_cal=C_c,
@@ -337,7 +338,7 @@ def _pooled_fit(run: _Run, split: Split, est_c, est_v):
     estimates, else :func:`identify`), or a FitFailure (the fit raised, or the data do not bound p)."""
     qs = sorted({j for j, _ in split.pooled_points(run.data.n_M)})
     data_u = split.pooled(run.data)
-    est_u = pooled_newton(run.model, data_u, split, est_c, est_v, run.w)
+    est_u = pooled_newton(run.model, data_u, split, est_c, est_v, w=run.w)
     if est_u is not None:
         return est_u
     try:
