@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from html import escape
 from types import MappingProxyType
 
 import numpy as np
@@ -109,6 +110,38 @@ class DetectionResult:
         model = self.models[0] if model is None else model
         st = statistic or self.settings.statistic
         return np.array([t.alpha(st) if t.ok else np.nan for t in self.tests_of(model)])
+
+    # ------------------------------------------------------------------ tables (pandas, Jupyter)
+    #: the columns of :meth:`to_frame` read from each :class:`SplitTest`
+    FRAME_FIELDS = ("cal_label", "val_label", "ok", "stage", "error", "alpha_lr", "alpha_two_sample", "alpha_paper",
+                    "lr", "d2_two_sample", "d2_paper", "n_cal", "n_val", "lr_error", "trustworthy")
+
+    def to_frame(self):
+        """One row per (model, split) (models outer, as :attr:`tests`), indexed by ``model`` and ``split``: the
+        split test's fields :attr:`FRAME_FIELDS` (the three alpha_min are p-values in [0, 1], NaN when not
+        computed; ``lr``, ``d2_*`` in chi^2 units, F units for ``lr`` when sigma is estimated), ``rejected``
+        (the split's hypothesis is rejected under the model's primary statistic and correction) and
+        ``decision`` (the model's primary verdict).  ``.attrs`` holds tol, statistic and correction."""
+        import pandas as pd
+        prim = {d.model: d for d in self.decisions}
+        rows = [dict(model=t.model, split=t.split, **{f: getattr(t, f) for f in self.FRAME_FIELDS},
+                     rejected=t.split in prim[t.model].flagged, decision=prim[t.model].decision) for t in self.tests]
+        df = pd.DataFrame(rows, columns=["model", "split", *self.FRAME_FIELDS, "rejected", "decision"])
+        df.attrs.update(tol=self.settings.tol, statistic=self.settings.statistic, correction=self.settings.correction)
+        return df.set_index(["model", "split"])
+
+    def _repr_html_(self) -> str:
+        """Jupyter's view: the verdict per model, the split table (:meth:`to_frame`) and the full text summary."""
+        s = self.settings
+        head = (f"<p><b>Detection of model uncertainty (Algorithm 1)</b>: TOL = {100 * s.tol:g} %, n_tests = "
+                f"{len(self.splits)}, statistic {escape(s.statistic)}, correction {escape(s.correction)}</p>")
+        verdicts = "".join(f"<tr><td>{escape(d.model)}</td><td><b>{escape(d.decision)}</b></td>"
+                           f"<td>{escape(d.statistic)}</td><td>{escape(d.reason)}</td></tr>" for d in self.decisions)
+        verdicts = ("<table><thead><tr><th>model</th><th>decision</th><th>statistic</th><th>reason</th></tr>"
+                    f"</thead><tbody>{verdicts}</tbody></table>")
+        table = self.to_frame().to_html(float_format=lambda v: f"{v:.4g}")
+        return (head + verdicts + table
+                + f"<details><summary>text summary</summary><pre>{escape(self.summary())}</pre></details>")
 
     def summary(self, units: Mapping | None = None, data_name: str = "series") -> str:
         """Per model: a table of the three statistics per split, the verdicts, numbered notes.
