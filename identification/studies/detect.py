@@ -79,6 +79,7 @@ __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDec
            "NormalityError", "normality_check", "run_split_tests", "decide", "STATISTICS", "CORRECTIONS",
            "DEFAULT_STATISTIC", "alpha_field", "model_decisions", "series_text", "FitFailure"]
 
+
 # ---------------------------------------------------------------------------- detect: validation
 def _detect_settings(settings: DetectSettings | None, **given) -> DetectSettings:
     """The settings of a run: ``settings``, or the keywords given (None = the DetectSettings default).
@@ -257,7 +258,6 @@ def _split_tests_shown(progress: Progress | None, model: Model, data: Measuremen
 def _dynamic(model) -> bool:
     ms = model.values() if isinstance(model, Mapping) else (model,)
     return any(getattr(m, "is_dynamic", False) for m in ms)
-
 
 
 # ---------------------------------------------------------------------------- main entry

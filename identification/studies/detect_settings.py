@@ -23,12 +23,15 @@ def alpha_field(statistic: str) -> str:
         return _ALPHA_FIELDS[statistic]
     except (KeyError, TypeError):
         raise ValueError(f"statistic: expected one of {STATISTICS}, got {statistic!r}") from None
+
+
+#: the multiple-test corrections of lines 09-16
 CORRECTIONS = ("bonferroni", "holm")
 
 
 @dataclass(frozen=True)
 class DetectSettings:
-    """Settings of :func:`detect` (defaults follow the paper, with the calibrated statistic).
+    """Settings of :func:`~identification.studies.detect.detect` (defaults follow the paper, with the calibrated statistic).
 
     Attributes
     ----------

@@ -56,7 +56,7 @@ def _disagreement(t: SplitTest, threshold: float, tol: float) -> str:
 
 @dataclass(frozen=True, eq=False)
 class DetectionResult:
-    """Immutable result of :func:`detect`.
+    """Immutable result of :func:`~identification.studies.detect.detect`.
 
     Attributes
     ----------

@@ -181,7 +181,7 @@ def run_split_tests(model: Model, data: Measurements, splits: Sequence[Split], p
     three alpha_min (likelihood ratio, two-sample Wald, paper).
 
     With ``curvature`` the Bates-Watts curvature of both fits is checked
-    (:attr:`SplitTest.trustworthy`; :func:`detect` does; Monte Carlo studies skip it for speed).
+    (:attr:`SplitTest.trustworthy`; :func:`~identification.studies.detect.detect` does; Monte Carlo studies skip it for speed).
 
     A failed fit or a singular covariance is recorded in its :class:`SplitTest` (``ok=False``,
     with the stage and the reason), never dropped and never raised.  A fit whose data do not bound
@@ -300,7 +300,7 @@ def pooled_newton(model, data_u, split, est_c, est_v, w: np.ndarray, max_steps: 
     fits, and takes the estimator's own exact Newton steps (J^T W J + S, see
     :func:`identification.fit.refinement.refine`).  The result is used only when the Newton decrement
     g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6 standard errors of the optimum); otherwise
-    (None) the caller runs the full-space :func:`identify` on the pooled data.  ``w`` (n_S,) are the
+    (None) the caller runs the full-space :func:`~identification.inference.identify.identify` on the pooled data.  ``w`` (n_S,) are the
     validated sensor weights of the fits.
     """
     from identification.errors import StateSolveError
@@ -335,7 +335,7 @@ def pooled_newton(model, data_u, split, est_c, est_v, w: np.ndarray, max_steps: 
 
 def _pooled_fit(run: _Run, split: Split, est_c, est_v):
     """The fit of the calibration and validation data together (:func:`pooled_newton` from the two
-    estimates, else :func:`identify`), or a FitFailure (the fit raised, or the data do not bound p)."""
+    estimates, else :func:`~identification.inference.identify.identify`), or a FitFailure (the fit raised, or the data do not bound p)."""
     qs = sorted({j for j, _ in split.pooled_points(run.data.n_M)})
     data_u = split.pooled(run.data)
     est_u = pooled_newton(run.model, data_u, split, est_c, est_v, w=run.w)
