@@ -235,14 +235,16 @@ class _Run:
         """The states at p0 of the input rows ``inputs`` (warm start of a fit), or None."""
         return None if self.states0 is None else self.states0[list(inputs)]
 
-    def fit(self, data: Measurements | None, inputs, given) -> tuple:
-        """(estimate, covariance of the settings' kind) of one set of a split (``data``, its input rows
-        ``inputs``), or (FitFailure, None) when the fit raised; ``given`` (an entry of
+    def fit(self, split: Split, which: str, given) -> tuple:
+        """(estimate, covariance of the settings' kind) of the ``which`` ("calibration" or "validation") set
+        of ``split``, or (FitFailure, None) when building its data or its fit raised; ``given`` (an entry of
         ``run_split_tests(fits=...)``) replaces the fit when not None."""
         if given is None:
+            cal = which == "calibration"
             try:
+                data = split.calibration(self.data) if cal else split.validation(self.data)
                 given = identify(self.model, data, self.p0, weights=self.weights, settings=self.settings.identify,
-                                 Y0=self.start(inputs))
+                                 Y0=self.start(split.cal_inputs if cal else split.val_inputs))
             except _FIT_ERRORS as exc:
                 return FitFailure.from_error(exc), None
         est = FitFailure.of_entry(given)
@@ -255,13 +257,13 @@ def _split_test(run: _Run, split: Split, given: tuple) -> SplitTest:
     """The fits and the three statistics of one split (``given``: its (calibration, validation) fits
     computed elsewhere, None entries fitted here)."""
     n_p, name = run.model.n_p, run.name
-    est_c, C_c = run.fit(split.calibration(run.data) if given[0] is None else None, split.cal_inputs, given[0])
+    est_c, C_c = run.fit(split, "calibration", given[0])
     if isinstance(est_c, FitFailure):
         return _failed(name, split, "calibration fit", est_c.reason, n_p)
     if not_bounded_reason(est_c):        # the data of this set do not bound p: no estimate to test
         return _failed(name, split, "calibration fit", not_bounded_reason(est_c), n_p, n_cal=est_c.n_data,
                        notes=est_c.notes)
-    est_v, C_v = run.fit(split.validation(run.data) if given[1] is None else None, split.val_inputs, given[1])
+    est_v, C_v = run.fit(split, "validation", given[1])
     why = est_v.reason if isinstance(est_v, FitFailure) else not_bounded_reason(est_v)
     if why:
         return _failed(name, split, "validation fit", why, n_p, p_cal=est_c.p, C_cal=C_c, n_cal=est_c.n_data,

@@ -135,6 +135,18 @@ def test_fits_given_as_errors_or_failure_texts_are_recorded_as_typed_failures(mo
     assert t.alpha_two_sample == ref.alpha_two_sample and np.isfinite(ref.alpha_lr)
 
 
+def test_a_set_whose_data_cannot_be_built_is_a_failed_fit_of_that_set(model):
+    """A validation set holding no finite value of a sensor: the DataError of building its data is recorded
+    at the validation fit (never raised), with the calibration estimate kept."""
+    data = campaign(model, 4)
+    z = np.array(data.z)
+    z[:, 20:, 0] = np.nan
+    holes = Measurements(Q, z, SIGMA, sensors=model.sensors)
+    t, = run_split_tests(model, holes, [Split("late", range(20), range(20, 29))], [0.5, 1.5])
+    assert not t.ok and t.stage == "validation fit" and t.error.startswith("DataError: z: sensor 's1'")
+    assert np.all(np.isfinite(t.p_cal)) and np.all(np.isnan(t.p_val))
+
+
 def test_tol_and_option_errors(model):
     data = campaign(model, 5)
     for tol in (0.0, 1.0, -0.1, 1.5, float("nan")):
