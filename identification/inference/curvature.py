@@ -194,8 +194,9 @@ def relative_curvature(V1: np.ndarray, V2: np.ndarray, dof: int, scale: float = 
         v = L @ d
         return v / np.linalg.norm(v)
 
-    return Curvature(float(gN), float(gT), crit, alpha, bool(gN < crit and gT < crit),
-                     in_params(dN), in_params(dT), dof + p, dof)
+    return Curvature(intrinsic=float(gN), parameter_effects=float(gT), critical=crit, alpha=alpha,
+                     trustworthy=bool(gN < crit and gT < crit), direction_intrinsic=in_params(dN),
+                     direction_parameter_effects=in_params(dT), n=dof + p, dof=dof)
 
 
 def estimate_curvature(est, model, data, alpha: float = 0.05) -> Curvature:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from html import escape
 
 import numpy as np
 from scipy import stats
@@ -128,8 +129,9 @@ class Estimate(FitRecord):
         if method == "wald":
             se = self._se(kind)
             c = self._quantile(alpha)
-            return ConfidenceIntervals(tuple(self.param_names[i] for i in idx), self.p[idx], (self.p - c * se)[idx],
-                                       (self.p + c * se)[idx], "wald", alpha)
+            return ConfidenceIntervals(param_names=tuple(self.param_names[i] for i in idx), estimate=self.p[idx],
+                                       lower=(self.p - c * se)[idx], upper=(self.p + c * se)[idx], method="wald",
+                                       alpha=alpha)
         model = self.model if model is None else model
         data = self.data if data is None else data
         if method == "profile":
@@ -161,6 +163,32 @@ class Estimate(FitRecord):
         else:
             g2 = float(stats.chi2.ppf(1 - alpha, self.n_p))
         return Ellipsoid(self.p.copy(), C.copy(), alpha, g2, self.param_names)
+
+    # ------------------------------------------------------------------ tables (pandas, Jupyter)
+    def to_frame(self, alpha: float = 0.05, kind: str = "second_order"):
+        """The parameter table as a pandas DataFrame indexed by parameter: ``estimate``, ``stderr``
+        (second-order), ``stderr_gn`` (Gauss-Newton), ``wald_lower`` and ``wald_upper`` (the (1 - alpha) Wald
+        interval p_i -+ c se_i of :meth:`conf_int` with the ``kind`` covariance; parameter units) and ``unit``;
+        ``.attrs`` holds alpha, kind and the model name."""
+        import pandas as pd
+        ci = self.conf_int(alpha, kind=kind)
+        df = pd.DataFrame({"estimate": self.p, "stderr": self.stderr, "stderr_gn": self.stderr_gn,
+                           "wald_lower": ci.lower, "wald_upper": ci.upper, "unit": list(self.param_units)},
+                          index=pd.Index(list(self.param_names), name="parameter"))
+        df.attrs.update(alpha=ci.alpha, kind=kind, model=self.model_name)
+        return df
+
+    def _repr_html_(self) -> str:
+        """Jupyter's view: the status line, the parameter table (:meth:`to_frame`) and the numbered notes."""
+        head = (f"<p><b>Identification of {escape(self.model_name or 'model')}</b>: {escape(str(self.status))} "
+                f"({escape(str(self.message))}); n = {self.n_data}, dof = {self.dof}, objective "
+                f"{self.objective:.6g}" + (" (sigma estimated)" if self.sigma_estimated else "") + "</p>")
+        table = self.to_frame().to_html(float_format=lambda v: f"{v:.7g}")
+        if self.unbounded is not None:          # where the parameters run off: the text summary says it
+            return head + table + f"<pre>{escape(self.summary())}</pre>"
+        notes = self._summary_notes(None)
+        items = "".join(f"<li>{escape(n)}</li>" for n in notes)
+        return head + table + (f"<p>Notes:</p><ol>{items}</ol>" if notes else "")
 
     # ------------------------------------------------------------------ report
     def summary(self, alpha: float = 0.05, intervals: ConfidenceIntervals | None = None) -> str:

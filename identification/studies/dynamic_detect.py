@@ -31,8 +31,13 @@ import numpy as np
 
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.dynamic_fit import DiscretisationSettings
-from identification.errors import DataError
+from identification.errors import DataError, IdentificationError
 from identification.fit.measurements import Measurements
+from identification.inference.identify import identify
+from identification.studies.decisions import model_decisions
+from identification.studies.detection_result import DetectionResult
+from identification.studies.normality import NormalityError, normality_check
+from identification.studies.split_tests import FitFailure, run_split_tests
 from identification.studies.splits import Split, SplitError
 
 __all__ = ["DynamicSplit", "time_window_splits", "early_late_dynamic_split", "detect_dynamic", "flat_split"]
@@ -80,8 +85,8 @@ def time_window_splits(edges) -> tuple:
     e = sorted({float(x) for x in edges})
     if not e:
         raise SplitError("time_windows: give at least one edge (a time cutting the experiments)")
-    return tuple(DynamicSplit(f"t < {v:g} vs t >= {v:g}", None, None, (-math.inf, v), (v, math.inf), "time window")
-                 for v in e)
+    return tuple(DynamicSplit(f"t < {v:g} vs t >= {v:g}", cal_window=(-math.inf, v), val_window=(v, math.inf),
+                              description="time window") for v in e)
 
 
 def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
@@ -95,8 +100,8 @@ def early_late_dynamic_split(data: DynamicMeasurements) -> DynamicSplit:
     """
     t = data.union_times
     cut = float(t[(t.size) // 2])
-    return DynamicSplit(f"early (t < {cut:g}) vs late", None, None, (-math.inf, cut), (cut, math.inf),
-                        "early vs late")
+    return DynamicSplit(f"early (t < {cut:g}) vs late", cal_window=(-math.inf, cut), val_window=(cut, math.inf),
+                        description="early vs late")
 
 
 def flat_split(sp, pairs, n_q: int) -> Split:
@@ -124,7 +129,7 @@ def flat_split(sp, pairs, n_q: int) -> Split:
                              f"are {np.unique(t).tolist()}")
         sets.append((list(range(n_q)) if exps is None else list(exps), cols))
     (qc, kc), (qv, kv) = sets
-    return Split(sp.name, qc, qv, None, None, sp.description or "dynamic split", kc, kv)
+    return Split(sp.name, qc, qv, description=sp.description or "dynamic split", cal_sensors=kc, val_sensors=kv)
 
 
 def _windows(splits) -> np.ndarray:
@@ -182,7 +187,6 @@ def _static_split(sp, rows, edges, n_q) -> Split:
 
 def _gate(settings, name, data: DynamicMeasurements, design, notes):
     """Line 05 pooled per instrument (see the module docstring)."""
-    from identification.studies.detect import NormalityError, normality_check
     inst = data.by_instrument()
     w = None
     if design is not None and all(isinstance(x, str) for x in design):
@@ -244,39 +248,37 @@ def _readings(data: DynamicMeasurements, mask: np.ndarray) -> DynamicMeasurement
         z[:, r, :len(times[r])] = data.z[:, j, mask[j]]
     f = data.flat()
     return DynamicMeasurements(data.inputs[rows], times if len({len(t) for t in times}) > 1 else np.array(times), z,
-                               data.sigma, data.sensors, f.input_names, f.series)
+                               sigma=data.sigma, sensors=data.sensors, input_names=f.input_names, series=f.series)
 
 
-def _fit(model, data, p0, weights, settings, discretisation=None):
-    """A dynamic fit, or the error it raised (recorded by the split test, never raised)."""
-    from identification.inference.identify import identify
-    from identification.errors import IdentificationError
+def _fit(model, data, p0, weights, settings, discretisation=None, failed: str = ""):
+    """A dynamic fit of a split, or the :class:`FitFailure` of the error it raised (reason
+    "<failed><ErrorType>: <message>"; recorded by the split test, never raised)."""
     try:
         return identify(model, data, p0, weights=weights, settings=settings.identify, discretisation=discretisation)
     except (IdentificationError, DataError) as exc:
-        return exc
+        return FitFailure.from_error(exc, failed)
 
 
 def _unbounded(est) -> str:
-    rec = est.extra.get("discretisation") if not isinstance(est, Exception) else None
+    """Why the discretisation error of the fit ``est`` is not bounded ("" when it is, or the fit failed)."""
+    rec = est.extra.get("discretisation") if not isinstance(est, FitFailure) else None
     return "" if rec is None or rec.bounded else rec.reason or "not bounded"
 
 
-def _split_fits(model, data, splits, p0, weights, settings, ds):
+def _split_fits(model, data, splits, p0, *, weights, settings, ds):
     """(fits [(cal, val)], pooled {points: fit}, unbounded {split: reason}) of every split."""
     fits, pooled, unbounded = [], {}, {}
     for sp, st in splits:
         masks = [_mask(data, sp.cal_experiments, sp.cal_window), _mask(data, sp.val_experiments, sp.val_window)]
-        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings, ds) for mk in masks)
+        pair = tuple(_fit(model, _readings(data, mk), p0, weights, settings, discretisation=ds) for mk in masks)
         fits.append(pair)
         key = st.pooled_points(data.n_M)
         if key not in pooled:
-            est_u = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings, ds)
-            pooled[key] = f"pooled fit failed: {type(est_u).__name__}: {est_u}" if isinstance(est_u, Exception) \
-                else est_u
+            pooled[key] = _fit(model, _readings(data, masks[0] | masks[1]), p0, weights, settings, discretisation=ds,
+                               failed="pooled fit failed: ")
         why = [f"{what} fit: {_unbounded(e)}" for what, e in zip(("calibration", "validation", "pooled"),
-                                                               pair + (pooled[key],))
-               if not isinstance(e, str) and _unbounded(e)]
+                                                               pair + (pooled[key],)) if _unbounded(e)]
         if why:
             unbounded[sp.name] = "discretisation error not bounded (" + "; ".join(why) + ")"
     return fits, pooled, unbounded
@@ -310,7 +312,6 @@ def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, de
     are those of :func:`identification.studies.detect.detect` (``design``: instrument names, each measured at
     every sampling time); splits are :class:`DynamicSplit` or :class:`Split` (by experiment);
     ``discretisation`` the error control of every fit (default :class:`DiscretisationSettings`)."""
-    from identification.studies.detect import DetectionResult, model_decisions, run_split_tests
     models = dict(model) if isinstance(model, Mapping) else {model.name: model}
     names = tuple(models)
     splits = tuple(_as_dynamic(sp) for sp in ((splits,) if isinstance(splits, (Split, DynamicSplit)) else splits))
@@ -333,11 +334,9 @@ def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, de
         rows, flat = _expanded(data, edges)
         static = tuple(_static_split(sp, rows, edges, data.n_q) for sp in splits)
         p_start = p0[n] if isinstance(p0, Mapping) else p0
-        whole = _fit(m, data, p_start, w, settings, discretisation)
-        if isinstance(whole, Exception):
-            raise whole
-        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, w, settings,
-                                              discretisation)
+        whole = identify(m, data, p_start, weights=w, settings=settings.identify, discretisation=discretisation)
+        fits, pooled, unbounded = _split_fits(m, data, tuple(zip(splits, static)), whole.p, weights=w,
+                                              settings=settings, ds=discretisation)
         res = run_split_tests(whole.model, flat, static, whole.p, settings=settings, model_name=n,
                               curvature=True, fits=fits, pooled=pooled)
         labels = {sp.name: (_label(sp.cal_experiments, sp.cal_window), _label(sp.val_experiments, sp.val_window))
@@ -349,5 +348,5 @@ def detect_dynamic(model, measurements, splits, p0, *, settings, design=None, de
                      f"(whole campaign: {rec.n_elements} elements, {100 * rec.error_sigma:.2g} % of sigma); the "
                      "normality gate is pooled per instrument")
     primary, all_dec = model_decisions(tuple(tests), names, settings)
-    return DetectionResult(settings, names, static, tuple(tests), primary, all_dec, tuple(normal), tuple(designs),
-                           tuple(notes))
+    return DetectionResult(settings=settings, models=names, splits=static, tests=tuple(tests), decisions=primary,
+                           all_decisions=all_dec, normality=tuple(normal), design=tuple(designs), notes=tuple(notes))

@@ -248,8 +248,9 @@ class Split:
 
     def swapped(self) -> "Split":
         """The same split with calibration and validation exchanged."""
-        return Split(f"{self.name} (swapped)", self.val_inputs, self.cal_inputs, self.val_series, self.cal_series,
-                     self.description, self.val_sensors, self.cal_sensors)
+        return Split(f"{self.name} (swapped)", self.val_inputs, self.cal_inputs, cal_series=self.val_series,
+                     val_series=self.cal_series, description=self.description, cal_sensors=self.val_sensors,
+                     val_sensors=self.cal_sensors)
 
 
 # ---------------------------------------------------------------------------- constructors
@@ -291,7 +292,7 @@ def splits_from_scenarios(scenarios, n_q: int, series: Sequence[int] | None = No
         if not isinstance(rows, (tuple, list)) or len(rows) not in (2, 3):
             raise SplitError(f"scenarios[{name!r}]: expected (cal_rows, val_rows) or (cal_rows, val_rows, "
                              f"description), got {rows!r}")
-        sp = Split(name, rows[0], rows[1], s, s, rows[2] if len(rows) == 3 else "")
+        sp = Split(name, rows[0], rows[1], cal_series=s, val_series=s, description=rows[2] if len(rows) == 3 else "")
         top = max(sp.cal_inputs + sp.val_inputs)
         if top >= n_q:
             raise SplitError(f"n_q: scenario {name!r} uses input row {top} but the campaign has {n_q} inputs "
@@ -321,8 +322,8 @@ def random_splits(n_q: int, n_splits: int, cal_fraction: float = 0.5, seed=None,
     s = None if series is None else list(series)
     for r in range(int(n_splits)):
         perm = rng.permutation(usable)
-        out.append(Split(f"{name} {r + 1}", sorted(perm[:k]), sorted(perm[k:]), s, s,
-                         f"random partition {r + 1} (seed {seed})"))
+        out.append(Split(f"{name} {r + 1}", sorted(perm[:k]), sorted(perm[k:]), cal_series=s, val_series=s,
+                         description=f"random partition {r + 1} (seed {seed})"))
     return tuple(out)
 
 
@@ -349,7 +350,8 @@ def input_range_split(inputs, threshold: float | None = None, column: int = 0, e
         raise SplitError(f"split {label!r}: threshold {thr:g} leaves the {'calibration' if low.size == 0 else 'validation'} "
                          "set empty")
     s = None if series is None else list(series)
-    return Split(label, low, high, s, s, f"calibrate on small, validate on large input {column} magnitudes")
+    return Split(label, low, high, cal_series=s, val_series=s,
+                 description=f"calibrate on small, validate on large input {column} magnitudes")
 
 
 def series_split(n_q: int, cal_series: Sequence[int], val_series: Sequence[int], inputs: Sequence[int] | None = None,
@@ -357,7 +359,8 @@ def series_split(n_q: int, cal_series: Sequence[int], val_series: Sequence[int],
     """Calibrate on some series and validate on others, at the same inputs (default all)."""
     qi = list(range(int(n_q))) if inputs is None else list(inputs)
     label = name or f"series {[i + 1 for i in cal_series]} vs {[i + 1 for i in val_series]}"
-    return Split(label, qi, qi, list(cal_series), list(val_series), "repeatability: series against series")
+    return Split(label, qi, qi, cal_series=list(cal_series), val_series=list(val_series),
+                 description="repeatability: series against series")
 
 
 def _pair_times(pairs) -> np.ndarray:
@@ -408,8 +411,9 @@ def time_window_split(pairs, n_q: int, cal_window, val_window, inputs: Sequence[
     qi = list(range(int(n_q))) if inputs is None else list(inputs)
     s = None if series is None else list(series)
     label = name or f"t in [{ac:g}, {bc:g}] vs [{av:g}, {bv:g}]"
-    return Split(label, qi, qi, s, s, f"calibrate on the sampling times in [{ac:g}, {bc:g}], validate on those in "
-                 f"[{av:g}, {bv:g}]", kc, kv)
+    return Split(label, qi, qi, cal_series=s, val_series=s,
+                 description=f"calibrate on the sampling times in [{ac:g}, {bc:g}], validate on those in "
+                 f"[{av:g}, {bv:g}]", cal_sensors=kc, val_sensors=kv)
 
 
 def early_late_split(pairs, n_q: int, t_split: float | None = None, inputs: Sequence[int] | None = None,
@@ -431,5 +435,5 @@ def early_late_split(pairs, n_q: int, t_split: float | None = None, inputs: Sequ
     if late.size == 0 or not np.any(times <= cut):
         raise SplitError(f"t_split: {cut:g} leaves the {'late' if late.size == 0 else 'early'} set empty; the "
                          f"sampling times are {times.tolist()}")
-    return time_window_split(pairs, n_q, (float(times[0]), cut), (float(late[0]), float(times[-1])), inputs,
-                             series, name or f"early t <= {cut:g} vs late t > {cut:g}")
+    return time_window_split(pairs, n_q, (float(times[0]), cut), (float(late[0]), float(times[-1])), inputs=inputs,
+                             series=series, name=name or f"early t <= {cut:g} vs late t > {cut:g}")

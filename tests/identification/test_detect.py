@@ -109,6 +109,44 @@ def test_failed_fit_is_recorded_and_makes_the_verdict_undecided(model):
     assert "failed" in res.summary()
 
 
+def test_fits_given_as_errors_or_failure_texts_are_recorded_as_typed_failures(model):
+    """run_split_tests(fits=..., pooled=...): a fit's error or a failure text becomes a FitFailure whose reason
+    is the split test's error (or lr_error); an estimate given is used as it is."""
+    from identification import IdentificationError
+    from identification.studies.split_tests import FitFailure
+    data = campaign(model, 4)
+    sp = PAPER_SPLITS[0]
+    ec, ev = identify(model, sp.calibration(data), [0.5, 1.5]), identify(model, sp.validation(data), [0.5, 1.5])
+    boom = IdentificationError("no convergence")
+    assert FitFailure.of_entry(boom) == FitFailure("IdentificationError: no convergence", "IdentificationError")
+    assert FitFailure.of_entry("pooled fit failed: x") == FitFailure("pooled fit failed: x", "")
+    assert FitFailure.of_entry(ec) is ec
+    with pytest.raises(ZeroDivisionError):
+        FitFailure.of_entry(ZeroDivisionError("not a fit error"))
+    t, = run_split_tests(model, data, [sp], [0.5, 1.5], fits=[(boom, ev)])
+    assert not t.ok and t.stage == "calibration fit" and t.error == "IdentificationError: no convergence"
+    t, = run_split_tests(model, data, [sp], [0.5, 1.5], fits=[(ec, FitFailure("validation broke", "DataError"))])
+    assert not t.ok and t.stage == "validation fit" and t.error == "validation broke"
+    assert np.array_equal(t.p_cal, ec.p) and t.n_cal == ec.n_data
+    key = sp.pooled_key(data.n_M)
+    t, = run_split_tests(model, data, [sp], [0.5, 1.5], fits=[(ec, ev)], pooled={key: "pooled fit failed: given"})
+    assert t.ok and t.lr_error == "pooled fit failed: given" and np.isnan(t.alpha_lr)
+    ref, = run_split_tests(model, data, [sp], [0.5, 1.5])
+    assert t.alpha_two_sample == ref.alpha_two_sample and np.isfinite(ref.alpha_lr)
+
+
+def test_a_set_whose_data_cannot_be_built_is_a_failed_fit_of_that_set(model):
+    """A validation set holding no finite value of a sensor: the DataError of building its data is recorded
+    at the validation fit (never raised), with the calibration estimate kept."""
+    data = campaign(model, 4)
+    z = np.array(data.z)
+    z[:, 20:, 0] = np.nan
+    holes = Measurements(Q, z, SIGMA, sensors=model.sensors)
+    t, = run_split_tests(model, holes, [Split("late", range(20), range(20, 29))], [0.5, 1.5])
+    assert not t.ok and t.stage == "validation fit" and t.error.startswith("DataError: z: sensor 's1'")
+    assert np.all(np.isfinite(t.p_cal)) and np.all(np.isnan(t.p_val))
+
+
 def test_tol_and_option_errors(model):
     data = campaign(model, 5)
     for tol in (0.0, 1.0, -0.1, 1.5, float("nan")):
@@ -161,7 +199,9 @@ def test_repeatability_sigma_is_std_of_differences_over_sqrt2(model):
 
 def _t(name, a):
     n = np.full(2, np.nan)
-    return SplitTest("m", name, "", "", True, "", "", n, n, np.eye(2), np.eye(2), 1.0, 1.0, a, a, lr=1.0, alpha_lr=a)
+    return SplitTest(model="m", split=name, cal_label="", val_label="", ok=True, stage="", error="", p_cal=n, p_val=n,
+                     C_cal=np.eye(2), C_val=np.eye(2), d2_paper=1.0, d2_two_sample=1.0, alpha_paper=a,
+                     alpha_two_sample=a, lr=1.0, alpha_lr=a)
 
 
 def test_bonferroni_and_holm():
@@ -254,7 +294,7 @@ def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):
 
 def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
     """The likelihood ratio's pooled minimum (reduced Newton from p_bar) is the full-space fit's."""
-    from identification.studies.detect import _pooled_newton
+    from identification.studies.split_tests import pooled_newton
     from identification.studies.montecarlo import ModelCampaign
     from models.press import Q_PAPER, press_model
     model = press_model()
@@ -266,7 +306,7 @@ def test_pooled_newton_equals_the_pooled_ipopt_fit_on_the_press():
         for sp in PAPER_SPLITS:
             ec = identify(model, sp.calibration(data), [450.0, 550.0], w)
             ev = identify(model, sp.validation(data), [450.0, 550.0], w)
-            pm = _pooled_newton(model, sp.pooled(data), sp, ec, ev, w)
+            pm = pooled_newton(model, sp.pooled(data), sp, ec, ev, w)
             eu = identify(model, sp.pooled(data), [450.0, 550.0], w)
             assert pm is not None
             np.testing.assert_allclose(pm.p, eu.p, rtol=1e-7)

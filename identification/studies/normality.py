@@ -1,0 +1,187 @@
+"""Line 05 of Algorithm 1: the Shapiro-Wilk test of the differences of repeated series, per sensor.
+
+tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q} (unit of z) is tested per
+sensor k; the gate passes when every gated sensor has an adjusted p-value >= the level (multiplicity
+correction over the gated sensors by :mod:`identification.studies.normality_gate`); the repeatability
+standard deviation of a sensor is std(tilde z_k) / sqrt(2) (same unit as z).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from identification.errors import DataError
+from identification.fit.measurements import Measurements
+from identification.studies.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction, correction_text
+
+__all__ = ["NormalityCheck", "NormalityError", "normality_check", "series_text"]
+
+
+class NormalityError(DataError):
+    """Line 05 of Algorithm 1 failed: the differences of repeated series are not Gaussian.
+
+    Attributes
+    ----------
+    check : NormalityCheck
+    """
+
+    def __init__(self, message: str, check: "NormalityCheck | None" = None):
+        super().__init__(message)
+        self.check = check
+
+
+@dataclass(frozen=True)
+class NormalityCheck:
+    """Shapiro-Wilk test of z_{2m} - z_{2m-1} (m = 1..n_M/2, all inputs) per sensor.
+
+    Attributes
+    ----------
+    sensors : tuple of str
+    pvalue : ndarray (n_S,)        Shapiro-Wilk p-values (NaN when not computable)
+    sigma_rep : ndarray (n_S,)     repeatability std(differences) / sqrt(2), unit of z
+    n_diff : ndarray (n_S,)        number of differences used
+    level : float                  family-wise level of the gate (per sensor with correction "none")
+    gated : tuple of str           sensors whose result decides the gate (the selected sensors)
+    passed : bool                  every gated sensor has an adjusted p-value >= level
+    overridden : bool              the gate failed and normality="override" let the run continue
+    pairs : tuple                  0-based series pairs (first, second) differenced
+    note : str
+    series : tuple of str          labels of the series the test ran on (``Measurements.series``)
+    correction : str               multiplicity correction over the gated sensors ("holm", "bonferroni",
+                                   "none"; :mod:`identification.studies.normality_gate`)
+    adjusted : ndarray (n_S,)      adjusted p-values of the gated sensors (NaN for the others; derived)
+    """
+
+    sensors: tuple
+    pvalue: np.ndarray
+    sigma_rep: np.ndarray
+    n_diff: np.ndarray
+    level: float
+    gated: tuple
+    passed: bool
+    overridden: bool = False
+    pairs: tuple = ()
+    note: str = ""
+    series: tuple = ()
+    correction: str = "none"
+    adjusted: np.ndarray = dataclasses.field(default=None, compare=False)
+
+    def __post_init__(self):
+        gated = [s in self.gated for s in self.sensors]
+        object.__setattr__(self, "adjusted", adjusted_pvalues(self.pvalue, check_correction(self.correction), gated))
+        for name in ("pvalue", "sigma_rep", "n_diff", "adjusted"):
+            a = np.array(getattr(self, name), dtype=float, copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    def gate_text(self) -> str:
+        """The gate in words: "Shapiro-Wilk at family-wise 5 % over 3 sensors (Holm)"."""
+        return "Shapiro-Wilk at " + correction_text(self.correction, self.level, len(self.gated))
+
+    def failing(self) -> tuple:
+        """The gated sensors that fail the gate (adjusted p-value below the level, or none computable)."""
+        return tuple(s for k, s in enumerate(self.sensors) if s in self.gated and not self.adjusted[k] >= self.level)
+
+    def series_text(self) -> str:
+        """The tested series as a reader names them: "5, 6", "1-6" or the labels ("" when unknown)."""
+        return series_text(self.series)
+
+    def pairs_text(self) -> str:
+        """The differences formed, in series labels: "z6-z5" ("(none)" with fewer than two series)."""
+        lab = (_series_numbers(self.series) or [f"({x})" for x in self.series]
+               or [str(i + 1) for i in range(2 * len(self.pairs))])
+        return ", ".join(f"z{lab[b]}-z{lab[a]}" for a, b in self.pairs) or "(none)"
+
+    def table(self, units: Mapping | None = None, data_name: str = "series") -> str:
+        """The per-sensor table: p-value (%), sigma_rep and its unit, number of differences, gate.
+
+        ``units`` {sensor: (factor, unit)} shows sigma_rep as factor * sigma_rep in unit (default:
+        the unit of z, unnamed); ``data_name`` names the data in the column headers (e.g. "study
+        series"), so that the p-values say what they were computed on.
+        """
+        units = units or {}
+        p_head, s_head = f"SW p % ({data_name})", f"sigma_rep ({data_name})"
+        wp, ws = max(12, len(p_head)), max(11, len(s_head))
+        adj = self.correction != "none"
+        lines = [f"{'sensor':<10} {p_head:>{wp}} {s_head:>{ws}} {'unit':<8} {'n':>4}  "
+                 + (f"{self.correction + ' p %':>14}  " if adj else "") + "gate"]
+        bad = self.failing()
+        for k, s in enumerate(self.sensors):
+            pv = self.pvalue[k]
+            factor, unit = units.get(s, (1.0, ""))
+            ok = "" if s not in self.gated else ("FAIL" if s in bad else "pass")
+            lines.append(f"{s:<10} {100 * pv:>{wp}.2f} {factor * self.sigma_rep[k]:>{ws}.4g} {unit or '-':<8} "
+                         f"{int(self.n_diff[k]):>4}  " + (f"{100 * self.adjusted[k]:>14.2f}  " if adj else "") + ok)
+        return "\n".join(lines)
+
+
+def _series_numbers(labels) -> list:
+    """The trailing numbers of series labels sharing one prefix ("series_5" -> "5"), else []."""
+    found = [re.fullmatch(r"(.*?)(\d+)", str(x)) for x in labels]
+    if not found or not all(found) or len({f.group(1) for f in found}) != 1:
+        return []
+    return [f.group(2) for f in found]
+
+
+def series_text(labels) -> str:
+    """Series labels for a reader: consecutive numbers as a range ("1-6"), else a list ("5, 6")."""
+    nums = _series_numbers(labels)
+    if not nums:
+        return ", ".join(str(x) for x in labels)
+    ints = [int(n) for n in nums]
+    if len(ints) > 2 and ints == list(range(ints[0], ints[0] + len(ints))):
+        return f"{ints[0]}-{ints[-1]}"
+    return ", ".join(nums)
+
+
+def normality_check(data: Measurements, level: float = 0.05, weights=None,
+                    correction: str = GATE_CORRECTIONS[0]) -> NormalityCheck:
+    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor, at a family-wise level.
+
+    tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q}; the pairs are
+    consecutive series (an odd last series is left out).  Returns the p-values and the
+    repeatability sigma std(tilde z_k) / sqrt(2) (unit of z); never raises on a failed test.
+    The gate passes when every gated sensor (weight > 0) has an adjusted p-value >= ``level``;
+    ``correction`` ("holm", "bonferroni" or "none", the paper's per-sensor gate) adjusts over the
+    gated sensors (:func:`identification.studies.normality_gate.adjusted_pvalues`).
+    """
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    check_correction(correction, "correction")
+    w = data.sensor_weights(weights)
+    n_pairs = data.n_M // 2
+    pairs = tuple((2 * m, 2 * m + 1) for m in range(n_pairs))
+    gated = tuple(s for s, wk in zip(data.sensors, w) if wk > 0)
+    pv = np.full(data.n_S, np.nan)
+    sig = np.full(data.n_S, np.nan)
+    nd = np.zeros(data.n_S)
+    notes = []
+    if n_pairs == 0:
+        return NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=level, gated=gated,
+                              passed=False, pairs=pairs,
+                              note="only one series: differences of repeated series cannot be formed",
+                              series=tuple(data.series), correction=correction)
+    if data.n_M % 2:
+        notes.append(f"series {data.n_M} (odd count) left out of the differences")
+    for k in range(data.n_S):
+        d = np.concatenate([data.z[b, :, k] - data.z[a, :, k] for a, b in pairs])
+        d = d[np.isfinite(d)]
+        nd[k] = d.size
+        if d.size >= 2:
+            sig[k] = float(np.std(d, ddof=1)) / math.sqrt(2.0)
+        if d.size >= 3 and np.ptp(d) > 0:
+            pv[k] = float(stats.shapiro(d).pvalue)
+        else:
+            notes.append(f"sensor {data.sensors[k]!r}: {d.size} differences"
+                         + (" all equal" if d.size >= 3 else "") + "; Shapiro-Wilk not computable")
+    chk = NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=float(level), gated=gated,
+                         passed=False, pairs=pairs,
+                         note="; ".join(notes), series=tuple(data.series), correction=correction)
+    return dataclasses.replace(chk, passed=not chk.failing())
+
