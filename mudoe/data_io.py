@@ -37,8 +37,10 @@ from models.fileio import atomic_write_text
 
 from . import csv_stream
 from .config import StudyConfig
+from .config_errors import ConfigError
 from .csv_stream import DataFileError
 from .data_checks import absurd_reading_message
+from .registry import virtual_prototype
 from .units import UnitError, check_unit, convert, dimension, same_dimension, unit_name
 
 __all__ = ["DataFileError", "DataUnits", "study_units", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
@@ -123,7 +125,6 @@ def _is(unit: str, dim: str) -> bool:
 
 def _input_file_unit(cfg: StudyConfig, model) -> tuple:
     """(file unit, config key) of the input column (:func:`study_units`)."""
-    from .config import ConfigError
     q_model = model.input_units[0] if model.input_units else ""
     if cfg.data.input_unit:
         return cfg.data.input_unit, "input_unit"
@@ -138,7 +139,6 @@ def _input_file_unit(cfg: StudyConfig, model) -> tuple:
 
 def _sensor_file_unit(cfg: StudyConfig, s: str, u_model: str) -> str:
     """The file unit of sensor ``s`` (:func:`study_units`); never a silent default for an undeclared one."""
-    from .config import ConfigError
     own = next((sc.unit for sc in cfg.sensors if sc.name == s), "")
     if own or cfg.data.output_unit:
         return own or cfg.data.output_unit
@@ -165,7 +165,6 @@ def study_units(cfg: StudyConfig, model) -> DataUnits:
     ConfigError
         A unit is declared nowhere, unknown to pint, or of another dimension than the model's.
     """
-    from .config import ConfigError
     d = cfg.data
     q_model = model.input_units[0] if model.input_units else ""
     q_file, q_key = _input_file_unit(cfg, model)
@@ -671,18 +670,7 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str], units: DataUnits | N
         units = DataUnits.legacy(cfg.data.displacement_unit, cfg.data.force_unit, len(sensors))
     d = cfg.data
     if d.source == "prototype":
-        from models.prototype import generate_campaign
-        pc = generate_campaign(seed=d.seed, n_series=d.n_series)
-        idx = [pc.sensors.index(s) if s in pc.sensors else None for s in sensors]
-        if None in idx:
-            raise DataFileError(f"[data] source = \"prototype\" provides sensors {', '.join(pc.sensors)} only; the "
-                                f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
-        z = pc.z[:, :, idx]
-        h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
-        return Campaign(q_set=pc.q_set, q_actual=pc.q_actual, z=z, sensors=tuple(sensors),
-                        series=tuple(f"series_{i + 1}" for i in range(pc.n_M)),
-                        source=f"virtual prototype (seed {d.seed}, {d.n_series} series)", sha256=h.hexdigest(),
-                        z_raw=pc.z_raw[:, :, idx], seed=pc.seed, config=pc.config)
+        return virtual_prototype().campaign(d, sensors)
     base = cfg.resolve(d.directory)
     if d.layout == "paper":
         files = {}
