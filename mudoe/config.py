@@ -12,12 +12,27 @@ is an error naming the key) and converted once, by pint, to the model's units (t
 
 Indices (series, inputs in splits) are **0-based**, like :mod:`identification.studies.splits`.
 
+Modules
+-------
+This module reads a file (:func:`load_config`, :func:`parse_config`: one parser per section, then
+the checks across sections) and re-exports the names of the modules it is built from:
+
+* :mod:`mudoe.config_sections` -- the section dataclasses and :class:`StudyConfig` (the schema);
+* :mod:`mudoe.config_schema` -- how a field declares its key (:func:`setting`, bounds, choices);
+* :mod:`mudoe.config_readers` -- the reader and validator of each kind of TOML value;
+* :mod:`mudoe.config_errors` -- :class:`ConfigError` and the line lookup of its messages
+  (:func:`config_error`);
+* :mod:`mudoe.dynamic_config` -- the ``[dynamic]`` section;
+* :mod:`mudoe.registry` -- the built-in models (variants, scenarios, defaults, virtual prototype),
+  each described by its own study module (the press: :mod:`mudoe.press`);
+* :mod:`mudoe.checks` -- the cross-key checks (:func:`mudoe.checks.check_config`).
+
 One schema
 ----------
-The section dataclasses below *are* the schema: a section's allowed keys are its fields, a
+The section dataclasses *are* the schema: a section's allowed keys are its fields, a
 key's default is the field's default, and the field's annotation and metadata say how the
-TOML value is checked (:func:`mudoe.config_readers.read_value`).  Keys that drive a library function are declared with
-:func:`setting`: their default is the default of the library's settings dataclass, the
+TOML value is checked (:func:`mudoe.config_readers.read_value`).  Keys that drive a library
+function are declared with :func:`setting`: their default is the default of the library's settings dataclass, the
 settings dataclass validates their values, and the section hands the workflow a settings
 object (``cfg.detect.settings()``, ``cfg.validate.settings(...)``).  The keys backed by a
 settings field (:func:`settings_keys`):
@@ -156,7 +171,7 @@ def _parse_splits(ctx, t):
     kw = read_table(ctx, "splits", SplitsConfig, t, skip=("random", "custom"))
     for s in kw.get("scenarios", ()):
         one_of(ctx, "splits", "scenarios", s, ("paper",) + tuple(known_scenarios()), "scenario",
-                "\"paper\": all four")
+               "\"paper\": all four")
     if "random" in t:
         kw["random"] = RandomSplitConfig(**read_table(ctx, "splits.random", RandomSplitConfig, t["random"]))
     if "custom" in t:
