@@ -14,7 +14,8 @@ from mudoe.limits import check_sizes, estimates
 MUDOE = Path(__file__).resolve().parents[2] / "mudoe"
 #: the generic modules: no built-in model's name, no import of a built-in model's package
 GENERIC = ("config.py", "config_errors.py", "config_readers.py", "config_schema.py", "config_sections.py",
-           "checks.py", "data_io.py", "limits.py", "units.py", "csv_stream.py", "data_checks.py", "registry.py")
+           "checks.py", "data_io.py", "data_units.py", "limits.py", "units.py", "csv_stream.py", "data_checks.py",
+           "registry.py")
 PROTOTYPE = """
 [data]
 source = "prototype"
@@ -87,3 +88,17 @@ sigma = 1.0
     assert runs.what == "replications x 4 splits x 3 fits"       # scenarios = ["paper"]: the press's four
     own = parse_config('[model]\nname = "pkg.mod:build"\n[splits]\nscenarios = []\n[splits.random]\nn = 2\n')
     assert estimates(own, "validate", runs=10)[-1].what == "replications x 2 splits x 3 fits"
+
+
+def test_press_entry_gives_what_the_study_asks_of_a_built_in_model():
+    """What study code asks of a built-in model instead of testing its name: a variant's model and inputs,
+    the rows of its scenarios, the explanations of its diagnosis."""
+    from models.press import PRESS_SENSORS
+    from mudoe.registry import builtin_model
+    press, cfg = builtin_model("press"), parse_config("")
+    m, inputs_fn = press.build("M1", cfg)
+    assert tuple(m.sensors) == PRESS_SENSORS and inputs_fn is None
+    m2, inputs_fn = press.build("M2", cfg)
+    assert inputs_fn(np.array([0.0, 100.0, 0.0])).shape[0] == 3
+    assert tuple(press.scenario_rows(29)) == press.scenarios
+    assert press.explanations(load_campaign(parse_config(PROTOTYPE), PRESS_SENSORS), ("M1", "M2")) == ()
