@@ -17,30 +17,12 @@ interval and a singular covariance into every table.
 """
 from __future__ import annotations
 
-import re
-
 import numpy as np
 
+from .config_errors import ConfigError, config_error, table_line
+from .csv_stream import DataFileError
+
 __all__ = ["check_config", "check_model", "check_data", "table_line", "call_factory", "study_splits"]
-
-
-def table_line(text: str, table: str, k: int, key: str) -> int | None:
-    """1-based line of ``key`` in the ``k``-th (0-based) ``[[table]]`` of the TOML ``text`` (None: not found)."""
-    head = re.compile(r"^\s*\[\[\s*" + re.escape(table) + r"\s*\]\]")
-    other = re.compile(r"^\s*\[")
-    pat = re.compile(r"^\s*" + re.escape(key) + r"\s*=")
-    seen, inside = -1, False
-    for i, ln in enumerate(text.splitlines()):
-        if head.match(ln):
-            seen += 1
-            inside = seen == k
-            if inside and not key:
-                return i + 1
-        elif other.match(ln):
-            inside = False
-        elif inside and pat.match(ln):
-            return i + 1
-    return None
 
 
 _SPLIT_KEYS = ("cal_inputs", "val_inputs", "cal_series", "val_series", "cal_sensors", "val_sensors")
@@ -48,7 +30,6 @@ _SPLIT_KEYS = ("cal_inputs", "val_inputs", "cal_series", "val_series", "cal_sens
 
 def _custom_error(cfg, k: int, key: str, msg: str):
     """A ConfigError naming the k-th [[splits.custom]] table and ``key``."""
-    from .config import ConfigError
     line = table_line(cfg.text, "splits.custom", k, key) or table_line(cfg.text, "splits.custom", k, "")
     loc = f"{cfg.path}:{line}" if line else cfg.path
     return ConfigError(f"{loc}: [[splits.custom]] {key}: {msg}")
@@ -90,7 +71,6 @@ def check_config(cfg, error) -> None:
 
 def check_model(cfg, model) -> None:
     """[oed] and [detect] against the model's sensors (before the data are read)."""
-    from .config import config_error
     sensors = tuple(model.sensors)
     o = cfg.oed
     for key in ("include", "exclude"):
@@ -129,8 +109,6 @@ def check_data(cfg, campaign, splits, n_p: int) -> None:
         A sensor has no reading in the study's series (names the data file).
     """
     from identification.studies.splits import SplitError
-    from .config import config_error
-    from .data_io import DataFileError
     series = list(range(campaign.n_M)) if cfg.data.series is None else list(cfg.data.series)
     z = campaign.z[series]
     for k, s in enumerate(campaign.sensors):
@@ -167,7 +145,6 @@ def call_factory(factory, name: str, variant: str, error):
 def study_splits(cfg, campaign, make) -> tuple:
     """``make(cfg, n_q, q_set)``: the study's splits; a split the data cannot hold names the [splits] key."""
     from identification.studies.splits import SplitError
-    from .config import config_error
     try:
         return make(cfg, campaign.n_q, campaign.q_set)
     except SplitError as exc:

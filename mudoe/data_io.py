@@ -19,7 +19,8 @@ input column in another unit of the declared dimension is converted by pint (``f
 with force_unit = "N"); a unit of another dimension (``force_parsec``) or one pint does not
 know is an error naming the file and column; a reading column must carry the declared unit
 (its sigma is declared in it).  Empty cells and ``NaN``/``NA`` mark a missing reading; set forces
-must be known.  Everything is converted once to the model's units (mm, N).
+must be known.  Everything is converted once to the model's units (mm, N).  The units of the data
+(declared, in headers, the model's) are resolved in :mod:`mudoe.data_units`.
 """
 from __future__ import annotations
 
@@ -39,7 +40,8 @@ from . import csv_stream
 from .config import StudyConfig
 from .csv_stream import DataFileError
 from .data_checks import absurd_reading_message
-from .units import UnitError, check_unit, convert, dimension, same_dimension, unit_name
+from .data_units import DataUnits, column_unit, split_unit, study_units
+from .registry import virtual_prototype
 
 __all__ = ["DataFileError", "DataUnits", "study_units", "Campaign", "read_paper_layout", "read_tidy_layout", "write_paper_layout",
            "write_tidy_layout", "load_campaign", "atomic_write_text", "sha256_files"]
@@ -49,144 +51,6 @@ _MISSING = {"", "nan", "na", "n/a", "null", "none"}
 #: largest magnitude accepted in a numeric cell; larger values (1e300, ...) are export or unit
 #: errors and would overflow the squared residuals of a fit
 MAX_MAGNITUDE = 1e15
-
-
-@dataclass(frozen=True)
-class DataUnits:
-    """The units of a campaign in its files and in the model: the one conversion of the data.
-
-    Attributes
-    ----------
-    input_file, input_model : str       unit of the input (set point) in the files / in the model
-    output_file, output_model : tuple   per sensor: unit of the readings in the files / in the model
-    input_name : str                    name of the input column ("force" writes ``force_N``)
-    input_key, output_key : str         the config keys that declare the file units (for messages)
-    """
-
-    input_file: str = "N"
-    input_model: str = "N"
-    output_file: tuple = ()
-    output_model: tuple = ()
-    input_name: str = "force"
-    input_key: str = "force_unit"
-    output_key: str = "displacement_unit"
-
-    @classmethod
-    def legacy(cls, displacement_unit: str, force_unit: str, n_sensors: int) -> "DataUnits":
-        """Forces in ``force_unit`` and displacements in ``displacement_unit`` (any pint force / length
-        unit, e.g. "N", "kN", "lbf" / "mm", "um", "m"), model in N and mm."""
-        for key, unit, dim, ex in (("displacement_unit", displacement_unit, "length", "mm, um, m"),
-                                   ("force_unit", force_unit, "force", "N, kN, lbf")):
-            if not _is(unit, dim):
-                raise DataFileError(f"{key}: {unit!r} is not a unit of {dim} (e.g. {ex})")
-        return cls(force_unit, "N", (displacement_unit,) * n_sensors, ("mm",) * n_sensors)
-
-    def q_to_model(self, q):
-        return convert(np.asarray(q, float), self.input_file, self.input_model)
-
-    def q_to_file(self, q):
-        return convert(np.asarray(q, float), self.input_model, self.input_file)
-
-    def z_to_model(self, z):
-        z = np.array(z, float)
-        for k, (a, b) in enumerate(zip(self.output_file, self.output_model)):
-            z[..., k] = convert(z[..., k], a, b)
-        return z
-
-    def z_to_file(self, z):
-        z = np.array(z, float)
-        for k, (a, b) in enumerate(zip(self.output_file, self.output_model)):
-            z[..., k] = convert(z[..., k], b, a)
-        return z
-
-    def sigma_to_model(self, k: int, sigma: float) -> float:
-        """A standard deviation of sensor k from the file unit to the model unit (no offset)."""
-        return float(convert(sigma, self.output_file[k], self.output_model[k], difference=True))
-
-    def input_names(self) -> set:
-        """Accepted (lower-case) names of the input column, without a unit suffix."""
-        n = self.input_name.lower()
-        return {"set_force", "input", "set_input", "q", "q_p", "load", n, "set_" + n}
-
-    def actual_names(self) -> set:
-        n = self.input_name.lower()
-        return {"actual_force", "actual_input", "actual_" + n}
-
-
-def _is(unit: str, dim: str) -> bool:
-    """Whether ``unit`` ("" = undeclared; an unknown unit is not) is a unit of dimension ``dim``."""
-    try:
-        return bool(unit) and dimension(unit) == dim
-    except UnitError:
-        return False
-
-
-def _input_file_unit(cfg: StudyConfig, model) -> tuple:
-    """(file unit, config key) of the input column (:func:`study_units`)."""
-    from .config import ConfigError
-    q_model = model.input_units[0] if model.input_units else ""
-    if cfg.data.input_unit:
-        return cfg.data.input_unit, "input_unit"
-    if _is(q_model, "force"):
-        return cfg.data.force_unit, "force_unit"
-    if q_model:
-        return q_model, "input_unit"
-    raise ConfigError(f"{cfg.path}: [data] input_unit: the input {model.inputs[0]!r} has no unit (the model declares "
-                      "none); declare the unit of the input column, e.g. input_unit = \"N\" or \"degC\" (any unit "
-                      "pint knows; \"1\" for a dimensionless input)")
-
-
-def _sensor_file_unit(cfg: StudyConfig, s: str, u_model: str) -> str:
-    """The file unit of sensor ``s`` (:func:`study_units`); never a silent default for an undeclared one."""
-    from .config import ConfigError
-    own = next((sc.unit for sc in cfg.sensors if sc.name == s), "")
-    if own or cfg.data.output_unit:
-        return own or cfg.data.output_unit
-    if _is(u_model, "length"):
-        return cfg.data.displacement_unit
-    if u_model:
-        return u_model
-    raise ConfigError(f"{cfg.path}: [[sensors]] unit: sensor {s!r} has no unit (the model declares none); declare "
-                      "the unit of its readings, e.g. unit = \"m/s^2\" in its [[sensors]] entry or [data] "
-                      "output_unit (any unit pint knows; \"1\" for a dimensionless reading)")
-
-
-def study_units(cfg: StudyConfig, model) -> DataUnits:
-    """The :class:`DataUnits` of a study: file units from the config, model units from the model.
-
-    File unit of the input: ``[data] input_unit``, else ``force_unit`` when the model's input is a
-    force, else the model's unit.  File unit of sensor k: its [[sensors]] ``unit``, else
-    ``[data] output_unit``, else ``displacement_unit`` when the model's unit is a length, else the
-    model's unit.  A unit declared nowhere (model and config) is an error, never a default.  Model
-    units: the model's declared ones; an undeclared one is the file's unit (no conversion).
-
-    Raises
-    ------
-    ConfigError
-        A unit is declared nowhere, unknown to pint, or of another dimension than the model's.
-    """
-    from .config import ConfigError
-    d = cfg.data
-    q_model = model.input_units[0] if model.input_units else ""
-    q_file, q_key = _input_file_unit(cfg, model)
-    out_file = [_sensor_file_unit(cfg, s, u) for s, u in zip(model.sensors, model.sensor_units)]
-    out_model = [u or f for u, f in zip(model.sensor_units, out_file)]
-    units = DataUnits(q_file, q_model or q_file, tuple(out_file), tuple(out_model),
-                      input_name=model.inputs[0] if d.input_unit or q_key == "input_unit" else "force",
-                      input_key=q_key, output_key="output_unit" if d.output_unit else "displacement_unit")
-    pairs = [(q_file, units.input_model, f"[data] {q_key}", f"input {model.inputs[0]!r}")]
-    pairs += [(a, b, f"[[sensors]] unit / [data] {units.output_key}", f"sensor {s!r}")
-              for s, a, b in zip(model.sensors, out_file, out_model)]
-    for a, b, key, what in pairs:
-        try:
-            check_unit(b)
-        except UnitError as exc:
-            raise ConfigError(f"{cfg.path}: the model declares unit {b!r} for {what}: {exc}") from None
-        try:
-            convert(1.0, a, b)
-        except UnitError as exc:
-            raise ConfigError(f"{cfg.path}: {key}: {what}: {exc}") from None
-    return units
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -199,49 +63,6 @@ def sha256_files(paths: Sequence) -> str:
     return h.hexdigest()
 
 
-def _split_unit(name: str, bases=()) -> tuple[str, str | None]:
-    """'set_force_kN' -> ('set_force', 'kN'): a known column name ``bases`` (lower case) and the unit
-    after it ("_unit", " unit", "[unit]" or "(unit)"); other names -> (name lower-cased, None).
-
-    The unit is returned as written (checked by :func:`_check_unit`); matching the known names
-    first keeps a name such as "set_T" from being read as a unit (T is the tesla).
-    """
-    n = name.strip()
-    low = n.lower()
-    for b in sorted(bases, key=len, reverse=True):
-        if low == b:
-            return b, None
-        if low.startswith(b) and len(n) > len(b) + 1 and n[len(b)] in "_ [(":
-            rest = n[len(b):].strip(" _")
-            if rest[:1] in "[(" and rest[-1:] in "])":
-                rest = rest[1:-1].strip()
-            return b, rest or None
-    return low, None
-
-
-def _check_unit(path, col, found, declared, what, convertible: bool = False) -> str:
-    """The unit of column ``col``: ``found`` in its header, else ``declared``.
-
-    A header unit must be a unit pint knows and of the declared unit's dimension; unless
-    ``convertible`` (the values are then converted by pint), it must be the declared unit itself.
-    """
-    if found is None or found == declared:
-        return declared
-    try:
-        check_unit(found)
-    except UnitError as exc:
-        raise DataFileError(f"{path}:1: column {col!r}: {exc}") from None
-    if not declared:
-        raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares no unit for it; "
-                            f"declare [data] {what} = {found!r}")
-    if not same_dimension(found, declared):
-        raise DataFileError(f"{path}:1: column {col!r} is in {found} ({unit_name(found)}, a unit of "
-                            f"{dimension(found)}) but the config declares {what} = {declared!r}, a unit of "
-                            f"{dimension(declared)}; fix the header or [data] {what}")
-    if convertible or convert(1.0, found, declared) == 1.0 and convert(0.0, found, declared) == 0.0:
-        return found
-    raise DataFileError(f"{path}:1: column {col!r} is in {found} but the config declares "
-                        f"{what} = {declared!r}; fix the header or [data] {what}")
 
 
 def _number(path, line, col, cell, allow_missing=True):
@@ -272,12 +93,12 @@ def _with_unit(name: str, unit: str) -> str:
 # ---------------------------------------------------------------------------- paper layout
 def _read_paper_file(path: Path, units: DataUnits):
     header, offset = csv_stream.read_header(path)
-    base, unit = _split_unit(header[0], units.input_names() | {"force"})
+    base, unit = split_unit(header[0], units.input_names() | {"force"})
     if not base.startswith("force") and base not in units.input_names():
         example = f"{units.input_name}_{units.input_file}" if units.input_file else units.input_name
         raise DataFileError(f"{path}:1: wrong header: the first column must be the input {units.input_name!r} "
                             f"(e.g. {example!r}), got {header[0]!r}")
-    q_unit = _check_unit(path, header[0], unit, units.input_file, units.input_key, convertible=True)
+    q_unit = column_unit(path, header[0], unit, units.input_file, units.input_key, convertible=True)
     if len(header) < 2:
         raise DataFileError(f"{path}:1: wrong header: expected the force column then one column per series, "
                             f"got only {header!r}")
@@ -295,7 +116,7 @@ def _read_paper_file(path: Path, units: DataUnits):
                             for i in range(1, len(header))]))
     if not qs:
         raise DataFileError(f"{path}: no data rows after the header")
-    return convert(np.concatenate(qs), q_unit, units.input_file), np.concatenate(zs, axis=1), tuple(header[1:])
+    return units.q_from_column(np.concatenate(qs), q_unit), np.concatenate(zs, axis=1), tuple(header[1:])
 
 
 def read_paper_layout(files: dict, displacement_unit: str = "um", force_unit: str = "N",
@@ -406,7 +227,7 @@ def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits)
     cols = {}
     same = set(units.output_file)
     for i, h in enumerate(header):
-        base, unit = _split_unit(h, units.input_names() | units.actual_names() | {"value", "raw"})
+        base, unit = split_unit(h, units.input_names() | units.actual_names() | {"value", "raw"})
         if base in units.input_names():
             role = "set_force"
         elif base in units.actual_names():
@@ -419,12 +240,12 @@ def _tidy_columns(path: Path, header: list, value_column: str, units: DataUnits)
             raise DataFileError(f"{path}:1: wrong header: column {role!r} appears twice")
         cols[role] = (i, h, unit)
         if role in ("set_force", "actual_force"):
-            cols[role] = (i, h, _check_unit(path, h, unit, units.input_file, units.input_key, convertible=True))
+            cols[role] = (i, h, column_unit(path, h, unit, units.input_file, units.input_key, convertible=True))
         elif role in ("value", "raw") and unit is not None:
             if len(same) > 1:
                 raise DataFileError(f"{path}:1: column {h!r} carries unit {unit} but the sensors are declared in "
                                     f"different units ({', '.join(sorted(same))}); name the column {role!r}")
-            _check_unit(path, h, unit, next(iter(same), ""), units.output_key)
+            column_unit(path, h, unit, next(iter(same), ""), units.output_key)
     need = ["series", "set_force", "sensor", value_column]
     missing = [c for c in need if c not in cols]
     if missing:
@@ -589,9 +410,9 @@ def read_tidy_layout(path, displacement_unit: str = "um", force_unit: str = "N",
     if absent:
         raise DataFileError(f"{path}: no rows for sensor(s) {', '.join(absent)}")
     q_set, q_act, z = _tidy_arrays(path, table, sens)
-    q_set = convert(q_set, cols["set_force"][2], units.input_file)           # a header in lbf, K, ...: pint
+    q_set = units.q_from_column(q_set, cols["set_force"][2])           # a header in lbf, K, ...: pint
     if "actual_force" in cols:
-        q_act = convert(q_act, cols["actual_force"][2], units.input_file)
+        q_act = units.q_from_column(q_act, cols["actual_force"][2])
     if np.isnan(q_set).any():
         j = int(np.flatnonzero(np.isnan(q_set))[0])
         raise DataFileError(f"{path}: no row for set-point index {j + 1}")
@@ -671,18 +492,7 @@ def load_campaign(cfg: StudyConfig, sensors: Sequence[str], units: DataUnits | N
         units = DataUnits.legacy(cfg.data.displacement_unit, cfg.data.force_unit, len(sensors))
     d = cfg.data
     if d.source == "prototype":
-        from models.prototype import generate_campaign
-        pc = generate_campaign(seed=d.seed, n_series=d.n_series)
-        idx = [pc.sensors.index(s) if s in pc.sensors else None for s in sensors]
-        if None in idx:
-            raise DataFileError(f"[data] source = \"prototype\" provides sensors {', '.join(pc.sensors)} only; the "
-                                f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
-        z = pc.z[:, :, idx]
-        h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
-        return Campaign(q_set=pc.q_set, q_actual=pc.q_actual, z=z, sensors=tuple(sensors),
-                        series=tuple(f"series_{i + 1}" for i in range(pc.n_M)),
-                        source=f"virtual prototype (seed {d.seed}, {d.n_series} series)", sha256=h.hexdigest(),
-                        z_raw=pc.z_raw[:, :, idx], seed=pc.seed, config=pc.config)
+        return virtual_prototype().campaign(d, sensors)
     base = cfg.resolve(d.directory)
     if d.layout == "paper":
         files = {}

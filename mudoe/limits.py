@@ -20,6 +20,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from .config_errors import ConfigError, config_error
+from .registry import builtin_model, known_scenarios, virtual_prototype
+
 __all__ = ["SizeEstimate", "estimates", "check_sizes", "memory_budget", "FIT_SECONDS", "TIME_BUDGET",
            "MAX_PAGE_PIXELS"]
 
@@ -36,7 +39,6 @@ _BYTES_READING = 8 * 2 + 20     # a simulated reading: h and z as float64, then 
 _BYTES_SPLIT = 400              # a random Split with its index lists (measured: 419 bytes with 3 inputs)
 _BYTES_REPLICATION = 300        # a Monte Carlo replication's SeedSequence and result row
 _BYTES_RGBA = 4                 # one pixel of a rendered report page
-_PROTOTYPE_SET_POINTS = 29      # the press prototype's set points per series
 
 
 @dataclass(frozen=True)
@@ -78,14 +80,15 @@ def _n_sensors(cfg) -> int:
 
 def _n_splits(cfg) -> int:
     s = cfg.splits
-    n = (4 if "paper" in s.scenarios else len(s.scenarios)) if cfg.model.name == "press" or s.scenarios else 0
+    n = len(known_scenarios()) if "paper" in s.scenarios else len(s.scenarios)
     return max(1, n + s.random.n + len(s.custom))
 
 
 def _simulate(cfg) -> list:
-    """``mudoe simulate``: the readings of an own model, or the press prototype's series."""
-    if cfg.model.name == "press":
-        per = _PROTOTYPE_SET_POINTS * _n_sensors(cfg) * _BYTES_READING
+    """``mudoe simulate``: the readings of an own model, or the series of a built-in model's virtual prototype."""
+    builtin = builtin_model(cfg.model.name)
+    if builtin is not None and builtin.prototype is not None:
+        per = builtin.prototype.set_points * _n_sensors(cfg) * _BYTES_READING
         return [SizeEstimate("data", "n_series", cfg.data.n_series, "series of the virtual prototype",
                              cfg.data.n_series * per, 0.0, per, 0.0)]
     sc, n_S = cfg.simulate, _n_sensors(cfg)
@@ -104,7 +107,7 @@ def _study(cfg, command: str, runs: int | None) -> list:
     out = []
     n_var, n_split = len(cfg.model.variants), _n_splits(cfg)
     if cfg.data.source == "prototype":
-        per = _PROTOTYPE_SET_POINTS * _n_sensors(cfg) * _BYTES_READING
+        per = virtual_prototype().set_points * _n_sensors(cfg) * _BYTES_READING
         out.append(SizeEstimate("data", "n_series", cfg.data.n_series, "series of the virtual prototype",
                                 cfg.data.n_series * per, 0.0, per, 0.0))
     n_rand = cfg.splits.random.n
@@ -187,7 +190,6 @@ def check_sizes(cfg, command: str, runs: int | None = None, budget: float | None
         Naming the file, line and key, the lower bounds of memory and time and the largest value
         that fits.
     """
-    from .config import ConfigError, config_error
     budget = memory_budget() if budget is None else budget
     for e in estimates(cfg, command, runs):
         too_wide = e.key == "dpi" and e.value * _PAGE_INCHES[0] >= MAX_PAGE_PIXELS

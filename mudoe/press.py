@@ -13,10 +13,15 @@ Everything here fits or trains, so it runs identification on the press model of
 * :func:`fit_candidates`: (k5, k7) identified with M1, M2, M3 on held-out series;
 * :func:`press_variant`: one candidate model of a study config with its input function;
 * :func:`diagnosis_explanations`: what is known of the diagnostic rejections on the shipped
-  campaign (:mod:`reports.diagnosis`), measured by ``bench/bench_diagnose_m3.py``.
+  campaign (:mod:`reports.diagnosis`), measured by ``bench/bench_diagnose_m3.py``;
+* :func:`prototype_campaign`: the campaign of ``[data] source = "prototype"`` (the virtual prototype);
+* :data:`PRESS`: all of the above as generic study code sees the press (:class:`mudoe.builtin.BuiltinModel`,
+  listed by :mod:`mudoe.registry`): its variants, scenarios, default data, candidate models, diagnosis
+  explanations and virtual prototype.  Generic code never tests ``[model] name == "press"``.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from functools import partial
 from pathlib import Path
@@ -31,17 +36,22 @@ from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from models.campaign import Campaign
 from models.contract import Model
 from models.fileio import atomic_write_text
+from models.friction import VARIANTS as FRICTION_VARIANTS
 from models.friction import (F_SCALE, FRICTION_JSON, Q_SCALE, FrictionError, PreisachNetwork, candidate_models,
                              direction_inputs, fit_coulomb, inverse_forces, load_friction, memory_inputs,
                              model_inputs)
-from models.press import K_NOMINAL, press_model
-from models.prototype import CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, read_campaign
+from models.press import K_NOMINAL, PRESS_SCENARIO_NAMES, Q_PAPER, press_model, press_scenario_rows
+from models.prototype import (CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, generate_campaign,
+                              read_campaign)
 from reports.diagnosis import Explanation
 
-from .config import StudyConfig, config_error
+from .builtin import BuiltinModel, VirtualPrototype
+from .config_errors import config_error
+from .csv_stream import DataFileError
 
 __all__ = ["campaign_measurements", "friction_samples", "train_preisach", "retrain", "fit_candidates",
-           "press_variant", "diagnosis_explanations", "M3_INPUT_RANGE_BENCH", "TRAINING_DEFAULTS", "CampaignError"]
+           "press_variant", "diagnosis_explanations", "prototype_campaign", "check_prototype_data", "PRESS",
+           "M3_INPUT_RANGE_BENCH", "TRAINING_DEFAULTS", "CampaignError"]
 
 #: training options of the stored network (written into data/press_friction.json)
 TRAINING_DEFAULTS = dict(n_hidden=4, reg=1e-2, sigma_f=20.0, n_starts=8, seed=0)
@@ -291,8 +301,9 @@ def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: 
 
 
 # ---------------------------------------------------------------------------- study variants
-def press_variant(variant: str, cfg: StudyConfig) -> tuple[Model, object]:
-    """(Model, inputs_fn) of press variant M1 / M2 / M3 of a study (stored, trained friction constants).
+def press_variant(variant: str, cfg) -> tuple[Model, object]:
+    """(Model, inputs_fn) of press variant M1 / M2 / M3 of a study config ``cfg`` (a
+    :class:`mudoe.config.StudyConfig`; stored, trained friction constants).
 
     ``inputs_fn(q_set)`` returns the input matrix (n_q, d_q) of the variant
     (:func:`models.friction.model_inputs`); it is None for M1, whose input is the set force.
@@ -351,3 +362,41 @@ def diagnosis_explanations(campaign: Campaign, variants: Sequence[str]) -> tuple
             f"({100 * b['friction not load dependent']:.3g} %) it still rejects. What M3 misses here is the "
             "measuring chain's reading-dependent error, not a mechanical effect of the press.")
     return (Explanation("M3", "input range", text),)
+
+
+# ---------------------------------------------------------------------------- the virtual prototype
+def prototype_campaign(data, sensors: Sequence[str]) -> Campaign:
+    """The campaign of ``[data] source = "prototype"``: :func:`models.prototype.generate_campaign` of
+    ``data`` (a :class:`mudoe.config_sections.DataConfig`: seed, n_series), readings of ``sensors`` (mm, N).
+
+    Raises
+    ------
+    DataFileError
+        A sensor the prototype does not measure.
+    """
+    pc = generate_campaign(seed=data.seed, n_series=data.n_series)
+    idx = [pc.sensors.index(s) if s in pc.sensors else None for s in sensors]
+    if None in idx:
+        raise DataFileError(f"[data] source = \"prototype\" provides sensors {', '.join(pc.sensors)} only; the "
+                            f"model asks for {', '.join(sensors)} (set [model] extra_sensors = false)")
+    z = pc.z[:, :, idx]
+    h = hashlib.sha256(np.ascontiguousarray(z).tobytes() + pc.q_set.tobytes() + pc.q_actual.tobytes())
+    return Campaign(q_set=pc.q_set, q_actual=pc.q_actual, z=z, sensors=tuple(sensors),
+                    series=tuple(f"series_{i + 1}" for i in range(pc.n_M)),
+                    source=f"virtual prototype (seed {data.seed}, {data.n_series} series)", sha256=h.hexdigest(),
+                    z_raw=pc.z_raw[:, :, idx], seed=pc.seed, config=pc.config)
+
+
+def check_prototype_data(data, error) -> None:
+    """The [data] keys that do not apply to the virtual prototype (``error(section, key, msg)``)."""
+    if data.force_correction:
+        raise error("data", "force_correction", "the prototype's readings are already corrected; "
+                    "force_correction applies to CSV data")
+
+
+#: the press as generic study code sees it (:mod:`mudoe.registry`)
+PRESS = BuiltinModel(
+    name="press", variants=FRICTION_VARIANTS, scenarios=PRESS_SCENARIO_NAMES, scenario_rows=press_scenario_rows,
+    data_directory="../data/press_campaign", build=press_variant, explanations=diagnosis_explanations,
+    prototype=VirtualPrototype(campaign=prototype_campaign, check=check_prototype_data, set_points=len(Q_PAPER),
+                               seed=CAMPAIGN_SEED, n_series=6))
