@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from .contract import Model, ModelError
-from .dynamic import DynamicModel, time_label
+from .dynamic import DynamicModel, register_collocation, time_label
 from .errors import StateSolveError
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
@@ -325,3 +325,6 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
     key = (t.tobytes(), mesh, None if outputs is None else tuple((str(k), float(v)) for k, v in outputs))
     return dynamic.cache.get_or_make("collocated", key, lambda: CollocatedModel(dynamic, t, mesh, outputs),
                                      maxsize=COLLOCATED_CACHE_SIZE)
+
+
+register_collocation(collocate)

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import StateSolveError
-from .state import batched_function
+from .batched import batched_function
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states"]
 
