@@ -113,6 +113,12 @@ class TrajectoryNumerics:
         self._maps = {}
 
     # ------------------------------------------------------------------ states
+    def _elements(self, Y: np.ndarray, n_x: int) -> tuple:
+        """(W, XS) of the trajectories Y (n, n_y): every element's unknowns (n, N, n_x d) and its start
+        (n, N, n_x), the previous element's end (x(0) for the first)."""
+        W = Y[:, n_x:].reshape(Y.shape[0], self.N, n_x * self.d)
+        return W, np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+
     def _controls(self, inputs: np.ndarray) -> np.ndarray:
         """U of every experiment and element, shape (n_q, N, n_u d)."""
         return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
@@ -188,8 +194,7 @@ class TrajectoryNumerics:
         Y[:, :n_x] = x0                                   # x(0) - x0(p, u(0)) = 0 exactly
         prev = np.inf
         for _ in range(8):
-            W = Y[:, n_x:].reshape(n, N, n_x * d)
-            XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+            W, XS = self._elements(Y, n_x)
             R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
                                      [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
             norm = float(np.max(np.abs(R)))
@@ -292,8 +297,7 @@ class TrajectoryNumerics:
         n, d, N, n_p = inputs.shape[0], self.d, self.N, p.shape[-1]
         _, x0p = _mapped_call(self._maps, self.init, n, [p, inputs])
         n_x = x0p.shape[1]
-        W = Y[:, n_x:].reshape(n, N, n_x * d)
-        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)      # element starts
+        W, XS = self._elements(Y, n_x)
         U = self._controls(inputs)
         m = n * N
         RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
@@ -320,8 +324,7 @@ class TrajectoryNumerics:
         n, d, N, n_p = inputs.shape[0], self.d, self.N, yp.shape[2]
         p = _params(p, n)
         n_x = Rx.shape[3]
-        W = Y[:, n_x:].reshape(n, N, n_x * d)
-        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+        W, XS = self._elements(Y, n_x)
         U = self._controls(inputs)
         m = n * N
         Vp = yp[:, n_x:].reshape(n, N, n_x * d, n_p)
