@@ -33,6 +33,7 @@ import numpy as np
 from .contract import Model, ModelError
 from .dynamic import DynamicModel, register_collocation, time_label
 from .errors import StateSolveError
+from .trajectory import trajectory_numerics
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
 
@@ -206,8 +207,7 @@ class CollocatedModel(Model):
         element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        from .trajectory import trajectory_numerics      # an ODE: all experiments at once, element by element
-        traj = trajectory_numerics(self)
+        traj = trajectory_numerics(self)      # an ODE: all experiments at once, element by element
         if traj is not None:
             return traj.outputs(p, inputs)
         return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])

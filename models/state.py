@@ -23,6 +23,7 @@ from .batched import BatchedFunction, batched_function
 from .cache import Cache
 from .errors import StateSolveError
 from .jit_cache import JitCache, JitCompileError, JitStats
+from .trajectory import trajectory_numerics
 from .vectorised import VectorisedSX, vectorisable
 
 __all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
@@ -532,8 +533,7 @@ def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
     p = np.asarray(p, float).ravel()
     if not model.n_y:
         return np.zeros((inputs.shape[0], 0))
-    from .trajectory import trajectory_numerics       # a collocated ODE: element after element, all inputs at once
-    traj = trajectory_numerics(model)
+    traj = trajectory_numerics(model)       # a collocated ODE: element after element, all inputs at once
     if traj is not None:
         try:
             return traj.states(p, inputs, Y0)
