@@ -32,7 +32,7 @@ from .bnb import BnBSettings, branch_and_bound
 from .constraints import DesignConstraints, make_constraints
 from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
                        screening_values, validate_information)
-from .design_tables import design_frame, design_html
+from .design_tables import design_frame, design_html, table_frame
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
@@ -467,6 +467,13 @@ class DesignTable:
 
     kind: str
     rows: tuple
+
+    def to_frame(self):
+        """A pandas DataFrame, one row per combination (see :func:`oed.design_tables.table_frame`)."""
+        return table_frame(self)
+
+    def _repr_html_(self) -> str:
+        return self.to_frame().to_html(float_format=lambda v: f"{v:.4e}")
 
     def to_text(self) -> str:
         """Fixed-width text table (A, det, log det, E, flag)."""

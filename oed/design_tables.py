@@ -1,4 +1,5 @@
-r"""Tables of a sensor design for pandas and Jupyter: :meth:`oed.DesignResult.to_frame` and ``_repr_html_``.
+r"""Tables of a sensor design for pandas and Jupyter: :meth:`oed.DesignResult.to_frame` and ``_repr_html_``,
+:meth:`oed.DesignTable.to_frame`.
 
 One row per candidate sensor k: whether it is chosen, its cost (when the design had a budget), whether
 it was forced in or out, and its information share in the chosen design
@@ -14,7 +15,7 @@ import html
 
 import numpy as np
 
-__all__ = ["design_frame", "design_html"]
+__all__ = ["design_frame", "design_html", "table_frame"]
 
 
 def design_frame(res):
@@ -54,3 +55,19 @@ def design_html(res) -> str:
     if extra:
         parts.append("<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in extra) + "</ul>")
     return "\n".join(parts)
+
+
+def table_frame(table):
+    """The pandas DataFrame of a :class:`oed.DesignTable`: one row per combination (in the table's order),
+    indexed by its mask, with the sensors (joined by ", "), A, det, log det, E, flag and reason; the
+    covariance kind in ``.attrs``."""
+    import pandas as pd
+    df = pd.DataFrame({"sensors": [", ".join(r.sensors) for r in table.rows],
+                       "A": np.array([r.A for r in table.rows], dtype=float),
+                       "det": np.array([r.det for r in table.rows], dtype=float),
+                       "logdet": np.array([r.logdet for r in table.rows], dtype=float),
+                       "E": np.array([r.E for r in table.rows], dtype=float),
+                       "flag": [r.flag for r in table.rows], "reason": [r.reason for r in table.rows]},
+                      index=pd.Index([r.mask for r in table.rows], name="combination"))
+    df.attrs["kind"] = table.kind
+    return df

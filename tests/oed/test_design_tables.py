@@ -1,7 +1,8 @@
-"""DesignResult.to_frame / _repr_html_ (issue 21 item 6): one row per candidate sensor, the summary as HTML."""
+"""DesignResult.to_frame / _repr_html_ (issue 21 item 6): one row per candidate sensor, the summary as HTML;
+DesignTable.to_frame: one row per combination."""
 import numpy as np
 
-from oed import select_sensors_from_information
+from oed import design_table, select_sensors_from_information
 
 NAMES = ("u1", "u2", "F_top", "F_base", "T<x>", "v")
 
@@ -58,3 +59,15 @@ def test_no_design_found_leaves_the_share_empty():
     df = res.to_frame()
     assert not df["selected"].any() and df["information_share"].isna().all()
     assert "infeasible" in res._repr_html_()
+
+
+def test_table_frame_holds_every_row():
+    table = design_table(_information(n=5), sensor_names=NAMES[:5], min_sensors=3)
+    df = table.to_frame()
+    assert list(df.index) == [r.mask for r in table.rows] and df.attrs["kind"] == table.kind
+    for col in ("A", "det", "logdet", "E"):
+        assert np.array_equal(df[col].to_numpy(), [getattr(r, col) for r in table.rows])
+    assert list(df["sensors"]) == [", ".join(r.sensors) for r in table.rows]
+    assert list(df["flag"]) == [r.flag for r in table.rows]
+    page = table._repr_html_()
+    assert all(f"<th>{r.mask}</th>" in page for r in table.rows) and "T&lt;x&gt;" in page
