@@ -31,8 +31,9 @@ import casadi as ca
 import numpy as np
 
 from .contract import Model, ModelError
-from .dynamic import DynamicModel, time_label
+from .dynamic import DynamicModel, register_collocation, time_label
 from .errors import StateSolveError
+from .trajectory import trajectory_numerics
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
 
@@ -179,13 +180,12 @@ class CollocatedModel(Model):
         N, n_x = self.mesh.n_elements, dyn.n_x
         W = ca.reshape(y, n_x + dyn.n_z, 1 + N * d)            # one column per point, the initial point first
         X, Z = W[:n_x, :], W[n_x:, :]
-        u0 = dyn.u_at(q, 0.0, 0.5 * b[1])
+        u0 = self.initial_input(q)
         C = ca.DM(self.C[:, 1:])
         # element k holds the columns k d .. k d + d (its start is the previous element's end)
         XP = ca.horzcat(*[ca.mtimes(X[:, k * d:k * d + d + 1], C) for k in range(N)])
         hk = np.repeat(np.diff(b), d)
-        U = ca.horzcat(*[dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
-                         for k in range(N) for r in range(1, d + 1)])
+        U = ca.horzcat(*self.point_inputs(q))
         n = N * d
         F = dyn.rhs_fun.map(n)(X[:, 1:], Z[:, 1:], ca.repmat(p, 1, n), U)
         G = dyn.alg_fun.map(n)(X[:, 1:], Z[:, 1:], ca.repmat(p, 1, n), U)
@@ -207,29 +207,40 @@ class CollocatedModel(Model):
         element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        from .trajectory import trajectory_numerics      # an ODE: all experiments at once, element by element
-        traj = trajectory_numerics(self)
+        traj = trajectory_numerics(self)      # an ODE: all experiments at once, element by element
         if traj is not None:
             return traj.outputs(p, inputs)
         return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])
 
     # ------------------------------------------------------------------ state guess
-    def _element_functions(self):
+    def element_symbols(self) -> tuple:
+        """SX symbols (V, xs, p, U, h) of one element's equations: the unknowns V = (x_r, z_r), r = 1..d,
+        the element's start x_start, the parameters, u at the d points and the element's length."""
+        dyn, d = self.dynamic, self.mesh.degree
+        return (ca.SX.sym("V", (dyn.n_x + dyn.n_z) * d), ca.SX.sym("xs", dyn.n_x), ca.SX.sym("p", dyn.n_p),
+                ca.SX.sym("U", dyn.n_u * d), ca.SX.sym("h"))
+
+    def element_residual(self, V, xs, p, U, hk):
+        r"""The collocation equations of one element (module docstring), r = 1..d:
+        :math:`\sum_j C_{jr} x_j - h f(x_r, z_r, p, u_r)` and :math:`g(x_r, z_r, p, u_r)`, stacked point
+        after point, as an expression of (V, xs, p, U, h) (see :meth:`element_symbols`)."""
+        dyn, d = self.dynamic, self.mesh.degree
+        n_w = dyn.n_x + dyn.n_z
+        X = [xs] + [V[(r - 1) * n_w:(r - 1) * n_w + dyn.n_x] for r in range(1, d + 1)]
+        res = []
+        for r in range(1, d + 1):
+            z, u = V[(r - 1) * n_w + dyn.n_x:r * n_w], U[(r - 1) * dyn.n_u:r * dyn.n_u]
+            res += [sum(self.C[j, r] * X[j] for j in range(d + 1)) - hk * dyn.rhs_fun(X[r], z, p, u),
+                    dyn.alg_fun(X[r], z, p, u)]
+        return ca.vertcat(*res)
+
+    def element_functions(self):
         """(rootfinder, residual) of one element: unknowns V = (x_r, z_r), r = 1..d; parameters
-        (x_start, p, U = u at the d points, h)."""
+        (x_start, p, U = u at the d points, h); Newton to max |R| <= 1e-13 in at most 60 iterations."""
         if self._element_solver is None:
-            dyn, d = self.dynamic, self.mesh.degree
-            n_w = dyn.n_x + dyn.n_z
-            V, xs = ca.SX.sym("V", n_w * d), ca.SX.sym("xs", dyn.n_x)
-            p, U, hk = ca.SX.sym("p", dyn.n_p), ca.SX.sym("U", dyn.n_u * d), ca.SX.sym("h")
-            X = [xs] + [V[(r - 1) * n_w:(r - 1) * n_w + dyn.n_x] for r in range(1, d + 1)]
-            res = []
-            for r in range(1, d + 1):
-                z, u = V[(r - 1) * n_w + dyn.n_x:r * n_w], U[(r - 1) * dyn.n_u:r * dyn.n_u]
-                res += [sum(self.C[j, r] * X[j] for j in range(d + 1)) - hk * dyn.rhs_fun(X[r], z, p, u),
-                        dyn.alg_fun(X[r], z, p, u)]
+            V, xs, p, U, hk = self.element_symbols()
             par = ca.vertcat(xs, p, U, hk)
-            R = ca.Function("R", [V, par], [ca.vertcat(*res)])
+            R = ca.Function("R", [V, par], [self.element_residual(V, xs, p, U, hk)])
             rf = ca.rootfinder("element", "newton", R, {"error_on_fail": False, "abstol": 1e-13,
                                                          "max_iter": 60})
             self._element_solver = (rf, R)
@@ -244,31 +255,44 @@ class CollocatedModel(Model):
                                                        [dyn.alg_fun(x0, z, p, u0)]), {"error_on_fail": False})
         return np.asarray(rf(np.ones(dyn.n_z), ca.DM(0, 1))).ravel()
 
-    def _march_functions(self):
+    def march_functions(self):
         """(march, residuals, Umap): march(w_0, P) -> (W_end, V) solves the elements one after the other
         (``mapaccum`` of one element's Newton solve; column k of P is (p, U_k, h_k)); residuals(V, (x_start,
         P)) are the elements' collocation residuals; U = Umap q the inputs at every point (linear in q)."""
         if self._march is None:
             dyn, d, N = self.dynamic, self.mesh.degree, self.mesh.n_elements
-            b = np.asarray(self.mesh.boundaries)
-            rf, R = self._element_functions()
+            rf, R = self.element_functions()
             n_w = dyn.n_x + dyn.n_z
             ws, par = ca.SX.sym("ws", n_w), ca.SX.sym("par", dyn.n_p + dyn.n_u * d + 1)
             V = rf(ca.repmat(ws, d, 1), ca.vertcat(ws[:dyn.n_x], par))
             march = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
-            q = ca.SX.sym("q", dyn.n_q_dim)
-            U = ca.vertcat(*[dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
-                             for k in range(N) for r in range(1, d + 1)])
-            Umap = np.asarray(ca.evalf(ca.jacobian(U, q))) if dyn.n_q_dim else np.zeros((U.size1(), 0))
-            self._march = (march, R.map(N), Umap)
+            self._march = (march, R.map(N), self.point_input_map())
         return self._march
+
+    # ------------------------------------------------------------------ inputs at the points
+    def initial_input(self, q):
+        """u(0) from the input row q (an expression or array): the value from time 0 on."""
+        return self.dynamic.u_at(q, 0.0, 0.5 * np.asarray(self.mesh.boundaries)[1])
+
+    def point_inputs(self, q) -> list:
+        """u(t_kr) from the input row q at every collocation point (element k, r = 1..d), element after
+        element; a control's jump at an element boundary takes the element's own side."""
+        dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
+        return [dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+                for k in range(N) for r in range(1, d + 1)]
+
+    def point_input_map(self) -> np.ndarray:
+        """Umap (N d n_u, d_q): the inputs at every point, stacked, are Umap q (linear in the input row)."""
+        q = ca.SX.sym("q", self.dynamic.n_q_dim)
+        U = ca.vertcat(*self.point_inputs(q))
+        return np.asarray(ca.evalf(ca.jacobian(U, q))) if self.dynamic.n_q_dim else np.zeros((U.size1(), 0))
 
     def _integrate(self, p, q) -> np.ndarray:
         """The collocation solution at (p, q), element by element (Newton on each element)."""
         dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
         p, q = np.asarray(p, float).ravel(), np.asarray(q, float).ravel()
-        march, residuals, Umap = self._march_functions()
-        u0 = dyn.u_at(q, 0.0, 0.5 * b[1])
+        march, residuals, Umap = self.march_functions()
+        u0 = self.initial_input(q)
         x0 = np.asarray(dyn.x0_fun(p, u0)).ravel()
         w0 = np.r_[x0, self._initial_algebraic(x0, p, u0)]
         P = np.vstack([np.tile(p[:, None], (1, N)), (Umap @ q).reshape(N, -1).T, np.diff(b)[None, :]])
@@ -325,3 +349,6 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
     key = (t.tobytes(), mesh, None if outputs is None else tuple((str(k), float(v)) for k, v in outputs))
     return dynamic.cache.get_or_make("collocated", key, lambda: CollocatedModel(dynamic, t, mesh, outputs),
                                      maxsize=COLLOCATED_CACHE_SIZE)
+
+
+register_collocation(collocate)

@@ -29,26 +29,16 @@ __all__ = ["output_sensitivity_function", "mapped_outputs", "outputs_and_sensiti
 def _march(cm, p, q):
     """(y, max residual per element) of the collocation solution as expressions of p and q."""
     dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
-    b = np.asarray(cm.mesh.boundaries)
     n_x = dyn.n_x
-    V, xs = ca.SX.sym("V", n_x * d), ca.SX.sym("xs", n_x)
-    ps, U, hk = ca.SX.sym("p", dyn.n_p), ca.SX.sym("U", dyn.n_u * d), ca.SX.sym("h")
-    X = [xs] + [V[(r - 1) * n_x:r * n_x] for r in range(1, d + 1)]
-    res = ca.vertcat(*[sum(cm.C[j, r] * X[j] for j in range(d + 1))
-                       - hk * dyn.rhs_fun(X[r], ca.SX(0, 1), ps, U[(r - 1) * dyn.n_u:r * dyn.n_u])
-                       for r in range(1, d + 1)])
-    par = ca.vertcat(xs, ps, U, hk)
-    R = ca.Function("R", [V, par], [res])
-    rf = ca.rootfinder("element", "newton", R, {"error_on_fail": False, "abstol": 1e-13, "max_iter": 60})
+    rf, R = cm.element_functions()
     ws, pk = ca.MX.sym("ws", n_x), ca.MX.sym("par", dyn.n_p + dyn.n_u * d + 1)
     Vk = rf(ca.repmat(ws, d, 1), ca.vertcat(ws, pk))
     rk = R(Vk, ca.vertcat(ws, pk))
     bad = ca.mmax(ca.fabs(rk)) / (1.0 + ca.mmax(ca.fabs(Vk)))
     step = ca.Function("step", [ws, pk], [Vk[-n_x:], Vk, bad]).mapaccum("march", N)
-    U_all = ca.horzcat(*[dyn.u_at(q, b[k] + cm.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
-                         for k in range(N) for r in range(1, d + 1)])
-    P = ca.vertcat(ca.repmat(p, 1, N), ca.reshape(U_all, dyn.n_u * d, N), ca.DM(np.diff(b)).T)
-    x0 = dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.5 * b[1]))
+    U_all = ca.horzcat(*cm.point_inputs(q))
+    P = ca.vertcat(ca.repmat(p, 1, N), ca.reshape(U_all, dyn.n_u * d, N), ca.DM(np.diff(cm.mesh.boundaries)).T)
+    x0 = dyn.x0_fun(p, cm.initial_input(q))
     _, Vs, bad = step(x0, P)
     return ca.vertcat(x0, ca.vec(Vs)), bad
 

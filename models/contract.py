@@ -14,151 +14,37 @@ y = f(p, q) without a state is the special case d_y = 0 (see :meth:`Model.explic
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+import threading
+from contextlib import contextmanager
 from typing import Callable, Iterable, Sequence
 
 import casadi as ca
 import numpy as np
 
 from .cache import Cache
+from .labels import LabelledModel, ModelError, Parameter, as_column, as_parameters, check_names
 
-__all__ = ["Parameter", "LabelledModel", "Model", "ModelError"]
+__all__ = ["Parameter", "LabelledModel", "Model", "ModelError", "pickling_as_recipe", "recipe_reducer"]
 
-
-class ModelError(ValueError):
-    """A model definition is inconsistent (wrong dimension, bad name, bad bound)."""
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """An unknown model parameter.
-
-    Parameters
-    ----------
-    name : str
-        Identifier used in tables and error messages.
-    lower, upper : float
-        Bounds (``-inf``/``inf`` when absent).  The estimator enforces them.
-    scale : float or None
-        Typical magnitude (same unit as the parameter).  Used to scale the
-        optimisation variable; ``None`` means "take it from the start value".
-    unit : str
-        Unit for reports, e.g. ``"N/mm"``.
-    """
-
-    name: str
-    lower: float = -math.inf
-    upper: float = math.inf
-    scale: float | None = None
-    unit: str = ""
-
-    def __post_init__(self):
-        if not isinstance(self.name, str) or not self.name:
-            raise ModelError(f"parameter name must be a non-empty string, got {self.name!r}")
-        lo, up = float(self.lower), float(self.upper)
-        if math.isnan(lo) or math.isnan(up):
-            raise ModelError(f"parameter {self.name!r}: bounds must not be NaN")
-        if lo > up:
-            raise ModelError(f"parameter {self.name!r}: lower bound {lo} exceeds upper bound {up}")
-        if self.scale is not None and not (np.isfinite(self.scale) and self.scale > 0):
-            raise ModelError(f"parameter {self.name!r}: scale must be a positive finite number, got {self.scale!r}")
-        object.__setattr__(self, "lower", lo)
-        object.__setattr__(self, "upper", up)
+#: this thread's reducer of models with an origin while :func:`pickling_as_recipe` is active
+#: (:func:`models.shipping.dumps` installs it; that module builds on this one, so it is handed in)
+_RECIPE = threading.local()
 
 
-def _as_parameters(params) -> tuple[Parameter, ...]:
-    out = []
-    for item in params:
-        if isinstance(item, Parameter):
-            out.append(item)
-        elif isinstance(item, str):
-            out.append(Parameter(item))
-        elif isinstance(item, dict):
-            out.append(Parameter(**item))
-        else:
-            raise ModelError(f"params: each entry must be a name, a dict or a Parameter, got {item!r}")
-    return tuple(out)
+@contextmanager
+def pickling_as_recipe(reduce: Callable):
+    """While active (in this thread), a model with an :attr:`Model.origin` pickles as ``reduce(model)``
+    (a ``__reduce__`` value: :func:`models.shipping.dumps` sends it as its factory's recipe)."""
+    _RECIPE.reduce = reduce
+    try:
+        yield
+    finally:
+        _RECIPE.reduce = None
 
 
-def _check_names(kind: str, names: Sequence[str]) -> tuple[str, ...]:
-    names = tuple(names)
-    for n in names:
-        if not isinstance(n, str) or not n:
-            raise ModelError(f"{kind}: every name must be a non-empty string, got {n!r}")
-    seen = set()
-    for n in names:
-        if n in seen:
-            raise ModelError(f"{kind}: name {n!r} appears twice")
-        seen.add(n)
-    return names
-
-
-def _stacked(items, what: str, symbolic):
-    """The column ``vertcat(items)`` of a list or tuple of scalars: numbers, NumPy scalars or 1x1
-    CasADi expressions of the model's symbolic type (``symbolic``: ca.SX or ca.MX).
-
-    Raises ModelError naming the entry that is not a scalar of that type.
-    """
-    parts = []
-    for k, e in enumerate(items):
-        if isinstance(e, (ca.DM, symbolic)) or (isinstance(e, np.ndarray) and e.dtype.kind in "biuf"):
-            if int(np.prod(e.shape)) != 1:
-                raise ModelError(f"{what}: entry {k} of the returned {type(items).__name__} has shape {tuple(e.shape)}; "
-                                 "a list may hold scalars only (return ca.vertcat(...) for vectors)")
-            if isinstance(e, np.ndarray):
-                e = float(e.reshape(-1)[0])
-            parts.append(e if isinstance(e, symbolic) else symbolic(e))
-        elif isinstance(e, (int, float, np.integer, np.floating)) and not isinstance(e, bool):
-            parts.append(symbolic(float(e)))
-        else:
-            raise ModelError(f"{what}: entry {k} of the returned {type(items).__name__} is a {type(e).__name__}; "
-                             f"expected a scalar ca.{symbolic.__name__} expression or a number")
-    return ca.vertcat(*parts) if parts else symbolic(0, 1)
-
-
-def _as_column(expr, what: str, symbolic):
-    """Turn what a user callable returned into a CasADi column vector (a list of scalars is stacked)."""
-    if isinstance(expr, (list, tuple)):
-        expr = _stacked(expr, what, symbolic)
-    elif isinstance(expr, (int, float, np.ndarray)):
-        expr = symbolic(expr)
-    elif not isinstance(expr, (ca.SX, ca.MX, ca.DM)):
-        raise ModelError(f"{what} must return a CasADi expression, a list of them or an array, got {type(expr).__name__}")
-    if expr.is_empty():
-        return symbolic(0, 1)
-    if expr.size2() != 1:
-        if expr.size1() == 1:
-            expr = expr.T
-        else:
-            raise ModelError(f"{what} must return a vector, got shape {expr.shape}")
-    return expr
-
-
-#: the argument checks shared with :mod:`models.dynamic` (public names of the helpers above)
-as_parameters, check_names, as_column = _as_parameters, _check_names, _as_column
-
-
-class LabelledModel:
-    """The labels every model shares (static :class:`Model`, :class:`models.dynamic.DynamicModel`):
-    ``params`` (Parameter tuple), ``inputs`` (names of one input row) and ``sensors`` (names)."""
-
-    @property
-    def n_p(self) -> int:
-        return len(self.params)
-
-    @property
-    def n_S(self) -> int:
-        return len(self.sensors)
-
-    @property
-    def n_q_dim(self) -> int:
-        """Length d_q of one input row q."""
-        return len(self.inputs)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.params)
+def recipe_reducer() -> Callable | None:
+    """The reducer of :func:`pickling_as_recipe` active in this thread, or None."""
+    return getattr(_RECIPE, "reduce", None)
 
 
 class Model(LabelledModel):
@@ -203,10 +89,10 @@ class Model(LabelledModel):
                  y_guess: Callable | None = None, symbolic: str = "SX", name: str = "model",
                  sensor_units: Sequence[str] | None = None, input_units: Sequence[str] | None = None,
                  description: str = ""):
-        self.params = _as_parameters(params)
-        _check_names("params", [p.name for p in self.params])
-        self.inputs = _check_names("inputs", inputs)
-        self.sensors = _check_names("sensors", sensors)
+        self.params = as_parameters(params)
+        check_names("params", [p.name for p in self.params])
+        self.inputs = check_names("inputs", inputs)
+        self.sensors = check_names("sensors", sensors)
         if not self.params:
             raise ModelError("params: a model needs at least one parameter")
         if not self.sensors:
@@ -232,7 +118,7 @@ class Model(LabelledModel):
         if self.n_y > 0:
             if E is None:
                 raise ModelError(f"E: a model with n_y={self.n_y} states needs a state equation")
-            e_expr = _as_column(E(y, p, q), "E", S)
+            e_expr = as_column(E(y, p, q), "E", S)
             if e_expr.size1() != self.n_y:
                 raise ModelError(f"E returns {e_expr.size1()} equations but n_y = {self.n_y}; "
                                  "the state equation must be square")
@@ -240,7 +126,7 @@ class Model(LabelledModel):
             if E is not None:
                 raise ModelError("E: an explicit model (n_y = 0) has no state equation; pass E=None")
             e_expr = S(0, 1)
-        h_expr = _as_column(h(y, p, q), "h", S)
+        h_expr = as_column(h(y, p, q), "h", S)
         if h_expr.size1() != self.n_S:
             raise ModelError(f"h returns {h_expr.size1()} outputs but {self.n_S} sensors are named "
                              f"({', '.join(self.sensors)})")
@@ -343,9 +229,9 @@ class Model(LabelledModel):
     def __reduce_ex__(self, protocol):
         """Pickled by value; while :func:`models.shipping.dumps` sends models as recipes, a model with an
         :attr:`origin` is its factory and variant plus the metadata changed after building."""
-        from . import shipping
-        if getattr(self, "origin", None) is not None and shipping.by_source():
-            return (shipping.rebuild, (self.origin, {k: self.__dict__[k] for k in shipping.METADATA}))
+        reduce = recipe_reducer()
+        if getattr(self, "origin", None) is not None and reduce is not None:
+            return reduce(self)
         return super().__reduce_ex__(protocol)
 
     def __repr__(self):

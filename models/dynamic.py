@@ -27,9 +27,21 @@ import casadi as ca
 import numpy as np
 
 from .cache import Cache
-from .contract import LabelledModel, ModelError, as_column, as_parameters, check_names
+from .labels import LabelledModel, ModelError, as_column, as_parameters, check_names
 
-__all__ = ["Control", "DynamicModel", "time_label"]
+__all__ = ["Control", "DynamicModel", "time_label", "register_collocation"]
+
+#: the collocation behind :meth:`DynamicModel.collocate` (:func:`models.collocation.collocate`, which
+#: registers itself here when :mod:`models.collocation` is imported; the ``models`` package imports it,
+#: so it is registered before any DynamicModel exists).  Held here so that this module does not import
+#: the collocation, which builds on it.
+_COLLOCATION = []
+
+
+def register_collocation(collocate: Callable) -> None:
+    """Make ``collocate(dynamic, times, mesh=, degree=, max_step=, outputs=)`` the function behind
+    :meth:`DynamicModel.collocate` (called by :mod:`models.collocation` when it is imported)."""
+    _COLLOCATION[:] = [collocate]
 
 
 def time_label(t: float) -> str:
@@ -265,8 +277,10 @@ class DynamicModel(LabelledModel):
         """The static :class:`models.Model` of this model sampled at ``times`` (Radau IIA collocation).
 
         See :func:`models.collocation.collocate`."""
-        from .collocation import collocate
-        return collocate(self, times, mesh=mesh, degree=degree, max_step=max_step, outputs=outputs)
+        if not _COLLOCATION:
+            raise RuntimeError("DynamicModel.collocate: models.collocation is not imported; import models "
+                               "(the package imports it) or models.collocation first")
+        return _COLLOCATION[0](self, times, mesh=mesh, degree=degree, max_step=max_step, outputs=outputs)
 
     def __repr__(self):
         return (f"DynamicModel({self.name!r}, params={list(self.param_names)}, states={list(self.states)}, "

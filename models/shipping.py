@@ -20,11 +20,9 @@ from __future__ import annotations
 
 import importlib
 import pickle
-import threading
-from contextlib import contextmanager
 from dataclasses import dataclass
 
-from .contract import Model, ModelError
+from .contract import Model, ModelError, pickling_as_recipe, recipe_reducer
 
 __all__ = ["ModelSource", "ShippingError", "dumps", "loads", "rebuild", "by_source"]
 
@@ -73,21 +71,15 @@ class ModelSource:
         return m
 
 
-_MODE = threading.local()
-
-
 def by_source() -> bool:
-    """True while :func:`dumps` sends models with an origin as their recipe (read by ``Model.__reduce_ex__``)."""
-    return bool(getattr(_MODE, "by_source", False))
+    """True while :func:`dumps` sends models with an origin as their recipe (``Model.__reduce_ex__`` then
+    returns :func:`_as_recipe`)."""
+    return recipe_reducer() is not None
 
 
-@contextmanager
-def _sending_by_source():
-    _MODE.by_source = True
-    try:
-        yield
-    finally:
-        _MODE.by_source = False
+def _as_recipe(model):
+    """The ``__reduce__`` value of a model sent as its recipe: :func:`rebuild` of its origin and metadata."""
+    return (rebuild, (model.origin, {k: model.__dict__[k] for k in METADATA}))
 
 
 def rebuild(source: ModelSource, metadata: dict):
@@ -127,7 +119,7 @@ def dumps(obj) -> bytes:
     except Exception as exc:  # noqa: BLE001 -- a __reduce__ may raise anything (CasADi raises Exception)
         first = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
     try:
-        with _sending_by_source():
+        with pickling_as_recipe(_as_recipe):
             return _pickled(obj)
     except Exception:  # noqa: BLE001 -- as above; the first error is the one reported
         pass

@@ -10,7 +10,6 @@ import atexit
 import os
 import shutil
 import tempfile
-import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -20,9 +19,11 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
+from .batched import BatchedFunction, batched_function
 from .cache import Cache
 from .errors import StateSolveError
 from .jit_cache import JitCache, JitCompileError, JitStats
+from .trajectory import trajectory_numerics
 from .vectorised import VectorisedSX, vectorisable
 
 __all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
@@ -196,7 +197,7 @@ class Numerics:
             f = self._functions.put("point", key, _Point(base, self.dense))
         return f
 
-    def batched(self, name: str, n: int) -> "_Batched":
+    def batched(self, name: str, n: int) -> "BatchedFunction":
         """Evaluator of ``getattr(self, name)`` at n points at once, NumPy in, NumPy out.
 
         ``batched(name, n)(a_1, ..., a_k)`` takes arrays of shape (n, d_i) (row j = the i-th
@@ -218,7 +219,7 @@ class Numerics:
         key = (name, min(n, BATCH_CHUNK), base is not getattr(self, name))
         f = self._functions.get("batched", key)
         if f is None:
-            f = self._functions.put("batched", key, _Batched(base, min(n, BATCH_CHUNK)))
+            f = self._functions.put("batched", key, BatchedFunction(base, min(n, BATCH_CHUNK)))
         return f if n <= BATCH_CHUNK else _Chunked(f, n)
 
     def factor(self, Ey_dm):
@@ -297,10 +298,10 @@ BATCH_CHUNK = 16384
 
 
 class _Chunked:
-    """A :class:`_Batched` evaluator of ``BATCH_CHUNK`` points applied to n > BATCH_CHUNK points
-    chunk by chunk (the last chunk padded with its last point), same call and results."""
+    """A :class:`models.batched.BatchedFunction` evaluator of ``BATCH_CHUNK`` points applied to
+    n > BATCH_CHUNK points chunk by chunk (the last chunk padded with its last point), same call and results."""
 
-    def __init__(self, f: "_Batched", n: int):
+    def __init__(self, f: "BatchedFunction", n: int):
         self._f, self.n = f, n
 
     def __call__(self, *args) -> list:
@@ -326,7 +327,7 @@ VECTORISE_MIN = 512
 
 class _VectorisedBatched:
     """An SX function of column-vector arguments replayed by NumPy at n points, with the call and
-    the dense (n, r, c) results of :class:`_Batched` (see :meth:`Numerics.batched`)."""
+    the dense (n, r, c) results of :class:`models.batched.BatchedFunction` (see :meth:`Numerics.batched`)."""
 
     def __init__(self, f: ca.Function):
         self._v = VectorisedSX(f)
@@ -368,67 +369,14 @@ class _VectorisedBatched:
 
 
 class _AtN:
-    """A :class:`_VectorisedBatched` evaluator bound to n points (the call of :class:`_Batched`)."""
+    """A :class:`_VectorisedBatched` evaluator bound to n points (the call of
+    :class:`models.batched.BatchedFunction`)."""
 
     def __init__(self, v: _VectorisedBatched, n: int):
         self._v, self.n = v, n
 
     def __call__(self, *args) -> list:
         return self._v(self.n, *args)
-
-
-class _Batched:
-    """A CasADi function mapped over n points, evaluated through a FunctionBuffer.
-
-    CasADi stores matrices column-major, so the (d, n) argument of the mapped function is
-    the C-contiguous (n, d) NumPy array and the (r, c n) output is the C-contiguous array
-    (n, c, r); the outputs are densified so that every entry has its slot.
-    """
-
-    def __init__(self, f: ca.Function, n: int):
-        fm = f.map(n)
-        sym = fm.mx_in()
-        self._f = ca.Function(f"{f.name()}_dense_{n}", sym, [ca.densify(o) for o in fm.call(sym)])
-        self.n = n
-        self._in = [(f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
-        self._out = [(f.size1_out(i), f.size2_out(i)) for i in range(f.n_out())]
-        self._local = threading.local()          # this thread's FunctionBuffer (20-50 us to create)
-        for r, c in self._in:
-            if c != 1:
-                raise ValueError(f"batched evaluation needs column-vector inputs, got ({r}, {c})")
-
-    def __call__(self, *args) -> list:
-        n = self.n
-        if len(args) != len(self._in):
-            raise ValueError(f"expected {len(self._in)} arguments, got {len(args)}")
-        got = getattr(self._local, "buffer", None)
-        if got is None:
-            got = self._local.buffer = self._f.buffer()
-        buf, ev = got
-        keep = []
-        for i, (a, (r, _)) in enumerate(zip(args, self._in)):
-            a = np.asarray(a, float)
-            if a.ndim == 1 or a.shape[0] != n:
-                a = np.repeat(a.reshape(1, r), n, axis=0)
-            a = np.ascontiguousarray(a, dtype=float)
-            if a.shape != (n, r):
-                raise ValueError(f"argument {i}: expected shape ({n}, {r}), got {a.shape}")
-            keep.append(a)
-            buf.set_arg(i, memoryview(a))
-        outs = [np.empty((n, c, r)) for r, c in self._out]
-        for i, o in enumerate(outs):
-            buf.set_res(i, memoryview(o))
-        ev()
-        if buf.ret() != 0:
-            raise StateSolveError(f"evaluation of {self._f.name()} failed (CasADi return code {buf.ret()})")
-        return [o.transpose(0, 2, 1) for o in outs]
-
-
-def batched_function(f: ca.Function, n: int) -> "_Batched":
-    """Evaluator of a CasADi function of column vectors at n points at once through a FunctionBuffer:
-    ``batched_function(f, n)(a_1, ..., a_k)`` takes (n, d_i) arrays (or (d_i,) arrays shared by all
-    points) and returns one dense (n, r, c) array per output (see :meth:`Numerics.batched`)."""
-    return _Batched(f, n)
 
 
 def numerics(model) -> Numerics:
@@ -585,8 +533,7 @@ def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
     p = np.asarray(p, float).ravel()
     if not model.n_y:
         return np.zeros((inputs.shape[0], 0))
-    from .trajectory import trajectory_numerics       # a collocated ODE: element after element, all inputs at once
-    traj = trajectory_numerics(model)
+    traj = trajectory_numerics(model)       # a collocated ODE: element after element, all inputs at once
     if traj is not None:
         try:
             return traj.states(p, inputs, Y0)

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import StateSolveError
-from .state import batched_function
+from .batched import batched_function
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states"]
 
@@ -40,7 +40,7 @@ __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpola
 _LOCAL = threading.local()
 
 #: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
-#: :meth:`models.collocation.CollocatedModel._element_functions` allows the same)
+#: :meth:`models.collocation.CollocatedModel.element_functions` allows the same)
 _MAX_ITER = 60
 #: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
 #: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
@@ -78,23 +78,18 @@ class TrajectoryNumerics:
     def __init__(self, cm):
         dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
         self.model, self.d, self.N = cm, d, N
-        n_x, n_p, n_u = dyn.n_x, dyn.n_p, dyn.n_u
+        n_x, n_p = dyn.n_x, dyn.n_p
         b = np.asarray(cm.mesh.boundaries)
-        V, xs = ca.SX.sym("V", n_x * d), ca.SX.sym("xs", n_x)
-        p, U, hk = ca.SX.sym("p", n_p), ca.SX.sym("U", n_u * d), ca.SX.sym("h")
-        X = [xs] + [V[(r - 1) * n_x:r * n_x] for r in range(1, d + 1)]
-        R = ca.vertcat(*[sum(cm.C[j, r] * X[j] for j in range(d + 1))
-                         - hk * dyn.rhs_fun(X[r], ca.SX(0, 1), p, U[(r - 1) * n_u:r * n_u]) for r in range(1, d + 1)])
+        V, xs, p, U, hk = cm.element_symbols()
+        R = cm.element_residual(V, xs, p, U, hk)
         RV = ca.jacobian(R, V)
         self.newton = ca.Function("traj_newton", [V, xs, p, U, hk], [R, RV])
         self.blocks = ca.Function("traj_blocks", [V, xs, p, U, hk], [RV, ca.jacobian(R, xs), ca.jacobian(R, p)])
         self.residual_blocks = ca.Function("traj_residual_blocks", [V, xs, p, U, hk], [R, RV, ca.jacobian(R, xs)])
         q = ca.SX.sym("q", dyn.n_q_dim)
-        x0 = dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.5 * b[1]))
+        x0 = dyn.x0_fun(p, cm.initial_input(q))
         self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
-        Uq = ca.vertcat(*[dyn.u_at(q, b[k] + cm.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
-                          for k in range(N) for r in range(1, d + 1)])
-        self.Umap = np.asarray(ca.evalf(ca.jacobian(Uq, q))) if dyn.n_q_dim else np.zeros((Uq.size1(), 0))
+        self.Umap = cm.point_input_map()
         y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
         h = cm.h_fun(y, p, q)
         G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
@@ -118,6 +113,12 @@ class TrajectoryNumerics:
         self._maps = {}
 
     # ------------------------------------------------------------------ states
+    def _elements(self, Y: np.ndarray, n_x: int) -> tuple:
+        """(W, XS) of the trajectories Y (n, n_y): every element's unknowns (n, N, n_x d) and its start
+        (n, N, n_x), the previous element's end (x(0) for the first)."""
+        W = Y[:, n_x:].reshape(Y.shape[0], self.N, n_x * self.d)
+        return W, np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+
     def _controls(self, inputs: np.ndarray) -> np.ndarray:
         """U of every experiment and element, shape (n_q, N, n_u d)."""
         return (inputs @ self.Umap.T).reshape(inputs.shape[0], self.N, -1)
@@ -193,8 +194,7 @@ class TrajectoryNumerics:
         Y[:, :n_x] = x0                                   # x(0) - x0(p, u(0)) = 0 exactly
         prev = np.inf
         for _ in range(8):
-            W = Y[:, n_x:].reshape(n, N, n_x * d)
-            XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+            W, XS = self._elements(Y, n_x)
             R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
                                      [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
             norm = float(np.max(np.abs(R)))
@@ -213,12 +213,12 @@ class TrajectoryNumerics:
     def _march(self, p, inputs, x0, U):
         """The same element-by-element Newton solves in one CasADi call for all experiments: the
         model's ``mapaccum`` of CasADi's rootfinder over the elements
-        (:meth:`models.collocation.CollocatedModel._march_functions`), mapped over the experiments;
+        (:meth:`models.collocation.CollocatedModel.march_functions`), mapped over the experiments;
         then every element's residual checked as in :meth:`_element`."""
         n, d, N, n_x = inputs.shape[0], self.d, self.N, x0.shape[1]
         fm = self._maps.get(("march", n))
         if fm is None:
-            march = self.model._march_functions()[0]
+            march = self.model.march_functions()[0]
             fm = self._maps[("march", n)] = march.map(n)
         P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
                            axis=2)                                   # (n, N, n_par): column k of experiment j
@@ -239,7 +239,7 @@ class TrajectoryNumerics:
     def _element(self, xs, p, U, hk, inputs, k):
         """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
         stops when max |R| <= 1e-13 or its step is below 1e-12 (the tests of CasADi's rootfinder in
-        :meth:`models.collocation.CollocatedModel._element_functions`), and is then left as it is."""
+        :meth:`models.collocation.CollocatedModel.element_functions`), and is then left as it is."""
         n = xs.shape[0]
         V = np.tile(xs, (1, self.d))
         active = np.ones(n, bool)
@@ -297,8 +297,7 @@ class TrajectoryNumerics:
         n, d, N, n_p = inputs.shape[0], self.d, self.N, p.shape[-1]
         _, x0p = _mapped_call(self._maps, self.init, n, [p, inputs])
         n_x = x0p.shape[1]
-        W = Y[:, n_x:].reshape(n, N, n_x * d)
-        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)      # element starts
+        W, XS = self._elements(Y, n_x)
         U = self._controls(inputs)
         m = n * N
         RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
@@ -325,8 +324,7 @@ class TrajectoryNumerics:
         n, d, N, n_p = inputs.shape[0], self.d, self.N, yp.shape[2]
         p = _params(p, n)
         n_x = Rx.shape[3]
-        W = Y[:, n_x:].reshape(n, N, n_x * d)
-        XS = np.concatenate([Y[:, None, :n_x], W[:, :-1, -n_x:]], axis=1)
+        W, XS = self._elements(Y, n_x)
         U = self._controls(inputs)
         m = n * N
         Vp = yp[:, n_x:].reshape(n, N, n_x * d, n_p)

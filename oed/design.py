@@ -32,6 +32,7 @@ from .bnb import BnBSettings, branch_and_bound
 from .constraints import DesignConstraints, make_constraints
 from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
                        screening_values, validate_information)
+from .design_tables import design_frame, design_html, table_frame
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
@@ -119,6 +120,15 @@ class DesignResult:
         Reason text when the chosen design is near-singular, else ''.
     notes : tuple of str
         Fallbacks and modelling assumptions.
+    candidates : tuple of str
+        Names of all candidate sensors (the order of ``weights``).
+    costs : tuple of float or None
+        Cost per candidate when the design had a budget.
+    include, exclude : tuple of int
+        Candidates forced in / out.
+    information_share : tuple of float
+        tr(M^-1 F_k) / n_p per candidate, M the chosen design's Gauss-Newton information
+        (dimensionless; the chosen sensors' shares add up to 1); empty when no design was found.
     """
 
     sensors: tuple
@@ -137,6 +147,19 @@ class DesignResult:
     wall_time: float
     near_singular: str = ""
     notes: tuple = field(default_factory=tuple)
+    candidates: tuple = ()
+    costs: tuple | None = None
+    include: tuple = ()
+    exclude: tuple = ()
+    information_share: tuple = ()
+
+    def to_frame(self):
+        """A pandas DataFrame with one row per candidate sensor: selected, cost (with a budget), fixed
+        (forced ``in``/``out``), information share (see :mod:`oed.design_tables`); scalars in ``.attrs``."""
+        return design_frame(self)
+
+    def _repr_html_(self) -> str:
+        return design_html(self)
 
     def summary(self) -> str:
         """Human-readable multi-line summary."""
@@ -409,11 +432,19 @@ def _assemble_result(req: _DesignRequest, out: _MethodOutcome, settings: DesignS
         status = "feasible"
     wt = np.zeros(req.F.shape[0], dtype=bool) if w is None else np.asarray(w, dtype=bool)
     idx = tuple(int(k) for k in np.flatnonzero(wt))
+    share = () if w is None else _information_share(req.F, wt)
     return DesignResult(sensors=tuple(req.names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
                         criterion=crit.value, kind=req.kind.value, value=float(value), det=det,
                         lower_bound=float(lb), gap=gap, proven_optimal=bool(proven), method=out.method,
                         status=status, message=message, wall_time=time.perf_counter() - t0, near_singular=near,
-                        notes=out.notes)
+                        notes=out.notes, candidates=req.names, costs=req.cons.costs, include=req.cons.include,
+                        exclude=req.cons.exclude, information_share=share)
+
+
+def _information_share(F: np.ndarray, w: np.ndarray) -> tuple:
+    """tr(M^{-1} F_k) / n_p of every candidate k, M = sum of the chosen F_k (regular: a found design)."""
+    M = F[w].sum(axis=0)
+    return tuple(float(v) for v in np.trace(np.linalg.solve(M[None], F), axis1=1, axis2=2) / F.shape[1])
 
 
 @dataclass(frozen=True)
@@ -436,6 +467,13 @@ class DesignTable:
 
     kind: str
     rows: tuple
+
+    def to_frame(self):
+        """A pandas DataFrame, one row per combination (see :func:`oed.design_tables.table_frame`)."""
+        return table_frame(self)
+
+    def _repr_html_(self) -> str:
+        return self.to_frame().to_html(float_format=lambda v: f"{v:.4e}")
 
     def to_text(self) -> str:
         """Fixed-width text table (A, det, log det, E, flag)."""

@@ -26,7 +26,8 @@ from identification.fit.dynamic_fit import DiscretisationSettings, controlled_me
 from models.collocation import collocate, pair_name
 from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
-from .inputs import InputDesignResult, RefineSettings, input_information, refine_inputs, select_inputs
+from .static_inputs import (InputDesignResult, RefineSettings, input_information, refine_inputs,
+                            select_static_inputs)
 
 __all__ = ["dynamic_problem", "dynamic_input_information", "select_dynamic_inputs"]
 
@@ -104,9 +105,9 @@ def select_dynamic_inputs(model, p, *, times, candidates, sigma, n_points, senso
     t0 = time.perf_counter()
     cm, sig, err = dynamic_problem(model, p, candidates, times, sigma, discretisation)
     pairs = _pair_sensors(model, cm, sensors)
-    res = select_inputs(cm, p, candidates=candidates, sigma=sig, n_points=n_points, sensors=pairs,
-                        refine=refine, bounds=bounds, refine_settings=refine_settings, **kwargs,
-                        time_limit=max(time_limit - (time.perf_counter() - t0), 0.05 * time_limit))
+    res = select_static_inputs(cm, p, candidates=candidates, sigma=sig, n_points=n_points, sensors=pairs,
+                               refine=refine, bounds=bounds, refine_settings=refine_settings, **kwargs,
+                               time_limit=max(time_limit - (time.perf_counter() - t0), 0.05 * time_limit))
     notes = [f"dynamic model: Radau IIA collocation of degree {cm.mesh.degree} on {cm.mesh.n_elements} elements, "
              f"output error at p within {err:.2g} sigma at every candidate"]
     refined = res.refined

@@ -6,7 +6,7 @@ from bench import dynamic_reference as dr
 from bench.bench_dynamic_doe import GRID, LOWER, NOMINAL, P, UPPER, reactor, scaled_log10_det
 from oed import RefineSettings, refine_inputs, select_inputs
 from oed.dynamic_inputs import dynamic_input_information
-from oed.inputs import _share
+from oed.static_inputs import _share
 
 
 def test_factorial_information_equals_the_odes():

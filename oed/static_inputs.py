@@ -1,0 +1,406 @@
+r"""Which inputs to apply to a static model: exact designs over candidate rows, then a continuous refinement.
+
+The engine behind :func:`oed.inputs.select_inputs` (the front door, which also takes dynamic models).
+
+Exact design (one engine, two front doors): each candidate c is an input row :math:`q_j`
+(with every chosen sensor measured there) or, jointly, an input-sensor pair :math:`(q_j, k)`;
+its information is
+
+.. math::  F_c = n_\text{series}\sum_{k\in c} G_{jk}^TG_{jk}/\sigma_k^2,\qquad
+           G_{jk} = \partial h_k/\partial p\,(y_j(p), p, q_j)\ \ (\text{1/param unit} \times \text{sensor unit}),
+
+and :func:`oed.design.select_sensors_from_information` chooses ``n_points`` candidates
+minimising :math:`\Psi((\sum_c w_cF_c)^{-1})` by the same enumeration / branch-and-bound /
+SCIP routes as the sensor selection.  Planned before measuring, the expected residual at the
+nominal ``p`` is 0, so the second-order term vanishes and the design is Gauss-Newton.
+
+Refinement: the chosen input levels are then moved continuously within bounds to minimise
+the same criterion, by Ipopt with exact CasADi derivatives of the criterion of the
+information matrix built symbolically from the model's sensitivities (implicit models: the
+states and sensitivities as NLP variables tied by E(y, p, q) = 0 and E_y y' + E_p = 0,
+:mod:`oed.input_nlp`).
+The E criterion is stated smoothly as :math:`\max t` s.t. :math:`M - tI = LL^T`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from identification.errors import IdentificationError, StateSolveError
+from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
+from models.sensitivity import sensitivities
+from models.state import solve_states
+from .criteria import Criterion, Kind
+from .design import DesignResult, DesignSettings, select_sensors_from_information
+from .input_nlp import information_nlp
+
+__all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "input_information", "select_static_inputs",
+           "refine_inputs"]
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """Settings of :func:`refine_inputs`.
+
+    Attributes
+    ----------
+    n_starts : int
+        Ipopt starts: the exact design's levels, then random points within the bounds.
+    seed : int
+        Seed of the random starts.
+    ipopt : IpoptSettings
+    """
+
+    n_starts: int = 4
+    seed: int = 0
+    ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
+
+    def __post_init__(self):
+        if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
+            raise ValueError(f"n_starts: expected an integer >= 1, got {self.n_starts!r}")
+
+
+@dataclass(frozen=True)
+class RefinedInputs:
+    """Continuous refinement of the exact design's input levels.
+
+    Attributes
+    ----------
+    inputs : ndarray, shape (n_points, d_q)
+        Refined input rows (read-only), within ``lower``/``upper``.
+    value : float
+        Criterion value of the refined design (D: log det C), same scale as the exact design's.
+    start_values : tuple of float
+        Criterion value reached from each start (``inf`` for a failed start).
+    n_failed : int
+        Starts whose Ipopt run failed (their messages are in ``messages``).
+    messages : tuple of str
+    lower, upper : ndarray, shape (d_q,)
+        The input bounds used.
+    wall_time : float
+    """
+
+    inputs: np.ndarray
+    value: float
+    start_values: tuple
+    n_failed: int
+    messages: tuple
+    lower: np.ndarray
+    upper: np.ndarray
+    wall_time: float
+
+
+@dataclass(frozen=True)
+class InputDesignResult:
+    """An exact input design (and optionally its continuous refinement).
+
+    Attributes
+    ----------
+    indices : tuple of int
+        Chosen candidate rows (joint designs: the row of each chosen pair, repeated per sensor).
+    pairs : tuple of (int, str)
+        Chosen (row, sensor) pairs; without ``sensors="joint"`` every chosen row with every measured sensor.
+    inputs : ndarray, shape (len(indices), d_q)
+        The chosen input rows (read-only).
+    value, lower_bound, gap : float
+        Criterion value (D: log det C), proven lower bound and gap.
+    proven_optimal : bool
+    criterion, method, status : str
+    design : DesignResult
+        The engine's result over the candidates (names ``q<j>`` or ``q<j>:<sensor>``).
+    refined : RefinedInputs or None
+    notes : tuple of str
+    """
+
+    indices: tuple
+    pairs: tuple
+    inputs: np.ndarray
+    value: float
+    lower_bound: float
+    gap: float
+    proven_optimal: bool
+    criterion: str
+    method: str
+    status: str
+    design: DesignResult
+    refined: RefinedInputs | None
+    notes: tuple = ()
+
+    def summary(self) -> str:
+        """Human-readable multi-line summary (exact design next to its refinement)."""
+        lines = [f"input design ({self.criterion}) via {self.method}: status {self.status}"
+                 + (" (proven optimal)" if self.proven_optimal else ""),
+                 f"  rows: {list(self.indices)}  value {self.value:.10g}  lower bound {self.lower_bound:.10g}"]
+        if self.refined is not None:
+            lines.append(f"  refined levels: {np.array2string(self.refined.inputs.ravel(), precision=6)}  value "
+                         f"{self.refined.value:.10g} ({len(self.refined.start_values)} starts, "
+                         f"{self.refined.n_failed} failed)")
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _readonly(a):
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _check_candidates(model, candidates) -> np.ndarray:
+    try:
+        Q = np.asarray(candidates, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"candidates: not numeric ({exc})") from None
+    if Q.ndim == 1 and model.n_q_dim == 1:
+        Q = Q[:, None]
+    if Q.ndim != 2 or Q.shape[0] == 0 or Q.shape[1] != model.n_q_dim:
+        raise ValueError(f"candidates: expected shape (n_candidates, {model.n_q_dim}) (one row per input point), "
+                         f"got {Q.shape}")
+    bad = np.argwhere(~np.isfinite(Q))
+    if bad.size:
+        raise ValueError(f"candidates: non-finite value at row {bad[0][0]}, column {bad[0][1]}; remove the row")
+    _, first, counts = np.unique(Q, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        dup = sorted(int(i) for i in np.flatnonzero(np.all(Q == Q[first[np.argmax(counts > 1)]], axis=1)))
+        raise ValueError(f"candidates: duplicate rows {dup}; list every input point once (use n_series for repeats)")
+    return Q
+
+
+def _check_p(model, p) -> np.ndarray:
+    p = np.asarray(p, dtype=float).ravel()
+    if p.shape != (model.n_p,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"p: expected {model.n_p} finite nominal parameter values, got {p}")
+    out = (p < model.lower) | (p > model.upper)
+    if np.any(out):
+        names = [model.param_names[i] for i in np.flatnonzero(out)]
+        raise ValueError(f"p: nominal parameters {names} lie outside their bounds "
+                         f"[{model.lower[out]}, {model.upper[out]}]")
+    return p
+
+
+def _check_sigma(model, sigma) -> np.ndarray:
+    sig = np.asarray(sigma, dtype=float).ravel()
+    if sig.size == 1:
+        sig = np.full(model.n_S, float(sig[0]))
+    if sig.shape != (model.n_S,) or not np.all(np.isfinite(sig) & (sig > 0)):
+        raise ValueError(f"sigma: expected {model.n_S} positive finite values (one per sensor), got {sigma!r}")
+    return sig
+
+
+def _measured(model, sensors) -> tuple:
+    """(sensor indices measured, joint?) from ``sensors`` (None, 'joint' or names)."""
+    if sensors is None:
+        return tuple(range(model.n_S)), False
+    if isinstance(sensors, str) and sensors == "joint":
+        return tuple(range(model.n_S)), True
+    names = [sensors] if isinstance(sensors, str) else list(sensors)
+    unknown = [s for s in names if s not in model.sensors]
+    if unknown or not names:
+        raise ValueError(f"sensors: expected None, 'joint' or names of {list(model.sensors)}, got {sensors!r}")
+    return tuple(model.sensors.index(s) for s in names), False
+
+
+def input_information(model, p, candidates, sigma, n_series=1) -> np.ndarray:
+    r"""Per-(input, sensor) information :math:`F_{jk} = n_\text{series}G_{jk}^TG_{jk}/\sigma_k^2`.
+
+    Returns
+    -------
+    ndarray, shape (n_candidates, n_S, n_p, n_p)
+    """
+    Q = _check_candidates(model, candidates)
+    p = _check_p(model, p)
+    sig = _check_sigma(model, sigma)
+    if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
+        raise ValueError(f"n_series: expected an integer >= 1, got {n_series!r}")
+    G = sensitivities(model, p, Q, solve_states(model, p, Q)).G           # (n_q, n_S, n_p)
+    return float(n_series) * np.einsum("k,jkp,jkr->jkpr", 1.0 / sig ** 2, G, G)
+
+
+def select_static_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criterion="D", kind="gauss_newton",
+                         costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
+                         refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
+                         settings: DesignSettings = DesignSettings()) -> InputDesignResult:
+    r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs) of a static model
+    (:class:`models.Model`, a collocated dynamic model included), optionally refined: the engine of
+    :func:`oed.inputs.select_inputs`, whose docstring gives the arguments (``times`` and
+    ``discretisation`` are not among them here).
+
+    Raises
+    ------
+    ValueError
+        Bad input (the message names the argument).
+    """
+    t_start = time.perf_counter()
+    Q = _check_candidates(model, candidates)
+    k_idx, joint = _measured(model, sensors)
+    n_cand = Q.shape[0] * (len(k_idx) if joint else 1)
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 1 <= n_points <= n_cand:
+        raise ValueError(f"n_points: expected an integer in 1..{n_cand} (the number of candidate "
+                         f"{'pairs' if joint else 'rows'}), got {n_points!r}")
+    kind_e = Kind.parse(kind)
+    Fjk = input_information(model, p, Q, sigma, n_series)
+    if joint:
+        F = Fjk[:, list(k_idx)].reshape(-1, model.n_p, model.n_p)
+        names = [f"q{j}:{model.sensors[k]}" for j in range(Q.shape[0]) for k in k_idx]
+        pair_of = [(j, model.sensors[k]) for j in range(Q.shape[0]) for k in k_idx]
+    else:
+        F = Fjk[:, list(k_idx)].sum(axis=1)
+        names = [f"q{j}" for j in range(Q.shape[0])]
+        pair_of = None
+    res = select_sensors_from_information(F, None, criterion=criterion, kind="gauss_newton", n_sensors=n_points,
+                                          costs=costs, budget=budget, include=include, exclude=exclude,
+                                          method=method, time_limit=time_limit, sensor_names=names,
+                                          settings=settings)
+    if not res.indices:
+        raise ValueError(f"n_points: no admissible design of {n_points} "
+                         f"{'pairs' if joint else 'input rows'} identifies the parameters ({res.message}); "
+                         "give more points or other candidates")
+    notes = list(res.notes)
+    if kind_e is Kind.SECOND_ORDER:
+        notes.append("kind='second_order' planned without data: expected residual 0, S = 0, so the design is "
+                     "Gauss-Newton at the nominal p")
+    if joint:
+        pairs = tuple(pair_of[c] for c in res.indices)
+        rows = tuple(j for j, _ in pairs)
+    else:
+        rows = tuple(res.indices)
+        pairs = tuple((j, model.sensors[k]) for j in rows for k in k_idx)
+    refined = None
+    if refine and res.indices:
+        if joint:
+            raise ValueError("refine: the continuous refinement is for input designs (sensors=None or names), "
+                             "not for joint input-sensor designs")
+        refined = refine_inputs(model, p, Q[list(rows)], sigma, criterion=criterion, sensors=sensors,
+                                n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
+                                settings=refine_settings,
+                                time_limit=max(time_limit - (time.perf_counter() - t_start), 0.05 * time_limit))
+    return InputDesignResult(indices=rows, pairs=pairs, inputs=_readonly(Q[list(rows)].reshape(len(rows), -1)),
+                             value=res.value, lower_bound=res.lower_bound, gap=res.gap,
+                             proven_optimal=res.proven_optimal, criterion=res.criterion, method=res.method,
+                             status=res.status, design=res, refined=refined, notes=tuple(notes))
+
+
+# ---------------------------------------------------------------------------- continuous refinement
+def _extras(crit: Criterion, M) -> np.ndarray:
+    """Start values of the E criterion's extra variables (t, L with M - t I = L L^T); none otherwise."""
+    if crit is not Criterion.E:
+        return np.zeros(0)
+    n_p = M.shape[0]
+    t_init = 0.5 * float(np.linalg.eigvalsh(M)[0])
+    Lc = np.linalg.cholesky(M - t_init * np.eye(n_p) + 1e-14 * np.eye(n_p))
+    return np.array([t_init] + [Lc[i, j] for j in range(n_p) for i in range(j, n_p)])
+
+
+def _share(seconds: float) -> float:
+    """An equal share of the time per start, rounded down to 1, 2 or 5 x 10^k s: Ipopt's wall-time
+    limit is a solver setting, and few distinct values let the compiled solver be reused."""
+    e = 10.0 ** np.floor(np.log10(seconds))
+    return float(max(m for m in (1.0, 2.0, 5.0, 10.0) if m * e <= seconds * (1 + 1e-12)) * e)
+
+
+def _check_bounds(model, start, bounds):
+    """(X0, lo, hi) checked: start rows within finite bounds lo <= hi."""
+    X0 = np.atleast_2d(np.asarray(start, float))
+    lo, hi = (np.broadcast_to(np.asarray(b, float).ravel(), (model.n_q_dim,)) for b in bounds)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+        raise ValueError(f"bounds: expected finite lower <= upper of shape ({model.n_q_dim},), got {bounds!r}")
+    if X0.shape[1] != model.n_q_dim or np.any(X0 < lo - 1e-12) or np.any(X0 > hi + 1e-12):
+        raise ValueError("start: input rows must lie within the bounds")
+    return X0, lo, hi
+
+
+def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_series=1, bounds,
+                  settings: RefineSettings = RefineSettings(), time_limit: float | None = None) -> RefinedInputs:
+    r"""Move ``n_points`` input rows continuously within ``bounds`` to minimise :math:`\Psi(M(q)^{-1})`.
+
+    Multi-start Ipopt (the exact design's levels, then random points in the bounds) on the
+    full-space NLP of :mod:`oed.input_nlp` (states and sensitivities as variables, exact sparse
+    CasADi derivatives); the best start is returned.  D is reported as log det C
+    (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.  ``time_limit``
+    (seconds, None: none) bounds the whole refinement: each start's Ipopt run has an equal share
+    of it (rounded down, :func:`_share`) as its wall-time limit, no start begins after it, and the
+    first start's levels are kept if nothing better was reached.
+
+    Raises
+    ------
+    ValueError
+        Bad bounds or start.
+    RuntimeError
+        When every start fails for another reason than the time limit (Ipopt's messages are given).
+    """
+    crit = Criterion.parse(criterion)
+    p = _check_p(model, p)
+    sig = _check_sigma(model, sigma)
+    k_idx, joint = _measured(model, sensors)
+    if joint:
+        raise ValueError("sensors: the refinement takes None or sensor names, not 'joint'")
+    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
+        raise ValueError(f"time_limit: expected a positive number of seconds or None, got {time_limit!r}")
+    X0, lo, hi = _check_bounds(model, start, bounds)
+    t0 = time.perf_counter()
+    deadline = np.inf if time_limit is None else t0 + float(time_limit)
+    n_pts, d = X0.shape
+    span = np.where(hi > lo, hi - lo, 1.0)
+    weights = np.array([float(n_series) / sig[k] ** 2 if k in k_idx else 0.0 for k in range(model.n_S)])
+    key = ("refine_nlp", np.asarray(p).tobytes(), weights.tobytes(), n_pts, lo.tobytes(), span.tobytes(), crit)
+    nlp = model.cache.get_or_make("refine_nlp", key, lambda: information_nlp(model, p, weights, n_pts, lo, span,
+                                                                             crit), maxsize=4)
+    rng = np.random.default_rng(settings.seed)
+    starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
+    best, best_v = X0, _value(crit, nlp.matrix(nlp.start(model, p, X0, lo, span)))
+    values, messages = [], []
+    lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
+    ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
+    share = None if time_limit is None else _share(float(time_limit) / len(starts))
+    ipopt = settings.ipopt if share is None else replace(
+        settings.ipopt, extra=settings.ipopt.extra + (("max_wall_time", share),))
+    for Xs in starts:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            messages.append("not started: time limit reached")
+            values.append(np.inf)
+            continue
+        v, msg, Xr = _one_start(model, p, nlp, Xs, (lo, hi, span), crit, (lbx, ubx), ipopt, key)
+        values.append(v)
+        messages.append(msg)
+        if v < best_v:
+            best, best_v = Xr, v
+    if not any(np.isfinite(values)) and not any("time limit" in m for m in messages):
+        raise RuntimeError(f"refine: every Ipopt start failed: {'; '.join(messages)}")
+    return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
+                         n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
+                         lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
+
+
+def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
+    """(criterion value, message, refined rows) of one Ipopt run of the refinement from the rows Xs
+    (value inf for a failed run; a stalled run's point is still a design, re-evaluated exactly)."""
+    lo, hi, span = box
+    n_pts, d = Xs.shape
+    zero = np.zeros(nlp.n_g)
+    try:
+        x0 = nlp.start(model, p, Xs, lo, span)
+        x0[nlp.n_u + nlp.n_y + nlp.n_s:] = _extras(crit, nlp.matrix(x0))
+        r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, [], settings=ipopt,
+                      what="input refinement", key=key, cache=model.cache)
+    except (IdentificationError, StateSolveError) as exc:
+        return np.inf, str(exc), Xs
+    Xr = lo + span * np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0) * (hi > lo)
+    try:
+        v = _value(crit, nlp.matrix(nlp.start(model, p, Xr, lo, span)))
+    except StateSolveError as exc:
+        return np.inf, f"the refined point has no state solution ({exc})", Xs
+    return v, (r.status if r.accepted else f"stalled ({r.status}); point re-evaluated"), Xr
+
+
+def _value(crit: Criterion, M) -> float:
+    """Psi(M^-1) evaluated exactly (D: log det C); inf when M is singular."""
+    ev = np.linalg.eigvalsh(0.5 * (M + M.T))
+    if ev[0] <= 0:
+        return np.inf
+    if crit is Criterion.A:
+        return float(np.sum(1.0 / ev))
+    if crit is Criterion.D:
+        return float(-np.sum(np.log(ev)))
+    return float(1.0 / ev[0])
