@@ -375,7 +375,7 @@ def _report(study, results, args, progress, out) -> int:
 
 def _report_results(study, results, progress):
     """Everything the report shows, computed by the study (the report only draws it)."""
-    from .study import (FitFailedError, MissingPieceError, plan_at_estimate, run_detect, run_diagnosis,
+    from .study import (FitFailedError, MissingPieceError, plan_at_estimate, run_bands, run_detect, run_diagnosis,
                         run_identify, run_oed, run_uncertainty)
     results = run_identify(study, results, progress)
     try:
@@ -395,7 +395,7 @@ def _report_results(study, results, progress):
     if study.is_dynamic:                   # what the dynamic pages draw (mudoe.dynamic_runs)
         from .dynamic_runs import run_discretisation, run_trajectories
         results = run_trajectories(study, run_discretisation(study, results), progress)
-    return run_uncertainty(study, results, progress=progress)
+    return run_uncertainty(study, run_bands(study, results), progress=progress)
 
 
 def _init(args) -> int:

@@ -37,7 +37,7 @@ from .study_models import build_models, declare_units, config_start_values, is_d
 
 __all__ = ["Study", "StudyResults", "VariantModel", "prepare", "load_factory", "start_values", "SimulatedCampaign",
            "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate", "run_diagnosis",
-           "run_uncertainty", "Progress", "MissingPieceError", "FitFailedError", "PlannedDesign",
+           "run_uncertainty", "run_bands", "Progress", "MissingPieceError", "FitFailedError", "PlannedDesign",
            "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate", "plan_discrimination"]
 
 
@@ -222,6 +222,12 @@ def run_uncertainty(study: Study, results: StudyResults, which: str | None = Non
     (:func:`mudoe.uncertainty_runs.run_uncertainty`; default the config's [report] uncertainty)."""
     from .uncertainty_runs import run_uncertainty as run
     return run(study, results, which, progress)
+
+
+def run_bands(study: Study, results: StudyResults, level: float = 0.95) -> StudyResults:
+    """The prediction bands of every fit at ``level`` (:func:`mudoe.band_runs.run_bands`)."""
+    from .band_runs import run_bands as run
+    return run(study, results, level)
 
 
 def run_validate(study: Study, results: StudyResults, progress: Progress | None = None,

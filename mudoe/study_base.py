@@ -33,6 +33,7 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from identification.studies.montecarlo import MonteCarloResult
     from oed.design import DesignResult, DesignTable
     from reports.diagnosis import Diagnosis
+    from reports.figures import PredictionBands
     from reports.uncertainty import ModelUncertainty
 
     from .dynamic_records import MeshSummary, Trajectories
@@ -152,6 +153,7 @@ class StudyResults:
     diagnosis                                 the diagnostic split family (:mod:`mudoe.diagnosis_runs`)
     uncertainty : {variant: ModelUncertainty} profile intervals and likelihood-ratio regions
                                               (:mod:`mudoe.uncertainty_runs`)
+    bands : {variant: PredictionBands}        prediction bands of every fit (:mod:`mudoe.band_runs`)
     validation                                the Monte Carlo size study
     trajectories : {variant: Trajectories}    dynamic studies (:mod:`mudoe.dynamic_runs`)
     discretisation : {variant: MeshSummary}   dynamic studies (:mod:`mudoe.dynamic_runs`)
@@ -172,6 +174,7 @@ class StudyResults:
     detection_error: str = ""
     diagnosis: Diagnosis | None = None
     uncertainty: Mapping[str, ModelUncertainty] = field(default_factory=dict)
+    bands: Mapping[str, PredictionBands] = field(default_factory=dict)
     validation: MonteCarloResult | None = None
     trajectories: Mapping[str, Trajectories] = field(default_factory=dict)
     discretisation: Mapping[str, MeshSummary] = field(default_factory=dict)

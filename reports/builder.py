@@ -355,11 +355,18 @@ def _alpha_pages(results):
     return figs
 
 
-def _band_pages(results, level: float = 0.95):
-    """Prediction bands of every model's fitted outputs, at most 6 sensors a page."""
+def _band_pages(results):
+    """Prediction bands of every model's fitted outputs as the study computed them (``results.bands``), at
+    most 6 sensors a page."""
     from .figures import prediction_band_plot
     figs = []
     for v, e in results.estimates.items():
+        if v not in results.bands:
+            fig = _page(f"Prediction bands of {v}")
+            _text(fig, 0.04, 0.85, "Not computed by the study (mudoe.study.run_bands).", size=10)
+            figs.append(fig)
+            continue
+        bands, level = results.bands[v], results.bands[v].level
         sens = [s for s, w in zip(e.sensors, e.weights) if w > 0]
         parts = _chunks(len(sens), MAX_COLS)
         for n, part in enumerate(parts):
@@ -368,7 +375,7 @@ def _band_pages(results, level: float = 0.95):
             ncol = min(len(names), 3)
             axes = fig.subplots(int(np.ceil(len(names) / 3)), ncol, squeeze=False).ravel()
             for ax, s in zip(axes, names):
-                prediction_band_plot(results.study, e, v, s, level, ax=ax)
+                prediction_band_plot(results.study, e, v, s, bands, ax=ax)
             for ax in axes[len(names):]:
                 ax.axis("off")
             fig.subplots_adjust(left=0.06, right=0.98, top=0.88, bottom=0.14, wspace=0.3, hspace=0.4)

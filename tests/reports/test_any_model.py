@@ -44,7 +44,7 @@ PRESS_WORDS = re.compile(r"\b(force|displacement|N/mm|press|k5|k7|loading|unload
 def toy_results(tmp_path_factory):
     from mudoe.config import parse_config
     from mudoe.data_io import DataUnits, write_paper_layout
-    from mudoe.study import StudyResults, prepare, run_detect, run_diagnosis, run_identify, run_oed
+    from mudoe.study import StudyResults, prepare, run_bands, run_detect, run_diagnosis, run_identify, run_oed
     import importlib
     tmp = tmp_path_factory.mktemp("toy")
     pkg = tmp / "mytoy_pkg"
@@ -100,7 +100,7 @@ def toy_results(tmp_path_factory):
             """)
         study = prepare(parse_config(text, str(tmp / "toy.toml"), tmp))
         r = run_detect(study, run_oed(study, run_identify(study, StudyResults(study))))
-        yield run_diagnosis(study, r), tmp
+        yield run_bands(study, run_diagnosis(study, r)), tmp
     finally:
         sys.path.remove(str(tmp))
         for name in [m for m in sys.modules if m.startswith("mytoy_pkg")]:
@@ -191,7 +191,7 @@ def test_fmt_value(value, se, expect):
 
 def test_prediction_bands_match_the_delta_method(toy_results):
     from scipy import stats
-    from reports.figures import prediction_bands
+    from mudoe.band_runs import prediction_bands
     r, _ = toy_results
     e = r.estimates["equilibrium"]
     b = prediction_bands(e, 0.95)
