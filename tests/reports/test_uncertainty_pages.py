@@ -203,3 +203,25 @@ def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
         with pytest.raises(Seen, match=expected):
             builder.build_report(r, out, diagnose=False, uncertainty=given)
     assert list(out.iterdir()) == []                 # nothing half-written
+
+
+def test_the_uncertainty_pages_only_draw_what_the_study_computed(truss, monkeypatch):
+    """No profile, region or fit runs while the pages are drawn: they read ``results.uncertainty``."""
+    import matplotlib.pyplot as plt
+    import identification.inference.profile as profile
+    from reports.builder import page_texts, report_pages
+    est = type(truss.estimates["linear"])
+
+    def no_computation(*args, **kwargs):
+        raise AssertionError("the report computed")
+
+    monkeypatch.setattr(est, "conf_int", no_computation)
+    monkeypatch.setattr(profile, "lr_region", no_computation)
+    monkeypatch.setattr(profile, "profile_intervals", no_computation, raising=False)
+    texts = []
+    for name, make in report_pages(truss, None, False):
+        if name.startswith("uncertainty"):
+            for fig in make():
+                texts += page_texts(fig)
+                plt.close(fig)
+    assert "Likelihood-ratio regions of linear next to the linearised ellipses" in texts
