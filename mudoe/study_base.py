@@ -35,6 +35,7 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from reports.diagnosis import Diagnosis
     from reports.figures import PredictionBands
     from reports.uncertainty import ModelUncertainty
+    from reports.view import FitAssessment
 
     from .dynamic_records import MeshSummary, Trajectories
     from .plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign
@@ -145,6 +146,8 @@ class StudyResults:
     study : Study
     estimates : {variant: Estimate}           fits on all study data that succeeded
     estimate_errors : {variant: str}          why the others failed
+    assessments : {variant: FitAssessment}    goodness of fit and trust of the linearisation of each fit
+                                              (:mod:`mudoe.fit_assessment`)
     oed, oed_table, oed_variant               the sensor (or sampling-time) design, its table and variant
     plan                                      [oed] mode inputs / both / discrimination / times:
                                               :mod:`mudoe.plan_records`
@@ -164,6 +167,7 @@ class StudyResults:
     study: Study
     estimates: Mapping[str, Estimate] = field(default_factory=dict)
     estimate_errors: Mapping[str, str] = field(default_factory=dict)
+    assessments: Mapping[str, FitAssessment] = field(default_factory=dict)
     oed: DesignResult | None = None
     oed_table: DesignTable | None = None
     oed_variant: str = ""
@@ -218,11 +222,13 @@ def start_values(study: Study, variant: str) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- the fits
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
-    """Identify every variant on the study's data (all sensors); failures are recorded, not raised (an
-    estimate the data do not bound is recorded as a failure with its reason, "not bounded: ...")."""
+    """Identify every variant on the study's data (all sensors) and assess each fit (goodness of fit, trust of
+    its linearisation); failures are recorded, not raised (an estimate the data do not bound is recorded as a
+    failure with its reason, "not bounded: ...")."""
     from identification.errors import IdentificationError
+    from .fit_assessment import assess
     progress = progress or Progress(False)
-    estimates, errors = dict(results.estimates), dict(results.estimate_errors)
+    estimates, errors, assessments = dict(results.estimates), dict(results.estimate_errors), dict(results.assessments)
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
@@ -233,8 +239,8 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
             if not est.bounded:      # no finite estimate: the pages of estimates need one; the reason is kept
                 errors[v] = f"not bounded: {est.unbounded.reason}"
                 continue
-            estimates[v] = est
-    return dataclasses.replace(results, estimates=estimates, estimate_errors=errors)
+            estimates[v], assessments[v] = est, assess(est)
+    return dataclasses.replace(results, estimates=estimates, estimate_errors=errors, assessments=assessments)
 
 
 def oed_variant(study: Study) -> str:

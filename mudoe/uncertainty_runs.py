@@ -19,7 +19,8 @@ import numpy as np
 from identification.errors import IdentificationError
 from identification.inference.profile import lr_region
 from reports.uncertainty import UNCERTAINTY_CHOICES, UNTRUSTED, ModelUncertainty, PairRegion
-from reports.view import linearisation_trust
+
+from .fit_assessment import linearisation_trust
 
 __all__ = ["uncertainty_variants", "run_uncertainty", "model_uncertainty", "region_limits", "region_alpha",
            "summary_intervals"]

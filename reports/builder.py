@@ -34,7 +34,7 @@ from models.fileio import publishing, register_scratch, release_scratch
 
 from .page_layout import PAGE_SIZE, ROWS_PER_PAGE, TEXT_LINE_HEIGHT
 from .page_layout import chunks as _chunks, draw_text as _text, new_page as _page, part_label as _part
-from .view import STATISTIC_WORDS, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust
+from .view import STATISTIC_WORDS, fmt_pct, fmt_value
 
 __all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
 
@@ -49,7 +49,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
         if e is not None:
             est = ", ".join(f"{n} = {a} +- {b}{(' ' + u) if u else ''}" for n, (a, b), u in
                             zip(e.param_names, (fmt_value(p, s) for p, s in zip(e.p, e.stderr)), e.param_units))
-            g = goodness_of_fit(e)
+            g = results.assessments[v].goodness
             parts.append(f"Fit on all study data (all sensors): {est}; reduced chi2 {e.reduced_chi2:.3g}.")
             if np.isfinite(g.pvalue):
                 rejected = det is not None and v in det.models and det.decision(v).decision == "rejected"
@@ -62,7 +62,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
                                 if fails and not rejected else ""))
             else:
                 parts.append(f"Goodness of fit: {g.text()}.")
-            if linearisation_trust(e) == "NOT trustworthy":
+            if results.assessments[v].trust == "NOT trustworthy":
                 parts.append("Its linearisation is NOT trustworthy (Bates-Watts curvature): do not read its "
                              "confidence ellipses and +- standard errors; use its profile-likelihood intervals "
                              f"(pages 'Uncertainty of {v}').")
@@ -412,7 +412,8 @@ def _residual_pages(results):
               f"sensors; {ph}. Dashed lines: +-2. Left: a trend over the input shows a missing input dependence. "
               "Middle: series after series; a drift or a step between series shows a change during the campaign. "
               "Right: points on the red line are Gaussian with the assumed sigma; a slope above 1 means the "
-              f"residuals are larger than sigma. Goodness of fit: {goodness_of_fit(e).text()}.", width=175, size=8)
+              f"residuals are larger than sigma. Goodness of fit: {results.assessments[v].goodness.text()}.", width=175,
+              size=8)
         figs.append(fig)
     return figs
 

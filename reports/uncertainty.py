@@ -9,7 +9,7 @@ this module words it and the builder draws it.
 
 Which models get these pages (:data:`UNCERTAINTY_CHOICES`): ``"untrusted"`` (default) the
 models whose Bates-Watts curvature says the linearisation is NOT trustworthy
-(:func:`reports.view.linearisation_trust`), ``"all"`` every fitted model, ``"none"`` none.
+(:func:`mudoe.fit_assessment.linearisation_trust`), ``"all"`` every fitted model, ``"none"`` none.
 """
 from __future__ import annotations
 

@@ -19,6 +19,8 @@ def test_every_run_returns_a_new_record_and_leaves_the_old_one(truss_study):
     empty = StudyResults(truss_study)
     fitted = run_identify(truss_study, empty)
     assert list(fitted.estimates) == ["linear"] and dict(empty.estimates) == {} and fitted.study is truss_study
+    a = fitted.assessments["linear"]                 # what the verdict table shows, assessed by the study
+    assert a.trust == "NOT trustworthy" and a.goodness.dof == fitted.estimates["linear"].dof
     with pytest.raises(dataclasses.FrozenInstanceError):
         fitted.estimates = {}
     full = run_uncertainty(truss_study, fitted, "all")
