@@ -4,9 +4,10 @@ Every function here is a thin layer over :mod:`identification`, :mod:`oed` and :
 it only assembles their arguments from a :class:`mudoe.config.StudyConfig` and collects
 their results in a frozen :class:`StudyResults` for the CLI and the report builder (every
 ``run_*`` returns a new record).  The records live in :mod:`mudoe.study_base`, the models in
-:mod:`mudoe.study_models`, the designs in :mod:`mudoe.plans`, the computations the report shows
-beyond the fits in :mod:`mudoe.diagnosis_runs` and :mod:`mudoe.uncertainty_runs`; they are
-importable from here too.
+:mod:`mudoe.study_models`, the designs in :mod:`mudoe.plans`, and what the report shows beyond the
+fits is computed in :mod:`mudoe.fit_assessment`, :mod:`mudoe.band_runs`, :mod:`mudoe.diagnosis_runs`
+and :mod:`mudoe.uncertainty_runs` (the report only draws); the runs are importable from here.
+Built-in models (the press) enter through :mod:`mudoe.builtin_studies`: this module names none.
 """
 from __future__ import annotations
 
