@@ -32,7 +32,7 @@ def low_vs_high(config: PrototypeConfig, seed: int):
     """(alpha_min, Holm-adjusted) of M3 on 'low vs high input' for a campaign of the prototype."""
     from mudoe.config import DEFAULT_CONFIG, parse_config
     from mudoe.study import StudyResults, prepare, run_detect, run_identify
-    from reports.diagnosis import diagnose
+    from mudoe.diagnosis_runs import diagnose
     camp = generate_campaign(seed=seed, config=config, n_series=6)
     d = Path(tempfile.mkdtemp(prefix="bench-m3-"))
     write_campaign(camp, d)
@@ -40,9 +40,7 @@ def low_vs_high(config: PrototypeConfig, seed: int):
     text = text.replace('variants = ["M1", "M2", "M3"]', 'variants = ["M3"]')
     text = text.replace('sensors = "oed"', 'sensors = ["F_x", "B0_y"]').replace('variant = "M1"', 'variant = "M3"')
     study = prepare(parse_config(text, "bench_m3.toml", DEFAULT_CONFIG.parent))
-    r = StudyResults(study)
-    run_identify(study, r)
-    run_detect(study, r)
+    r = run_detect(study, run_identify(study, StudyResults(study)))
     row = next(x for x in diagnose(r).rows if x.split == "low vs high input")
     return row.alpha, row.holm
 

@@ -12,6 +12,7 @@ failed (one line; ``--debug`` shows the traceback); 130 interrupted (Ctrl-C), 14
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -242,13 +243,14 @@ def _identify_diagnostics(est) -> dict:
 def _identify(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, estimate_dict
     from .study import FitFailedError, run_identify
-    run_identify(study, results, progress)
+    from .uncertainty_runs import summary_intervals
+    results = run_identify(study, results, progress)
     failed = "; ".join(f"the fit of {v} failed ({e})" for v, e in results.estimate_errors.items())
     if not results.estimates:
         raise FitFailedError(failed)
     obj = {v: dict(estimate_dict(e), **_identify_diagnostics(e)) for v, e in results.estimates.items()}
     obj.update({v: dict(error=e) for v, e in results.estimate_errors.items()})
-    text = "\n\n".join([e.summary() for e in results.estimates.values()]
+    text = "\n\n".join([e.summary(intervals=summary_intervals(e)) for e in results.estimates.values()]
                        + [f"{v}: identification failed: {e}" for v, e in results.estimate_errors.items()])
     _write(out, {"identify.json": dumps(obj), "identify.txt": text + "\n"})
     _emit(args, text, obj)
@@ -290,14 +292,14 @@ def _oed_inputs(study, results, args, progress, out) -> int:
 def _oed(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, oed_dict
     from .study import run_oed
-    if getattr(study, "is_dynamic", False):  # a sampling-time design (mudoe.dynamic_runs)
-        run_oed(study, results, progress)
+    if study.is_dynamic:                     # a sampling-time design (mudoe.dynamic_runs)
+        results = run_oed(study, results, progress)
         _write(out, {"oed.json": dumps(results.plan.to_dict()), "oed.txt": results.plan.summary() + "\n"})
         _emit(args, results.plan.summary(), results.plan.to_dict())
         return EXIT_OK
     if study.cfg.oed.mode != "sensors":
         return _oed_inputs(study, results, args, progress, out)
-    run_oed(study, results, progress)
+    results = run_oed(study, results, progress)
     obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
     text = _oed_text(results)
     _write(out, {"oed.json": dumps(obj), "oed.txt": text + "\n"})
@@ -310,8 +312,7 @@ def _detect(study, results, args, progress, out) -> int:
     from reports.serialize import detection_dict, diagnosis_dict, dumps
     from reports.tables import normality_labels
     from .study import run_detect, run_diagnosis
-    run_detect(study, results, progress)
-    run_diagnosis(study, results, progress)
+    results = run_diagnosis(study, run_detect(study, results, progress), progress)
     labels = normality_labels(study)
     diag = results.diagnosis               # None for a dynamic study (no diagnostic split family)
     obj = dict(detection_dict(results.detection, **labels), diagnosis=None if diag is None else diagnosis_dict(diag))
@@ -323,7 +324,6 @@ def _detect(study, results, args, progress, out) -> int:
 
 
 def _validate(study, results, args, progress, out) -> int:
-    import dataclasses
     from reports.serialize import dumps, validation_dict
     from .study import run_validate
     if args.runs is not None:
@@ -332,7 +332,7 @@ def _validate(study, results, args, progress, out) -> int:
             raise ConfigError(f"--runs: need at least one replication, got {args.runs}")
         cfg = dataclasses.replace(study.cfg, validate=dataclasses.replace(study.cfg.validate, n_runs=args.runs))
         study = dataclasses.replace(study, cfg=cfg)
-        results.study = study
+        results = dataclasses.replace(results, study=study)
     if args.workers < 1:
         from .config import ConfigError
         raise ConfigError(f"--workers: need at least one worker, got {args.workers}")
@@ -340,7 +340,7 @@ def _validate(study, results, args, progress, out) -> int:
         from .config import ConfigError
         raise ConfigError("--scheduler: give the Dask scheduler address printed by `dask scheduler`, "
                           "e.g. tcp://10.0.0.5:8786, or leave the option out for local processes")
-    run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
+    results = run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
     text = results.validation.table()
     _write(out, {"validate.json": dumps(obj), "validate.txt": text + "\n"})
@@ -351,31 +351,12 @@ def _validate(study, results, args, progress, out) -> int:
 def _report(study, results, args, progress, out) -> int:
     from reports.builder import build_report
     from reports.diagnosis import findings_text
-    from .study import FitFailedError, MissingPieceError, run_detect, run_diagnosis, run_identify, run_oed
-    t0 = time.perf_counter()
-    run_identify(study, results, progress)
-    try:
-        run_oed(study, results, progress)
-    except (MissingPieceError, FitFailedError) as exc:
-        results.notes.append(f"optimal design not available: {exc}")
-    if study.cfg.oed.mode != "sensors":
-        from .study import plan_at_estimate
-        results.plan = plan_at_estimate(study, results, progress)
-    try:
-        run_detect(study, results, progress)
-    except (MissingPieceError, FitFailedError) as exc:
-        results.notes.append(f"detection not available: {exc}")
-    except _bad_input_types() as exc:      # e.g. the normality gate failed: report it, do not hide it
-        results.detection_error = f"{type(exc).__name__}: {exc}"
-        results.notes.append(f"detection stopped: {exc}")
-    run_diagnosis(study, results, progress)
-    if getattr(study, "is_dynamic", False):  # what the dynamic pages draw (mudoe.dynamic_runs)
-        from .dynamic_runs import run_discretisation, run_trajectories
-        run_discretisation(study, results)
-        run_trajectories(study, results, progress)
-    results.timing = dict(progress.timing)
-    results.timing["analysis_total"] = time.perf_counter() - t0
     from .outdir import claim, record
+    t0 = time.perf_counter()
+    results = _report_results(study, results, progress)
+    timing = dict(progress.timing)
+    timing["analysis_total"] = time.perf_counter() - t0
+    results = dataclasses.replace(results, timing=timing)
     with progress.step("build report"):
         claim(out)
         paths = build_report(results, out, progress=progress)
@@ -390,6 +371,31 @@ def _report(study, results, args, progress, out) -> int:
                    misses={} if diag is None else {m: diag.misses(m) for m in results.detection.models})
     _emit(args, text, obj)
     return EXIT_OK
+
+
+def _report_results(study, results, progress):
+    """Everything the report shows, computed by the study (the report only draws it)."""
+    from .study import (FitFailedError, MissingPieceError, plan_at_estimate, run_bands, run_detect, run_diagnosis,
+                        run_identify, run_oed, run_uncertainty)
+    results = run_identify(study, results, progress)
+    try:
+        results = run_oed(study, results, progress)
+    except (MissingPieceError, FitFailedError) as exc:
+        results = results.with_note(f"optimal design not available: {exc}")
+    if study.cfg.oed.mode != "sensors":
+        results = dataclasses.replace(results, plan=plan_at_estimate(study, results, progress))
+    try:
+        results = run_detect(study, results, progress)
+    except (MissingPieceError, FitFailedError) as exc:
+        results = results.with_note(f"detection not available: {exc}")
+    except _bad_input_types() as exc:      # e.g. the normality gate failed: report it, do not hide it
+        results = dataclasses.replace(results, detection_error=f"{type(exc).__name__}: {exc}")
+        results = results.with_note(f"detection stopped: {exc}")
+    results = run_diagnosis(study, results, progress)
+    if study.is_dynamic:                   # what the dynamic pages draw (mudoe.dynamic_runs)
+        from .dynamic_runs import run_discretisation, run_trajectories
+        results = run_trajectories(study, run_discretisation(study, results), progress)
+    return run_uncertainty(study, run_bands(study, results), progress=progress)
 
 
 def _init(args) -> int:

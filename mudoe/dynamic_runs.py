@@ -18,8 +18,8 @@ Student t when sigma was estimated) quantile.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -29,57 +29,13 @@ from models.sensitivity import sensitivities
 from models.state import solve_states
 
 from .config import ConfigError
+from .dynamic_records import MeshSummary, Trajectories
+from .plan_records import DynamicDesign, design_rows_text
+from .study_base import oed_variant, require_fit
 
 __all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "run_trajectories",
            "plan_dynamic", "design_rows_text", "validation_problem", "MeshSummary", "mesh_summary",
            "run_discretisation"]
-
-
-@dataclass(frozen=True)
-class DynamicDesign:
-    """A sampling-time design: the :class:`oed.DesignResult`, the ranked table, the candidates."""
-
-    variant: str
-    planned: bool
-    p: tuple
-    candidates: tuple
-    pairs: bool
-    result: object
-    table: object
-    mode = "times"
-
-    def chosen_times(self) -> tuple:
-        """The chosen sampling times (sorted)."""
-        t = self.candidates
-        if not self.pairs:
-            return tuple(t[i] for i in self.result.indices)
-        n_S = len(self.table.rows[0].mask) // len(t)
-        return tuple(sorted({t[i // n_S] for i in self.result.indices}))
-
-    def summary(self) -> str:
-        head = (f"sampling-time design of variant {self.variant} at p = {list(self.p)} "
-                + ("(planned before data: Gauss-Newton)" if self.planned else "(at the estimate)"))
-        text = self.result.summary().replace("  sensors (", "  readings (" if self.pairs else "  sampling times (", 1)
-        return head + "\n" + text + "\n" + self.table.note + ":\n" + design_rows_text(self.table)
-
-    def to_dict(self) -> dict:
-        r = self.result
-        return dict(variant=self.variant, mode="times", planned=self.planned, p=list(self.p),
-                    candidates=list(self.candidates), pairs=self.pairs, chosen=list(r.sensors),
-                    chosen_times=list(self.chosen_times()), criterion=r.criterion, value=r.value,
-                    lower_bound=r.lower_bound, proven_optimal=r.proven_optimal, method=r.method,
-                    notes=list(r.notes), table_note=self.table.note,
-                    table=[dict(candidates=list(x.sensors), A=x.A, logdet=x.logdet, E=x.E, flag=x.flag)
-                           for x in self.table.rows])
-
-
-def design_rows_text(table) -> str:
-    """The ranked designs as text: rank, log det C, trace C, max eig C, the candidates."""
-    out = [f"{'rank':>4} {'log det C':>11} {'trace C':>11} {'max eig C':>11}  candidates"]
-    for k, r in enumerate(table.rows, 1):
-        out.append(f"{k:>4} {r.logdet:>11.4f} {r.A:>11.4e} {r.E:>11.4e}  {', '.join(r.sensors)}"
-                   + (f"  ({r.flag})" if r.flag else ""))
-    return "\n".join(out)
 
 
 def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> DynamicDesign:
@@ -103,24 +59,19 @@ def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> Dy
                          res, table)
 
 
-def run_oed_dynamic(study, results, progress) -> None:
-    """[oed] of a dynamic study at the estimate of its variant: sampling times (results.oed, oed_table)."""
-    from .study import FitFailedError, run_identify
-    v = study.cfg.oed.variant or list(study.models)[-1]
-    if v not in results.estimates:
-        run_identify(study, results, progress)
-    if v not in results.estimates:
-        raise FitFailedError(f"oed: the fit of variant {v} failed ({results.estimate_errors.get(v)}); no "
-                             "information matrix to design with")
+def run_oed_dynamic(study, results, progress):
+    """[oed] of a dynamic study at the estimate of its variant: ``results`` with the sampling times (plan,
+    oed, oed_table)."""
+    v = oed_variant(study)
+    results = require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     est = results.estimates[v]
     sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
     with progress.step(f"sampling-time design ({study.cfg.oed.criterion}, {v})"):
         d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False)
-    results.plan = d
-    results.oed, results.oed_table, results.oed_variant = d.result, d.table, v
-    results.design_sensors = tuple(study.sensors)
-    results.design_how = ("all instruments at every sampling time of the data (the sampling-time design is for "
-                          "the next campaign)")
+    return dataclasses.replace(
+        results, plan=d, oed=d.result, oed_table=d.table, oed_variant=v, design_sensors=tuple(study.sensors),
+        design_how="all instruments at every sampling time of the data (the sampling-time design is for the next "
+                   "campaign)")
 
 
 def _instrument_sigma(est, sensors) -> np.ndarray:
@@ -138,23 +89,6 @@ def plan_dynamic(cfg, built: dict, progress) -> DynamicDesign:
         raise ConfigError(f"{cfg.path}: [[sensors]] a design without data needs every instrument's sigma")
     with progress.step(f"sampling-time design ({cfg.oed.criterion}, {v}, planned)"):
         return time_design(cfg, v, models[v], p0s[v], Q, sig, planned=True)
-
-
-@dataclass(frozen=True)
-class Trajectories:
-    """Outputs of every experiment on a fine time grid and their delta-method half-widths.
-
-    t (n_t,), h, half_mean, half_new (n_q, n_t, n_S) in the model's units; level, quantile name."""
-
-    t: np.ndarray
-    h: np.ndarray
-    half_mean: np.ndarray
-    half_new: np.ndarray
-    level: float
-    quantile: str
-    residuals: np.ndarray = None     # (n_M, n_q, n_t_data, n_S): (z - h) / sigma at the data's times
-    error_sigma: float = math.nan    # largest discretisation error of h on the fine grid, in sigmas
-    tol_sigma: float = math.nan      # its tolerance
 
 
 def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 401) -> Trajectories:
@@ -187,45 +121,13 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 40
                         res, float(err), DiscretisationSettings().tol_sigma)
 
 
-def run_trajectories(study, results, progress) -> None:
-    """``results.trajectories``: the trajectories of every fitted variant (for the report)."""
+def run_trajectories(study, results, progress):
+    """``results`` with ``trajectories``: the trajectories of every fitted variant (for the report)."""
+    out = dict(results.trajectories)
     for v, est in results.estimates.items():
         with progress.step(f"trajectories of {v} with prediction bands"):
-            results.trajectories[v] = trajectories(study, est, v)
-
-
-@dataclass(frozen=True)
-class MeshSummary:
-    """What a report shows of the discretisation of a dynamic fit (from its
-    :class:`identification.fit.dynamic_fit.DiscretisationRecord`).
-
-    degree, n_elements : the Radau IIA mesh; error_pct : largest estimated output error at the
-    readings, % of sigma (tol_pct its tolerance); shift_se : largest linearised shift of the estimate
-    without discretisation error, in standard errors (tol_se its tolerance); bounded : both within
-    their tolerances; reason : why not ("" when bounded).
-    """
-
-    degree: int
-    n_elements: int
-    error_pct: float
-    tol_pct: float
-    shift_se: float
-    tol_se: float
-    bounded: bool
-    reason: str = ""
-    method: str = "Radau IIA collocation"
-
-    def text(self) -> str:
-        """One line: mesh, largest output error in % of sigma, bounded or NOT bounded (and why)."""
-        head = (f"{self.method}, degree {self.degree}, {self.n_elements} elements; largest discretisation error "
-                f"{self.error_pct:.2g} % of sigma")
-        if self.bounded:
-            return (f"{head} (bounded below {self.tol_pct:.2g} %), estimate shifted by at most {self.shift_se:.2g} "
-                    f"standard errors (below {self.tol_se:.2g})")
-        why = self.reason or "no finer mesh was tried"
-        return (f"{head}, estimate shift {self.shift_se:.3g} standard errors: discretisation error NOT bounded "
-                f"(tolerances {self.tol_pct:.2g} % of sigma, {self.tol_se:.2g} standard errors: {why}); the "
-                "estimate and its verdicts may reflect the discretisation, not the model")
+            out[v] = trajectories(study, est, v)
+    return dataclasses.replace(results, trajectories=out)
 
 
 def mesh_summary(est) -> MeshSummary | None:
@@ -239,12 +141,15 @@ def mesh_summary(est) -> MeshSummary | None:
                        float(rec.tol_se), bool(rec.bounded), rec.reason)
 
 
-def run_discretisation(study, results) -> None:
-    """``results.discretisation``: {variant: MeshSummary} of every fit on all study data (for the report)."""
+def run_discretisation(study, results):
+    """``results`` with ``discretisation``: {variant: MeshSummary} of every fit on all study data (for the
+    report)."""
+    out = dict(results.discretisation)
     for v, est in results.estimates.items():
         m = mesh_summary(est)
         if m is not None:
-            results.discretisation[v] = m
+            out[v] = m
+    return dataclasses.replace(results, discretisation=out)
 
 
 def validation_problem(study, results, est, used) -> tuple:

@@ -32,7 +32,7 @@ from models.contract import ModelError, Parameter
 from .config import ConfigError, StudyConfig, config_error
 from .data_io import DataFileError
 from .parameter_units import model_parameters
-from .study import Study
+from .study_base import Study, load_factory
 from .units import UnitError, convert
 
 __all__ = ["DynamicCampaign", "DynamicStudy", "is_dynamic", "is_dynamic_study", "experiment_rows", "prepare_dynamic",
@@ -44,8 +44,8 @@ def is_dynamic(model) -> bool:
 
 
 def is_dynamic_study(cfg: StudyConfig, built: dict) -> bool:
-    """Whether the study's models ({variant: (model, inputs_fn)}) are dynamic; [dynamic] needs one."""
-    dyn = [is_dynamic(m) for m, _ in built.values()]
+    """Whether the study's models ({variant: VariantModel}) are dynamic; [dynamic] needs one."""
+    dyn = [is_dynamic(b.model) for b in built.values()]
     if any(dyn) and not all(dyn):
         raise ConfigError(f"{cfg.path}: [model] variants mix dynamic (ODE/DAE) and static models")
     if cfg.dynamic is not None and not any(dyn):
@@ -75,6 +75,10 @@ class DynamicStudy(Study):
     times: tuple = ()
     p0s: dict = field(default_factory=dict)
     is_dynamic = True
+
+    def start_values(self, variant: str) -> np.ndarray:
+        """The start values of a variant's fits (the variants may differ in parameters)."""
+        return self.p0s.get(variant, self.p0)
 
 
 # ---------------------------------------------------------------------------- config against the model
@@ -301,7 +305,6 @@ def simulate_dynamic(cfg: StudyConfig, built: dict, seed: int | None = None) -> 
 
 def factory_models(cfg: StudyConfig) -> dict:
     """{variant: the factory's model} of [model]."""
-    from .study import load_factory
     factory = load_factory(cfg.model.name, f"{cfg.path}: [model] name")
     return {v: factory(v) for v in cfg.model.variants}
 

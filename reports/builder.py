@@ -32,13 +32,11 @@ import numpy as np
 
 from models.fileio import publishing, register_scratch, release_scratch
 
-from .view import STATISTIC_WORDS, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust
+from .page_layout import PAGE_SIZE, ROWS_PER_PAGE, TEXT_LINE_HEIGHT
+from .page_layout import chunks as _chunks, draw_text as _text, new_page as _page, part_label as _part
+from .view import STATISTIC_WORDS, fmt_pct, fmt_value
 
 __all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
-
-#: A4 landscape (inches)
-PAGE_SIZE = (11.69, 8.27)
-
 
 def verdict_paragraphs(results) -> list[tuple[str, str]]:
     """One paragraph per model: the verdict of Algorithm 1 with its numbers and goodness of fit (plain text)."""
@@ -51,7 +49,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
         if e is not None:
             est = ", ".join(f"{n} = {a} +- {b}{(' ' + u) if u else ''}" for n, (a, b), u in
                             zip(e.param_names, (fmt_value(p, s) for p, s in zip(e.p, e.stderr)), e.param_units))
-            g = goodness_of_fit(e)
+            g = results.assessments[v].goodness
             parts.append(f"Fit on all study data (all sensors): {est}; reduced chi2 {e.reduced_chi2:.3g}.")
             if np.isfinite(g.pvalue):
                 rejected = det is not None and v in det.models and det.decision(v).decision == "rejected"
@@ -64,7 +62,7 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
                                 if fails and not rejected else ""))
             else:
                 parts.append(f"Goodness of fit: {g.text()}.")
-            if linearisation_trust(e) == "NOT trustworthy":
+            if results.assessments[v].trust == "NOT trustworthy":
                 parts.append("Its linearisation is NOT trustworthy (Bates-Watts curvature): do not read its "
                              "confidence ellipses and +- standard errors; use its profile-likelihood intervals "
                              f"(pages 'Uncertainty of {v}').")
@@ -87,35 +85,6 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
             parts.insert(0, f"{v}: no verdict ({why}).")
         out.append((v, " ".join(parts)))
     return out
-
-
-def _page(title=None):
-    import matplotlib.pyplot as plt
-    fig = plt.figure(figsize=PAGE_SIZE)
-    if title:
-        fig.suptitle(title, x=0.04, y=0.97, ha="left", fontsize=14, weight="bold")
-    return fig
-
-
-#: height of one line of 9-point text as a fraction of the page height (1.2 x 9 pt on an 8.27 in page)
-TEXT_LINE_HEIGHT = 0.019
-
-
-def _text(fig, x, y, text, width=150, size=9, **kw):
-    wrapped = "\n".join("\n".join(textwrap.wrap(par, width)) if par else "" for par in text.split("\n"))
-    fig.text(x, y, wrapped, va="top", ha="left", fontsize=size, family=kw.pop("family", "sans-serif"), **kw)
-    return wrapped.count("\n") + 1
-
-
-def _chunks(n: int, size: int) -> list[range]:
-    """range(0, n) in the fewest, most even pieces of at most ``size`` (27 by 25: 14 + 13); [range(0)] if n = 0."""
-    k = -(-n // size)
-    edges = [round(i * n / k) for i in range(k + 1)] if k else []
-    return [range(a, b) for a, b in zip(edges, edges[1:])] or [range(0)]
-
-
-def _part(k: int, n: int) -> str:
-    return f" ({k + 1}/{n})" if n > 1 else ""
 
 
 def _title_page(results, cfg):
@@ -141,7 +110,7 @@ def _title_page(results, cfg):
     for v, par in verdict_paragraphs(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.campaign
-    dyn = getattr(s, "is_dynamic", False)
+    dyn = s.is_dynamic
     meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
@@ -150,7 +119,7 @@ def _title_page(results, cfg):
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
     y -= 0.02 * _text(fig, 0.04, y, meta, width=175, size=7.5, color="0.35") + 0.015
-    mesh = getattr(results, "discretisation", None) or {}       # dynamic studies: {variant: MeshSummary}
+    mesh = results.discretisation                                # dynamic studies: {variant: MeshSummary}
     notes = [(nt, False) for nt in list(results.notes) + list(s.notes)]
     notes += [(f"{v}: {m.text()}", not m.bounded) for v, m in mesh.items()]
     if notes:
@@ -169,8 +138,6 @@ def _title_page(results, cfg):
 
 #: panels per row / rows per page of the grid pages (never shrink below readable)
 MAX_COLS, MAX_ROWS = 6, 3
-#: table rows per page
-ROWS_PER_PAGE = 25
 #: lines (title, header, rows, decision) of the alpha_min tables on one page
 ALPHA_LINES = 24
 
@@ -219,7 +186,7 @@ def _normality_page(results):
                     + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
                     + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else "")
                     + (f" (failing: {', '.join(chk.failing())})" if chk.failing() else ""))
-    over = "every (experiment, time) reading, pooled per instrument" if getattr(s, "is_dynamic", False) else \
+    over = "every (experiment, time) reading, pooled per instrument" if s.is_dynamic else \
         "all set points"
     txt = (f"Normality gate: {(gate or s.normality).gate_text()} (one test per sensor, on the differences of "
            f"consecutive series over {over}), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
@@ -388,11 +355,18 @@ def _alpha_pages(results):
     return figs
 
 
-def _band_pages(results, level: float = 0.95):
-    """Prediction bands of every model's fitted outputs, at most 6 sensors a page."""
+def _band_pages(results):
+    """Prediction bands of every model's fitted outputs as the study computed them (``results.bands``), at
+    most 6 sensors a page."""
     from .figures import prediction_band_plot
     figs = []
     for v, e in results.estimates.items():
+        if v not in results.bands:
+            fig = _page(f"Prediction bands of {v}")
+            _text(fig, 0.04, 0.85, "Not computed by the study (mudoe.study.run_bands).", size=10)
+            figs.append(fig)
+            continue
+        bands, level = results.bands[v], results.bands[v].level
         sens = [s for s, w in zip(e.sensors, e.weights) if w > 0]
         parts = _chunks(len(sens), MAX_COLS)
         for n, part in enumerate(parts):
@@ -401,7 +375,7 @@ def _band_pages(results, level: float = 0.95):
             ncol = min(len(names), 3)
             axes = fig.subplots(int(np.ceil(len(names) / 3)), ncol, squeeze=False).ravel()
             for ax, s in zip(axes, names):
-                prediction_band_plot(results.study, e, v, s, level, ax=ax)
+                prediction_band_plot(results.study, e, v, s, bands, ax=ax)
             for ax in axes[len(names):]:
                 ax.axis("off")
             fig.subplots_adjust(left=0.06, right=0.98, top=0.88, bottom=0.14, wspace=0.3, hspace=0.4)
@@ -438,7 +412,8 @@ def _residual_pages(results):
               f"sensors; {ph}. Dashed lines: +-2. Left: a trend over the input shows a missing input dependence. "
               "Middle: series after series; a drift or a step between series shows a change during the campaign. "
               "Right: points on the red line are Gaussian with the assumed sigma; a slope above 1 means the "
-              f"residuals are larger than sigma. Goodness of fit: {goodness_of_fit(e).text()}.", width=175, size=8)
+              f"residuals are larger than sigma. Goodness of fit: {results.assessments[v].goodness.text()}.", width=175,
+              size=8)
         figs.append(fig)
     return figs
 
@@ -489,128 +464,6 @@ def _misses_pages(results, diagnosis):
     return figs
 
 
-#: panels a row / rows a page of the profile and likelihood-ratio region pages
-UNC_COLS, UNC_ROWS = 3, 2
-PROFILE_CAPTION = ("Profile-t curves tau(theta) = sign(theta - theta_hat) sqrt(D(theta)) with the other parameters "
-                   "re-optimised (solid) and the straight line (theta - theta_hat)/se of the linearised picture "
-                   "(dashed). Dotted horizontal lines: +-sqrt(c) of the {pct} level; the profile interval ends where "
-                   "the solid curve crosses them, the Wald interval where the dashed line does. A curve that bends "
-                   "away from the line, or never reaches the level on one side (unbounded), is the nonlinearity the "
-                   "ellipse hides.")
-
-
-def _uncertainty_pages(results, variant, progress=None):
-    """Profile-likelihood vs Wald intervals, the sloppiest direction, the profile-t curves and the
-    likelihood-ratio region of every parameter pair next to its ellipse, for one model."""
-    from matplotlib.ticker import MaxNLocator
-    from .region_figures import lr_region_figure, profile_figure
-    from .tables import draw_table
-    from .uncertainty import model_uncertainty
-    mu = model_uncertainty(results, variant, progress=progress)
-    e = mu.estimate
-    title = f"Uncertainty of {variant}: profile likelihood vs linearisation"
-    head, rows, flags = mu.interval_rows()
-    figs = []
-    parts = _chunks(len(rows), ROWS_PER_PAGE)
-    for n, part in enumerate(parts):
-        fig = _page(title + _part(n, len(parts)))
-        y = 0.9
-        y -= 0.024 * _text(fig, 0.04, y, mu.warning(), width=125, size=10.5, color="#b22222" if
-                           mu.trust != "trustworthy" else "black", weight="bold") + 0.02
-        chunk = [rows[k] for k in part]
-        h = min(0.032 * (len(chunk) + 1), 0.6)
-        ax = fig.add_axes([0.04, y - h, 0.92, h])
-        draw_table(ax, head, chunk, flags=[flags[k] for k in part], fontsize=9,
-                   col_widths=[0.14, 0.17, 0.19, 0.25, 0.25])
-        y -= h + 0.03
-        figs.append(fig)
-    txt = (f"Wald: p -+ q se with the second-order covariance (q the {'Student t' if e.sigma_estimated else 'normal'}"
-           f" quantile), the interval the ellipses are made of. Profile likelihood: the values theta of a "
-           "parameter where 2 (min over the other parameters of Phi with the parameter fixed at theta - Phi(p_hat)) "
-           f"stays below {'F(1, n - p)' if e.sigma_estimated else 'chi2_1'}({1 - mu.alpha:g}) "
-           "(Phi = chi2/2 with the sensor sigmas): it does not assume the model is linear in the parameters. "
-           "Last column: how far each profile end lies from the estimate compared with the Wald end "
-           "(1x: they agree; red cells: they differ by more than 20 % or a side is unbounded).")
-    sl = mu.sloppy_text()
-    if sl:
-        txt = sl + "\n\n" + txt
-    nts = mu.notes()
-    if nts:
-        txt += "\n\nNotes: " + " ".join(f"[{k}] {t}" for k, t in enumerate(nts, 1))
-    y -= 0.021 * _text(figs[-1], 0.04, y, txt, width=170, size=9)
-    per = UNC_COLS * UNC_ROWS
-    profiles = mu.profile.profiles if mu.profile is not None else ()
-    if 0 < len(profiles) <= UNC_COLS and len(parts) == 1 and y > 0.42:      # the profiles fit under the table
-        for k, pr in enumerate(profiles):
-            ax = figs[-1].add_axes([0.06 + k * 0.32, 0.14, 0.25, min(y - 0.22, 0.28)])
-            i = list(e.param_names).index(pr.name)
-            profile_figure(pr, float(e.stderr[i]), e.param_units[i], ax=ax, title=f"profile of {pr.name}")
-            ax.xaxis.set_major_locator(MaxNLocator(4))
-            ax.title.set_fontsize(9)
-        _text(figs[-1], 0.04, 0.065, PROFILE_CAPTION.format(pct=mu.pct), width=175, size=8)
-        profiles = ()
-    if profiles:
-        pparts = _chunks(len(profiles), per)
-        for n, part in enumerate(pparts):
-            fig = _page(f"Profiles of {variant}: profile-likelihood (solid) vs linearised (dashed)"
-                        + _part(n, len(pparts)))
-            axes = fig.subplots(UNC_ROWS, UNC_COLS, squeeze=False).ravel()
-            for ax, k in zip(axes, part):
-                pr = profiles[k]
-                i = list(e.param_names).index(pr.name)
-                profile_figure(pr, float(e.stderr[i]), e.param_units[i], ax=ax, title=f"{variant}: {pr.name}")
-                ax.xaxis.set_major_locator(MaxNLocator(4))
-            for ax in axes[len(part):]:
-                ax.axis("off")
-            fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.14, hspace=0.45, wspace=0.3)
-            _text(fig, 0.04, 0.07, PROFILE_CAPTION.format(pct=mu.pct), width=175, size=8)
-            figs.append(fig)
-    rparts = _chunks(len(mu.regions), per)
-    for n, part in enumerate(rparts):
-        fig = _page(f"Likelihood-ratio regions of {variant} next to the linearised ellipses" + _part(n, len(rparts)))
-        shape = (1, max(len(part), 2)) if len(part) <= UNC_COLS else (UNC_ROWS, UNC_COLS)
-        axes = fig.subplots(*shape, squeeze=False).ravel()
-        handles = {}
-        for ax, k in zip(axes, part):
-            pr = mu.regions[k]
-            i, j = pr.pair
-            names = (e.param_names[i], e.param_names[j])
-            if pr.region is None:
-                ax.axis("off")
-                ax.text(0.0, 0.5, "\n".join(textwrap.wrap(f"{variant}: ({names[0]}, {names[1]}) not computed: "
-                                                          f"{pr.error[:300]}", 50)), fontsize=8, va="center")
-                continue
-            traced = mu.extent if mu.extent is not None else mu.profile
-            profs = [q for q in (traced.profiles if traced is not None else ()) if q.name in names]
-            lr_region_figure(pr.region, units=(e.param_units[i], e.param_units[j]), profiles=profs, ax=ax,
-                             title=f"{variant}: {names[0]} vs {names[1]}")
-            ax.title.set_fontsize(9)
-            ax.xaxis.set_major_locator(MaxNLocator(4))
-            ax.yaxis.set_major_locator(MaxNLocator(5))
-            for h, lab in zip(*ax.get_legend_handles_labels()):
-                if lab.startswith("profile trace of "):
-                    lab = ("profile trace of the x-axis parameter" if lab.endswith(names[0])
-                           else "profile trace of the y-axis parameter")
-                handles.setdefault(lab, h)
-            ax.get_legend().remove()
-        for ax in axes[len(part):]:
-            ax.axis("off")
-        fig.legend(list(handles.values()), list(handles), loc="upper right", ncol=3, fontsize=8, frameon=False,
-                   bbox_to_anchor=(0.98, 0.935))
-        fig.subplots_adjust(left=0.07, right=0.98, top=0.84 if shape[0] == 1 else 0.85,
-                            bottom=0.30 if shape[0] == 1 else 0.14, hspace=0.45, wspace=0.3)
-        _text(fig, 0.04, 0.07, f"Joint {mu.pct} regions of each parameter pair (fit on all study data). Solid red: "
-              f"the likelihood-ratio region {{D <= {'2 F(2, n - p)' if e.sigma_estimated else 'chi2_2'}}} with every "
-              "other parameter re-optimised at each grid point; "
-              "dashed blue: the ellipse of the covariance at the same level; green: the profile traces (the other "
-              "parameters re-optimised along each profile, followed to the level of the region: the extent of the "
-              "region along each axis). Where the red contour and the dashed ellipse differ, the "
-              "ellipse (and every Wald-based number of this model) is a poor picture; believe the red contour.",
-              width=175, size=8)
-        figs.append(fig)
-    return figs
-
-
 def page_texts(fig) -> list[str]:
     """Every text drawn on a page in reading order (top to bottom, then left to right).
 
@@ -647,34 +500,34 @@ def _validation_page(results):
     return fig
 
 
-def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertainty: str = "untrusted",
-                 progress=None) -> list:
+def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertainty: str = "untrusted") -> list:
     """The pages of a report in order: (name, function returning a figure or a list of figures).
 
-    The one place where pages are listed.  Pages that need results the study does not hold
-    yet are added here (e.g. the likelihood-ratio region figures of ``reports.region_figures``
-    after the confidence regions: one ``(name, partial(make, results))`` entry).
-    ``uncertainty`` (one of ``reports.uncertainty.UNCERTAINTY_CHOICES``): which models get the
-    profile-likelihood / likelihood-ratio pages after the confidence regions -- "untrusted" (the
-    models whose linearisation is NOT trustworthy), "all" or "none"; ``progress`` shows their bar.
+    The one place where pages are listed; every page draws what the study computed (``results``).
+    ``diagnosis`` (:class:`reports.diagnosis.Diagnosis`, the study's ``results.diagnosis``) is shown on
+    the page "What the model misses" when ``with_diagnosis``.  ``uncertainty`` (one of
+    ``reports.uncertainty.UNCERTAINTY_CHOICES``): which of the models whose uncertainty the study
+    computed (``results.uncertainty``) get the profile-likelihood / likelihood-ratio pages after the
+    confidence regions -- "untrusted" (the models whose linearisation is NOT trustworthy), "all" or "none".
     """
     from .uncertainty import uncertainty_models
+    from .uncertainty_pages import uncertainty_pages
     cfg = results.study.cfg
     pages = [("title", partial(_title_page, results, cfg)), ("loops", partial(_loops_page, results)),
              ("normality", partial(_normality_page, results)), ("oed", partial(_oed_page, results)),
              ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results))]
     for k, v in enumerate(uncertainty_models(results, uncertainty), 1):
-        pages.append((f"uncertainty{k}", partial(_uncertainty_pages, results, v, progress)))
+        pages.append((f"uncertainty{k}", partial(uncertainty_pages, results, v)))
     pages += [("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
               ("residuals", partial(_residual_pages, results))]
-    if getattr(results, "plan", None) is not None:       # [oed] mode inputs / both / discrimination
+    if results.plan is not None:                         # [oed] mode inputs / both / discrimination
         from .design_pages import design_pages
         pages.insert([n for n, _ in pages].index("oed") + 1, ("design", partial(design_pages, results)))
     if with_diagnosis:
         pages.append(("misses", partial(_misses_pages, results, diagnosis)))
     if results.validation is not None:
         pages.append(("validation", partial(_validation_page, results)))
-    if getattr(results.study, "is_dynamic", False):      # time series: reports.dynamic_pages
+    if results.study.is_dynamic:                         # time series: reports.dynamic_pages
         from .dynamic_pages import dynamic_pages
         pages = dynamic_pages(pages, results)
     return pages
@@ -703,16 +556,16 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     dpi : int, optional
         PNG resolution (default: the config's [report] dpi, 150).
     diagnose : bool
-        Run the diagnostic split family (:func:`reports.diagnosis.diagnose`: input range,
-        phases, series; three fits per split and model) for the page "What the model misses",
-        unless ``results.diagnosis`` holds it already.
+        Show the page "What the model misses": the diagnostic split family the study computed
+        (``results.diagnosis``, :func:`mudoe.study.run_diagnosis`; "not available" without it).
     uncertainty : "untrusted", "all" or "none", optional
-        Which models get the pages "Uncertainty of ...": profile-likelihood intervals next to the
-        Wald ones and the likelihood-ratio region of every parameter pair next to its ellipse
-        (default: the config's [report] uncertainty, "untrusted": the models whose linearisation
-        is NOT trustworthy).
+        Which of the models whose uncertainty the study computed (``results.uncertainty``,
+        :func:`mudoe.study.run_uncertainty`) get the pages "Uncertainty of ...": profile-likelihood
+        intervals next to the Wald ones and the likelihood-ratio region of every parameter pair next
+        to its ellipse (default: the config's [report] uncertainty, "untrusted": the models whose
+        linearisation is NOT trustworthy).
     progress : identification.progress.Progress, optional
-        Bars over the diagnostic fits, the profiles and regions, and the pages (default None: no output).
+        A bar over the pages (default None: no output).
 
     Returns
     -------
@@ -734,8 +587,6 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
 
     from identification.progress import Progress
 
-    from .diagnosis import diagnose as run_diagnosis
-
     from .uncertainty import UNCERTAINTY_CHOICES
     if uncertainty is not None and uncertainty not in UNCERTAINTY_CHOICES:
         raise ValueError(f"uncertainty: expected one of {', '.join(repr(c) for c in UNCERTAINTY_CHOICES)}, "
@@ -752,10 +603,8 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     written = []
     try:
         tmp.mkdir(mode=0o700)
-        diagnosis = getattr(results, "diagnosis", None)
-        if diagnosis is None and diagnose and not getattr(results.study, "is_dynamic", False):
-            diagnosis = run_diagnosis(results, progress=progress)
-        pages = report_pages(results, diagnosis, diagnose, uncertainty, progress)
+        diagnosis = results.diagnosis
+        pages = report_pages(results, diagnosis, diagnose, uncertainty)
         names, texts = [], []
         with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf, \
                 (progress or Progress(False)).bar(len(pages), "report pages", unit="page") as bar:

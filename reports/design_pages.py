@@ -49,7 +49,7 @@ def design_pages(results) -> list:
     -------
     list of matplotlib.figure.Figure
     """
-    plan = getattr(results, "plan", None)
+    plan = results.plan
     if plan is None:
         return []
     model = results.study.models[plan.variant]

@@ -128,7 +128,7 @@ def _text(fig, x, y, text, width=175, size=8, **kw) -> int:
 def discretisation_lines(fig, results, y) -> None:
     """Under the estimates of a dynamic study, from ``y`` down: the discretisation of each fit on all study
     data as the study recorded it (``results.discretisation``), in red when its error is not bounded."""
-    mesh = getattr(results, "discretisation", None) or {}
+    mesh = results.discretisation
     if not mesh:
         return
     fig.text(0.04, y, "Discretisation of the fits on all study data", fontsize=9, weight="bold", va="top")
@@ -142,8 +142,8 @@ def discretisation_lines(fig, results, y) -> None:
 
 
 def _chosen(results) -> tuple:
-    plan = getattr(results, "plan", None)
-    return plan.chosen_times() if plan is not None and getattr(plan, "mode", "") == "times" else ()
+    plan = results.plan
+    return plan.chosen_times() if plan is not None and plan.mode == "times" else ()
 
 
 def _trajectory_pages(results):
@@ -179,7 +179,7 @@ def _trajectory_pages(results):
 
 def _grid_error(traj) -> str:
     """How accurate the drawn outputs are, as the study computed it (``Trajectories.error_sigma``)."""
-    err, tol = getattr(traj, "error_sigma", np.nan), getattr(traj, "tol_sigma", np.nan)
+    err, tol = traj.error_sigma, traj.tol_sigma
     if not np.isfinite(err):
         return "Radau IIA collocation"
     return (f"Radau IIA collocation, discretisation error at most {100 * err:.2g} % of sigma"
@@ -210,8 +210,8 @@ def _residual_pages(results):
 def _design_page(results):
     from .tables import criteria_units, draw_table
     fig = _page("Sampling-time design")
-    plan = getattr(results, "plan", None)
-    if plan is None or getattr(plan, "mode", "") != "times":
+    plan = results.plan
+    if plan is None or plan.mode != "times":
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig
     r, model = plan.result, results.study.models[plan.variant]

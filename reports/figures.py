@@ -12,7 +12,7 @@ from scipy import stats
 from .view import input_label, output_display, output_label, phase_labels, sensor_unit, unit_suffix
 
 __all__ = ["measurement_loops", "confidence_ellipses", "ellipse_points", "residuals_plot", "table_figure",
-           "VARIANT_STYLE", "prediction_bands", "PredictionBands", "prediction_band_plot", "residuals_vs_order",
+           "VARIANT_STYLE", "PredictionBands", "prediction_band_plot", "residuals_vs_order",
            "normal_probability_plot"]
 
 #: line style per model variant
@@ -276,36 +276,16 @@ class PredictionBands:
         self.quantile, self.level = float(quantile), float(level)
 
 
-def prediction_bands(est, level: float = 0.95) -> PredictionBands:
-    """Delta-method bands of the fitted outputs (like MATLAB's ``nlpredci``).
-
-    With the exact sensitivities g = dh/dp (``est.G``, from the implicit state) and the
-    estimate's covariance C: mean band h +- q sqrt(g^T C g), new-observation band
-    h +- q sqrt(g^T C g + sigma_k^2), q the two-sided ``level`` quantile of Student's t with
-    the fit's degrees of freedom when sigma was estimated, of N(0, 1) when it was given.
-    """
-    if not 0.5 < level < 1:
-        raise ValueError(f"level: a two-sided confidence level in (0.5, 1), got {level}")
-    G = np.asarray(est.G, float)
-    C = np.asarray(est.cov, float)
-    var = np.einsum("jkp,pq,jkq->jk", G, C, G)
-    var = np.clip(var, 0, None)
-    q = (stats.t.ppf(0.5 + level / 2, est.dof) if est.sigma_estimated and est.dof > 0
-         else stats.norm.ppf(0.5 + level / 2))
-    sig2 = np.asarray(est.sigma, float) ** 2
-    return PredictionBands(np.asarray(est.fitted, float), q * np.sqrt(var), q * np.sqrt(var + sig2[None, :]), q, level)
-
-
-def prediction_band_plot(study, est, variant: str, sensor: str, level: float = 0.95, ax=None):
+def prediction_band_plot(study, est, variant: str, sensor: str, bands: PredictionBands, ax=None):
     """One sensor: measured values, the fitted output, its mean band and its new-observation band.
 
-    Shaded: band of the mean response; dashed: band of a new observation (both at ``level``,
-    delta method with exact sensitivities, :func:`prediction_bands`).  Set points are joined
-    in measurement order, so loading and unloading branches (or other phases) stay apart.
+    Shaded: band of the mean response; dashed: band of a new observation (both at ``bands.level``,
+    delta method with exact sensitivities, as the study computed them: :func:`mudoe.band_runs.prediction_bands`).
+    Set points are joined in measurement order, so loading and unloading branches (or other phases) stay apart.
     """
     ax = _ax(ax)
     k = list(est.sensors).index(sensor)
-    b = prediction_bands(est, level)
+    b, level = bands, bands.level
     f = output_display(study).scale
     c = study.campaign
     q = c.q_set

@@ -162,9 +162,9 @@ def results_dict(results) -> dict:
                design=dict(sensors=results.design_sensors, how=results.design_how))
     if results.oed is not None:
         out["oed"] = oed_dict(results.oed, results.oed_table, results.oed_variant)
-    if getattr(getattr(results, "plan", None), "mode", "") == "times":      # a dynamic study's sampling times
+    if results.plan is not None and results.plan.mode == "times":    # a dynamic study's sampling times
         out["time_design"] = results.plan.to_dict()
-    if getattr(results, "discretisation", None):               # a dynamic study: the mesh of each fit
+    if results.discretisation:                                  # a dynamic study: the mesh of each fit
         out["discretisation"] = {v: dataclasses.asdict(m) for v, m in results.discretisation.items()}
     if results.detection is not None:
         out["detection"] = detection_dict(results.detection, **normality_labels(results.study))

@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, goodness_of_fit, linearisation_trust,
-                   output_display, param_units, sensor_unit, unit_suffix)
+from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, output_display, param_units, sensor_unit,
+                   unit_suffix)
 
 __all__ = ["fmt_alpha", "normality_rows", "normality_widths", "normality_checks", "normality_labels",
            "sigma_display", "STUDY_SERIES", "ALL_SERIES", "oed_rows", "oed_table_text", "estimate_rows", "alpha_rows",
@@ -240,10 +240,9 @@ def verdict_rows(results) -> tuple[list, list, list]:
         else:
             word, a_txt, where = "no verdict", "n/a", "-"
         if e is not None:
-            g = goodness_of_fit(e)
+            g, trust = results.assessments[v].goodness, results.assessments[v].trust
             gof = fmt_p(g.pvalue) + ("" if not np.isfinite(g.pvalue) else
                                      (" (fails at 5 %)" if g.pvalue < 0.05 else " (passes at 5 %)"))
-            trust = linearisation_trust(e)
             gof_bad = bool(np.isfinite(g.pvalue) and g.pvalue < 0.05)
         else:
             gof, trust, gof_bad = "fit failed", "-", True

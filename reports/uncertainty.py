@@ -4,26 +4,24 @@ For one model's fit on all study data: the (1 - alpha) profile-likelihood interv
 the Wald ones, the likelihood-ratio region of every parameter pair (the other parameters
 re-optimised) next to the linearised ellipse, the sloppiest direction of the information
 matrix, and the sentence that tells the engineer which picture to believe.  Everything is
-computed once per model (:func:`model_uncertainty`); the builder only draws it.
+computed once per model by the study (:mod:`mudoe.uncertainty_runs`) into a :class:`ModelUncertainty`;
+this module words it and the builder draws it.
 
 Which models get these pages (:data:`UNCERTAINTY_CHOICES`): ``"untrusted"`` (default) the
 models whose Bates-Watts curvature says the linearisation is NOT trustworthy
-(:func:`reports.view.linearisation_trust`), ``"all"`` every fitted model, ``"none"`` none.
+(:func:`mudoe.fit_assessment.linearisation_trust`), ``"all"`` every fitted model, ``"none"`` none.
 """
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from identification.errors import IdentificationError
-from identification.inference.profile import ConfidenceIntervals, LikelihoodRegion, lr_region
-from .view import fmt_value, linearisation_trust, unit_suffix
+from identification.inference.profile import ConfidenceIntervals, LikelihoodRegion
+from .view import fmt_value, unit_suffix
 
-__all__ = ["UNCERTAINTY_CHOICES", "PairRegion", "ModelUncertainty", "uncertainty_models", "model_uncertainty",
-           "region_limits", "region_alpha"]
+__all__ = ["UNCERTAINTY_CHOICES", "UNTRUSTED", "PairRegion", "ModelUncertainty", "uncertainty_models"]
 
 #: which models get the uncertainty pages
 UNCERTAINTY_CHOICES = ("untrusted", "all", "none")
@@ -155,108 +153,12 @@ class ModelUncertainty:
 
 
 def uncertainty_models(results, which: str = "untrusted") -> list:
-    """The fitted models that get uncertainty pages (``which`` one of :data:`UNCERTAINTY_CHOICES`)."""
+    """The variants that get uncertainty pages: those of ``results.uncertainty`` (computed by the study,
+    :mod:`mudoe.uncertainty_runs`) that ``which`` (one of :data:`UNCERTAINTY_CHOICES`) selects --
+    "untrusted" the ones whose linearisation is NOT trustworthy, "all" every one, "none" none."""
     if which not in UNCERTAINTY_CHOICES:
         raise ValueError(f"uncertainty: expected one of {', '.join(repr(c) for c in UNCERTAINTY_CHOICES)}, "
                          f"got {which!r}")
     if which == "none":
         return []
-    out = []
-    for v, e in results.estimates.items():
-        if e.n_p < 1 or e.model is None or e.data is None:
-            continue
-        if which == "all" or linearisation_trust(e) == UNTRUSTED:
-            out.append(v)
-    return out
-
-
-def region_alpha(alpha: float, sigma_estimated: bool, dof: int) -> float:
-    """The miss probability alpha' whose single-parameter profile threshold equals the pair-region one.
-
-    The projection of the pair region {D_ij <= c_2} on p_i is {a : D_i(a) <= c_2} exactly (D_i is
-    the minimum of D_ij over p_j), i.e. the profile interval at the level whose threshold is c_2:
-    alpha' = P(chi2_1 > chi2_2(1 - alpha)) (sigma known) or P(F(1, dof) > 2 F(2, dof; 1 - alpha)).
-    """
-    from scipy import stats
-    from identification.inference.profile import region_threshold
-    c2 = region_threshold(alpha, sigma_estimated, dof)
-    return float(stats.f.sf(c2, 1, dof) if sigma_estimated else stats.chi2.sf(c2, 1))
-
-
-def region_limits(estimate, extent, pair, span: float = 1.3, cap: float = 8.0) -> tuple:
-    """Grid rectangle of a pair region: the linearised ellipse's extent (``span`` x its half-widths)
-    joined with the extent of the likelihood-ratio region (``extent``: the profile intervals at
-    :func:`region_alpha`, and their traces), 10 % margin, each side capped at ``cap`` ellipse
-    half-widths from the estimate (an unbounded region reaches the cap)."""
-    from scipy import stats
-    p = np.asarray(estimate.p, float)
-    se = np.asarray(estimate.stderr, float)
-    half = math.sqrt(stats.chi2.ppf(0.95, 2)) * se
-    names = (estimate.param_names[pair[0]], estimate.param_names[pair[1]])
-    lim = []
-    for k in pair:
-        lo, hi = p[k] - span * half[k], p[k] + span * half[k]
-        if extent is not None:
-            if estimate.param_names[k] in extent.param_names:
-                e_lo, e_hi = extent[estimate.param_names[k]]
-                lo, hi = min(lo, e_lo), max(hi, e_hi)
-            for pr in extent.profiles:
-                if pr.name in names:
-                    col = pr.params[:, k]
-                    lo, hi = min(lo, float(np.min(col))), max(hi, float(np.max(col)))
-        lo, hi = max(lo, p[k] - cap * half[k]), min(hi, p[k] + cap * half[k])
-        width = hi - lo
-        lim.append((lo - 0.1 * width, hi + 0.1 * width))
-    return tuple(lim)
-
-
-def model_uncertainty(results, variant: str, alpha: float = 0.05, n_grid: int | None = None,
-                      progress=None) -> ModelUncertainty:
-    """Profile intervals, Wald intervals and the likelihood-ratio region of every pair of one model.
-
-    Parameters
-    ----------
-    results : mudoe.study.StudyResults     (``results.estimates[variant]`` carries model and data)
-    variant : str
-    alpha : float                           miss probability (0.05: 95 %)
-    n_grid : int, optional                  grid points per axis of the pair regions (default 21, 15
-                                            beyond 6 pairs)
-    progress : identification.progress.Progress, optional   a bar over the profiles and pairs
-
-    A failed profile or region is recorded with its reason (shown on the page), never dropped.
-    """
-    from identification.inference.profile import ProfileError
-    t0 = time.perf_counter()
-    e = results.estimates[variant]
-    n = e.n_p
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    if n_grid is None:
-        n_grid = 21 if len(pairs) <= 6 else 15
-    bar = progress.bar(len(pairs) + 1, f"uncertainty of {variant}", unit="step") if progress is not None else None
-    wald = np.asarray(e.conf_int(alpha), float)
-    try:
-        prof, perr = e.conf_int(alpha, method="profile"), ""
-    except (ProfileError, IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
-        prof, perr = None, str(exc).splitlines()[0]
-    extent, eerr = None, ""
-    if pairs:
-        try:
-            extent = e.conf_int(region_alpha(alpha, e.sigma_estimated, e.dof), method="profile")
-        except (ProfileError, IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
-            eerr = str(exc).splitlines()[0]
-    if bar is not None:
-        bar.update(1)
-    regions = []
-    for pair in pairs:
-        try:
-            reg = lr_region(e.model, e.data, e, pair, alpha, n_grid=n_grid, grid="valley",
-                            limits=region_limits(e, extent, pair))
-            regions.append(PairRegion(pair, reg))
-        except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
-            regions.append(PairRegion(pair, None, str(exc).splitlines()[0]))
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    return ModelUncertainty(variant, e, linearisation_trust(e), wald, prof, perr, tuple(regions), alpha,
-                            time.perf_counter() - t0, extent, eerr)
+    return [v for v, mu in results.uncertainty.items() if which == "all" or mu.trust == UNTRUSTED]

@@ -6,9 +6,9 @@ assumes the press.  The press study is recognised in one place, :func:`is_press`
 
 Hooks (one documented place each, for results the study does not hold yet):
 
-* :func:`linearisation_trust` -- the "trust of the linearisation" column of the verdict
-  table; filled when an :class:`identification.Estimate` carries ``curvature`` (with a
-  ``trustworthy`` flag), "not assessed" otherwise.
+* :class:`FitAssessment` -- the goodness of fit and the "trust of the linearisation" columns of
+  the verdict table, as the study assessed each fit (``StudyResults.assessments``,
+  :mod:`mudoe.fit_assessment`).
 * :func:`phase_labels` -- a phase label per set point: loading / unloading for the press,
   the model's ``mudoe_phases(q_set)`` (a user declaration, like ``mudoe_inputs``) otherwise,
   or ``None`` (no phases).
@@ -19,10 +19,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 __all__ = ["unit_suffix", "is_press", "OutputDisplay", "output_display",
-           "input_label", "param_units", "phase_labels", "linearisation_trust", "goodness_of_fit", "GoodnessOfFit",
+           "input_label", "param_units", "phase_labels", "GoodnessOfFit", "FitAssessment",
            "fmt_value", "fmt_p", "fmt_pct", "STATISTIC_WORDS", "sensor_unit", "output_label"]
 
 #: plain names of the three statistics
@@ -109,22 +108,6 @@ def phase_labels(study):
     return labels
 
 
-def linearisation_trust(est) -> str:
-    """Trust of the linearised covariance of one estimate (verdict table column).
-
-    From ``est.curvature`` (Bates-Watts relative curvatures against 1/sqrt(F(p, n-p; 0.05))):
-    "trustworthy", "NOT trustworthy", or "not assessed" when the estimate carries no model/data,
-    has no residual degrees of freedom, or the curvature could not be computed.
-    """
-    if est.model is None or est.data is None or est.dof < 1:
-        return "not assessed"
-    try:
-        ok = est.curvature.trustworthy
-    except (np.linalg.LinAlgError, ValueError):
-        return "not assessed"
-    return "trustworthy" if ok else "NOT trustworthy"
-
-
 @dataclass(frozen=True)
 class GoodnessOfFit:
     """chi2 = sum ((z - h) / sigma)^2 over the used values, its degrees of freedom and p-value.
@@ -142,15 +125,17 @@ class GoodnessOfFit:
         return f"chi2 = {self.chi2:.4g} on {self.dof} dof, p = {fmt_p(self.pvalue)}"
 
 
-def goodness_of_fit(est) -> GoodnessOfFit:
-    """Chi-square goodness-of-fit test of one fit: P(chi2_dof >= observed) with the sensors' sigma."""
-    r = np.asarray(est.residuals, float) / np.asarray(est.sigma, float)
-    used = np.asarray(est.weights) > 0
-    chi2 = float(np.nansum(r[..., used] ** 2))
-    dof = int(est.dof)
-    if est.sigma_estimated or dof <= 0:
-        return GoodnessOfFit(chi2, dof, math.nan)
-    return GoodnessOfFit(chi2, dof, float(stats.chi2.sf(chi2, dof)))
+@dataclass(frozen=True)
+class FitAssessment:
+    """What the study says of one fit beside its numbers (:func:`mudoe.fit_assessment.assess`).
+
+    goodness : GoodnessOfFit    chi-square test of all used residuals with the sensors' sigma
+    trust : str                 the linearisation: "trustworthy", "NOT trustworthy" or "not assessed"
+                                (Bates-Watts curvature)
+    """
+
+    goodness: GoodnessOfFit
+    trust: str
 
 
 def fmt_p(p: float) -> str:

@@ -48,8 +48,7 @@ def test_same_numbers_serial_and_dask_from_the_study(campaign_dirs, cluster):
     cfg = load_config(campaign_dirs["paper_cfg"])
     cfg = dataclasses.replace(cfg, validate=dataclasses.replace(cfg.validate, n_runs=3, seed=5))
     study = prepare(cfg)
-    results = StudyResults(study)
-    run_identify(study, results)
+    results = run_identify(study, StudyResults(study))
     serial = run_validate(study, results, workers=1).validation
     dask = run_validate(study, results, scheduler=cluster.scheduler_address).validation
     assert serial.backend.startswith("serial") and dask.backend.startswith("dask (")

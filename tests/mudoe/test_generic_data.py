@@ -113,14 +113,13 @@ def test_parameter_unit_key(tmp_path):
                      for n, v, u in (("k_ref", 0.1, "1/min"), ("E_a", 50.0, "kJ/mol"), ("k_2", 0.05, "1/min")))
     cfg = _cstr_cfg(params=params)
     assert [p.unit for p in cfg.parameters] == ["1/min", "kJ/mol", "1/min"]
-    from mudoe.study import _apply_parameters
+    from mudoe.study_models import apply_parameters, config_start_values
     # another unit of the same dimension: start and bounds converted by pint to the model's kJ/mol
     cfg_j = _cstr_cfg(params=params.replace('start = 50.0\nunit = "kJ/mol"', 'start = 5e4\nunit = "J/mol"'))
-    m = _apply_parameters(cfg_j, build())
-    from mudoe.study import _p0
-    assert _p0(cfg_j, m)[1] == pytest.approx(50.0, rel=1e-14) and m.params[1].unit == "kJ/mol"
+    m = apply_parameters(cfg_j, build())
+    assert config_start_values(cfg_j, m)[1] == pytest.approx(50.0, rel=1e-14) and m.params[1].unit == "kJ/mol"
     with pytest.raises(ConfigError, match=r"E_a: unit '1/s' but the model declares 'kJ/mol': cannot convert"):
-        _apply_parameters(_cstr_cfg(params=params.replace('"kJ/mol"', '"1/s"')), build())
+        apply_parameters(_cstr_cfg(params=params.replace('"kJ/mol"', '"1/s"')), build())
 
 
 def test_unknown_unit_in_config_names_the_line():

@@ -78,10 +78,8 @@ def test_terminal_json_and_report_agree_on_units_labels_and_words(tmp_path, caps
     assert rc == 0
     det_json = json.loads((tmp_path / "detect.json").read_text())
 
-    results = StudyResults(prepare(load_config(cfg_path)))
-    run_identify(results.study, results)
-    run_oed(results.study, results)
-    run_detect(results.study, results)
+    study = prepare(load_config(cfg_path))
+    results = run_detect(study, run_oed(study, run_identify(study, StudyResults(study))))
     pages = dict(report_pages(results, None, with_diagnosis=False))
     title, normality = pages["title"](), pages["normality"]()
     normality = normality if isinstance(normality, list) else [normality]

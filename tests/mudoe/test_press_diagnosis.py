@@ -45,10 +45,8 @@ def test_press_report_page_and_terminal_state_the_finding(tmp_path, capsys):
     text = text.replace('sensors = "oed"', 'sensors = ["F_x", "B0_y"]').replace('variant = "M1"', 'variant = "M3"')
     study = prepare(parse_config(text, str(DEFAULT_CONFIG), DEFAULT_CONFIG.parent))
     assert [e.model for e in study.explanations] == ["M3"]
-    results = StudyResults(study)
-    run_identify(study, results)
-    run_detect(study, results)
-    run_diagnosis(study, results)
+    results = run_identify(study, StudyResults(study))
+    results = run_diagnosis(study, run_detect(study, results))
     row = next(r for r in results.diagnosis.rows if r.split == "low vs high input")
     assert row.rejected and row.alpha == pytest.approx(M3_INPUT_RANGE_BENCH["as shipped"], rel=0.05)
     pages = dict(report_pages(results, results.diagnosis))

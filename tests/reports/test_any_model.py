@@ -44,7 +44,7 @@ PRESS_WORDS = re.compile(r"\b(force|displacement|N/mm|press|k5|k7|loading|unload
 def toy_results(tmp_path_factory):
     from mudoe.config import parse_config
     from mudoe.data_io import DataUnits, write_paper_layout
-    from mudoe.study import StudyResults, prepare, run_detect, run_identify, run_oed
+    from mudoe.study import StudyResults, prepare, run_bands, run_detect, run_diagnosis, run_identify, run_oed
     import importlib
     tmp = tmp_path_factory.mktemp("toy")
     pkg = tmp / "mytoy_pkg"
@@ -99,11 +99,8 @@ def toy_results(tmp_path_factory):
             dpi = 30
             """)
         study = prepare(parse_config(text, str(tmp / "toy.toml"), tmp))
-        r = StudyResults(study)
-        run_identify(study, r)
-        run_oed(study, r)
-        run_detect(study, r)
-        yield r, tmp
+        r = run_detect(study, run_oed(study, run_identify(study, StudyResults(study))))
+        yield run_bands(study, run_diagnosis(study, r)), tmp
     finally:
         sys.path.remove(str(tmp))
         for name in [m for m in sys.modules if m.startswith("mytoy_pkg")]:
@@ -194,7 +191,7 @@ def test_fmt_value(value, se, expect):
 
 def test_prediction_bands_match_the_delta_method(toy_results):
     from scipy import stats
-    from reports.figures import prediction_bands
+    from mudoe.band_runs import prediction_bands
     r, _ = toy_results
     e = r.estimates["equilibrium"]
     b = prediction_bands(e, 0.95)
@@ -208,7 +205,7 @@ def test_prediction_bands_match_the_delta_method(toy_results):
 
 
 def test_holm_adjusted_p_values():
-    from reports.diagnosis import holm_adjusted
+    from mudoe.diagnosis_runs import holm_adjusted
     p = [0.01, 0.04, 0.03, float("nan"), 0.5]
     # m = 5 planned tests: sorted 0.01, 0.03, 0.04, 0.5 -> 5*0.01, max(., 4*0.03), max(., 3*0.04), max(., 2*0.5)
     exp = [0.05, 0.12, 0.12, float("nan"), 1.0]

@@ -20,10 +20,7 @@ def reactor():
     from mudoe.dynamic_runs import run_discretisation
     from mudoe.study import StudyResults, prepare, run_identify
     study = prepare(load_config(REPO / "configs" / "reactor.toml"))
-    r = StudyResults(study)
-    run_identify(study, r)
-    run_discretisation(study, r)
-    return r
+    return run_discretisation(study, run_identify(study, StudyResults(study)))
 
 
 def _overflowing_cells(fig) -> list:

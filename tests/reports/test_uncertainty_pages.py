@@ -27,11 +27,9 @@ CONFIG = Path(__file__).resolve().parents[2] / "configs" / "truss_one_sensor.tom
 @pytest.fixture(scope="module")
 def truss():
     from mudoe.config import load_config
-    from mudoe.study import StudyResults, prepare, run_identify
+    from mudoe.study import StudyResults, prepare, run_identify, run_uncertainty
     study = prepare(load_config(CONFIG))
-    r = StudyResults(study)
-    run_identify(study, r)
-    return r
+    return run_uncertainty(study, run_identify(study, StudyResults(study)))       # [report] uncertainty: untrusted
 
 
 @pytest.fixture(scope="module")
@@ -82,8 +80,7 @@ def test_truss_one_sensor_gets_uncertainty_pages_with_profile_intervals(truss, t
 
 
 def test_truss_one_sensor_region_is_resolved_and_longer_than_the_ellipse(truss):
-    from reports.uncertainty import model_uncertainty
-    mu = model_uncertainty(truss, "linear")
+    mu = truss.uncertainty["linear"]                # computed by the study (mudoe.uncertainty_runs)
     (pr,) = mu.regions
     reg = pr.region
     inside = reg.statistic <= reg.threshold
@@ -95,12 +92,24 @@ def test_truss_one_sensor_region_is_resolved_and_longer_than_the_ellipse(truss):
 
 
 def test_truss_one_sensor_summary_warns_and_gives_profile_intervals(truss):
+    from mudoe.uncertainty_runs import summary_intervals
     est = truss.estimates["linear"]
     assert "est.summary(intervals=ci)" in est.summary()
-    s = est.summary(intervals=est.conf_int(method="profile"))
+    ci = summary_intervals(est)                      # what `mudoe identify` passes: the profile intervals
+    np.testing.assert_array_equal(np.asarray(ci), np.asarray(est.conf_int(method="profile")))
+    s = est.summary(intervals=ci)
     assert "NOT trustworthy" in s and "conf_int(method=\"profile\")" in s
     assert "95 % profile intervals (trust these, not the Wald columns): k1 [" in s and "k2 [" in s
     assert "weakest direction" in s
+    assert summary_intervals(_linear_results().estimates["lin"]) is None      # trustworthy: nothing computed
+
+
+def test_identify_prints_the_profile_intervals_of_an_untrusted_fit(tmp_path, capsys):
+    from mudoe.cli import main
+    assert main(["identify", str(CONFIG), "--out", str(tmp_path), "--quiet"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "NOT trustworthy" in out and "95 % profile intervals (trust these, not the Wald columns): k1 [" in out
+    assert "95 % profile intervals (trust these" in (tmp_path / "identify.txt").read_text()
 
 
 def test_verdict_paragraph_points_to_the_uncertainty_pages(truss):
@@ -118,13 +127,18 @@ def _linear_results():
 
 
 def test_which_models_get_the_pages():
-    from reports.uncertainty import model_uncertainty, uncertainty_models
+    from mudoe.uncertainty_runs import model_uncertainty, uncertainty_variants
+    from reports.uncertainty import uncertainty_models
     r = _linear_results()
-    assert uncertainty_models(r) == []                          # trustworthy: no pages by default
-    assert uncertainty_models(r, "all") == ["lin"] and uncertainty_models(r, "none") == []
+    assert uncertainty_variants(r.estimates) == []                 # trustworthy: no pages by default
+    assert uncertainty_variants(r.estimates, "all") == ["lin"] and uncertainty_variants(r.estimates, "none") == []
     with pytest.raises(ValueError, match="uncertainty: expected one of"):
-        uncertainty_models(r, "some")
-    mu = model_uncertainty(r, "lin", n_grid=7)
+        uncertainty_variants(r.estimates, "some")
+    mu = model_uncertainty(r.estimates["lin"], "lin", n_grid=7)
+    shown = SimpleNamespace(uncertainty={"lin": mu})               # the report draws what the study computed
+    assert uncertainty_models(shown) == [] and uncertainty_models(shown, "all") == ["lin"]
+    with pytest.raises(ValueError, match="uncertainty: expected one of"):
+        uncertainty_models(shown, "some")
     assert mu.trust == "trustworthy" and mu.warning().startswith("The linearisation of lin is trustworthy")
     # a linear model with sigma known: the profile interval is the Wald interval (chi2_1 = z^2)
     np.testing.assert_allclose(mu.profile.array, mu.wald, rtol=1e-6)
@@ -180,7 +194,7 @@ def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
     class Seen(Exception):
         pass
 
-    def spy(results, diagnosis, with_diagnosis, uncertainty, progress):
+    def spy(results, diagnosis, with_diagnosis, uncertainty):
         raise Seen(uncertainty)
 
     monkeypatch.setattr(builder, "report_pages", spy)
@@ -189,3 +203,25 @@ def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
         with pytest.raises(Seen, match=expected):
             builder.build_report(r, out, diagnose=False, uncertainty=given)
     assert list(out.iterdir()) == []                 # nothing half-written
+
+
+def test_the_uncertainty_pages_only_draw_what_the_study_computed(truss, monkeypatch):
+    """No profile, region or fit runs while the pages are drawn: they read ``results.uncertainty``."""
+    import matplotlib.pyplot as plt
+    import identification.inference.profile as profile
+    from reports.builder import page_texts, report_pages
+    est = type(truss.estimates["linear"])
+
+    def no_computation(*args, **kwargs):
+        raise AssertionError("the report computed")
+
+    monkeypatch.setattr(est, "conf_int", no_computation)
+    monkeypatch.setattr(profile, "lr_region", no_computation)
+    monkeypatch.setattr(profile, "profile_intervals", no_computation, raising=False)
+    texts = []
+    for name, make in report_pages(truss, None, False):
+        if name.startswith("uncertainty"):
+            for fig in make():
+                texts += page_texts(fig)
+                plt.close(fig)
+    assert "Likelihood-ratio regions of linear next to the linearised ellipses" in texts

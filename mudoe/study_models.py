@@ -1,0 +1,101 @@
+"""The models of a study: every ``[model]`` variant built, bounded by ``[[parameters]]``, with units and start values.
+
+Generic: a built-in model (the press) is built by its :class:`mudoe.builtin_studies.BuiltinStudy`,
+any other by the factory ``"package.module:function"``.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+from typing import Callable
+
+import numpy as np
+
+from models.contract import Model, ModelError
+from models.shipping import ModelSource
+
+from .builtin_studies import builtin_study
+from .checks import call_factory
+from .config import ConfigError, StudyConfig, config_error
+from .data_io import DataUnits
+from .parameter_units import model_parameters
+from .study_base import VariantModel, load_factory
+
+__all__ = ["build_models", "apply_parameters", "declare_units", "config_start_values", "is_dynamic_built"]
+
+
+def build_models(cfg: StudyConfig) -> dict:
+    """{variant: VariantModel} of the config's variants (a dynamic model is kept as built, without inputs)."""
+    builtin = builtin_study(cfg.model.name)
+    if builtin is not None:
+        return {v: dataclasses.replace(b, model=apply_parameters(cfg, b.model))
+                for v, b in builtin.build_models(cfg).items()}
+    factory = _factory(cfg)
+    out = {}
+    for v in cfg.model.variants:
+        m = call_factory(factory, cfg.model.name, v, lambda msg: config_error(cfg, "model", "name", msg))
+        if getattr(m, "is_dynamic", False):           # an ODE/DAE model: mudoe.dynamic_study
+            m.origin = ModelSource(cfg.model.name, v)
+            out[v] = VariantModel(m)
+            continue
+        if not isinstance(m, Model):
+            raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
+                              f"{type(m).__name__}, expected a models.Model")
+        m.origin = ModelSource(cfg.model.name, v)     # worker processes may rebuild it from here
+        out[v] = VariantModel(apply_parameters(cfg, m), getattr(m, "mudoe_inputs", None))
+    return out
+
+
+def _factory(cfg: StudyConfig) -> Callable:
+    return load_factory(cfg.model.name, f"{cfg.path}: [model] name")
+
+
+def apply_parameters(cfg: StudyConfig, m: Model) -> Model:
+    """A copy of the model with the config's parameter bounds."""
+    if not cfg.parameters:
+        return m
+    names = [p.name for p in cfg.parameters]
+    unknown = [n for n in names if n not in m.param_names]
+    if unknown:
+        raise ConfigError(f"{cfg.path}: [[parameters]] unknown parameter(s) {', '.join(unknown)}; the model has "
+                          f"{', '.join(m.param_names)}")
+    missing = [n for n in m.param_names if n not in names]
+    if missing:
+        raise ConfigError(f"{cfg.path}: [[parameters]] missing start value(s) for {', '.join(missing)}")
+    cfg = dataclasses.replace(cfg, parameters=model_parameters(cfg, m))
+    try:
+        new = m.with_bounds({pc.name: (pc.lower, pc.upper) for pc in cfg.parameters})
+    except ModelError as exc:
+        raise ConfigError(f"{cfg.path}: [[parameters]] {exc}") from None
+    units = {pc.name: pc.unit for pc in cfg.parameters if pc.unit}
+    new.params = tuple(dataclasses.replace(p, unit=p.unit or units.get(p.name, "")) for p in new.params)
+    return new
+
+
+def declare_units(m: Model, units: DataUnits) -> Model:
+    """The model with the data's model-side units where it declares none (for tables and the report)."""
+    q_units = (units.input_model or m.input_units[0],) + tuple(m.input_units[1:])
+    s_units = tuple(own or u for own, u in zip(m.sensor_units, units.output_model))
+    if q_units == tuple(m.input_units) and s_units == tuple(m.sensor_units):
+        return m
+    new = copy.copy(m)
+    new.input_units = tuple(own or u for own, u in zip(m.input_units, q_units))
+    new.sensor_units = s_units
+    return new
+
+
+def config_start_values(cfg: StudyConfig, m: Model) -> np.ndarray:
+    """The [[parameters]] start values of a model (else its ``p_nominal``)."""
+    if cfg.parameters:
+        d = {p.name: p.start for p in model_parameters(cfg, m)}
+        return np.array([d[n] for n in m.param_names], float)
+    nominal = getattr(m, "p_nominal", None)
+    if nominal is None:
+        raise ConfigError(f"{cfg.path}: [[parameters]] give start values for {', '.join(m.param_names)}")
+    return np.asarray(nominal, float)
+
+
+def is_dynamic_built(cfg: StudyConfig, built: dict) -> bool:
+    """Whether the built variants are dynamic models (:func:`mudoe.dynamic_study.is_dynamic_study`)."""
+    from .dynamic_study import is_dynamic_study
+    return is_dynamic_study(cfg, built)
