@@ -26,6 +26,8 @@ class VirtualPrototype:
                                prototype, ``error(section, key, msg)`` makes the ConfigError
     set_points : int           set points of one simulated series (the size limits' lower bound)
     seed, n_series : int       defaults of [data] seed and n_series
+    generate : callable        ``generate(seed, n_series)``: the rig's whole campaign (``mudoe simulate``)
+    write : callable           ``write(campaign, folder) -> list of paths``: that campaign as data files
     """
 
     campaign: Callable
@@ -33,6 +35,8 @@ class VirtualPrototype:
     set_points: int
     seed: int
     n_series: int
+    generate: Callable
+    write: Callable
 
 
 @dataclass(frozen=True)

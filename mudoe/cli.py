@@ -409,16 +409,17 @@ def _simulate(cfg, args, progress, out) -> int:
     if args.seed is not None and args.seed < 0:
         from .config import ConfigError
         raise ConfigError(f"--seed: must be non-negative, got {args.seed}")
-    if cfg.model.name != "press":
+    from .registry import builtin_model
+    builtin = builtin_model(cfg.model.name)
+    if builtin is None or builtin.prototype is None:
         return _simulate_study(cfg, args, progress, out)
-    from models.prototype import generate_campaign, write_campaign
     seed = cfg.data.seed if args.seed is None else args.seed
     with progress.step(f"simulate the virtual prototype (seed {seed}, {cfg.data.n_series} series)"):
-        camp = generate_campaign(seed=seed, n_series=cfg.data.n_series)
+        camp = builtin.prototype.generate(seed=seed, n_series=cfg.data.n_series)
     _interrupt_check()
     from .outdir import claim, record
     claim(out)
-    paths = write_campaign(camp, out)
+    paths = builtin.prototype.write(camp, out)
     record(out, paths)
     text = "\n".join(str(p) for p in paths)
     _emit(args, text, {"files": [str(p) for p in paths], "seed": seed, "n_series": cfg.data.n_series})

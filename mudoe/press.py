@@ -42,7 +42,7 @@ from models.friction import (F_SCALE, FRICTION_JSON, Q_SCALE, FrictionError, Pre
                              model_inputs)
 from models.press import K_NOMINAL, PRESS_SCENARIO_NAMES, Q_PAPER, press_model, press_scenario_rows
 from models.prototype import (CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, generate_campaign,
-                              read_campaign)
+                              read_campaign, write_campaign)
 from reports.diagnosis import Explanation
 
 from .builtin import BuiltinModel, VirtualPrototype
@@ -399,4 +399,4 @@ PRESS = BuiltinModel(
     name="press", variants=FRICTION_VARIANTS, scenarios=PRESS_SCENARIO_NAMES, scenario_rows=press_scenario_rows,
     data_directory="../data/press_campaign", build=press_variant, explanations=diagnosis_explanations,
     prototype=VirtualPrototype(campaign=prototype_campaign, check=check_prototype_data, set_points=len(Q_PAPER),
-                               seed=CAMPAIGN_SEED, n_series=6))
+                               seed=CAMPAIGN_SEED, n_series=6, generate=generate_campaign, write=write_campaign))

@@ -8,11 +8,13 @@ prototype of ``[data] source = "prototype"``.
 """
 from __future__ import annotations
 
+from identification.studies.splits import splits_from_scenarios
+
 from .builtin import BuiltinModel, VirtualPrototype
 from .press import PRESS
 
 __all__ = ["BUILTIN_MODELS", "DEFAULT_MODEL", "builtin_model", "default_model", "known_variants", "known_scenarios",
-           "virtual_prototype"]
+           "virtual_prototype", "scenario_splits", "simulate_refusal"]
 
 #: the built-in models by [model] name
 BUILTIN_MODELS = {m.name: m for m in (PRESS,)}
@@ -48,3 +50,20 @@ def known_scenarios() -> tuple:
 def virtual_prototype() -> VirtualPrototype:
     """The virtual prototype that ``[data] source = "prototype"`` simulates (the default model's: the press's)."""
     return default_model().prototype
+
+
+def scenario_splits(n_q: int, wanted) -> list:
+    """The shipped scenario splits named in ``wanted`` (``[splits] scenarios``; "paper": all of a model's)
+    over ``n_q`` set points."""
+    out = []
+    for m in BUILTIN_MODELS.values():
+        names = m.scenarios if "paper" in wanted else wanted
+        out += [sp for sp in splits_from_scenarios(m.scenario_rows, n_q) if sp.name in names]
+    return out
+
+
+def simulate_refusal(name: str) -> str | None:
+    """Why ``mudoe simulate`` does not apply to the built-in model ``name`` (None: an own model, it does)."""
+    if name not in BUILTIN_MODELS:
+        return None
+    return f"[simulate] is for own models; the {name} simulates its virtual prototype"

@@ -7,7 +7,7 @@ their results in a frozen :class:`StudyResults` for the CLI and the report build
 :mod:`mudoe.study_models`, the designs in :mod:`mudoe.plans`, and what the report shows beyond the
 fits is computed in :mod:`mudoe.fit_assessment`, :mod:`mudoe.band_runs`, :mod:`mudoe.diagnosis_runs`
 and :mod:`mudoe.uncertainty_runs` (the report only draws); the runs are importable from here.
-Built-in models (the press) enter through :mod:`mudoe.builtin_studies`: this module names none.
+Built-in models (the press) enter through :mod:`mudoe.registry`: this module names none.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from identification.studies.detect import NormalityCheck, normality_check
 from identification.studies.splits import Split, random_splits
 from models.campaign import Campaign
 
-from .builtin_studies import builtin_study, scenario_splits
+from .registry import builtin_model, scenario_splits, simulate_refusal
 from .checks import check_data, check_model, study_splits
 from .config import ConfigError, StudyConfig, config_error
 from .data_io import DataFileError, DataUnits, load_campaign, study_units
@@ -147,7 +147,7 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
         data[v] = full if cfg.data.series is None else full.subset(series=list(cfg.data.series))
     first = next(iter(models.values()))
     p0 = config_start_values(cfg, first)
-    builtin = builtin_study(cfg.model.name)
+    builtin = builtin_model(cfg.model.name)
     explanations = builtin.explanations(campaign, tuple(models)) if builtin is not None else ()
     return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
                  campaign.notes, units, explanations)
@@ -308,9 +308,9 @@ def simulate_study(cfg: StudyConfig, seed: int | None = None) -> SimulatedCampai
     ConfigError
         A built-in model (the press: use its virtual prototype), a sensor without sigma, missing true values.
     """
-    builtin = builtin_study(cfg.model.name)
-    if builtin is not None:
-        raise ConfigError(f"{cfg.path}: {builtin.simulate_refusal}")
+    refusal = simulate_refusal(cfg.model.name)
+    if refusal is not None:
+        raise ConfigError(f"{cfg.path}: {refusal}")
     sc = cfg.simulate
     if not sc.inputs and sc.input_start is None:
         raise ConfigError(f"{cfg.path}: [simulate] give the set points: inputs = [...] or input_start, input_stop "

@@ -1,6 +1,6 @@
 """The models of a study: every ``[model]`` variant built, bounded by ``[[parameters]]``, with units and start values.
 
-Generic: a built-in model (the press) is built by its :class:`mudoe.builtin_studies.BuiltinStudy`,
+Generic: a built-in model (the press) is built by its :class:`mudoe.builtin.BuiltinModel` (:mod:`mudoe.registry`),
 any other by the factory ``"package.module:function"``.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from models.contract import Model, ModelError
 from models.shipping import ModelSource
 
-from .builtin_studies import builtin_study
+from .registry import builtin_model
 from .checks import call_factory
 from .config import ConfigError, StudyConfig, config_error
 from .data_io import DataUnits
@@ -26,10 +26,13 @@ __all__ = ["build_models", "apply_parameters", "declare_units", "config_start_va
 
 def build_models(cfg: StudyConfig) -> dict:
     """{variant: VariantModel} of the config's variants (a dynamic model is kept as built, without inputs)."""
-    builtin = builtin_study(cfg.model.name)
+    builtin = builtin_model(cfg.model.name)
     if builtin is not None:
-        return {v: dataclasses.replace(b, model=apply_parameters(cfg, b.model))
-                for v, b in builtin.build_models(cfg).items()}
+        out = {}
+        for v in cfg.model.variants:
+            model, inputs_fn = builtin.build(v, cfg)
+            out[v] = VariantModel(apply_parameters(cfg, model), inputs_fn)
+        return out
     factory = _factory(cfg)
     out = {}
     for v in cfg.model.variants:

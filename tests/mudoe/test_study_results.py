@@ -40,8 +40,8 @@ def test_results_fields_are_typed_not_object():
 def test_built_in_studies_are_looked_up_by_name():
     from identification.studies.splits import Split
     from models.press import PRESS_SCENARIO_NAMES
-    from mudoe.builtin_studies import builtin_study, scenario_splits
-    assert builtin_study("press").name == "press" and builtin_study("mytoy_pkg.model:build") is None
+    from mudoe.registry import builtin_model, scenario_splits
+    assert builtin_model("press").name == "press" and builtin_model("mytoy_pkg.model:build") is None
     paper = scenario_splits(29, ["paper"])
     assert [s.name for s in paper] == [n for n in PRESS_SCENARIO_NAMES] and all(isinstance(s, Split) for s in paper)
     assert [s.name for s in scenario_splits(29, [PRESS_SCENARIO_NAMES[1]])] == [PRESS_SCENARIO_NAMES[1]]
