@@ -3,13 +3,15 @@
 information terms."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from identification.fit import dense
 from identification.errors import IdentifiabilityError, IdentificationError
 
 __all__ = ["check_identifiability", "covariance_from_terms", "ABSURD_SCALES", "check_plausible", "rank_ok",
-           "absurd", "bad_stderr", "failed_check"]
+           "absurd", "bad_stderr", "failed_check", "CheckFailure"]
 
 
 def check_identifiability(model, G, cw, sig, s_p, rtol, selected, sv=None):
@@ -101,18 +103,26 @@ def bad_stderr(cov: np.ndarray, cov_gn: np.ndarray) -> np.ndarray:
     return ~(np.isfinite(d1) & (d1 >= 0) & np.isfinite(d2) & (d2 >= 0))
 
 
-#: the reasons of a failed check of :func:`failed_check` (the batch engine's fallback reasons)
-NOT_IDENTIFIABLE = "Assumption 3 (rank(Omega J) = n_p) fails at the converged point"
-ABSURD = "the estimate ran off to absurd values"
-NOT_FINITE_SE = "the standard errors are not finite (H singular)"
+@dataclass(frozen=True)
+class CheckFailure:
+    """A converged point that fails a check of :func:`failed_check` (the batch engine then falls back
+    to identify with ``reason``)."""
+
+    reason: str
 
 
-def failed_check(ident: np.ndarray, p: np.ndarray, s_p: np.ndarray, cov: np.ndarray, cov_gn: np.ndarray) -> list:
-    """Per member of a stack: "" when the estimate passes the checks, else the reason of the first failed
-    one (Assumption 3 ``ident`` False, :func:`absurd`, :func:`bad_stderr`)."""
+NOT_IDENTIFIABLE = CheckFailure("Assumption 3 (rank(Omega J) = n_p) fails at the converged point")
+ABSURD = CheckFailure("the estimate ran off to absurd values")
+NOT_FINITE_SE = CheckFailure("the standard errors are not finite (H singular)")
+
+
+def failed_check(ident: np.ndarray, p: np.ndarray, s_p: np.ndarray, cov: np.ndarray,
+                 cov_gn: np.ndarray) -> list:
+    """Per member of a stack: None when the estimate passes the checks, else the :class:`CheckFailure` of
+    the first failed one (Assumption 3 ``ident`` False, :func:`absurd`, :func:`bad_stderr`)."""
     far = np.any(absurd(p, s_p), axis=-1)
     bad_se = np.any(bad_stderr(cov, cov_gn), axis=-1)
-    return [NOT_IDENTIFIABLE if not ident[i] else ABSURD if far[i] else NOT_FINITE_SE if bad_se[i] else ""
+    return [NOT_IDENTIFIABLE if not ident[i] else ABSURD if far[i] else NOT_FINITE_SE if bad_se[i] else None
             for i in range(p.shape[0])]
 
 
