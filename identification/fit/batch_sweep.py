@@ -12,6 +12,7 @@ import numpy as np
 from identification.errors import StateSolveError
 from identification.fit.batch_data import BatchData, BatchSettings
 from identification.fit.batch_points import Points, unique_rows
+from identification.fit.measurements import data_terms
 
 __all__ = ["Prepared", "prepare", "Iteration", "Sweep", "evaluate", "evaluate_fused", "evaluate_shared"]
 
@@ -46,10 +47,6 @@ def prepare(model, data: BatchData, w, Y_ref) -> Prepared:
     n_u, R = first.size, data.n_members
     selected = np.flatnonzero(w > 0)
     Z = data.z
-    mask = np.isfinite(Z)
-    counts = mask.sum(axis=1).astype(float)                                  # (R, n_q, n_S)
-    zsum = np.where(mask, Z, 0.0).sum(axis=1)
-    zbar = np.where(counts > 0, zsum / np.maximum(counts, 1), 0.0)
     if data.sigma is not None:
         sig = data.sigma
     else:                            # identify's common spread of the selected sensors
@@ -57,9 +54,8 @@ def prepare(model, data: BatchData, w, Y_ref) -> Prepared:
         for r in range(R):
             zs = Z[r][:, :, selected]
             sig[r] = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
-    cw = counts * w[None, None, :]
-    dev = np.where(mask, Z - zbar[:, None], 0.0)
-    const = 0.5 * np.sum(w[None, None, None, :] * dev ** 2 / sig[:, None, None, :] ** 2, axis=(1, 2, 3))
+    terms = data_terms(Z, w, sig)                                           # (R, n_q, n_S) and (R,)
+    counts, zbar, cw, const = terms.counts, terms.zbar, terms.cw, terms.const
     onehot = np.zeros((n_u, group.size))
     onehot[group, np.arange(group.size)] = 1.0
     C = np.einsum("uj,rjs->rus", onehot, cw)

@@ -32,7 +32,7 @@ from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from identification.fit import dense
 from identification.fit.factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
-from identification.fit.measurements import Measurements
+from identification.fit.measurements import Measurements, data_terms
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
            "newton_decrement"]
@@ -115,20 +115,8 @@ class ReducedProblem:
         """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
         w = np.asarray(weights, float)
         sig = np.asarray(sigma, float)
-        z = data.z
-        mask = np.isfinite(z)
-        if z.shape[0] == 1:                 # one series: the means are the values, no scatter
-            counts = mask[0].astype(float)
-            zbar = np.where(mask[0], z[0], 0.0)
-            const = 0.0
-        else:                               # the same numbers as data.counts() and data.means()
-            c = mask.sum(axis=0)
-            counts = c.astype(float)
-            zsum = np.where(mask, z, 0.0).sum(axis=0)
-            zbar = np.where(c > 0, zsum / np.maximum(c, 1), 0.0)
-            dev = np.where(mask, z - zbar[None], 0.0)
-            const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
-        cw = counts * w[None, :]
+        terms = data_terms(data.z, w, sig)
+        zbar, cw, const = terms.zbar, terms.cw, float(terms.const)
         return cls(model, data, w, sig, np.asarray(p_scale, float), zbar, cw, const)
 
     def evaluate(self, p: np.ndarray, states0=None) -> ReducedPoint:
