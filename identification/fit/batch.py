@@ -191,135 +191,189 @@ def fit_batch(model: Model, data: "Sequence[Measurements] | BatchData", p0, weig
         bad data is its fallback's error instead.
     """
     settings = settings or IdentifySettings()
-    bs = batch_settings or BatchSettings()
     data, p0, w = _check_batch(model, data, p0, weights)
-    R, n_p, n_y = data.n_members, model.n_p, model.n_y
-    q = data.inputs
-    n_q = q.shape[-2]
+    Y0 = _checked_states(model, data, Y0)
+    run = _BatchRun(model, data, p0, w, weights, settings, batch_settings or BatchSettings(), bool(fallback), Y0)
+    return run.fit(starts, start_states)
+
+
+def _checked_states(model, data: BatchData, Y0):
+    """Y0 as a float array of the states at p0 ((n_q, n_y), or (R, n_q, n_y) with per-member inputs)."""
+    n_y = model.n_y
     if Y0 is not None and n_y:
         Y0 = np.asarray(Y0, float)
-        want = (n_q, n_y) if data.shared else (R, n_q, n_y)
+        n_q = data.inputs.shape[-2]
+        want = (n_q, n_y) if data.shared else (data.n_members, n_q, n_y)
         if Y0.shape != want:
             raise DataError(f"Y0: expected the states at p0 of shape {want}, got {Y0.shape}")
-    sigma_unknown = data.sigma is None
-    records, results = [], [None] * R
+    return Y0
 
-    def run_fallbacks():
-        for r, why in sorted(fallback.items()):
-            if not fallback_on:
-                records.append(FallbackRecord(int(r), why, "not refitted (fallback=False)"))
-                results[r] = IdentificationError(f"member {r}: {why} (not refitted: fallback=False)")
+
+class _BatchRun:
+    """One call of :func:`fit_batch`: the validated request, the members handed to identify
+    (``fallback``: member -> reason), and the per-member results and fallback records."""
+
+    def __init__(self, model, data: BatchData, p0, w, weights, settings: IdentifySettings, bs: BatchSettings,
+                 fallback_on: bool, Y0):
+        self.model, self.data, self.p0, self.w, self.weights = model, data, p0, w, weights
+        self.settings, self.bs, self.fallback_on, self.Y0 = settings, bs, fallback_on, Y0
+        self.R = data.n_members
+        self.records, self.results = [], [None] * self.R
+        self.fallback = {}
+
+    def fit(self, starts, start_states) -> BatchFit:
+        """The batch iteration and the fallbacks (see :func:`fit_batch`)."""
+        model, data, R = self.model, self.data, self.R
+        Y_ref = self._reference_states(starts, start_states)
+        if Y_ref is None:
+            return self._unusable(starts)
+        n_p, n_y = model.n_p, model.n_y
+        n_values = np.isfinite(data.z[..., self.w > 0]).sum(axis=(1, 2, 3))
+        for r in np.flatnonzero((n_values < n_p) | ((data.sigma is None) & (n_values <= n_p))):
+            self.fallback[int(r)] = "too few values for the parameters"
+        q = data.inputs
+        prep = prepare(model, data, self.w, Y_ref if n_y else np.zeros(q.shape[:-1] + (0,)))
+        s_p = param_scale(model, self.p0)
+        Q_u, Y_u, Yst, P0 = self._start_points(prep, Y_ref, starts, start_states)
+        members = np.array([r for r in range(R) if r not in self.fallback], int)
+        it = prep_m = None
+        if members.size:
+            prep_m = Prepared(prep.first, prep.group, prep.zb[members], prep.wts[members], prep.const[members],
+                              prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w,
+                              prep.Z[members])
+            if data.shared:
+                points = Points(model, Q_u, members.size, self.p0, Y_u)
+            else:
+                # (E_y's symmetry, a shortcut checked again at every sweep, is first tested at one member's start)
+                points = Points(model, Q_u[members], members.size, P0[members[0]], Yst[members[0]])
+            it = iterate(model, prep_m, points, s_p, P0[members], Yst[members], self.settings, self.bs,
+                         data.sigma is None, starts is None and data.shared)
+        converged, decrement, sweeps = self._finals(prep_m, it, members, s_p)
+        self._run_fallbacks()
+        return _collect(model, self.results, self.records, converged, decrement, sweeps,
+                        0 if it is None else it.dense_sweeps)
+
+    def _reference_states(self, starts, start_states):
+        """The states at p0 (or the members' own start states), None when the batch engine cannot be used."""
+        model, data, p0, R = self.model, self.data, self.p0, self.R
+        q = data.inputs
+        n_q, n_y = q.shape[-2], model.n_y
+        usable = (q.shape[-1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(self.w > 0)
+                  and np.all(p0 >= model.lower) and np.all(p0 <= model.upper) and np.all(np.isfinite(p0))
+                  and (not n_y or numerics(model).dense))
+        if not usable:
+            return None
+        try:
+            own_all = (not data.shared and starts is not None and start_states is not None
+                       and np.all(np.isfinite(np.asarray(starts, float))))
+            if self.Y0 is not None:
+                return self.Y0
+            if own_all:              # every member starts from its own states: no solve at p0
+                return np.asarray(start_states, float).reshape(R, n_q, n_y)
+            if data.shared:
+                return solve_states(model, p0, q)
+            # all members' rows in one solve
+            return solve_states(model, p0, q.reshape(-1, q.shape[2])).reshape(R, n_q, -1)
+        except StateSolveError:
+            return None
+
+    def _unusable(self, starts) -> BatchFit:
+        """Every member by identify (the batch engine cannot be used)."""
+        model, R = self.model, self.R
+        n_y = model.n_y
+        if n_y and trajectory_numerics(model) is not None and self.fallback_on:
+            # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
+            results, errors = fit_members(model, [self.data.member(r) for r in range(R)], self.p0, self.weights,
+                                          self.settings, starts)
+            # a failed fit, or an estimate the data do not bound (kept, ok False), is recorded with its reason
+            records = [FallbackRecord(int(r), "the fit failed", e) for r, e in sorted(errors.items())]
+            records += [FallbackRecord(r, "not bounded by the data", not_bounded_reason(res))
+                        for r, res in enumerate(results) if r not in errors and not_bounded_reason(res)]
+            ok = np.array([r not in errors for r in range(R)])
+            return _collect(model, results, records, ok, decrements(results), np.zeros(R, int))
+        why = ("the batch engine handles states of at most 60 variables" if n_y and not numerics(model).dense
+               else "the start or the problem is not valid for the batch engine")
+        self.fallback.update({r: why for r in range(R)})
+        self._run_fallbacks()
+        return _collect(model, self.results, self.records, np.zeros(R, bool), np.full(R, np.nan), np.zeros(R, int))
+
+    def _start_points(self, prep: Prepared, Y_ref, starts, start_states) -> tuple:
+        """(Q_u, Y_u, Yst, P0): the unique inputs and the states there at p0, and every member's start
+        states and start values (``starts`` where finite)."""
+        model, data, R = self.model, self.data, self.R
+        q = data.inputs
+        n_q, n_p, n_y = q.shape[-2], model.n_p, model.n_y
+        if data.shared:
+            Q_u = q[prep.first]
+            Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
+            Yst = np.tile(Y_u, (R, 1, 1))
+        else:
+            Q_u = q
+            Y_u = Y_ref if n_y else np.zeros((R, n_q, 0))
+            Yst = Y_u.copy()
+        P0 = np.tile(self.p0, (R, 1))
+        if starts is not None:
+            S0 = np.asarray(starts, float).reshape(R, n_p)
+            if start_states is None and n_y:
+                raise DataError("start_states: needed with starts (states at the start values, shape (R, n_q, n_y))")
+            own = np.all(np.isfinite(S0), axis=1)
+            P0[own] = S0[own]
+            if n_y:
+                YS = np.asarray(start_states, float).reshape(R, n_q, n_y)
+                Yst[own] = YS[own][:, prep.first]
+        return Q_u, Y_u, Yst, P0
+
+    def _finals(self, prep_m, it, members, s_p) -> tuple:
+        """(converged, decrement, sweeps) of every member; the estimates of the members that converged
+        inside the bounds and pass identify's checks go to ``results``, the others to ``fallback``."""
+        model, R = self.model, self.R
+        converged = np.zeros(R, bool)
+        decrement = np.full(R, np.nan)
+        sweeps = np.zeros(R, int)
+        finals = []
+        margin = 1e-6 * s_p
+        for k, r in enumerate(members):
+            sweeps[r] = it.sweeps[k]
+            if not it.done[k]:
+                self.fallback[r] = it.reason[k] or "the batch iteration did not converge"
+            elif not (np.all(it.fp[k] > model.lower + margin) and np.all(it.fp[k] < model.upper - margin)):
+                self.fallback[r] = "the optimum lies at or beyond a parameter bound (identify solves the bounded problem)"
+            else:
+                finals.append(k)
+        if finals:
+            finals = np.array(finals, int)
+            for k, res in zip(finals, _members(model, prep_m, it, finals, s_p, self.settings,
+                                                self.data.sigma is None)):
+                r = members[k]
+                if isinstance(res, CheckFailure):
+                    self.fallback[r] = f"the converged point failed identify's checks: {res.reason}"
+                    continue
+                self.results[r] = res
+                converged[r] = True
+                decrement[r] = res.decrement
+        return converged, decrement, sweeps
+
+    def _run_fallbacks(self) -> None:
+        """Fit the members in ``fallback`` by identify (or, without fallbacks, record them as not refitted)."""
+        model, data, settings, Y0, n_y = self.model, self.data, self.settings, self.Y0, self.model.n_y
+        for r, why in sorted(self.fallback.items()):
+            if not self.fallback_on:
+                self.records.append(FallbackRecord(int(r), why, "not refitted (fallback=False)"))
+                self.results[r] = IdentificationError(f"member {r}: {why} (not refitted: fallback=False)")
                 continue
             try:
                 # a member whose iteration left the bounds is solved with them from the start: the
                 # unbounded first pass of identify (lazy_bounds) may run to Ipopt's max_iter first
                 use = replace(settings, lazy_bounds=False) if why == LEFT_BOUNDS else settings
                 Y0_r = Y0 if Y0 is None or data.shared or not n_y else Y0[r]
-                est = fit_static(model, data.member(r), p0, weights=weights, settings=use, Y0=Y0_r)
+                est = fit_static(model, data.member(r), self.p0, weights=self.weights, settings=use, Y0=Y0_r)
                 # an estimate the data do not bound is kept (callers test Estimate.bounded) but is no
                 # estimate of p: ok False, its reason recorded
-                records.append(FallbackRecord(int(r), why, not_bounded_reason(est)))
-                results[r] = est
+                self.records.append(FallbackRecord(int(r), why, not_bounded_reason(est)))
+                self.results[r] = est
             except (IdentificationError, DataError) as exc:
-                records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
-                results[r] = exc
-
-    fallback_on = bool(fallback)
-    fallback = {}
-    usable = (q.shape[-1] == model.n_q_dim and data.z.shape[3] == model.n_S and np.any(w > 0)
-              and np.all(p0 >= model.lower) and np.all(p0 <= model.upper) and np.all(np.isfinite(p0))
-              and (not n_y or numerics(model).dense))
-    Y_ref = None
-    if usable:
-        try:
-            own_all = (not data.shared and starts is not None and start_states is not None
-                       and np.all(np.isfinite(np.asarray(starts, float))))
-            if Y0 is not None:
-                Y_ref = Y0
-            elif own_all:            # every member starts from its own states: no solve at p0
-                Y_ref = np.asarray(start_states, float).reshape(R, n_q, n_y)
-            elif data.shared:
-                Y_ref = solve_states(model, p0, q)
-            else:                    # all members' rows in one solve
-                Y_ref = solve_states(model, p0, q.reshape(-1, q.shape[2])).reshape(R, n_q, -1)
-        except StateSolveError:
-            usable = False
-    if not usable and n_y and trajectory_numerics(model) is not None and fallback_on:
-        # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
-        results, errors = fit_members(model, [data.member(r) for r in range(R)], p0, weights, settings, starts)
-        # a failed fit, or an estimate the data do not bound (kept, ok False), is recorded with its reason
-        records = [FallbackRecord(int(r), "the fit failed", e) for r, e in sorted(errors.items())]
-        records += [FallbackRecord(r, "not bounded by the data", not_bounded_reason(res)) for r, res in enumerate(results)
-                    if r not in errors and not_bounded_reason(res)]
-        ok = np.array([r not in errors for r in range(R)])
-        return _collect(model, results, records, ok, decrements(results), np.zeros(R, int))
-    if not usable:
-        why = ("the batch engine handles states of at most 60 variables" if n_y and not numerics(model).dense
-               else "the start or the problem is not valid for the batch engine")
-        fallback.update({r: why for r in range(R)})
-        run_fallbacks()
-        return _collect(model, results, records, np.zeros(R, bool), np.full(R, np.nan), np.zeros(R, int))
-    n_values = np.isfinite(data.z[..., w > 0]).sum(axis=(1, 2, 3))
-    for r in np.flatnonzero((n_values < n_p) | (sigma_unknown & (n_values <= n_p))):
-        fallback[int(r)] = "too few values for the parameters"
-    prep = prepare(model, data, w, Y_ref if n_y else np.zeros(q.shape[:-1] + (0,)))
-    s_p = param_scale(model, p0)
-    if data.shared:
-        Q_u = q[prep.first]
-        Y_u = Y_ref[prep.first] if n_y else np.zeros((Q_u.shape[0], 0))
-        Yst = np.tile(Y_u, (R, 1, 1))
-    else:
-        Q_u = q
-        Y_u = Y_ref if n_y else np.zeros((R, n_q, 0))
-        Yst = Y_u.copy()
-    P0 = np.tile(p0, (R, 1))
-    if starts is not None:
-        S0 = np.asarray(starts, float).reshape(R, n_p)
-        if start_states is None and n_y:
-            raise DataError("start_states: needed with starts (states at the start values, shape (R, n_q, n_y))")
-        own = np.all(np.isfinite(S0), axis=1)
-        P0[own] = S0[own]
-        if n_y:
-            YS = np.asarray(start_states, float).reshape(R, n_q, n_y)
-            Yst[own] = YS[own][:, prep.first]
-    members = np.array([r for r in range(R) if r not in fallback], int)
-    it = None
-    if members.size:
-        prep_m = Prepared(prep.first, prep.group, prep.zb[members], prep.wts[members], prep.const[members],
-                           prep.cw[members], prep.sig[members], prep.n_data[members], prep.selected, prep.w,
-                           prep.Z[members])
-        if data.shared:
-            points = Points(model, Q_u, members.size, p0, Y_u)
-        else:
-            # (E_y's symmetry, a shortcut checked again at every sweep, is first tested at one member's start)
-            points = Points(model, Q_u[members], members.size, P0[members[0]], Yst[members[0]])
-        it = iterate(model, prep_m, points, s_p, P0[members], Yst[members], settings, bs,
-                      sigma_unknown, starts is None and data.shared)
-    converged = np.zeros(R, bool)
-    decrement = np.full(R, np.nan)
-    sweeps = np.zeros(R, int)
-    finals = []
-    margin = 1e-6 * s_p
-    for k, r in enumerate(members):
-        sweeps[r] = it.sweeps[k]
-        if not it.done[k]:
-            fallback[r] = it.reason[k] or "the batch iteration did not converge"
-        elif not (np.all(it.fp[k] > model.lower + margin) and np.all(it.fp[k] < model.upper - margin)):
-            fallback[r] = "the optimum lies at or beyond a parameter bound (identify solves the bounded problem)"
-        else:
-            finals.append(k)
-    if finals:
-        finals = np.array(finals, int)
-        for k, res in zip(finals, _members(model, prep_m, it, finals, s_p, settings, sigma_unknown)):
-            r = members[k]
-            if isinstance(res, CheckFailure):
-                fallback[r] = f"the converged point failed identify's checks: {res.reason}"
-                continue
-            results[r] = res
-            converged[r] = True
-            decrement[r] = res.decrement
-    run_fallbacks()
-    return _collect(model, results, records, converged, decrement, sweeps, 0 if it is None else it.dense_sweeps)
+                self.records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
+                self.results[r] = exc
 
 
 def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps: int = 0) -> BatchFit:
