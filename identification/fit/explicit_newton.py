@@ -4,6 +4,7 @@ inputs (:func:`reduced_start`)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 
@@ -13,6 +14,7 @@ from models.errors import StateSolveError
 from models.state import numerics
 from models.trajectory import trajectory_numerics
 from identification.fit import dense
+from identification.fit import newton as newton_core
 from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms
 from identification.fit.implicit_start import ImplicitObjective
 from identification.fit.ipopt_solver import IpoptResult
@@ -167,8 +169,8 @@ def solve_explicit_newton(st: Start, settings: IdentifySettings):
 def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObjective", x: np.ndarray,
                  t0: float, max_halvings: int = 40):
     """The iteration of :func:`solve_explicit_newton` from the scaled start x (same returns);
-    it gives up when a Gauss-Newton step needs more than ``max_halvings`` halvings."""
-    s_p = st.s_p
+    it gives up when a Gauss-Newton step needs more than ``max_halvings`` halvings.  The rules (line
+    search, convergence test) are those of :mod:`identification.fit.newton`."""
     dof = st.n - st.model.n_p
     known = st.data.sigma is not None
     refine_dec, dec_tol = settings.refine_decrement, settings.decrement_tol
@@ -178,61 +180,37 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
         return None
     newton = False
     prev_dec = None
-    evals = 1
-    round_off = 16 * np.finfo(float).eps
+    budget = [1]                                   # evaluations so far
     for it in range(1, _NEWTON_MAX_ITER + 1):
         if not math.isfinite(cur.f):
             return None
         if newton and cur.S is None:
             cur = objective(x, True)
-        L = dense.cholesky_lower(cur.F + cur.S if newton else cur.F)
+        L = _newton_factor(cur, newton)
         if L is None:
-            if not newton:
-                return None
-            L = dense.cholesky_lower(cur.F)
-            if L is None:
-                return None
+            return None
         v = dense.tri_solve(L, cur.g)
         dec = float(v @ v)
         # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
         unit = 1.0 if known else 2 * cur.f / dof
         if newton:
-            # the decrement that round-off in the gradient's sum over the data alone produces
-            u = dense.tri_solve(L, round_off * cur.g_abs)
-            if dec <= max(refine_dec * unit, float(u @ u)):
+            roundoff = newton_core.gradient_roundoff(functools.partial(dense.tri_solve, L), cur.g_abs)
+            if newton_core.converged(dec, refine_dec * unit, roundoff):
                 break
             if dec <= dec_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
         d = dense.tri_solve(L, v, trans=1)
         d *= -1.0
-        if abs(d).max() < 1e-13:
+        if newton_core.tiny_step(d):
             break
-        step, new = 1.0, None
-        if newton and dec <= dec_tol * unit:
-            x_new = x + d
-            try:                                   # quadratic region: the objective cannot resolve
-                new = objective(x_new, True)       # the decrease any more; take the full step
-            except StateSolveError:
-                new = None
-            if new is not None and not math.isfinite(new.f):
-                new = None
-        for k in range(40 if new is None else 0):
-            evals += 1
-            if evals > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
-                return None                        # far from the optimum: Levenberg-Marquardt's turn
-            x_new = x + step * d
-            try:
-                trial = objective(x_new, newton)
-            except StateSolveError:
-                trial = None
-            if trial is not None and trial.f <= cur.f - 1e-4 * step * dec:
-                new = trial
-                break
-            step *= 0.5
+        quadratic = newton and dec <= dec_tol * unit
+        new, x_new = _step(objective, x, d, cur, dec, newton, quadratic, budget, max_halvings)
+        if new is newton_core.ABORT:
+            return None                            # far from the optimum: Levenberg-Marquardt's turn
         if new is None:
-            if newton and dec <= dec_tol * unit:
+            if quadratic:
                 break                              # at round-off: the decrement certifies the optimum
             if not newton:
                 newton = True                      # Gauss-Newton cannot descend further: try Newton
@@ -244,6 +222,52 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
         x, cur = x_new, new
     else:
         return None
+    return _newton_result(st, objective, x, cur, it, dec, t0)
+
+
+def _newton_factor(cur: ExplicitTerms, newton: bool):
+    """The Cholesky factor of F + S (Newton phase) or F (Gauss-Newton phase, and where F + S is not
+    positive definite); None when F is not positive definite either."""
+    L = dense.cholesky_lower(cur.F + cur.S if newton else cur.F)
+    if L is None and newton:
+        L = dense.cholesky_lower(cur.F)
+    return L
+
+
+def _step(objective, x: np.ndarray, d: np.ndarray, cur: ExplicitTerms, dec: float, newton: bool, quadratic: bool,
+          budget: list, max_halvings: int) -> tuple:
+    """(terms, x_new) after the step d from x: in the quadratic region (Phi cannot resolve the decrease)
+    the full step, else (or when that fails) the line search of :func:`identification.fit.newton.backtrack`
+    with Armijo's rule; (None, None) when no step is accepted, (ABORT, None) beyond the evaluation
+    budget or, in the Gauss-Newton phase, beyond ``max_halvings`` halvings."""
+    if quadratic:
+        x_new = x + d
+        try:                                   # quadratic region: the objective cannot resolve
+            new = objective(x_new, True)       # the decrease any more; take the full step
+        except StateSolveError:
+            new = None
+        if new is not None and math.isfinite(new.f):
+            return new, x_new
+    calls = [0]
+
+    def trial(t):
+        k = calls[0]
+        calls[0] += 1
+        budget[0] += 1
+        if budget[0] > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
+            return newton_core.ABORT
+        try:
+            return objective(x + t * d, newton)
+        except StateSolveError:
+            return None
+
+    new, t = newton_core.backtrack(trial, lambda c, t: newton_core.sufficient_decrease(c.f, cur.f, t, dec))
+    return new, (x + t * d if new is not None and new is not newton_core.ABORT else None)
+
+
+def _newton_result(st: Start, objective, x: np.ndarray, cur: ExplicitTerms, it: int, dec: float, t0: float):
+    """(result, point, S) of the converged iteration at the scaled x, or None (state solve failed)."""
+    s_p = st.s_p
     try:
         point = objective.point(x)
     except StateSolveError:
