@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from identification.errors import StateSolveError
+from identification.fit import newton as newton_core
 from identification.fit.batch_data import LEFT_BOUNDS, BatchSettings
 from identification.fit.batch_points import Points
 from identification.fit.batch_sweep import (Iteration, Prepared, Sweep, evaluate, evaluate_fused,
@@ -50,22 +51,21 @@ def _advance(model, prep: Prepared, it: Iteration, sw: Sweep, s_p: np.ndarray, s
     dN, decN, goodN, LN = _chol_solve(sw.F + sw.S, -sw.g, s_p)
     dG, _, goodG, _ = _chol_solve(sw.F, -sw.g, s_p)
     # the decrement that round-off in the gradient's sum over the data alone produces
-    g_err = 16 * np.finfo(float).eps * sw.gabs * s_p
-    u = np.linalg.solve(LN, g_err[:, :, None])[:, :, 0]
-    round_off = np.einsum("mp,mp->m", u, u)
+    round_off = newton_core.gradient_roundoff(lambda b: np.linalg.solve(LN, b[:, :, None])[:, :, 0], sw.gabs * s_p)
     dec = np.where(goodN, decN, np.inf)
     bad = ~sw.finite
     exact = sw.state_ok & sw.has_S & ~bad
     with np.errstate(invalid="ignore"):
-        increased = exact & ~(sw.obj <= it.fobj[a] * (1 + 1e-14) + 1e-300)
+        increased = exact & ~newton_core.no_increase(sw.obj, it.fobj[a])
     # refine's test: a step may not increase Phi.  In the quadratic region (previous decrement below
     # decrement_tol) Phi cannot resolve the decrease any more: the step is kept while the decrement
     # falls, else the previous point is the optimum
     quadratic = it.has_final[a] & (it.fdec[a] <= settings.decrement_tol * it.funit[a])
-    keep_inc = increased & quadratic & (dec < it.fdec[a])
+    with np.errstate(invalid="ignore"):
+        keep_inc = increased & newton_core.keep_step(sw.obj, it.fobj[a], quadratic, dec, it.fdec[a])
     # outside the quadratic region an increase halves the step from the last exact point (the
     # backtracking of identify's explicit Newton; at most 30 halvings)
-    back = increased & ~quadratic & (it.halvings[a] < 30)
+    back = increased & ~quadratic & (it.halvings[a] < newton_core.BATCH_MAX_HALVINGS)
     stop_inc = increased & ~keep_inc & ~back
     update = exact & ~stop_inc & ~back
     b = a[update]
@@ -76,8 +76,8 @@ def _advance(model, prep: Prepared, it: Iteration, sw: Sweep, s_p: np.ndarray, s
     it.fF[b], it.fS[b], it.fobj[b], it.fdec[b], it.funit[b] = sw.F[update], sw.S[update], sw.obj[update], \
         dec[update], unit[update]
     it.fsweeps[b] = it.sweeps[b]
-    conv = update & goodN & ((decN <= np.maximum(settings.refine_decrement * unit, round_off))
-                             | (np.max(np.abs(dN / s_p), axis=1) < 1e-13))
+    conv = update & goodN & (newton_core.converged(decN, settings.refine_decrement * unit, round_off)
+                             | newton_core.tiny_step(dN / s_p))
     it.done[a[conv | (stop_inc & quadratic)]] = True
     step = ~bad & ~stop_inc & ~conv & goodG
     use_N = it.newton[a] & sw.has_S & goodN
@@ -91,7 +91,7 @@ def _advance(model, prep: Prepared, it: Iteration, sw: Sweep, s_p: np.ndarray, s
     inside = np.all((p_new > model.lower) & (p_new < model.upper), axis=1)
     for k in np.flatnonzero(back):
         i = a[k]
-        d = 0.5 * (sw.P[k] - it.fp[i])
+        d = newton_core.halved_step(it.fp[i], sw.P[k])
         it.P[i] = it.fp[i] + d
         it.Y[i] = it.fY[i] + it.fyp[i] @ d if model.n_y else it.Y[i]
         it.halvings[i] += 1
@@ -120,7 +120,6 @@ def iterate(model, prep: Prepared, points: Points, s_p, P0, Y0, settings: Identi
 
     ``start_solved``: the start states solve E = 0 at the start values (the first sweep of
     members sharing the start is then evaluated once, :func:`evaluate_shared`)."""
-    R = P0.shape[0]
     it = Iteration.start(P0, Y0, model.n_S)
     first = bool(start_solved)
     for _ in range(bs.max_sweeps):

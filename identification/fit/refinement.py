@@ -31,6 +31,7 @@ from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from identification.fit import dense
+from identification.fit import newton as newton_core
 from identification.fit.factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
 from identification.fit.measurements import Measurements, data_terms
 
@@ -172,7 +173,7 @@ class Refinement:
 
 
 #: the gradient's round-off bound: this many ulps of sum |lambda_jk| |G_jk|
-_GRAD_ULPS = 16
+_GRAD_ULPS = newton_core.GRAD_ULPS
 
 
 def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> float:
@@ -186,9 +187,9 @@ def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> 
     """
     eps16 = _GRAD_ULPS * np.finfo(float).eps
     G = point.sens.G.reshape(-1, point.p.size)
-    u = system.whiten(eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)))
+    grad = newton_core.gradient_roundoff(system.whiten, np.abs(point.lam).reshape(-1) @ np.abs(G))
     e2 = problem.cw / problem.sigma ** 2 * (eps16 * (np.abs(problem.zbar) + np.abs(point.sens.h))) ** 2
-    return max(float(u @ u), point.p.size * float(e2.max(initial=0.0)))
+    return max(grad, point.p.size * float(e2.max(initial=0.0)))
 
 
 def point_factor(problem: ReducedProblem, point: ReducedPoint) -> WeightedFactor:
@@ -287,11 +288,10 @@ def _unit(point: ReducedPoint, dof: int | None) -> float:
 
 def _stop_reason(problem: ReducedProblem, point: ReducedPoint, system, dp: np.ndarray, dec: float,
                  tol: float) -> str:
-    """Why :func:`refine` stops before the step dp ("" when it does not)."""
-    if dec < tol:
-        return "converged"
-    if dec <= _gradient_roundoff(problem, point, system):
-        return "round-off of the gradient"
+    """Why :func:`refine` stops before the step dp ("" when it does not): the convergence test of
+    :func:`identification.fit.newton.converged`, naming which bound it met."""
+    if newton_core.converged(dec, tol, _gradient_roundoff(problem, point, system)):
+        return "converged" if dec <= tol else "round-off of the gradient"
     if np.all(np.abs(dp) <= 8 * np.finfo(float).eps * np.abs(point.p)):
         return "round-off of p"
     return ""
@@ -306,10 +306,12 @@ def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, q
         new = _At(problem, problem.evaluate(np.clip(point.p + dp, model.lower, model.upper), point.states))
     except StateSolveError:
         return None, "state solve failed"
-    if new.point.objective <= point.objective * (1 + 1e-14) + 1e-300:
+    if newton_core.no_increase(new.point.objective, point.objective):
         return new, ""
     if not (dec <= quadratic or dec <= 20 * _objective_roundoff(problem, point)):
         return None, "objective increased"
-    if not _decrement(new.filled().fac, new.point, new.S) < dec:
+    # the quadratic region: kept while the decrement falls (identification.fit.newton.keep_step)
+    if not newton_core.keep_step(new.point.objective, point.objective, True,
+                                 _decrement(new.filled().fac, new.point, new.S), dec):
         return None, "no progress at round-off"
     return new, ""

@@ -45,8 +45,8 @@ from identification.inference.unbounded_intervals import profile_intervals_unbou
 from identification.inference.intervals import (ConfidenceIntervals, profile_threshold, region_threshold,
                                                  resolve_params, validate_alpha)
 from identification.inference.likelihood_region import GRID_BLOCK_ROWS, LikelihoodRegion, lr_region
-from identification.inference.profile_solver import (ProfileError, ProfileSettings, Profiler, Solved, check_pair,
-                                                      readonly)
+from identification.inference.profile_solver import (NewtonFailure, ProfileError, ProfileSettings, Profiler, Solved,
+                                                      check_pair, readonly)
 
 __all__ = ["ProfileError", "ProfileSettings", "ParameterProfile", "ConfidenceIntervals", "LikelihoodRegion",
            "profile_intervals", "lr_region", "profile_threshold", "region_threshold", "resolve_params",
@@ -307,8 +307,8 @@ def _restart(prof: Profiler, lower: Solved, exc: ProfileError) -> str:
     reference of every profile.  Returns the note saying so (raises when the Newton fails)."""
     old = prof.best
     new = prof.minimise(lower)
-    if isinstance(new, str):
-        raise ProfileError(f"{exc}; re-minimising from there failed: {new}", status="not a minimum") from None
+    if isinstance(new, NewtonFailure):
+        raise ProfileError(f"{exc}; re-minimising from there failed: {new.reason}", status="not a minimum") from None
     prof.best = new
     names = prof.model.param_names
     return (f"the estimate is not the minimum of the objective: a profile step found Phi lower by "

@@ -13,11 +13,12 @@ import numpy as np
 from models.contract import Model
 from models.errors import StateSolveError
 from identification.errors import IdentificationError
+from identification.fit import newton as newton_core
 from identification.fit.entry import fit_model
 from identification.fit.measurements import Measurements
 from identification.fit.refinement import ReducedPoint, ReducedProblem
 
-__all__ = ["ProfileError", "ProfileSettings", "Solved", "Profiler", "check_pair", "readonly"]
+__all__ = ["ProfileError", "ProfileSettings", "Solved", "NewtonFailure", "Profiler", "check_pair", "readonly"]
 
 
 class ProfileError(IdentificationError):
@@ -65,6 +66,13 @@ def readonly(a) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class NewtonFailure:
+    """Why the reduced Newton of :class:`Profiler` did not converge (the caller retries or falls back to Ipopt)."""
+
+    reason: str
+
+
+@dataclass(frozen=True)
 class Solved:
     """A re-optimised point: the reduced point, J^T Omega J there (the curvature of the
     continuation predictor) and whether Ipopt was needed."""
@@ -95,7 +103,7 @@ class Profiler:
         return Solved(point, self.problem.information(point), ipopt)
 
     def minimise(self, start: Solved):
-        """Exact Newton on all parameters from ``start``: a Solved, or the reason of failure (str)."""
+        """Exact Newton on all parameters from ``start``: a Solved, or a :class:`NewtonFailure`."""
         return self._newton([], np.asarray(start.point.p, float), start.point.states)
 
     def predict(self, base: Solved, fixed: list, values: np.ndarray) -> np.ndarray:
@@ -136,74 +144,81 @@ class Profiler:
             retry = self._newton(fixed, p_zero, base.point.states)
             if isinstance(retry, Solved):
                 return retry
-            reason = f"{reason}; from the zero-order start: {retry}"
+            reason = NewtonFailure(f"{reason.reason}; from the zero-order start: {retry.reason}")
         if not self.settings.ipopt_fallback:
-            raise ProfileError(f"reduced Newton failed ({reason}); the Ipopt fallback is disabled",
+            raise ProfileError(f"reduced Newton failed ({reason.reason}); the Ipopt fallback is disabled",
                                status="profile failed")
-        return self._ipopt(fixed, values, p0, base, reason)
+        return self._ipopt(fixed, values, p0, base, reason.reason)
 
     def _newton(self, fixed, p0, states0):
-        """Exact Newton on the free parameters; a Solved on success, else the reason (str)."""
-        s = self.se
+        """Exact Newton on the free parameters (the rules of :mod:`identification.fit.newton`: active set,
+        convergence test, Armijo backtracking); a Solved on success, else a :class:`NewtonFailure`."""
         free = [k for k in range(p0.size) if k not in fixed]
         try:
             point = self.problem.evaluate(p0, states0)
         except StateSolveError as exc:
-            return f"state equation not solvable at the predicted start: {exc}"
+            return NewtonFailure(f"state equation not solvable at the predicted start: {exc}")
         for _ in range(self.settings.max_newton + 1):
             solved = self.solved_at(point, False)
             if not free:
                 return solved
-            g = point.gradient
             # active set: a free parameter at a bound whose gradient pushes it outwards stays there
-            act = [k for k in free if not ((point.p[k] <= self.lo[k] and g[k] > 0)
-                                           or (point.p[k] >= self.up[k] and g[k] < 0))]
+            act = newton_core.active_set(point.p, point.gradient, self.lo, self.up, free)
             if not act:
                 return solved
-            gs = g[act] * s[act]
-            Fs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
-            try:
-                LF = np.linalg.cholesky(Fs)
-            except np.linalg.LinAlgError:
-                LF = None
-            if LF is None and not np.any(gs):
-                return solved              # exactly stationary where the free parameters have no influence (Vm = 0)
-            if LF is not None:
-                w = np.linalg.solve(LF, gs)
-                if float(w @ w) < self.settings.newton_tol:
-                    return solved          # converged: g^T (J^T Omega J)^-1 g below the tolerance
-            # the exact Hessian J^T Omega J + S (AD second derivatives) for the Newton step
-            Hs = (solved.H + point.sens.hessians(point.lam[None])[0])[np.ix_(act, act)] * np.outer(s[act], s[act])
-            try:
-                L = np.linalg.cholesky(Hs)
-            except np.linalg.LinAlgError:
-                if LF is None:
-                    return "the Gauss-Newton information of the free parameters is singular"
-                L = LF
-            v = np.linalg.solve(L, gs)
-            dec = float(v @ v)
-            if dec < self.settings.newton_tol:
-                return solved
-            step = -s[act] * np.linalg.solve(L.T, v)
-            t = 1.0
-            new = None
-            for _ls in range(40):
+            got = self._direction(solved, act)
+            if not isinstance(got, tuple):
+                return got
+            step, dec = got
+
+            def trial(t):
                 p_try = np.array(point.p)
                 p_try[act] = np.clip(point.p[act] + t * step, self.lo[act], self.up[act])
                 try:
-                    cand = self.problem.evaluate(p_try, point.states)
+                    return self.problem.evaluate(p_try, point.states)
                 except StateSolveError:
-                    cand = None
-                if cand is not None and cand.objective <= point.objective - 1e-4 * t * dec:
-                    new = cand
-                    break
-                t *= 0.5
+                    return None
+
+            new, _ = newton_core.backtrack(
+                trial, lambda c, t: newton_core.sufficient_decrease(c.objective, point.objective, t, dec))
             if new is None:
                 if dec < 1e3 * self.settings.newton_tol:
                     return solved            # at round-off: no decrease possible, decrement tiny
-                return f"line search failed (Newton decrement {dec:.2e})"
+                return NewtonFailure(f"line search failed (Newton decrement {dec:.2e})")
             point = new
-        return f"no convergence in {self.settings.max_newton} Newton steps"
+        return NewtonFailure(f"no convergence in {self.settings.max_newton} Newton steps")
+
+    def _direction(self, solved: Solved, act: list):
+        """(step, decrement) of the exact Newton step on the parameters ``act`` at ``solved`` (H = J^T Omega J
+        + S, J^T Omega J where that is not positive definite); ``solved`` itself when it has converged (the
+        Gauss-Newton or Newton decrement below ``newton_tol``), a NewtonFailure when both are singular."""
+        s, point = self.se, solved.point
+        tol = self.settings.newton_tol
+        gs = point.gradient[act] * s[act]
+        Fs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
+        try:
+            LF = np.linalg.cholesky(Fs)
+        except np.linalg.LinAlgError:
+            LF = None
+        if LF is None and not np.any(gs):
+            return solved              # exactly stationary where the free parameters have no influence (Vm = 0)
+        if LF is not None:
+            w = np.linalg.solve(LF, gs)
+            if newton_core.converged(float(w @ w), tol, 0.0):
+                return solved          # converged: g^T (J^T Omega J)^-1 g below the tolerance
+        # the exact Hessian J^T Omega J + S (AD second derivatives) for the Newton step
+        Hs = (solved.H + point.sens.hessians(point.lam[None])[0])[np.ix_(act, act)] * np.outer(s[act], s[act])
+        try:
+            L = np.linalg.cholesky(Hs)
+        except np.linalg.LinAlgError:
+            if LF is None:
+                return NewtonFailure("the Gauss-Newton information of the free parameters is singular")
+            L = LF
+        v = np.linalg.solve(L, gs)
+        dec = float(v @ v)
+        if newton_core.converged(dec, tol, 0.0):
+            return solved
+        return -s[act] * np.linalg.solve(L.T, v), dec
 
     def _ipopt(self, fixed, values, p0, base, reason) -> Solved:
         names = self.model.param_names
