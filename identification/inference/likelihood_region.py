@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from identification.inference.intervals import region_threshold, resolve_params,
 from identification.inference.profile_solver import (ProfileError, ProfileSettings, Profiler, Solved, check_pair,
                                                       readonly)
 
-__all__ = ["LikelihoodRegion", "lr_region", "GRID_BLOCK_ROWS"]
+__all__ = ["LikelihoodRegion", "lr_region", "GRID_BLOCK_ROWS", "GridSolver", "PER_POINT", "BATCHED_ROWS", "grid_solver"]
 
 
 #: rows of the grid solved as one batch by lr_region(batch=True), each point started from its column's point in the
@@ -174,6 +175,39 @@ def _grid_batched(prof: Profiler, idx: list, X: np.ndarray, Y: np.ndarray, C: np
 
 
 
+@dataclass(frozen=True)
+class GridSolver:
+    """A strategy of :func:`lr_region` for the grid's constrained fits, chosen once per region.
+
+    Attributes
+    ----------
+    name : str
+    solve : callable    (profiler, pair indices, X, Y, pair covariance, pair estimate) -> (D, failed
+                        points, points outside the bounds, note)
+    """
+
+    name: str
+    solve: Callable
+
+
+#: every grid point by the per-point constrained Newton, warm-started along rows from the centre
+PER_POINT = GridSolver("per point", _grid_per_point)
+#: the centre row per point, the other rows in blocks of GRID_BLOCK_ROWS as batched fits (fit_batch)
+BATCHED_ROWS = GridSolver("batched rows", _grid_batched)
+
+
+def grid_solver(batch, n_p: int) -> GridSolver:
+    """The strategy of ``lr_region(batch=...)``: a GridSolver as given; True: :data:`BATCHED_ROWS` (but
+    :data:`PER_POINT` for a model of two parameters: no free parameter to batch); False: :data:`PER_POINT`."""
+    if isinstance(batch, GridSolver):
+        chosen = batch
+    elif isinstance(batch, (bool, np.bool_)):
+        chosen = BATCHED_ROWS if batch else PER_POINT
+    else:
+        raise TypeError(f"batch: expected True, False or a GridSolver (PER_POINT, BATCHED_ROWS), got {batch!r}")
+    return PER_POINT if chosen is BATCHED_ROWS and n_p <= 2 else chosen
+
+
 # ---------------------------------------------------------------------------- pair regions
 def _valley_grid(prof: Profiler, idx: list, C: np.ndarray, ph: np.ndarray, c: float, n: int, span: float,
                  lim) -> tuple:
@@ -264,7 +298,7 @@ class LikelihoodRegion:
 
 def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, n_grid: int = 25,
               span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None,
-              limits=None, batch: bool = True) -> LikelihoodRegion:
+              limits=None, batch: "bool | GridSolver" = True) -> LikelihoodRegion:
     """Likelihood-ratio statistic of the pair ``pair = (i, j)`` on an n_grid x n_grid grid.
 
     ``grid="principal"`` (default): the grid p = p_hat + V diag(sqrt(w)) (u, v) with C = V diag(w) V^T
@@ -288,7 +322,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     point started from its column's solved point in the row before the block (towards the
     centre); a point the batch does not converge (or ends on a bound) is solved point by point
     from its neighbour, counted in ``notes``.  ``batch=False``, or a model of two parameters (no
-    free parameter left): every point by the per-point solver.
+    free parameter left): every point by the per-point solver.  ``batch`` may also be a :class:`GridSolver`
+    (:data:`BATCHED_ROWS`, :data:`PER_POINT`): the strategy is chosen once (:func:`grid_solver`).
     """
     alpha = validate_alpha(alpha)
     idx = resolve_params(list(pair), tuple(est.param_names))
@@ -333,8 +368,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
         U, W = np.meshgrid(u, u)
         X = ph[0] + L[0, 0] * U + L[0, 1] * W
         Y = ph[1] + L[1, 0] * U + L[1, 1] * W
-    solve = _grid_batched if batch and model.n_p > 2 else _grid_per_point      # (a pair alone: nothing to fit)
-    D, failed, outside, batch_note = solve(prof, idx, X, Y, C, ph)
+    solver = grid_solver(batch, model.n_p)           # chosen once (a pair alone: nothing to fit, per point)
+    D, failed, outside, batch_note = solver.solve(prof, idx, X, Y, C, ph)
     notes = [valley_note] if valley_note else []
     if batch_note:
         notes.append(batch_note)
