@@ -109,7 +109,7 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
         except StateSolveError:
             new = None
         rho = (cur.f - new.f) / pred if new is not None and math.isfinite(new.f) and pred > 0 else -1.0
-        if rho > 1e-4:
+        if rho > newton_core.ARMIJO:                  # the decrease is at least 1e-4 of the predicted one
             stalled = cur.f - new.f <= 1e-10 * abs(cur.f)
             x, cur = x + d, new
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)

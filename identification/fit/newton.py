@@ -21,7 +21,8 @@ implicit reduced-space solves of :mod:`identification.fit.explicit_newton`, the 
 * :func:`converged`: delta <= max(tolerance, the decrement round-off alone produces), or
   :func:`tiny_step`: every |d_i| / s_p,i below :data:`STEP_TOL`;
 * :func:`gradient_roundoff`: that round-off, u^T u with u = L^{-1} (16 eps sum_jk |lambda_jk| |G_jk|);
-* :func:`active_set`: with bounds, the free parameters not held at a bound by the gradient.
+* :func:`active_set`: with bounds, the free parameters not held at a bound by the gradient, and
+  :func:`trial_point`: the trial point clipped to the bounds, moving only the active parameters.
 
 The functions work elementwise on scalars and on stacks (the batch engine's members) with the
 same arithmetic, so every caller's numbers are those of its former private copy.
@@ -34,7 +35,7 @@ import numpy as np
 
 __all__ = ["ARMIJO", "MAX_HALVINGS", "BATCH_MAX_HALVINGS", "STEP_TOL", "GRAD_ULPS", "ABORT", "sufficient_decrease",
            "no_increase", "keep_step", "backtrack", "halved_step", "converged", "tiny_step", "gradient_roundoff",
-           "active_set"]
+           "active_set", "trial_point"]
 
 #: the Armijo constant of the sufficient decrease
 ARMIJO = 1e-4
@@ -117,6 +118,16 @@ def gradient_roundoff(whiten: Callable, g_abs: np.ndarray):
     ``g_abs`` = sum_jk |lambda_jk| |G_jk|, a stack (m, n_p) allowed)."""
     u = whiten(GRAD_ULPS * np.finfo(float).eps * g_abs)
     return np.einsum("mp,mp->m", u, u) if u.ndim > 1 else float(u @ u)
+
+
+def trial_point(p: np.ndarray, d: np.ndarray, t: float, lower: np.ndarray, upper: np.ndarray, act=None) -> np.ndarray:
+    """The trial point p + t d clipped to the bounds [lower, upper]; with an active set ``act`` (a list of
+    indices) only those parameters move (the others keep their values)."""
+    if act is None:
+        return np.clip(p + t * d, lower, upper)
+    out = np.array(p)
+    out[act] = np.clip(p[act] + t * d, lower[act], upper[act])
+    return out
 
 
 def active_set(p: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray, free) -> list:

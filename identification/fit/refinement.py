@@ -303,7 +303,8 @@ def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, q
     round-off), when the decrement falls."""
     model, point = problem.model, at.point
     try:
-        new = _At(problem, problem.evaluate(np.clip(point.p + dp, model.lower, model.upper), point.states))
+        new = _At(problem, problem.evaluate(newton_core.trial_point(point.p, dp, 1.0, model.lower, model.upper),
+                                            point.states))
     except StateSolveError:
         return None, "state solve failed"
     if newton_core.no_increase(new.point.objective, point.objective):

@@ -172,10 +172,9 @@ class Profiler:
             step, dec = got
 
             def trial(t):
-                p_try = np.array(point.p)
-                p_try[act] = np.clip(point.p[act] + t * step, self.lo[act], self.up[act])
                 try:
-                    return self.problem.evaluate(p_try, point.states)
+                    return self.problem.evaluate(newton_core.trial_point(point.p, step, t, self.lo, self.up, act),
+                                                 point.states)
                 except StateSolveError:
                     return None
 
