@@ -47,7 +47,7 @@ def _advance(model, prep: Prepared, it: Iteration, sw: Sweep, s_p: np.ndarray, s
     """Convergence test (that of identification.fit.refinement.refine) and the next step of every member."""
     n_p = model.n_p
     a = sw.a
-    unit = 2 * sw.obj / np.maximum(prep.n_data[a] - n_p, 1) if sigma_unknown else np.ones(a.size)
+    unit = newton_core.decrement_unit(sw.obj, prep.n_data[a] - n_p) if sigma_unknown else np.ones(a.size)
     dN, decN, goodN, LN = _chol_solve(sw.F + sw.S, -sw.g, s_p)
     dG, _, goodG, _ = _chol_solve(sw.F, -sw.g, s_p)
     # the decrement that round-off in the gradient's sum over the data alone produces
@@ -60,7 +60,7 @@ def _advance(model, prep: Prepared, it: Iteration, sw: Sweep, s_p: np.ndarray, s
     # refine's test: a step may not increase Phi.  In the quadratic region (previous decrement below
     # decrement_tol) Phi cannot resolve the decrease any more: the step is kept while the decrement
     # falls, else the previous point is the optimum
-    quadratic = it.has_final[a] & (it.fdec[a] <= settings.decrement_tol * it.funit[a])
+    quadratic = it.has_final[a] & newton_core.in_quadratic_region(it.fdec[a], settings.decrement_tol * it.funit[a])
     with np.errstate(invalid="ignore"):
         keep_inc = increased & newton_core.keep_step(sw.obj, it.fobj[a], quadratic, dec, it.fdec[a])
     # outside the quadratic region an increase halves the step from the last exact point (the

@@ -193,19 +193,19 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
         dec = float(v @ v)
         # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
-        unit = 1.0 if known else 2 * cur.f / dof
+        unit = newton_core.decrement_unit(cur.f, None if known else dof)
         if newton:
             roundoff = newton_core.gradient_roundoff(functools.partial(dense.tri_solve, L), cur.g_abs)
             if newton_core.converged(dec, refine_dec * unit, roundoff):
                 break
-            if dec <= dec_tol * unit and prev_dec is not None and dec > 0.1 * prev_dec:
+            if newton_core.in_quadratic_region(dec, dec_tol * unit) and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
         d = dense.tri_solve(L, v, trans=1)
         d *= -1.0
         if newton_core.tiny_step(d):
             break
-        quadratic = newton and dec <= dec_tol * unit
+        quadratic = newton and newton_core.in_quadratic_region(dec, dec_tol * unit)
         new, x_new = _step(objective, x, d, cur, dec, newton, quadratic, budget, max_halvings)
         if new is newton_core.ABORT:
             return None                            # far from the optimum: Levenberg-Marquardt's turn

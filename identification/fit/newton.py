@@ -18,6 +18,8 @@ implicit reduced-space solves of :mod:`identification.fit.explicit_newton`, the 
 * :func:`backtrack`: t = 1, 1/2, 1/4, ... (at most :data:`MAX_HALVINGS`) until a rule accepts;
 * :func:`halved_step`: the halving of a step from the last accepted point across evaluations
   (the batch engine, at most :data:`BATCH_MAX_HALVINGS`);
+* :func:`decrement_unit`: the decrement's unit (1, or 2 Phi / dof with sigma unknown) and
+  :func:`in_quadratic_region`: delta <= decrement_tol, where Phi cannot resolve a decrease;
 * :func:`converged`: delta <= max(tolerance, the decrement round-off alone produces), or
   :func:`tiny_step`: every |d_i| / s_p,i below :data:`STEP_TOL`;
 * :func:`gradient_roundoff`: that round-off, u^T u with u = L^{-1} (16 eps sum_jk |lambda_jk| |G_jk|);
@@ -35,7 +37,7 @@ import numpy as np
 
 __all__ = ["ARMIJO", "MAX_HALVINGS", "BATCH_MAX_HALVINGS", "STEP_TOL", "GRAD_ULPS", "ABORT", "sufficient_decrease",
            "no_increase", "keep_step", "backtrack", "halved_step", "converged", "tiny_step", "gradient_roundoff",
-           "active_set", "trial_point"]
+           "active_set", "trial_point", "decrement_unit", "in_quadratic_region"]
 
 #: the Armijo constant of the sufficient decrease
 ARMIJO = 1e-4
@@ -99,6 +101,19 @@ def halved_step(last: np.ndarray, p: np.ndarray) -> np.ndarray:
     """The step from the last accepted point ``last`` to ``p``, halved: (p - last) / 2 (the next trial
     is last + the halved step)."""
     return 0.5 * (p - last)
+
+
+def decrement_unit(objective, dof):
+    """Objective units per chi^2 unit of the decrement: 1 with sigma known (``dof`` None), else
+    2 Phi / max(dof, 1) (the objective's sigma is a common spread; the standard errors use
+    s^2 = RSS / (n - n_p)); scalars or arrays."""
+    return 1.0 if dof is None else 2.0 * objective / np.maximum(dof, 1)
+
+
+def in_quadratic_region(dec, tol):
+    """delta <= tol: the quadratic region, where Phi cannot resolve the decrease of a step any more
+    (``tol`` = decrement_tol in objective units; scalars or arrays)."""
+    return dec <= tol
 
 
 def converged(dec, tol, roundoff):

@@ -283,7 +283,7 @@ class _At:
 
 def _unit(point: ReducedPoint, dof: int | None) -> float:
     """Objective units per decrement unit: 1, or 2 Phi / dof with sigma unknown."""
-    return 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
+    return newton_core.decrement_unit(point.objective, dof)
 
 
 def _stop_reason(problem: ReducedProblem, point: ReducedPoint, system, dp: np.ndarray, dec: float,
@@ -309,7 +309,7 @@ def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, q
         return None, "state solve failed"
     if newton_core.no_increase(new.point.objective, point.objective):
         return new, ""
-    if not (dec <= quadratic or dec <= 20 * _objective_roundoff(problem, point)):
+    if not newton_core.in_quadratic_region(dec, max(quadratic, 20 * _objective_roundoff(problem, point))):
         return None, "objective increased"
     # the quadratic region: kept while the decrement falls (identification.fit.newton.keep_step)
     if not newton_core.keep_step(new.point.objective, point.objective, True,

@@ -19,6 +19,7 @@ from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
 from models.trajectory import trajectory_numerics
 from identification.errors import DataError, IdentificationError, StateSolveError
+from identification.fit import newton as newton_core
 from identification.fit.implicit_start import solve_states_from
 from identification.fit.measurements import Measurements
 from identification.fit.refinement import ReducedProblem
@@ -249,4 +250,4 @@ def make_start(model, data, p0, weights, Y0) -> Start:
 def decrement_unit(st: Start, objective: float) -> float:
     """Objective units per chi^2 unit of the decrement: 1 with sigma known, else 2 Phi / (n - n_p)
     (the objective's sigma is a common spread; the standard errors use s^2 = RSS / (n - n_p))."""
-    return 1.0 if st.data.sigma is not None else 2.0 * objective / max(st.n - st.model.n_p, 1)
+    return newton_core.decrement_unit(objective, None if st.data.sigma is not None else st.n - st.model.n_p)
