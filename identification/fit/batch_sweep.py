@@ -12,7 +12,7 @@ import numpy as np
 from identification.errors import StateSolveError
 from identification.fit.batch_data import BatchData, BatchSettings
 from identification.fit.batch_points import Points, unique_rows
-from identification.fit.measurements import data_terms
+from identification.fit.measurements import common_spread, data_terms
 
 __all__ = ["Prepared", "prepare", "Iteration", "Sweep", "evaluate", "evaluate_fused", "evaluate_shared"]
 
@@ -52,8 +52,7 @@ def prepare(model, data: BatchData, w, Y_ref) -> Prepared:
     else:                            # identify's common spread of the selected sensors
         sig = np.empty((R, model.n_S))
         for r in range(R):
-            zs = Z[r][:, :, selected]
-            sig[r] = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+            sig[r] = common_spread(Z[r][:, :, selected])
     terms = data_terms(Z, w, sig)                                           # (R, n_q, n_S) and (R,)
     counts, zbar, cw, const = terms.counts, terms.zbar, terms.cw, terms.const
     onehot = np.zeros((n_u, group.size))

@@ -21,7 +21,7 @@ from models.trajectory import trajectory_numerics
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit import newton as newton_core
 from identification.fit.implicit_start import solve_states_from
-from identification.fit.measurements import Measurements
+from identification.fit.measurements import Measurements, common_spread
 from identification.fit.refinement import ReducedProblem
 
 __all__ = ["Start", "make_start", "scalings", "predictor", "as_start_vector", "param_scale", "decrement_unit"]
@@ -222,12 +222,7 @@ def make_start(model, data, p0, weights, Y0) -> Start:
     p0, w, n = _validate(model, data, p0, weights)
     selected = np.flatnonzero(w > 0)
     if data.sigma is None:
-        zs = data.z[:, :, selected]
-        if math.isfinite(zs.sum()):         # no missing value: np.std is nanstd's number, 10x faster
-            spread = float(np.std(zs)) or float(np.mean(np.abs(zs))) or 1.0
-        else:
-            spread = float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
-        sig = np.full(model.n_S, spread)
+        sig = np.full(model.n_S, common_spread(data.z[:, :, selected]))
     else:
         sig = np.asarray(data.sigma, float)
     s_p = param_scale(model, p0)
