@@ -19,7 +19,14 @@ from identification.fit.refinement import ReducedPoint, Refinement
 from identification.fit.settings import IdentifySettings
 from identification.fit.start import Start, decrement_unit
 
-__all__ = ["PhaseClock", "assemble_estimate", "FullSpaceSolution"]
+__all__ = ["PhaseClock", "assemble_estimate", "FullSpaceSolution", "sigma_rescaling"]
+
+
+def sigma_rescaling(rss, dof, sig0) -> tuple:
+    """(s^2, s^2 / sigma_0^2) with s^2 = RSS / (n - n_p): the estimated sigma (unknown sigma) and the factor
+    that rescales information, objective and covariance from the objective's sigma_0 (scalars or arrays)."""
+    s2 = rss / dof
+    return s2, s2 / sig0 ** 2
 
 
 @dataclass(frozen=True)
@@ -73,8 +80,7 @@ def assemble_estimate(st: Start, sol: FullSpaceSolution, ref: Refinement, settin
     rss = float(np.nansum(resid[:, :, st.selected] ** 2))
     dof = st.n - model.n_p
     if data.sigma is None:
-        s2 = rss / dof
-        factor = s2 / st.sig[0] ** 2
+        s2, factor = sigma_rescaling(rss, dof, st.sig[0])
         sig_used = np.full(model.n_S, math.sqrt(s2))
     else:
         factor = 1.0

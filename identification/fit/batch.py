@@ -75,6 +75,7 @@ from models.contract import Model
 from models.state import numerics, solve_states
 from models.trajectory import trajectory_numerics
 from identification.errors import DataError, IdentificationError, StateSolveError
+from identification.fit.assembly import sigma_rescaling
 from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, BatchMember, BatchSettings,
                                            FallbackRecord)
 from identification.fit.batch_iteration import iterate
@@ -126,15 +127,14 @@ def _members(model, prep: Prepared, it: Iteration, k: np.ndarray, s_p: np.ndarra
     n = prep.n_data[k]
     dof = n - n_p
     if sigma_unknown:
-        s2 = rss / dof
-        factor = s2 / sig[:, 0] ** 2
+        s2, factor = sigma_rescaling(rss, dof, sig[:, 0])
     else:
         factor = np.ones(m)
     cov, cov_gn = cov * factor[:, None, None], cov_gn * factor[:, None, None]
     out = failed_check(ident, p, s_p, cov, cov_gn)
     for i in range(m):
         if out[i] is None:
-            sig_used = np.full(model.n_S, math.sqrt(rss[i] / dof[i])) if sigma_unknown else sig[i]
+            sig_used = np.full(model.n_S, math.sqrt(s2[i])) if sigma_unknown else sig[i]
             states = it.fY[k[i]][prep.group]
             out[i] = BatchMember(p=p[i], cov=cov[i], cov_gn=cov_gn[i], information=F[i] / factor[i],
                                  S=S[i] / factor[i], H=H[i] / factor[i],
