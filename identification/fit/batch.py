@@ -62,6 +62,11 @@ A member that does not converge (or fails a check, or ends on or outside a param
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
 fallback is recorded (which member, why, and identify's error when it failed too): a member
 is never dropped.
+The parts: the inputs, settings and results :mod:`identification.fit.batch_data`, the mapped point
+functions :mod:`identification.fit.batch_points`, the data terms and sweeps
+:mod:`identification.fit.batch_sweep`, the iteration :mod:`identification.fit.batch_iteration` (the
+rules of :mod:`identification.fit.newton`); the checks of a converged member are identify's
+(:mod:`identification.fit.checks`).
 """
 from __future__ import annotations
 

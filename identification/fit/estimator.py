@@ -17,6 +17,12 @@ is evaluated exactly by AD and the implicit function theorem.
 For implicit models with many inputs Ipopt is started at the reduced-space optimum
 (:mod:`identification.fit.implicit_start`) with its multipliers, so that it verifies that point
 (at iteration 0, or after one step at round-off) instead of iterating on the n_q n_y states.
+
+The steps live in their own modules: validation, start and scalings :mod:`identification.fit.start`,
+the NLP :mod:`identification.fit.nlp`, the reduced-space Newton of explicit models and the reduced
+start :mod:`identification.fit.explicit_newton` (rules of :mod:`identification.fit.newton`), the
+checks :mod:`identification.fit.checks` and the result :mod:`identification.fit.assembly`; this
+module runs the pipeline (:func:`fit_static`) and gives the information contributions.
 """
 from __future__ import annotations
 
@@ -56,7 +62,7 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
     An explicit model is first solved by exact reduced-space Newton steps
-    (:func:`solve_explicit_newton`, with ``explicit_newton``); that solution is kept when it lies
+    (:func:`identification.fit.explicit_newton.solve_explicit_newton`, with ``explicit_newton``); that solution is kept when it lies
     strictly inside the bounds (no NLP is built), else the bounded problem is solved by Ipopt
     (pass 2), and Ipopt solves it as below when the Newton iteration fails.
     With ``lazy_bounds``, pass 1 solves without the parameter bounds: a pure equality-
@@ -66,7 +72,7 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
     Otherwise, and on any failure, pass 2 solves the bounded problem from the same start.
 
     An implicit model with small (dense) states and at least ``reduced_start_inputs`` inputs
-    starts Ipopt at the reduced-space optimum (:func:`reduced_start`) with the multipliers that
+    starts Ipopt at the reduced-space optimum (:func:`identification.fit.explicit_newton.reduced_start`) with the multipliers that
     make it a primal-dual solution (warm start, no barrier: pass 1 without bounds), so Ipopt
     verifies it at iteration 0 or after one step at round-off; the estimate is then that point
     (and its S), else Ipopt's solution as usual.  When the reduced iteration fails, Ipopt starts
@@ -206,10 +212,10 @@ def fit_static(model: Model, data: Measurements, p0, weights=None,
                settings: IdentifySettings | None = None, Y0=None) -> FitRecord:
     """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7).
 
-    The pipeline: validate and start (:func:`make_start`), solve the scaled full-space NLP with
+    The pipeline: validate and start (:func:`identification.fit.start.make_start`), solve the scaled full-space NLP with
     Ipopt (:func:`_solve_full_space`), refine by exact reduced Newton steps
     (:func:`identification.fit.refinement.refine`), then identifiability, covariance and the
-    result (:func:`assemble_estimate`).
+    result (:func:`identification.fit.assembly.assemble_estimate`).
 
     Parameters
     ----------
