@@ -342,7 +342,8 @@ class _BatchRun:
             if not it.done[k]:
                 self.fallback[r] = it.reason[k] or "the batch iteration did not converge"
             elif not (np.all(it.fp[k] > model.lower + margin) and np.all(it.fp[k] < model.upper - margin)):
-                self.fallback[r] = "the optimum lies at or beyond a parameter bound (identify solves the bounded problem)"
+                self.fallback[r] = ("the optimum lies at or beyond a parameter bound (identify solves the bounded "
+                                    "problem)")
             else:
                 finals.append(k)
         if finals:

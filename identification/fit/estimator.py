@@ -46,7 +46,8 @@ from identification.fit.nlp import build_nlp
 from identification.fit.refinement import ReducedProblem, Refinement, refine
 from identification.fit.record import FitRecord
 from identification.fit.settings import IdentifySettings
-from identification.fit.start import Start, as_start_vector, decrement_unit, make_start, param_scale, predictor, scalings
+from identification.fit.start import (Start, as_start_vector, decrement_unit, make_start, param_scale, predictor,
+                                      scalings)
 from models.sensitivity import sensitivities
 from models.state import solve_states
 from models.trajectory import trajectory_numerics

@@ -74,8 +74,7 @@ def no_increase(f_new, f):
 
 def keep_step(f_new, f, quadratic, dec_new, dec):
     """Whether the step to p_new is kept: :func:`no_increase`, or in the quadratic region (``quadratic``:
-    Phi cannot resolve the decrease) a decrement that falls.  Arrays: elementwise (``dec_new`` is then
-    read only where needed by the caller)."""
+    Phi cannot resolve the decrease) a decrement that falls (scalars or arrays, elementwise)."""
     return no_increase(f_new, f) | (quadratic & (dec_new < dec))
 
 
@@ -135,7 +134,8 @@ def gradient_roundoff(whiten: Callable, g_abs: np.ndarray):
     return np.einsum("mp,mp->m", u, u) if u.ndim > 1 else float(u @ u)
 
 
-def trial_point(p: np.ndarray, d: np.ndarray, t: float, lower: np.ndarray, upper: np.ndarray, act=None) -> np.ndarray:
+def trial_point(p: np.ndarray, d: np.ndarray, t: float, lower: np.ndarray, upper: np.ndarray,
+                act=None) -> np.ndarray:
     """The trial point p + t d clipped to the bounds [lower, upper]; with an active set ``act`` (a list of
     indices) only those parameters move (the others keep their values)."""
     if act is None:
