@@ -186,11 +186,10 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
             return None
         if newton and cur.S is None:
             cur = objective(x, True)
-        L = _newton_factor(cur, newton)
+        L = newton_core.factor(cur.F + cur.S, cur.F) if newton else newton_core.factor(cur.F)
         if L is None:
             return None
-        v = dense.tri_solve(L, cur.g)
-        dec = float(v @ v)
+        v, dec = newton_core.decrement(L, cur.g)
         # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
         unit = newton_core.decrement_unit(cur.f, None if known else dof)
@@ -201,8 +200,7 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
             if newton_core.in_quadratic_region(dec, dec_tol * unit) and prev_dec is not None and dec > 0.1 * prev_dec:
                 break                              # no more progress at round-off, within 1e-5 std errors
         prev_dec = dec if newton else None
-        d = dense.tri_solve(L, v, trans=1)
-        d *= -1.0
+        d = newton_core.direction(L, v)
         if newton_core.tiny_step(d):
             break
         quadratic = newton and newton_core.in_quadratic_region(dec, dec_tol * unit)
@@ -223,15 +221,6 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
     else:
         return None
     return _newton_result(st, objective, x, cur, it, dec, t0)
-
-
-def _newton_factor(cur: ExplicitTerms, newton: bool):
-    """The Cholesky factor of F + S (Newton phase) or F (Gauss-Newton phase, and where F + S is not
-    positive definite); None when F is not positive definite either."""
-    L = dense.cholesky_lower(cur.F + cur.S if newton else cur.F)
-    if L is None and newton:
-        L = dense.cholesky_lower(cur.F)
-    return L
 
 
 def _step(objective, x: np.ndarray, d: np.ndarray, cur: ExplicitTerms, dec: float, newton: bool, quadratic: bool,

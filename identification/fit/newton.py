@@ -10,7 +10,11 @@ implicit reduced-space solves of :mod:`identification.fit.explicit_newton`, the 
 
 .. math::  \delta = g^T M^{-1} g,\qquad d = -M^{-1} g,
 
-(M = J^T Omega J or J^T Omega J + S, in chi^2 / 2 units of Phi) and decides with the rules here:
+(M = J^T Omega J or J^T Omega J + S, in chi^2 / 2 units of Phi) and decides with the rules here.
+The explicit/implicit reduced Newton and the profile's solver take the step itself from the Cholesky
+factor here (:func:`factor`, :func:`decrement`, :func:`direction`); :func:`identification.fit.refinement.refine`
+takes it through the QR factor of the weighted Jacobian (more accurate where J^T Omega J is ill-conditioned)
+and the batch engine through stacked factorisations of all members at once.
 
 * :func:`sufficient_decrease` (Armijo): Phi(p + t d) <= Phi(p) - 1e-4 t delta;
 * :func:`no_increase`: Phi(p + d) <= Phi(p) (1 + 1e-14) + 1e-300 (where Phi cannot resolve the decrease);
@@ -35,9 +39,11 @@ from typing import Callable
 
 import numpy as np
 
+from identification.fit import dense
+
 __all__ = ["ARMIJO", "MAX_HALVINGS", "BATCH_MAX_HALVINGS", "STEP_TOL", "GRAD_ULPS", "ABORT", "sufficient_decrease",
            "no_increase", "keep_step", "backtrack", "halved_step", "converged", "tiny_step", "gradient_roundoff",
-           "active_set", "trial_point", "decrement_unit", "in_quadratic_region"]
+           "active_set", "trial_point", "decrement_unit", "in_quadratic_region", "factor", "decrement", "direction"]
 
 #: the Armijo constant of the sufficient decrease
 ARMIJO = 1e-4
@@ -60,6 +66,29 @@ class _Abort:
 
 #: returned by a trial of :func:`backtrack` (and then by backtrack itself) to end the search
 ABORT = _Abort()
+
+
+def factor(M: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray | None:
+    """The lower Cholesky factor L of the (scaled) Newton matrix M = L L^T (LAPACK dpotrf), else of
+    ``fallback`` (J^T Omega J where J^T Omega J + S is not positive definite); None when neither is
+    positive definite."""
+    L = dense.cholesky_lower(M)
+    if L is None and fallback is not None:
+        L = dense.cholesky_lower(fallback)
+    return L
+
+
+def decrement(L: np.ndarray, g: np.ndarray) -> tuple:
+    """(v, delta): v = L^{-1} g and the Newton decrement delta = v^T v = g^T M^{-1} g (M = L L^T)."""
+    v = dense.tri_solve(L, g)
+    return v, float(v @ v)
+
+
+def direction(L: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The Newton step d = -M^{-1} g = -L^{-T} v from v of :func:`decrement`."""
+    d = dense.tri_solve(L, v, trans=1)
+    d *= -1.0
+    return d
 
 
 def sufficient_decrease(f_new, f, t, dec):

@@ -195,29 +195,22 @@ class Profiler:
         tol = self.settings.newton_tol
         gs = point.gradient[act] * s[act]
         Fs = solved.H[np.ix_(act, act)] * np.outer(s[act], s[act])
-        try:
-            LF = np.linalg.cholesky(Fs)
-        except np.linalg.LinAlgError:
-            LF = None
+        LF = newton_core.factor(Fs)
         if LF is None and not np.any(gs):
             return solved              # exactly stationary where the free parameters have no influence (Vm = 0)
-        if LF is not None:
-            w = np.linalg.solve(LF, gs)
-            if newton_core.converged(float(w @ w), tol, 0.0):
-                return solved          # converged: g^T (J^T Omega J)^-1 g below the tolerance
+        if LF is not None and newton_core.converged(newton_core.decrement(LF, gs)[1], tol, 0.0):
+            return solved              # converged: g^T (J^T Omega J)^-1 g below the tolerance
         # the exact Hessian J^T Omega J + S (AD second derivatives) for the Newton step
         Hs = (solved.H + point.sens.hessians(point.lam[None])[0])[np.ix_(act, act)] * np.outer(s[act], s[act])
-        try:
-            L = np.linalg.cholesky(Hs)
-        except np.linalg.LinAlgError:
+        L = newton_core.factor(Hs)
+        if L is None:
             if LF is None:
                 return NewtonFailure("the Gauss-Newton information of the free parameters is singular")
             L = LF
-        v = np.linalg.solve(L, gs)
-        dec = float(v @ v)
+        v, dec = newton_core.decrement(L, gs)
         if newton_core.converged(dec, tol, 0.0):
             return solved
-        return -s[act] * np.linalg.solve(L.T, v), dec
+        return s[act] * newton_core.direction(L, v), dec
 
     def _ipopt(self, fixed, values, p0, base, reason) -> Solved:
         names = self.model.param_names
