@@ -96,13 +96,13 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
         return None
     for _ in range(_LM_MAX_EVALS):
         D = np.maximum(D, np.diag(cur.F))               # Marquardt's scaling, never shrinking
-        L = dense.cholesky_lower(cur.F + mu * np.diag(D))
+        L = newton_core.factor(cur.F + mu * np.diag(D))
         if L is None:
             mu, nu = mu * nu, 2 * nu
             if not math.isfinite(mu):
                 return None
             continue
-        d = -dense.tri_solve(L, dense.tri_solve(L, cur.g), trans=1)
+        d = newton_core.direction(L, newton_core.decrement(L, cur.g)[0])     # the damped Gauss-Newton step
         pred = -(cur.g @ d + 0.5 * d @ (cur.F @ d))     # decrease predicted by the Gauss-Newton model
         try:
             new = objective(x + d, False)
@@ -117,10 +117,9 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
             if stalled:
                 return x
             if mu < 1e-6 * float(D.max()):
-                Lf = dense.cholesky_lower(cur.F)
+                Lf = newton_core.factor(cur.F)
                 if Lf is not None:
-                    v = dense.tri_solve(Lf, cur.g)
-                    if float(v @ v) < 1e-2 * max(cur.f, 1e-300):
+                    if newton_core.decrement(Lf, cur.g)[1] < 1e-2 * max(cur.f, 1e-300):
                         return x
         else:
             mu, nu = mu * nu, 2 * nu
