@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from models.contract import Model
-from identification.fit.batch import BatchData
+from identification.fit.batch_data import BatchData
 from identification.errors import DataError
 
 __all__ = ["fixed_model", "full_parameters", "fixed_batch"]

@@ -6,13 +6,67 @@ from every sum, never zero-filled.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from identification.errors import DataError
 
-__all__ = ["Measurements"]
+__all__ = ["Measurements", "DataTerms", "data_terms", "group_means", "common_spread"]
+
+
+def group_means(z: np.ndarray) -> tuple:
+    """(counts, zbar) of values z (..., n_M, n_q, n_S) (NaN: missing; a leading stack axis allowed):
+    the number of present values per (input, sensor) (float) and their mean over the series, 0 where
+    none, each (..., n_q, n_S)."""
+    mask = np.isfinite(z)
+    counts = mask.sum(axis=-3).astype(float)
+    zsum = np.where(mask, z, 0.0).sum(axis=-3)
+    return counts, np.where(counts > 0, zsum / np.maximum(counts, 1), 0.0)
+
+
+def common_spread(zs: np.ndarray) -> float:
+    """The objective's common sigma when sigma is unknown: the standard deviation of the values ``zs`` of the
+    selected sensors (NaN: missing), else their mean magnitude, else 1 (same unit as z)."""
+    if math.isfinite(zs.sum()):         # no missing value: np.std is nanstd's number, 10x faster
+        return float(np.std(zs)) or float(np.mean(np.abs(zs))) or 1.0
+    return float(np.nanstd(zs)) or float(np.nanmean(np.abs(zs))) or 1.0
+
+
+@dataclass(frozen=True)
+class DataTerms:
+    """The data terms of the reduced weighted least-squares objective (see :func:`data_terms`).
+
+    Attributes
+    ----------
+    counts : ndarray (..., n_q, n_S)   present values n_jk per (input, sensor)
+    zbar : ndarray (..., n_q, n_S)     their means over the series (0 where none; unit of z)
+    cw : ndarray (..., n_q, n_S)       weighted counts c_jk = n_jk w_k
+    const : ndarray (...) or float     within-group scatter Phi_0 (chi^2 / 2 units)
+    """
+
+    counts: np.ndarray
+    zbar: np.ndarray
+    cw: np.ndarray
+    const: np.ndarray
+
+
+def data_terms(z: np.ndarray, w: np.ndarray, sig: np.ndarray) -> DataTerms:
+    r"""The data terms of one data set or a stack of them (the one place they are computed).
+
+    .. math::  \Phi(p) = \tfrac12 \sum_{j,k} c_{jk} (\bar z_{jk} - h_{jk}(p))^2 / \sigma_k^2 + \Phi_0,\qquad
+               \Phi_0 = \tfrac12 \sum_{i,j,k} w_k (z_{ijk} - \bar z_{jk})^2 / \sigma_k^2
+
+    ``z`` (..., n_M, n_q, n_S) values (NaN: missing), ``w`` (n_S,) sensor weights, ``sig`` (..., n_S)
+    the objective's sigmas (unit of z).
+    """
+    counts, zbar = group_means(z)
+    sig = np.asarray(sig, float)
+    dev = np.where(np.isfinite(z), z - zbar[..., None, :, :], 0.0)
+    const = 0.5 * np.sum(w * dev ** 2 / sig[..., None, None, :] ** 2, axis=(-3, -2, -1))
+    return DataTerms(counts, zbar, counts * w, const)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -176,10 +230,8 @@ class Measurements:
 
     def means(self) -> np.ndarray:
         """Mean over series per (input, sensor) of present values (NaN where none), (n_q, n_S)."""
-        c = self.counts()
-        s = np.where(self.mask(), self.z, 0.0).sum(axis=0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(c > 0, s / np.maximum(c, 1), np.nan)
+        c, zbar = group_means(self.z)
+        return np.where(c > 0, zbar, np.nan)
 
     def n_data(self, weights=None) -> int:
         """Number of present values in the sensors with nonzero weight."""

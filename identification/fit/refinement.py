@@ -31,8 +31,9 @@ from models.errors import StateSolveError
 from models.sensitivity import Sensitivities, sensitivities
 from models.state import solve_states
 from identification.fit import dense
+from identification.fit import newton as newton_core
 from identification.fit.factor import WeightedFactor, newton_system, weighted_factor, weighted_rows
-from identification.fit.measurements import Measurements
+from identification.fit.measurements import Measurements, data_terms
 
 __all__ = ["ReducedProblem", "ReducedPoint", "Refinement", "refine", "gauss_newton_information",
            "newton_decrement"]
@@ -115,20 +116,8 @@ class ReducedProblem:
         """The problem of ``data`` with sensor weights and sigmas (1-D arrays of length n_S)."""
         w = np.asarray(weights, float)
         sig = np.asarray(sigma, float)
-        z = data.z
-        mask = np.isfinite(z)
-        if z.shape[0] == 1:                 # one series: the means are the values, no scatter
-            counts = mask[0].astype(float)
-            zbar = np.where(mask[0], z[0], 0.0)
-            const = 0.0
-        else:                               # the same numbers as data.counts() and data.means()
-            c = mask.sum(axis=0)
-            counts = c.astype(float)
-            zsum = np.where(mask, z, 0.0).sum(axis=0)
-            zbar = np.where(c > 0, zsum / np.maximum(c, 1), 0.0)
-            dev = np.where(mask, z - zbar[None], 0.0)
-            const = 0.5 * float(np.sum(w[None, None, :] * dev ** 2 / sig[None, None, :] ** 2))
-        cw = counts * w[None, :]
+        terms = data_terms(data.z, w, sig)
+        zbar, cw, const = terms.zbar, terms.cw, float(terms.const)
         return cls(model, data, w, sig, np.asarray(p_scale, float), zbar, cw, const)
 
     def evaluate(self, p: np.ndarray, states0=None) -> ReducedPoint:
@@ -184,7 +173,7 @@ class Refinement:
 
 
 #: the gradient's round-off bound: this many ulps of sum |lambda_jk| |G_jk|
-_GRAD_ULPS = 16
+_GRAD_ULPS = newton_core.GRAD_ULPS
 
 
 def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> float:
@@ -198,9 +187,9 @@ def _gradient_roundoff(problem: ReducedProblem, point: ReducedPoint, system) -> 
     """
     eps16 = _GRAD_ULPS * np.finfo(float).eps
     G = point.sens.G.reshape(-1, point.p.size)
-    u = system.whiten(eps16 * (np.abs(point.lam).reshape(-1) @ np.abs(G)))
+    grad = newton_core.gradient_roundoff(system.whiten, np.abs(point.lam).reshape(-1) @ np.abs(G))
     e2 = problem.cw / problem.sigma ** 2 * (eps16 * (np.abs(problem.zbar) + np.abs(point.sens.h))) ** 2
-    return max(float(u @ u), point.p.size * float(e2.max(initial=0.0)))
+    return max(grad, point.p.size * float(e2.max(initial=0.0)))
 
 
 def point_factor(problem: ReducedProblem, point: ReducedPoint) -> WeightedFactor:
@@ -294,16 +283,15 @@ class _At:
 
 def _unit(point: ReducedPoint, dof: int | None) -> float:
     """Objective units per decrement unit: 1, or 2 Phi / dof with sigma unknown."""
-    return 1.0 if dof is None else 2.0 * point.objective / max(dof, 1)
+    return newton_core.decrement_unit(point.objective, dof)
 
 
 def _stop_reason(problem: ReducedProblem, point: ReducedPoint, system, dp: np.ndarray, dec: float,
                  tol: float) -> str:
-    """Why :func:`refine` stops before the step dp ("" when it does not)."""
-    if dec < tol:
-        return "converged"
-    if dec <= _gradient_roundoff(problem, point, system):
-        return "round-off of the gradient"
+    """Why :func:`refine` stops before the step dp ("" when it does not): the convergence test of
+    :func:`identification.fit.newton.converged`, naming which bound it met."""
+    if newton_core.converged(dec, tol, _gradient_roundoff(problem, point, system)):
+        return "converged" if dec <= tol else "round-off of the gradient"
     if np.all(np.abs(dp) <= 8 * np.finfo(float).eps * np.abs(point.p)):
         return "round-off of p"
     return ""
@@ -315,13 +303,16 @@ def _newton_step(problem: ReducedProblem, at: _At, dp: np.ndarray, dec: float, q
     round-off), when the decrement falls."""
     model, point = problem.model, at.point
     try:
-        new = _At(problem, problem.evaluate(np.clip(point.p + dp, model.lower, model.upper), point.states))
+        new = _At(problem, problem.evaluate(newton_core.trial_point(point.p, dp, 1.0, model.lower, model.upper),
+                                            point.states))
     except StateSolveError:
         return None, "state solve failed"
-    if new.point.objective <= point.objective * (1 + 1e-14) + 1e-300:
+    if newton_core.no_increase(new.point.objective, point.objective):
         return new, ""
-    if not (dec <= quadratic or dec <= 20 * _objective_roundoff(problem, point)):
+    if not newton_core.in_quadratic_region(dec, max(quadratic, 20 * _objective_roundoff(problem, point))):
         return None, "objective increased"
-    if not _decrement(new.filled().fac, new.point, new.S) < dec:
+    # the quadratic region: kept while the decrement falls (identification.fit.newton.keep_step)
+    if not newton_core.keep_step(new.point.objective, point.objective, True,
+                                 _decrement(new.filled().fac, new.point, new.S), dec):
         return None, "no progress at round-off"
     return new, ""

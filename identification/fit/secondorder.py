@@ -26,6 +26,7 @@ import numpy as np
 
 from models.errors import StateSolveError
 from identification.errors import ConvergenceError
+from identification.fit import newton as newton_core
 from identification.fit.factor import WeightedFactor, normalised_hessian, weighted_factor, weighted_rows
 from identification.fit.refinement import ReducedPoint, ReducedProblem, Refinement
 
@@ -36,7 +37,7 @@ MAX_SADDLE_ESCAPES = 3
 
 #: the doublings and halvings of the step along the negative-curvature direction
 _MAX_DOUBLINGS = 60
-_MAX_HALVINGS = 40
+_MAX_HALVINGS = newton_core.MAX_HALVINGS
 
 
 @dataclass(frozen=True)
@@ -125,13 +126,8 @@ def escape(problem: ReducedProblem, point: ReducedPoint, so: SecondOrder) -> Red
     best = None
     for sign in (1.0, -1.0):
         d = sign * so.direction
-        t, found = 1.0, None
-        for _ in range(_MAX_HALVINGS):
-            trial = _trial(problem, point, point.p + t * d)
-            if trial is not None and trial.objective < f0 - tol:
-                found = trial
-                break
-            t *= 0.5
+        found, t = newton_core.backtrack(lambda s, d=d: _trial(problem, point, point.p + s * d),
+                                         lambda c, s: c.objective < f0 - tol, _MAX_HALVINGS)
         if found is None:
             continue
         for _ in range(_MAX_DOUBLINGS):

@@ -277,7 +277,7 @@ def test_predictor_changes_only_the_start_point():
 @pytest.mark.parametrize("which", ["press", "chain"])
 def test_stage_hessian_from_cached_derivatives_equals_casadi_hessian(which):
     """The NLP's stage Hessian, assembled from the model's lag_hess and dh/d(p, y), is exact."""
-    from identification.fit.estimator import _stage_hessian
+    from identification.fit.nlp import stage_hessian as _stage_hessian
     from models.press import press_model
     model = press_model() if which == "press" else spring_chain(7, n_sensors=4, n_groups=2)
     n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
@@ -309,11 +309,11 @@ def _coupled_model():
     return Model(["a", "b"], ["u", "v"], ["s1", "s2", "s3"], n_y=3, E=E, h=h)
 
 
-@pytest.mark.parametrize("builder", ["_build_nlp_glued", "_build_nlp_staged"])
+@pytest.mark.parametrize("builder", ["build_nlp_glued", "build_nlp_staged"])
 @pytest.mark.parametrize("which", ["chain", "coupled"])
 def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
     """The constraint Jacobian and Lagrangian Hessian handed to Ipopt equal CasADi's AD of (f, g)."""
-    import identification.fit.estimator as est_mod
+    import identification.fit.nlp as est_mod
     model = spring_chain(9, n_sensors=4, n_groups=3) if which == "chain" else _coupled_model()
     rng = np.random.default_rng(3)
     n_q = 4
@@ -335,10 +335,10 @@ def test_assembled_nlp_derivatives_equal_casadi_ad(builder, which):
 
 def test_large_state_model_uses_the_glued_nlp_and_agrees_with_the_reduced_fit(monkeypatch):
     """Models with more than 60 states take the MX-glued NLP; the estimate matches the reduced space."""
-    import identification.fit.estimator as est_mod
+    import identification.fit.nlp as est_mod
     calls = []
-    orig = est_mod._build_nlp_glued
-    monkeypatch.setattr(est_mod, "_build_nlp_glued", lambda *a: calls.append(1) or orig(*a))
+    orig = est_mod.build_nlp_glued
+    monkeypatch.setattr(est_mod, "build_nlp_glued", lambda *a: calls.append(1) or orig(*a))
     model = spring_chain(80, n_sensors=4, n_groups=2)
     q = np.array([[f, 0.3 * f] for f in np.linspace(0.2, 3.0, 4)])
     p_true = np.array([2.0, 2.2, 0.5])
@@ -448,13 +448,13 @@ def test_set_jit_switches_the_documented_configuration():
 def test_explicit_nlp_is_over_p_only_and_its_hessian_equals_casadi_ad():
     """An explicit model's NLP has the parameters as its only variables, no constraints, and the
     mapped (reduced) stage Hessian equals CasADi's AD of the mapped objective."""
-    import identification.fit.estimator as est_mod
+    import identification.fit.nlp as est_mod
     model = Model.explicit(["a", "b", "c"], ["x", "u"], ["y1", "y2"],
                            h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]) + p[2] * q[1],
                                                      p[1] ** 2 * ca.sin(q[0])))
     rng = np.random.default_rng(2)
     inputs = rng.uniform(0.1, 2.0, (37, 2))
-    nlp = est_mod._build_nlp(model, inputs, rng.uniform(0.5, 2, 3), np.ones(0), np.ones(0))
+    nlp = est_mod.build_nlp(model, inputs, rng.uniform(0.5, 2, 3), np.ones(0), np.ones(0))
     assert nlp.x.size1() == model.n_p and nlp.g.size1() == 0
     lam_f = ca.MX.sym("lf")
     ref = ca.Function("ref", [nlp.x, nlp.par, lam_f], [ca.triu(ca.hessian(lam_f * nlp.f, nlp.x)[0])])

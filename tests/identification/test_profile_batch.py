@@ -70,3 +70,17 @@ def test_a_two_parameter_model_takes_the_per_point_path():
     per = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
     assert np.all(np.isfinite(bat.statistic))
     np.testing.assert_array_equal(bat.statistic, per.statistic)
+
+
+def test_grid_strategy_is_chosen_once_from_batch():
+    """lr_region(batch=...) takes True, False or a GridSolver; a pair model has no free parameter to batch."""
+    from identification.inference.likelihood_region import BATCHED_ROWS, PER_POINT, grid_solver
+    assert grid_solver(True, 3) is BATCHED_ROWS and grid_solver(False, 3) is PER_POINT
+    assert grid_solver(True, 2) is PER_POINT and grid_solver(BATCHED_ROWS, 2) is PER_POINT
+    assert grid_solver(PER_POINT, 5) is PER_POINT
+    with pytest.raises(TypeError, match="batch: expected True, False or a GridSolver"):
+        grid_solver("yes", 3)
+    model, data, est = _rise_and_slope()
+    a = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=PER_POINT)
+    b = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
+    np.testing.assert_array_equal(a.statistic, b.statistic)
