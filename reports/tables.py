@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .view import (STATISTIC_WORDS, fmt_p, fmt_pct, fmt_value, output_display, param_units, sensor_unit,
+from .view import (fmt_p, fmt_pct, fmt_value, output_display, param_units, sensor_unit,
                    unit_suffix)
 
 __all__ = ["fmt_alpha", "normality_rows", "normality_widths", "normality_checks", "normality_labels",

@@ -27,7 +27,7 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.sensitivity import sensitivities
-from models.state import numerics, solve_states
+from models.state import numerics
 from models.trajectory import trajectory_numerics
 from identification.fit.explicit_kernel import ExplicitTerms
 from identification.fit.refinement import ReducedPoint, ReducedProblem

@@ -176,7 +176,7 @@ def build_nlp_explicit(model, inputs, s_p) -> NlpProblem:
     with the sum over j as the map's reduction.
     """
     fns = _stage_functions(model)
-    n_q, n_p = inputs.shape[0], model.n_p
+    n_q = inputs.shape[0]
     pt, _, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
     Q = ca.DM(inputs.T)
     e0 = ca.MX(0, 1)

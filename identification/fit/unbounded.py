@@ -40,11 +40,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from models.errors import StateSolveError
 from identification.fit import dense
-from identification.errors import IdentifiabilityError, NotBoundedError
+from identification.errors import IdentifiabilityError
 from identification.fit.refinement import ReducedPoint, ReducedProblem
 from identification.fit.record import FitRecord
 

@@ -17,7 +17,6 @@ detection (:mod:`identification.studies.detect_bootstrap`) take one.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -29,27 +28,11 @@ from identification.fit.batch import BatchData, BatchFit, fit_batch
 from identification.fit.measurements import Measurements
 from identification.fit.unbounded import not_bounded_reason
 from identification.studies.detect import DetectSettings, SplitTest, normality_check, run_split_tests
+from identification.studies.split_tests import FitFailure
 from identification.studies.splits import Split, SplitError
 
-__all__ = ["BATCHED", "ONE_BY_ONE", "BatchedSplitFits", "OneByOneSplitFits", "PooledFailure", "SplitFits",
+__all__ = ["BATCHED", "ONE_BY_ONE", "BatchedSplitFits", "OneByOneSplitFits", "SplitFits",
            "batched_split_tests", "shapiro_pvalues"]
-
-
-@dataclass(frozen=True)
-class PooledFailure:
-    """A pooled fit (calibration and validation data together) that gave no estimate, and why.
-
-    Attributes
-    ----------
-    text : str   "pooled fit failed: <error>" or "pooled fit not bounded: ..." (as run_split_tests says it)
-    """
-
-    text: str
-
-
-def _for_run_split_tests(pooled: dict) -> dict:
-    """``pooled`` as :func:`identification.studies.detect.run_split_tests` takes it: a failure as its text."""
-    return {k: v.text if isinstance(v, PooledFailure) else v for k, v in pooled.items()}
 
 
 def _given(fit: BatchFit, member: int):
@@ -126,7 +109,7 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
     """The fits of run_split_tests for R data sets of one model with the same inputs: every
     calibration, validation and pooled fit of a split is one :func:`identification.fit.batch.fit_batch`
     call over the data sets.  Returns (fits, pooled, ok_split): per data set the (calibration,
-    validation) estimates of every split and {pooled points: pooled estimate or PooledFailure} (the
+    validation) estimates of every split and {pooled points: pooled estimate or FitFailure} (the
     ``fits`` and ``pooled`` arguments of run_split_tests), and per split whether it fits the data.
 
     A fit_batch call that raises LinAlgError (a singular system for the batch as a whole, e.g. a
@@ -180,9 +163,9 @@ def _batched_fits(model: Model, splits: tuple, p0: np.ndarray, weights, det: Det
         for k, r in enumerate(members):
             e = _given(bf, k)
             if isinstance(e, Exception):
-                pooled[r][key] = PooledFailure(f"pooled fit failed: {type(e).__name__}: {e}")
+                pooled[r][key] = FitFailure.from_error(e, "pooled fit failed: ")
             else:
-                pooled[r][key] = PooledFailure(f"pooled fit {not_bounded_reason(e)}") if not_bounded_reason(e) else e
+                pooled[r][key] = FitFailure(f"pooled fit {not_bounded_reason(e)}", "not bounded") if not_bounded_reason(e) else e
     return fits, pooled, ok_split
 
 
@@ -207,7 +190,7 @@ def _covariances(fits: list, det: DetectSettings, n_p: int) -> tuple:
 def _batched_cholesky(C: np.ndarray) -> tuple:
     """(L, ok): the lower Cholesky factors of a stack (m, n, n) (numpy.linalg.cholesky), ok False (L the
     identity) where a matrix is not finite or not positive definite."""
-    m, n = C.shape[0], C.shape[-1]
+    n = C.shape[-1]
     ok = np.all(np.isfinite(C), axis=(1, 2))
     A = np.where(ok[:, None, None], C, np.eye(n))
     try:
@@ -264,7 +247,7 @@ def _split_statistics(model: Model, name: str, splits: tuple, det: DetectSetting
         for r in np.flatnonzero(reg):
             est_c, est_v = fits[r][js]
             est_u = pooled[r].get(key)
-            if est_u is None or isinstance(est_u, PooledFailure):
+            if est_u is None or isinstance(est_u, FitFailure):
                 reg[r] = False
                 continue
             sig_est[r] = est_c.sigma_estimated
@@ -386,7 +369,7 @@ def batched_split_tests(model: Model, name: str | None, datasets, splits: Sequen
     for r, tests in enumerate(out):
         if tests is None:
             out[r] = run_split_tests(model, ds[r], splits, p0, weights, det, name, start_states, fits=fits[r],
-                                     pooled=_for_run_split_tests(pooled[r]))
+                                     pooled=pooled[r])
     return out
 
 
