@@ -83,11 +83,8 @@ def _stage_functions(model):
     got = model.cache.get("identify.nlp_stage", compiled)
     if got is not None:
         return got
-    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
-    S = ca.SX if model.symbolic == "SX" else ca.MX
-    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
-    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
-    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    n_y, n_p = model.n_y, model.n_p
+    S, (y, p, q, zb, c, sy, sp, e) = _stage_symbols(model)
     sf, lg = S.sym("sigma_f"), S.sym("lam_g", n_y)
     y_un, p_un = y * sy, p * sp
     base = [y, p, q, zb, c, sy, sp, e]
@@ -111,6 +108,17 @@ def _stage_functions(model):
     return model.cache.put("identify.nlp_stage", compiled, fns)
 
 
+def _stage_symbols(model) -> tuple:
+    """(S, (ỹ, p̃, q, zbar, c, s_y, s_p, e)): the symbol class of the model (SX or MX) and the arguments of
+    one stage's functions (scaled states and parameters, inputs, mean readings, counts, scales)."""
+    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
+    S = ca.SX if model.symbolic == "SX" else ca.MX
+    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
+    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
+    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    return S, (y, p, q, zb, c, sy, sp, e)
+
+
 def _stage_gradient(model) -> ca.Function:
     """(ỹ, p̃, q, zbar, c, s_y, s_p, e) -> (f, df/dp̃, df/dỹ) of one stage (see
     :func:`_stage_functions`), by AD of the stage objective; built once per model and kept in
@@ -118,11 +126,7 @@ def _stage_gradient(model) -> ca.Function:
     got = model.cache.get("identify.nlp_stage_grad", None)
     if got is not None:
         return got
-    n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
-    S = ca.SX if model.symbolic == "SX" else ca.MX
-    y, p, q = S.sym("y", n_y), S.sym("p", n_p), S.sym("q", model.n_q_dim)
-    zb, c = S.sym("zbar", n_S), S.sym("c", n_S)
-    sy, sp, e = S.sym("s_y", n_y), S.sym("s_p", n_p), S.sym("e", n_y)
+    _, (y, p, q, zb, c, sy, sp, e) = _stage_symbols(model)
     r = model.h_fun(y * sy, p * sp, q) - zb
     f = 0.5 * ca.dot(c * r, r)
     fn = ca.Function("nlp_stage_grad", [y, p, q, zb, c, sy, sp, e], [f, ca.gradient(f, p), ca.gradient(f, y)])
