@@ -30,7 +30,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from identification import Measurements, identify
+from identification import Measurements, identify, simulate
 from identification.errors import IdentificationError
 from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from models.campaign import Campaign
@@ -44,12 +44,14 @@ from models.press import K_NOMINAL, PRESS_SCENARIO_NAMES, Q_PAPER, press_model, 
 from models.prototype import (CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, generate_campaign,
                               read_campaign, write_campaign)
 from reports.diagnosis import Explanation
+from reports.press_figures import ModelCurve
 
 from .builtin import BuiltinModel, VirtualPrototype
 from .config_errors import config_error
 from .csv_stream import DataFileError
 
 __all__ = ["campaign_measurements", "friction_samples", "train_preisach", "retrain", "fit_candidates",
+           "model_curves",
            "press_variant", "diagnosis_explanations", "prototype_campaign", "check_prototype_data", "PRESS",
            "M3_INPUT_RANGE_BENCH", "TRAINING_DEFAULTS", "CampaignError"]
 
@@ -297,6 +299,18 @@ def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: 
         if unknown:
             raise FrictionError(f"sensors: {sorted(unknown)} are not sensors of {model.name!r}")
         out[name] = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
+    return out
+
+
+def model_curves(campaign, estimates: dict, models: dict) -> dict:
+    """{name: ModelCurve}: h(y_j, p_hat, q_j) of every candidate model at its estimate over the campaign's
+    set points (m), with the model's inputs of :func:`models.friction.model_inputs`; what
+    :func:`reports.press_figures.plot_models` draws."""
+    out = {}
+    for name, est in estimates.items():
+        m = models[name]
+        out[name] = ModelCurve(simulate(m, est.p, model_inputs(name, campaign.q_set)), tuple(m.sensors),
+                               float(est.reduced_chi2))
     return out
 
 

@@ -8,16 +8,16 @@ measurements of the force-displacement curve".
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from identification import simulate
-from models.friction import direction_inputs, memory_inputs, model_inputs
+from models.friction import direction_inputs, memory_inputs
 from models.prototype import TEST_SERIES, read_campaign
 
-__all__ = ["plot_campaign", "plot_models", "plot_friction"]
+__all__ = ["plot_campaign", "ModelCurve", "plot_models", "plot_friction"]
 
 _SERIES_MARKERS = ("s", "D", "^", "v", "o", "*")
 _MODEL_STYLE = {"M1": dict(color="tab:red", ls="-"), "M2": dict(color="tab:orange", ls="--"),
@@ -52,17 +52,32 @@ def plot_campaign(ax=None, sensor: str = "D_y", campaign=None):
     return fig
 
 
-def plot_models(campaign, estimates: dict, models: dict, axes=None,
+@dataclass(frozen=True)
+class ModelCurve:
+    """The outputs of one candidate model at its estimate, as :func:`plot_models` draws them.
+
+    Attributes
+    ----------
+    outputs : ndarray (n_q, n_S)   h(y_j, p_hat, q_j) over the campaign's set points (m)
+    sensors : tuple of str         the model's sensors (columns of ``outputs``)
+    reduced_chi2 : float           the fit's reduced chi^2 (shown in the legend)
+    """
+
+    outputs: np.ndarray
+    sensors: tuple
+    reduced_chi2: float
+
+
+def plot_models(campaign, curves: dict, axes=None,
                 sensors: Sequence[str] = ("D_y", "F_x", "B0_y"), series: Sequence[int] | None = None):
     """Measured series and the outputs of M1, M2, M3 at their estimates, one panel per sensor.
 
     Parameters
     ----------
     campaign : Campaign
-    estimates : dict {name: Estimate}
-        The fits to draw, e.g. :func:`mudoe.press.fit_candidates` on the held-out series.
-    models : dict {name: Model}
-        The models of the estimates (e.g. :func:`models.friction.candidate_models`).
+    curves : dict {name: ModelCurve}
+        The fitted outputs to draw (:func:`mudoe.press.model_curves` of the fits, e.g.
+        :func:`mudoe.press.fit_candidates` on the held-out series); this function computes nothing.
     axes : array of Axes (len(sensors),), optional
     sensors : sensors to plot
     series : 0-based series shown as data (default the held-out ones)
@@ -76,11 +91,9 @@ def plot_models(campaign, estimates: dict, models: dict, axes=None,
         for n, i in enumerate(series):
             a.plot(c.q_set, 1e3 * c.z[i, :, k], ls="none", marker=_SERIES_MARKERS[n % 6], ms=3.5, mfc="none",
                    color="0.45", label=f"series {i + 1}")
-        for name, e in estimates.items():
-            m = models[name]
-            h = simulate(m, e.p, model_inputs(name, c.q_set))
-            a.plot(c.q_set, 1e3 * h[:, m.sensors.index(sensor)], lw=1.2, label=f"{name} ($\\chi^2_r$ = "
-                   f"{e.reduced_chi2:.2f})", **_MODEL_STYLE.get(name, {}))
+        for name, cv in curves.items():
+            a.plot(c.q_set, 1e3 * cv.outputs[:, cv.sensors.index(sensor)], lw=1.2, label=f"{name} ($\\chi^2_r$ = "
+                   f"{cv.reduced_chi2:.2f})", **_MODEL_STYLE.get(name, {}))
         a.set_xlabel("force $q_P$ in N")
         a.set_ylabel(f"{sensor} in µm")
         if col == 0:

@@ -69,9 +69,11 @@ def test_identification_converges_and_only_M3_fits_the_held_out_series(fits, sen
 
 # ---------------------------------------------------------------------------- figures take the computed data
 def test_press_figures_draw_the_fits_and_samples_they_are_given(campaign, models, fits):
-    from mudoe.press import friction_samples
+    from mudoe.press import friction_samples, model_curves
     from reports.press_figures import plot_friction, plot_models
-    fig = plot_models(campaign, fits[("D_y", "F_x")], models)
+    curves = model_curves(campaign, fits[("D_y", "F_x")], models)
+    assert all(c.outputs.shape == (campaign.q_set.size, len(models[n].sensors)) for n, c in curves.items())
+    fig = plot_models(campaign, curves)
     labels = [ln.get_label() for ln in fig.axes[0].get_lines()]
     assert len(fig.axes) == 3 and sum(lab.startswith(("M1", "M2", "M3")) for lab in labels) == 3
     samples = friction_samples(campaign)
