@@ -57,6 +57,7 @@ class BuiltinModel:
                                     :class:`reports.diagnosis.Explanation`: what is known of its
                                     diagnostic rejections on this campaign
     prototype : VirtualPrototype or None   its simulated test rig, if it has one
+    presentation : reports.view.Presentation or None   the words its report pages use (None: the generic ones)
     """
 
     name: str
@@ -67,3 +68,4 @@ class BuiltinModel:
     build: Callable
     explanations: Callable
     prototype: VirtualPrototype | None = None
+    presentation: object = None

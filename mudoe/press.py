@@ -45,6 +45,7 @@ from models.prototype import (CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed
                               read_campaign, write_campaign)
 from reports.diagnosis import Explanation
 from reports.press_figures import ModelCurve
+from reports.view import Presentation
 
 from .builtin import BuiltinModel, VirtualPrototype
 from .config_errors import config_error
@@ -409,8 +410,17 @@ def check_prototype_data(data, error) -> None:
 
 
 #: the press as generic study code sees it (:mod:`mudoe.registry`)
+def press_phases(q_set) -> tuple:
+    """'loading' while the set force does not decrease, 'unloading' after its maximum (one per set point)."""
+    q = np.asarray(q_set, float)
+    top = int(np.argmax(q))
+    return tuple("loading" if j <= top else "unloading" for j in range(q.size))
+
+
 PRESS = BuiltinModel(
     name="press", variants=FRICTION_VARIANTS, scenarios=PRESS_SCENARIO_NAMES, scenario_rows=press_scenario_rows,
     data_directory="../data/press_campaign", build=press_variant, explanations=diagnosis_explanations,
     prototype=VirtualPrototype(campaign=prototype_campaign, check=check_prototype_data, set_points=len(Q_PAPER),
-                               seed=CAMPAIGN_SEED, n_series=6, generate=generate_campaign, write=write_campaign))
+                               seed=CAMPAIGN_SEED, n_series=6, generate=generate_campaign, write=write_campaign),
+    presentation=Presentation(quantity="displacement", input_label="process force $q_P$", input_unit="N",
+                              phases=press_phases))

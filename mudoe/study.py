@@ -22,6 +22,7 @@ from identification import Measurements, information_contributions
 from identification.studies.detect import NormalityCheck, normality_check
 from identification.studies.splits import Split, random_splits
 from models.campaign import Campaign
+from reports.view import Presentation
 
 from .registry import builtin_model, scenario_splits, simulate_refusal
 from .checks import check_data, check_model, study_splits
@@ -149,8 +150,10 @@ def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
     p0 = config_start_values(cfg, first)
     builtin = builtin_model(cfg.model.name)
     explanations = builtin.explanations(campaign, tuple(models)) if builtin is not None else ()
-    return Study(cfg, campaign, sensors, sigma, sig_rows, norm, models, data, data_all, p0, splits,
-                 campaign.notes, units, explanations)
+    shown = builtin.presentation if builtin is not None and builtin.presentation is not None else Presentation()
+    return Study(cfg=cfg, campaign=campaign, sensors=sensors, sigma=sigma, sigma_table=sig_rows, normality=norm,
+                 models=models, data=data, data_all=data_all, p0=p0, splits=splits, notes=campaign.notes,
+                 units=units, explanations=explanations, presentation=shown)
 
 
 # ---------------------------------------------------------------------------- runs

@@ -22,6 +22,7 @@ from identification.progress import Progress as BaseProgress
 from identification.studies.detect import NormalityCheck
 from models.campaign import Campaign
 from models.contract import Model
+from reports.view import Presentation
 
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
@@ -110,6 +111,8 @@ class Study:
     units : DataUnits            units of the data in the files and in the model (the one conversion)
     explanations : tuple         what the study knows of its diagnostic rejections
                                  (:class:`reports.diagnosis.Explanation`; the press: the shipped campaign's)
+    presentation : Presentation  the words a built-in model's study puts on its pages
+                                 (:class:`reports.view.Presentation`; empty for an own model)
     is_dynamic : bool            False (a :class:`mudoe.dynamic_study.DynamicStudy` is True)
     """
 
@@ -127,6 +130,7 @@ class Study:
     notes: tuple = ()
     units: DataUnits | None = None
     explanations: tuple = ()
+    presentation: Presentation = Presentation()
     is_dynamic = False
 
     def start_values(self, variant: str) -> np.ndarray:

@@ -2,7 +2,8 @@
 
 Everything here is derived from a :class:`mudoe.study.StudyResults` (its models, config and
 estimates), so that every page of a report names the study's own quantities: no page
-assumes the press.  The press study is recognised in one place, :func:`is_press`.
+assumes the press.  What a built-in model's study adds to the words (the press: "displacement",
+"process force", loading / unloading) arrives as the study's :class:`Presentation`.
 
 Hooks (one documented place each, for results the study does not hold yet):
 
@@ -20,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["unit_suffix", "is_press", "OutputDisplay", "output_display",
+__all__ = ["unit_suffix", "Presentation", "OutputDisplay", "output_display",
            "input_label", "param_units", "phase_labels", "GoodnessOfFit", "FitAssessment",
            "fmt_value", "fmt_p", "fmt_pct", "STATISTIC_WORDS", "sensor_unit", "output_label"]
 
@@ -34,9 +35,24 @@ def unit_suffix(unit: str) -> str:
     return f" ({unit})" if unit else ""
 
 
-def is_press(study) -> bool:
-    """True for the press study of the paper (the only study that may use press words)."""
-    return study.cfg.model.name == "press"
+@dataclass(frozen=True)
+class Presentation:
+    """The words a built-in model's study puts on its pages (the press: the paper's); empty for an own model.
+
+    Attributes
+    ----------
+    quantity : str        what outputs in mm are ("displacement"), shown in axis labels; "" none
+    input_label : str     axis label of the first input without its unit ("process force $q_P$"); "" the
+                          input's name
+    input_unit : str      unit shown when the model declares none ("N"); "" none
+    phases : callable or None   ``phases(q_set) -> tuple of str``, a phase label per set point
+                          ("loading" / "unloading"); None: the model's own ``mudoe_phases`` or none
+    """
+
+    quantity: str = ""
+    input_label: str = ""
+    input_unit: str = ""
+    phases: object = None
 
 
 def _first_model(study):
@@ -57,7 +73,7 @@ def output_display(study) -> OutputDisplay:
     m = _first_model(study)
     units = tuple(m.sensor_units) if m.sensor_units else ("",) * len(m.sensors)
     if units and all(u == "mm" for u in units):
-        return OutputDisplay(1e3, ("um",) * len(units), "displacement" if is_press(study) else "")
+        return OutputDisplay(1e3, ("um",) * len(units), study.presentation.quantity)
     return OutputDisplay(1.0, units, "")
 
 
@@ -79,8 +95,9 @@ def input_label(study) -> str:
     m = _first_model(study)
     name = m.inputs[0]
     unit = m.input_units[0] if m.input_units else ""
-    if is_press(study):
-        return f"process force $q_P${unit_suffix(unit or 'N')}"
+    shown = study.presentation
+    if shown.input_label:
+        return f"{shown.input_label}{unit_suffix(unit or shown.input_unit)}"
     return f"{name}{unit_suffix(unit)}"
 
 
@@ -96,9 +113,8 @@ def phase_labels(study):
     maximum.  Other models: ``model.mudoe_phases(q_set)`` when the model defines it.
     """
     q = np.asarray(study.campaign.q_set, float)
-    if is_press(study):
-        top = int(np.argmax(q))
-        return tuple("loading" if j <= top else "unloading" for j in range(q.size))
+    if study.presentation.phases is not None:
+        return tuple(study.presentation.phases(q))
     fn = getattr(_first_model(study), "mudoe_phases", None)
     if fn is None:
         return None
