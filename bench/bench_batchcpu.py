@@ -33,11 +33,11 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def make_task(jit: bool = True) -> "mc._Task":
+def make_task(jit: bool = True) -> "mc.SizeStudyTask":
     """The task of bench_detect's size/timing study (M1 on its own campaigns, the paper's splits)."""
     model = press_model()
     gen = mc.ModelCampaign(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, 2)
-    return mc._Task(names=("M1",), models=(model,), p0s=(np.asarray(P0, float),),
+    return mc.SizeStudyTask(names=("M1",), models=(model,), p0s=(np.asarray(P0, float),),
                     weights=(WEIGHTS_110,), splits=tuple(PAPER_SPLITS), generator=gen, truth=(gen.p_true,),
                     detect=DetectSettings(tol=0.05, normality="override"), coverage_alpha=0.05, fits=mc.BATCHED,
                     jit=jit)

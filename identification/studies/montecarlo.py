@@ -57,7 +57,7 @@ from models.state import simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
            "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests",
-           "shapiro_pvalues", "BATCHED", "ONE_BY_ONE", "Replication", "SplitFailure"]
+           "shapiro_pvalues", "BATCHED", "ONE_BY_ONE", "Replication", "SplitFailure", "SizeStudyTask"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -207,7 +207,7 @@ class SplitFailure:
 
 @dataclass(frozen=True, eq=False)
 class Replication:
-    """The split tests of every model on one simulated campaign (the record of :meth:`_Task.run_chunk`).
+    """The split tests of every model on one simulated campaign (the record of :meth:`SizeStudyTask.run_chunk`).
 
     Attributes
     ----------
@@ -248,7 +248,7 @@ class _StartStates:
 
 
 @dataclass(frozen=True, eq=False)
-class _Task(ReplicationTask):
+class SizeStudyTask(ReplicationTask):
     """Everything a replication needs (sent once to every worker; see :mod:`identification.replicate`)."""
 
     names: tuple
@@ -287,7 +287,7 @@ class _Task(ReplicationTask):
         return [Replication(index=i, failures=tuple(out.pop("errors")), **out) for (i, _), out in zip(chunk, outs)]
 
 
-def _empty_result(task: _Task) -> dict:
+def _empty_result(task: SizeStudyTask) -> dict:
     """The fields of one replication's record before its tests (NaN everywhere, no failures)."""
     n_m, n_s = len(task.names), len(task.splits)
     return {"alpha_paper": np.full((n_m, n_s), np.nan), "alpha_two_sample": np.full((n_m, n_s), np.nan),
@@ -295,7 +295,7 @@ def _empty_result(task: _Task) -> dict:
             "shapiro": None}
 
 
-def _record(task: _Task, out: dict, im: int, tests) -> None:
+def _record(task: SizeStudyTask, out: dict, im: int, tests) -> None:
     """Enter the split tests of model ``im`` into a replication's fields ``out``."""
     name, model, truth = task.names[im], task.models[im], task.truth[im]
     g2 = stats.chi2.ppf(1 - task.coverage_alpha, model.n_p) if truth is not None else None
@@ -333,7 +333,7 @@ def _backend_text(backend: cluster.Backend) -> str:
     return str(backend)
 
 
-def _execute(task: _Task, settings: MonteCarloSettings, desc: str) -> tuple:
+def _execute(task: SizeStudyTask, settings: MonteCarloSettings, desc: str) -> tuple:
     """Run every replication on the replication engine; returns (records by index, backend text, workers).
 
     Chunks of about 8 per worker, at most 50 replications (the numbers do not depend on them)."""
@@ -638,7 +638,7 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
         if v.shape != (m.n_p,):
             raise DataError(f"p0[{n!r}]: expected {m.n_p} values, got {v.size}")
     tr = tuple(None if v is None else np.asarray(v, float).ravel() for v in _per_model("truth", truth, names))
-    task = _Task(names=names, models=tuple(models.values()), p0s=p0s, weights=_per_model("weights", weights, names),
+    task = SizeStudyTask(names=names, models=tuple(models.values()), p0s=p0s, weights=_per_model("weights", weights, names),
                  splits=splits, generator=generator, truth=tr, detect=settings.detect,
                  coverage_alpha=float(settings.coverage_alpha), fits=settings.fits, jit=bool(settings.jit))
     # fail early (in this process) on a generator or split that does not fit the models
