@@ -52,7 +52,7 @@ from .config_errors import config_error
 from .csv_stream import DataFileError
 
 __all__ = ["campaign_measurements", "friction_samples", "train_preisach", "retrain", "fit_candidates",
-           "model_curves",
+           "model_curves", "friction_curves",
            "press_variant", "diagnosis_explanations", "prototype_campaign", "check_prototype_data", "PRESS",
            "M3_INPUT_RANGE_BENCH", "TRAINING_DEFAULTS", "CampaignError"]
 
@@ -301,6 +301,14 @@ def fit_candidates(campaign=None, series: Sequence[int] | None = None, sensors: 
             raise FrictionError(f"sensors: {sorted(unknown)} are not sensors of {model.name!r}")
         out[name] = identify(model, data, K_NOMINAL, weights=[1.0 if s in sensors else 0.0 for s in model.sensors])
     return out
+
+
+def friction_curves(q_set, constants: dict) -> dict:
+    """{"M2": q_c dir(q), "M3": N(memory inputs of q)}: the stored friction models' forces (N) along the
+    force sequence ``q_set`` (N); ``constants`` as :func:`models.friction.load_friction` gives them."""
+    q = np.asarray(q_set, float)
+    return {"M2": np.asarray(constants["coulomb"].q_c * direction_inputs(q), float),
+            "M3": np.asarray(constants["network"](memory_inputs(q)), float).ravel()}
 
 
 def model_curves(campaign, estimates: dict, models: dict) -> dict:

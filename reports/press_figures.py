@@ -14,7 +14,6 @@ from typing import Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
-from models.friction import direction_inputs, memory_inputs
 from models.prototype import TEST_SERIES, read_campaign
 
 __all__ = ["plot_campaign", "ModelCurve", "plot_models", "plot_friction"]
@@ -101,25 +100,26 @@ def plot_models(campaign, curves: dict, axes=None,
     return fig
 
 
-def plot_friction(samples: dict, constants: dict, ax=None):
+def plot_friction(samples: dict, curves: dict, ax=None):
     """Friction forces attributed by the inverse model to the training series, with M2 and M3 (N over N).
 
     Parameters
     ----------
     samples : dict
         :func:`mudoe.press.friction_samples` (keys ``q_set``, ``f``, ``series``).
-    constants : dict
-        :func:`models.friction.load_friction` (keys ``coulomb``, ``network``).
+    curves : dict
+        :func:`mudoe.press.friction_curves` at ``samples["q_set"]``: keys ``"M2"`` (Coulomb) and ``"M3"``
+        (Preisach network), friction force (N) per set point; this function computes nothing.
     ax : Axes, optional
     """
-    s, fr = samples, constants
+    s = samples
     fig, axs = _axes(ax)
     a = axs[0, 0]
     for n, i in enumerate(s["series"]):
         a.plot(s["q_set"], s["f"][n], ls="none", marker=_SERIES_MARKERS[n % 6], ms=3, color="0.5",
                label=f"inverse model, series {i + 1}")
-    a.plot(s["q_set"], fr["coulomb"].q_c * direction_inputs(s["q_set"]), **_MODEL_STYLE["M2"], label="M2 (Coulomb)")
-    a.plot(s["q_set"], fr["network"](memory_inputs(s["q_set"])), **_MODEL_STYLE["M3"], label="M3 (Preisach network)")
+    a.plot(s["q_set"], curves["M2"], **_MODEL_STYLE["M2"], label="M2 (Coulomb)")
+    a.plot(s["q_set"], curves["M3"], **_MODEL_STYLE["M3"], label="M3 (Preisach network)")
     a.axhline(0, color="0.8", lw=0.5)
     a.set_xlabel("force $q_P$ in N")
     a.set_ylabel("friction force $q_{fric}$ in N")

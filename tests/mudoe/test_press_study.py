@@ -69,7 +69,7 @@ def test_identification_converges_and_only_M3_fits_the_held_out_series(fits, sen
 
 # ---------------------------------------------------------------------------- figures take the computed data
 def test_press_figures_draw_the_fits_and_samples_they_are_given(campaign, models, fits):
-    from mudoe.press import friction_samples, model_curves
+    from mudoe.press import friction_curves, friction_samples, model_curves
     from reports.press_figures import plot_friction, plot_models
     curves = model_curves(campaign, fits[("D_y", "F_x")], models)
     assert all(c.outputs.shape == (campaign.q_set.size, len(models[n].sensors)) for n, c in curves.items())
@@ -77,5 +77,5 @@ def test_press_figures_draw_the_fits_and_samples_they_are_given(campaign, models
     labels = [ln.get_label() for ln in fig.axes[0].get_lines()]
     assert len(fig.axes) == 3 and sum(lab.startswith(("M1", "M2", "M3")) for lab in labels) == 3
     samples = friction_samples(campaign)
-    fig = plot_friction(samples, load_friction())
+    fig = plot_friction(samples, friction_curves(samples["q_set"], load_friction()))
     assert len(fig.axes[0].get_lines()) == len(samples["series"]) + 3     # samples, M2, M3, zero line
