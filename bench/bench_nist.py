@@ -10,7 +10,7 @@ Then MGH10 from start 1 with the parameter scales a user would declare (1e-2, 1e
 certified optimum or an exception.
 
 ``attainable``: the digits the certified values themselves allow in double precision (see
-``tests/identification/nist.py``, :func:`attainable_digits`): Lanczos1's RSS (1.4e-25) lies below
+``tests/identification/fit/nist.py``, :func:`attainable_digits`): Lanczos1's RSS (1.4e-25) lies below
 the round-off of its residuals, so its RSS and standard errors cannot be reproduced in double.
 
 Run ``python -m bench.bench_nist`` (``--markdown`` prints the table for bench/RESULTS.md).  With
@@ -34,10 +34,10 @@ CERTIFIED_DIGITS = 11.0
 
 
 def nist_module():
-    """tests/identification/nist.py of this tree, loaded by path."""
+    """tests/identification/fit/nist.py of this tree, loaded by path."""
     name = "_mudoe_tests_nist_strd"
     if name not in sys.modules:
-        path = Path(__file__).resolve().parents[1] / "tests" / "identification" / "nist.py"
+        path = Path(__file__).resolve().parents[1] / "tests" / "identification" / "fit" / "nist.py"
         spec = importlib.util.spec_from_file_location(name, path)
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod

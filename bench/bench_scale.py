@@ -205,7 +205,7 @@ def _subprocess(who, kind, n):
 
 def _nist_module():
     import importlib.util
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests", "identification",
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests", "identification", "fit",
                         "nist.py")
     spec = importlib.util.spec_from_file_location("nist_data", path)
     mod = importlib.util.module_from_spec(spec)

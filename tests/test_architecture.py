@@ -115,3 +115,13 @@ def test_the_size_rules_see_a_long_function():
 def test_floors_are_packages(name):
     """The three floors of identification exist as sub-packages (their order is import-linter's contract)."""
     assert (ROOT / name.replace(".", "/") / "__init__.py").is_file()
+
+
+def test_tests_mirror_the_packages():
+    """Every test folder names a package or sub-package (tests/identification/fit tests identification/fit)."""
+    folders = [d for d in (ROOT / "tests").rglob("*") if d.is_dir() and d.name != "__pycache__"
+               and "data" not in d.relative_to(ROOT / "tests").parts]
+    assert folders, "no test folder found"
+    strays = [str(d.relative_to(ROOT)) for d in folders
+              if not (ROOT / d.relative_to(ROOT / "tests") / "__init__.py").is_file()]
+    assert strays == []

@@ -16,7 +16,7 @@ to min(9, attainable) digits, attainable = log10(RSD / (eps max|y|)) computed
 from the file (:func:`nist.attainable_digits`; it is below 9 only for Lanczos1,
 whose residuals of 1e-13 lie at the round-off of values near 1).  The Newton
 decrement of every result is finite (a non-finite one is never a success).  The
-files and the model formulas are in ``tests/identification/nist.py``; the full
+files and the model formulas are in ``tests/identification/fit/nist.py``; the full
 table is ``bench/bench_nist.py`` (bench/RESULTS.md, "Issue 20: NIST accuracy").
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ import pytest
 
 
 def _load_helper():
-    # Load nist.py by path: works whether or not tests/identification is a package.
+    # Load nist.py by path: works whether or not tests/identification/fit is a package.
     name = "_mudoe_tests_nist_strd"
     if name not in sys.modules:
         spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("nist.py"))

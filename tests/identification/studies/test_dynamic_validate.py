@@ -81,7 +81,7 @@ def test_merged_batch_fits_of_a_collocated_model_run_and_equal_the_per_fit_path(
     import subprocess
     import sys
     from pathlib import Path
-    repo = Path(__file__).resolve().parents[2]
+    repo = Path(__file__).resolve().parents[3]
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(repo))
     run = subprocess.run([sys.executable, "-c", BATCH_SCRIPT, json.dumps(Q.tolist())], cwd=repo, env=env,
                          capture_output=True, text=True, timeout=600)

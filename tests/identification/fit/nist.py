@@ -30,7 +30,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "nist"
+DATA_DIR = Path(__file__).resolve().parents[2] / "data" / "nist"
 
 __all__ = ["DATA_DIR", "NistDataset", "load", "available", "MODELS", "RESPONSE", "model_function", "h_of",
            "attainable_digits"]

@@ -26,7 +26,7 @@ from models import Model
 def _nist():
     name = "_mudoe_tests_nist_strd"
     if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("nist.py"))
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "fit" / "nist.py")
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod
         spec.loader.exec_module(mod)
