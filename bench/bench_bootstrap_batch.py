@@ -40,6 +40,7 @@ import numpy as np  # noqa: E402
 from bench.bench_detect import P0, SIGMA_PAPER_MM, WEIGHTS_110, _machine  # noqa: E402
 from identification import Measurements, identify  # noqa: E402
 from identification.inference.bootstrap import BATCH_REFITS, ONE_BY_ONE_REFITS, bootstrap_replicates  # noqa: E402
+from identification.inference.likelihood_region import BATCHED_ROWS, PER_POINT  # noqa: E402
 from identification.inference.profile import lr_region  # noqa: E402
 from identification.studies.montecarlo import ModelCampaign  # noqa: E402
 from models import Model  # noqa: E402
@@ -86,23 +87,27 @@ def region_problems() -> list:
     return out
 
 
+#: the two grid strategies of lr_region, keyed as the table's columns (batched or not)
+SOLVERS = {False: PER_POINT, True: BATCHED_ROWS}
+
+
 def region_table(sizes: tuple, repeats: int, grid: str = "valley") -> None:
-    """CPU per grid point of lr_region: the per-point solver (batch=False) against the rows batched (batch=True)."""
+    """CPU per grid point of lr_region: the per-point solver (PER_POINT) against the rows batched (BATCHED_ROWS)."""
     print(f"\nLikelihood-ratio regions (lr_region, grid = {grid!r}, pair (0, 1), the third parameter re-optimised at "
-          f"every point): per-point Newton (batch=False) against rows as fit_batch calls with per-member inputs "
-          f"(batch=True); medians of {repeats} alternating runs\n")
+          f"every point): per-point Newton (solver=PER_POINT) against rows as fit_batch calls with per-member inputs "
+          f"(solver=BATCHED_ROWS); medians of {repeats} alternating runs\n")
     print("| problem | grid | per-point CPU / point | batched CPU / point | CPU ratio | per-point wall / point "
           "| batched wall / point | max abs diff of D | points solved | batched points redone point by point |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for label, model, data, est in region_problems():
         for b in (False, True):
-            lr_region(model, data, est, (0, 1), n_grid=5, grid=grid, batch=b)            # build once
+            lr_region(model, data, est, (0, 1), n_grid=5, grid=grid, solver=SOLVERS[b])            # build once
         for n in sizes:
             times = {True: [], False: []}
             got = {}
             for _ in range(repeats):
                 for b in (False, True):
-                    got[b], w, c = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n, grid=grid, batch=b))
+                    got[b], w, c = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n, grid=grid, solver=SOLVERS[b]))
                     times[b].append((w, c))
             (wp, cp), (wb, cb) = (np.median(np.array(times[b]), axis=0) for b in (False, True))
             Dp, Db = got[False].statistic, got[True].statistic

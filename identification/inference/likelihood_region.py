@@ -5,7 +5,7 @@ D_ij(theta_i, theta_j) = 2 (min over the other parameters of Phi with (p_i, p_j)
 :class:`identification.inference.profile_solver.Profiler`, warm-started from the previous grid point).
 
 The grid's constrained fits are fits of one model with different fixed values: with
-``batch=True`` (default) the rows of the grid but the centre one are solved in batches of a few rows
+``solver=BATCHED_ROWS`` (default) the rows of the grid but the centre one are solved in batches of a few rows
 (:func:`identification.fit.batch.fit_batch` on the derived model of
 :func:`identification.fit.fixed.fixed_model`, the fixed values as per-member input columns, so K
 points cost K n_q row evaluations per sweep), each point started from its solved neighbour in
@@ -17,6 +17,7 @@ explicit and implicit 3-parameter models; the same statistic to 3e-10).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
@@ -34,7 +35,7 @@ from identification.inference.profile_solver import (ProfileError, ProfileSettin
 __all__ = ["LikelihoodRegion", "lr_region", "GRID_BLOCK_ROWS", "GridSolver", "PER_POINT", "BATCHED_ROWS", "grid_solver"]
 
 
-#: rows of the grid solved as one batch by lr_region(batch=True), each point started from its column's point in the
+#: rows of the grid solved as one batch by lr_region(solver=BATCHED_ROWS), each point started from its column's point in the
 #: solved row before the block (1: row by row; 4 measured fastest of 1, 2, 4 with the same continuation quality)
 GRID_BLOCK_ROWS = 4
 
@@ -196,16 +197,21 @@ PER_POINT = GridSolver("per point", _grid_per_point)
 BATCHED_ROWS = GridSolver("batched rows", _grid_batched)
 
 
-def grid_solver(batch, n_p: int) -> GridSolver:
-    """The strategy of ``lr_region(batch=...)``: a GridSolver as given; True: :data:`BATCHED_ROWS` (but
-    :data:`PER_POINT` for a model of two parameters: no free parameter to batch); False: :data:`PER_POINT`."""
-    if isinstance(batch, GridSolver):
-        chosen = batch
-    elif isinstance(batch, (bool, np.bool_)):
-        chosen = BATCHED_ROWS if batch else PER_POINT
-    else:
-        raise TypeError(f"batch: expected True, False or a GridSolver (PER_POINT, BATCHED_ROWS), got {batch!r}")
-    return PER_POINT if chosen is BATCHED_ROWS and n_p <= 2 else chosen
+def grid_solver(solver: GridSolver, n_p: int, batch: "bool | None" = None) -> GridSolver:
+    """The strategy of :func:`lr_region`: ``solver`` as given (:data:`PER_POINT` for a model of two
+    parameters: no free parameter to batch).  ``batch`` (deprecated, a bool) is the old spelling:
+    True -> :data:`BATCHED_ROWS`, False -> :data:`PER_POINT`, with a DeprecationWarning."""
+    if batch is not None:
+        if not isinstance(batch, (bool, np.bool_)):
+            raise TypeError(f"batch: expected True or False (deprecated; pass solver=PER_POINT or BATCHED_ROWS), "
+                            f"got {batch!r}")
+        warnings.warn("lr_region(batch=...) is deprecated: pass solver=BATCHED_ROWS (the default) or "
+                      "solver=PER_POINT (identification.inference.likelihood_region)", DeprecationWarning,
+                      stacklevel=3)
+        solver = BATCHED_ROWS if batch else PER_POINT
+    if not isinstance(solver, GridSolver):
+        raise TypeError(f"solver: expected a GridSolver (PER_POINT, BATCHED_ROWS), got {solver!r}")
+    return PER_POINT if solver is BATCHED_ROWS and n_p <= 2 else solver
 
 
 # ---------------------------------------------------------------------------- pair regions
@@ -298,7 +304,7 @@ class LikelihoodRegion:
 
 def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, n_grid: int = 25,
               span: float = 1.6, grid: str = "principal", settings: ProfileSettings | None = None,
-              limits=None, batch: "bool | GridSolver" = True) -> LikelihoodRegion:
+              limits=None, solver: GridSolver = BATCHED_ROWS, batch: "bool | None" = None) -> LikelihoodRegion:
     """Likelihood-ratio statistic of the pair ``pair = (i, j)`` on an n_grid x n_grid grid.
 
     ``grid="principal"`` (default): the grid p = p_hat + V diag(sqrt(w)) (u, v) with C = V diag(w) V^T
@@ -315,15 +321,15 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
     warm-started along rows from the grid centre.  A point that cannot be solved or lies outside the
     bounds is NaN, counted in ``notes``; a region that reaches the edge of the grid is noted too.
 
-    ``batch=True`` (default): the row through the point nearest the estimate is solved point by
+    ``solver=BATCHED_ROWS`` (default): the row through the point nearest the estimate is solved point by
     point as above; the other rows, in blocks of :data:`GRID_BLOCK_ROWS` outwards from it, are one
     :func:`identification.fit.batch.fit_batch` call per block on the derived model
     :func:`identification.fit.fixed.fixed_model` (the pair's values as per-member input columns), each
     point started from its column's solved point in the row before the block (towards the
     centre); a point the batch does not converge (or ends on a bound) is solved point by point
-    from its neighbour, counted in ``notes``.  ``batch=False``, or a model of two parameters (no
-    free parameter left): every point by the per-point solver.  ``batch`` may also be a :class:`GridSolver`
-    (:data:`BATCHED_ROWS`, :data:`PER_POINT`): the strategy is chosen once (:func:`grid_solver`).
+    from its neighbour, counted in ``notes``.  ``solver=PER_POINT``, or a model of two parameters (no
+    free parameter left): every point by the per-point solver.  The strategy is chosen once
+    (:func:`grid_solver`); ``batch=True/False`` is the deprecated spelling of the two.
     """
     alpha = validate_alpha(alpha)
     idx = resolve_params(list(pair), tuple(est.param_names))
@@ -368,8 +374,8 @@ def lr_region(model: Model, data: Measurements, est, pair, alpha: float = 0.05, 
         U, W = np.meshgrid(u, u)
         X = ph[0] + L[0, 0] * U + L[0, 1] * W
         Y = ph[1] + L[1, 0] * U + L[1, 1] * W
-    solver = grid_solver(batch, model.n_p)           # chosen once (a pair alone: nothing to fit, per point)
-    D, failed, outside, batch_note = solver.solve(prof, idx, X, Y, C, ph)
+    chosen = grid_solver(solver, model.n_p, batch)  # chosen once (a pair alone: nothing to fit, per point)
+    D, failed, outside, batch_note = chosen.solve(prof, idx, X, Y, C, ph)
     notes = [valley_note] if valley_note else []
     if batch_note:
         notes.append(batch_note)

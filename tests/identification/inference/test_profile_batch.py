@@ -7,6 +7,7 @@ import pytest
 
 from identification import Measurements, identify
 from identification.studies.montecarlo import ModelCampaign
+from identification.inference.likelihood_region import BATCHED_ROWS, PER_POINT, grid_solver
 from identification.inference.profile import lr_region
 from models import Model
 from models.library import spring_chain
@@ -35,8 +36,8 @@ def test_batched_rows_give_the_region_of_the_per_point_solver(problem, grid):
     """Explicit and implicit 3-parameter models: the statistic on a 7 x 7 grid with the rows batched equals
     that of the per-point solver to 1e-8 (relative, 1e-8 absolute near D = 0), the same points solved."""
     model, data, est = problem()
-    per = lr_region(model, data, est, (0, 1), n_grid=7, grid=grid, batch=False)
-    bat = lr_region(model, data, est, (0, 1), n_grid=7, grid=grid, batch=True)
+    per = lr_region(model, data, est, (0, 1), n_grid=7, grid=grid, solver=PER_POINT)
+    bat = lr_region(model, data, est, (0, 1), n_grid=7, grid=grid, solver=BATCHED_ROWS)
     np.testing.assert_array_equal(bat.X, per.X)
     np.testing.assert_array_equal(bat.Y, per.Y)
     np.testing.assert_array_equal(np.isfinite(bat.statistic), np.isfinite(per.statistic))
@@ -52,8 +53,8 @@ def test_a_row_the_batch_cannot_solve_falls_back_point_by_point():
     c_hat = float(est.p[2])
     bounded = model.with_bounds({"c": (c_hat - 0.2 * abs(c_hat) - 1e-3, 10.0)})
     est_b = identify(bounded, data, est.p)
-    per = lr_region(bounded, data, est_b, (0, 1), n_grid=7, grid="axes", span=3.0, batch=False)
-    bat = lr_region(bounded, data, est_b, (0, 1), n_grid=7, grid="axes", span=3.0, batch=True)
+    per = lr_region(bounded, data, est_b, (0, 1), n_grid=7, grid="axes", span=3.0, solver=PER_POINT)
+    bat = lr_region(bounded, data, est_b, (0, 1), n_grid=7, grid="axes", span=3.0, solver=BATCHED_ROWS)
     assert any("point by point" in note for note in bat.notes)
     np.testing.assert_array_equal(np.isfinite(bat.statistic), np.isfinite(per.statistic))
     np.testing.assert_allclose(bat.statistic, per.statistic, rtol=1e-8, atol=1e-8)
@@ -66,21 +67,25 @@ def test_a_two_parameter_model_takes_the_per_point_path():
     z = (3 * (1 - np.exp(-0.4 * x)))[None, :, None] + 0.05 * np.random.default_rng(2).standard_normal((1, 12, 1))
     data = Measurements(x, z, [0.05])
     est = identify(model, data, [2.0, 0.5])
-    bat = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=True)
-    per = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
+    bat = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", solver=BATCHED_ROWS)
+    per = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", solver=PER_POINT)
     assert np.all(np.isfinite(bat.statistic))
     np.testing.assert_array_equal(bat.statistic, per.statistic)
 
 
-def test_grid_strategy_is_chosen_once_from_batch():
-    """lr_region(batch=...) takes True, False or a GridSolver; a pair model has no free parameter to batch."""
-    from identification.inference.likelihood_region import BATCHED_ROWS, PER_POINT, grid_solver
-    assert grid_solver(True, 3) is BATCHED_ROWS and grid_solver(False, 3) is PER_POINT
-    assert grid_solver(True, 2) is PER_POINT and grid_solver(BATCHED_ROWS, 2) is PER_POINT
-    assert grid_solver(PER_POINT, 5) is PER_POINT
-    with pytest.raises(TypeError, match="batch: expected True, False or a GridSolver"):
-        grid_solver("yes", 3)
+def test_grid_strategy_is_chosen_once():
+    """lr_region(solver=...) takes a GridSolver; a pair model has no free parameter to batch; the old
+    batch=True/False still works, with a DeprecationWarning naming the replacement."""
+    assert grid_solver(BATCHED_ROWS, 3) is BATCHED_ROWS and grid_solver(PER_POINT, 3) is PER_POINT
+    assert grid_solver(BATCHED_ROWS, 2) is PER_POINT and grid_solver(PER_POINT, 5) is PER_POINT
+    with pytest.raises(TypeError, match="solver: expected a GridSolver"):
+        grid_solver(True, 3)
+    with pytest.raises(TypeError, match="batch: expected True or False"):
+        grid_solver(BATCHED_ROWS, 3, batch="yes")
+    with pytest.warns(DeprecationWarning, match="solver=PER_POINT"):
+        assert grid_solver(BATCHED_ROWS, 3, batch=False) is PER_POINT
     model, data, est = _rise_and_slope()
-    a = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=PER_POINT)
-    b = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
+    a = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", solver=PER_POINT)
+    with pytest.warns(DeprecationWarning, match="lr_region\\(batch=...\\) is deprecated"):
+        b = lr_region(model, data, est, (0, 1), n_grid=5, grid="axes", batch=False)
     np.testing.assert_array_equal(a.statistic, b.statistic)
