@@ -12,7 +12,7 @@ from models.contract import Model
 
 from .checks import check_model
 from .config import ConfigError, StudyConfig
-from .data_io import study_units
+from .data_io import DataUnits, study_units
 from .plan_records import DiscriminationPlan, PlannedDesign
 from .study_base import Progress, Study, StudyResults, VariantModel, oed_variant, require_fit
 from .study_models import build_models, config_start_values, is_dynamic_built
@@ -23,8 +23,11 @@ __all__ = ["PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_d
 
 # ---------------------------------------------------------------------------- designs before data (issue 13)
 def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigma, planned: bool,
-                progress: Progress | None = None) -> PlannedDesign:
+                progress: Progress | None = None, *, units: DataUnits) -> PlannedDesign:
     """The ``[oed]`` design of ``mode`` at ``p`` without data: sensors over the candidate inputs, or inputs.
+
+    ``units`` are the study's (:func:`mudoe.data_units.study_units`, resolved once by the caller): the
+    [oed] candidates are in the file's input unit.
 
     Raises
     ------
@@ -38,7 +41,7 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                           "use plan_discrimination")
     from oed import select_sensors
     from oed.inputs import select_inputs
-    q_set = study_units(cfg, model).q_to_model(o.candidate_points())
+    q_set = units.q_to_model(o.candidate_points())
     if q_set.size == 0:
         raise ConfigError(f"{cfg.path}: [oed] candidates: a design without data needs candidate inputs")
     Q = q_set[:, None] if inputs_fn is None else np.asarray(inputs_fn(q_set), float)
@@ -74,7 +77,9 @@ def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> Pla
     v = cfg.oed.variant or list(built)[-1]
     model, fn = built[v].model, built[v].inputs_fn
     check_model(cfg, model)
-    sigma = _planned_sigma(cfg, model)
+    given = _given_sigma(cfg, model)
+    units = study_units(cfg, model)                  # once for the whole plan
+    sigma = np.array([units.sigma_to_model(k, given[s]) for k, s in enumerate(model.sensors)], float)
     p = config_start_values(cfg, model)
     bad = (p < model.lower) | (p > model.upper)
     if np.any(bad):
@@ -82,20 +87,19 @@ def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> Pla
                           "lie outside their bounds (a planned design uses the start values as nominal parameters)")
     if cfg.oed.mode == "discrimination":
         return plan_discrimination(cfg, v, built, {v: p, cfg.oed.rival: config_start_values(cfg, built[cfg.oed.rival].model)}, sigma,
-                                   True, progress=progress)
-    return plan_design(cfg, v, model, fn, p, sigma, True, progress)
+                                   True, progress=progress, units=units)
+    return plan_design(cfg, v, model, fn, p, sigma, True, progress, units=units)
 
 
-def _planned_sigma(cfg: StudyConfig, model: Model) -> np.ndarray:
-    """Every sensor's ``sigma`` from [[sensors]] (converted to the model's units); without data sigma_man
-    cannot be composed."""
+def _given_sigma(cfg: StudyConfig, model: Model) -> dict:
+    """Every sensor's ``sigma`` from [[sensors]] (the file's units); without data sigma_man cannot be
+    composed."""
     given = {sc.name: sc.sigma for sc in cfg.sensors}
     missing = [s for s in model.sensors if given.get(s) is None]
     if missing:
         raise ConfigError(f"{cfg.path}: [[sensors]] a design without data needs sigma for {', '.join(missing)} "
                           "(sigma_man needs the data's repeatability)")
-    units = study_units(cfg, model)
-    return np.array([units.sigma_to_model(k, given[s]) for k, s in enumerate(model.sensors)], float)
+    return given
 
 
 def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | None = None) -> PlannedDesign:
@@ -104,6 +108,7 @@ def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | N
     v = oed_variant(study)
     results = require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     built = build_models(study.cfg)
+    units = study.units if study.units is not None else study_units(study.cfg, study.models[v])
     if study.cfg.oed.mode == "discrimination":
         rival = study.cfg.oed.rival
         results = require_fit(study, results, rival, progress, "oed", "; the rival's predictions need its estimate")
@@ -111,9 +116,10 @@ def plan_at_estimate(study: Study, results: StudyResults, progress: Progress | N
         sigma = study.sigma if study.sigma is not None else est.sigma
         built = {k: VariantModel(study.models[k], built[k].inputs_fn) for k in (v, rival)}
         return plan_discrimination(study.cfg, v, built, {k: results.estimates[k] for k in (v, rival)}, sigma,
-                                   False, q_default=study.campaign.q_set, progress=progress)
+                                   False, q_default=study.campaign.q_set, progress=progress, units=units)
     fn = built[v].inputs_fn
-    return plan_design(study.cfg, v, study.models[v], fn, results.estimates[v].p, study.sigma, False, progress)
+    return plan_design(study.cfg, v, study.models[v], fn, results.estimates[v].p, study.sigma, False, progress,
+                       units=units)
 
 
 # ---------------------------------------------------------------------------- discrimination designs (issue 13)
@@ -127,14 +133,15 @@ def _even_rows(n_q: int, k: int) -> list:
 
 
 def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dict, sigma, planned: bool,
-                        q_default=None, progress: Progress | None = None) -> DiscriminationPlan:
+                        q_default=None, progress: Progress | None = None, *, units: DataUnits) -> DiscriminationPlan:
     r"""``[oed] mode = "discrimination"``: the readings that best separate ``variant`` (assumed true) from
     ``[oed] rival`` (:func:`oed.select_discriminating`), each model at ``params`` (start values or
     Estimates).
 
     The candidates are the [oed] set points (or ``q_default``, the study's set points), each model
     reading them through its own inputs; sigma in model units; the values of a design are per
-    series times ``[oed] n_series``.
+    series times ``[oed] n_series``; ``units`` the study's (the [oed] candidates are in the file's
+    input unit).
 
     Raises
     ------
@@ -147,7 +154,7 @@ def plan_discrimination(cfg: StudyConfig, variant: str, built: dict, params: dic
     (m_a, fn_a), (m_b, fn_b) = ((built[k].model, built[k].inputs_fn) for k in (variant, o.rival))
     pts = o.candidate_points()
     if pts.size:
-        q_set = study_units(cfg, m_a).q_to_model(pts)
+        q_set = units.q_to_model(pts)
     elif q_default is not None:
         q_set = np.asarray(q_default, float)
     else:
