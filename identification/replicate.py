@@ -9,8 +9,9 @@ dataclass with an ``index`` field).  :func:`replicate` runs every chunk serially
 processes or on a Dask scheduler (:func:`identification.cluster.execute`) and returns the records
 ordered by index.
 
-The JIT setting travels with the task: :func:`run_chunk` switches :func:`models.state.set_jit` to
-``task.jit`` around each chunk and restores the previous setting, in whatever process runs it.
+The JIT setting travels with the task: :func:`run_chunk` runs each chunk inside
+:func:`models.state.jit_scope` (``task.jit``), a context-local setting in whatever process or thread
+runs it; the process-wide :func:`models.state.set_jit` is never touched.
 Replication r draws from ``SeedSequence(seed).spawn(n)[r]`` whatever the chunks, the workers or
 the backend.
 
@@ -20,14 +21,13 @@ from __future__ import annotations
 
 import os
 from abc import ABC, abstractmethod
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable
 
-from models.state import set_jit
+from models.state import jit_scope
 from identification import cluster
 
-__all__ = ["ReplicationTask", "Replications", "jit_setting", "replicate", "run_chunk"]
+__all__ = ["ReplicationTask", "Replications", "replicate", "run_chunk"]
 
 
 class ReplicationTask(ABC):
@@ -37,7 +37,7 @@ class ReplicationTask(ABC):
     ----------
     jit : bool
         Evaluate small models' CasADi functions as compiled C while the chunks run
-        (:func:`models.state.set_jit`; the same numbers either way).
+        (:func:`models.state.jit_scope`; the same numbers either way).
     """
 
     jit: bool
@@ -45,16 +45,6 @@ class ReplicationTask(ABC):
     @abstractmethod
     def run_chunk(self, chunk: list) -> list:
         """The replications ``[(index, SeedSequence), ...]`` -> one record per replication (with ``index``)."""
-
-
-@contextmanager
-def jit_setting(enabled: bool):
-    """``models.state.set_jit(enabled)`` for the block; the previous setting is restored after it."""
-    prev = set_jit(enabled)
-    try:
-        yield
-    finally:
-        set_jit(prev)
 
 
 class _Installed:
@@ -74,7 +64,7 @@ def run_chunk(task: ReplicationTask | None, chunk: list) -> list:
     t = _Installed.task if task is None else task
     if t is None:
         raise RuntimeError("run_chunk: no task given and none installed in this process")
-    with jit_setting(t.jit):
+    with jit_scope(t.jit):
         return t.run_chunk(chunk)
 
 

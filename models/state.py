@@ -12,6 +12,8 @@ import shutil
 import tempfile
 import time
 import warnings
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -26,7 +28,8 @@ from .jit_cache import JitCache, JitCompileError, JitStats
 from .trajectory import trajectory_numerics
 from .vectorised import VectorisedSX, vectorisable
 
-__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "JitConfig", "JIT"]
+__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "jit_scope", "jit_enabled", "JitConfig",
+           "JIT"]
 
 _DENSE_LIMIT = 60
 
@@ -34,8 +37,9 @@ _DENSE_LIMIT = 60
 class JitConfig:
     """Just-in-time compilation of the per-model CasADi functions (C code through the system compiler).
 
-    One process-wide instance, :data:`JIT`, is read by :meth:`Numerics.jit_active`; switch it
-    with :func:`set_jit`.  Off by default: compiling the press functions takes about 1.5 s of
+    One process-wide instance, :data:`JIT`, is read by :meth:`Numerics.jit_active`; switch it for the
+    process with :func:`set_jit`, or for a block of code in one thread or task with :func:`jit_scope`.
+    Off by default: compiling the press functions takes about 1.5 s of
     ``gcc``, which pays off only for many repeated fits (the Monte Carlo workers switch it on).
     Only models stated in SX with at most 60 states are compiled, and only when a C compiler
     (``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as usual
@@ -69,8 +73,9 @@ class JitConfig:
     stats: JitStats = field(default_factory=JitStats)
 
     def active(self) -> bool:
-        """True when compilation is switched on and a compiler has not failed."""
-        return self.enabled and not self.failed
+        """True when compilation is switched on (by :func:`jit_scope` in this context, else by
+        :func:`set_jit` for the process) and a compiler has not failed."""
+        return jit_enabled() and not self.failed
 
     def workdir(self) -> str:
         """The temporary directory for generated code without the cache (created on first use,
@@ -115,6 +120,8 @@ class JitConfig:
 
 #: the process-wide JIT configuration (see :class:`JitConfig` and :func:`set_jit`)
 JIT = JitConfig()
+#: the JIT setting of the running context (None: the process-wide one), see :func:`jit_scope`
+_JIT_SCOPE: ContextVar = ContextVar("mudoe_jit_scope", default=None)
 
 
 def set_jit(enabled: bool) -> bool:
@@ -127,6 +134,29 @@ def set_jit(enabled: bool) -> bool:
     prev = JIT.enabled
     JIT.enabled = bool(enabled)
     return prev
+
+
+def jit_enabled() -> bool:
+    """The JIT setting in effect here: the innermost :func:`jit_scope` of this context, else the
+    process-wide one of :func:`set_jit` (whether a compiler works is :attr:`JitConfig.failed`)."""
+    scoped = _JIT_SCOPE.get()
+    return JIT.enabled if scoped is None else scoped
+
+
+@contextmanager
+def jit_scope(enabled: bool):
+    """JIT compilation on or off for the code run inside the block, in this thread (or task) only.
+
+    A :class:`contextvars.ContextVar` overrides :data:`JIT`'s process-wide setting while the block
+    runs, so that a setting carried by a task (the replication engine's chunks) never changes what
+    other threads of the process (a threaded Dask worker's other tasks) evaluate, and nothing is left
+    switched afterwards (an exception included).
+    """
+    token = _JIT_SCOPE.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _JIT_SCOPE.reset(token)
 
 
 def _to_scipy(dm: ca.DM):

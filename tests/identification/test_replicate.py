@@ -11,7 +11,7 @@ import pytest
 
 from identification import cluster
 from identification.replicate import ReplicationTask, replicate, run_chunk
-from models.state import JIT, set_jit
+from models.state import JIT, jit_enabled, jit_scope, set_jit
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class _DrawTask(ReplicationTask):
     drop: int = -1
 
     def run_chunk(self, chunk: list) -> list:
-        return [_Draw(i, float(np.random.default_rng(s).standard_normal()), JIT.enabled, os.getpid())
+        return [_Draw(i, float(np.random.default_rng(s).standard_normal()), jit_enabled(), os.getpid())
                 for i, s in chunk if i != self.drop]
 
 
@@ -56,9 +56,38 @@ def test_the_jit_setting_travels_with_the_task_and_is_restored(outside):
     try:
         got = replicate(_DrawTask(jit=not outside), 4, functools.partial(_chunks, 4, 2))
         assert all(r.jit_seen is (not outside) for r in got.records)
-        assert JIT.enabled is outside                       # restored after every chunk
+        assert JIT.enabled is outside and jit_enabled() is outside      # the process setting never touched
         assert run_chunk(_DrawTask(jit=not outside), _chunks(2, 2, 1)[0])[0].jit_seen is (not outside)
-        assert JIT.enabled is outside
+        assert JIT.enabled is outside and jit_enabled() is outside
+    finally:
+        set_jit(prev)
+
+
+def test_jit_scope_is_local_to_its_thread_and_undone_by_an_exception():
+    """Chunks of tasks with different JIT settings in two threads (a threaded Dask worker) each see their own."""
+    import threading
+    prev = set_jit(False)
+    try:
+        barrier = threading.Barrier(2, timeout=30)
+        seen = {}
+
+        def chunk(setting):
+            with jit_scope(setting):
+                barrier.wait()                    # both scopes open at once
+                seen[setting] = jit_enabled()
+                barrier.wait()
+
+        threads = [threading.Thread(target=chunk, args=(v,)) for v in (True, False)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert seen == {True: True, False: False} and jit_enabled() is False
+        with pytest.raises(ZeroDivisionError):
+            with jit_scope(True):
+                assert jit_enabled() and JIT.enabled is False
+                1 / 0
+        assert jit_enabled() is False
     finally:
         set_jit(prev)
 
