@@ -286,9 +286,13 @@ def _first_bad(path, b, bad, msg) -> None:
         raise DataFileError(f"{path}:{int(b.lines[i])}: {msg(i)}")
 
 
-def _tidy_block(path, b, cols, value_column, sensors, state) -> tuple:
-    """One block of the tidy table as arrays (errors name the file and line); ``state`` carries the codes
-    and the running per-(series, sensor) counters across blocks."""
+#: the per-row columns of :class:`_TidyTable`, as one block of the file gives them (:func:`_tidy_block`)
+_BLOCK_COLUMNS = ("line", "series_code", "index", "sensor_code", "set_force", "actual_force", "value")
+
+
+def _tidy_block(path, b, cols, value_column, sensors, state) -> dict:
+    """One block of the tidy table as arrays, {column of :data:`_BLOCK_COLUMNS`: array} (errors name the
+    file and line); ``state`` carries the codes and the running per-(series, sensor) counters across blocks."""
     import pandas as pd
     ser, sen = csv_stream.texts(b, cols["series"][0]), csv_stream.texts(b, cols["sensor"][0])
     _first_bad(path, b, ser == "", lambda i: "column 'series' is empty")
@@ -315,7 +319,8 @@ def _tidy_block(path, b, cols, value_column, sensors, state) -> tuple:
     qa = (num(cols["actual_force"][0], cols["actual_force"][1], allow_missing=False) if "actual_force" in cols
           else np.full(qs.shape, np.nan))
     v = num(cols[value_column][0], cols[value_column][1])
-    return b.lines, s_code.astype(np.int32), idx.astype(np.int32), k_code.astype(np.int32), qs, qa, v
+    return dict(line=b.lines, series_code=s_code.astype(np.int32), index=idx.astype(np.int32),
+                sensor_code=k_code.astype(np.int32), set_force=qs, actual_force=qa, value=v)
 
 
 def _tidy_rows(path: Path, header: list, cols: dict, offset: int, value_column: str, sensors) -> _TidyTable:
@@ -326,11 +331,10 @@ def _tidy_rows(path: Path, header: list, cols: dict, offset: int, value_column: 
              for b in csv_stream.blocks(path, len(header), numeric, offset=offset)]
     if not parts:
         raise DataFileError(f"{path}: no data rows after the header")
-    arrays = []
-    for k in range(len(parts[0])):         # one column at a time, freeing the blocks' pieces
-        arrays.append(np.concatenate([p[k] for p in parts]))
-        parts = [p[:k] + (None,) + p[k + 1:] for p in parts]
-    return _TidyTable(*arrays, series=list(state["series"]), sensors=list(state["sensors"]))
+    arrays = {}
+    for name in _BLOCK_COLUMNS:            # one column at a time, freeing the blocks' pieces
+        arrays[name] = np.concatenate([p.pop(name) for p in parts])
+    return _TidyTable(**arrays, series=list(state["series"]), sensors=list(state["sensors"]))
 
 
 def _close(a, b) -> np.ndarray:

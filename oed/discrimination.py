@@ -331,7 +331,27 @@ def _joint_upper_bound(d, k, m):
     return float(min(np.sort(row_best)[::-1][:k].sum(), np.sort(col_best)[::-1][:m].sum()))
 
 
-def _joint_design(d, k, m, limit, n_starts):
+@dataclass(frozen=True)
+class _Search:
+    """What a design search found: the chosen rows and sensor columns, the criterion value, an upper bound
+    on the optimum (the value itself when proven), whether it is proven optimal, the method and how many
+    designs it evaluated."""
+
+    rows: tuple
+    cols: tuple
+    value: float
+    bound: float
+    proven: bool
+    method: str
+    count: int
+
+    @classmethod
+    def exact(cls, rows, cols, value: float, method: str, count: int) -> "_Search":
+        """A search whose value is proven optimal (its own bound)."""
+        return cls(tuple(rows), tuple(cols), float(value), float(value), True, method, int(count))
+
+
+def _joint_design(d, k, m, limit, n_starts) -> _Search:
     """Exact (enumerating the smaller side) or alternating ascent with the bound."""
     n_q, n_S = d.shape
     n_cols, n_rows = math.comb(n_S, m), math.comb(n_q, k)
@@ -350,7 +370,7 @@ def _joint_design(d, k, m, limit, n_starts):
                 if v > best[0]:
                     best = (v, np.array(rows), cols)
             method, n = "enumerate-inputs", n_rows
-        return best[1], best[2], best[0], best[0], True, method, n
+        return _Search.exact(best[1], best[2], best[0], method, n)
     starts = [top_k(d.sum(axis=0), m)] + [top_k(d[i], m) for i in top_k(d.max(axis=1), min(n_starts, n_q))]
     best = (-np.inf, None, None)
     n = 0
@@ -366,7 +386,8 @@ def _joint_design(d, k, m, limit, n_starts):
         if value > best[0]:
             best = (value, rows, cols)
     proven = best[0] >= ub * (1 - 1e-12)
-    return best[1], best[2], best[0], (best[0] if proven else ub), proven, "alternating", n
+    return _Search(tuple(best[1]), tuple(best[2]), float(best[0]), float(best[0] if proven else ub), bool(proven),
+                   "alternating", n)
 
 
 # ---------------------------------------------------------------------------- front door
@@ -434,17 +455,15 @@ def select_discriminating(model_a, p_a, model_b, p_b, candidates, sensors=None, 
         cols = sorted({s for _, s in pairs})
         readings = tuple((i, names[s]) for i, s in pairs)
         value = float(d.ravel()[flat].sum())
-        return _result(rows, cols, readings, value, value, True, "top-k", criterion, d, diff, names, 1)
+        return _result(_Search.exact(rows, cols, value, "top-k", 1), readings, criterion, d, diff, names)
     if k is not None and m is not None and k < n_q and m < n_S:
-        rows, cols, value, ub, proven, method, count = _joint_design(d, k, m, int(enumeration_limit),
-                                                                     int(n_starts))
+        found = _joint_design(d, k, m, int(enumeration_limit), int(n_starts))
     else:
         cols = top_k(d.sum(axis=0), m) if m is not None else np.arange(n_S)
         rows = top_k(d[:, cols].sum(axis=1), k) if k is not None else np.arange(n_q)
-        value = float(d[np.ix_(rows, cols)].sum())
-        ub, proven, method, count = value, True, "top-k", 1
-    readings = tuple((int(i), names[s]) for i in rows for s in cols)
-    return _result(rows, cols, readings, value, ub, proven, method, criterion, d, diff, names, count)
+        found = _Search.exact(rows, cols, float(d[np.ix_(rows, cols)].sum()), "top-k", 1)
+    readings = tuple((int(i), names[s]) for i in found.rows for s in found.cols)
+    return _result(found, readings, criterion, d, diff, names)
 
 
 def _rival_sensitivities(model_b, p_b, candidates, model_a, names, sigma):
@@ -531,15 +550,18 @@ def _refit_design(d, diff, names, g, k, m, n, limit):
     rows = sorted({i for i, _ in best})
     cols = sorted({s for _, s in best})
     readings = tuple((int(i), names[s]) for i, s in best)
-    return _result(rows, cols, readings, best_value, best_value, True, "enumerate-refit", "T_refit", d, diff, names,
-                   count)
+    return _result(_Search.exact(rows, cols, best_value, "enumerate-refit", count), readings, "T_refit", d, diff,
+                   names)
 
 
-def _result(rows, cols, readings, value, ub, proven, method, criterion, d, diff, names, count):
+def _result(found: _Search, readings, criterion: str, d, diff, names) -> "DiscriminationResult":
+    """The user's :class:`DiscriminationResult` of a search (read-only copies of the divergence tables)."""
     d, diff = d.copy(), diff.copy()
     d.setflags(write=False)
     diff.setflags(write=False)
-    return DiscriminationResult(indices=tuple(int(i) for i in rows), sensors=tuple(names[int(s)] for s in cols),
-                                readings=tuple(readings), value=float(value), upper_bound=float(ub),
-                                proven_optimal=bool(proven), method=method, criterion=criterion, divergences=d,
-                                difference=diff, candidate_sensors=tuple(names), n_designs=int(count))
+    return DiscriminationResult(indices=tuple(int(i) for i in found.rows),
+                                sensors=tuple(names[int(s)] for s in found.cols), readings=tuple(readings),
+                                value=float(found.value), upper_bound=float(found.bound),
+                                proven_optimal=bool(found.proven), method=found.method, criterion=criterion,
+                                divergences=d, difference=diff, candidate_sensors=tuple(names),
+                                n_designs=int(found.count))

@@ -4,6 +4,8 @@ fused sweep function of models in SX with JIT compilation), mapped over the poin
 through reused buffers."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
@@ -94,6 +96,37 @@ def _point_functions(model) -> dict:
 _SWEEP_MATRICES = (1, 3, 5, 6)
 
 
+@dataclass(frozen=True)
+class SweepTerms:
+    """The outputs of :func:`_sweep_function` at every (member, input) point, each (m, n_u, ...), named
+    as the function's outputs: state correction dyE, y' (yp), h, G, gradient g, F = G^T W G, S, obj,
+    gabs, the LDL pivot ratio and the asymmetry of E_y."""
+
+    dyE: np.ndarray
+    yp: np.ndarray
+    h: np.ndarray
+    G: np.ndarray
+    g: np.ndarray
+    F: np.ndarray
+    S: np.ndarray
+    obj: np.ndarray
+    gabs: np.ndarray
+    pivot: np.ndarray
+    asym: np.ndarray
+
+
+@dataclass(frozen=True)
+class ModelTerms:
+    """E, h and their derivatives E_y, E_p, h_y, h_p at every (member, input) point, each (m, n_u, ...)."""
+
+    E: np.ndarray
+    h: np.ndarray
+    Ey: np.ndarray
+    Ep: np.ndarray
+    hy: np.ndarray
+    hp: np.ndarray
+
+
 def _sweep_function(model) -> ca.Function | None:
     r"""The fused per-point function of a sweep, or None when the model does not qualify.
 
@@ -182,7 +215,7 @@ class Points:
         return self._sym
 
     def sweep(self, Y: np.ndarray, P: np.ndarray, wts: np.ndarray, zb: np.ndarray,
-              c: np.ndarray | None = None, members: np.ndarray | None = None) -> tuple:
+              c: np.ndarray | None = None, members: np.ndarray | None = None) -> SweepTerms:
         """The outputs of :func:`_sweep_function` at Y (m, n_u, n_y), P (m, n_p) and the data terms
         wts, zb, c (m, n_u, n_S) (c None: zero), each (m, n_u, ...) (matrices in row-major order)."""
         m, n, Yf, Pf, Qf = self._args(Y, P, members)
@@ -196,7 +229,7 @@ class Points:
         for i, o in enumerate(outs):
             o = o[:k].reshape(sh + o.shape[1:])
             res.append(o.swapaxes(2, 3) if i in _SWEEP_MATRICES else o[..., 0, :])
-        return tuple(res)
+        return SweepTerms(*res)                 # in the order of the function's outputs
 
     def _args(self, Y, P, members=None):
         m = P.shape[0]
@@ -211,13 +244,16 @@ class Points:
             Qf = self.Q_u[np.asarray(members)[idx]].reshape(n, -1)
         return m, n, Yf, Pf, Qf
 
-    def terms(self, Y: np.ndarray, P: np.ndarray, members: np.ndarray | None = None) -> tuple:
-        """(E, h, Ey, Ep, hy, hp) at Y (m, n_u, n_y), P (m, n_p), each (m, n_u, ...)."""
+    def terms(self, Y: np.ndarray, P: np.ndarray, members: np.ndarray | None = None) -> ModelTerms:
+        """The :class:`ModelTerms` at Y (m, n_u, n_y), P (m, n_p)."""
         m, n, Yf, Pf, Qf = self._args(Y, P, members)
-        E, h, Ey, Ep, hy, hp = _mapped(self.model, "terms", n)(Yf, Pf, Qf)
+        E, h, Ey, Ep, hy, hp = _mapped(self.model, "terms", n)(Yf, Pf, Qf)      # the outputs of "terms"
         k, sh = m * self.n_u, (m, self.n_u)
-        return (E[:k, 0].reshape(sh + (-1,)), h[:k, 0].reshape(sh + (-1,)),
-                *(a[:k].reshape(sh + a.shape[1:]).swapaxes(2, 3) for a in (Ey, Ep, hy, hp)))
+
+        def matrix(a):
+            return a[:k].reshape(sh + a.shape[1:]).swapaxes(2, 3)
+        return ModelTerms(E=E[:k, 0].reshape(sh + (-1,)), h=h[:k, 0].reshape(sh + (-1,)), Ey=matrix(Ey),
+                          Ep=matrix(Ep), hy=matrix(hy), hp=matrix(hp))
 
     def lag_hessians(self, Y, P, lam, mu, members: np.ndarray | None = None) -> np.ndarray:
         """Hessians of lam^T h + mu^T E w.r.t. (y, p) at every point, (m, n_u, n_y + n_p, n_y + n_p)."""
@@ -239,7 +275,7 @@ def _symmetric(model, points: Points, p0: np.ndarray, Y_u: np.ndarray, members=N
     if not model.n_y:
         return False
     try:
-        Ey = points.terms(Y_u[None], p0[None], members)[2][0]
+        Ey = points.terms(Y_u[None], p0[None], members).Ey[0]
     except StateSolveError:
         return False
     return bool(np.all(np.abs(Ey - Ey.transpose(0, 2, 1)) <= 1e-12 * np.abs(Ey).max(axis=(1, 2))[:, None, None]))

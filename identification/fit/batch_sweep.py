@@ -135,7 +135,8 @@ def _shared_terms_fused(model, points: Points, P1: np.ndarray, Y1: np.ndarray) -
     zero = np.zeros((n_S + 1, n_u, n_S))
     c = zero.copy()
     c[1:] = np.eye(n_S)[:, None, :]
-    _, yp, h, G, _, _, S, _, _, piv, asym = Points(model, points.Q_u, n_S + 1).sweep(Yk, Pk, zero, zero, c)
+    t = Points(model, points.Q_u, n_S + 1).sweep(Yk, Pk, zero, zero, c)
+    yp, h, G, S, piv, asym = t.yp, t.h, t.G, t.S, t.pivot, t.asym
     with np.errstate(invalid="ignore"):
         good = (np.all(np.isfinite(h[0])) and np.all(np.isfinite(G[0])) and np.all(np.isfinite(yp[0]))
                 and np.all(np.isfinite(S)) and np.all(piv > 0) and np.all(asym <= 1e-12))
@@ -155,7 +156,8 @@ def _shared_terms(model, points: Points, P1: np.ndarray, Y1: np.ndarray) -> tupl
         got = _shared_terms_fused(model, points, P1, Y1)
         if got is not None:
             return got
-    E, h, Ey, Ep, hy, hp = (x[0] for x in points.terms(Y1, P1))
+    t = points.terms(Y1, P1)
+    E, h, Ey, Ep, hy, hp = t.E[0], t.h[0], t.Ey[0], t.Ep[0], t.hy[0], t.hp[0]
     if not (np.all(np.isfinite(h)) and np.all(np.isfinite(Ey)) and np.all(np.isfinite(Ep))):
         raise StateSolveError("the model or its derivatives are not finite at the common start")
     if n_y:
@@ -214,7 +216,9 @@ def evaluate_fused(model, prep: Prepared, points: Points, it: Iteration, a: np.n
     or asymmetry): the caller then takes the dense path for this sweep."""
     n_p = model.n_p
     P, Y = it.P[a], it.Y[a]
-    dyE, yp, h, G, g, F, S, obj, gabs, piv, asym = points.sweep(Y, P, prep.wts[a], prep.zb[a], members=a)
+    t = points.sweep(Y, P, prep.wts[a], prep.zb[a], members=a)
+    dyE, yp, h, G, g, F, S, obj, gabs = t.dyE, t.yp, t.h, t.G, t.g, t.F, t.S, t.obj, t.gabs
+    piv, asym = t.pivot, t.asym
     with np.errstate(invalid="ignore", over="ignore"):
         spd = np.all((piv[..., 0] > 0) & (asym[..., 0] <= 1e-12))
         finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(G).all(axis=(1, 2, 3))
@@ -244,7 +248,8 @@ def evaluate(model, prep: Prepared, points: Points, it: Iteration, a: np.ndarray
     n_p, n_y = model.n_p, model.n_y
     P, Y = it.P[a], it.Y[a]
     m, n_u = a.size, points.n_u
-    E, h, Ey, Ep, hy, hp = points.terms(Y, P, a)
+    t = points.terms(Y, P, a)
+    E, h, Ey, Ep, hy, hp = t.E, t.h, t.Ey, t.Ep, t.hy, t.hp
     zb, wts = prep.zb[a], prep.wts[a]
     with np.errstate(invalid="ignore", over="ignore"):
         finite = (np.isfinite(h).all(axis=(1, 2)) & np.isfinite(E).all(axis=(1, 2))

@@ -8,6 +8,8 @@ data sets with the same inputs and scaling (:func:`build_nlp`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
@@ -164,12 +166,25 @@ def build_nlp(model, inputs, s_p, s_y, e_scale) -> NlpProblem:
 _EXPAND_EXPLICIT_MAX = 2000
 
 
-def _symbols(model, n_q):
+@dataclass(frozen=True)
+class _Symbols:
     """MX symbols of the NLP: scaled p̃ (n_p), scaled states ỹ (n_y, n_q), zbar and c (n_S, n_q),
     the multipliers lam_f and lam_g (n_y n_q)."""
+
+    p: ca.MX
+    y: ca.MX
+    zbar: ca.MX
+    c: ca.MX
+    lam_f: ca.MX
+    lam_g: ca.MX
+
+
+def _symbols(model, n_q) -> _Symbols:
+    """The :class:`_Symbols` of a model's NLP over n_q inputs."""
     n_y, n_p, n_S = model.n_y, model.n_p, model.n_S
-    return (ca.MX.sym("p_scaled", n_p), ca.MX.sym("y_scaled", n_y, n_q), ca.MX.sym("zbar", n_S, n_q),
-            ca.MX.sym("c", n_S, n_q), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_y * n_q))
+    return _Symbols(p=ca.MX.sym("p_scaled", n_p), y=ca.MX.sym("y_scaled", n_y, n_q),
+                    zbar=ca.MX.sym("zbar", n_S, n_q), c=ca.MX.sym("c", n_S, n_q), lam_f=ca.MX.sym("lam_f"),
+                    lam_g=ca.MX.sym("lam_g", n_y * n_q))
 
 
 def build_nlp_explicit(model, inputs, s_p) -> NlpProblem:
@@ -181,7 +196,8 @@ def build_nlp_explicit(model, inputs, s_p) -> NlpProblem:
     """
     fns = _stage_functions(model)
     n_q = inputs.shape[0]
-    pt, _, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
+    sym = _symbols(model, n_q)
+    pt, Zb, Cw, lam_f, lam_g = sym.p, sym.zbar, sym.c, sym.lam_f, sym.lam_g
     Q = ca.DM(inputs.T)
     e0 = ca.MX(0, 1)
     scal = (e0, ca.DM(s_p), e0)
@@ -237,7 +253,8 @@ def build_nlp_staged(model, inputs, s_p, s_y, e_scale):
     (for models stated in MX the constraint Jacobian is left to CasADi's AD)."""
     fns = _stage_functions(model)
     n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
-    pt, yt, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
+    sym = _symbols(model, n_q)
+    pt, yt, Zb, Cw, lam_f, lam_g = sym.p, sym.y, sym.zbar, sym.c, sym.lam_f, sym.lam_g
     Q = ca.DM(inputs.T)
     scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
     x = ca.vertcat(pt, ca.vec(yt))
@@ -320,7 +337,8 @@ def build_nlp_glued(model, inputs, s_p, s_y, e_scale):
     """
     fns = _glued_stage_functions(model)
     n_q, n_y, n_p = inputs.shape[0], model.n_y, model.n_p
-    pt, yt, Zb, Cw, lam_f, lam_g = _symbols(model, n_q)
+    sym = _symbols(model, n_q)
+    pt, yt, Zb, Cw, lam_f, lam_g = sym.p, sym.y, sym.zbar, sym.c, sym.lam_f, sym.lam_g
     Q = ca.DM(inputs.T)
     scal = (ca.DM(s_y), ca.DM(s_p), ca.DM(e_scale))
     x = ca.vertcat(pt, ca.vec(yt))
