@@ -101,13 +101,14 @@ def region_table(sizes: tuple, repeats: int, grid: str = "valley") -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for label, model, data, est in region_problems():
         for b in (False, True):
-            lr_region(model, data, est, (0, 1), n_grid=5, grid=grid, solver=SOLVERS[b])            # build once
+            lr_region(model, data, est, (0, 1), n_grid=5, grid=grid, solver=SOLVERS[b])  # build once
         for n in sizes:
             times = {True: [], False: []}
             got = {}
             for _ in range(repeats):
                 for b in (False, True):
-                    got[b], w, c = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n, grid=grid, solver=SOLVERS[b]))
+                    got[b], w, c = _timed(lambda: lr_region(model, data, est, (0, 1), n_grid=n, grid=grid,
+                                                            solver=SOLVERS[b]))
                     times[b].append((w, c))
             (wp, cp), (wb, cb) = (np.median(np.array(times[b]), axis=0) for b in (False, True))
             Dp, Db = got[False].statistic, got[True].statistic

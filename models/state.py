@@ -28,8 +28,8 @@ from .jit_cache import JitCache, JitCompileError, JitStats
 from .trajectory import trajectory_numerics
 from .vectorised import VectorisedSX, vectorisable
 
-__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit", "jit_scope", "jit_enabled", "JitConfig",
-           "JIT"]
+__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit",
+           "jit_scope", "jit_enabled", "JitConfig", "JIT"]
 
 _DENSE_LIMIT = 60
 
@@ -39,8 +39,8 @@ class JitConfig:
 
     One process-wide instance, :data:`JIT`, is read by :meth:`Numerics.jit_active`; switch it for the
     process with :func:`set_jit`, or for a block of code in one thread or task with :func:`jit_scope`.
-    Off by default: compiling the press functions takes about 1.5 s of
-    ``gcc``, which pays off only for many repeated fits (the Monte Carlo workers switch it on).
+    Off by default: compiling the press functions takes about 1.5 s of ``gcc``, which pays off
+    only for many repeated fits (the Monte Carlo workers switch it on).
     Only models stated in SX with at most 60 states are compiled, and only when a C compiler
     (``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as usual
     (same numbers, slower).
@@ -72,10 +72,15 @@ class JitConfig:
     flags: tuple = ("-O1",)
     stats: JitStats = field(default_factory=JitStats)
 
+    def wanted(self) -> bool:
+        """The setting in effect here: the innermost :func:`jit_scope` of this context, else
+        :attr:`enabled` (the process-wide one of :func:`set_jit`)."""
+        scoped = _JIT_SCOPE.get()
+        return self.enabled if scoped is None else scoped
+
     def active(self) -> bool:
-        """True when compilation is switched on (by :func:`jit_scope` in this context, else by
-        :func:`set_jit` for the process) and a compiler has not failed."""
-        return jit_enabled() and not self.failed
+        """True when compilation is wanted here (:meth:`wanted`) and a compiler has not failed."""
+        return self.wanted() and not self.failed
 
     def workdir(self) -> str:
         """The temporary directory for generated code without the cache (created on first use,
@@ -137,10 +142,9 @@ def set_jit(enabled: bool) -> bool:
 
 
 def jit_enabled() -> bool:
-    """The JIT setting in effect here: the innermost :func:`jit_scope` of this context, else the
-    process-wide one of :func:`set_jit` (whether a compiler works is :attr:`JitConfig.failed`)."""
-    scoped = _JIT_SCOPE.get()
-    return JIT.enabled if scoped is None else scoped
+    """The JIT setting in effect here (:meth:`JitConfig.wanted` of :data:`JIT`; whether a compiler works
+    is :attr:`JitConfig.failed`)."""
+    return JIT.wanted()
 
 
 @contextmanager

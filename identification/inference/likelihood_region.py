@@ -35,8 +35,9 @@ from identification.inference.profile_solver import (ProfileError, ProfileSettin
 __all__ = ["LikelihoodRegion", "lr_region", "GRID_BLOCK_ROWS", "GridSolver", "PER_POINT", "BATCHED_ROWS", "grid_solver"]
 
 
-#: rows of the grid solved as one batch by lr_region(solver=BATCHED_ROWS), each point started from its column's point in the
-#: solved row before the block (1: row by row; 4 measured fastest of 1, 2, 4 with the same continuation quality)
+#: rows of the grid solved as one batch by lr_region(solver=BATCHED_ROWS), each point started from its column's
+#: point in the solved row before the block (1: row by row; 4 measured fastest of 1, 2, 4 with the same
+#: continuation quality)
 GRID_BLOCK_ROWS = 4
 
 
