@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: setup test bench identify oed detect report validate clean
+.PHONY: setup test test-repeat test-slow-clock bench identify oed detect report validate clean
 
 setup:
 	$(PY) -m venv $(VENV)
@@ -17,6 +17,16 @@ setup:
 test:
 	$(BIN)/lint-imports --no-cache
 	$(BIN)/python -m pytest -q
+
+# the suite N times in this checkout, one line a run (issue 27); fresh clones, two suites at once and random
+# order: python bench/repeat_suite.py --help
+N ?= 5
+test-repeat:
+	$(BIN)/python bench/repeat_suite.py --runs $(N)
+
+# this process's clocks 8x fast: a test whose result depends on the machine's speed fails at once
+test-slow-clock:
+	MUDOE_TEST_SLOW_CLOCK=8 $(BIN)/python -m pytest -q
 
 bench:
 	$(BIN)/python -m bench

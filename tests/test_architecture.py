@@ -125,3 +125,106 @@ def test_tests_mirror_the_packages():
     strays = [str(d.relative_to(ROOT)) for d in folders
               if not (ROOT / d.relative_to(ROOT / "tests") / "__init__.py").is_file()]
     assert strays == []
+
+
+# ------------------------------------------------------------------ no test decides on the wall clock (issue 27)
+#: the clocks of the ``time`` module: a value computed from one of them is a wall-clock (or CPU-clock) reading
+CLOCKS = {"time", "time_ns", "monotonic", "monotonic_ns", "perf_counter", "perf_counter_ns", "process_time",
+          "process_time_ns", "thread_time", "thread_time_ns"}
+#: names and attributes that hold a duration by this project's conventions (a parameter ``dt``, ``r.wall_time``)
+DURATION_WORDS = {"dt", "elapsed", "wall", "wall_time", "duration", "runtime", "seconds", "took", "cpu_time",
+                  "elapsed_s", "wall_s", "timings"}
+
+
+def _name_of(node) -> str:
+    return node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else ""
+
+
+class _Clocks:
+    """Which names and functions of one module hold clock readings (to a fixed point over the module)."""
+
+    def __init__(self, tree):
+        self.clock_aliases = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                              and n.module == "time" for a in n.names if a.name in CLOCKS}
+        self.timed_functions: set = set()
+        self.timed_names: set = set(DURATION_WORDS)
+        functions = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+        while True:
+            before = (len(self.timed_functions), len(self.timed_names))
+            for n in ast.walk(tree):
+                if isinstance(n, (ast.Assign, ast.AnnAssign, ast.AugAssign)) and n.value is not None \
+                        and self.timed(n.value):
+                    targets = n.targets if isinstance(n, ast.Assign) else [n.target]
+                    self.timed_names |= {t.id for tg in targets for t in ast.walk(tg) if isinstance(t, ast.Name)}
+            for f in functions:
+                if any(isinstance(r, ast.Return) and r.value is not None and self.timed(r.value)
+                       for r in ast.walk(f)):
+                    self.timed_functions.add(f.name)
+            if (len(self.timed_functions), len(self.timed_names)) == before:
+                return
+
+    def is_clock_call(self, node) -> bool:
+        if not isinstance(node, ast.Call):
+            return False
+        f = node.func
+        if isinstance(f, ast.Attribute) and f.attr in CLOCKS and _name_of(f.value) == "time":
+            return True
+        return _name_of(f) in self.clock_aliases or _name_of(f) in self.timed_functions
+
+    def timed(self, expr) -> bool:
+        for n in ast.walk(expr):
+            if self.is_clock_call(n):
+                return True
+            if isinstance(n, ast.Name) and n.id in self.timed_names:
+                return True
+            if isinstance(n, ast.Attribute) and n.attr in DURATION_WORDS:
+                return True
+        return False
+
+
+def wall_clock_assertions(source: str) -> list:
+    """Lines of ``assert`` statements that compare a clock reading (or a duration) with a bound other than
+    zero: such a test passes or fails with the load of the machine.  ``assert r.wall_time >= 0`` is fine."""
+    tree = ast.parse(source)
+    clocks = _Clocks(tree)
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Assert):
+            continue
+        for cmp in (c for c in ast.walk(node.test) if isinstance(c, ast.Compare)):
+            sides = [cmp.left, *cmp.comparators]
+            ordered = any(isinstance(op, (ast.Lt, ast.LtE, ast.Gt, ast.GtE)) for op in cmp.ops)
+            zero = any(isinstance(s, ast.Constant) and s.value == 0 for s in sides)
+            if ordered and not zero and any(clocks.timed(s) for s in sides):
+                found.append(node.lineno)
+                break
+    return found
+
+
+def test_no_test_asserts_on_the_wall_clock():
+    """Speed goals live in bench/ (bench/RESULTS.md); a test that compares a time with a bound is flaky under
+    load.  A time limit that decides a result gets a node or iteration limit in tests instead."""
+    found = {f"{p.relative_to(ROOT)}:{line}" for p in sorted((ROOT / "tests").rglob("*.py"))
+             for line in wall_clock_assertions(p.read_text())}
+    assert sorted(found) == []
+
+
+@pytest.mark.parametrize("source", [
+    "import time\nt0 = time.perf_counter()\nwork()\nassert time.perf_counter() - t0 < 1.0\n",
+    "import time\ndef f():\n    t = time.monotonic()\n    return time.monotonic() - t\ndef test():\n"
+    "    x = f()\n    assert x < 10\n",
+    "from time import perf_counter as pc\nstart = pc()\nassert pc() - start <= 2\n",
+    "def check(dt):\n    assert dt < 10.0\n",
+    "def test(r):\n    assert r.wall_time < 5.0\n",
+])
+def test_the_wall_clock_guard_sees_a_timed_assertion(source):
+    assert wall_clock_assertions(source) != []
+
+
+@pytest.mark.parametrize("source", [
+    "def test(r):\n    assert r.wall_time >= 0\n",
+    "import time\nend = time.monotonic() + 60\nwhile time.monotonic() < end:\n    pass\nassert done()\n",
+    "def test(r):\n    assert r.value < 10.0\n",
+])
+def test_the_wall_clock_guard_lets_other_assertions_pass(source):
+    assert wall_clock_assertions(source) == []

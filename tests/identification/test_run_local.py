@@ -15,8 +15,13 @@ def _install(task):
 
 def _square(task, chunk):
     t = _INSTALLED["task"] if task is None else task
-    if task == "slow here":
-        time.sleep(0.5)                             # this process is slow: the spawned one must take chunks
+    if isinstance(t, dict):                         # wait here until the spawned process has run a chunk
+        if task is None:
+            open(t["flag"], "w").close()
+        else:
+            end = time.monotonic() + 600            # a hang guard: a loaded machine may start it slowly
+            while not os.path.exists(t["flag"]) and time.monotonic() < end:
+                time.sleep(0.02)
     if t == "fail" and chunk == [3]:
         raise ArithmeticError("chunk 3 failed")
     return [(i, i * i, os.getpid()) for i in chunk]
@@ -32,9 +37,11 @@ def test_every_chunk_once_some_in_this_process_some_spawned():
     assert len(pids) in (1, 2)                     # and the spawned one joined unless the parent finished first
 
 
-def test_a_ready_spawned_process_takes_chunks():
+def test_a_ready_spawned_process_takes_chunks(tmp_path):
+    """This process waits for the spawned one (no race with its start-up, issue 27)."""
     got = []
-    cluster.run_local(_square, "slow here", [[i] for i in range(12)], got.extend, 2, _install)
+    cluster.run_local(_square, {"flag": str(tmp_path / "spawned_ran")}, [[i] for i in range(12)], got.extend, 2,
+                      _install)
     assert sorted(i for i, _, _ in got) == list(range(12))
     assert len({pid for _, _, pid in got}) == 2
 

@@ -149,7 +149,7 @@ def test_a_damaged_entry_is_recompiled_not_an_error(filled, damage):
 
 
 _CHILD = """
-import json, sys, time
+import json, os, sys, time
 import casadi as ca
 from models.jit_cache import JitCache
 x = ca.SX.sym("x", 8)
@@ -157,7 +157,8 @@ e = x
 for k in range(60):                       # a body that takes gcc a noticeable time
     e = ca.sin(e * (k + 1)) + ca.cos(e[::-1]) * x[k % 8]
 f = ca.Function("busy", [x], [e])
-while time.time() < float(sys.argv[2]):   # both processes start together
+open(sys.argv[2] + "." + sys.argv[3], "w").close()       # ready
+while not all(os.path.exists(sys.argv[2] + "." + k) for k in ("0", "1")):   # both start together (a barrier)
     time.sleep(0.005)
 c = JitCache(sys.argv[1])
 g = c.get(f)
@@ -167,19 +168,19 @@ print(json.dumps({"compiled": c.stats.compiled, "loaded": c.stats.loaded,
 
 
 def test_two_processes_compiling_the_same_key_compile_it_once(tmp_path):
-    import time
-    start = time.time() + 2.0
-    procs = [subprocess.Popen([sys.executable, "-c", _CHILD, str(tmp_path), repr(start)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True, env=_env(), cwd=ROOT) for _ in range(2)]
+    cache, barrier = tmp_path / "cache", tmp_path / "ready"
+    cache.mkdir()
+    procs = [subprocess.Popen([sys.executable, "-c", _CHILD, str(cache), str(barrier), str(k)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=_env(), cwd=ROOT) for k in range(2)]
     outs = []
     for p in procs:
-        out, err = p.communicate(timeout=120)
+        out, err = p.communicate(timeout=600)       # a hang guard only
         assert p.returncode == 0, err
         outs.append(json.loads(out.strip().splitlines()[-1]))
     assert sorted((o["compiled"], o["loaded"]) for o in outs) == [(0, 1), (1, 0)]
     assert outs[0]["y"] == outs[1]["y"]
-    assert len([p for p in tmp_path.iterdir() if p.suffix == ".so"]) == 1
-    assert len([p for p in tmp_path.iterdir() if p.suffix == ".casadi"]) == 1
+    assert len([p for p in cache.iterdir() if p.suffix == ".so"]) == 1
+    assert len([p for p in cache.iterdir() if p.suffix == ".casadi"]) == 1
 
 
 def test_a_missing_compiler_raises_a_clear_error(tmp_path):

@@ -1,4 +1,4 @@
-"""Ctrl-C and SIGTERM at any moment: exit 130 / 143 within a second, no process left, nothing half-written.
+"""Ctrl-C and SIGTERM at any moment: exit 130 / 143, no process left, nothing half-written (how fast: bench).
 
 Issue 20 item 8: Ctrl-C (``kill -INT``) while the model compiled was lost 8 of 8 times (CasADi runs
 the compiler through ``system()``, which ignores SIGINT meanwhile); a terminal's Ctrl-C (the
@@ -25,14 +25,15 @@ from mudoe.outdir import MARKER
 
 REPO = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(REPO))
-#: The process must end this soon after the signal.  The requirement (within a second) is a speed
-#: goal measured by ``python -m bench signals`` (bench/RESULTS.md); here the bound only has to tell an
-#: acted-on signal from a lost one (the run then goes on to its end: a minute or more for these
-#: commands) on a loaded machine, where starting a process alone can take seconds.
-EXIT_WITHIN_S = 10.0
-#: how long the processes left may take to notice that their parent is gone, after the exit (s):
-#: polled, so a passing run does not wait for it
-TRACKER_S = 15.0
+#: How long to wait for the exit after the signal before calling the run hung.  Not a requirement: the speed
+#: goal (exit within a second) is measured by ``python -m bench signals`` (bench/RESULTS.md).  A lost signal is
+#: told from an acted-on one by the exit code and the last line ("mudoe: interrupted" / "terminated"), which a
+#: run that goes on to its end never gives; this bound only stops a hung run (issue 27: no test decides on
+#: the wall clock).
+HANG_S = 600.0
+#: how long the processes left may take to notice that their parent is gone, after the exit (s): polled, so a
+#: passing run does not wait for it; generous, since a loaded machine may not schedule them for seconds
+TRACKER_S = 120.0
 COMPILERS = {"gcc", "cc", "cc1", "as", "collect2", "ld"}
 
 
@@ -68,19 +69,17 @@ class _Run:
         self.p.kill()
         pytest.fail("the moment to signal never came: " + "".join(self.lines)[-2000:])
 
-    def signal(self, signum, group: bool = False) -> float:
-        """Send ``signum`` (to the process group: a terminal's Ctrl-C); returns the seconds to the exit."""
-        t0 = time.monotonic()
+    def signal(self, signum, group: bool = False) -> None:
+        """Send ``signum`` (to the process group: a terminal's Ctrl-C) and wait for the exit."""
         if group:
             os.killpg(self.p.pid, signum)
         else:
             self.p.send_signal(signum)
         try:
-            self.p.wait(timeout=60)
+            self.p.wait(timeout=HANG_S)
         except subprocess.TimeoutExpired:
             self.p.kill()
             raise
-        return time.monotonic() - t0
 
     def left_over(self) -> list:
         """The descendants seen that still run (zombies count as gone) TRACKER_S seconds after the exit."""
@@ -113,11 +112,10 @@ def _is_worker(proc) -> bool:
         return False
 
 
-def _check(run: _Run, dt: float, code: int, word: str, out: Path) -> None:
-    run.reader.join(timeout=10)                  # its last lines
+def _check(run: _Run, code: int, word: str, out: Path) -> None:
+    run.reader.join(timeout=HANG_S)              # its last lines: the pipe closes with the last process
     err = "".join(run.lines)
     assert run.p.returncode == code, err[-2000:]
-    assert dt < EXIT_WITHIN_S, f"exit {dt:.2f} s after the signal"
     assert "Traceback" not in err and f"mudoe: {word}" in err.splitlines()[-1], err[-2000:]
     assert run.left_over() == [], f"processes left: {run.left_over()}"
     # no output: at most the folder's ownership marker (complete, written before any work)
@@ -131,8 +129,8 @@ def test_ctrl_c_while_the_model_compiles(tmp_path, group):
     out = tmp_path / "out"
     run = _Run(["validate", "configs/press.toml", "--runs", "40", "--workers", "2", "--out", str(out)], env, group)
     run.wait_for(lambda kids: any(_is_compiler(k) for k in kids))
-    dt = run.signal(signal.SIGINT, group)
-    _check(run, dt, 130, "interrupted", out)
+    run.signal(signal.SIGINT, group)
+    _check(run, 130, "interrupted", out)
 
 
 def test_sigterm_while_the_workers_fit(tmp_path):
@@ -141,8 +139,8 @@ def test_sigterm_while_the_workers_fit(tmp_path):
     # the spawned worker process runs, and some replications are done
     run.wait_for(lambda kids: any(_is_worker(k) for k in kids) and any("rep/s" in ln and " 0/" not in ln
                                                                          for ln in run.lines))
-    dt = run.signal(signal.SIGTERM)
-    _check(run, dt, 143, "terminated", out)
+    run.signal(signal.SIGTERM)
+    _check(run, 143, "terminated", out)
 
 
 def test_ctrl_c_while_the_report_is_written(tmp_path):
@@ -150,8 +148,8 @@ def test_ctrl_c_while_the_report_is_written(tmp_path):
     run = _Run(["report", "configs/cstr.toml", "--out", str(out)], ENV)
     # the report's pages are being written into its temporary folder inside --out
     run.wait_for(lambda kids: out.is_dir() and any(any(d.iterdir()) for d in out.glob(".report-*")))
-    dt = run.signal(signal.SIGINT)
-    _check(run, dt, 130, "interrupted", out)
+    run.signal(signal.SIGINT)
+    _check(run, 130, "interrupted", out)
 
 
 def test_workers_end_when_the_cli_is_killed(tmp_path):

@@ -3,6 +3,10 @@ from math import comb
 
 import numpy as np
 
+#: A time limit (s) that never decides a test's result (issue 27): the tests' solves are bounded by their node,
+#: round or iteration limits and by the size of the instances, not by the speed of a (possibly loaded) machine.
+UNTIMED = 1e9
+
 
 def rank_one(rng, n, p):
     a = rng.standard_normal((n, p))

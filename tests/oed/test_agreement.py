@@ -30,6 +30,7 @@ def _load_instances():
 
 _inst = _load_instances()
 random_instance, rank_one, second_order_terms = _inst.random_instance, _inst.rank_one, _inst.second_order_terms
+UNTIMED = _inst.UNTIMED
 
 REL = 1e-8
 
@@ -49,7 +50,7 @@ def test_bnb_matches_enumeration_200_instances(block):
         F, _ = validate_information(F)
         cons = make_constraints(n, p, n_sensors=m)
         e = enumerate_designs(F, None, cons, crit)
-        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30))
+        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=UNTIMED))
         assert b.status == "optimal", (seed, b.status)
         assert np.isfinite(e.value)
         assert b.lower_bound <= b.value
@@ -108,7 +109,7 @@ def test_scip_cuts_match_enumeration_subset():
         else:
             cons = make_constraints(n, p, n_sensors=m)
         e = enumerate_designs(F, None, cons, crit)
-        s = solve_scip(F, None, cons, crit, "gauss_newton", settings=ScipSettings(formulation="cuts", time_limit=30))
+        s = solve_scip(F, None, cons, crit, "gauss_newton", settings=ScipSettings(formulation="cuts", time_limit=UNTIMED))
         assert s.status == "optimal", (seed, s.status, s.message)
         assert close(crit, e.value, s.value), (seed, crit, e.value, s.value)
         assert cons.is_admissible(s.w)
@@ -126,11 +127,11 @@ def test_scip_naive_and_second_order_match_enumeration_subset():
         crit = "ADE"[seed % 3]
         cons = make_constraints(n, p, n_sensors=2 + seed % 2)
         e = enumerate_designs(F, None, cons, crit)
-        s = solve_scip(F, None, cons, crit, "gauss_newton", settings=ScipSettings(formulation="naive", time_limit=30))
+        s = solve_scip(F, None, cons, crit, "gauss_newton", settings=ScipSettings(formulation="naive", time_limit=UNTIMED))
         assert s.status == "optimal", s.message
         assert close(crit, e.value, s.value), (seed, crit, e.value, s.value)
         e2 = enumerate_designs(F, S, cons, crit, "second_order")
-        s2 = solve_scip(F, S, cons, crit, "second_order", settings=ScipSettings(time_limit=30))
+        s2 = solve_scip(F, S, cons, crit, "second_order", settings=ScipSettings(time_limit=UNTIMED))
         assert s2.status == "optimal", s2.message
         assert s2.assumption  # the modelling bound is reported
         assert close(crit, e2.value, s2.value), (seed, crit, e2.value, s2.value)
@@ -148,7 +149,7 @@ def test_bnb_with_forced_sensors_matches_enumeration():
         kw = dict(max_sensors=m) if seed % 2 else dict(n_sensors=m)
         cons = make_constraints(n, p, include=inc, exclude=exc, **kw)
         e = enumerate_designs(F, None, cons, crit)
-        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30))
+        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=UNTIMED))
         if not np.isfinite(e.value):
             assert b.status == "infeasible" or not np.isfinite(b.value)
             continue
@@ -178,7 +179,7 @@ def test_bnb_with_costs_and_budget_matches_enumeration(block, steer):
         except ValueError:
             continue                        # no design meets the budget: rejected up front
         e = enumerate_designs(F, None, cons, crit)
-        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30, budget_steering=steer))
+        b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=UNTIMED, budget_steering=steer))
         if not np.isfinite(e.value):
             assert not np.isfinite(b.value), (seed, b.value)
             continue
@@ -212,14 +213,14 @@ def test_bnb_budget_edge_cases_match_enumeration():
             except ValueError:
                 continue                    # no design meets the budget: rejected up front
             e = enumerate_designs(F, None, cons, crit)
-            b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=30))
+            b = branch_and_bound(F, cons, crit, settings=BnBSettings(time_limit=UNTIMED))
             if not np.isfinite(e.value):
                 assert not np.isfinite(b.value)
                 continue
             assert b.status == "optimal" and close(crit, e.value, b.value), (t, kind, crit, kw, e.value, b.value)
             assert cons.is_admissible(b.w)
             if kind == 4:
-                b0 = branch_and_bound(F, make_constraints(n, p, **kw), crit, settings=BnBSettings(time_limit=30))
+                b0 = branch_and_bound(F, make_constraints(n, p, **kw), crit, settings=BnBSettings(time_limit=UNTIMED))
                 assert close(crit, b0.value, b.value)
             checked += 1
     assert checked >= 30, checked

@@ -91,7 +91,7 @@ def test_all_designs_singular_is_reported_infeasible():
 
 def test_auto_uses_bnb_at_scale_and_proves_optimality():
     F = rank_one(4, 40, 4)
-    r = select_sensors_from_information(F, criterion="D", n_sensors=8, time_limit=30)
+    r = select_sensors_from_information(F, criterion="D", n_sensors=8, time_limit=1e9)   # never decides (issue 27)
     assert r.method == "bnb" and r.proven_optimal and r.gap <= 1e-9
 
 
@@ -194,9 +194,12 @@ def test_unfinished_bnb_reports_gap_not_optimality():
 
 
 def test_scip_time_limit_is_reported_not_silent():
+    """SCIP's clock is its CPU time here (timing/clocktype 1): a loaded machine gives it the same second of work,
+    so its outcome does not depend on the load (issue 27); either outcome is reported as what it is."""
+    from oed.constraints import make_constraints
     F = rank_one(13, 30, 4)
-    r = select_sensors_from_information(F, criterion="A", n_sensors=8, method="scip", time_limit=1.0,
-                                        settings=__import__("oed").DesignSettings(scip_formulation="naive"))
-    assert r.method == "scip"
-    assert r.proven_optimal or (r.status in ("time_limit", "feasible") and "time limit" in r.message.lower())
-    assert r.gap >= 0 and len(r.indices) == 8
+    r = scip_solver.solve_scip(F, None, make_constraints(30, 4, n_sensors=8), "A",
+                               settings=scip_solver.ScipSettings(formulation="naive", time_limit=1.0,
+                                                                 scip_options=(("timing/clocktype", 1),)))
+    assert r.status == "optimal" or (r.status in ("time_limit", "feasible") and "time limit" in r.message.lower())
+    assert r.value >= r.lower_bound and r.w is not None and int(round(r.w.sum())) == 8
