@@ -30,7 +30,7 @@ def no_jit(monkeypatch):
 @pytest.fixture(scope="module")
 def process_cluster():
     distributed = pytest.importorskip("distributed", reason="dask[distributed] is in the test extras (make setup)")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl:
         yield cl
 
 

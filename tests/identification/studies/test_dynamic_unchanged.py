@@ -126,7 +126,7 @@ def test_monte_carlo_validate_same_numbers_serial_local_processes_and_dask(mc_pr
     np.testing.assert_array_equal(serial.alpha_lr, local.alpha_lr)
     assert np.all(np.isfinite(serial.alpha_lr)) and np.all(np.isfinite(serial.covered))
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
             distributed.Client(cl) as client:
         dk = validate(est.model, splits, **common, settings=MonteCarloSettings(scheduler=client, **mc))
     assert "dask" in dk.backend

@@ -95,7 +95,7 @@ def test_same_seeds_same_numbers_serial_processes_and_dask(model):
     np.testing.assert_array_equal(serial.alpha_two_sample, local.alpha_two_sample)
     np.testing.assert_array_equal(serial.alpha_paper, local.alpha_paper)
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
             distributed.Client(cl) as client:
         dk = size_study(model, P_TRUE, Q, SIGMA, splits, settings=MonteCarloSettings(scheduler=client, **common))
     assert "dask" in dk.backend
