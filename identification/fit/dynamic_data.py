@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from models.collocation import pair_name
+from models.dynamic import TIME_RTOL, merge_times, time_tolerance
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
 
@@ -70,7 +71,28 @@ def _times_table(times, n_q: int) -> np.ndarray:
             i = int(np.flatnonzero(np.diff(r) <= 0)[0])
             raise DataError(f"times: experiment {j}: sampling times must be strictly increasing; "
                             f"{r[i + 1]:g} follows {r[i]:g}")
-    return t
+    return _merged(t)
+
+
+def _merged(t: np.ndarray) -> np.ndarray:
+    """The times with every time within round-off of another (:func:`models.dynamic.time_tolerance` of the
+    last time) replaced by one value for all experiments, so that round-off never makes two instants."""
+    finite = t[np.isfinite(t)]
+    tol = time_tolerance(finite.max())
+    for j, row in enumerate(t):
+        r = row[np.isfinite(row)]
+        if np.any(np.diff(r) <= tol):
+            i = int(np.flatnonzero(np.diff(r) <= tol)[0])
+            raise DataError(f"times: experiment {j + 1}: the sampling times {float(r[i])!r} and {float(r[i + 1])!r} differ by "
+                            f"round-off only (less than {TIME_RTOL:g} of the last time); give that time once")
+    union = merge_times(finite, tol=tol)
+    if union.size == np.unique(finite).size:
+        return t
+    out = t.copy()
+    ok = np.isfinite(t)
+    near = np.abs(t[ok][:, None] - union[None, :]).argmin(axis=1)
+    out[ok] = union[near]
+    return out
 
 
 class DynamicMeasurements:

@@ -309,3 +309,14 @@ def test_predict_and_simulate_campaign():
     assert data.z.shape == (3, 6, 10, 2) and data.sensors == ("cA", "cB") and np.allclose(data.sigma, SIGMA)
     resid = (data.z - ref[None]) / SIGMA
     assert abs(resid.mean()) < 4 / np.sqrt(resid.size) and abs(resid.std() - 1) < 4 / np.sqrt(2 * resid.size)
+
+
+def test_round_off_times_across_experiments_are_one_instant():
+    # issue 30: experiment 1 sampled at 0.3, experiment 2 at 0.1 * 3 = 0.30000000000000004: one time of
+    # the campaign (one sensor@time column), the value that reads shortest; within one experiment an error
+    z = np.zeros((1, 2, 2, 1))
+    data = DynamicMeasurements([[1.0], [2.0]], [[0.1, 0.3], [0.1, 0.1 * 3]], z, sigma=[0.1])
+    assert data.union_times.tolist() == [0.1, 0.3]
+    assert data.times[1, 1] == 0.3 and len(data.flat().sensors) == 2
+    with pytest.raises(DataError, match="experiment 1: the sampling times 0.3 and 0.30000000000000004 differ"):
+        DynamicMeasurements([[1.0]], [0.1, 0.3, 0.30000000000000004], np.zeros((1, 1, 3, 1)), sigma=[0.1])
