@@ -206,7 +206,7 @@ class DynamicModel(LabelledModel):
             raise ModelError("alg: algebraic states are named but no algebraic equation alg(x, z, p, u) is given")
         if alg is not None and not self.algebraic:
             raise ModelError("algebraic: alg(x, z, p, u) is given but no algebraic states are named")
-        self.constants = check_names("inputs", inputs)
+        self.constants = check_names("inputs", () if inputs is None else inputs)    # None, []: no inputs
         self.controls = _as_controls(controls)
         check_names("inputs and controls", list(self.constants) + [c.name for c in self.controls])
         self.sensors = check_names("sensors", sensors)

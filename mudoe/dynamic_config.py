@@ -7,7 +7,8 @@
     candidate_times = [...]          # candidates of the sampling-time design (default: times)
     n_times = 4                      # sampling times chosen (default: one per parameter)
     pairs = false                    # choose (time, instrument) pairs instead of times
-    [[dynamic.experiments]]          # one table per experiment: its inputs by name (model units)
+    [[dynamic.experiments]]          # one table per experiment: its inputs by name (model units); empty for a
+                                     # model without inputs (one empty table per run)
     cA0 = 1.0                        # a constant input
     T = [350, 360, 370]              # a control: one value per grid point of its grid
 
@@ -64,7 +65,7 @@ def _times(ctx, key, v) -> tuple:
 
 
 def _experiment(ctx, k: int, t) -> dict:
-    if not isinstance(t, dict) or not t:
+    if not isinstance(t, dict):       # empty: an experiment of a model without inputs
         raise ctx.error("dynamic.experiments", "", f"experiment {k + 1}: expected a table of input values")
     out = {}
     for name, v in t.items():

@@ -97,11 +97,12 @@ def experiment_rows(cfg: StudyConfig, model) -> np.ndarray:
     for k, e in enumerate(dyn.experiments, 1):
         unknown = [n for n in e if n not in known]
         if unknown:
+            has = f"has {', '.join(known)}" if known else "has no inputs (leave the experiment's table empty)"
             raise config_error(cfg, "dynamic.experiments", unknown[0], f"experiment {k}: unknown input {unknown[0]!r}; "
-                               f"the model {model.name!r} has {', '.join(known)}")
+                               f"the model {model.name!r} {has}")
         missing = [n for n in known if n not in e]
         if missing:
-            raise config_error(cfg, "dynamic.experiments", next(iter(e)), f"experiment {k}: no value for input(s) "
+            raise config_error(cfg, "dynamic.experiments", next(iter(e), ""), f"experiment {k}: no value for input(s) "
                                f"{', '.join(missing)}")
         row = []
         for n in model.constants:
@@ -116,7 +117,7 @@ def experiment_rows(cfg: StudyConfig, model) -> np.ndarray:
                                    f"values (one per grid point {', '.join(f'{g:g}' for g in c.grid)}), got {len(v)}")
             row.extend(v)
         rows.append(row)
-    return np.array(rows, float)
+    return np.array(rows, float).reshape(len(rows), len(model.inputs))    # (n_q, 0) for a model without inputs
 
 
 def _checked_times(cfg: StudyConfig, model, key: str, times) -> np.ndarray:

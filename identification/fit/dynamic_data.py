@@ -95,12 +95,32 @@ def _merged(t: np.ndarray) -> np.ndarray:
     return out
 
 
+def _inputs_table(inputs, zz: np.ndarray) -> np.ndarray:
+    """The input rows (n_q, d_q); ``None`` (or an (n_q, 0) array) for experiments without inputs: one empty
+    row per experiment of z (axis 1)."""
+    if inputs is None:
+        if zz.ndim != 4:
+            raise DataError(f"z: expected shape (series, experiments, times, sensors), got {zz.shape}")
+        return np.zeros((zz.shape[1], 0))
+    try:
+        q = np.asarray(inputs, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"inputs: not numeric ({exc})") from None
+    q = q[:, None] if q.ndim == 1 else q
+    if q.ndim != 2 or q.shape[0] == 0:
+        raise DataError(f"inputs: expected one row per experiment, shape (n_q, d_q) (np.zeros((n_q, 0)) or None "
+                        f"for experiments without inputs), got shape {q.shape}")
+    return q
+
+
 class DynamicMeasurements:
     """An immutable campaign of time series.
 
     Parameters
     ----------
-    inputs : array_like (n_q, d_q)      experiment input rows (constants, then control grid values)
+    inputs : array_like (n_q, d_q) or None
+                                        experiment input rows (constants, then control grid values); a model
+                                        without inputs: None or np.zeros((n_q, 0)) (n_q from z)
     times : array_like                  sampling times: (n_t,) common to all experiments, (n_q, n_t) per
                                         experiment padded with NaN, or a list of 1-D arrays (ragged)
     z : array_like (n_M, n_q, n_t, n_S) measured values; NaN marks a missing value
@@ -119,10 +139,10 @@ class DynamicMeasurements:
 
     def __init__(self, inputs, times, z, sigma=None, sensors: Sequence[str] | None = None,
                  input_names: Sequence[str] | None = None, series: Sequence[str] | None = None):
-        q = np.asarray(inputs, dtype=float)
-        n_q = q.shape[0] if q.ndim >= 1 else 0
-        t = _times_table(times, n_q)
         zz = np.asarray(z, dtype=float)
+        q = _inputs_table(inputs, zz)
+        n_q = q.shape[0]
+        t = _times_table(times, n_q)
         if zz.ndim != 4 or zz.shape[1:3] != t.shape:
             raise DataError(f"z: expected shape (series, experiments, times, sensors) = (n_M, {t.shape[0]}, "
                             f"{t.shape[1]}, n_S), got {zz.shape}")
