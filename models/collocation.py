@@ -77,7 +77,8 @@ class Mesh:
         short = np.flatnonzero(np.diff(b) <= time_tolerance(b[-1]))
         if short.size:
             i = int(short[0])
-            raise ModelError(f"mesh: the boundaries {float(b[i])!r} and {float(b[i + 1])!r} differ by round-off only (an element "
+            raise ModelError(f"mesh: the boundaries {float(b[i])!r} and {float(b[i + 1])!r} differ by round-off only "
+                             f"(an element "
                              f"shorter than {time_tolerance(b[-1]):.3g}); give that boundary once")
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or not 1 <= self.degree <= 9:
             raise ModelError(f"degree: expected an integer in 1..9, got {self.degree!r}")

@@ -310,7 +310,8 @@ class DynamicModel(LabelledModel):
         tol = time_tolerance(self.horizon if self.horizon is not None else t[-1])
         if np.any(np.diff(t) <= tol):
             i = int(np.flatnonzero(np.diff(t) <= tol)[0])
-            raise ModelError(f"{arg}: sampling times {float(t[i])!r} and {float(t[i + 1])!r} differ by round-off only (less than "
+            raise ModelError(f"{arg}: sampling times {float(t[i])!r} and {float(t[i + 1])!r} differ by round-off only "
+                             f"(less than "
                              f"{TIME_RTOL:g} of the horizon); give that time once")
         if self.horizon is not None and t[-1] > self.horizon + tol:
             raise ModelError(f"{arg}: sampling time {t[-1]:g} lies beyond the horizon {self.horizon:g}")

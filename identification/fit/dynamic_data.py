@@ -83,7 +83,8 @@ def _merged(t: np.ndarray) -> np.ndarray:
         r = row[np.isfinite(row)]
         if np.any(np.diff(r) <= tol):
             i = int(np.flatnonzero(np.diff(r) <= tol)[0])
-            raise DataError(f"times: experiment {j + 1}: the sampling times {float(r[i])!r} and {float(r[i + 1])!r} differ by "
+            raise DataError(f"times: experiment {j + 1}: the sampling times {float(r[i])!r} and {float(r[i + 1])!r} "
+                            f"differ by "
                             f"round-off only (less than {TIME_RTOL:g} of the last time); give that time once")
     union = merge_times(finite, tol=tol)
     if union.size == np.unique(finite).size:
