@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .config_errors import EntryContext
+
 __all__ = ["DynamicConfig", "parse_dynamic"]
 
 _KEYS = ("times", "candidate_times", "n_times", "pairs", "experiments")
@@ -106,5 +108,6 @@ def parse_dynamic(ctx, t) -> DynamicConfig:
     if not isinstance(exps, list) or not exps:
         raise ctx.error("dynamic", "experiments" if "experiments" in t else "times",
                         "a dynamic study needs its experiments: one [[dynamic.experiments]] table each")
-    kw["experiments"] = tuple(_experiment(ctx, k, e) for k, e in enumerate(exps))
+    kw["experiments"] = tuple(_experiment(EntryContext(ctx, "dynamic.experiments", k), k, e)
+                              for k, e in enumerate(exps))
     return DynamicConfig(**kw)

@@ -60,16 +60,16 @@ def _times_table(times, n_q: int) -> np.ndarray:
         ok = np.isfinite(row)
         n = int(ok.sum())
         if n == 0:
-            raise DataError(f"times: experiment {j} has no sampling time")
+            raise DataError(f"times: experiment {j + 1} has no sampling time")
         if not np.all(ok[:n]) or np.any(np.isinf(row)):
-            raise DataError(f"times: experiment {j}: NaN may only pad the end of a row (ragged times), "
+            raise DataError(f"times: experiment {j + 1}: NaN may only pad the end of a row (ragged times), "
                             "and times must be finite")
         r = row[:n]
         if r[0] < 0:
-            raise DataError(f"times: experiment {j} has a negative sampling time {r[0]:g}")
+            raise DataError(f"times: experiment {j + 1} has a negative sampling time {r[0]:g}")
         if np.any(np.diff(r) <= 0):
             i = int(np.flatnonzero(np.diff(r) <= 0)[0])
-            raise DataError(f"times: experiment {j}: sampling times must be strictly increasing; "
+            raise DataError(f"times: experiment {j + 1}: sampling times must be strictly increasing; "
                             f"{r[i + 1]:g} follows {r[i]:g}")
     return _merged(t)
 
@@ -150,7 +150,7 @@ class DynamicMeasurements:
         pad = ~np.isfinite(t)
         if np.any(np.isfinite(zz[:, pad, :])):
             j, i = np.argwhere(pad)[0]
-            raise DataError(f"z: experiment {j} has a value at sample {i}, where it has no sampling time")
+            raise DataError(f"z: experiment {j + 1} has a value at sample {i + 1}, where it has no sampling time")
         n_S = zz.shape[3]
         names = tuple(sensors) if sensors is not None else tuple(f"s{k + 1}" for k in range(n_S))
         if len(names) != n_S:

@@ -113,13 +113,13 @@ def test_collocated_problem_is_a_static_model():
 
 @pytest.mark.parametrize("make, exc, match", [
     (lambda: DynamicMeasurements(Q, TIMES[::-1], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
-     "times: experiment 0: sampling times must be strictly increasing"),
+     "times: experiment 1: sampling times must be strictly increasing"),
     (lambda: DynamicMeasurements(Q, np.r_[-0.1, TIMES[1:]], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
-     "times: experiment 0 has a negative sampling time"),
+     "times: experiment 1 has a negative sampling time"),
     (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 10, 2)), np.ones((10, 2))), DataError,
      "sigma: expected 2 values .one per instrument"),
     (lambda: DynamicMeasurements(Q, [TIMES, TIMES[:5]] + [TIMES] * 4, np.zeros((1, 6, 10, 2)), SIGMA),
-     DataError, "z: experiment 1 has a value at sample 5"),
+     DataError, "z: experiment 2 has a value at sample 6"),
     (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 9, 2)), SIGMA), DataError, "z: expected shape"),
     (lambda: identify(build(), DynamicMeasurements(Q, TIMES + 0.5, campaign(), SIGMA), P0), DataError,
      "data.times: sampling time 2.5 lies beyond the horizon 2"),
