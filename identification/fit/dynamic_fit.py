@@ -285,7 +285,7 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
 def _interior_start(model: DynamicModel, p0) -> tuple:
     """(p0 with every start value on a finite bound moved ``START_MARGIN`` of its scale into the interior (at
     most half the bound range), the note saying so or ())."""
-    p0 = as_start_vector(model, p0)
+    p0 = as_start_vector(model, p0).copy()          # the caller's array is never changed
     s = param_scale(model, p0)
     moved = []
     for i, par in enumerate(model.params):

@@ -351,7 +351,9 @@ def test_start_on_a_bound_moves_into_the_interior_with_a_note():
     data = simulate_campaign(_chain(0.0), [2.0, 0.5], np.zeros((1, 0)), t, [0.01, 0.01], n_series=2, seed=2)
     with warnings.catch_warnings():
         warnings.simplefilter("error", DegenerateStartWarning)     # moved off 0: no longer degenerate
-        est = identify(_chain(0.0), data, p0=[0.0, 0.0])
+        p0 = np.zeros(2)
+        est = identify(_chain(0.0), data, p0=p0)
+    assert p0.tolist() == [0.0, 0.0]                                # the caller's start is not changed
     assert est.notes[0].startswith("start values on a bound moved 0.001 of their scale into the interior: "
                                    "k1 = 0.001, k2 = 0.001")
     assert np.allclose(est.p, [2.0, 0.5], atol=0.05)
