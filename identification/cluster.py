@@ -14,13 +14,25 @@ Local worker processes leave interrupts to the process that started them: they i
 SIGTERM's default action and end themselves when that parent is gone.
 
 Seeds travel with the chunks, so the numbers do not depend on how the scheduler places them.
+
+Local processes are spawned, and a spawned process imports the script that started the run
+(``__main__``) before it can take a task.  Where that would fail -- the script read from stdin, or a
+script that calls the run from its top level without ``if __name__ == "__main__":`` (the workers
+would run it again) -- or where the task cannot be sent (:class:`models.shipping.ShippingError`),
+:func:`execute` runs the chunks in this process and says why in one :class:`WorkersWarning`; never a
+broken pool.  The default ``workers=None`` is therefore: every core when the script is guarded
+(or run with ``python -m``, ``-c``, the ``mudoe`` command, a notebook), else serial with the warning.
 """
 from __future__ import annotations
 
+import ast
+import inspect
 import math
 import os
 import signal
+import sys
 import threading
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable
@@ -29,8 +41,9 @@ import numpy as np
 
 from models import shipping
 
-__all__ = ["Backend", "SchedulerError", "Shipped", "call_locked", "check_scheduler", "connect", "execute", "n_workers",
-           "run_chunks", "run_local", "seed_chunks", "unpack", "worker_start"]
+__all__ = ["Backend", "SchedulerError", "Shipped", "WorkersWarning", "call_locked", "check_scheduler", "connect",
+           "execute", "main_rerun_hazard", "n_workers", "run_chunks", "run_local", "seed_chunks", "unpack",
+           "worker_start"]
 
 #: how long :func:`connect` waits for at least one worker to join the scheduler (s)
 WORKER_WAIT_S = 30.0
@@ -38,6 +51,10 @@ WORKER_WAIT_S = 30.0
 
 class SchedulerError(ConnectionError):
     """The Dask scheduler cannot be used: not installed, unreachable, or without workers."""
+
+
+class WorkersWarning(RuntimeWarning):
+    """Local worker processes cannot be used here; the replications run in this process (the message says why)."""
 
 
 @dataclass(frozen=True)
@@ -208,17 +225,89 @@ def execute(fn: Callable, task, make_chunks: Callable, on_result: Callable, work
             run_chunks(client, fn, task, make_chunks(n_w), on_result)
             return Backend("dask", n_w, str(client.scheduler.address))
     n_w = int(workers or os.cpu_count() or 1)
+    blob = None
+    if n_w > 1:
+        blob, why = _shipped_or_why(task)
+        if why:
+            warnings.warn(f"running the replications in this process, not on {n_w} local processes: {why}",
+                          WorkersWarning, stacklevel=_caller_level())
+            n_w = 1
     if n_w == 1:
         for ch in make_chunks(1):
             on_result(fn(task, ch))
         return Backend("serial", 1)
     if install is None:
         raise ValueError("install: local processes need the function that stores the task in a worker")
-    run_local(fn, task, make_chunks(n_w), on_result, n_w, install)
+    run_local(fn, task, make_chunks(n_w), on_result, n_w, install, blob=blob)
     return Backend("local", n_w)
 
 
-def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: int, install: Callable) -> None:
+def _shipped_or_why(task) -> tuple:
+    """(the task serialised for spawned processes, "") or (None, why they cannot take it)."""
+    why = main_rerun_hazard()
+    if why:
+        return None, why
+    try:
+        return shipping.dumps(task), ""
+    except shipping.ShippingError as exc:
+        return None, str(exc).split(";")[0]
+
+
+def main_rerun_hazard() -> str:
+    """Why a spawned process cannot start in this program ("" when it can): it imports ``__main__`` first,
+    which fails for a script read from stdin and runs the run again for a script calling it from its top
+    level without ``if __name__ == "__main__":`` (see the module docstring)."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    name = getattr(spec, "name", None)
+    if name is not None and (name == "__main__" or name.endswith(".__main__")):
+        return ""                   # python -m pkg: the workers do not import it
+    path = getattr(spec, "origin", None) if name is not None else getattr(main, "__file__", None)
+    if not path:
+        return ""                   # python -c, an interactive session, a notebook: nothing to import
+    if not os.path.isfile(path):
+        return (f"the script was read from standard input ({path}), which spawned worker processes cannot import; "
+                "save it as a file with its work under `if __name__ == \"__main__\":` to use them")
+    frame = inspect.currentframe()
+    while frame is not None and not (frame.f_globals is vars(main) and frame.f_code.co_name == "<module>"):
+        frame = frame.f_back
+    if frame is None or _guarded(path, frame.f_lineno):
+        return ""
+    return (f"{os.path.basename(path)} starts it from its top level (line {frame.f_lineno}) without "
+            "`if __name__ == \"__main__\":`, and every spawned worker process would run the script again; put the "
+            "script's work under that guard to use them")
+
+
+def _guarded(path: str, line: int) -> bool:
+    """Line ``line`` of the script ``path`` lies in a top-level ``if __name__ == "__main__":`` block."""
+    try:
+        with open(path, "rb") as f:
+            tree = ast.parse(f.read())
+    except (OSError, SyntaxError, ValueError):
+        return False
+
+    def is_main_test(t) -> bool:
+        parts = [t.left] + list(t.comparators) if isinstance(t, ast.Compare) else []
+        return (len(parts) == 2 and isinstance(t.ops[0], ast.Eq)
+                and {type(v).__name__ for v in parts} == {"Name", "Constant"}
+                and any(isinstance(v, ast.Name) and v.id == "__name__" for v in parts)
+                and any(isinstance(v, ast.Constant) and v.value == "__main__" for v in parts))
+    return any(isinstance(n, ast.If) and is_main_test(n.test) and n.body[0].lineno <= line <= n.body[-1].end_lineno
+               for n in tree.body)
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of a warning that points at the first caller outside mudoe's packages."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    ours = tuple(os.path.join(root, pkg) + os.sep for pkg in ("identification", "models", "oed", "reports", "mudoe"))
+    frame, level = inspect.currentframe().f_back, 1     # level 1: the function calling warnings.warn
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(ours):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: int, install: Callable,
+              blob: bytes | None = None) -> None:
     """``on_result(fn(task, chunk))`` for every chunk, on this process and ``n_workers - 1`` spawned ones.
 
     This process is one of the workers: it has imported everything and built the models
@@ -242,6 +331,7 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
     on_result : callable (list) -> None, called with every chunk's result (in this thread)
     n_workers : int >= 2    processes in all, this one included
     install : module-level callable (task) -> None
+    blob : bytes, optional  ``task`` already serialised by :func:`models.shipping.dumps`
 
     Raises
     ------
@@ -252,7 +342,7 @@ def run_local(fn: Callable, task, chunks: list, on_result: Callable, n_workers: 
     from concurrent.futures import ProcessPoolExecutor
     if int(n_workers) < 2:
         raise ValueError(f"n_workers: run_local needs at least 2 processes (this one and 1 spawned), got {n_workers}")
-    blob = shipping.dumps(task)
+    blob = shipping.dumps(task) if blob is None else blob
     _start_resource_tracker()
     run = _Dispatch(chunks, on_result)
     with ProcessPoolExecutor(max_workers=int(n_workers) - 1, mp_context=mp.get_context("spawn"),

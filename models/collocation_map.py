@@ -82,7 +82,7 @@ def _check(cm, p, Q, h, bad, tol):
         j, k = np.argwhere(wrong)[0] if np.any(wrong) else (int(np.argwhere(~np.isfinite(h.T))[0][0]), 0)
         b = cm.mesh.boundaries
         raise StateSolveError(
-            f"integration of {cm.dynamic.name!r} failed at p = {p.tolist()}, experiment {int(j)} (inputs "
+            f"integration of {cm.dynamic.name!r} failed at p = {p.tolist()}, experiment {int(j) + 1} (inputs "
             f"{Q[int(j)].tolist()}): no collocation solution on the element [{b[int(k)]:g}, {b[int(k) + 1]:g}] "
             "(the trajectory blows up or is too stiff for the element); check p and the inputs, or give a finer mesh")
 

@@ -149,7 +149,11 @@ class Model(LabelledModel):
     def ode(cls, params, states, inputs, sensors, rhs: Callable, x0: Callable, h: Callable, **kw):
         """A dynamic model dx/dt = rhs(x, p, u), x(0) = x0(p, u), outputs h(x, p, u) (with ``algebraic``
         states and ``alg``: an index-1 DAE); returns a :class:`models.dynamic.DynamicModel`, which
-        :meth:`~models.dynamic.DynamicModel.collocate` turns into a Model at given sampling times."""
+        :meth:`~models.dynamic.DynamicModel.collocate` turns into a Model at given sampling times.
+
+        A model without inputs (a batch run: x0 and the rates depend on p only) takes ``inputs=[]`` (or
+        None); its experiments are input rows of length 0, ``np.zeros((n_q, 0))``, or ``inputs=None`` in
+        :class:`identification.DynamicMeasurements`, and empty ``[[dynamic.experiments]]`` tables in a study."""
         from .dynamic import DynamicModel
         return DynamicModel(params, states, inputs, sensors, rhs, x0, h, **kw)
 

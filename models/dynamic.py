@@ -29,7 +29,13 @@ import numpy as np
 from .cache import Cache
 from .labels import LabelledModel, ModelError, as_column, as_parameters, check_names
 
-__all__ = ["Control", "DynamicModel", "time_label", "register_collocation"]
+__all__ = ["Control", "DynamicModel", "time_label", "register_collocation", "TIME_RTOL", "time_tolerance",
+           "merge_times"]
+
+#: two times closer than TIME_RTOL x the horizon are one instant (round-off: 0.35 and
+#: 0.35000000000000003 from ``np.arange(10) * 0.05``); sampling times, control grid points and mesh
+#: boundaries are compared and merged with :func:`time_tolerance`, so round-off never makes an element
+TIME_RTOL = 1e-9
 
 #: the collocation behind :meth:`DynamicModel.collocate` (:func:`models.collocation.collocate`, which
 #: registers itself here when :mod:`models.collocation` is imported; the ``models`` package imports it,
@@ -47,6 +53,38 @@ def register_collocation(collocate: Callable) -> None:
 def time_label(t: float) -> str:
     """t to 12 significant digits (``0.5``, ``1``, ``0.125``; 0.6000000000000001 reads ``0.6``)."""
     return f"{float(t):.12g}"
+
+
+def time_tolerance(horizon) -> float:
+    """The distance under which two times of an experiment of length ``horizon`` are the same instant:
+    ``TIME_RTOL * horizon`` (``TIME_RTOL`` when the horizon is not positive)."""
+    h = abs(float(horizon))
+    return TIME_RTOL * h if math.isfinite(h) and h > 0 else TIME_RTOL
+
+
+def merge_times(*groups, tol: float) -> np.ndarray:
+    """The sorted distinct times of ``groups`` with times closer than ``tol`` merged into one instant.
+
+    A group of times within ``tol`` of their neighbours becomes one value: the one of the earliest group
+    that holds one (pass the times that must stay exact first, e.g. 0 and the horizon, then the sampling
+    times, then control grid points), within that group the one that reads shortest (0.35 rather than
+    0.35000000000000003)."""
+    vals, rank = [], []
+    for g, times in enumerate(groups):
+        v = np.asarray(times, float).ravel()
+        vals.append(v)
+        rank.append(np.full(v.size, g))
+    v, r = np.concatenate(vals) if vals else np.zeros(0), np.concatenate(rank) if rank else np.zeros(0, int)
+    if v.size == 0:
+        return v
+    order = np.argsort(v, kind="stable")
+    v, r = v[order], r[order]
+    starts = np.r_[0, np.flatnonzero(np.diff(v) > tol) + 1]
+    out = []
+    for a, b in zip(starts, np.r_[starts[1:], v.size]):
+        cand = v[a:b][r[a:b] == r[a:b].min()]
+        out.append(min(cand, key=lambda x: (len(repr(float(x))), x)))
+    return np.asarray(out, float)
 
 
 @dataclass(frozen=True)
@@ -168,7 +206,7 @@ class DynamicModel(LabelledModel):
             raise ModelError("alg: algebraic states are named but no algebraic equation alg(x, z, p, u) is given")
         if alg is not None and not self.algebraic:
             raise ModelError("algebraic: alg(x, z, p, u) is given but no algebraic states are named")
-        self.constants = check_names("inputs", inputs)
+        self.constants = check_names("inputs", () if inputs is None else inputs)    # None, []: no inputs
         self.controls = _as_controls(controls)
         check_names("inputs and controls", list(self.constants) + [c.name for c in self.controls])
         self.sensors = check_names("sensors", sensors)
@@ -179,7 +217,7 @@ class DynamicModel(LabelledModel):
             if not (isinstance(horizon, (int, float, np.floating, np.integer)) and math.isfinite(horizon)
                     and horizon > 0):
                 raise ModelError(f"horizon: expected a positive finite time, got {horizon!r}")
-            late = [c.name for c in self.controls if c.grid[-1] > horizon]
+            late = [c.name for c in self.controls if c.grid[-1] > horizon + time_tolerance(horizon)]
             if late:
                 raise ModelError(f"controls: the grid of {', '.join(late)} extends beyond the horizon {horizon:g}")
             horizon = float(horizon)
@@ -269,7 +307,13 @@ class DynamicModel(LabelledModel):
         if np.any(np.diff(t) <= 0):
             i = int(np.flatnonzero(np.diff(t) <= 0)[0])
             raise ModelError(f"{arg}: sampling times must be strictly increasing; {t[i + 1]:g} follows {t[i]:g}")
-        if self.horizon is not None and t[-1] > self.horizon:
+        tol = time_tolerance(self.horizon if self.horizon is not None else t[-1])
+        if np.any(np.diff(t) <= tol):
+            i = int(np.flatnonzero(np.diff(t) <= tol)[0])
+            raise ModelError(f"{arg}: sampling times {float(t[i])!r} and {float(t[i + 1])!r} differ by round-off only "
+                             f"(less than "
+                             f"{TIME_RTOL:g} of the horizon); give that time once")
+        if self.horizon is not None and t[-1] > self.horizon + tol:
             raise ModelError(f"{arg}: sampling time {t[-1]:g} lies beyond the horizon {self.horizon:g}")
         return t
 

@@ -277,8 +277,8 @@ class TrajectoryNumerics:
         p = p if np.ndim(p) == 1 else p[j]
         raise StateSolveError(
             f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
-            f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j} "
-            "(the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
+            f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment "
+            f"{j + 1} (the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
 
     # ------------------------------------------------------------------ sensitivities
     def state_derivatives(self, p, inputs, Y) -> np.ndarray:

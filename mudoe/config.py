@@ -68,7 +68,7 @@ from dataclasses import fields
 from pathlib import Path
 
 from .checks import check_config
-from .config_errors import ConfigContext, ConfigError, config_error
+from .config_errors import ConfigContext, ConfigError, EntryContext, config_error
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
@@ -139,7 +139,8 @@ def _parse_sensor(ctx, t):
 
 
 def _parse_sensors(ctx, arr):
-    out = tuple(_parse_sensor(ctx, t) for t in tables(ctx, "", "sensors", arr))
+    out = tuple(_parse_sensor(EntryContext(ctx, "sensors", k), t)
+                for k, t in enumerate(tables(ctx, "", "sensors", arr)))
     unique(ctx, "", "sensors", [s.name for s in out], "sensor")
     return out
 
@@ -156,7 +157,8 @@ def _parse_parameter(ctx, t):
 
 
 def _parse_parameters(ctx, arr):
-    out = tuple(_parse_parameter(ctx, t) for t in tables(ctx, "", "parameters", arr))
+    out = tuple(_parse_parameter(EntryContext(ctx, "parameters", k), t)
+                for k, t in enumerate(tables(ctx, "", "parameters", arr)))
     unique(ctx, "", "parameters", [p.name for p in out], "parameter")
     return out
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["ConfigError", "ConfigContext", "config_error", "table_line"]
+__all__ = ["ConfigError", "ConfigContext", "EntryContext", "config_error", "entry_error", "table_line"]
 
 
 class ConfigError(ValueError):
@@ -50,6 +50,28 @@ class ConfigContext:
         line = self.line_of(section, key) if key else None
         loc = f"{self.path}:{line}" if line else self.path
         return ConfigError(f"{loc}: {where}{key + ': ' if key else ''}{msg}")
+
+
+class EntryContext:
+    """The context of the ``k``-th (0-based) ``[[table]]`` entry: its errors name that entry's line (of ``key``,
+    else of its header), not the first entry's; errors of other sections go to ``ctx``."""
+
+    def __init__(self, ctx: ConfigContext, table: str, k: int):
+        self.ctx, self.table, self.k = ctx, table, k
+        self.path, self.lines = ctx.path, ctx.lines
+
+    def error(self, section: str, key: str, msg: str) -> ConfigError:
+        if section != self.table:
+            return self.ctx.error(section, key, msg)
+        return entry_error(self.path, "\n".join(self.lines), self.table, self.k, key, msg)
+
+
+def entry_error(path, text: str, table: str, k: int, key: str, msg: str) -> ConfigError:
+    """A :class:`ConfigError` naming the line of ``key`` in the ``k``-th (0-based) ``[[table]]`` of ``text``
+    (the entry's header when the key is not in it)."""
+    line = (table_line(text, table, k, key) if key else None) or table_line(text, table, k, "")
+    loc = f"{path}:{line}" if line else str(path)
+    return ConfigError(f"{loc}: [{table}] {key + ': ' if key else ''}{msg}")
 
 
 def config_error(cfg, section: str, key: str, msg: str) -> ConfigError:

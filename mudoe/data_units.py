@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import StudyConfig
-from .config_errors import ConfigError
+from .config_errors import ConfigError, table_line
 from .csv_stream import DataFileError
 from .units import UnitError, check_unit, convert, dimension, same_dimension, unit_name
 
@@ -122,9 +122,11 @@ def _sensor_file_unit(cfg: StudyConfig, s: str, u_model: str) -> str:
         return cfg.data.displacement_unit
     if u_model:
         return u_model
-    raise ConfigError(f"{cfg.path}: [[sensors]] unit: sensor {s!r} has no unit (the model declares none); declare "
-                      "the unit of its readings, e.g. unit = \"m/s^2\" in its [[sensors]] entry or [data] "
-                      "output_unit (any unit pint knows; \"1\" for a dimensionless reading)")
+    names = [sc.name for sc in cfg.sensors]
+    line = table_line(cfg.text, "sensors", names.index(s), "") if s in names else None    # the sensor's entry
+    raise ConfigError(f"{cfg.path}{f':{line}' if line else ''}: [[sensors]] unit: sensor {s!r} has no unit (the model "
+                      "declares none); declare the unit of its readings, e.g. unit = \"m/s^2\" in its [[sensors]] "
+                      "entry or [data] output_unit (any unit pint knows; \"1\" for a dimensionless reading)")
 
 
 def study_units(cfg: StudyConfig, model) -> DataUnits:

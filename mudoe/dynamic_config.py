@@ -7,7 +7,8 @@
     candidate_times = [...]          # candidates of the sampling-time design (default: times)
     n_times = 4                      # sampling times chosen (default: one per parameter)
     pairs = false                    # choose (time, instrument) pairs instead of times
-    [[dynamic.experiments]]          # one table per experiment: its inputs by name (model units)
+    [[dynamic.experiments]]          # one table per experiment: its inputs by name (model units); empty for a
+                                     # model without inputs (one empty table per run)
     cA0 = 1.0                        # a constant input
     T = [350, 360, 370]              # a control: one value per grid point of its grid
 
@@ -19,6 +20,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from .config_errors import EntryContext
 
 __all__ = ["DynamicConfig", "parse_dynamic"]
 
@@ -64,7 +67,7 @@ def _times(ctx, key, v) -> tuple:
 
 
 def _experiment(ctx, k: int, t) -> dict:
-    if not isinstance(t, dict) or not t:
+    if not isinstance(t, dict):       # empty: an experiment of a model without inputs
         raise ctx.error("dynamic.experiments", "", f"experiment {k + 1}: expected a table of input values")
     out = {}
     for name, v in t.items():
@@ -105,5 +108,6 @@ def parse_dynamic(ctx, t) -> DynamicConfig:
     if not isinstance(exps, list) or not exps:
         raise ctx.error("dynamic", "experiments" if "experiments" in t else "times",
                         "a dynamic study needs its experiments: one [[dynamic.experiments]] table each")
-    kw["experiments"] = tuple(_experiment(ctx, k, e) for k, e in enumerate(exps))
+    kw["experiments"] = tuple(_experiment(EntryContext(ctx, "dynamic.experiments", k), k, e)
+                              for k, e in enumerate(exps))
     return DynamicConfig(**kw)

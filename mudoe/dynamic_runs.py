@@ -29,6 +29,7 @@ from models.sensitivity import sensitivities
 from models.state import solve_states
 
 from .config import ConfigError
+from .config_errors import table_line
 from .dynamic_records import MeshSummary, Trajectories
 from .plan_records import DynamicDesign, design_rows_text
 from .study_base import oed_variant, require_fit
@@ -86,7 +87,11 @@ def plan_dynamic(cfg, built: dict, progress) -> DynamicDesign:
     v = cfg.oed.variant or list(models)[-1]
     sig = instrument_sigma(cfg, models[v])
     if np.any(np.isnan(sig)):
-        raise ConfigError(f"{cfg.path}: [[sensors]] a design without data needs every instrument's sigma")
+        s = models[v].sensors[int(np.flatnonzero(np.isnan(sig))[0])]
+        names = cfg.sensor_names()
+        line = table_line(cfg.text, "sensors", names.index(s), "") if s in names else None
+        raise ConfigError(f"{cfg.path}{f':{line}' if line else ''}: [[sensors]] a design without data needs every "
+                          f"instrument's sigma; {s!r} has none")
     with progress.step(f"sampling-time design ({cfg.oed.criterion}, {v}, planned)"):
         return time_design(cfg, v, models[v], p0s[v], Q, sig, planned=True)
 

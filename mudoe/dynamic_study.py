@@ -30,6 +30,7 @@ from models.cache import Cache
 from models.contract import ModelError, Parameter
 
 from .config import ConfigError, StudyConfig, config_error
+from .config_errors import entry_error
 from .data_io import DataFileError
 from .parameter_units import model_parameters
 from .study_base import Study, load_factory
@@ -95,28 +96,28 @@ def experiment_rows(cfg: StudyConfig, model) -> np.ndarray:
     known = tuple(model.constants) + tuple(controls)
     rows = []
     for k, e in enumerate(dyn.experiments, 1):
+        def error(key: str, msg: str) -> ConfigError:        # the line of the k-th [[dynamic.experiments]]
+            return entry_error(cfg.path, cfg.text, "dynamic.experiments", k - 1, key, f"experiment {k}: {msg}")
         unknown = [n for n in e if n not in known]
         if unknown:
-            raise config_error(cfg, "dynamic.experiments", unknown[0], f"experiment {k}: unknown input {unknown[0]!r}; "
-                               f"the model {model.name!r} has {', '.join(known)}")
+            has = f"has {', '.join(known)}" if known else "has no inputs (leave the experiment's table empty)"
+            raise error(unknown[0], f"unknown input {unknown[0]!r}; the model {model.name!r} {has}")
         missing = [n for n in known if n not in e]
         if missing:
-            raise config_error(cfg, "dynamic.experiments", next(iter(e)), f"experiment {k}: no value for input(s) "
-                               f"{', '.join(missing)}")
+            raise error(next(iter(e), ""), f"no value for input(s) {', '.join(missing)}")
         row = []
         for n in model.constants:
             if isinstance(e[n], tuple):
-                raise config_error(cfg, "dynamic.experiments", n, f"experiment {k}: {n} is a constant input; give "
-                                   "one number")
+                raise error(n, f"{n} is a constant input; give one number")
             row.append(e[n])
         for n, c in controls.items():
             v = e[n] if isinstance(e[n], tuple) else (e[n],)
             if len(v) != len(c.grid):
-                raise config_error(cfg, "dynamic.experiments", n, f"experiment {k}: control {n} takes {len(c.grid)} "
-                                   f"values (one per grid point {', '.join(f'{g:g}' for g in c.grid)}), got {len(v)}")
+                raise error(n, f"control {n} takes {len(c.grid)} values (one per grid point "
+                               f"{', '.join(f'{g:g}' for g in c.grid)}), got {len(v)}")
             row.extend(v)
         rows.append(row)
-    return np.array(rows, float)
+    return np.array(rows, float).reshape(len(rows), len(model.inputs))    # (n_q, 0) for a model without inputs
 
 
 def _checked_times(cfg: StudyConfig, model, key: str, times) -> np.ndarray:
@@ -152,8 +153,9 @@ def instrument_sigma(cfg: StudyConfig, model) -> tuple:
     names = cfg.sensor_names()
     unknown = [n for n in names if n not in model.sensors]
     if unknown:
-        raise config_error(cfg, "sensors", "name", f"unknown instrument {unknown[0]!r}; the model "
-                           f"{model.name!r} measures {', '.join(model.sensors)}")
+        raise entry_error(cfg.path, cfg.text, "sensors", names.index(unknown[0]), "name",
+                          f"unknown instrument {unknown[0]!r}; the model {model.name!r} measures "
+                          f"{', '.join(model.sensors)}")
     missing = [s for s in model.sensors if s not in names]
     if names and missing:
         raise ConfigError(f"{cfg.path}: [[sensors]] no entry for instrument(s) {', '.join(missing)}; give each "
@@ -166,7 +168,8 @@ def instrument_sigma(cfg: StudyConfig, model) -> tuple:
             try:
                 v = float(convert(v, sc.unit, unit) - convert(0.0, sc.unit, unit))
             except UnitError as exc:
-                raise ConfigError(f"{cfg.path}: [[sensors]] {s}: unit {sc.unit!r}: {exc}") from None
+                raise entry_error(cfg.path, cfg.text, "sensors", names.index(s), "unit",
+                                  f"instrument {s}: unit {sc.unit!r}: {exc}") from None
         sig.append(math.nan if v is None else v)
     return np.array(sig)
 
@@ -179,7 +182,8 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
         raise config_error(cfg, "data", "source", "a dynamic study reads its data from a long-format CSV file "
                            "(source = \"csv\", file = ...); `mudoe simulate` writes one")
     path = cfg.resolve(d.directory) / d.file
-    data = read_long_csv(path, Q, model.sensors, model.sensor_units, sigma=sigma, input_names=model.inputs)
+    data = read_long_csv(path, Q, model.sensors, model.sensor_units, sigma=sigma, input_names=model.inputs,
+                         times=cfg.dynamic.times)
     try:
         raw = path.read_bytes()
     except OSError as exc:

@@ -20,11 +20,7 @@ seed = 1
 scenarios = []                  # the paper's press scenarios do not apply
 early_late = true               # readings before the median sampling time against the later ones
 # time_windows = [{mid}]        # one split per time e: t < e against t >= e
-[[splits.custom]]               # experiments (0-based) against experiments
-name = "first vs second experiment"
-cal_inputs = [0]
-val_inputs = [1]
-
+{custom}
 [detect]
 tol = 0.05                      # family-wise level
 sensors = "all"                 # the instruments used by the tests (each at every sampling time)
@@ -44,7 +40,23 @@ def _num(v: float) -> str:
     return repr(float(v)) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
 
 
+_CUSTOM = """[[splits.custom]]               # experiments (0-based) against experiments
+name = "first vs second experiment"
+cal_inputs = [0]
+val_inputs = [1]
+"""
+#: a model without inputs: one run, so no split by experiment (a repeated run is one more empty table)
+_NO_CUSTOM = """# [[splits.custom]]             # with repeated runs (more empty [[dynamic.experiments]] tables):
+# name = "first vs second run"  # experiments (0-based) against experiments
+# cal_inputs = [0]
+# val_inputs = [1]
+"""
+
+
 def _experiment(model, scale: float) -> str:
+    if not model.inputs:
+        return ("[[dynamic.experiments]]             # the model has no inputs: one empty table per run "
+                "(repeat it for repeated runs)")
     units = list(model.input_units) + [""] * len(model.inputs)
     lines = ["[[dynamic.experiments]]             # EDIT: the inputs of each experiment (model units)"]
     for k, n in enumerate(model.constants):
@@ -81,8 +93,7 @@ times = [{', '.join(f'{t:g}' for t in times)}]   # sampling times{unit}
 # n_times = {model.n_p}                   # sampling times chosen (default: one per parameter)
 # pairs = false                 # choose (time, instrument) pairs instead
 {_experiment(model, 1.0)}
-{_experiment(model, 2.0)}
-"""]
+""" + (f"{_experiment(model, 2.0)}\n" if model.inputs else "")]
     for s, u in zip(model.sensors, model.sensor_units):
         parts.append(f'[[sensors]]\nname = "{s}"\nsigma = 0.01                    # one per instrument'
                      f'{" (" + u + ")" if u else ""}, not per time\n' + (f'unit = "{u}"\n' if u else ""))
@@ -91,4 +102,5 @@ times = [{', '.join(f'{t:g}' for t in times)}]   # sampling times{unit}
         unit = f'unit = "{p.unit}"\n' if p.unit else ""
         parts.append(f'[[parameters]]\nname = "{p.name}"\nstart = {_num(start)}               # start value'
                      f'\nlower = {_num(p.lower)}\nupper = {_num(p.upper)}\n' + unit)
-    return "\n".join(parts) + _TAIL.format(mid=f"{times[len(times) // 2]:g}")
+    return "\n".join(parts) + _TAIL.format(mid=f"{times[len(times) // 2]:g}",
+                                          custom=_CUSTOM if model.inputs else _NO_CUSTOM)

@@ -35,6 +35,7 @@ from models.state import solve_states
 from .criteria import Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
 from .input_nlp import information_nlp
+from . import refine_child
 
 __all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "input_information", "select_static_inputs",
            "refine_inputs"]
@@ -51,15 +52,24 @@ class RefineSettings:
     seed : int
         Seed of the random starts.
     ipopt : IpoptSettings
+    child_above : int or None
+        Under a time limit, an NLP with more variables than this (rows x (inputs + states x (1 + n_p))) is
+        built and solved in a child process that is killed at the limit (:mod:`oed.refine_child`): its
+        construction cannot be interrupted otherwise.  None: always in this process.
     """
 
     n_starts: int = 4
     seed: int = 0
     ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
+    child_above: int | None = 5000
 
     def __post_init__(self):
         if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
             raise ValueError(f"n_starts: expected an integer >= 1, got {self.n_starts!r}")
+        if self.child_above is not None and (isinstance(self.child_above, bool)
+                                             or not isinstance(self.child_above, (int, np.integer))
+                                             or self.child_above < 0):
+            raise ValueError(f"child_above: expected None or an integer >= 0, got {self.child_above!r}")
 
 
 @dataclass(frozen=True)
@@ -275,6 +285,9 @@ def select_static_inputs(model, p, *, candidates, sigma, n_points, sensors=None,
                                 n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
                                 settings=refine_settings,
                                 time_limit=max(time_limit - (time.perf_counter() - t_start), 0.05 * time_limit))
+        if refined.n_failed and all(m.startswith("not finished: time limit") for m in refined.messages):
+            notes.append(f"refinement {refined.messages[0]}: the refined design is the exact design's levels "
+                         "(raise time_limit to refine them)")
     return InputDesignResult(indices=rows, pairs=pairs, inputs=_readonly(Q[list(rows)].reshape(len(rows), -1)),
                              value=res.value, lower_bound=res.lower_bound, gap=res.gap,
                              proven_optimal=res.proven_optimal, criterion=res.criterion, method=res.method,
@@ -318,9 +331,12 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     full-space NLP of :mod:`oed.input_nlp` (states and sensitivities as variables, exact sparse
     CasADi derivatives); the best start is returned.  D is reported as log det C
     (= -log det M), E as :math:`1/\lambda_{\min}(M)`, A as trace :math:`M^{-1}`.  ``time_limit``
-    (seconds, None: none) bounds the whole refinement: each start's Ipopt run has an equal share
-    of it (rounded down, :func:`_share`) as its wall-time limit, no start begins after it, and the
-    first start's levels are kept if nothing better was reached.
+    (seconds, None: none) bounds the whole refinement, the NLP's construction included: each start's
+    Ipopt run has an equal share of the time left after the construction (rounded down, :func:`_share`)
+    as its wall-time limit, no start begins after it, and the first start's levels are kept if nothing
+    better was reached.  A large NLP (``settings.child_above``) is built and solved in a child process
+    killed at the limit (:mod:`oed.refine_child`); then the start's levels are kept, stated in the
+    messages.
 
     Raises
     ------
@@ -339,6 +355,16 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
         raise ValueError(f"time_limit: expected a positive number of seconds or None, got {time_limit!r}")
     X0, lo, hi = _check_bounds(model, start, bounds)
     t0 = time.perf_counter()
+    n_vars = X0.shape[0] * (model.n_q_dim + model.n_y * (1 + model.n_p))
+    if time_limit is not None and settings.child_above is not None and n_vars > settings.child_above:
+        inner = max(0.9 * time_limit, time_limit - refine_child.GRACE_S)     # its Ipopt runs end before the kill
+        call = (refine_inputs, (model, p, X0, sig),
+                dict(criterion=criterion, sensors=sensors, n_series=n_series, bounds=(lo, hi),
+                     settings=replace(settings, child_above=None), time_limit=inner))
+        got = refine_child.run(call, time_limit)
+        return got if got is not None else _kept(model, p, X0, sig, (crit, k_idx, n_series), (lo, hi), settings,
+                                                 f"time limit ({time_limit:.3g} s) reached while building or solving "
+                                                 f"the refinement's NLP ({n_vars} variables) in its child process", t0)
     deadline = np.inf if time_limit is None else t0 + float(time_limit)
     n_pts, d = X0.shape
     span = np.where(hi > lo, hi - lo, 1.0)
@@ -352,7 +378,8 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     values, messages = [], []
     lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
     ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
-    share = None if time_limit is None else _share(float(time_limit) / len(starts))
+    # each start's share of the time left once the NLP is built (its construction is part of the limit)
+    share = None if time_limit is None else _share(max(deadline - time.perf_counter(), 1e-3) / len(starts))
     ipopt = settings.ipopt if share is None else replace(
         settings.ipopt, extra=settings.ipopt.extra + (("max_wall_time", share),))
     for Xs in starts:
@@ -371,6 +398,17 @@ def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_seri
     return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
                          n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
                          lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
+
+
+def _kept(model, p, X0, sig, design, box, settings: RefineSettings, why: str, t0: float) -> RefinedInputs:
+    """The refinement that kept the start rows X0 (no start finished: ``why``), valued exactly from the
+    sensitivities at X0 (``design`` = (criterion, measured sensor indices, n_series))."""
+    crit, k_idx, n_series = design
+    F = input_information(model, p, X0, sig, n_series)[:, list(k_idx)].sum(axis=(0, 1))
+    msg = f"not finished: {why}; the start's levels are kept"
+    return RefinedInputs(inputs=_readonly(X0), value=_value(crit, F), start_values=(np.inf,) * settings.n_starts,
+                         n_failed=settings.n_starts, messages=(msg,) * settings.n_starts, lower=_readonly(box[0]),
+                         upper=_readonly(box[1]), wall_time=time.perf_counter() - t0)
 
 
 def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from models.collocation import pair_name
+from models.dynamic import TIME_RTOL, merge_times, time_tolerance
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
 
@@ -59,18 +60,58 @@ def _times_table(times, n_q: int) -> np.ndarray:
         ok = np.isfinite(row)
         n = int(ok.sum())
         if n == 0:
-            raise DataError(f"times: experiment {j} has no sampling time")
+            raise DataError(f"times: experiment {j + 1} has no sampling time")
         if not np.all(ok[:n]) or np.any(np.isinf(row)):
-            raise DataError(f"times: experiment {j}: NaN may only pad the end of a row (ragged times), "
+            raise DataError(f"times: experiment {j + 1}: NaN may only pad the end of a row (ragged times), "
                             "and times must be finite")
         r = row[:n]
         if r[0] < 0:
-            raise DataError(f"times: experiment {j} has a negative sampling time {r[0]:g}")
+            raise DataError(f"times: experiment {j + 1} has a negative sampling time {r[0]:g}")
         if np.any(np.diff(r) <= 0):
             i = int(np.flatnonzero(np.diff(r) <= 0)[0])
-            raise DataError(f"times: experiment {j}: sampling times must be strictly increasing; "
+            raise DataError(f"times: experiment {j + 1}: sampling times must be strictly increasing; "
                             f"{r[i + 1]:g} follows {r[i]:g}")
-    return t
+    return _merged(t)
+
+
+def _merged(t: np.ndarray) -> np.ndarray:
+    """The times with every time within round-off of another (:func:`models.dynamic.time_tolerance` of the
+    last time) replaced by one value for all experiments, so that round-off never makes two instants."""
+    finite = t[np.isfinite(t)]
+    tol = time_tolerance(finite.max())
+    for j, row in enumerate(t):
+        r = row[np.isfinite(row)]
+        if np.any(np.diff(r) <= tol):
+            i = int(np.flatnonzero(np.diff(r) <= tol)[0])
+            raise DataError(f"times: experiment {j + 1}: the sampling times {float(r[i])!r} and {float(r[i + 1])!r} "
+                            f"differ by "
+                            f"round-off only (less than {TIME_RTOL:g} of the last time); give that time once")
+    union = merge_times(finite, tol=tol)
+    if union.size == np.unique(finite).size:
+        return t
+    out = t.copy()
+    ok = np.isfinite(t)
+    near = np.abs(t[ok][:, None] - union[None, :]).argmin(axis=1)
+    out[ok] = union[near]
+    return out
+
+
+def _inputs_table(inputs, zz: np.ndarray) -> np.ndarray:
+    """The input rows (n_q, d_q); ``None`` (or an (n_q, 0) array) for experiments without inputs: one empty
+    row per experiment of z (axis 1)."""
+    if inputs is None:
+        if zz.ndim != 4:
+            raise DataError(f"z: expected shape (series, experiments, times, sensors), got {zz.shape}")
+        return np.zeros((zz.shape[1], 0))
+    try:
+        q = np.asarray(inputs, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"inputs: not numeric ({exc})") from None
+    q = q[:, None] if q.ndim == 1 else q
+    if q.ndim != 2 or q.shape[0] == 0:
+        raise DataError(f"inputs: expected one row per experiment, shape (n_q, d_q) (np.zeros((n_q, 0)) or None "
+                        f"for experiments without inputs), got shape {q.shape}")
+    return q
 
 
 class DynamicMeasurements:
@@ -78,7 +119,9 @@ class DynamicMeasurements:
 
     Parameters
     ----------
-    inputs : array_like (n_q, d_q)      experiment input rows (constants, then control grid values)
+    inputs : array_like (n_q, d_q) or None
+                                        experiment input rows (constants, then control grid values); a model
+                                        without inputs: None or np.zeros((n_q, 0)) (n_q from z)
     times : array_like                  sampling times: (n_t,) common to all experiments, (n_q, n_t) per
                                         experiment padded with NaN, or a list of 1-D arrays (ragged)
     z : array_like (n_M, n_q, n_t, n_S) measured values; NaN marks a missing value
@@ -97,17 +140,17 @@ class DynamicMeasurements:
 
     def __init__(self, inputs, times, z, sigma=None, sensors: Sequence[str] | None = None,
                  input_names: Sequence[str] | None = None, series: Sequence[str] | None = None):
-        q = np.asarray(inputs, dtype=float)
-        n_q = q.shape[0] if q.ndim >= 1 else 0
-        t = _times_table(times, n_q)
         zz = np.asarray(z, dtype=float)
+        q = _inputs_table(inputs, zz)
+        n_q = q.shape[0]
+        t = _times_table(times, n_q)
         if zz.ndim != 4 or zz.shape[1:3] != t.shape:
             raise DataError(f"z: expected shape (series, experiments, times, sensors) = (n_M, {t.shape[0]}, "
                             f"{t.shape[1]}, n_S), got {zz.shape}")
         pad = ~np.isfinite(t)
         if np.any(np.isfinite(zz[:, pad, :])):
             j, i = np.argwhere(pad)[0]
-            raise DataError(f"z: experiment {j} has a value at sample {i}, where it has no sampling time")
+            raise DataError(f"z: experiment {j + 1} has a value at sample {i + 1}, where it has no sampling time")
         n_S = zz.shape[3]
         names = tuple(sensors) if sensors is not None else tuple(f"s{k + 1}" for k in range(n_S))
         if len(names) != n_S:

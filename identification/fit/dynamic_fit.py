@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,11 +34,22 @@ from models.contract import ModelError
 from models.dynamic import DynamicModel
 from models.trajectory import interpolate_states, trajectory_numerics
 from identification.fit.dynamic_data import DynamicMeasurements
-from identification.errors import DataError, StateSolveError
+from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.estimator import fit_static, static_information
+from identification.fit.start import as_start_vector, param_scale
 
 __all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem",
-           "controlled_mesh", "dynamic_information", "predict", "simulate_campaign"]
+           "controlled_mesh", "dynamic_information", "predict", "simulate_campaign", "DegenerateStartWarning",
+           "START_MARGIN"]
+
+#: a start value on a bound is moved this far into the interior, in units of the parameter's scale
+#: (its declared scale, else |p0|, else the bound range: identification.fit.start.param_scale)
+START_MARGIN = 1e-3
+
+
+class DegenerateStartWarning(RuntimeWarning):
+    """The outputs do not depend on some parameters at the start values (their sensitivities are exactly
+    zero: a degenerate trajectory, e.g. every rate 0); the fit may stall or fail from there."""
 
 
 @dataclass(frozen=True)
@@ -228,10 +240,20 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     data = _dynamic_data(model, data)
     w = _weights(data, weights)
     cm, flat = collocated_problem(model, data, degree=ds.degree, elements=ds.elements)
+    p0, start_notes = _interior_start(model, p0)
+    degenerate = _degenerate_start(cm, flat, p0, w)
+    if degenerate:
+        warnings.warn(degenerate, DegenerateStartWarning, stacklevel=3)
+        start_notes += (degenerate,)
     mesh, p_start, history, order = cm.mesh, p0, [], 2 * ds.degree - 1
     while True:
         cm = collocate(model, data.union_times, mesh=mesh, outputs=data.pairs)
-        est = fit_static(cm, flat, p_start, weights=w, settings=settings)
+        try:
+            est = fit_static(cm, flat, p_start, weights=w, settings=settings)
+        except IdentificationError as exc:
+            if not degenerate:
+                raise
+            raise IdentificationError(f"{degenerate}; the fit then failed: {exc}", status=exc.status) from exc
         reason = ""
         try:
             by_sensor, err, shift = _error(model, data, est, mesh, w)
@@ -256,7 +278,50 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
            if any(ps == s for ps, _ in data.pairs) else 0.0 for s in data.sensors}
     rec = DiscretisationRecord(ds.degree, mesh.n_elements, mesh.boundaries, err, per, shift, ds.tol_sigma,
                                ds.tol_se, ok, tuple(history), reason)
-    return dataclasses.replace(est, notes=est.notes + (rec.note(),), extra={**est.extra, "discretisation": rec})
+    return dataclasses.replace(est, notes=start_notes + est.notes + (rec.note(),),
+                               extra={**est.extra, "discretisation": rec})
+
+
+def _interior_start(model: DynamicModel, p0) -> tuple:
+    """(p0 with every start value on a finite bound moved ``START_MARGIN`` of its scale into the interior (at
+    most half the bound range), the note saying so or ())."""
+    p0 = as_start_vector(model, p0).copy()          # the caller's array is never changed
+    s = param_scale(model, p0)
+    moved = []
+    for i, par in enumerate(model.params):
+        room = 0.5 * (par.upper - par.lower)
+        step = min(START_MARGIN * s[i], room) if room > 0 else 0.0
+        if p0[i] == par.lower and math.isfinite(par.lower) and step > 0:
+            p0[i] = par.lower + step
+        elif p0[i] == par.upper and math.isfinite(par.upper) and step > 0:
+            p0[i] = par.upper - step
+        else:
+            continue
+        moved.append(f"{par.name} = {p0[i]:.6g}")
+    if not moved:
+        return p0, ()
+    return p0, (f"start values on a bound moved {START_MARGIN:g} of their scale into the interior: "
+                f"{', '.join(moved)} (the sensitivities at a bound such as a rate of 0 may vanish)",)
+
+
+def _degenerate_start(cm, flat, p0, w) -> str:
+    """"" or the one-line message naming the parameters the outputs with data do not depend on at p0 (exact
+    AD sensitivities of the collocation, zero in every output: a degenerate start).  An ODE only (a DAE is
+    not checked); a start whose trajectory fails is left to the fit, which names it."""
+    if cm.dynamic.n_z:
+        return ""
+    try:
+        _, G = outputs_and_sensitivities(cm, p0, flat.inputs)
+    except StateSolveError:
+        return ""
+    used = (flat.counts() > 0) & ((np.ones(G.shape[1]) if w is None else np.asarray(w)) > 0)[None, :]
+    dead = [n for i, n in enumerate(cm.param_names) if not np.any(G[:, :, i][used])]
+    if not dead:
+        return ""
+    at = ", ".join(f"{n} = {v:.4g}" for n, v in zip(cm.param_names, p0))
+    return (f"p0: at the start ({at}) the outputs do not depend on {', '.join(dead)} (their sensitivities are "
+            "exactly zero: a degenerate trajectory, e.g. every rate 0); start where they act (nonzero rates, "
+            "values of their typical size)")
 
 
 def _outputs(cm, p, inputs) -> np.ndarray:

@@ -1,7 +1,9 @@
 """Graded (weak) identifiability: the sloppiest direction of the information matrix.
 
 With the Gauss-Newton information F = J^T Omega J and the parameter magnitudes
-D = diag(|p_i|) (1 where p_i = 0), the relative information F_r = D F D has eigenpairs
+D = diag(max(|p_i|, se_i)) (se_i the standard error of p_i when given, so that a parameter at 0, e.g.
+on its bound, is measured by its uncertainty and not by 1 in its unit; 1 where both are 0), the
+relative information F_r = D F D has eigenpairs
 (lambda_i, v_i), lambda_1 <= ... <= lambda_n.  The combination v_1^T (dp / p) of relative
 parameter changes has standard error 1 / sqrt(lambda_1), the best determined one v_n^T (dp / p)
 1 / sqrt(lambda_n): v_1 is determined sqrt(lambda_n / lambda_1) times worse than v_n.
@@ -29,6 +31,7 @@ class SloppyDirection:
     eigenvalues : ndarray (n_p,)    eigenvalues of D F D, ascending (dimensionless)
     ratio : float                   sqrt(lambda_max / lambda_min): the standard-error ratio
                                     (inf when F is singular)
+    by_stderr : tuple of str        parameters whose magnitude is their standard error (|p| smaller)
     """
 
     param_names: tuple
@@ -37,6 +40,7 @@ class SloppyDirection:
     stiff: np.ndarray
     eigenvalues: np.ndarray
     ratio: float
+    by_stderr: tuple = ()
 
     def __post_init__(self):
         for name in ("scale", "sloppy", "stiff", "eigenvalues"):
@@ -65,18 +69,22 @@ class SloppyDirection:
         else:
             r = f"{self.ratio:.3g}x" if self.ratio < 1000 else f"{self.ratio:.3e}x" if self.ratio >= 1e7 \
                 else f"{self.ratio:.0f}x"
-        return (f"weakest direction (relative changes dp/|p|): {self.combination(self.sloppy)} is determined "
+        rel = "dp/|p|" if not self.by_stderr else f"dp/|p|, dp/se for {', '.join(self.by_stderr)}"
+        return (f"weakest direction (relative changes {rel}): {self.combination(self.sloppy)} is determined "
                 f"{r} worse than {self.combination(self.stiff)}")
 
 
-def sloppy_direction(information, p, param_names) -> SloppyDirection | None:
-    """The sloppiest and stiffest directions of ``information`` scaled by |p| (None for one parameter).
+def sloppy_direction(information, p, param_names, stderr=None) -> SloppyDirection | None:
+    """The sloppiest and stiffest directions of ``information`` scaled by max(|p|, stderr) (None for one
+    parameter).
 
     Parameters
     ----------
     information : ndarray (n_p, n_p)   Fisher information J^T Omega J (1 / parameter units^2)
     p : ndarray (n_p,)                 the estimate (its magnitudes scale the information)
     param_names : sequence of str
+    stderr : ndarray (n_p,), optional  standard errors: the magnitude of a parameter smaller than its own
+                                       (e.g. 0 on a bound); non-finite entries are ignored
     """
     F = np.asarray(information, float)
     p = np.asarray(p, float).ravel()
@@ -84,7 +92,11 @@ def sloppy_direction(information, p, param_names) -> SloppyDirection | None:
         raise ValueError(f"information: expected shape {(p.size, p.size)}, got {F.shape}")
     if p.size < 2:
         return None
-    d = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    se = np.zeros(p.size) if stderr is None else np.asarray(stderr, float).ravel()
+    se = np.where(np.isfinite(se), se, 0.0) if se.shape == p.shape else np.zeros(p.size)
+    d = np.maximum(np.abs(p), se)
+    by_se = tuple(n for n, a, b in zip(param_names, np.abs(p), se) if b > a)
+    d = np.where(d > 0, d, 1.0)
     Fr = 0.5 * (F + F.T) * np.outer(d, d)
     lam, V = np.linalg.eigh(Fr)
     ratio = math.sqrt(lam[-1] / lam[0]) if lam[0] > 0 else math.inf
@@ -92,4 +104,4 @@ def sloppy_direction(information, p, param_names) -> SloppyDirection | None:
     def signed(v):
         return v if v[np.argmax(np.abs(v))] > 0 else -v
 
-    return SloppyDirection(tuple(param_names), d, signed(V[:, 0]), signed(V[:, -1]), lam, ratio)
+    return SloppyDirection(tuple(param_names), d, signed(V[:, 0]), signed(V[:, -1]), lam, ratio, by_se)

@@ -102,7 +102,8 @@ class Measurements:
     Parameters
     ----------
     inputs : array_like, shape (n_q, d_q)
-        Input vectors q_j (a 1-D array is read as d_q = 1).
+        Input vectors q_j (a 1-D array is read as d_q = 1); a model without inputs takes
+        ``np.zeros((n_q, 0))``: n_q rows of nothing.
     z : array_like, shape (n_M, n_q, n_S)
         Measured values (series x inputs x sensors); NaN marks a missing value.
     sigma : array_like of shape (n_S,), float, or None
@@ -136,8 +137,9 @@ class Measurements:
             raise DataError(f"inputs: not numeric ({exc})") from None
         if q.ndim == 1:
             q = q[:, None]
-        if q.ndim != 2 or q.shape[0] == 0 or q.shape[1] == 0:
-            raise DataError(f"inputs: expected shape (n_q, d_q) with n_q, d_q >= 1, got {q.shape}")
+        if q.ndim != 2 or q.shape[0] == 0:
+            raise DataError(f"inputs: expected shape (n_q, d_q) with n_q >= 1 rows (d_q = 0: a model without "
+                            f"inputs), got {q.shape}")
         if not np.all(np.isfinite(q)):
             bad = np.argwhere(~np.isfinite(q))[0]
             raise DataError(f"inputs: non-finite value at row {bad[0]}, column {bad[1]}; inputs must be known")

@@ -131,8 +131,8 @@ class FitRecord:
     @cached_property
     def sloppy_direction(self) -> SloppyDirection | None:
         """The worst and best determined combinations of relative parameter changes and their
-        standard-error ratio, from the information scaled by |p| (None for one parameter)."""
-        return sloppy_direction(self.information, self.p, self.param_names)
+        standard-error ratio, from the information scaled by max(|p|, standard error) (None for one parameter)."""
+        return sloppy_direction(self.information, self.p, self.param_names, self.stderr_gn)
 
     def record_fields(self) -> dict:
         """The dataclass fields of this record by name (to build a richer result from it)."""

@@ -119,14 +119,17 @@ class DetectionResult:
     def to_frame(self):
         """One row per (model, split) (models outer, as :attr:`tests`), indexed by ``model`` and ``split``: the
         split test's fields :attr:`FRAME_FIELDS` (the three alpha_min are p-values in [0, 1], NaN when not
-        computed; ``lr``, ``d2_*`` in chi^2 units, F units for ``lr`` when sigma is estimated), ``rejected``
-        (the split's hypothesis is rejected under the model's primary statistic and correction) and
-        ``decision`` (the model's primary verdict).  ``.attrs`` holds tol, statistic and correction."""
+        computed; ``lr``, ``d2_*`` in chi^2 units, F units for ``lr`` when sigma is estimated),
+        ``split_rejected`` (this split's hypothesis is rejected under the model's primary statistic and
+        correction) and ``model_decision`` (the model's primary verdict over all its splits: "rejected" as soon
+        as one split is, so a row may read split_rejected False, model_decision "rejected").  ``.attrs`` holds
+        tol, statistic and correction."""
         import pandas as pd
         prim = {d.model: d for d in self.decisions}
         rows = [dict(model=t.model, split=t.split, **{f: getattr(t, f) for f in self.FRAME_FIELDS},
-                     rejected=t.split in prim[t.model].flagged, decision=prim[t.model].decision) for t in self.tests]
-        df = pd.DataFrame(rows, columns=["model", "split", *self.FRAME_FIELDS, "rejected", "decision"])
+                     split_rejected=t.split in prim[t.model].flagged, model_decision=prim[t.model].decision)
+                for t in self.tests]
+        df = pd.DataFrame(rows, columns=["model", "split", *self.FRAME_FIELDS, "split_rejected", "model_decision"])
         df.attrs.update(tol=self.settings.tol, statistic=self.settings.statistic, correction=self.settings.correction)
         return df.set_index(["model", "split"])
 

@@ -105,7 +105,9 @@ class MonteCarloSettings:
     ----------
     n_rep : int              replications
     seed : int               root of numpy.random.SeedSequence (replication r uses spawn(n_rep)[r])
-    workers : int | None     local processes (None: os.cpu_count(); 1: serial in this process)
+    workers : int | None     local processes (None: os.cpu_count(); 1: serial in this process); serial with
+                             one cluster.WorkersWarning where spawned processes cannot start (a script
+                             without ``if __name__ == "__main__":``, stdin, a task that cannot be sent)
     scheduler : str | None   Dask scheduler address ("tcp://HOST:8786", ``[validate] scheduler``) or a
                              distributed.Client; None: local (``workers``)
     chunk_size : int | None  replications per task (None: about 8 tasks per worker, at most 50)

@@ -25,5 +25,5 @@ def test_blow_up_names_the_experiment_and_element():
                   h=lambda x, p, u: x, horizon=2.0)
     cm = m.collocate([0.5, 2.0], max_step=0.5)
     assert np.isfinite(mapped_outputs(cm, [1.0], [[0.1]])).all()
-    with pytest.raises(StateSolveError, match=r"experiment 1 .* on the element \[0.5, 1\]"):
+    with pytest.raises(StateSolveError, match=r"experiment 2 .* on the element \[0.5, 1\]"):
         outputs_and_sensitivities(cm, [1.0], [[0.1], [1.0]])

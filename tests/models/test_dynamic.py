@@ -103,7 +103,7 @@ def test_bad_definitions_name_the_argument(kw, match):
 
 
 @pytest.mark.parametrize("times, match", [([0.5, 0.4], "strictly increasing"), ([-0.1, 1.0], ">= 0"),
-                                          ([0.5, 0.5 + 1e-14, 1.0], "agree to 12 digits"),
+                                          ([0.5, 0.5 + 1e-14, 1.0], "differ by round-off only"),
                                           ([0.5, 3.0], "beyond the horizon"), ([np.nan], "finite"),
                                           ([], "no sampling time")])
 def test_bad_times(times, match):
@@ -156,3 +156,37 @@ def test_reactor_temperature_profile_matches_piecewise_integration():
         ref.extend(r.y[:2, :ts.size].T)
         x = r.y[:, -1]
     assert np.abs(out - np.array(ref)).max() < 5e-8
+
+
+def test_round_off_in_grids_and_times_makes_no_element():
+    # issue 30: np.arange(10) * 0.05 holds 0.30000000000000004 and 0.35000000000000003; the sampling
+    # times 0.3 and 0.35 (and a drawing grid holding the other spelling) must not make 4e-17 s elements
+    from models.dynamic import TIME_RTOL, merge_times
+    grid = np.arange(10) * 0.05
+    assert grid[6] != 0.3 and grid[7] != 0.35
+    vals = np.linspace(1.0, 2.0, 10)
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * u[1] * x, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, controls={"u": {"grid": grid}})
+    m_clean = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * u[1] * x, x0=lambda p, u: u[0],
+                        h=lambda x, p, u: x, controls={"u": {"grid": np.round(grid, 12)}})
+    for t in (np.array([0.1, 0.3, 0.35, 0.5]), np.array([0.1, 0.30000000000000004, 0.35000000000000003, 0.5])):
+        cm = m.collocate(t, max_step=0.05)
+        b = np.asarray(cm.mesh.boundaries)
+        assert np.diff(b).min() > 0.01                       # no round-off element
+        assert all(np.any(b == v) for v in t)                 # the sampling times stay exact boundaries
+        q = np.r_[2.0, vals][None, :]
+        ref = m_clean.collocate(np.round(t, 12), max_step=0.05).simulate([1.3], q)
+        edges = np.r_[grid, np.inf]
+        exact = 2.0 * np.exp(-1.3 * np.array([np.sum(vals * np.clip(np.minimum(edges[1:], s) - edges[:-1], 0, None))
+                                               for s in t]))
+        assert np.allclose(cm.simulate([1.3], q), ref, rtol=1e-12, atol=0)
+        assert np.allclose(cm.simulate([1.3], q)[0], exact, rtol=1e-9)
+    # the merge keeps the earlier group's value (sampling times before grid points), else the shorter one
+    tol = TIME_RTOL * 0.5
+    assert merge_times([0.3], [0.30000000000000004, 0.4], tol=tol).tolist() == [0.3, 0.4]
+    assert merge_times([0.30000000000000004], [0.3], tol=tol).tolist() == [0.30000000000000004]
+    assert merge_times([0.30000000000000004, 0.3], tol=tol).tolist() == [0.3]
+    with pytest.raises(ModelError, match="differ by round-off only"):
+        Mesh((0.0, 0.35, 0.35000000000000003, 0.5))
+    with pytest.raises(ModelError, match="differ by round-off only"):
+        decay().collocate([0.3, 0.30000000000000004])

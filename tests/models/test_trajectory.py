@@ -58,7 +58,7 @@ def test_blow_up_names_the_experiment_and_element(monkeypatch):
     cm = collocate(m, [0.5, 1.0, 2.0])
     for limit in (100, 0):
         monkeypatch.setattr(trajectory, "MARCH_IN_CASADI_MAX", limit)
-        with pytest.raises(Exception, match=r"inputs \[1.0\]: no collocation solution on the element .* of experiment 1"):
+        with pytest.raises(Exception, match=r"inputs \[1.0\]: no collocation solution on the element .* of experiment 2"):
             trajectory_numerics(cm).states([1.0], [[0.1], [1.0]])
 
 

@@ -142,3 +142,45 @@ def test_planned_time_design_reads_no_data(tmp_path, capsys):
     plan = json.loads(text)
     assert rc == 0 and plan["planned"] and plan["p"] == [1.5, 50.0, 1.0, 70.0] and len(plan["chosen_times"]) == 4
     assert "sampling times (4)" in (tmp_path / "out" / "oed.txt").read_text()
+
+
+ENTRY = [
+    ("unknown input in experiment 4", [(r"^T = 360\.0", "Tx = 360.0")], "Tx = 360.0",
+     "[dynamic.experiments] Tx: experiment 4: unknown input 'Tx'"),
+    ("a list for a constant in experiment 5", [(r"^cA0 = 2\.0\nT = 370\.0", "cA0 = [2.0, 1.0]\nT = 370.0")],
+     "cA0 = [2.0, 1.0]", "experiment 5: cA0 is a constant input"),
+    ("unknown second instrument", [(r'name = "cB"', 'name = "cC"')], 'name = "cC"', "unknown instrument 'cC'"),
+    ("bad sigma of the second instrument", [(r'(name = "cB"\n)sigma = [^\n]*', r"\1sigma = -1.0")],
+     "sigma = -1.0", "sigma"),
+]
+
+
+@pytest.mark.parametrize("what,edits,bad_line,words", ENTRY, ids=[e[0] for e in ENTRY])
+def test_entry_errors_name_the_wrong_entrys_line(tmp_path, capsys, what, edits, bad_line, words):
+    # issue 30: an error of the k-th [[dynamic.experiments]] / [[sensors]] names that entry's line, not the first's
+    cfg = _small(tmp_path, "reactor", edits)
+    line = cfg.read_text().splitlines().index(bad_line) + 1
+    rc, _, err = _run(capsys, "identify", str(cfg), "--out", str(tmp_path / "out"))
+    assert rc == 2 and f"{cfg}:{line}: " in err and words in err, err
+
+
+def test_csv_errors_name_the_csv_file_and_line(tmp_path, capsys):
+    # issue 30: times and readings of the long CSV are checked there (file and line, not study.toml): a time
+    # not in [dynamic] times, a negative time, an absurd reading (the static readers' check), |value| > 1e15;
+    # a time off by round-off only reads as the declared one
+    shipped = (REPO / "data" / "reactor" / "campaign_long.csv").read_text().splitlines()
+    row = shipped[5].split(",")
+    cases = [(2, "0.33", "time '0.33' is not one of the declared sampling times"),
+             (2, "-0.2", "time '-0.2' is negative"), (4, "1e14", "robust spreads from the sensor's median"),
+             (4, "1e16", "out of range (|value| > 1e+15)")]
+    for col, cell, words in cases:
+        bad = row[:col] + [cell] + row[col + 1:]
+        (tmp_path / "data").mkdir(exist_ok=True)
+        (tmp_path / "data" / "campaign_long.csv").write_text("\n".join(shipped[:5] + [",".join(bad)] + shipped[6:]))
+        cfg = _small(tmp_path, "reactor", [], data_dir=tmp_path / "data")
+        rc, _, err = _run(capsys, "identify", str(cfg), "--out", str(tmp_path / "out"))
+        assert rc == 2 and f"campaign_long.csv, line 6: " in err and words in err, err
+    twin = row[:2] + [repr(float(row[2]) + 1e-16 * 3)] + row[3:]
+    (tmp_path / "data" / "campaign_long.csv").write_text("\n".join(shipped[:5] + [",".join(twin)] + shipped[6:]))
+    rc, _, err = _run(capsys, "identify", str(cfg), "--out", str(tmp_path / "out"))
+    assert rc == 0, err

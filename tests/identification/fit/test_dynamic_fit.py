@@ -1,4 +1,7 @@
 """identify on dynamic models: collocation with discretisation error control (identification.fit.dynamic_fit)."""
+import warnings
+
+import casadi as ca
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -6,8 +9,9 @@ from scipy.optimize import least_squares
 
 from identification import (DataError, DynamicMeasurements, Estimate, Measurements, Split, detect, identify,
                             information_contributions)
-from identification.fit.dynamic_fit import (DiscretisationRecord, DiscretisationSettings, collocated_problem,
-                                       identify_dynamic)
+from identification.fit.dynamic_fit import (DegenerateStartWarning, DiscretisationRecord, DiscretisationSettings,
+                                            collocated_problem, identify_dynamic, simulate_campaign)
+from models import Model
 from mudoe.example_reactor import HORIZON, P_TRUE, R_KJ, T_REF, TIMES, build
 
 Q = np.array([[1.0, 330.0], [1.0, 340.0], [1.0, 350.0], [2.0, 350.0], [2.0, 360.0], [2.0, 370.0]])
@@ -109,13 +113,13 @@ def test_collocated_problem_is_a_static_model():
 
 @pytest.mark.parametrize("make, exc, match", [
     (lambda: DynamicMeasurements(Q, TIMES[::-1], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
-     "times: experiment 0: sampling times must be strictly increasing"),
+     "times: experiment 1: sampling times must be strictly increasing"),
     (lambda: DynamicMeasurements(Q, np.r_[-0.1, TIMES[1:]], np.zeros((1, 6, 10, 2)), SIGMA), DataError,
-     "times: experiment 0 has a negative sampling time"),
+     "times: experiment 1 has a negative sampling time"),
     (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 10, 2)), np.ones((10, 2))), DataError,
      "sigma: expected 2 values .one per instrument"),
     (lambda: DynamicMeasurements(Q, [TIMES, TIMES[:5]] + [TIMES] * 4, np.zeros((1, 6, 10, 2)), SIGMA),
-     DataError, "z: experiment 1 has a value at sample 5"),
+     DataError, "z: experiment 2 has a value at sample 6"),
     (lambda: DynamicMeasurements(Q, TIMES, np.zeros((1, 6, 9, 2)), SIGMA), DataError, "z: expected shape"),
     (lambda: identify(build(), DynamicMeasurements(Q, TIMES + 0.5, campaign(), SIGMA), P0), DataError,
      "data.times: sampling time 2.5 lies beyond the horizon 2"),
@@ -309,3 +313,49 @@ def test_predict_and_simulate_campaign():
     assert data.z.shape == (3, 6, 10, 2) and data.sensors == ("cA", "cB") and np.allclose(data.sigma, SIGMA)
     resid = (data.z - ref[None]) / SIGMA
     assert abs(resid.mean()) < 4 / np.sqrt(resid.size) and abs(resid.std() - 1) < 4 / np.sqrt(2 * resid.size)
+
+
+def test_round_off_times_across_experiments_are_one_instant():
+    # issue 30: experiment 1 sampled at 0.3, experiment 2 at 0.1 * 3 = 0.30000000000000004: one time of
+    # the campaign (one sensor@time column), the value that reads shortest; within one experiment an error
+    z = np.zeros((1, 2, 2, 1))
+    data = DynamicMeasurements([[1.0], [2.0]], [[0.1, 0.3], [0.1, 0.1 * 3]], z, sigma=[0.1])
+    assert data.union_times.tolist() == [0.1, 0.3]
+    assert data.times[1, 1] == 0.3 and len(data.flat().sensors) == 2
+    with pytest.raises(DataError, match="experiment 1: the sampling times 0.3 and 0.30000000000000004 differ"):
+        DynamicMeasurements([[1.0]], [0.1, 0.3, 0.30000000000000004], np.zeros((1, 1, 3, 1)), sigma=[0.1])
+
+
+def _chain(lower):
+    from models.contract import Parameter
+    return Model.ode([Parameter("k1", lower, 10.0, scale=1.0), Parameter("k2", lower, 10.0, scale=1.0)],
+                     ["cA", "cB"], [], ["cA", "cB"],
+                     rhs=lambda x, p, u: ca.vertcat(-p[0] * x[0], p[0] * x[0] - p[1] * x[1]),
+                     x0=lambda p, u: ca.vertcat(1.0, 0.0), h=lambda x, p, u: x)
+
+
+def test_degenerate_start_is_named_before_solving():
+    # issue 30: k1 = 0 (inside its bounds) makes cB = 0 at every time, so the outputs do not depend on k2
+    # at the start (exact AD sensitivities): one warning naming the start and what to try, and a note
+    t = np.linspace(0.2, 2.0, 8)
+    data = simulate_campaign(_chain(-10.0), [2.0, 0.5], np.zeros((1, 0)), t, [0.01, 0.01], n_series=2, seed=2)
+    with pytest.warns(DegenerateStartWarning, match=r"p0: at the start \(k1 = 0, k2 = 1\) the outputs do not "
+                                                    r"depend on k2 \(their sensitivities are exactly zero"):
+        est = identify(_chain(-10.0), data, p0=[0.0, 1.0])
+    assert any("do not depend on k2" in n for n in est.notes)
+    assert np.allclose(est.p, [2.0, 0.5], atol=0.05)
+
+
+def test_start_on_a_bound_moves_into_the_interior_with_a_note():
+    t = np.linspace(0.2, 2.0, 8)
+    data = simulate_campaign(_chain(0.0), [2.0, 0.5], np.zeros((1, 0)), t, [0.01, 0.01], n_series=2, seed=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DegenerateStartWarning)     # moved off 0: no longer degenerate
+        p0 = np.zeros(2)
+        est = identify(_chain(0.0), data, p0=p0)
+    assert p0.tolist() == [0.0, 0.0]                                # the caller's start is not changed
+    assert est.notes[0].startswith("start values on a bound moved 0.001 of their scale into the interior: "
+                                   "k1 = 0.001, k2 = 0.001")
+    assert np.allclose(est.p, [2.0, 0.5], atol=0.05)
+    interior = identify(_chain(0.0), data, p0=[1.0, 1.0])
+    assert not any("on a bound" in n for n in interior.notes)

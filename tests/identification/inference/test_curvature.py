@@ -141,6 +141,23 @@ def test_sloppy_direction_names_the_confounded_combination():
         sloppy_direction(np.eye(3), [1.0, 2.0], ["a", "b"])
 
 
+def test_sloppy_direction_of_a_parameter_at_zero_uses_its_standard_error():
+    # issue 30: Tc = 0 on its bound (se 1e-5 N m) next to R = 1 ohm (se 1e-2): dividing by 1 (its unit) made
+    # Tc "determined 1e3x better"/"worse" by the unit chosen; scaled by its standard error it is one se
+    from identification.fit.identifiability import sloppy_direction
+    se = np.array([1e-2, 1e-5])
+    F = np.diag(1.0 / se ** 2)
+    old = sloppy_direction(F, [1.0, 0.0], ["R", "Tc"])
+    assert old.ratio == pytest.approx(1e3) and old.by_stderr == ()
+    sd = sloppy_direction(F, [1.0, 0.0], ["R", "Tc"], stderr=se)
+    assert sd.scale.tolist() == [1.0, 1e-5] and sd.by_stderr == ("Tc",)
+    assert sd.ratio == pytest.approx(100.0) and sd.combination(sd.sloppy) == "Tc"
+    assert "(relative changes dp/|p|, dp/se for Tc): Tc is determined 100x worse than R" in str(sd)
+    # |p| above its standard error: unchanged; a non-finite standard error is ignored
+    same = sloppy_direction(F, [1.0, 2.0], ["R", "Tc"], stderr=[1e-2, np.inf])
+    assert same.ratio == pytest.approx(sloppy_direction(F, [1.0, 2.0], ["R", "Tc"]).ratio) and same.by_stderr == ()
+
+
 def test_summary_shows_the_weakest_direction():
     est = _puromycin_fit()
     sd = est.sloppy_direction

@@ -76,8 +76,9 @@ def test_detection_frame_has_one_row_per_split_test_with_its_alphas_and_decision
     st = res.settings.statistic
     assert np.array_equal(df[f"alpha_{'lr' if st == 'likelihood_ratio' else st}"].to_numpy(), res.alphas())
     assert list(df["n_cal"]) == [t.n_cal for t in res.tests] and list(df["ok"]) == [t.ok for t in res.tests]
-    assert list(df["decision"]) == [res.verdicts[model.name]] * len(res.tests)
-    assert list(df["rejected"]) == [t.split in res.decision().flagged for t in res.tests]
+    assert list(df["model_decision"]) == [res.verdicts[model.name]] * len(res.tests)
+    assert list(df["split_rejected"]) == [t.split in res.decision().flagged for t in res.tests]
+    assert "rejected" not in df.columns and "decision" not in df.columns     # issue 30: the level is named
     assert df.attrs["tol"] == res.settings.tol and df.attrs["statistic"] == st
     html = res._repr_html_()
     assert res.verdicts[model.name] in html and "low vs high" in html and "even vs odd" in html
