@@ -24,6 +24,9 @@ __all__ = ["run", "main", "GRACE_S"]
 #: seconds of the time limit left to the child for its last Ipopt iteration and its answer (its own
 #: refinement runs under the limit less this, at least 90 % of it)
 GRACE_S = 1.0
+#: a limit longer than this (s) waits without a timeout: the OS's poll takes milliseconds in 32 bits (24.8 days)
+#: and overflows on a larger one (``time_limit=1e9`` or ``inf``)
+UNBOUNDED_S = 1e6
 
 
 def run(call: tuple, time_limit: float):
@@ -41,7 +44,8 @@ def run(call: tuple, time_limit: float):
     proc = subprocess.Popen([sys.executable, "-c", "from oed.refine_child import main; main()"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     try:
-        out, err = proc.communicate(blob, timeout=float(time_limit))
+        limit = float(time_limit)
+        out, err = proc.communicate(blob, timeout=limit if limit <= UNBOUNDED_S else None)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.communicate()

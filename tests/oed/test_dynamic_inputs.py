@@ -8,6 +8,9 @@ from oed import RefineSettings, refine_inputs, select_inputs
 from oed.dynamic_inputs import dynamic_input_information
 from oed.static_inputs import _share
 
+#: a time limit that never decides a result here (issue 27)
+UNTIMED = 1e9
+
 
 def test_factorial_information_equals_the_odes():
     # per-experiment FIMs of Pyomo.DoE's reactor at factorial points (T = 300 after t = 0.125) against
@@ -22,7 +25,7 @@ def test_factorial_information_equals_the_odes():
 
 def test_continuous_design_beats_the_nominal_and_pyomos_design_in_the_ode():
     res = select_inputs(reactor(), P, times=GRID, candidates=[NOMINAL], sigma=0.01, n_points=1, refine=True,
-                        bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1), time_limit=30.0)
+                        bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1), time_limit=UNTIMED)
     x = res.refined.inputs[0]
     assert np.all(x >= LOWER) and np.all(x <= UPPER)
     ode = dr.log10_det(dr.pyomo_doe_reactor_fim(x[0], x[1:]))
@@ -78,27 +81,29 @@ def test_mesh_controlled_again_at_the_refined_design():
 
 
 def test_large_refinement_runs_in_a_child_process_ended_at_the_time_limit():
+    # a child process cannot start python, import casadi and build the NLP in 0.05 s on any machine: the killed
+    # runs are killed whatever the load; the finished ones are untimed (issue 27)
     # issue 30: building the refinement's NLP cannot be interrupted (over 11 minutes for the DC motor's four
     # rows); above child_above variables it runs in a child process killed at time_limit, and the exact
     # design's levels are kept and said to be
     cm = reactor().collocate(GRID, max_step=0.125)
     sig = np.full(cm.n_S, 0.01)
     here = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1),
-                         time_limit=30.0)
+                         time_limit=UNTIMED)
     child = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER),
-                          settings=RefineSettings(n_starts=1, child_above=0), time_limit=30.0)
+                          settings=RefineSettings(n_starts=1, child_above=0), time_limit=UNTIMED)
     assert child.n_failed == 0 and np.allclose(child.inputs, here.inputs, rtol=1e-9, atol=1e-9)
     assert child.value == pytest.approx(here.value, rel=1e-12)
     start = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=2),
                           time_limit=2e-3)                          # in this process: no start finishes
     killed = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER),
-                           settings=RefineSettings(n_starts=2, child_above=0), time_limit=0.2)
+                           settings=RefineSettings(n_starts=2, child_above=0), time_limit=0.05)
     assert np.array_equal(killed.inputs, [NOMINAL]) and killed.n_failed == 2
-    assert all(m.startswith("not finished: time limit (0.2 s) reached while building or solving") for m in
+    assert all(m.startswith("not finished: time limit (0.05 s) reached while building or solving") for m in
                killed.messages), killed.messages
     assert killed.value == pytest.approx(start.value, rel=1e-9)     # the start's value, from its sensitivities
     res = select_inputs(reactor(), P, times=GRID, candidates=[NOMINAL], sigma=0.01, n_points=1, refine=True,
                         bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1, child_above=0),
-                        time_limit=0.5)
+                        time_limit=0.05)
     assert any(n.startswith("refinement not finished: time limit") for n in res.notes), res.notes
     assert np.array_equal(res.refined.inputs, res.inputs)
