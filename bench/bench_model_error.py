@@ -1,0 +1,125 @@
+"""Model error of the press (issue 29, first slice): held-out coverage, widening, size of the test, runtime.
+
+Three measurements on the shipped press study (``configs/press.toml``: series 4 and 5, the paper's four
+split scenarios, the sensors F_x and B0_y of the study's E-optimal design, sigma = sqrt(sigma_rep^2 +
+sigma_man^2)):
+
+1. **coverage**: for every variant M1/M2/M3 and every split, the validation readings predicted from a fit
+   on the calibration part, by the plain 95 % new-reading delta-method bands (h +- 1.96 sqrt(g^T C g +
+   sigma^2), the baseline of issue 29) and by :func:`identification.model_error`'s bands with the output
+   discrepancy; the median widening (ratio of band widths) per variant; the runtime of ``model_error``.
+2. **size** of the 'no model error' test (alpha 5 %): ``--n`` campaigns simulated from an adequate model
+   (the variant ``--size-variant`` at its fit on the shipped data, z = h(p_hat) + sigma eps, 2 series x 29
+   inputs), the rejection rate with its binomial (Clopper-Pearson 95 %) interval.
+3. **adequate-model coverage** (``--n-coverage`` campaigns of the same kind): the held-out coverage and the
+   widening of the model-error bands when there is no model error.
+
+Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from identification import model_error
+from identification.studies.montecarlo import clopper_pearson
+from mudoe.config import load_config
+from mudoe.study import prepare
+from models.state import simulate
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
+#: the sensors of the study's E-optimal design ([oed] n_sensors = 2): F_x and B0_y
+WEIGHTS = np.array([0.0, 1.0, 1.0])
+
+
+def coverage_table(study) -> dict:
+    """{variant: ModelErrorResult with kind 'discrepancy'} on the study's data and splits; prints the table."""
+    out = {}
+    print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain %':>8} {'error %':>8} {'widen':>6}")
+    for v, m in study.models.items():
+        t0 = time.perf_counter()
+        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, kind="discrepancy")
+        dt = time.perf_counter() - t0
+        for h in r.heldout:
+            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>8.1f} {100 * h.coverage_error:>8.1f} "
+                  f"{h.widening:>6.2f}")
+        n = sum(h.n_values for h in r.heldout)
+        pooled = [sum(getattr(h, a) * h.n_values for h in r.heldout) / n for a in ("coverage_plain", "coverage_error")]
+        auto = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS)
+        print(f"{v:<8} {'pooled':<32} {n:>4} {100 * pooled[0]:>8.1f} {100 * pooled[1]:>8.1f} "
+              f"{np.median([h.widening for h in r.heldout]):>6.2f}   model_error {dt:.2f} s; test p = "
+              f"{r.test.p_value:.3g}; identifiable {r.identifiable} (information kept {r.information_kept:.2f}); "
+              f"auto -> {auto.kind}")
+        out[v] = r
+    return out
+
+
+def _campaigns(study, variant: str, n: int, seed: int):
+    """Campaigns simulated from ``variant`` at its plain fit on the shipped data (2 series, sigma given)."""
+    m, d = study.models[variant], study.data[variant]
+    fit = model_error(m, d, study.p0, kind="none", weights=WEIGHTS)
+    h = simulate(m, fit.p_plain, d.inputs)
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        yield m, d.with_z(h[None] + d.sigma * rng.standard_normal(d.z.shape)), fit.p_plain
+
+
+def size_study(study, variant: str, n: int, seed: int) -> None:
+    """The rejection rate of the 'no model error' test at alpha 5 % on campaigns of an adequate model."""
+    t0 = time.perf_counter()
+    rej, pv = 0, []
+    for i, (m, d, p) in enumerate(_campaigns(study, variant, n, seed)):
+        r = model_error(m, d, p, kind="none", weights=WEIGHTS)
+        rej += r.detected
+        pv.append(r.test.p_value)
+        if (i + 1) % 100 == 0:
+            print(f"  {i + 1} campaigns, {rej} rejections", file=sys.stderr, flush=True)
+    rate = clopper_pearson(rej, n)
+    pv = np.array(pv)
+    print(f"size ({variant} adequate, {n} campaigns, seed {seed}): {100 * rej / n:.2f} % "
+          f"[95 % CI {100 * rate.lo:.2f}, {100 * rate.hi:.2f}] at alpha 5 %; P(LR = 0) = {np.mean(pv == 1):.3f}; "
+          f"rate at 1 % {100 * np.mean(pv < 0.01):.2f} %, at 10 % {100 * np.mean(pv < 0.1):.2f} %; "
+          f"{time.perf_counter() - t0:.0f} s")
+
+
+def adequate_coverage(study, variant: str, n: int, seed: int) -> None:
+    """Held-out coverage and widening of the model-error bands on campaigns without model error."""
+    cov0, cov1, wid = [], [], []
+    for m, d, p in _campaigns(study, variant, n, seed):
+        r = model_error(m, d, p, splits=study.splits, weights=WEIGHTS, kind="discrepancy")
+        cov0 += [h.coverage_plain for h in r.heldout]
+        cov1 += [h.coverage_error for h in r.heldout]
+        wid += [h.widening for h in r.heldout]
+    se = np.std(cov1) / np.sqrt(len(cov1))
+    print(f"adequate {variant}, {n} campaigns x {len(study.splits)} splits: held-out coverage plain "
+          f"{100 * np.mean(cov0):.1f} %, with model error {100 * np.mean(cov1):.1f} % (+- {100 * se:.1f}); "
+          f"median widening {np.median(wid):.2f}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="bench model_error")
+    ap.add_argument("--n", type=int, default=1000, help="campaigns of the size study")
+    ap.add_argument("--n-coverage", type=int, default=50, help="campaigns of the adequate-model coverage")
+    ap.add_argument("--size-variant", default="M1")
+    ap.add_argument("--seed", type=int, default=29)
+    ap.add_argument("--quick", action="store_true", help="--n=100 --n-coverage=10")
+    ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate")
+    args = ap.parse_args(argv or [])
+    if args.quick:
+        args.n, args.n_coverage = 100, 10
+    skip = set(filter(None, args.skip.split(",")))
+    study = prepare(load_config(CONFIG))
+    if "coverage" not in skip:
+        coverage_table(study)
+    if "size" not in skip and args.n:
+        size_study(study, args.size_variant, args.n, args.seed)
+    if "adequate" not in skip and args.n_coverage:
+        adequate_coverage(study, args.size_variant, args.n_coverage, args.seed + 1)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
