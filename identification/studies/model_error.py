@@ -21,9 +21,12 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    discrepancy when the test detects model error, else none).
 4. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
 
-``identifiable`` is False when the discrepancy's correlation leaves less than
-:data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` of the information uncorrelated errors
-of the same size would leave about p (the discrepancy can mimic a change of the parameters).
+``identifiable`` is False when, along some direction of p, the model error leaves less than
+:data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` (1 %) of the information the noise alone
+leaves and its correlation less than :data:`~identification.studies.model_error_fit.CONFOUNDED_CORRELATION` (50 %)
+of what uncorrelated errors of the same size would leave: the discrepancy can mimic a change of the parameters
+(heuristic thresholds).  A discrepancy that mimics p with a small one (a smooth error absorbed by p) is not
+caught by any such check: ``exact_at`` (where the model is known to be exact) is the remedy.
 
 Only the output discrepancy is available; the embedded kind (a random-effects covariance of the
 parameters across conditions) is not implemented yet.
@@ -165,9 +168,10 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
                      "distribution is then approximate")
     if kind == "discrepancy" and not fit.identifiable:
         hint = "" if exact_at else "; pin the discrepancy where the model is known to be exact (exact_at={input: value})"
-        notes.append(f"not identifiable: the discrepancy can mimic a change of the parameters (it leaves "
-                     f"{100 * fit.information_kept:.2g} % of the information uncorrelated errors of the same size "
-                     f"would leave); p under the model error has lost its meaning{hint}")
+        notes.append(f"not identifiable: the discrepancy can mimic a change of the parameters (along one direction "
+                     f"of p it leaves {100 * fit.information_kept:.2g} % of the information the noise alone leaves, "
+                     f"{100 * fit.correlation_kept:.2g} % of what uncorrelated errors of its size would leave); p under "
+                     f"the model error has lost its meaning{hint}")
     if kind == "none" and detected:
         notes.append("model error detected, but the reported error model is 'none': the bands ignore it")
     bad = [h.split for h in heldout if h.coverage_error < h.coverage_plain]
@@ -231,6 +235,6 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         sensors=tuple(s for s, wk in zip(data.sensors, w) if wk > 0), param_names=tuple(model.param_names),
         p=fit.p.copy(), cov=fit.cov.copy(), p_plain=est.p.copy(), cov_plain=np.asarray(est.cov, float).copy(),
         discrepancies=_discrepancies(fit, data, scaling), identifiable=fit.identifiable,
-        information_kept=fit.information_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
+        information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source),
         fit=fit)

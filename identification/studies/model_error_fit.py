@@ -41,11 +41,15 @@ from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observat
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
-__all__ = ["ErrorFit", "Band", "fit_model_error", "outputs_at", "CONFOUNDED_INFORMATION"]
+__all__ = ["ErrorFit", "Band", "fit_model_error", "outputs_at", "pure_error_sigma", "CONFOUNDED_INFORMATION",
+           "CONFOUNDED_CORRELATION"]
 
-#: below this fraction of the information uncorrelated errors of the same size would leave, p and the
-#: discrepancy cannot be told apart (identifiable False)
-CONFOUNDED_INFORMATION = 0.1
+#: identifiable is False when, along some direction of p, the model error leaves less than this share of the
+#: information the noise alone leaves (standard error inflated more than 10 times) ...
+CONFOUNDED_INFORMATION = 0.01
+#: ... and the discrepancy's correlation leaves less than this share of what uncorrelated errors of the same
+#: size would leave (the discrepancy mimics a change of p, rather than being merely large); heuristic thresholds
+CONFOUNDED_CORRELATION = 0.5
 
 
 @dataclass(frozen=True)
@@ -88,7 +92,10 @@ class ErrorFit:
     alpha_r : ndarray (N,)            V^{-1} r(p) (stacked residual means)
     Vinv_G : ndarray (N, n_p)         V^{-1} G
     Vinv : ndarray (N, N)
-    information_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T diag(V)^-1 G)
+    information_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T D^-1 G): the share of the
+                                      noise-only information about p the model error leaves
+    correlation_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T diag(V)^-1 G): the share
+                                      uncorrelated errors of the same size would leave
     notes : tuple of str
     """
 
@@ -105,11 +112,13 @@ class ErrorFit:
     Vinv_G: np.ndarray | None = None
     Vinv: np.ndarray | None = None
     information_kept: float = 1.0
+    correlation_kept: float = 1.0
     notes: tuple = ()
 
     @property
     def identifiable(self) -> bool:
-        return self.information_kept >= CONFOUNDED_INFORMATION
+        """False when the discrepancy can mimic a change of p (both shares below their thresholds)."""
+        return self.information_kept >= CONFOUNDED_INFORMATION or self.correlation_kept >= CONFOUNDED_CORRELATION
 
     def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool) -> Band:
         """The (1 - alpha) band of the outputs (``new_reading``: of one new reading) at input rows (n*, d_q)."""
@@ -195,15 +204,18 @@ def _gls(model, data, est: Estimate, gp: GPFit, obs: Observations, zbar_s: np.nd
     return p, h, G, tuple(notes)
 
 
-def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray) -> float:
-    """min generalised eigenvalue of (G^T V^-1 G, G^T diag(V)^-1 G): the share of the parameters'
-    information that the discrepancy's correlation leaves (1: none lost; near 0: confounded)."""
+def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np.ndarray) -> tuple:
+    """(min generalised eigenvalue of (G^T V^-1 G, G^T D^-1 G), of (G^T V^-1 G, G^T diag(V)^-1 G)): the share of
+    the parameters' information the model error leaves against the noise D alone and against uncorrelated
+    errors of the same size (1: nothing lost; near 0: that direction of p is not determined)."""
     A = Gs.T @ Vinv @ Gs
-    B = Gs.T @ (Gs / np.diag(V)[:, None])
-    try:
-        return float(linalg.eigh(A, B, eigvals_only=True)[0])
-    except linalg.LinAlgError:
-        return 0.0
+    out = []
+    for d in (noise, np.diag(V)):
+        try:
+            out.append(float(linalg.eigh(A, Gs.T @ (Gs / d[:, None]), eigvals_only=True)[0]))
+        except linalg.LinAlgError:
+            out.append(0.0)
+    return tuple(out)
 
 
 def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, with_gp: bool,
@@ -231,5 +243,6 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
     A = Gs.T @ Vinv @ Gs
     cov = linalg.cho_solve(linalg.cho_factor(A, lower=True), np.eye(len(p)))
     r = zbar_s - obs.stack(h)
-    return ErrorFit(model, weights, sigma, scaling, est, test, p, cov, gp, Vinv @ r, Vinv @ Gs, Vinv,
-                    _information_kept(Gs, V, Vinv), notes)
+    kept, corr = _information_kept(Gs, V, Vinv, np.concatenate(obs.noise))
+    return ErrorFit(model, weights, sigma, scaling, est, test, p, cov, gp, Vinv @ r, Vinv @ Gs, Vinv, kept, corr,
+                    notes)

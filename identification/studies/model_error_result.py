@@ -100,7 +100,10 @@ class ModelErrorResult:
     p_plain, cov_plain : ndarray  the fit without model error (second-order covariance)
     discrepancies : tuple of SensorDiscrepancy   (empty for kind "none")
     identifiable : bool          False: the discrepancy can mimic a change of the parameters
-    information_kept : float     share of the parameters' information the discrepancy's correlation leaves
+    information_kept : float     share of the noise-only information about p the model error leaves (min over
+                                 directions; 1 for kind "none")
+    correlation_kept : float     share of what uncorrelated errors of the same size would leave (same direction
+                                 rule; 1 for kind "none")
     heldout : tuple of HeldOut   one per split (empty without splits)
     exact_at : dict              {input name: value} where the discrepancy and its slope are zero
     sigma : ndarray (n_S,)       sensor standard deviations used (unit of z)
@@ -123,6 +126,7 @@ class ModelErrorResult:
     discrepancies: tuple
     identifiable: bool
     information_kept: float
+    correlation_kept: float
     heldout: tuple
     exact_at: dict
     sigma: np.ndarray
@@ -185,7 +189,8 @@ class ModelErrorResult:
             "sensors": list(self.sensors), "parameters": list(self.param_names), "p": self.p, "cov": self.cov,
             "conf_int": {"lower": ci.lower, "upper": ci.upper}, "p_plain": self.p_plain, "cov_plain": self.cov_plain,
             "discrepancies": [d.to_dict() for d in self.discrepancies], "identifiable": self.identifiable,
-            "information_kept": self.information_kept, "heldout": [h.to_dict() for h in self.heldout],
+            "information_kept": self.information_kept,
+            "correlation_kept": self.correlation_kept, "heldout": [h.to_dict() for h in self.heldout],
             "exact_at": dict(self.exact_at), "sigma": self.sigma, "sigma_source": self.sigma_source,
             "notes": list(self.notes)})
 
@@ -196,7 +201,9 @@ class ModelErrorResult:
         lines = [f"Model error of {self.model_name or 'model'}: {'DETECTED' if self.detected else 'not detected'} "
                  f"(likelihood ratio {t.statistic:.4g}, p = {t.p_value:.3g} against {t.reference}, alpha "
                  f"{self.alpha:g}); kind: {self.kind} ({self.how})",
-                 f"  sensors: {', '.join(self.sensors)}; sigma {self.sigma_source}", ""]
+                 f"  sensors: {', '.join(self.sensors)}; sigma {self.sigma_source}; parameters "
+                 f"{'identifiable' if self.identifiable else 'NOT identifiable'} under the model error "
+                 f"(information kept {100 * self.information_kept:.3g} % of the noise-only)", ""]
         ci = self.conf_int()
         se0 = np.sqrt(np.diag(self.cov_plain))
         lines.append(f"{'parameter':<10} {'p plain':>12} {'se plain':>10} {'p':>12} {'se':>10} "

@@ -88,6 +88,17 @@ def test_kind_none_has_no_discrepancy():
     assert any("detected" in n for n in r.notes)
 
 
+def test_a_discrepancy_that_mimics_the_parameters_is_not_identifiable():
+    m = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] * q[0] + p[1] * q[0] ** 2)
+    q = np.linspace(0, 1, 15)
+    z = (2 * q + 0.5 * q ** 2 + 0.3 * np.sin(8 * q))[None, :, None] + 0.02 * np.random.default_rng(1).standard_normal((2, 15, 1))
+    r = model_error(m, Measurements(q[:, None], z, 0.02, sensors=["y"]), [1.0, 1.0], kind="discrepancy")
+    assert not r.identifiable and r.information_kept < 0.01
+    assert any(n.startswith("not identifiable") and "exact_at" in n for n in r.notes)
+    assert "NOT identifiable" in r.summary()
+    assert np.all(np.sqrt(np.diag(r.cov)) > 10 * np.sqrt(np.diag(r.cov_plain)))
+
+
 def test_predict_shapes_and_the_new_reading_band_is_wider(found):
     q = np.array([[0.1], [0.7], [1.9], [2.5]])
     mean_band = found.predict(q)
