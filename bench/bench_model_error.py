@@ -7,7 +7,8 @@ sigma_man^2)):
 1. **coverage**: for every variant M1/M2/M3 and every split, the validation readings predicted from a fit
    on the calibration part, by the plain 95 % new-reading delta-method bands (h +- 1.96 sqrt(g^T C g +
    sigma^2), the baseline of issue 29) and by :func:`identification.model_error`'s bands with the output
-   discrepancy; the median widening (ratio of band widths) per variant; the runtime of ``model_error``.
+   discrepancy and with the embedded error; the median widening (ratio of band widths) per variant; the
+   runtime of ``model_error`` (kind auto, with the held-out table).
 2. **size** of the 'no model error' test (alpha 5 %): ``--n`` campaigns simulated from an adequate model
    (the variant ``--size-variant`` at its fit on the shipped data, z = h(p_hat) + sigma eps, 2 series x 29
    inputs), the rejection rate with its binomial (Clopper-Pearson 95 %) interval.
@@ -37,23 +38,26 @@ WEIGHTS = np.array([0.0, 1.0, 1.0])
 
 
 def coverage_table(study) -> dict:
-    """{variant: ModelErrorResult with kind 'discrepancy'} on the study's data and splits; prints the table."""
+    """{variant: ModelErrorResult (kind auto)} on the study's data and splits; prints the held-out table: coverage
+    of the plain, discrepancy and embedded 95 % new-reading bands (%) and their median widening."""
     out = {}
-    print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain %':>8} {'error %':>8} {'widen':>6}")
+    print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}")
     for v, m in study.models.items():
         t0 = time.perf_counter()
-        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, kind="discrepancy")
+        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS)
         dt = time.perf_counter() - t0
         for h in r.heldout:
-            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>8.1f} {100 * h.coverage_error:>8.1f} "
-                  f"{h.widening:>6.2f}")
+            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
+                  f"{100 * h.coverage_discrepancy:>6.1f} {h.widening_discrepancy:>6.2f} "
+                  f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}")
         n = sum(h.n_values for h in r.heldout)
-        pooled = [sum(getattr(h, a) * h.n_values for h in r.heldout) / n for a in ("coverage_plain", "coverage_error")]
-        auto = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS)
-        print(f"{v:<8} {'pooled':<32} {n:>4} {100 * pooled[0]:>8.1f} {100 * pooled[1]:>8.1f} "
-              f"{np.median([h.widening for h in r.heldout]):>6.2f}   model_error {dt:.2f} s; test p = "
-              f"{r.test.p_value:.3g}; identifiable {r.identifiable} (information kept {r.information_kept:.2f}); "
-              f"auto -> {auto.kind}")
+        pooled = {k: sum(h.coverage(k) * h.n_values for h in r.heldout) / n for k in ("none", "discrepancy", "embedded")}
+        print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {100 * pooled['none']:>6.1f} "
+              f"{100 * pooled['discrepancy']:>6.1f} {np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} "
+              f"{100 * pooled['embedded']:>6.1f} {np.median([h.widening_embedded for h in r.heldout]):>6.2f}")
+        print(f"         model_error {dt:.2f} s; test LR {r.test.statistic:.4g}, p = {r.test.p_value:.3g}; "
+              f"{r.how} -> {r.kind}; identifiable {r.identifiable} (information kept {r.information_kept:.3f})")
+        print("         " + r.summary().split("\n\n")[1].replace("\n", "\n         "))
         out[v] = r
     return out
 
@@ -88,16 +92,17 @@ def size_study(study, variant: str, n: int, seed: int) -> None:
 
 def adequate_coverage(study, variant: str, n: int, seed: int) -> None:
     """Held-out coverage and widening of the model-error bands on campaigns without model error."""
-    cov0, cov1, wid = [], [], []
+    rows = []
     for m, d, p in _campaigns(study, variant, n, seed):
-        r = model_error(m, d, p, splits=study.splits, weights=WEIGHTS, kind="discrepancy")
-        cov0 += [h.coverage_plain for h in r.heldout]
-        cov1 += [h.coverage_error for h in r.heldout]
-        wid += [h.widening for h in r.heldout]
-    se = np.std(cov1) / np.sqrt(len(cov1))
+        r = model_error(m, d, p, splits=study.splits, weights=WEIGHTS)
+        rows += [(h.coverage_plain, h.coverage_discrepancy, h.coverage_embedded, h.widening_discrepancy,
+                  h.widening_embedded) for h in r.heldout]
+    a = np.array(rows)
+    se = a[:, :3].std(axis=0) / np.sqrt(len(a))
     print(f"adequate {variant}, {n} campaigns x {len(study.splits)} splits: held-out coverage plain "
-          f"{100 * np.mean(cov0):.1f} %, with model error {100 * np.mean(cov1):.1f} % (+- {100 * se:.1f}); "
-          f"median widening {np.median(wid):.2f}")
+          f"{100 * a[:, 0].mean():.1f} (+- {100 * se[0]:.1f}) %, discrepancy {100 * a[:, 1].mean():.1f} "
+          f"(+- {100 * se[1]:.1f}) %, embedded {100 * a[:, 2].mean():.1f} (+- {100 * se[2]:.1f}) %; median widening "
+          f"discrepancy {np.median(a[:, 3]):.2f}, embedded {np.median(a[:, 4]):.2f}")
 
 
 def main(argv=None):

@@ -15,11 +15,14 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
 2. **Discrepancy** (kind "discrepancy"): per sensor amplitude s_k, length scale l_k and rough part tau_k by
    REML with exact gradients, then p by generalised least squares under the residual covariance, with
    covariance (G^T V^-1 G)^-1 (:mod:`identification.studies.model_error_fit`: profiling, not a joint fit).
-3. **Held-out table**: for every split, both error models fitted on its calibration part predict its
+3. **Embedded** (kind "embedded", :mod:`identification.studies.embedded_error`): the parameters vary between
+   conditions (input rows), p + b_j with b_j ~ N(0, diag(omega^2)), omega by REML with exact gradients: which
+   parameters carry the error and by how much.
+4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
    validation readings (95 % new-reading bands by default): coverage, median widening, log score.
-   ``kind="auto"`` takes the error model of the higher total held-out log score (without splits: the
+   ``kind="auto"`` takes the error model of the highest total held-out log score (without splits: the
    discrepancy when the test detects model error, else none).
-4. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
+5. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
 
 ``identifiable`` is False when, along some direction of p, the model error leaves less than
 :data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` (1 %) of the information the noise alone
@@ -28,8 +31,8 @@ of what uncorrelated errors of the same size would leave: the discrepancy can mi
 (heuristic thresholds).  A discrepancy that mimics p with a small one (a smooth error absorbed by p) is not
 caught by any such check: ``exact_at`` (where the model is known to be exact) is the remedy.
 
-Only the output discrepancy is available; the embedded kind (a random-effects covariance of the
-parameters across conditions) is not implemented yet.
+The embedded error's conditions are the input rows; groups named by the user and the moment estimate from
+the excess spread of the split fits are not implemented yet.
 """
 from __future__ import annotations
 
@@ -45,14 +48,16 @@ from identification.fit.measurements import Measurements
 from identification.inference.intervals import validate_alpha
 from identification.studies.discrepancy_gp import InputScaling
 from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
-from identification.studies.model_error_result import ErrorTest, HeldOut, ModelErrorResult, SensorDiscrepancy
+from identification.studies.model_error_result import (EmbeddedParameter, ErrorTest, HeldOut, ModelErrorResult,
+                                                       SensorDiscrepancy)
 from identification.studies.splits import Split, SplitError
 from models.contract import Model
 
 __all__ = ["model_error", "ModelErrorResult", "KINDS"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
-KINDS = ("auto", "none", "discrepancy")
+KINDS = ("auto", "none", "discrepancy", "embedded")
+_ERROR_KINDS = ("none", "discrepancy", "embedded")
 
 
 # ---------------------------------------------------------------------------- validation
@@ -119,23 +124,23 @@ def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
 
 # ---------------------------------------------------------------------------- held-out table
 def _held_out(model, data, p0, w, scaling, split: Split, alpha: float) -> HeldOut:
-    """Both error models fitted on the calibration part of ``split`` predict its validation readings."""
+    """Every error model fitted on the calibration part of ``split`` predicts its validation readings."""
     cal, val = split.calibration(data), split.validation(data)
-    plain = fit_model_error(model, cal, p0, w, scaling, with_gp=False)
-    error = fit_model_error(model, cal, p0, w, scaling, with_gp=True, plain=plain.plain)
+    plain = fit_model_error(model, cal, p0, w, scaling, "none")
+    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain) for k in _ERROR_KINDS[1:]]
     sel = w > 0
     z = val.z[:, :, sel]
     ok = np.isfinite(z)
     cover, score, width = [], [], []
-    for f in (plain, error):
+    for f in fits:
         b = f.predict(val.inputs, alpha, new_reading=True)
         lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
         sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
         cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
         score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
-    return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], float(np.median(width[1] / width[0])),
-                   score[0], score[1])
+    return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
+                   float(np.median(width[2] / width[0])), score[0], score[1], score[2])
 
 
 def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
@@ -143,11 +148,17 @@ def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
     if kind != "auto":
         return kind, "as asked"
     if heldout:
-        s0 = sum(h.log_score_plain * h.n_values for h in heldout)
-        s1 = sum(h.log_score_error * h.n_values for h in heldout)
-        chosen = "discrepancy" if s1 > s0 else "none"
-        return chosen, f"auto: held-out log score {s1:.4g} with the discrepancy, {s0:.4g} without"
-    return ("discrepancy" if detected else "none"), "auto: no splits, so by the test"
+        total = {k: sum(h.log_score(k) * h.n_values for h in heldout) for k in _ERROR_KINDS}
+        chosen = max(total, key=total.get)
+        return chosen, "auto: total held-out log score " + ", ".join(f"{k} {v:.4g}" for k, v in total.items())
+    return ("discrepancy" if detected else "none"), "auto: no splits, so by the test (discrepancy when detected)"
+
+
+def _embedded(fit: ErrorFit, names: tuple) -> tuple:
+    if fit.embedded is None:
+        return ()
+    return tuple(EmbeddedParameter(n, float(o), float(o / abs(p)) if p != 0 else math.inf)
+                 for n, o, p in zip(names, fit.embedded.omega, fit.p))
 
 
 def _discrepancies(fit: ErrorFit, data: Measurements, scaling: InputScaling) -> tuple:
@@ -174,9 +185,9 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
                      f"the model error has lost its meaning{hint}")
     if kind == "none" and detected:
         notes.append("model error detected, but the reported error model is 'none': the bands ignore it")
-    bad = [h.split for h in heldout if h.coverage_error < h.coverage_plain]
+    bad = [h.split for h in heldout if h.coverage(kind) < h.coverage_plain]
     if bad:
-        notes.append(f"the model error lowered the held-out coverage on split(s) {', '.join(bad)}")
+        notes.append(f"the {kind} error model lowered the held-out coverage on split(s) {', '.join(bad)}")
     return tuple(notes)
 
 
@@ -196,7 +207,7 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     data : Measurements           with sigma (unit of z), or sigma None and repeated series (pure error)
     p0 : array_like (n_p,)        start values of the fits
     splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice)
-    kind : "auto", "none" or "discrepancy"
+    kind : "auto", "none", "discrepancy" or "embedded"
     exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
     weights : array_like (n_S,), optional   sensor selection (0/1), as in identify
@@ -222,19 +233,20 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     data, sigma_source = _sigma_of(data, w)
     splits = _checked_splits(splits, data, w, model.n_p)
     scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs))
-    plain = fit_model_error(model, data, p0, w, scaling, with_gp=False)
+    plain = fit_model_error(model, data, p0, w, scaling, "none")
     t = plain.test
     detected = t.p_value < alpha
     heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha) for sp in splits)
     chosen, how = _choose(kind, detected, heldout)
-    fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, True, plain=plain.plain)
+    fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, chosen, plain=plain.plain)
     est = plain.plain
     return ModelErrorResult(
         model_name=est.model_name or model.name, kind=chosen, detected=bool(detected),
         test=ErrorTest(t.statistic, t.p_value, t.lam, t.dof), alpha=alpha,
         sensors=tuple(s for s, wk in zip(data.sensors, w) if wk > 0), param_names=tuple(model.param_names),
         p=fit.p.copy(), cov=fit.cov.copy(), p_plain=est.p.copy(), cov_plain=np.asarray(est.cov, float).copy(),
-        discrepancies=_discrepancies(fit, data, scaling), identifiable=fit.identifiable,
+        discrepancies=_discrepancies(fit, data, scaling), embedded=_embedded(fit, tuple(model.param_names)),
+        identifiable=fit.identifiable,
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source),
         fit=fit)

@@ -24,6 +24,8 @@ for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
     \operatorname{var} = s_k^2 c(q^*, q^*) + \tau_k^2 w(q^*) - k_*^\top V^{-1} k_* + u^\top C^{ME} u
     \;[+\,\sigma_k^2 \text{ for a new reading}];
 
+with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
+condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
 without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
 delta-method bands of the plain fit, C its second-order covariance).  Units: those of z.
 """
@@ -38,6 +40,7 @@ from identification.inference.identify import identify
 from identification.inference.results import Estimate
 from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observations, WhiteTest, fit_discrepancy,
                                                    white_lr_test)
+from identification.studies.embedded_error import EmbeddedFit, fit_embedded
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
@@ -88,7 +91,8 @@ class ErrorFit:
     plain : Estimate                  the fit without model error
     test : WhiteTest                  'no model error' test on the plain residuals
     p, cov : ndarray                  parameters and their covariance under this fit's error model
-    gp : GPFit or None
+    gp : GPFit or None                the output discrepancy (kind "discrepancy")
+    embedded : EmbeddedFit or None    the parameters' spread between conditions (kind "embedded")
     alpha_r : ndarray (N,)            V^{-1} r(p) (stacked residual means)
     Vinv_G : ndarray (N, n_p)         V^{-1} G
     Vinv : ndarray (N, N)
@@ -114,10 +118,17 @@ class ErrorFit:
     information_kept: float = 1.0
     correlation_kept: float = 1.0
     notes: tuple = ()
+    embedded: EmbeddedFit | None = None
+
+    @property
+    def kind(self) -> str:
+        return "discrepancy" if self.gp is not None else "embedded" if self.embedded is not None else "none"
 
     @property
     def identifiable(self) -> bool:
-        """False when the discrepancy can mimic a change of p (both shares below their thresholds)."""
+        """False when the output discrepancy can mimic a change of p (both shares below their thresholds)."""
+        if self.gp is None:
+            return True
         return self.information_kept >= CONFOUNDED_INFORMATION or self.correlation_kept >= CONFOUNDED_CORRELATION
 
     def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool) -> Band:
@@ -125,7 +136,8 @@ class ErrorFit:
         h, G = outputs_at(self.model, self.p, inputs)
         sel = self.weights > 0
         if self.gp is None:
-            var = np.einsum("jkp,pq,jkq->jk", G, self.cov, G)
+            C = self.cov if self.embedded is None else self.cov + self.embedded.Omega
+            var = np.einsum("jkp,pq,jkq->jk", G, C, G)
             mean = h
         else:
             mean, var = self._kriging(inputs, h, G, include_g=True)
@@ -136,6 +148,10 @@ class ErrorFit:
         """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error)."""
         n = np.atleast_2d(inputs).shape[0]
         sel = self.weights > 0
+        if self.embedded is not None:
+            G = outputs_at(self.model, self.p, inputs)[1]
+            var = np.einsum("jkp,pq,jkq->jk", G, self.embedded.Omega, G)
+            return self._band(np.zeros_like(var), var, sel, alpha, "discrepancy", False)
         if self.gp is None:
             z = np.zeros((n, len(self.sigma)))
             return self._band(z, z, sel, alpha, "discrepancy", False)
@@ -172,9 +188,8 @@ def pure_error_sigma(z: np.ndarray) -> tuple:
         return np.where(dof > 0, np.sqrt(ss / dof), np.nan), dof
 
 
-def _gls(model, data, est: Estimate, gp: GPFit, obs: Observations, zbar_s: np.ndarray) -> tuple:
+def _gls(model, data, est: Estimate, V: np.ndarray, obs: Observations, zbar_s: np.ndarray) -> tuple:
     """(p, h (n_q, n_S), G (n_q, n_S, n_p), notes): Gauss-Newton on the GLS objective r^T V^-1 r."""
-    V = gp.covariance()
     L = linalg.cholesky(V, lower=True)
     p, h, G = est.p.copy(), np.asarray(est.fitted, float), np.asarray(est.G, float)
     Y = np.asarray(est.states, float) if model.n_y else None
@@ -218,31 +233,35 @@ def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np
     return tuple(out)
 
 
-def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, with_gp: bool,
+def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
                     plain: Estimate | None = None) -> ErrorFit:
-    """The :class:`ErrorFit` of ``data`` (sigma known): the plain fit, the test and, ``with_gp``, the
-    discrepancy (REML) and the generalised least-squares refit of p.  ``plain``: the plain fit when
-    already done.  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
+    plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
+    the plain fit when already done.  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
     obs = Observations.of(data.counts(), sigma, weights, scaling(data.inputs))
     zbar_s = obs.stack(np.nan_to_num(data.means()))
     Gs = obs.stack(np.asarray(est.G, float))
-    test = white_lr_test(obs, Gs, zbar_s - obs.stack(np.asarray(est.fitted, float)))
-    base = ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float))
-    if not with_gp:
-        return base
-    gp = fit_discrepancy(obs, Gs, zbar_s - obs.stack(np.asarray(est.fitted, float)), scaling.pins)
-    p, h, G, notes = _gls(model, data, est, gp, obs, zbar_s)
-    if not gp.converged:
-        notes += ("the discrepancy's REML optimiser stopped before convergence (best start kept)",)
-    V = gp.covariance()
-    L = linalg.cholesky(V, lower=True)
-    Vinv = linalg.cho_solve((L, True), np.eye(len(V)))
+    r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))
+    test = white_lr_test(obs, Gs, r0)
+    if kind == "none":
+        return ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float))
+    noise = np.concatenate(obs.noise)
+    gp = emb = None
+    if kind == "discrepancy":
+        gp = fit_discrepancy(obs, Gs, r0, scaling.pins)
+        V, converged = gp.covariance(), gp.converged
+    else:
+        emb = fit_embedded(Gs, np.concatenate(obs.rows), noise, np.asarray(est.stderr_gn, float), r0)
+        V, converged = emb.V, emb.converged
+    p, h, G, notes = _gls(model, data, est, V, obs, zbar_s)
+    if not converged:
+        notes += (f"the {kind}'s REML optimiser stopped before convergence (best start kept)",)
+    Vinv = linalg.cho_solve((linalg.cholesky(V, lower=True), True), np.eye(len(V)))
     Gs = obs.stack(G)
-    A = Gs.T @ Vinv @ Gs
-    cov = linalg.cho_solve(linalg.cho_factor(A, lower=True), np.eye(len(p)))
+    cov = linalg.cho_solve(linalg.cho_factor(Gs.T @ Vinv @ Gs, lower=True), np.eye(len(p)))
     r = zbar_s - obs.stack(h)
-    kept, corr = _information_kept(Gs, V, Vinv, np.concatenate(obs.noise))
+    kept, corr = _information_kept(Gs, V, Vinv, noise)
     return ErrorFit(model, weights, sigma, scaling, est, test, p, cov, gp, Vinv @ r, Vinv @ Gs, Vinv, kept, corr,
-                    notes)
+                    notes, emb)

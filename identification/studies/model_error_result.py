@@ -10,7 +10,7 @@ from scipy import stats
 from identification.inference.intervals import ConfidenceIntervals, validate_alpha
 from identification.studies.model_error_fit import Band, ErrorFit
 
-__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "ErrorTest"]
+__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest"]
 
 
 @dataclass(frozen=True)
@@ -48,22 +48,48 @@ class SensorDiscrepancy:
 
 
 @dataclass(frozen=True)
+class EmbeddedParameter:
+    """The spread of one parameter between conditions (kind "embedded"): omega in the parameter's unit and
+    relative to the parameter's value (omega / |p|)."""
+
+    name: str
+    omega: float
+    relative: float
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "omega": self.omega, "relative": self.relative}
+
+
+@dataclass(frozen=True)
 class HeldOut:
     """One split: its validation readings predicted from the fits on its calibration part.
 
     ``coverage_*`` the fraction of validation readings (selected sensors) inside the (1 - alpha)
-    new-reading band without (``plain``) and with the model error; ``widening`` the median ratio of the
-    band widths (with / without); ``log_score_*`` the mean log predictive density of a reading (log of
-    1 / unit of z); ``n_values`` the readings counted.
+    new-reading band without model error (``plain``), with the output discrepancy and with the embedded
+    error; ``widening_*`` the median ratio of the band widths (with / without); ``log_score_*`` the mean
+    log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted.
     """
 
     split: str
     n_values: int
     coverage_plain: float
-    coverage_error: float
-    widening: float
+    coverage_discrepancy: float
+    coverage_embedded: float
+    widening_discrepancy: float
+    widening_embedded: float
     log_score_plain: float
-    log_score_error: float
+    log_score_discrepancy: float
+    log_score_embedded: float
+
+    def coverage(self, kind: str) -> float:
+        """The coverage of the ``kind`` ("none", "discrepancy", "embedded") bands."""
+        return getattr(self, f"coverage_{'plain' if kind == 'none' else kind}")
+
+    def log_score(self, kind: str) -> float:
+        return getattr(self, f"log_score_{'plain' if kind == 'none' else kind}")
+
+    def widening(self, kind: str) -> float:
+        return 1.0 if kind == "none" else getattr(self, f"widening_{kind}")
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -90,7 +116,7 @@ class ModelErrorResult:
     Attributes
     ----------
     model_name : str
-    kind : str                   "none" or "discrepancy": the error model of p, predict and discrepancy
+    kind : str                   "none", "discrepancy" or "embedded": the error model of p, predict, discrepancy
     detected : bool              the test's p-value < alpha
     test : ErrorTest
     alpha : float
@@ -98,7 +124,8 @@ class ModelErrorResult:
     param_names : tuple of str
     p, cov : ndarray             parameters (their units) and covariance under the chosen error model
     p_plain, cov_plain : ndarray  the fit without model error (second-order covariance)
-    discrepancies : tuple of SensorDiscrepancy   (empty for kind "none")
+    discrepancies : tuple of SensorDiscrepancy   (kind "discrepancy", else empty)
+    embedded : tuple of EmbeddedParameter        (kind "embedded", else empty)
     identifiable : bool          False: the discrepancy can mimic a change of the parameters
     information_kept : float     share of the noise-only information about p the model error leaves (min over
                                  directions; 1 for kind "none")
@@ -124,6 +151,7 @@ class ModelErrorResult:
     p_plain: np.ndarray
     cov_plain: np.ndarray
     discrepancies: tuple
+    embedded: tuple
     identifiable: bool
     information_kept: float
     correlation_kept: float
@@ -188,7 +216,8 @@ class ModelErrorResult:
             "test": {k: getattr(self.test, k) for k in ErrorTest.__dataclass_fields__}, "alpha": self.alpha,
             "sensors": list(self.sensors), "parameters": list(self.param_names), "p": self.p, "cov": self.cov,
             "conf_int": {"lower": ci.lower, "upper": ci.upper}, "p_plain": self.p_plain, "cov_plain": self.cov_plain,
-            "discrepancies": [d.to_dict() for d in self.discrepancies], "identifiable": self.identifiable,
+            "discrepancies": [d.to_dict() for d in self.discrepancies],
+            "embedded": [e.to_dict() for e in self.embedded], "identifiable": self.identifiable,
             "information_kept": self.information_kept,
             "correlation_kept": self.correlation_kept, "heldout": [h.to_dict() for h in self.heldout],
             "exact_at": dict(self.exact_at), "sigma": self.sigma, "sigma_source": self.sigma_source,
@@ -215,12 +244,15 @@ class ModelErrorResult:
             lines += ["", f"{'sensor':<10} {'s/sigma':>8} {'l (scaled)':>10} {'tau/sigma':>9}"]
             lines += [f"{d.sensor:<10} {d.amplitude / d.sigma:>8.3g} {d.length_scale:>10.3g} "
                       f"{d.rough / d.sigma:>9.3g}" for d in self.discrepancies]
+        if self.embedded:
+            lines += ["", f"{'parameter':<10} {'omega':>12} {'omega/|p|':>10}  (spread between conditions)"]
+            lines += [f"{e.name:<10} {e.omega:>12.4g} {e.relative:>10.3g}" for e in self.embedded]
         if self.heldout:
-            pct = f"{100 * (1 - self.alpha):g} %"
-            lines += ["", f"held-out {pct} new-reading bands: {'split':<34} {'n':>4} {'plain':>7} {'error':>7} "
-                          f"{'widen':>6}"]
-            lines += [f"{'':<34}{h.split:<34.34} {h.n_values:>4} {100 * h.coverage_plain:>6.1f}% "
-                      f"{100 * h.coverage_error:>6.1f}% {h.widening:>6.2f}" for h in self.heldout]
+            lines += ["", f"held-out {100 * (1 - self.alpha):g} % new-reading bands (coverage %, median widening)",
+                      f"  {'split':<34} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}"]
+            lines += [f"  {h.split:<34.34} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
+                      f"{100 * h.coverage_discrepancy:>6.1f} {h.widening_discrepancy:>6.2f} "
+                      f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}" for h in self.heldout]
         if self.notes:
             lines += ["", "Notes:"] + [f"[{k}] {n}" for k, n in enumerate(self.notes, 1)]
         return "\n".join(lines)

@@ -57,8 +57,8 @@ def test_a_known_additive_discrepancy_is_found_and_predicted(found):
     assert found.detected and found.test.p_value < 1e-6
     assert found.kind == "discrepancy"
     inter = found.heldout[0]
-    assert inter.coverage_error >= 0.9 and inter.coverage_error > inter.coverage_plain + 0.1
-    assert inter.log_score_error > inter.log_score_plain
+    assert inter.coverage_discrepancy >= 0.9 and inter.coverage_discrepancy > inter.coverage_plain + 0.1
+    assert inter.log_score_discrepancy > max(inter.log_score_plain, inter.log_score_embedded)
     q = (Q[1:] + Q[:-1]) / 2                     # inputs between the data's
     true = _truth(q) + _discrepancy(q)
     pred = found.predict(q[:, None]).mean
@@ -66,6 +66,23 @@ def test_a_known_additive_discrepancy_is_found_and_predicted(found):
     assert np.sqrt(np.mean((pred - true) ** 2)) < 0.25 * np.sqrt(np.mean((plain - true) ** 2))
     assert [d.sensor for d in found.discrepancies] == ["y1", "y2"]
     assert found.discrepancies[0].amplitude > 2 * SIGMA          # y1: 0.3 sin(3 x), sigma 0.05
+
+
+def test_an_embedded_error_names_the_parameter_that_carries_it():
+    rng = np.random.default_rng(5)
+    a = 2.0 + 0.2 * rng.standard_normal(Q.size)             # a varies between conditions, b = 1.5 does not
+    mean = np.stack([a * (1 - np.exp(-1.5 * Q)), a * Q / (1 + 1.5 * Q)], axis=1)
+    d = Measurements(Q[:, None], mean[None] + SIGMA * rng.standard_normal((2, Q.size, 2)), SIGMA, sensors=["y1", "y2"])
+    r = model_error(_model(), d, P0, splits=SPLITS, kind="embedded")
+    assert r.kind == "embedded" and r.discrepancies == ()
+    assert [e.name for e in r.embedded] == ["a", "b"]
+    assert r.embedded[0].omega > 2 * r.embedded[1].omega
+    assert r.embedded[0].relative == pytest.approx(r.embedded[0].omega / abs(r.p[0]))
+    assert all(h.coverage_embedded > h.coverage_plain + 0.1 for h in r.heldout)
+    band = r.discrepancy([0.5, 1.5])
+    assert np.all(band.mean == 0) and np.all(band.upper > band.lower)
+    assert np.all(np.diag(r.cov) > np.diag(r.cov_plain))
+    assert "spread between conditions" in r.summary()
 
 
 def test_adequate_model_mechanics():
@@ -161,7 +178,8 @@ def test_result_protocol(found):
     assert s.startswith("Model error of") and "DETECTED" in s and "interleaved" in s
     df = found.to_frame()
     assert list(df.index) == ["interleaved", "low vs high"]
-    assert {"coverage_plain", "coverage_error", "widening", "log_score_error"} <= set(df.columns)
+    assert {"coverage_plain", "coverage_discrepancy", "coverage_embedded", "widening_discrepancy",
+            "log_score_embedded"} <= set(df.columns)
     assert df.attrs["kind"] == "discrepancy"
     back = json.loads(json.dumps(found.to_dict()))
     assert back["kind"] == "discrepancy" and back["detected"] is True and len(back["heldout"]) == 2
@@ -177,7 +195,7 @@ def test_result_protocol(found):
     ({"exact_at": {"x": float("nan")}}, None, r"^exact_at\['x'\]: expected a finite number"),
     ({"exact_at": {"x": "a"}}, None, r"^exact_at\['x'\]: expected a finite number"),
     ({"splits": [Split("tiny", [0], [1, 2])], "weights": [1, 0]}, None, r"^splits: split 'tiny' has 1 calibration"),
-    ({"kind": "embedded"}, None, r"^kind: unknown kind 'embedded'"),
+    ({"kind": "random"}, None, r"^kind: unknown kind 'random'"),
     ({"alpha": 0.7}, None, r"^alpha: must lie in"),
     ({}, "one series", r"^data: sigma is None and the data hold no repeated series"),
 ])
