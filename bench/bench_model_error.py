@@ -57,7 +57,8 @@ def coverage_table(study) -> dict:
               f"{100 * pooled['embedded']:>6.1f} {np.median([h.widening_embedded for h in r.heldout]):>6.2f}")
         print(f"         model_error {dt:.2f} s; test LR {r.test.statistic:.4g}, p = {r.test.p_value:.3g}; "
               f"{r.how} -> {r.kind}; identifiable {r.identifiable} (information kept {r.information_kept:.3f})")
-        print("         " + r.summary().split("\n\n")[1].replace("\n", "\n         "))
+        for block in r.summary().split("\n\n")[1:3]:          # the parameters, the discrepancy / embedded error
+            print("         " + block.replace("\n", "\n         "))
         out[v] = r
     return out
 

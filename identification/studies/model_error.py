@@ -183,6 +183,8 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
                      f"of p it leaves {100 * fit.information_kept:.2g} % of the information the noise alone leaves, "
                      f"{100 * fit.correlation_kept:.2g} % of what uncorrelated errors of its size would leave); p under "
                      f"the model error has lost its meaning{hint}")
+    if exact_at and kind != "discrepancy":
+        notes.append(f"exact_at pins the output discrepancy only; the {kind} error model does not use it")
     if kind == "none" and detected:
         notes.append("model error detected, but the reported error model is 'none': the bands ignore it")
     bad = [h.split for h in heldout if h.coverage(kind) < h.coverage_plain]

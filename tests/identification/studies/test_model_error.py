@@ -78,6 +78,7 @@ def test_an_embedded_error_names_the_parameter_that_carries_it():
     assert [e.name for e in r.embedded] == ["a", "b"]
     assert r.embedded[0].omega > 2 * r.embedded[1].omega
     assert r.embedded[0].relative == pytest.approx(r.embedded[0].omega / abs(r.p[0]))
+    assert model_error(_model(), d, P0, kind="embedded", exact_at={"x": 0.0}).notes[-1].startswith("exact_at pins")
     assert all(h.coverage_embedded > h.coverage_plain + 0.1 for h in r.heldout)
     band = r.discrepancy([0.5, 1.5])
     assert np.all(band.mean == 0) and np.all(band.upper > band.lower)
