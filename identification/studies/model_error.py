@@ -196,12 +196,13 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
 # ---------------------------------------------------------------------------- entry
 def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, kind: str = "auto",
                 exact_at: Mapping | None = None, alpha: float = 0.05, weights=None) -> ModelErrorResult:
-    r"""Detect, size and locate the model error of a static model, and predict with it.
+    r"""zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk, or h_k(q_j, p + b_j) + eps_jk: detect, size and
+    locate the model error of a static model, and predict with it.
 
-    zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk (module docstring): the 'no model error' test
-    (REML likelihood ratio, reference 0.5 chi2_0 + 0.5 chi2_1), the discrepancy per sensor (Gaussian
-    process over the scaled inputs, REML with exact gradients), p by generalised least squares under it,
-    the held-out table of ``splits``; units those of z and of the parameters.
+    The 'no model error' test (REML likelihood ratio, reference 0.5 chi2_0 + 0.5 chi2_1), the output
+    discrepancy per sensor (Gaussian process over the scaled inputs) or the embedded error (b_j ~ N(0,
+    diag(omega^2)) per condition), each by REML with exact gradients, p by generalised least squares under
+    it, the held-out table of ``splits`` (module docstring); units those of z and of the parameters.
 
     Parameters
     ----------
@@ -230,8 +231,11 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     exact = _checked_exact_at(exact_at, model)
     p0 = np.asarray(p0, float).ravel()
     if p0.shape != (model.n_p,) or not np.all(np.isfinite(p0)):
-        raise DataError(f"p0: expected {model.n_p} finite start values ({', '.join(model.param_names)}), got {p0.size}")
+        raise DataError(f"p0: expected {model.n_p} finite start values ({', '.join(model.param_names)}), got "
+                        f"{p0.tolist()}")
     w = data.sensor_weights(weights)
+    if not np.any(w > 0):
+        raise DataError("weights: select at least one sensor (a positive weight)")
     data, sigma_source = _sigma_of(data, w)
     splits = _checked_splits(splits, data, w, model.n_p)
     scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs))

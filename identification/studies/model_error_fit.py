@@ -41,6 +41,7 @@ from identification.inference.results import Estimate
 from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observations, WhiteTest, fit_discrepancy,
                                                    white_lr_test)
 from identification.studies.embedded_error import EmbeddedFit, fit_embedded
+from models.errors import NumericsError
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
@@ -203,7 +204,7 @@ def _gls(model, data, est: Estimate, V: np.ndarray, obs: Observations, zbar_s: n
             cand = p + step
             try:
                 hc, Gc = outputs_at(model, cand, data.inputs, Y)
-            except (ValueError, ArithmeticError, RuntimeError):
+            except NumericsError:                  # the states do not solve there: a shorter step
                 step = step / 2
                 continue
             rc = linalg.solve_triangular(L, zbar_s - obs.stack(hc), lower=True)

@@ -198,6 +198,7 @@ def test_result_protocol(found):
     ({"splits": [Split("tiny", [0], [1, 2])], "weights": [1, 0]}, None, r"^splits: split 'tiny' has 1 calibration"),
     ({"kind": "random"}, None, r"^kind: unknown kind 'random'"),
     ({"alpha": 0.7}, None, r"^alpha: must lie in"),
+    ({"weights": [0, 0]}, None, r"^weights: select at least one sensor"),
     ({}, "one series", r"^data: sigma is None and the data hold no repeated series"),
 ])
 def test_bad_input_raises_one_clear_value_error(kwargs, data, match):
