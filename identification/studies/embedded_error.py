@@ -1,12 +1,13 @@
 r"""Embedded model error: the parameters vary between conditions.
 
-At every input row j (a condition) the model holds with its own parameters p + b_j,
-b_j ~ N(0, Omega), Omega = diag(omega_i^2) (omega_i in the unit of parameter i), independent between rows.
+In every condition g (an input row, or a group of input rows the user names) the model holds with its own
+parameters p + b_g, b_g ~ N(0, Omega), Omega = diag(omega_i^2) (omega_i in the unit of parameter i),
+independent between conditions.
 Linearised at the plain fit, the residual means r = zbar - h(p) of the selected sensors have the covariance
 
 .. math::
 
-    V(\omega) = D + \big(G\,\Omega\,G^\top\big) \circ S,\qquad S_{oo'} = [\text{row}(o) = \text{row}(o')],
+    V(\omega) = D + \big(G\,\Omega\,G^\top\big) \circ S,\qquad S_{oo'} = [g(o) = g(o')],
 
 with D = diag(sigma_k^2 / n_jk) and G the stacked sensitivities dh/dp: the error is shaped by the model's
 own sensitivities (it couples the sensors of one condition) instead of being free like an output
@@ -79,7 +80,8 @@ class EmbeddedFit:
 
 
 def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.ndarray, r: np.ndarray) -> EmbeddedFit:
-    """The REML omega for stacked sensitivities Gs (N, n_p) at input rows ``rows`` (N,), noise variances (N,),
+    """The REML omega for stacked sensitivities Gs (N, n_p) in conditions ``rows`` (N,) (labels: equal labels
+    share b), noise variances (N,),
     the plain fit's standard errors se (n_p,) and residuals r (N,).  numpy.linalg.LinAlgError when no start
     gives positive definite V and G^T V^-1 G."""
     same_row = (rows[:, None] == rows[None, :]).astype(float)

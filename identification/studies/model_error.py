@@ -16,8 +16,8 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    REML with exact gradients, then p by generalised least squares under the residual covariance, with
    covariance (G^T V^-1 G)^-1 (:mod:`identification.studies.model_error_fit`: profiling, not a joint fit).
 3. **Embedded** (kind "embedded", :mod:`identification.studies.embedded_error`): the parameters vary between
-   conditions (input rows), p + b_j with b_j ~ N(0, diag(omega^2)), omega by REML with exact gradients: which
-   parameters carry the error and by how much.
+   conditions (input rows or named groups), p + b_g with b_g ~ N(0, diag(omega^2)), omega by REML with exact
+   gradients: which parameters carry the error and by how much.
 4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
    validation readings (95 % new-reading bands by default): coverage, median widening, log score.
    ``kind="auto"`` takes the error model of the highest total held-out log score (without splits: the
@@ -31,8 +31,8 @@ of what uncorrelated errors of the same size would leave: the discrepancy can mi
 (heuristic thresholds).  A discrepancy that mimics p with a small one (a smooth error absorbed by p) is not
 caught by any such check: ``exact_at`` (where the model is known to be exact) is the remedy.
 
-The embedded error's conditions are the input rows; groups named by the user and the moment estimate from
-the excess spread of the split fits are not implemented yet.
+The embedded error's conditions are the input rows, or the ``groups`` the user names; the moment estimate
+from the excess spread of the split fits is not implemented.
 """
 from __future__ import annotations
 
@@ -110,6 +110,22 @@ def _checked_splits(splits, data: Measurements, w: np.ndarray, n_p: int) -> tupl
     return splits
 
 
+def _checked_groups(groups, n_q: int) -> np.ndarray | None:
+    """The condition of every input row as integer codes (n_q,), or None (ValueError naming the argument)."""
+    if groups is None:
+        return None
+    if isinstance(groups, (str, bytes)) or not hasattr(groups, "__len__"):
+        raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {groups!r}")
+    labels = list(groups)
+    if len(labels) != n_q:
+        raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {len(labels)}")
+    try:
+        codes = {lab: i for i, lab in enumerate(dict.fromkeys(labels))}
+    except TypeError:
+        raise ValueError("groups: the condition labels must be hashable (numbers or strings)") from None
+    return np.array([codes[lab] for lab in labels])
+
+
 def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
     """(data with sigma, source): sigma as given, or the pure error of repeated series (ValueError without)."""
     if data.sigma is not None:
@@ -123,11 +139,14 @@ def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
 
 
 # ---------------------------------------------------------------------------- held-out table
-def _held_out(model, data, p0, w, scaling, split: Split, alpha: float) -> HeldOut:
-    """Every error model fitted on the calibration part of ``split`` predicts its validation readings."""
+def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups) -> HeldOut:
+    """Every error model fitted on the calibration part of ``split`` predicts its validation readings (as new
+    conditions)."""
     cal, val = split.calibration(data), split.validation(data)
     plain = fit_model_error(model, cal, p0, w, scaling, "none")
-    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain) for k in _ERROR_KINDS[1:]]
+    g = None if groups is None else groups[list(split.cal_inputs)]
+    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g)
+                      for k in _ERROR_KINDS[1:]]
     sel = w > 0
     z = val.z[:, :, sel]
     ok = np.isfinite(z)
@@ -172,8 +191,11 @@ def _discrepancies(fit: ErrorFit, data: Measurements, scaling: InputScaling) -> 
     return tuple(out)
 
 
-def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str) -> tuple:
+def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
+           grouped: bool) -> tuple:
     notes = list(fit.notes)
+    if grouped and kind != "embedded":
+        notes.append(f"groups name the conditions of the embedded error only; the {kind} error model does not use them")
     if sigma_source != "given":
         notes.append("sigma is the pure error of the repeated series, taken as known: the test's reference "
                      "distribution is then approximate")
@@ -195,7 +217,7 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
 
 # ---------------------------------------------------------------------------- entry
 def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, kind: str = "auto",
-                exact_at: Mapping | None = None, alpha: float = 0.05, weights=None) -> ModelErrorResult:
+                exact_at: Mapping | None = None, alpha: float = 0.05, weights=None, groups=None) -> ModelErrorResult:
     r"""zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk, or h_k(q_j, p + b_j) + eps_jk: detect, size and
     locate the model error of a static model, and predict with it.
 
@@ -214,6 +236,8 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
     weights : array_like (n_S,), optional   sensor selection (0/1), as in identify
+    groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
+                                  with one label share their parameter deviation b); None: every row its own
 
     Returns
     -------
@@ -238,13 +262,15 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         raise DataError("weights: select at least one sensor (a positive weight)")
     data, sigma_source = _sigma_of(data, w)
     splits = _checked_splits(splits, data, w, model.n_p)
+    codes = _checked_groups(groups, data.n_q)
     scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs))
     plain = fit_model_error(model, data, p0, w, scaling, "none")
     t = plain.test
     detected = t.p_value < alpha
-    heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha) for sp in splits)
+    heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha, codes) for sp in splits)
     chosen, how = _choose(kind, detected, heldout)
-    fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, chosen, plain=plain.plain)
+    fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, chosen, plain=plain.plain,
+                                                         groups=codes)
     est = plain.plain
     return ModelErrorResult(
         model_name=est.model_name or model.name, kind=chosen, detected=bool(detected),
@@ -254,5 +280,6 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         discrepancies=_discrepancies(fit, data, scaling), embedded=_embedded(fit, tuple(model.param_names)),
         identifiable=fit.identifiable,
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
-        sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source),
+        sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,
+                                                                 codes is not None),
         fit=fit)

@@ -235,10 +235,11 @@ def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np
 
 
 def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
-                    plain: Estimate | None = None) -> ErrorFit:
+                    plain: Estimate | None = None, groups: np.ndarray | None = None) -> ErrorFit:
     """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
     plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
-    the plain fit when already done.  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    the plain fit when already done; ``groups`` (n_q,) integer condition of every input row of the embedded error
+    (None: each row its own).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
     obs = Observations.of(data.counts(), sigma, weights, scaling(data.inputs))
@@ -254,7 +255,8 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
         gp = fit_discrepancy(obs, Gs, r0, scaling.pins)
         V, converged = gp.covariance(), gp.converged
     else:
-        emb = fit_embedded(Gs, np.concatenate(obs.rows), noise, np.asarray(est.stderr_gn, float), r0)
+        cond = np.arange(data.n_q) if groups is None else np.asarray(groups)
+        emb = fit_embedded(Gs, cond[np.concatenate(obs.rows)], noise, np.asarray(est.stderr_gn, float), r0)
         V, converged = emb.V, emb.converged
     p, h, G, notes = _gls(model, data, est, V, obs, zbar_s)
     if not converged:

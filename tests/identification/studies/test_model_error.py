@@ -86,6 +86,20 @@ def test_an_embedded_error_names_the_parameter_that_carries_it():
     assert "spread between conditions" in r.summary()
 
 
+def test_embedded_groups_share_their_deviation():
+    rng = np.random.default_rng(7)
+    groups = np.repeat(["g1", "g2", "g3", "g4", "g5"], 5)
+    a = 2.0 + np.repeat(0.2 * rng.standard_normal(5), 5)     # one a per group of five rows
+    mean = np.stack([a * (1 - np.exp(-1.5 * Q)), a * Q / (1 + 1.5 * Q)], axis=1)
+    d = Measurements(Q[:, None], mean[None] + SIGMA * rng.standard_normal((2, Q.size, 2)), SIGMA, sensors=["y1", "y2"])
+    by_group = model_error(_model(), d, P0, kind="embedded", groups=groups)
+    by_row = model_error(_model(), d, P0, kind="embedded")
+    assert by_group.embedded[0].omega > 2 * by_group.embedded[1].omega
+    assert by_group.embedded[0].omega != pytest.approx(by_row.embedded[0].omega, rel=1e-3)
+    assert np.sqrt(by_group.cov[0, 0]) > np.sqrt(by_row.cov[0, 0])       # five draws of b, not 25
+    assert any("groups" in n for n in model_error(_model(), d, P0, kind="discrepancy", groups=groups).notes)
+
+
 def test_adequate_model_mechanics():
     r = model_error(_model(), _data(False), P0, splits=SPLITS)
     t = r.test
@@ -199,6 +213,7 @@ def test_result_protocol(found):
     ({"kind": "random"}, None, r"^kind: unknown kind 'random'"),
     ({"alpha": 0.7}, None, r"^alpha: must lie in"),
     ({"weights": [0, 0]}, None, r"^weights: select at least one sensor"),
+    ({"groups": [1, 2, 3]}, None, r"^groups: expected one condition label per input row \(25\), got 3"),
     ({}, "one series", r"^data: sigma is None and the data hold no repeated series"),
 ])
 def test_bad_input_raises_one_clear_value_error(kwargs, data, match):
