@@ -8,7 +8,8 @@ sigma_man^2)):
    on the calibration part, by the plain 95 % new-reading delta-method bands (h +- 1.96 sqrt(g^T C g +
    sigma^2), the baseline of issue 29) and by :func:`identification.model_error`'s bands with the output
    discrepancy and with the embedded error; the median widening (ratio of band widths) per variant; the
-   runtime of ``model_error`` (kind auto, with the held-out table).
+   runtime of ``model_error`` (kind auto, with the held-out table); once more with the discrepancy pinned to
+   zero with zero slope at zero press force (``exact_at={"q_P": 0}``).
 2. **size** of the 'no model error' test (alpha 5 %): ``--n`` campaigns simulated from an adequate model
    (the variant ``--size-variant`` at its fit on the shipped data, z = h(p_hat) + sigma eps, 2 series x 29
    inputs), the rejection rate with its binomial (Clopper-Pearson 95 %) interval.
@@ -37,14 +38,15 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 WEIGHTS = np.array([0.0, 1.0, 1.0])
 
 
-def coverage_table(study) -> dict:
+def coverage_table(study, exact_at=None) -> dict:
     """{variant: ModelErrorResult (kind auto)} on the study's data and splits; prints the held-out table: coverage
     of the plain, discrepancy and embedded 95 % new-reading bands (%) and their median widening."""
     out = {}
+    print(f"exact_at = {exact_at}")
     print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}")
     for v, m in study.models.items():
         t0 = time.perf_counter()
-        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS)
+        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at)
         dt = time.perf_counter() - t0
         for h in r.heldout:
             print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
@@ -121,6 +123,7 @@ def main(argv=None):
     study = prepare(load_config(CONFIG))
     if "coverage" not in skip:
         coverage_table(study)
+        coverage_table(study, {"q_P": 0.0})          # the linkage is exact at zero press force
     if "size" not in skip and args.n:
         size_study(study, args.size_variant, args.n, args.seed)
     if "adequate" not in skip and args.n_coverage:
