@@ -95,17 +95,18 @@ def size_study(study, variant: str, n: int, seed: int) -> None:
 
 def adequate_coverage(study, variant: str, n: int, seed: int) -> None:
     """Held-out coverage and widening of the model-error bands on campaigns without model error."""
-    rows = []
+    rows, kinds = [], {}
     for m, d, p in _campaigns(study, variant, n, seed):
         r = model_error(m, d, p, splits=study.splits, weights=WEIGHTS)
         rows += [(h.coverage_plain, h.coverage_discrepancy, h.coverage_embedded, h.widening_discrepancy,
                   h.widening_embedded) for h in r.heldout]
+        kinds[r.kind] = kinds.get(r.kind, 0) + 1
     a = np.array(rows)
     se = a[:, :3].std(axis=0) / np.sqrt(len(a))
     print(f"adequate {variant}, {n} campaigns x {len(study.splits)} splits: held-out coverage plain "
           f"{100 * a[:, 0].mean():.1f} (+- {100 * se[0]:.1f}) %, discrepancy {100 * a[:, 1].mean():.1f} "
           f"(+- {100 * se[1]:.1f}) %, embedded {100 * a[:, 2].mean():.1f} (+- {100 * se[2]:.1f}) %; median widening "
-          f"discrepancy {np.median(a[:, 3]):.2f}, embedded {np.median(a[:, 4]):.2f}")
+          f"discrepancy {np.median(a[:, 3]):.2f}, embedded {np.median(a[:, 4]):.2f}; kind auto chose {kinds}")
 
 
 def main(argv=None):

@@ -20,8 +20,9 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    gradients: which parameters carry the error and by how much.
 4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
    validation readings (95 % new-reading bands by default): coverage, median widening, log score.
-   ``kind="auto"`` takes the error model of the highest total held-out log score (without splits: the
-   discrepancy when the test detects model error, else none).
+   ``kind="auto"``: "none" when the test does not detect model error (so an adequate model gets an error
+   model no more often than the test's size), else the error model of the highest total held-out log score
+   (without splits: the discrepancy).
 5. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
 
 ``identifiable`` is False when, along some direction of p, the model error leaves less than
@@ -166,11 +167,13 @@ def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
     """(kind, how) of the error model to report."""
     if kind != "auto":
         return kind, "as asked"
+    if not detected:
+        return "none", "auto: the test does not detect model error"
     if heldout:
         total = {k: sum(h.log_score(k) * h.n_values for h in heldout) for k in _ERROR_KINDS}
         chosen = max(total, key=total.get)
         return chosen, "auto: total held-out log score " + ", ".join(f"{k} {v:.4g}" for k, v in total.items())
-    return ("discrepancy" if detected else "none"), "auto: no splits, so by the test (discrepancy when detected)"
+    return "discrepancy", "auto: model error detected, no splits to compare the error models on"
 
 
 def _embedded(fit: ErrorFit, names: tuple) -> tuple:
@@ -235,7 +238,8 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     kind : "auto", "none", "discrepancy" or "embedded"
     exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
-    weights : array_like (n_S,), optional   sensor selection (0/1), as in identify
+    weights : array_like (n_S,), optional   sensor selection (0/1), as in identify (a positive weight selects the
+                                  sensor; its size weights the plain fit only, not the error model)
     groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
                                   with one label share their parameter deviation b); None: every row its own
 
@@ -260,6 +264,10 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     w = data.sensor_weights(weights)
     if not np.any(w > 0):
         raise DataError("weights: select at least one sensor (a positive weight)")
+    n_means = int((data.counts()[:, w > 0] > 0).sum())
+    if n_means < model.n_p + 2:
+        raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
+                        f"n_p + 2 = {model.n_p + 2}")
     data, sigma_source = _sigma_of(data, w)
     splits = _checked_splits(splits, data, w, model.n_p)
     codes = _checked_groups(groups, data.n_q)

@@ -106,7 +106,8 @@ def test_adequate_model_mechanics():
     assert t.statistic >= 0 and 0 < t.p_value <= 1
     assert t.p_value == (1.0 if t.statistic == 0 else pytest.approx(0.5 * stats.chi2.sf(t.statistic, 1)))
     assert r.detected == (t.p_value < r.alpha)
-    assert r.kind in ("none", "discrepancy")
+    assert r.kind in ("none", "discrepancy", "embedded")
+    assert r.kind == "none" or r.detected                # auto gives an error model only when the test detects one
     assert np.all(np.isfinite(r.conf_int().lower)) and np.all(np.isfinite(r.conf_int().upper))
     assert len(r.heldout) == 2 and all(0 <= h.coverage_plain <= 1 for h in r.heldout)
 
@@ -214,10 +215,17 @@ def test_result_protocol(found):
     ({"alpha": 0.7}, None, r"^alpha: must lie in"),
     ({"weights": [0, 0]}, None, r"^weights: select at least one sensor"),
     ({"groups": [1, 2, 3]}, None, r"^groups: expected one condition label per input row \(25\), got 3"),
+    ({}, "three inputs", r"^data: 3 input x sensor means on the selected sensors; model_error needs at least"),
     ({}, "one series", r"^data: sigma is None and the data hold no repeated series"),
 ])
 def test_bad_input_raises_one_clear_value_error(kwargs, data, match):
     d = _data(True, n_series=1, sigma=None) if data == "one series" else _data(True)
+    if data == "three inputs":
+        d = d.subset(inputs=[0, 5, 10]).select(["y1"])
+        kwargs = {"weights": None}
+        model = Model.explicit(["a", "b"], ["x"], ["y1"], h=lambda p, q: p[0] * q[0] + p[1])
+    else:
+        model = _model()
     with pytest.raises(ValueError, match=match) as info:
-        model_error(_model(), d, P0, **kwargs)
+        model_error(model, d, P0, **kwargs)
     assert "\n" not in str(info.value)
