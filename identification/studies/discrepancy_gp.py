@@ -258,17 +258,16 @@ class GPFit:
         return k, prior
 
 
-def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = ()) -> GPFit:
+def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = (), starts=None) -> GPFit:
     """theta maximising the REML likelihood of the stacked residuals r (N,) with sensitivities G (N, n_p).
 
-    L-BFGS-B with the exact gradient (:func:`reml_objective`) from each start of ``_STARTS``; the best
-    finite optimum is kept.  Raises numpy.linalg.LinAlgError when no start gives a positive definite V
+    L-BFGS-B with the exact gradient (:func:`reml_objective`) from each start (``starts``: arrays (3 n_sel,);
+    None: each of ``_STARTS`` for every sensor); the best finite optimum is kept.  Raises numpy.linalg.LinAlgError when no start gives a positive definite V
     and G^T V^{-1} G.
     """
     n_sel = len(obs.sensors)
     best = None
-    for start in _STARTS:
-        x0 = np.tile(start, n_sel)
+    for x0 in (np.tile(st, n_sel) for st in _STARTS) if starts is None else starts:
         if not np.isfinite(reml_objective(x0, obs, G, r, pins)[0]):
             continue
         res = optimize.minimize(reml_objective, x0, args=(obs, G, r, pins), jac=True, method="L-BFGS-B",

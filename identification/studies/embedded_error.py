@@ -67,9 +67,11 @@ def embedded_objective(c, Gs, same_row, noise, se, r) -> tuple:
 
 @dataclass(frozen=True)
 class EmbeddedFit:
-    """omega (n_p,) (parameter units), the residual covariance V (N, N) and whether the optimiser converged."""
+    """omega (n_p,) (parameter units), c = log(omega / se), the residual covariance V (N, N) and whether the
+    optimiser converged."""
 
     omega: np.ndarray
+    c: np.ndarray
     V: np.ndarray
     reml: float
     converged: bool
@@ -79,16 +81,17 @@ class EmbeddedFit:
         return np.diag(self.omega ** 2)
 
 
-def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.ndarray, r: np.ndarray) -> EmbeddedFit:
+def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.ndarray, r: np.ndarray,
+                 starts=None) -> EmbeddedFit:
     """The REML omega for stacked sensitivities Gs (N, n_p) in conditions ``rows`` (N,) (labels: equal labels
     share b), noise variances (N,),
-    the plain fit's standard errors se (n_p,) and residuals r (N,).  numpy.linalg.LinAlgError when no start
+    the plain fit's standard errors se (n_p,) and residuals r (N,), from each of ``starts`` (arrays of c (n_p,);
+    None: the constant starts ``_STARTS``).  numpy.linalg.LinAlgError when no start
     gives positive definite V and G^T V^-1 G."""
     same_row = (rows[:, None] == rows[None, :]).astype(float)
     n_p = Gs.shape[1]
     best = None
-    for start in _STARTS:
-        x0 = np.full(n_p, start)
+    for x0 in (np.full(n_p, st) for st in _STARTS) if starts is None else starts:
         if not np.isfinite(embedded_objective(x0, Gs, same_row, noise, se, r)[0]):
             continue
         res = optimize.minimize(embedded_objective, x0, args=(Gs, same_row, noise, se, r), jac=True,
@@ -99,4 +102,4 @@ def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.nda
         raise np.linalg.LinAlgError("the embedded error's covariance V or G^T V^-1 G is not positive definite at "
                                     "any start (Cholesky failed)")
     c = np.asarray(best.x, float)
-    return EmbeddedFit(se * np.exp(c), _covariance(c, Gs, same_row, noise, se)[0], float(best.fun), bool(best.success))
+    return EmbeddedFit(se * np.exp(c), c, _covariance(c, Gs, same_row, noise, se)[0], float(best.fun), bool(best.success))

@@ -14,7 +14,8 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    0.5 chi2_0 + 0.5 chi2_1 (``detected`` when p < alpha).
 2. **Discrepancy** (kind "discrepancy"): per sensor amplitude s_k, length scale l_k and rough part tau_k by
    REML with exact gradients, then p by generalised least squares under the residual covariance, with
-   covariance (G^T V^-1 G)^-1 (:mod:`identification.studies.model_error_fit`: profiling, not a joint fit).
+   covariance (G^T V^-1 G)^-1 (:mod:`identification.studies.model_error_fit`: REML and GLS alternated to a fixed point, not one joint
+   maximisation).
 3. **Embedded** (kind "embedded", :mod:`identification.studies.embedded_error`): the parameters vary between
    conditions (input rows or named groups), p + b_g with b_g ~ N(0, diag(omega^2)), omega by REML with exact
    gradients: which parameters carry the error and by how much.

@@ -1,10 +1,12 @@
-r"""The fit of a static model with and without an output discrepancy, and its predictions.
+r"""The fit of a static model with and without a model error (output discrepancy or embedded), and its predictions.
 
-Profiling, in three steps (p is not estimated jointly with the discrepancy's hyperparameters):
+Alternating estimation, not one joint maximisation over (p, theta) (the linear mixed model's REML / GLS
+fixed point, applied to the model linearised at the current p as in Lindstrom and Bates):
 
 1. the plain fit p_hat of :func:`identification.identify` (paper eq. 3) on the selected sensors;
-2. the discrepancy's hyperparameters theta by restricted maximum likelihood of the residual means
-   r = zbar - h(p_hat) (:func:`identification.studies.discrepancy_gp.fit_discrepancy`, exact gradient);
+2. the error model's hyperparameters theta by restricted maximum likelihood of the residual means
+   r = zbar - h(p) with the sensitivities G(p) as fixed effects (:func:`identification.studies.discrepancy_gp.
+   fit_discrepancy`, :func:`identification.studies.embedded_error.fit_embedded`, exact gradients);
 3. the generalised least-squares refit of p under the residual covariance V(theta),
 
 .. math::
@@ -13,7 +15,8 @@ Profiling, in three steps (p is not estimated jointly with the discrepancy's hyp
     C^{ME} = (G^\top V^{-1} G)^{-1},
 
 by Gauss-Newton steps on the model (states re-solved, G = dh/dp exact by AD and the implicit function
-theorem), each halved until the objective decreases.
+theorem), each halved until the objective decreases; steps 2 and 3 repeat at the new p until theta moves by less
+than 1e-3 (in log units; at most :data:`OUTER_ITERATIONS` rounds, a note otherwise).
 
 Prediction at new inputs q* (universal kriging: the discrepancy and the parameter error together),
 for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
@@ -48,6 +51,8 @@ from models.state import solve_states
 __all__ = ["ErrorFit", "Band", "fit_model_error", "outputs_at", "pure_error_sigma", "CONFOUNDED_INFORMATION",
            "CONFOUNDED_CORRELATION"]
 
+#: rounds of (REML hyperparameters at the current linearisation, generalised least squares in p)
+OUTER_ITERATIONS = 5
 #: identifiable is False when, along some direction of p, the model error leaves less than this share of the
 #: information the noise alone leaves (standard error inflated more than 10 times) ...
 CONFOUNDED_INFORMATION = 0.01
@@ -189,11 +194,11 @@ def pure_error_sigma(z: np.ndarray) -> tuple:
         return np.where(dof > 0, np.sqrt(ss / dof), np.nan), dof
 
 
-def _gls(model, data, est: Estimate, V: np.ndarray, obs: Observations, zbar_s: np.ndarray) -> tuple:
-    """(p, h (n_q, n_S), G (n_q, n_S, n_p), notes): Gauss-Newton on the GLS objective r^T V^-1 r."""
+def _gls(model, data, start: tuple, Y, V: np.ndarray, obs: Observations, zbar_s: np.ndarray) -> tuple:
+    """(p, h (n_q, n_S), G (n_q, n_S, n_p), notes): Gauss-Newton on the GLS objective r^T V^-1 r from
+    ``start`` = (p, h, G) (states Y as the state solves' guess)."""
     L = linalg.cholesky(V, lower=True)
-    p, h, G = est.p.copy(), np.asarray(est.fitted, float), np.asarray(est.G, float)
-    Y = np.asarray(est.states, float) if model.n_y else None
+    p, h, G = start
     notes = []
     for _ in range(8):
         r, Gs = zbar_s - obs.stack(h), obs.stack(G)
@@ -250,15 +255,30 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
     if kind == "none":
         return ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float))
     noise = np.concatenate(obs.noise)
-    gp = emb = None
-    if kind == "discrepancy":
-        gp = fit_discrepancy(obs, Gs, r0, scaling.pins)
-        V, converged = gp.covariance(), gp.converged
+    cond = (np.arange(data.n_q) if groups is None else np.asarray(groups))[np.concatenate(obs.rows)]
+    se = np.asarray(est.stderr_gn, float)
+
+    def error_model(Gs, r, starts):
+        if kind == "discrepancy":
+            f = fit_discrepancy(obs, Gs, r, scaling.pins, starts)
+            return f, f.covariance(), f.converged, f.theta
+        f = fit_embedded(Gs, cond, noise, se, r, starts)
+        return f, f.V, f.converged, f.c
+
+    Y = np.asarray(est.states, float) if model.n_y else None
+    fitted, V, converged, theta = error_model(Gs, r0, None)
+    p, h, G, notes = _gls(model, data, (est.p.copy(), np.asarray(est.fitted, float), np.asarray(est.G, float)), Y,
+                          V, obs, zbar_s)
+    for _ in range(OUTER_ITERATIONS - 1):          # REML at the new linearisation, GLS under it, to a fixed point
+        fitted, V, converged, new = error_model(obs.stack(G), zbar_s - obs.stack(h), (theta,))
+        p, h, G, notes = _gls(model, data, (p, h, G), None, V, obs, zbar_s)
+        moved, theta = float(np.max(np.abs(new - theta))), new
+        if moved < 1e-3:
+            break
     else:
-        cond = np.arange(data.n_q) if groups is None else np.asarray(groups)
-        emb = fit_embedded(Gs, cond[np.concatenate(obs.rows)], noise, np.asarray(est.stderr_gn, float), r0)
-        V, converged = emb.V, emb.converged
-    p, h, G, notes = _gls(model, data, est, V, obs, zbar_s)
+        notes += (f"the alternation of REML and generalised least squares stopped after {OUTER_ITERATIONS} rounds "
+                  f"(last change of log hyperparameters {moved:.2g})",)
+    gp, emb = (fitted, None) if kind == "discrepancy" else (None, fitted)
     if not converged:
         notes += (f"the {kind}'s REML optimiser stopped before convergence (best start kept)",)
     Vinv = linalg.cho_solve((linalg.cholesky(V, lower=True), True), np.eye(len(V)))
