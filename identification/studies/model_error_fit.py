@@ -269,6 +269,7 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
     fitted, V, converged, theta = error_model(Gs, r0, None)
     p, h, G, notes = _gls(model, data, (est.p.copy(), np.asarray(est.fitted, float), np.asarray(est.G, float)), Y,
                           V, obs, zbar_s)
+    moved = np.inf
     for _ in range(OUTER_ITERATIONS - 1):          # REML at the new linearisation, GLS under it, to a fixed point
         fitted, V, converged, new = error_model(obs.stack(G), zbar_s - obs.stack(h), (theta,))
         p, h, G, notes = _gls(model, data, (p, h, G), None, V, obs, zbar_s)
