@@ -1,0 +1,322 @@
+r"""The output discrepancy of a static model: a Gaussian process per sensor over the model's inputs.
+
+The readings of sensor k at input row j, averaged over the n_jk series that hold them, are
+
+.. math::
+
+    \bar z_{jk} = h_k(q_j, p) + \delta_k(q_j) + \rho_{jk} + \bar\varepsilon_{jk},\qquad
+    \bar\varepsilon_{jk} \sim N(0, \sigma_k^2 / n_{jk}),
+
+with the smooth discrepancy delta_k a Gaussian process of squared-exponential covariance
+s_k^2 exp(-|x - x'|^2 / (2 l_k^2)) on the inputs scaled to [0, 1] (x = (q - q_min) / (q_max - q_min)
+per input column, l_k dimensionless) and a rough part rho_jk ~ N(0, tau_k^2), independent between input
+rows (conditions the model's inputs do not tell apart, e.g. loading and unloading at one force).
+s_k, tau_k are in the unit of sensor k.  Stacked over the selected sensors, r = zbar - h(p) has the
+covariance V(theta) = blockdiag_k(s_k^2 C_k + tau_k^2 W_k + D_k), D_k = diag(sigma_k^2 / n_jk).
+
+``exact_at`` pins delta and its slope to zero at input value v of a named input (for every value
+of the other inputs): the factor of that input column is the squared-exponential process conditioned
+on f(v) = 0 and f'(v) = 0,
+
+.. math::
+
+    c(a, b) = e^{-(a - b)^2 / 2} - e^{-(a^2 + b^2) / 2}\,(1 + a b),\qquad a = (x - v) / l,\; b = (x' - v) / l,
+
+and the rough part's variance is multiplied by c(a, a) = 1 - e^{-a^2} (1 + a^2) (zero, with zero slope, at v).
+
+The hyperparameters theta = (log(s_k / sigma_k), log l_k, log(tau_k / sigma_k)) maximise the restricted
+(REML) likelihood of the residuals, p being a fixed effect with sensitivities G = dh/dp:
+
+.. math::
+
+    -2\ell_R(\theta) = \log|V| + \log|G^\top V^{-1} G| + r^\top P r + \text{const},\qquad
+    P = V^{-1} - V^{-1} G (G^\top V^{-1} G)^{-1} G^\top V^{-1},
+
+with the exact gradient d(-2 l_R)/d theta_i = tr(P V_i) - r^T P V_i P r (V_i = dV / d theta_i, analytic),
+by L-BFGS-B from a few starts.  Every factorisation is a Cholesky; one that fails is reported, never
+replaced by a pseudo-inverse.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg, optimize, stats
+
+__all__ = ["InputScaling", "Observations", "GPFit", "fit_discrepancy", "white_lr_test", "WhiteTest",
+           "kernel_blocks", "reml_objective", "BOUNDS"]
+
+#: bounds of (log(s / sigma), log l, log(tau / sigma)): s, tau from ~3e-4 sigma (effectively zero) to 150 sigma
+BOUNDS = ((-8.0, 5.0), (float(np.log(0.03)), float(np.log(5.0))), (-8.0, 5.0))
+_STARTS = ((0.0, float(np.log(0.3)), -2.0), (-2.0, 0.0, 0.0), (1.0, float(np.log(1.0)), -4.0))
+
+
+@dataclass(frozen=True)
+class InputScaling:
+    """x = (q - offset) / scale per input column (dimensionless); a column without range keeps scale 1.
+
+    ``pins`` : tuple of (column, scaled value) where the discrepancy and its slope are zero.
+    """
+
+    offset: np.ndarray
+    scale: np.ndarray
+    pins: tuple = ()
+
+    @classmethod
+    def of(cls, inputs: np.ndarray, exact_at: dict, names: tuple) -> "InputScaling":
+        """The scaling of the data's inputs (n_q, d_q) with the pins ``exact_at`` {input name: value}."""
+        lo, hi = inputs.min(axis=0), inputs.max(axis=0)
+        scale = np.where(hi > lo, hi - lo, 1.0)
+        pins = tuple((names.index(n), (float(v) - lo[names.index(n)]) / scale[names.index(n)])
+                     for n, v in exact_at.items())
+        return cls(lo, scale, pins)
+
+    def __call__(self, inputs: np.ndarray) -> np.ndarray:
+        return (np.atleast_2d(np.asarray(inputs, float)) - self.offset) / self.scale
+
+
+@dataclass(frozen=True)
+class Observations:
+    """The stacked residual means of the selected sensors.
+
+    Attributes
+    ----------
+    sensors : tuple of int       the selected sensor columns k
+    rows : tuple of ndarray      per sensor, the input rows j with a value
+    noise : tuple of ndarray     per sensor, sigma_k^2 / n_jk (unit of z squared)
+    sigma : ndarray (n_sel,)     sigma_k of the selected sensors
+    x : ndarray (n_q, d_q)       the scaled inputs of all rows
+    """
+
+    sensors: tuple
+    rows: tuple
+    noise: tuple
+    sigma: np.ndarray
+    x: np.ndarray
+
+    @classmethod
+    def of(cls, counts: np.ndarray, sigma: np.ndarray, w: np.ndarray, x: np.ndarray) -> "Observations":
+        """From the counts (n_q, n_S) of a campaign, sigma (n_S,), the weights (n_S,) and the scaled inputs."""
+        sens = tuple(int(k) for k in np.flatnonzero(w > 0))
+        rows = tuple(np.flatnonzero(counts[:, k] > 0) for k in sens)
+        noise = tuple(sigma[k] ** 2 / counts[r, k] for k, r in zip(sens, rows))
+        return cls(sens, rows, noise, np.asarray(sigma, float)[list(sens)], x)
+
+    @property
+    def sizes(self) -> list:
+        return [len(r) for r in self.rows]
+
+    def stack(self, a: np.ndarray) -> np.ndarray:
+        """Values a (n_q, n_S, ...) of the observations, stacked sensor by sensor (N, ...)."""
+        return np.concatenate([a[r, k] for k, r in zip(self.sensors, self.rows)], axis=0)
+
+
+def _factors(xa: np.ndarray, xb: np.ndarray, ell: float, pins: tuple) -> tuple:
+    """(c, dc/dlog l) per input column, each (d, na, nb), of the kernel's product form."""
+    d = xa.shape[1]
+    cs, dcs = [], []
+    pinned = dict(pins)
+    for col in range(d):
+        A, B = xa[:, col][:, None], xb[:, col][None, :]
+        u2 = (A - B) ** 2 / ell ** 2
+        e = np.exp(-0.5 * u2)
+        if col in pinned:
+            a, b = (A - pinned[col]) / ell, (B - pinned[col]) / ell
+            g = np.exp(-0.5 * (a ** 2 + b ** 2))
+            cs.append(e - g * (1 + a * b))
+            dcs.append(e * u2 - g * ((a ** 2 + b ** 2) * (1 + a * b) - 2 * a * b))
+        else:
+            cs.append(e)
+            dcs.append(e * u2)
+    return np.array(cs), np.array(dcs)
+
+
+def kernel_blocks(xa: np.ndarray, xb: np.ndarray, ell: float, pins: tuple = ()) -> tuple:
+    """(C, dC/dlog l): the correlation of the smooth part between scaled inputs xa (na, d), xb (nb, d)."""
+    cs, dcs = _factors(xa, xb, ell, pins)
+    C = np.prod(cs, axis=0)
+    dC = np.zeros_like(C)
+    for col in range(cs.shape[0]):
+        others = np.prod(np.delete(cs, col, axis=0), axis=0) if cs.shape[0] > 1 else 1.0
+        dC += dcs[col] * others
+    return C, dC
+
+
+def rough_weight(x: np.ndarray, ell: float, pins: tuple = ()) -> tuple:
+    """(W, dW/dlog l) (n,): the rough part's variance factor, prod over pins of 1 - e^{-a^2} (1 + a^2)."""
+    W = np.ones(x.shape[0])
+    dW = np.zeros(x.shape[0])
+    for col, v in pins:
+        a2 = ((x[:, col] - v) / ell) ** 2
+        f = 1 - np.exp(-a2) * (1 + a2)
+        df = -2 * a2 ** 2 * np.exp(-a2)
+        dW = dW * f + W * df
+        W = W * f
+    return W, dW
+
+
+def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple) -> tuple:
+    """(V_k, [dV_k/d theta]) of sensor block i with its hyperparameters th (3,)."""
+    sig = obs.sigma[i]
+    s2, ell, t2 = (sig * np.exp(th[0])) ** 2, float(np.exp(th[1])), (sig * np.exp(th[2])) ** 2
+    x = obs.x[obs.rows[i]]
+    C, dC = kernel_blocks(x, x, ell, pins)
+    W, dW = rough_weight(x, ell, pins)
+    V = s2 * C + np.diag(t2 * W + obs.noise[i])
+    return V, (2 * s2 * C, s2 * dC + np.diag(t2 * dW), np.diag(2 * t2 * W))
+
+
+def _reml_parts(obs: Observations, theta: np.ndarray, G: np.ndarray, pins: tuple):
+    """(f, Vinv blocks, A = G^T V^-1 G factor, block derivatives) or None when a Cholesky fails."""
+    blocks, derivs, Vi, logdet = [], [], [], 0.0
+    for i in range(len(obs.sensors)):
+        V, dV = _block(obs, i, theta[3 * i:3 * i + 3], pins)
+        try:
+            L = linalg.cholesky(V, lower=True)
+        except linalg.LinAlgError:
+            return None
+        logdet += 2 * np.sum(np.log(np.diag(L)))
+        Vi.append(linalg.cho_solve((L, True), np.eye(len(V))))
+        blocks.append(V)
+        derivs.append(dV)
+    Vinv = linalg.block_diag(*Vi)
+    A = G.T @ Vinv @ G
+    try:
+        LA = linalg.cholesky(A, lower=True)
+    except linalg.LinAlgError:
+        return None
+    return logdet + 2 * np.sum(np.log(np.diag(LA))), Vinv, LA, derivs
+
+
+def reml_objective(theta, obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = ()) -> tuple:
+    """(-2 l_R(theta) without constant, its exact gradient) for stacked residuals r (N,), G (N, n_p)."""
+    theta = np.asarray(theta, float)
+    parts = _reml_parts(obs, theta, G, pins)
+    if parts is None:
+        return np.inf, np.zeros_like(theta)
+    logdets, Vinv, LA, derivs = parts
+    VG = Vinv @ G
+    P = Vinv - VG @ linalg.cho_solve((LA, True), VG.T)
+    alpha = P @ r
+    f = logdets + float(r @ alpha)
+    grad = np.zeros_like(theta)
+    start = 0
+    for i, n in enumerate(obs.sizes):
+        sl = slice(start, start + n)
+        Pk, ak = P[sl, sl], alpha[sl]
+        for m, dV in enumerate(derivs[i]):
+            grad[3 * i + m] = np.sum(Pk * dV) - ak @ dV @ ak
+        start += n
+    return f, grad
+
+
+@dataclass(frozen=True)
+class GPFit:
+    """The discrepancy's hyperparameters and the factors its predictions need.
+
+    Attributes
+    ----------
+    theta : ndarray (3 n_sel,)   (log(s_k / sigma_k), log l_k, log(tau_k / sigma_k)) per selected sensor
+    obs : Observations
+    pins : tuple                 (column, scaled value) of exact_at
+    reml : float                 -2 l_R at theta (without constant)
+    converged : bool             the optimiser reported success from the best start
+    """
+
+    theta: np.ndarray
+    obs: Observations
+    pins: tuple
+    reml: float
+    converged: bool
+
+    def amplitude(self, i: int) -> float:
+        """s_k of selected sensor i (unit of z)."""
+        return float(self.obs.sigma[i] * np.exp(self.theta[3 * i]))
+
+    def length_scale(self, i: int) -> float:
+        """l_k of selected sensor i (scaled inputs, dimensionless)."""
+        return float(np.exp(self.theta[3 * i + 1]))
+
+    def rough(self, i: int) -> float:
+        """tau_k of selected sensor i (unit of z)."""
+        return float(self.obs.sigma[i] * np.exp(self.theta[3 * i + 2]))
+
+    def covariance(self) -> np.ndarray:
+        """V (N, N): the stacked residual covariance (block diagonal over sensors)."""
+        return linalg.block_diag(*[_block(self.obs, i, self.theta[3 * i:3 * i + 3], self.pins)[0]
+                                   for i in range(len(self.obs.sensors))])
+
+    def cross(self, i: int, xs: np.ndarray) -> tuple:
+        """(k (n*, N): cov(delta_k(x*), stacked residuals), prior variance (n*,)) for sensor i at scaled x*."""
+        ell = self.length_scale(i)
+        s2, t2 = self.amplitude(i) ** 2, self.rough(i) ** 2
+        k = np.zeros((xs.shape[0], sum(self.obs.sizes)))
+        start = sum(self.obs.sizes[:i])
+        C, _ = kernel_blocks(xs, self.obs.x[self.obs.rows[i]], ell, self.pins)
+        k[:, start:start + self.obs.sizes[i]] = s2 * C
+        prior = s2 * np.diag(kernel_blocks(xs, xs, ell, self.pins)[0]) + t2 * rough_weight(xs, ell, self.pins)[0]
+        return k, prior
+
+
+def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = (), starts=None) -> GPFit:
+    """theta maximising the REML likelihood of the stacked residuals r (N,) with sensitivities G (N, n_p).
+
+    L-BFGS-B with the exact gradient (:func:`reml_objective`) from each start (``starts``: arrays (3 n_sel,);
+    None: each of ``_STARTS`` for every sensor); the best finite optimum is kept.  Raises numpy.linalg.LinAlgError when no start gives a positive definite V
+    and G^T V^{-1} G.
+    """
+    n_sel = len(obs.sensors)
+    best = None
+    for x0 in (np.tile(st, n_sel) for st in _STARTS) if starts is None else starts:
+        if not np.isfinite(reml_objective(x0, obs, G, r, pins)[0]):
+            continue
+        res = optimize.minimize(reml_objective, x0, args=(obs, G, r, pins), jac=True, method="L-BFGS-B",
+                                bounds=list(BOUNDS) * n_sel, options={"maxiter": 300})
+        if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+            best = res
+    if best is None:
+        raise np.linalg.LinAlgError("the discrepancy's covariance V or G^T V^-1 G is not positive definite at "
+                                    "any start (Cholesky failed)")
+    return GPFit(np.asarray(best.x, float), obs, pins, float(best.fun), bool(best.success))
+
+
+@dataclass(frozen=True)
+class WhiteTest:
+    r"""The likelihood-ratio test of 'no model error' against one variance component.
+
+    H0: lambda = 0 against lambda > 0 in V(lambda) = D + lambda diag(sigma_k^2) (a discrepancy of every
+    input row and sensor, independent, of variance lambda sigma_k^2); statistic
+    LR = -2 l_R(0) + 2 max_{lambda >= 0} l_R(lambda) (REML, chi^2 units), reference distribution the
+    boundary-corrected 50:50 mixture of chi2_0 and chi2_1: p = 0.5 P(chi2_1 > LR) for LR > 0, else 1.
+    """
+
+    statistic: float
+    p_value: float
+    lam: float
+    dof: int
+
+
+def _white_f(lam: float, obs: Observations, G: np.ndarray, r: np.ndarray) -> float:
+    d = np.concatenate([n + lam * s ** 2 for n, s in zip(obs.noise, obs.sigma)])
+    VG = G / d[:, None]
+    A = G.T @ VG
+    try:
+        LA = linalg.cholesky(A, lower=True)
+    except linalg.LinAlgError:
+        return np.inf
+    b = VG.T @ r
+    quad = float(r @ (r / d)) - float(b @ linalg.cho_solve((LA, True), b))
+    return float(np.sum(np.log(d)) + 2 * np.sum(np.log(np.diag(LA))) + quad)
+
+
+def white_lr_test(obs: Observations, G: np.ndarray, r: np.ndarray) -> WhiteTest:
+    """The test of :class:`WhiteTest` on stacked residuals r (N,) at the plain fit, G (N, n_p)."""
+    f0 = _white_f(0.0, obs, G, r)
+    if not np.isfinite(f0):
+        raise np.linalg.LinAlgError("G^T D^-1 G is not positive definite (Cholesky failed)")
+    res = optimize.minimize_scalar(lambda u: _white_f(float(np.exp(u)), obs, G, r), bounds=(-18.0, 10.0),
+                                   method="bounded", options={"xatol": 1e-6})
+    lr = max(f0 - float(res.fun), 0.0)
+    lam = float(np.exp(res.x)) if lr > 0 else 0.0
+    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+    return WhiteTest(lr, p, lam, int(len(r) - G.shape[1]))

@@ -1,0 +1,294 @@
+r"""How large is the model error, where does it sit, and what prediction error to expect (issue 29, static models).
+
+For a static model h(y(p, q), p, q) and the means zbar_jk of the readings of sensor k at input row j,
+
+.. math::
+
+    \bar z_{jk} = h_k(q_j, p) + \delta_k(q_j) + \rho_{jk} + \bar\varepsilon_{jk},
+
+with the output discrepancy delta_k a Gaussian process over the model's inputs and rho_jk a rough
+part independent between input rows (:mod:`identification.studies.discrepancy_gp`).  Steps:
+
+1. **Test** of 'no model error' on the plain fit's residuals: the REML likelihood ratio for one variance
+   component lambda >= 0 (V = D + lambda diag(sigma_k^2)) against the boundary-corrected reference
+   0.5 chi2_0 + 0.5 chi2_1 (``detected`` when p < alpha).
+2. **Discrepancy** (kind "discrepancy"): per sensor amplitude s_k, length scale l_k and rough part tau_k by
+   REML with exact gradients, then p by generalised least squares under the residual covariance, with
+   covariance (G^T V^-1 G)^-1 (:mod:`identification.studies.model_error_fit`: REML and GLS alternated to a fixed point, not one joint
+   maximisation).
+3. **Embedded** (kind "embedded", :mod:`identification.studies.embedded_error`): the parameters vary between
+   conditions (input rows or named groups), p + b_g with b_g ~ N(0, diag(omega^2)), omega by REML with exact
+   gradients: which parameters carry the error and by how much.
+4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
+   validation readings (95 % new-reading bands by default): coverage, median widening, log score.
+   ``kind="auto"``: "none" when the test does not detect model error (so an adequate model gets an error
+   model no more often than the test's size), else the error model of the highest total held-out log score
+   (without splits: the discrepancy).
+5. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
+
+``identifiable`` is False when, along some direction of p, the model error leaves less than
+:data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` (1 %) of the information the noise alone
+leaves and its correlation less than :data:`~identification.studies.model_error_fit.CONFOUNDED_CORRELATION` (50 %)
+of what uncorrelated errors of the same size would leave: the discrepancy can mimic a change of the parameters
+(heuristic thresholds).  A discrepancy that mimics p with a small one (a smooth error absorbed by p) is not
+caught by any such check: ``exact_at`` (where the model is known to be exact) is the remedy.
+
+The embedded error's conditions are the input rows, or the ``groups`` the user names; the moment estimate
+from the excess spread of the split fits is not implemented.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Sequence
+
+import numpy as np
+from scipy import stats
+
+from identification.errors import DataError
+from identification.fit.measurements import Measurements
+from identification.inference.intervals import validate_alpha
+from identification.studies.discrepancy_gp import InputScaling
+from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
+from identification.studies.model_error_result import (EmbeddedParameter, ErrorTest, HeldOut, ModelErrorResult,
+                                                       SensorDiscrepancy)
+from identification.studies.splits import Split, SplitError
+from models.contract import Model
+
+__all__ = ["model_error", "ModelErrorResult", "KINDS"]
+
+#: the error models model_error chooses from ("auto": by held-out log score)
+KINDS = ("auto", "none", "discrepancy", "embedded")
+_ERROR_KINDS = ("none", "discrepancy", "embedded")
+
+
+# ---------------------------------------------------------------------------- validation
+def _checked_model_data(model, data) -> None:
+    if not isinstance(model, Model) or getattr(model, "is_dynamic", False):
+        raise TypeError(f"model: expected a static models.Model, got {type(model).__name__} (model_error covers "
+                        "static models only)")
+    if not isinstance(data, Measurements):
+        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    if data.d_q != model.n_q_dim:
+        raise DataError(f"data: the inputs have {data.d_q} columns but the model has {model.n_q_dim} "
+                        f"({', '.join(model.inputs)})")
+
+
+def _checked_exact_at(exact_at, model: Model) -> dict:
+    if exact_at is None:
+        return {}
+    if not isinstance(exact_at, Mapping):
+        raise ValueError(f"exact_at: expected a mapping {{input name: value}}, got {type(exact_at).__name__}")
+    out = {}
+    for name, value in exact_at.items():
+        if name not in model.inputs:
+            raise ValueError(f"exact_at: unknown input {name!r}; the model's inputs are {list(model.inputs)}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"exact_at[{name!r}]: expected a finite number, got {value!r}") from None
+        if not math.isfinite(v):
+            raise ValueError(f"exact_at[{name!r}]: expected a finite number, got {value!r}")
+        out[str(name)] = v
+    return out
+
+
+def _checked_splits(splits, data: Measurements, w: np.ndarray, n_p: int) -> tuple:
+    """The splits as a tuple; every calibration set holds at least n_p + 2 input x sensor means of the
+    selected sensors and every validation set at least one reading (SplitError naming the split)."""
+    if splits is None:
+        return ()
+    splits = (splits,) if isinstance(splits, Split) else tuple(splits)
+    sel = w > 0
+    for sp in splits:
+        if not isinstance(sp, Split):
+            raise TypeError(f"splits: expected identification.Split objects, got {type(sp).__name__}")
+        sp.check(data.n_q, data.n_M)
+        n_cal = int((sp.calibration(data).counts()[:, sel] > 0).sum())
+        n_val = int(sp.validation(data).counts()[:, sel].sum())
+        if n_cal < n_p + 2 or n_val < 1:
+            raise SplitError(f"splits: split {sp.name!r} has {n_cal} calibration means (input x sensor) and "
+                             f"{n_val} validation readings; model_error needs at least n_p + 2 = {n_p + 2} and 1")
+    return splits
+
+
+def _checked_groups(groups, n_q: int) -> np.ndarray | None:
+    """The condition of every input row as integer codes (n_q,), or None (ValueError naming the argument)."""
+    if groups is None:
+        return None
+    if isinstance(groups, (str, bytes)) or not hasattr(groups, "__len__"):
+        raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {groups!r}")
+    labels = list(groups)
+    if len(labels) != n_q:
+        raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {len(labels)}")
+    try:
+        codes = {lab: i for i, lab in enumerate(dict.fromkeys(labels))}
+    except TypeError:
+        raise ValueError("groups: the condition labels must be hashable (numbers or strings)") from None
+    return np.array([codes[lab] for lab in labels])
+
+
+def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
+    """(data with sigma, source): sigma as given, or the pure error of repeated series (ValueError without)."""
+    if data.sigma is not None:
+        return data, "given"
+    s, dof = pure_error_sigma(data.z)
+    sel = w > 0
+    if data.n_M < 2 or not np.all(dof[sel] > 0) or not np.all(s[sel] > 0):
+        raise ValueError("data: sigma is None and the data hold no repeated series to estimate the noise from "
+                         "(pure error); give sigma (Measurements(..., sigma=...)) or measure a second series")
+    return data.with_sigma(np.where(np.isfinite(s) & (s > 0), s, 1.0)), "pure error (repeated series)"
+
+
+# ---------------------------------------------------------------------------- held-out table
+def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups) -> HeldOut:
+    """Every error model fitted on the calibration part of ``split`` predicts its validation readings (as new
+    conditions)."""
+    cal, val = split.calibration(data), split.validation(data)
+    plain = fit_model_error(model, cal, p0, w, scaling, "none")
+    g = None if groups is None else groups[list(split.cal_inputs)]
+    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g)
+                      for k in _ERROR_KINDS[1:]]
+    sel = w > 0
+    z = val.z[:, :, sel]
+    ok = np.isfinite(z)
+    cover, score, width = [], [], []
+    for f in fits:
+        b = f.predict(val.inputs, alpha, new_reading=True)
+        lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
+        sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
+        cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
+        score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
+        width.append(np.broadcast_to(hi - lo, z.shape)[ok])
+    return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
+                   float(np.median(width[2] / width[0])), score[0], score[1], score[2])
+
+
+def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
+    """(kind, how) of the error model to report."""
+    if kind != "auto":
+        return kind, "as asked"
+    if not detected:
+        return "none", "auto: the test does not detect model error"
+    if heldout:
+        total = {k: sum(h.log_score(k) * h.n_values for h in heldout) for k in _ERROR_KINDS}
+        chosen = max(total, key=total.get)
+        return chosen, "auto: total held-out log score " + ", ".join(f"{k} {v:.4g}" for k, v in total.items())
+    return "discrepancy", "auto: model error detected, no splits to compare the error models on"
+
+
+def _embedded(fit: ErrorFit, names: tuple) -> tuple:
+    if fit.embedded is None:
+        return ()
+    return tuple(EmbeddedParameter(n, float(o), float(o / abs(p)) if p != 0 else math.inf)
+                 for n, o, p in zip(names, fit.embedded.omega, fit.p))
+
+
+def _discrepancies(fit: ErrorFit, data: Measurements, scaling: InputScaling) -> tuple:
+    if fit.gp is None:
+        return ()
+    out = []
+    for i, k in enumerate(fit.gp.obs.sensors):
+        ell = fit.gp.length_scale(i)
+        out.append(SensorDiscrepancy(data.sensors[k], fit.gp.amplitude(i), ell, tuple(float(v) for v in ell * scaling.scale),
+                                     fit.gp.rough(i), float(fit.sigma[k])))
+    return tuple(out)
+
+
+def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
+           grouped: bool) -> tuple:
+    notes = list(fit.notes)
+    if grouped and kind != "embedded":
+        notes.append(f"groups name the conditions of the embedded error only; the {kind} error model does not use them")
+    if sigma_source != "given":
+        notes.append("sigma is the pure error of the repeated series, taken as known: the test's reference "
+                     "distribution is then approximate")
+    if kind == "discrepancy" and not fit.identifiable:
+        hint = "" if exact_at else "; pin the discrepancy where the model is known to be exact (exact_at={input: value})"
+        notes.append(f"not identifiable: the discrepancy can mimic a change of the parameters (along one direction "
+                     f"of p it leaves {100 * fit.information_kept:.2g} % of the information the noise alone leaves, "
+                     f"{100 * fit.correlation_kept:.2g} % of what uncorrelated errors of its size would leave); p under "
+                     f"the model error has lost its meaning{hint}")
+    if exact_at and kind != "discrepancy":
+        notes.append(f"exact_at pins the output discrepancy only; the {kind} error model does not use it")
+    if kind == "none" and detected:
+        notes.append("model error detected, but the reported error model is 'none': the bands ignore it")
+    bad = [h.split for h in heldout if h.coverage(kind) < h.coverage_plain]
+    if bad:
+        notes.append(f"the {kind} error model lowered the held-out coverage on split(s) {', '.join(bad)}")
+    return tuple(notes)
+
+
+# ---------------------------------------------------------------------------- entry
+def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, kind: str = "auto",
+                exact_at: Mapping | None = None, alpha: float = 0.05, weights=None, groups=None) -> ModelErrorResult:
+    r"""zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk, or h_k(q_j, p + b_j) + eps_jk: detect, size and
+    locate the model error of a static model, and predict with it.
+
+    The 'no model error' test (REML likelihood ratio, reference 0.5 chi2_0 + 0.5 chi2_1), the output
+    discrepancy per sensor (Gaussian process over the scaled inputs) or the embedded error (b_j ~ N(0,
+    diag(omega^2)) per condition), each by REML with exact gradients, p by generalised least squares under
+    it, the held-out table of ``splits`` (module docstring); units those of z and of the parameters.
+
+    Parameters
+    ----------
+    model : models.Model (static)
+    data : Measurements           with sigma (unit of z), or sigma None and repeated series (pure error)
+    p0 : array_like (n_p,)        start values of the fits
+    splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice)
+    kind : "auto", "none", "discrepancy" or "embedded"
+    exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
+    alpha : float in (0, 0.5)     the test's level and the bands' miss probability
+    weights : array_like (n_S,), optional   sensor selection (0/1), as in identify (a positive weight selects the
+                                  sensor; its size weights the plain fit only, not the error model)
+    groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
+                                  with one label share their parameter deviation b); None: every row its own
+
+    Returns
+    -------
+    ModelErrorResult
+
+    Raises
+    ------
+    ValueError (DataError, SplitError)
+        A bad argument; the message names it.
+    """
+    _checked_model_data(model, data)
+    if kind not in KINDS:
+        raise ValueError(f"kind: unknown kind {kind!r}; choose one of {', '.join(repr(k) for k in KINDS)}")
+    alpha = validate_alpha(alpha)
+    exact = _checked_exact_at(exact_at, model)
+    p0 = np.asarray(p0, float).ravel()
+    if p0.shape != (model.n_p,) or not np.all(np.isfinite(p0)):
+        raise DataError(f"p0: expected {model.n_p} finite start values ({', '.join(model.param_names)}), got "
+                        f"{p0.tolist()}")
+    w = data.sensor_weights(weights)
+    if not np.any(w > 0):
+        raise DataError("weights: select at least one sensor (a positive weight)")
+    n_means = int((data.counts()[:, w > 0] > 0).sum())
+    if n_means < model.n_p + 2:
+        raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
+                        f"n_p + 2 = {model.n_p + 2}")
+    data, sigma_source = _sigma_of(data, w)
+    splits = _checked_splits(splits, data, w, model.n_p)
+    codes = _checked_groups(groups, data.n_q)
+    scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs))
+    plain = fit_model_error(model, data, p0, w, scaling, "none")
+    t = plain.test
+    detected = t.p_value < alpha
+    heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha, codes) for sp in splits)
+    chosen, how = _choose(kind, detected, heldout)
+    fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, chosen, plain=plain.plain,
+                                                         groups=codes)
+    est = plain.plain
+    return ModelErrorResult(
+        model_name=est.model_name or model.name, kind=chosen, detected=bool(detected),
+        test=ErrorTest(t.statistic, t.p_value, t.lam, t.dof), alpha=alpha,
+        sensors=tuple(s for s, wk in zip(data.sensors, w) if wk > 0), param_names=tuple(model.param_names),
+        p=fit.p.copy(), cov=fit.cov.copy(), p_plain=est.p.copy(), cov_plain=np.asarray(est.cov, float).copy(),
+        discrepancies=_discrepancies(fit, data, scaling), embedded=_embedded(fit, tuple(model.param_names)),
+        identifiable=fit.identifiable,
+        information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
+        sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,
+                                                                 codes is not None),
+        fit=fit)

@@ -1,0 +1,291 @@
+r"""The fit of a static model with and without a model error (output discrepancy or embedded), and its predictions.
+
+Alternating estimation, not one joint maximisation over (p, theta) (the linear mixed model's REML / GLS
+fixed point, applied to the model linearised at the current p as in Lindstrom and Bates):
+
+1. the plain fit p_hat of :func:`identification.identify` (paper eq. 3) on the selected sensors;
+2. the error model's hyperparameters theta by restricted maximum likelihood of the residual means
+   r = zbar - h(p) with the sensitivities G(p) as fixed effects (:func:`identification.studies.discrepancy_gp.
+   fit_discrepancy`, :func:`identification.studies.embedded_error.fit_embedded`, exact gradients);
+3. the generalised least-squares refit of p under the residual covariance V(theta),
+
+.. math::
+
+    p^{ME} = \arg\min_p\; (\bar z - h(p))^\top V^{-1} (\bar z - h(p)),\qquad
+    C^{ME} = (G^\top V^{-1} G)^{-1},
+
+by Gauss-Newton steps on the model (states re-solved, G = dh/dp exact by AD and the implicit function
+theorem), each halved until the objective decreases; steps 2 and 3 repeat at the new p until theta moves by less
+than 1e-3 (in log units; at most :data:`OUTER_ITERATIONS` rounds, a note otherwise).
+
+Prediction at new inputs q* (universal kriging: the discrepancy and the parameter error together),
+for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
+
+.. math::
+
+    \hat z_k(q^*) = h_k(q^*, p^{ME}) + k_*^\top V^{-1} r(p^{ME}),\qquad
+    \operatorname{var} = s_k^2 c(q^*, q^*) + \tau_k^2 w(q^*) - k_*^\top V^{-1} k_* + u^\top C^{ME} u
+    \;[+\,\sigma_k^2 \text{ for a new reading}];
+
+with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
+condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
+without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
+delta-method bands of the plain fit, C its second-order covariance).  Units: those of z.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg, stats
+
+from identification.inference.identify import identify
+from identification.inference.results import Estimate
+from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observations, WhiteTest, fit_discrepancy,
+                                                   white_lr_test)
+from identification.studies.embedded_error import EmbeddedFit, fit_embedded
+from models.errors import NumericsError
+from models.sensitivity import sensitivities
+from models.state import solve_states
+
+__all__ = ["ErrorFit", "Band", "fit_model_error", "outputs_at", "pure_error_sigma", "CONFOUNDED_INFORMATION",
+           "CONFOUNDED_CORRELATION"]
+
+#: rounds of (REML hyperparameters at the current linearisation, generalised least squares in p)
+OUTER_ITERATIONS = 5
+#: identifiable is False when, along some direction of p, the model error leaves less than this share of the
+#: information the noise alone leaves (standard error inflated more than 10 times) ...
+CONFOUNDED_INFORMATION = 0.01
+#: ... and the discrepancy's correlation leaves less than this share of what uncorrelated errors of the same
+#: size would leave (the discrepancy mimics a change of p, rather than being merely large); heuristic thresholds
+CONFOUNDED_CORRELATION = 0.5
+
+
+@dataclass(frozen=True)
+class Band:
+    """Mean and (1 - alpha) band, each ndarray (n*, n_S) in the unit of z (NaN for unselected sensors).
+
+    ``what``: "prediction" (of the output's mean, or of a new reading) or "discrepancy".
+    """
+
+    mean: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    alpha: float
+    sensors: tuple
+    what: str
+    new_reading: bool = False
+
+
+def outputs_at(model, p: np.ndarray, inputs: np.ndarray, Y0=None) -> tuple:
+    """(h (n, n_S), G (n, n_S, n_p)) of the model at p for the input rows (n, d_q), exact G."""
+    Y = solve_states(model, p, inputs, Y0)
+    s = sensitivities(model, p, inputs, Y)
+    return np.asarray(s.h, float), np.asarray(s.G, float)
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorFit:
+    """A fit of one data set, without (``gp`` None) or with an output discrepancy.
+
+    Attributes
+    ----------
+    model : Model
+    weights : ndarray (n_S,)          sensor selection
+    sigma : ndarray (n_S,)            sensor standard deviations used (unit of z)
+    scaling : InputScaling
+    plain : Estimate                  the fit without model error
+    test : WhiteTest                  'no model error' test on the plain residuals
+    p, cov : ndarray                  parameters and their covariance under this fit's error model
+    gp : GPFit or None                the output discrepancy (kind "discrepancy")
+    embedded : EmbeddedFit or None    the parameters' spread between conditions (kind "embedded")
+    alpha_r : ndarray (N,)            V^{-1} r(p) (stacked residual means)
+    Vinv_G : ndarray (N, n_p)         V^{-1} G
+    Vinv : ndarray (N, N)
+    information_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T D^-1 G): the share of the
+                                      noise-only information about p the model error leaves
+    correlation_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T diag(V)^-1 G): the share
+                                      uncorrelated errors of the same size would leave
+    notes : tuple of str
+    """
+
+    model: object
+    weights: np.ndarray
+    sigma: np.ndarray
+    scaling: InputScaling
+    plain: Estimate
+    test: WhiteTest
+    p: np.ndarray
+    cov: np.ndarray
+    gp: GPFit | None = None
+    alpha_r: np.ndarray | None = None
+    Vinv_G: np.ndarray | None = None
+    Vinv: np.ndarray | None = None
+    information_kept: float = 1.0
+    correlation_kept: float = 1.0
+    notes: tuple = ()
+    embedded: EmbeddedFit | None = None
+
+    @property
+    def kind(self) -> str:
+        return "discrepancy" if self.gp is not None else "embedded" if self.embedded is not None else "none"
+
+    @property
+    def identifiable(self) -> bool:
+        """False when the output discrepancy can mimic a change of p (both shares below their thresholds)."""
+        if self.gp is None:
+            return True
+        return self.information_kept >= CONFOUNDED_INFORMATION or self.correlation_kept >= CONFOUNDED_CORRELATION
+
+    def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool) -> Band:
+        """The (1 - alpha) band of the outputs (``new_reading``: of one new reading) at input rows (n*, d_q)."""
+        h, G = outputs_at(self.model, self.p, inputs)
+        sel = self.weights > 0
+        if self.gp is None:
+            C = self.cov if self.embedded is None else self.cov + self.embedded.Omega
+            var = np.einsum("jkp,pq,jkq->jk", G, C, G)
+            mean = h
+        else:
+            mean, var = self._kriging(inputs, h, G, include_g=True)
+        var = np.clip(var, 0.0, None) + (self.sigma ** 2 if new_reading else 0.0)
+        return self._band(mean, var, sel, alpha, "prediction", new_reading)
+
+    def discrepancy(self, inputs: np.ndarray, alpha: float) -> Band:
+        """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error)."""
+        n = np.atleast_2d(inputs).shape[0]
+        sel = self.weights > 0
+        if self.embedded is not None:
+            G = outputs_at(self.model, self.p, inputs)[1]
+            var = np.einsum("jkp,pq,jkq->jk", G, self.embedded.Omega, G)
+            return self._band(np.zeros_like(var), var, sel, alpha, "discrepancy", False)
+        if self.gp is None:
+            z = np.zeros((n, len(self.sigma)))
+            return self._band(z, z, sel, alpha, "discrepancy", False)
+        mean, var = self._kriging(inputs, np.zeros((n, len(self.sigma))), None, include_g=False)
+        return self._band(mean, np.clip(var, 0.0, None), sel, alpha, "discrepancy", False)
+
+    def _kriging(self, inputs, h, G, include_g: bool) -> tuple:
+        xs = self.scaling(inputs)
+        mean = np.full(h.shape, np.nan)
+        var = np.full(h.shape, np.nan)
+        for i, k in enumerate(self.gp.obs.sensors):
+            kx, prior = self.gp.cross(i, xs)
+            mean[:, k] = h[:, k] + kx @ self.alpha_r
+            u = (G[:, k, :] if include_g else 0.0) - kx @ self.Vinv_G
+            var[:, k] = prior - np.einsum("an,nm,am->a", kx, self.Vinv, kx) + np.einsum("ap,pq,aq->a", u, self.cov, u)
+        return mean, var
+
+    def _band(self, mean, var, sel, alpha, what, new_reading) -> Band:
+        c = float(stats.norm.ppf(1 - alpha / 2))
+        mean = np.where(sel, mean, np.nan)
+        half = c * np.sqrt(np.where(sel, var, np.nan))
+        return Band(mean, mean - half, mean + half, alpha, tuple(self.plain.sensors), what, new_reading)
+
+
+def pure_error_sigma(z: np.ndarray) -> tuple:
+    """(s (n_S,), dof (n_S,)): the pooled standard deviation of the series about their mean at each input
+    (pure error), s_k^2 = sum_ij (z_ijk - zbar_jk)^2 / sum_j (n_jk - 1) (unit of z; NaN where dof = 0)."""
+    mask = np.isfinite(z)
+    n = mask.sum(axis=0)
+    zbar = np.where(n > 0, np.nansum(z, axis=0) / np.maximum(n, 1), 0.0)
+    ss = np.sum(np.where(mask, (z - zbar[None]) ** 2, 0.0), axis=(0, 1))
+    dof = np.clip(n - 1, 0, None).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(dof > 0, np.sqrt(ss / dof), np.nan), dof
+
+
+def _gls(model, data, start: tuple, Y, V: np.ndarray, obs: Observations, zbar_s: np.ndarray) -> tuple:
+    """(p, h (n_q, n_S), G (n_q, n_S, n_p), notes): Gauss-Newton on the GLS objective r^T V^-1 r from
+    ``start`` = (p, h, G) (states Y as the state solves' guess)."""
+    L = linalg.cholesky(V, lower=True)
+    p, h, G = start
+    notes = []
+    for _ in range(8):
+        r, Gs = zbar_s - obs.stack(h), obs.stack(G)
+        wr, wG = linalg.solve_triangular(L, r, lower=True), linalg.solve_triangular(L, Gs, lower=True)
+        step = linalg.cho_solve(linalg.cho_factor(wG.T @ wG, lower=True), wG.T @ wr)
+        obj = float(wr @ wr)
+        for _half in range(6):
+            cand = p + step
+            try:
+                hc, Gc = outputs_at(model, cand, data.inputs, Y)
+            except NumericsError:                  # the states do not solve there: a shorter step
+                step = step / 2
+                continue
+            rc = linalg.solve_triangular(L, zbar_s - obs.stack(hc), lower=True)
+            if float(rc @ rc) <= obj * (1 + 1e-12):
+                break
+            step = step / 2
+        else:
+            notes.append("the generalised least-squares refit of p stopped: no step decreased its objective")
+            break
+        p, h, G = cand, hc, Gc
+        if np.all(np.abs(step) <= 1e-9 * (np.abs(p) + 1e-12)):
+            break
+    return p, h, G, tuple(notes)
+
+
+def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np.ndarray) -> tuple:
+    """(min generalised eigenvalue of (G^T V^-1 G, G^T D^-1 G), of (G^T V^-1 G, G^T diag(V)^-1 G)): the share of
+    the parameters' information the model error leaves against the noise D alone and against uncorrelated
+    errors of the same size (1: nothing lost; near 0: that direction of p is not determined)."""
+    A = Gs.T @ Vinv @ Gs
+    out = []
+    for d in (noise, np.diag(V)):
+        try:
+            out.append(float(linalg.eigh(A, Gs.T @ (Gs / d[:, None]), eigvals_only=True)[0]))
+        except linalg.LinAlgError:
+            out.append(0.0)
+    return tuple(out)
+
+
+def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
+                    plain: Estimate | None = None, groups: np.ndarray | None = None) -> ErrorFit:
+    """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
+    plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
+    the plain fit when already done; ``groups`` (n_q,) integer condition of every input row of the embedded error
+    (None: each row its own).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    est = plain if plain is not None else identify(model, data, p0, weights=weights)
+    sigma = np.asarray(data.sigma, float)
+    obs = Observations.of(data.counts(), sigma, weights, scaling(data.inputs))
+    zbar_s = obs.stack(np.nan_to_num(data.means()))
+    Gs = obs.stack(np.asarray(est.G, float))
+    r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))
+    test = white_lr_test(obs, Gs, r0)
+    if kind == "none":
+        return ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float))
+    noise = np.concatenate(obs.noise)
+    cond = (np.arange(data.n_q) if groups is None else np.asarray(groups))[np.concatenate(obs.rows)]
+    se = np.asarray(est.stderr_gn, float)
+
+    def error_model(Gs, r, starts):
+        if kind == "discrepancy":
+            f = fit_discrepancy(obs, Gs, r, scaling.pins, starts)
+            return f, f.covariance(), f.converged, f.theta
+        f = fit_embedded(Gs, cond, noise, se, r, starts)
+        return f, f.V, f.converged, f.c
+
+    Y = np.asarray(est.states, float) if model.n_y else None
+    fitted, V, converged, theta = error_model(Gs, r0, None)
+    p, h, G, notes = _gls(model, data, (est.p.copy(), np.asarray(est.fitted, float), np.asarray(est.G, float)), Y,
+                          V, obs, zbar_s)
+    moved = np.inf
+    for _ in range(OUTER_ITERATIONS - 1):          # REML at the new linearisation, GLS under it, to a fixed point
+        fitted, V, converged, new = error_model(obs.stack(G), zbar_s - obs.stack(h), (theta,))
+        p, h, G, notes = _gls(model, data, (p, h, G), None, V, obs, zbar_s)
+        moved, theta = float(np.max(np.abs(new - theta))), new
+        if moved < 1e-3:
+            break
+    else:
+        notes += (f"the alternation of REML and generalised least squares stopped after {OUTER_ITERATIONS} rounds "
+                  f"(last change of log hyperparameters {moved:.2g})",)
+    gp, emb = (fitted, None) if kind == "discrepancy" else (None, fitted)
+    if not converged:
+        notes += (f"the {kind}'s REML optimiser stopped before convergence (best start kept)",)
+    Vinv = linalg.cho_solve((linalg.cholesky(V, lower=True), True), np.eye(len(V)))
+    Gs = obs.stack(G)
+    cov = linalg.cho_solve(linalg.cho_factor(Gs.T @ Vinv @ Gs, lower=True), np.eye(len(p)))
+    r = zbar_s - obs.stack(h)
+    kept, corr = _information_kept(Gs, V, Vinv, noise)
+    return ErrorFit(model, weights, sigma, scaling, est, test, p, cov, gp, Vinv @ r, Vinv @ Gs, Vinv, kept, corr,
+                    notes, emb)
