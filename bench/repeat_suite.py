@@ -91,12 +91,21 @@ def _start(tree: Path, k: int, args, log: Path):
     return subprocess.Popen(["make", "test"], cwd=tree, env=env, stdout=fh, stderr=subprocess.STDOUT), fh
 
 
-def _finish(proc, fh, t0: float, k: int, log: Path, beside: bool) -> Run:
-    code = proc.wait()
-    seconds = time.monotonic() - t0
+def _wait_all(procs: list, t0: float) -> list:
+    """The seconds from ``t0`` at which each process ended (polled, so each run gets its own time)."""
+    ended = [None] * len(procs)
+    while None in ended:
+        for i, p in enumerate(procs):
+            if ended[i] is None and p.poll() is not None:
+                ended[i] = time.monotonic() - t0
+        time.sleep(0.5)
+    return ended
+
+
+def _finish(proc, fh, seconds: float, k: int, log: Path, beside: bool) -> Run:
     fh.close()
     counts, failed = parse(log.read_text(errors="replace"))
-    return Run(index=k, seconds=seconds, returncode=code, counts=counts, failed=failed, beside=beside)
+    return Run(index=k, seconds=seconds, returncode=proc.returncode, counts=counts, failed=failed, beside=beside)
 
 
 def main(argv=None) -> int:
@@ -123,8 +132,9 @@ def main(argv=None) -> int:
             trees = [_prepare(args.fresh, args.random_order, work, k) for k in ks]
             t0 = time.monotonic()
             started = [(_start(t, k, args, logs / f"run{k:02d}.log"), k) for t, k in zip(trees, ks)]
-            for (proc, fh), k in started:
-                run = _finish(proc, fh, t0, k, logs / f"run{k:02d}.log", beside=len(ks) > 1)
+            ended = _wait_all([proc for (proc, _), _ in started], t0)
+            for ((proc, fh), k), seconds in zip(started, ended):
+                run = _finish(proc, fh, seconds, k, logs / f"run{k:02d}.log", beside=len(ks) > 1)
                 runs.append(run)
                 print(run.line(), flush=True)
             for t in trees:
