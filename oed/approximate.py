@@ -4,7 +4,7 @@ An approximate design :math:`\xi = \{(x_i, w_i)\}_{i=1}^k`, :math:`w_i > 0`, :ma
 share :math:`w_i` of the runs at the point :math:`x_i` (an input row of a static model, or a sampling time of
 a dynamic model's experiments) in the box :math:`[\ell, u]`; its information at the parameter vector
 :math:`P_s` is :math:`M_s(\xi) = \sum_i w_i F_s(x_i)`, with :math:`F_s(x)` the exact (CasADi AD) planned
-information of one run at x (:func:`oed.input_information`, :func:`oed.time_information`).  Solved:
+information of one run at x (:func:`oed.input_information`, :func:`identification.information_contributions`).  Solved:
 
 .. math::
 
@@ -30,13 +30,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from identification import information_contributions
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
 from .prior import Prior, make_prior
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
 from .static_inputs import input_information
-from .times import time_information
 
 __all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design"]
 
@@ -375,12 +375,18 @@ def _static_info(model, sigma, sensors, n_series):
 
 
 def _time_info(model, inputs, sigma, sensors, n_series):
+    """Information per sampling time summed over the chosen instruments and the experiments (as
+    :func:`oed.time_information`), at every parameter vector."""
+    k_idx = list(range(model.n_S)) if sensors is None else [model.sensors.index(s) for s in sensors]
+
     def info(X, P):
         t = X[:, 0]
         order = np.argsort(t)
         out = np.empty((t.size, len(P), model.n_p, model.n_p))
         for s, ps in enumerate(P):
-            out[order, s] = time_information(model, ps, t[order], inputs, sigma, sensors=sensors, n_series=n_series)[0]
+            F, _ = information_contributions(model, None, ps, inputs=inputs, times=t[order], sigma=sigma,
+                                             n_series=n_series)
+            out[order, s] = F.reshape(t.size, model.n_S, model.n_p, model.n_p)[:, k_idx].sum(axis=1)
         return out
     return info
 

@@ -160,3 +160,27 @@ def test_prior_outside_the_model_bounds_is_refused():
     m = Model.explicit([Parameter("k", 0.0, 10.0)], ["t"], ["y"], h=lambda p, q: ca.exp(-p[0] * q[0]))
     with pytest.raises(ValueError, match=r"prior: k = -1 \(a quadrature point\) lies outside"):
         approximate_design(m, [1.0], sigma=1.0, bounds=(0.0, 5.0), prior=(np.array([[-1.0], [1.0]]), [1, 1]))
+
+
+def test_design_verbs_route_approximate_designs(model):
+    from oed import select_inputs, select_times
+    r = select_inputs(model, P0, candidates=np.linspace(0.0, 24.0, 5), sigma=1.0, approximate=True)
+    ref = approximate_design(model, P0, sigma=1.0, bounds=(0.0, 24.0))
+    assert np.array_equal(r.points, ref.points) and np.array_equal(r.weights, ref.weights)
+    with pytest.raises(ValueError, match="candidates: approximate designs need a continuous range"):
+        select_inputs(model, P0, candidates=[[3.0]], sigma=1.0, approximate=True)
+    with pytest.raises(ValueError, match="prior: exact robust designs .* not implemented"):
+        select_inputs(model, P0, candidates=np.linspace(0.0, 24.0, 5), sigma=1.0, n_points=3, prior=NARROW)
+    with pytest.raises(ValueError, match="n_points: not used by an approximate design"):
+        select_inputs(model, P0, candidates=np.linspace(0.0, 24.0, 5), sigma=1.0, n_points=3, approximate=True)
+    from mudoe.example_reactor import P_TRUE, TIMES, build
+    m = build()
+    Q = np.array([[1.0, 330.0], [2.0, 350.0]])
+    with pytest.raises(ValueError, match="times: approximate designs need a continuous range of times"):
+        select_times(m, P_TRUE, [0.5], Q, np.array([0.01, 0.008]), approximate=True)
+    with pytest.raises(ValueError, match="pairs: not used by an approximate design"):
+        select_times(m, P_TRUE, TIMES, Q, np.array([0.01, 0.008]), approximate=True, pairs=True)
+    rt = select_times(m, P_TRUE, TIMES, Q, np.array([0.01, 0.008]), approximate=True, criterion="A",
+                      approx_settings=ApproximateSettings(grid=31, rounds=4))
+    assert rt.names == ("t",) and TIMES.min() <= rt.points.min() and rt.points.max() <= TIMES.max()
+    assert rt.gap < 1e-6 * rt.reference
