@@ -68,15 +68,15 @@ def test_local_a_and_e_designs_satisfy_their_equivalence_theorems(model, criteri
 
 
 def _brute_multiplicative(F, prior_w, n_p, tol=5e-5, max_iter=200000):
-    """The multiplicative algorithm w <- w g / n_p on the whole fine grid (after 500 steps only on the points
-    keeping weight > 1e-9) until its equivalence gap over the whole grid (which bounds its distance to the grid's
-    optimum whatever was dropped) is below tol; returns (expected log det, gap)."""
+    """The multiplicative algorithm w <- w g / n_p on the whole fine grid (dropping points whose weight fell below
+    1e-10 at steps 512, 1024, 2048, ..., for speed) until its equivalence gap over the whole grid (which bounds its
+    distance to the grid's optimum whatever was dropped) is below tol; returns (expected log det, gap)."""
     w = np.full(F.shape[0], 1.0 / F.shape[0])
     keep = np.arange(F.shape[0])
     for it in range(max_iter):
-        if it == 500:
-            keep = np.flatnonzero(w > 1e-9)
-            w = w[keep] / w[keep].sum()
+        if it >= 512 and it & (it - 1) == 0:
+            sel = w > 1e-10
+            keep, w = keep[sel], w[sel] / w[sel].sum()
         Fk = F[keep]
         M = np.einsum("x,xsij->sij", w, Fk)
         g = np.einsum("sij,xsji->xs", np.linalg.inv(M), Fk) @ prior_w
@@ -91,10 +91,10 @@ def _brute_multiplicative(F, prior_w, n_p, tol=5e-5, max_iter=200000):
 
 def test_bayesian_d_design_certificate_and_brute_force_agreement(model):
     r = approximate_design(model, P0, sigma=1.0, bounds=(0.0, 24.0), prior=NARROW,
-                           settings=ApproximateSettings(prior_order=3))
-    assert r.robust == "bayes" and r.prior.n == 9
+                           settings=ApproximateSettings(prior_order=2))
+    assert r.robust == "bayes" and r.prior.n == 4
     assert abs(r.sensitivity_max - 3.0) < 1e-3
-    assert np.isfinite(r.quadrature_error) and r.quadrature_error < 1e-4
+    assert 0 < r.quadrature_error < 1e-3       # 2 x 2 Gauss rule against the 3 x 3 one
     T = np.r_[np.linspace(0.0, 2.0, 2001), np.linspace(2.02, 24.0, 1100)]     # spacing 0.001, then 0.02
     brute, brute_gap = _brute_multiplicative(_fine_information(model, r.prior.points, T), r.prior.weights, 3)
     assert brute_gap < 5e-5
