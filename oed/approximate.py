@@ -78,12 +78,11 @@ class ApproximateSettings:
     seed: int = 0
 
     def __post_init__(self):
-        for name in ("grid", "rounds", "zoom", "half_width", "n_multiplicative", "prior_order"):
+        least = {"grid": 3, "rounds": 0, "zoom": 2, "half_width": 1, "n_multiplicative": 0, "prior_order": 1}
+        for name, low in least.items():
             v = getattr(self, name)
-            low = 3 if name == "grid" else (2 if name == "zoom" else 0)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < max(low, 1 if name in (
-                    "half_width", "prior_order") else low):
-                raise ValueError(f"{name}: expected an integer >= {max(low, 1)}, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {v!r}")
         if not (isinstance(self.merge_tol, (int, float)) and 0 <= self.merge_tol < 1):
             raise ValueError(f"merge_tol: expected a number in [0, 1), got {self.merge_tol!r}")
 
@@ -421,10 +420,10 @@ def _check_prior_points(model, prior: Prior):
 
 def _resolve_prior(model, p, prior, robust, settings) -> tuple:
     """(Prior, mode): the nominal point for ``prior=None`` (local), else the rule of the prior."""
-    if prior is None:
-        return make_prior((np.asarray(p, float)[None, :], [1.0]), model, p), "local"
     if robust not in ROBUST:
         raise ValueError(f"robust: expected one of {ROBUST}, got {robust!r}")
+    if prior is None:
+        return make_prior((np.asarray(p, float)[None, :], [1.0]), model, p), "local"
     rule = settings.prior_rule or ("grid" if robust == "maximin" else "gauss")
     pr = make_prior(prior, model, p, rule=rule, order=settings.prior_order, seed=settings.seed)
     _check_prior_points(model, pr)

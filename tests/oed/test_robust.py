@@ -156,6 +156,15 @@ def test_bad_input_names_the_argument(model, kwargs, match):
         approximate_design(model, P0, sigma=1.0, **kwargs)
 
 
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(grid=2), "grid: expected an integer >= 3"), (dict(zoom=1), "zoom: expected an integer >= 2"),
+    (dict(rounds=-1), "rounds: expected an integer >= 0"), (dict(merge_tol=1.5), "merge_tol: expected a number"),
+])
+def test_bad_settings_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        ApproximateSettings(**kwargs)
+
+
 def test_prior_outside_the_model_bounds_is_refused():
     m = Model.explicit([Parameter("k", 0.0, 10.0)], ["t"], ["y"], h=lambda p, q: ca.exp(-p[0] * q[0]))
     with pytest.raises(ValueError, match=r"prior: k = -1 \(a quadrature point\) lies outside"):
