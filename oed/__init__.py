@@ -19,11 +19,12 @@ from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_info
 from .times import select_times, time_information
 from .dynamic_inputs import dynamic_input_information, select_dynamic_inputs
 from .prior import Prior, make_prior
-from .approximate import ApproximateDesign, ApproximateSettings, approximate_design
+from .approximate import ApproximateDesign, ApproximateSettings, approximate_design, design_efficiencies
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
            "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating",
            "select_times", "time_information", "dynamic_input_information", "select_dynamic_inputs", "Prior",
-           "make_prior", "ApproximateDesign", "ApproximateSettings", "approximate_design"]
+           "make_prior", "ApproximateDesign", "ApproximateSettings", "approximate_design",
+           "design_efficiencies"]

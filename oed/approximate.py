@@ -38,7 +38,7 @@ from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_
                      utilities)
 from .static_inputs import input_information
 
-__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design"]
+__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "design_efficiencies"]
 
 ROBUST = ("bayes", "maximin")
 
@@ -390,6 +390,22 @@ def _time_info(model, inputs, sigma, sensors, n_series):
     return info
 
 
+def _information_source(model, sigma, inputs, sensors, n_series):
+    """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns), arguments checked."""
+    if sensors is not None:
+        sensors = [sensors] if isinstance(sensors, str) else list(sensors)
+        unknown = [s for s in sensors if s not in model.sensors]
+        if unknown or not sensors:
+            raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {list(model.sensors)}")
+    if getattr(model, "is_dynamic", False):
+        if inputs is None:
+            raise ValueError("inputs: a dynamic model needs the experiments (rows of inputs) sampled at the times")
+        return _time_info(model, np.atleast_2d(np.asarray(inputs, float)), sigma, sensors, n_series), ("t",)
+    if inputs is not None:
+        raise ValueError("inputs: only for a dynamic model (the static model's inputs are the design points)")
+    return _static_info(model, sigma, sensors, n_series), tuple(model.inputs)
+
+
 def _check_box(model, bounds, dynamic):
     d = 1 if dynamic else model.n_q_dim
     what = "the sampling-time range (t_min, t_max)" if dynamic else f"input bounds (lower, upper) of shape ({d},)"
@@ -473,19 +489,7 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
     dynamic = bool(getattr(model, "is_dynamic", False))
     crit = Criterion.parse(criterion)
     lo, hi = _check_box(model, bounds, dynamic)
-    if sensors is not None:
-        sensors = [sensors] if isinstance(sensors, str) else list(sensors)
-        unknown = [s for s in sensors if s not in model.sensors]
-        if unknown or not sensors:
-            raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {list(model.sensors)}")
-    if dynamic:
-        if inputs is None:
-            raise ValueError("inputs: a dynamic model needs the experiments (rows of inputs) sampled at the times")
-        info, names = _time_info(model, np.atleast_2d(np.asarray(inputs, float)), sigma, sensors, n_series), ("t",)
-    else:
-        if inputs is not None:
-            raise ValueError("inputs: only for a dynamic model (the static model's inputs are the design points)")
-        info, names = _static_info(model, sigma, sensors, n_series), tuple(model.inputs)
+    info, names = _information_source(model, sigma, inputs, sensors, n_series)
     pr, mode = _resolve_prior(model, p, prior, robust, settings)
     if mode == "maximin":
         return _maximin(model, info, pr, (lo, hi), crit, names, settings, t0)
@@ -501,7 +505,8 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
         value=value, sensitivity_max=float(np.max(g)), reference=ref,
         efficiency_bound=bayes_efficiency_bound(crit, U, pr.weights, gap, model.n_p), worst_case_bound=float("nan"),
         local_gaps=_readonly([]), efficiencies=_readonly([]), measure=_readonly(mu), quadrature_error=qerr,
-        checked=_readonly(store.X[order]), sensitivity=_readonly(g[order]), spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
+        checked=_readonly(store.X[order]), sensitivity=_readonly(g[order]),
+        spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
         wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store))
 
 
@@ -544,3 +549,27 @@ def _maximin(model, info, pr: Prior, box, crit, names, settings, t0) -> Approxim
         quadrature_error=float("nan"), checked=_readonly(store.X[order]), sensitivity=_readonly(b.sensitivity[order]),
         spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
         wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store))
+
+
+def design_efficiencies(model, design: ApproximateDesign, reference: ApproximateDesign, *, sigma, inputs=None,
+                        sensors=None, n_series: int = 1) -> np.ndarray:
+    r"""Efficiency of ``design`` against ``reference`` at every parameter vector :math:`P_s` of ``reference.prior``:
+    D: :math:`\exp((u_D(M_s(\xi)) - u_D(M_s(\xi_{ref})))/n_p)`, A, E: :math:`u(M_s(\xi_{ref}))/u(M_s(\xi))` (the
+    ratio of trace of the inverse, or of the inverse smallest eigenvalue), with the criterion of ``reference``;
+    e.g. the local design across the prior against the robust one.  ``sigma``, ``inputs``, ``sensors`` and
+    ``n_series`` as the designs were made with.
+
+    Returns
+    -------
+    ndarray (n_s,)
+    """
+    if design.names != reference.names:
+        raise ValueError(f"design: its columns {design.names} are not the reference's {reference.names}")
+    info, _ = _information_source(model, sigma, inputs, sensors, n_series)
+    crit = Criterion.parse(reference.criterion)
+    P = reference.prior.points
+    u = utilities(crit, information_of(design.weights, info(np.asarray(design.points), P))).u
+    u_ref = utilities(crit, information_of(reference.weights, info(np.asarray(reference.points), P))).u
+    if crit is Criterion.D:
+        return np.exp((u - u_ref) / P.shape[1])
+    return u_ref / u

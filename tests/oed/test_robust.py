@@ -103,11 +103,18 @@ def test_bayesian_d_design_certificate_and_brute_force_agreement(model):
     assert brute <= r.value + max(r.gap, 0.0) + 1e-12
 
 
-def test_wide_prior_spreads_the_bayesian_design(model):
+def test_wide_prior_spreads_the_bayesian_design_and_the_local_design_loses_across_it(model):
+    from oed import design_efficiencies
     wide = {"theta1": ("uniform", 0.04884, 0.06884), "theta2": ("uniform", 0.298, 8.298)}
     r = approximate_design(model, P0, sigma=1.0, bounds=(0.0, 24.0), prior=wide,
                            settings=ApproximateSettings(prior_order=5))
     assert len(r.weights) > 3 and abs(r.sensitivity_max - 3.0) < 1e-3
+    local = approximate_design(model, P0, sigma=1.0, bounds=(0.0, 24.0))
+    eff = design_efficiencies(model, local, r, sigma=1.0)
+    assert eff.shape == (25,) and np.allclose(design_efficiencies(model, r, r, sigma=1.0), 1.0)
+    # sum_s pi_s n_p log eff_s = Phi(local) - Phi(bayes) <= the Bayesian design's certified gap
+    assert 3 * r.prior.mean(np.log(eff)) <= max(r.gap, 0.0) + 1e-12
+    assert eff.min() < 0.9
 
 
 def test_maximin_d_design_against_a_brute_force_parameter_grid(model):
