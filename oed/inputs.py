@@ -86,10 +86,10 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
         Bad input (the message names the argument).
     """
     if approximate or prior is not None:
+        exact_args = dict(n_points=n_points, costs=costs, budget=budget, include=include, exclude=exclude,
+                          refine=refine, times=times)
         return _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, approximate, prior, robust,
-                                   approx_settings, criterion, exact_args=dict(n_points=n_points, costs=costs, budget=budget,
-                                                                    include=include, exclude=exclude, refine=refine,
-                                                                    times=times))
+                                   approx_settings, criterion, exact_args)
     if getattr(model, "is_dynamic", False):
         if times is None:
             raise ValueError("times: a dynamic model needs the sampling times of its experiments")
