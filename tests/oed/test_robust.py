@@ -200,3 +200,16 @@ def test_design_verbs_route_approximate_designs(model):
                       approx_settings=ApproximateSettings(grid=31, rounds=4))
     assert rt.names == ("t",) and TIMES.min() <= rt.points.min() and rt.points.max() <= TIMES.max()
     assert rt.gap < 1e-6 * rt.reference
+
+
+def test_classical_polynomial_designs_including_a_multiple_smallest_eigenvalue():
+    line = Model.explicit(["b0", "b1"], ["x"], ["y"], h=lambda p, q: p[0] + p[1] * q[0])
+    r = approximate_design(line, [1.0, 1.0], sigma=1.0, bounds=(-1.0, 1.0), criterion="E")
+    assert np.allclose(r.points[:, 0], [-1.0, 1.0]) and np.allclose(r.weights, 0.5, atol=1e-7)
+    assert r.multiplicity == 2 and r.gap < 1e-9 and any("multiplicity 2" in n for n in r.notes)
+    quad = Model.explicit(["b0", "b1", "b2"], ["x"], ["y"], h=lambda p, q: p[0] + p[1] * q[0] + p[2] * q[0] ** 2)
+    e = approximate_design(quad, np.ones(3), sigma=1.0, bounds=(-1.0, 1.0), criterion="E")
+    assert np.allclose(e.points[:, 0], [-1.0, 0.0, 1.0], atol=1e-6)
+    assert np.allclose(e.weights, [0.2, 0.6, 0.2], atol=1e-6) and e.value == pytest.approx(-5.0, rel=1e-7)
+    d = approximate_design(quad, np.ones(3), sigma=1.0, bounds=(-1.0, 1.0), criterion="D")
+    assert np.allclose(d.weights, 1 / 3, atol=1e-7) and d.value == pytest.approx(np.log(4 / 27), rel=1e-9)
