@@ -16,7 +16,9 @@ with the utilities of :mod:`oed.robust` (D: log det, A: -trace of the inverse, E
 Algorithm: weights on a coarse tensor grid (:mod:`oed.approx_weights`), then ``rounds`` times: a local
 grid ``zoom`` times finer around every support point and every high local maximum of the sensitivity
 function, and the weights again on those points; support points closer than the merge distance are
-merged (weighted mean) and their weights re-optimised.  The certificate is computed, never assumed: the
+merged (weighted mean) and their weights re-optimised.  For explicit static models the support points of
+local and pseudo-Bayesian designs are then moved continuously to local maxima of the sensitivity function (L-BFGS-B with its exact CasADi
+gradient, :mod:`oed.approx_polish`) and the weights re-optimised, kept only if the criterion improves.  The certificate is computed, never assumed: the
 sensitivity function (:math:`g(x) = \sum_s \pi_s d_s(x)`, or the worst-case measure's for maximin) at
 the final design is evaluated at every point ever evaluated (the coarse grid and all local grids), its
 maximum is reported with the equivalence-theorem gap and the efficiency lower bound that follows from
@@ -31,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identification import information_contributions
+from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
 from .prior import Prior, make_prior
@@ -65,6 +68,10 @@ class ApproximateSettings:
         Rule of a dict prior (:func:`oed.prior.make_prior`); None: ``"gauss"`` (bayes), ``"grid"`` (maximin).
     prior_order : int
     seed : int
+    polish_rounds : int
+        Explicit static models, local and pseudo-Bayesian designs (and the local optima of maximin designs):
+        rounds of the continuous refinement of the support points by L-BFGS-B with the exact CasADi gradient of
+        the sensitivity function (:mod:`oed.approx_polish`); 0: none.
     """
 
     grid: int = 121
@@ -76,9 +83,11 @@ class ApproximateSettings:
     prior_rule: str | None = None
     prior_order: int = 5
     seed: int = 0
+    polish_rounds: int = 3
 
     def __post_init__(self):
-        least = {"grid": 3, "rounds": 0, "zoom": 2, "half_width": 1, "n_multiplicative": 0, "prior_order": 1}
+        least = {"grid": 3, "rounds": 0, "zoom": 2, "half_width": 1, "n_multiplicative": 0, "prior_order": 1,
+                 "polish_rounds": 0}
         for name, low in least.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
@@ -258,17 +267,30 @@ def _local(centres, h, lo, hi, k):
     return np.clip((centres[:, None, :] + offs[None, :, :]).reshape(-1, lo.size), lo, hi)
 
 
-def _sensitivity(mode, crit, F, w, prior_w, u_star):
-    """(g over the points of F, reference, measure, U) of the design w (module docstring)."""
+@dataclass(frozen=True)
+class _Sensitivity:
+    """The sensitivity function of a design over the store: values g, its value at the optimum (reference), the
+    measure on the parameter vectors, the coefficient a_s of every vector's directional derivative, utilities."""
+
+    g: np.ndarray
+    reference: float
+    measure: np.ndarray
+    coef: np.ndarray
+    U: object
+
+
+def _sensitivity(mode, crit, F, w, prior_w, u_star) -> _Sensitivity:
+    """The sensitivity function of the design w over the points of F (module docstring)."""
     n_p = F.shape[-1]
     U = utilities(crit, information_of(w, F))
     d = directional(U.grad, F)
     if mode == "bayes":
         g, _ = bayes_gap(U, d, prior_w)
-        return g, float(np.dot(prior_w, U.inner)), np.asarray(prior_w, float), U
+        pw = np.asarray(prior_w, float)
+        return _Sensitivity(g, float(np.dot(prior_w, U.inner)), pw, pw, U)
     c, kappa = standardized(crit, U.u, u_star, n_p)
     b = maximin_bound(c, kappa, d, U.inner)
-    return b.sensitivity, float(np.dot(b.measure, kappa * U.inner)), b.measure, U
+    return _Sensitivity(b.sensitivity, float(np.dot(b.measure, kappa * U.inner)), b.measure, b.measure * kappa, U)
 
 
 def _peaks(X, g, ref, n_p):
@@ -304,8 +326,8 @@ def _start(store, box, crit, mode, prior_w, u_star, settings, start):
     n_p = store.F.shape[-1]
     if start is None:
         wc = multiplicative_weights(store.F[idx], prior_w, crit, settings.n_multiplicative)
-        g, ref, _, _ = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], idx, wc), prior_w, u_star)
-        S = np.union1d(_peaks(store.X, g, ref, n_p), idx[wc >= 0.5 * wc.max()])
+        sens = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], idx, wc), prior_w, u_star)
+        S = np.union1d(_peaks(store.X, sens.g, sens.reference, n_p), idx[wc >= 0.5 * wc.max()])
     else:
         S = np.unique(store.add(start))
     wS = _weights(mode, crit, store.F[S], prior_w, u_star, np.full(S.size, 1.0 / S.size))
@@ -321,11 +343,11 @@ def _optimise(store, box, crit, mode, prior_w, u_star, settings, start=None):
     S, wS = _start(store, box, crit, mode, prior_w, u_star, settings, start)
     for _ in range(settings.rounds):
         h = h / settings.zoom
-        g, ref, _, _ = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], S, wS), prior_w, u_star)
-        centres = store.X[np.union1d(S, _peaks(store.X, g, ref, store.F.shape[-1]))]
+        sens = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], S, wS), prior_w, u_star)
+        centres = store.X[np.union1d(S, _peaks(store.X, sens.g, sens.reference, store.F.shape[-1]))]
         local = _local(centres, h, lo, hi, settings.half_width)
         groups = np.split(store.add(local), len(centres))
-        g, _, _, _ = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], S, wS), prior_w, u_star)
+        g = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], S, wS), prior_w, u_star).g
         newS = np.unique([gr[np.argmax(g[gr])] for gr in groups])
         carried = {int(i): v for i, v in zip(S, wS)}
         w0 = np.array([carried.get(int(i), 0.0) for i in newS]) + 1e-3 / newS.size
@@ -353,15 +375,53 @@ def _merge(store, S, wS, h, box, settings):
     return idx, np.bincount(inv, weights=np.array([wS[gr].sum() for gr in groups]))
 
 
-def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None):
-    """(support indices, weights, g over the store, reference, measure, U, h) of the optimised, merged design."""
+@dataclass(frozen=True)
+class _Solution:
+    """Support (indices in the store, weights), the sensitivity function over the store, final spacing h."""
+
+    idx: np.ndarray
+    weights: np.ndarray
+    sens: _Sensitivity
+    h: np.ndarray
+
+
+def _polish(store, sol, box, crit, prior_w, polisher, settings):
+    """``settings.polish_rounds`` times: the support points moved to local maxima of the sensitivity function
+    (exact CasADi gradient, :mod:`oed.approx_polish`), points that met merged, the weights re-optimised; a round
+    is kept only if the criterion improves (pseudo-Bayesian and local designs)."""
+    idx, ws = sol
+    for _ in range(settings.polish_rounds):
+        sens = _sensitivity("bayes", crit, store.F, _full(store.X.shape[0], idx, ws), prior_w, None)
+        moved = store.add(polisher.polish(store.X[idx], sens.coef[:, None, None] * sens.U.grad, box[0], box[1]))
+        if np.array_equal(moved, idx):
+            break
+        new, wm = _merge(store, moved, ws, np.zeros(box[0].size), box, settings)
+        wn = _weights("bayes", crit, store.F[new], prior_w, None, wm / wm.sum())
+        if _objective_value("bayes", crit, store.F[new], wn, prior_w, None) < \
+                _objective_value("bayes", crit, store.F[idx], ws, prior_w, None):
+            break
+        idx, ws = new[wn > 0], wn[wn > 0]
+    return idx, ws
+
+
+def _objective_value(mode, crit, F, w, prior_w, u_star) -> float:
+    U = utilities(crit, information_of(w, F))
+    if mode == "bayes":
+        return float(np.dot(prior_w, U.u))
+    return float(np.min(standardized(crit, U.u, u_star, F.shape[-1])[0]))
+
+
+def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None, polisher=None) -> _Solution:
+    """The optimised, merged (and, for explicit models, polished) design and its sensitivity function."""
     S, wS, h = _optimise(store, box, crit, mode, prior_w, u_star, settings, start)
     idx, wm = _merge(store, S, wS, h, box, settings)
     ws = _weights(mode, crit, store.F[idx], prior_w, u_star, wm / wm.sum())
-    g, ref, mu, U = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], idx, ws), prior_w, u_star)
     idx, ws = idx[ws > 0], ws[ws > 0]
+    if polisher is not None and mode == "bayes" and settings.polish_rounds:
+        idx, ws = _polish(store, (idx, ws), box, crit, prior_w, polisher, settings)
+    sens = _sensitivity(mode, crit, store.F, _full(store.X.shape[0], idx, ws), prior_w, u_star)
     order = np.lexsort(store.X[idx].T[::-1])
-    return idx[order], ws[order], g, ref, mu, U, h
+    return _Solution(idx[order], ws[order], sens, h)
 
 
 # ---------------------------------------------------------------------------- the front door
@@ -491,10 +551,16 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
     lo, hi = _check_box(model, bounds, dynamic)
     info, names = _information_source(model, sigma, inputs, sensors, n_series)
     pr, mode = _resolve_prior(model, p, prior, robust, settings)
+
+    def polisher(P):
+        return explicit_polisher(model, P, sigma, None if sensors is None else list(np.atleast_1d(sensors)),
+                                 n_series)
     if mode == "maximin":
-        return _maximin(model, info, pr, (lo, hi), crit, names, settings, t0)
+        return _maximin(model, info, pr, (lo, hi), crit, names, settings, t0, polisher)
     store = _Store(info, pr.points, (lo, hi))
-    idx, ws, g, ref, mu, U, h = _solve(store, (lo, hi), crit, "bayes", pr.weights, None, settings)
+    sol = _solve(store, (lo, hi), crit, "bayes", pr.weights, None, settings, polisher=polisher(pr.points))
+    idx, ws, g, ref, mu, U, h = sol.idx, sol.weights, sol.sens.g, sol.sens.reference, sol.sens.measure, sol.sens.U, \
+        sol.h
     gap = float(np.max(g) - ref)
     value = pr.mean(U.u)
     qerr = float("nan") if mode == "local" else pr.error(
@@ -519,17 +585,18 @@ def _notes(crit, U, store) -> tuple:
     return tuple(notes)
 
 
-def _maximin(model, info, pr: Prior, box, crit, names, settings, t0) -> ApproximateDesign:
+def _maximin(model, info, pr: Prior, box, crit, names, settings, t0, polisher) -> ApproximateDesign:
     """Local optima at every parameter vector, then the standardized maximin design and its bounds."""
     lo, hi = box
     u_star, gaps, starts = np.empty(pr.n), np.empty(pr.n), []
     for s in range(pr.n):
         st = _Store(info, pr.points[s:s + 1], box)
-        idx_s, _, g_s, ref_s, _, U_s, _ = _solve(st, box, crit, "bayes", np.ones(1), None, settings)
-        u_star[s], gaps[s] = U_s.u[0], float(np.max(g_s) - ref_s)
-        starts.append(st.X[idx_s])
+        loc = _solve(st, box, crit, "bayes", np.ones(1), None, settings, polisher=polisher(pr.points[s:s + 1]))
+        u_star[s], gaps[s] = loc.sens.U.u[0], float(np.max(loc.sens.g) - loc.sens.reference)
+        starts.append(st.X[loc.idx])
     store = _Store(info, pr.points, (lo, hi))
-    idx, ws, g, ref, mu, U, h = _solve(store, box, crit, "maximin", None, u_star, settings, np.vstack(starts))
+    sol = _solve(store, box, crit, "maximin", None, u_star, settings, np.vstack(starts))
+    idx, ws, U, h = sol.idx, sol.weights, sol.sens.U, sol.h
     c, kappa = standardized(crit, U.u, u_star, model.n_p)
     b = maximin_bound(c, kappa, directional(U.grad, store.F), U.inner)
     eff = efficiency_from_c(crit, c)
