@@ -17,10 +17,13 @@ Algorithm: weights on a coarse tensor grid (:mod:`oed.approx_weights`), then ``r
 grid ``zoom`` times finer around every support point and every high local maximum of the sensitivity
 function, and the weights again on those points; support points closer than the merge distance are
 merged (weighted mean) and their weights re-optimised.  For explicit static models the support points of
-local and pseudo-Bayesian designs are then moved continuously to local maxima of the sensitivity function (L-BFGS-B with its exact CasADi
-gradient, :mod:`oed.approx_polish`) and the weights re-optimised, kept only if the criterion improves.  The certificate is computed, never assumed: the
+local and pseudo-Bayesian designs are then moved continuously to local maxima of the sensitivity function
+(L-BFGS-B with its exact CasADi gradient, :mod:`oed.approx_polish`) and the weights re-optimised, kept only
+if neither the criterion nor the equivalence gap gets worse (the points reached are checked either way).
+The certificate is computed, never assumed: the
 sensitivity function (:math:`g(x) = \sum_s \pi_s d_s(x)`, or the worst-case measure's for maximin) at
-the final design is evaluated at every point ever evaluated (the coarse grid and all local grids), its
+the final design is evaluated at every point ever evaluated (the coarse grid, all local grids and the
+points the continuous refinement reached), its
 maximum is reported with the equivalence-theorem gap and the efficiency lower bound that follows from
 it.  The maximum is over those points (a grid refined around every local maximum to the final
 spacing), not a proven maximum over the continuum.
@@ -388,7 +391,8 @@ class _Solution:
 def _polish(store, sol, box, crit, prior_w, polisher, settings):
     """``settings.polish_rounds`` times: the support points moved to local maxima of the sensitivity function
     (exact CasADi gradient, :mod:`oed.approx_polish`), points that met merged, the weights re-optimised; a round
-    is kept only if the criterion improves (pseudo-Bayesian and local designs)."""
+    is kept only if the criterion does not decrease and the equivalence gap over the store does not grow
+    (pseudo-Bayesian and local designs)."""
     idx, ws = sol
     for _ in range(settings.polish_rounds):
         sens = _sensitivity("bayes", crit, store.F, _full(store.X.shape[0], idx, ws), prior_w, None)
@@ -397,8 +401,11 @@ def _polish(store, sol, box, crit, prior_w, polisher, settings):
             break
         new, wm = _merge(store, moved, ws, np.zeros(box[0].size), box, settings)
         wn = _weights("bayes", crit, store.F[new], prior_w, None, wm / wm.sum())
+        after = _sensitivity("bayes", crit, store.F, _full(store.X.shape[0], new, wn), prior_w, None)
+        before = _sensitivity("bayes", crit, store.F, _full(store.X.shape[0], idx, ws), prior_w, None)
         if _objective_value("bayes", crit, store.F[new], wn, prior_w, None) < \
-                _objective_value("bayes", crit, store.F[idx], ws, prior_w, None):
+                _objective_value("bayes", crit, store.F[idx], ws, prior_w, None) or \
+                np.max(after.g) - after.reference > np.max(before.g) - before.reference:
             break
         idx, ws = new[wn > 0], wn[wn > 0]
     return idx, ws
