@@ -8,6 +8,9 @@ is built.  The other names are those of :mod:`oed.static_inputs`.
 """
 from __future__ import annotations
 
+import numpy as np
+
+from .approximate import ApproximateSettings, approximate_design
 from .design import DesignSettings
 from .dynamic_inputs import select_dynamic_inputs
 from .static_inputs import (InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs,
@@ -17,11 +20,15 @@ __all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "input_inform
            "refine_inputs"]
 
 
-def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criterion="D", kind="gauss_newton",
+def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, criterion="D", kind="gauss_newton",
                   costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
                   refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
-                  settings: DesignSettings = DesignSettings(), times=None, discretisation=None) -> InputDesignResult:
-    r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs), optionally refined.
+                  settings: DesignSettings = DesignSettings(), times=None, discretisation=None,
+                  approximate: bool = False, prior=None, robust: str = "bayes",
+                  approx_settings: ApproximateSettings = ApproximateSettings()):
+    r"""Exact optimal choice of ``n_points`` input rows (or input-sensor pairs), optionally refined; or, with
+    ``approximate=True``, the approximate design :math:`\max_\xi \sum_s \pi_s u(M_s(\xi))` (or its maximin)
+    on the continuous input range (:func:`oed.approximate.approximate_design`).
 
     Parameters
     ----------
@@ -33,7 +40,8 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
     sigma : array_like, shape (n_S,) or float
         Sensor standard deviations (sensor units).
     n_points : int
-        Number of candidates chosen: input rows, or (row, sensor) pairs with ``sensors="joint"``.
+        (Exact designs, required.)  Number of candidates chosen: input rows, or (row, sensor) pairs
+        with ``sensors="joint"``.
     sensors : None, "joint" or sequence of str
         None: every sensor measured at each chosen input; names: those sensors; ``"joint"``:
         the candidates are all (row, sensor) pairs and the sensors are chosen with the inputs.
@@ -57,16 +65,31 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
         input rows with the control profiles (:func:`oed.dynamic_inputs.select_dynamic_inputs`).
     discretisation : identification.DiscretisationSettings or None
         Dynamic models: the collocation's tolerance.
+    approximate : bool
+        Static models: return the approximate design (support points and weights with the
+        equivalence-theorem certificate) on ``bounds`` (default the candidates' range), not an exact
+        n-run design; ``n_points``, costs, budget, include/exclude, refine and method are then not used.
+    prior : None, (P, w), dict or oed.prior.Prior
+        Parameter uncertainty (:func:`oed.prior.make_prior`); only with ``approximate=True`` (exact
+        robust designs are not implemented).
+    robust : {"bayes", "maximin"}
+        With a prior: pseudo-Bayesian or standardized maximin criterion.
+    approx_settings : oed.approximate.ApproximateSettings
 
     Returns
     -------
-    InputDesignResult
+    InputDesignResult, or oed.approximate.ApproximateDesign with ``approximate=True``
 
     Raises
     ------
     ValueError
         Bad input (the message names the argument).
     """
+    if approximate or prior is not None:
+        exact_args = dict(n_points=n_points, costs=costs, budget=budget, include=include, exclude=exclude,
+                          refine=refine, times=times)
+        return _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, approximate, prior, robust,
+                                   approx_settings, criterion, exact_args)
     if getattr(model, "is_dynamic", False):
         if times is None:
             raise ValueError("times: a dynamic model needs the sampling times of its experiments")
@@ -82,3 +105,32 @@ def select_inputs(model, p, *, candidates, sigma, n_points, sensors=None, criter
                                 criterion=criterion, kind=kind, costs=costs, budget=budget, include=include,
                                 exclude=exclude, n_series=n_series, method=method, time_limit=time_limit,
                                 refine=refine, bounds=bounds, refine_settings=refine_settings, settings=settings)
+
+
+def _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, approximate, prior, robust, settings,
+                        criterion, exact_args):
+    """The ``approximate=True`` route of :func:`select_inputs` (arguments checked, then
+    :func:`oed.approximate.approximate_design` on the input range)."""
+    if not approximate:
+        raise ValueError("prior: exact robust designs (expected or worst-case criterion of an n-run design) are "
+                         "not implemented; use approximate=True for a robust approximate design")
+    if getattr(model, "is_dynamic", False):
+        raise ValueError("approximate: for a dynamic model the approximate design is over sampling times "
+                         "(oed.select_times(..., approximate=True)); approximate input profiles are not implemented")
+    used = [k for k, v in exact_args.items()
+            if v is not None and v is not False and not (isinstance(v, (tuple, list)) and len(v) == 0)]
+    if used:
+        raise ValueError(f"{used[0]}: not used by an approximate design (approximate=True); leave it out")
+    if isinstance(sensors, str) and sensors == "joint":
+        raise ValueError("sensors: approximate designs take None or sensor names, not 'joint'")
+    if bounds is None:
+        Q = np.asarray(candidates, float)
+        Q = Q[:, None] if Q.ndim == 1 else Q
+        if Q.ndim != 2 or Q.shape[0] == 0 or Q.shape[1] != model.n_q_dim or not np.all(np.isfinite(Q)):
+            raise ValueError(f"candidates: expected finite rows of shape (n, {model.n_q_dim}) spanning the range")
+        if not np.any(Q.max(axis=0) > Q.min(axis=0)):
+            raise ValueError("candidates: approximate designs need a continuous range, but every candidate row is "
+                             "the same point; give bounds=(lower, upper) or candidates spanning a range")
+        bounds = (Q.min(axis=0), Q.max(axis=0))
+    return approximate_design(model, p, sigma=sigma, bounds=bounds, criterion=criterion, prior=prior,
+                              robust=robust, sensors=sensors, n_series=n_series, settings=settings)

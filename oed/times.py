@@ -19,6 +19,7 @@ import numpy as np
 from identification import information_contributions
 from models.collocation import pair_name
 from models.dynamic import time_label
+from .approximate import ApproximateSettings, approximate_design
 from .design import DesignResult, select_sensors_from_information
 
 __all__ = ["time_information", "select_times"]
@@ -44,9 +45,12 @@ def time_information(model, p, times, inputs, sigma, sensors=None, pairs: bool =
 
 def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None, pairs: bool = False,
                  sensors=None, criterion: str = "D", costs=None, budget=None, include=(), exclude=(),
-                 method: str = "auto", time_limit: float = 60.0, n_series: int = 1) -> DesignResult:
+                 method: str = "auto", time_limit: float = 60.0, n_series: int = 1, approximate: bool = False,
+                 prior=None, robust: str = "bayes", approx_settings=None):
     """The sampling times (or time x sensor pairs) minimising the A, D or E criterion of the planned
-    Gauss-Newton covariance of a dynamic model at p (see the module docstring).
+    Gauss-Newton covariance of a dynamic model at p (see the module docstring); or, with
+    ``approximate=True``, the approximate design (times and weights) on the range of ``times``
+    (:func:`oed.approximate.approximate_design`).
 
     Parameters
     ----------
@@ -62,13 +66,43 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
                                    as in :func:`oed.select_sensors_from_information` (names are
                                    ``0.5`` for times, ``cA@0.5`` for pairs)
     n_series : int                 repeated series per experiment
+    approximate : bool             the approximate design on [min(times), max(times)] (n_times, costs,
+                                   budget, include, exclude, max_times and pairs are then not used)
+    prior : None, (P, w), dict     parameter uncertainty (:func:`oed.prior.make_prior`), only with
+                                   ``approximate=True`` (exact robust designs are not implemented)
+    robust : {"bayes", "maximin"}
+    approx_settings : oed.approximate.ApproximateSettings or None
 
     Returns
     -------
-    DesignResult
+    DesignResult, or oed.approximate.ApproximateDesign with ``approximate=True``
     """
+    if approximate or prior is not None:
+        return _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
+                                  approximate, approx_settings,
+                                  dict(n_times=n_times, max_times=max_times, pairs=pairs, costs=costs, budget=budget,
+                                       include=include, exclude=exclude))
     F, names = time_information(model, p, times, inputs, sigma, sensors, pairs, n_series)
     return select_sensors_from_information(F, None, criterion=criterion, kind="gauss_newton", n_sensors=n_times,
                                            max_sensors=max_times, costs=costs, budget=budget, include=include,
                                            exclude=exclude, method=method, time_limit=time_limit,
                                            sensor_names=names)
+
+
+def _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, approximate,
+                       settings, exact_args):
+    """The ``approximate=True`` route of :func:`select_times`."""
+    if not approximate:
+        raise ValueError("prior: exact robust designs (expected or worst-case criterion of an n-run design) are "
+                         "not implemented; use approximate=True for a robust approximate design")
+    used = [k for k, v in exact_args.items()
+            if v is not None and v is not False and not (isinstance(v, (tuple, list)) and len(v) == 0)]
+    if used:
+        raise ValueError(f"{used[0]}: not used by an approximate design (approximate=True); leave it out")
+    t = np.asarray(times, float).ravel()
+    if t.size == 0 or not np.all(np.isfinite(t)) or not t.max() > t.min():
+        raise ValueError("times: approximate designs need a continuous range of times (at least two distinct finite "
+                         f"candidate times; the range is [min, max]), got {t}")
+    return approximate_design(model, p, sigma=sigma, bounds=(t.min(), t.max()), criterion=criterion, prior=prior,
+                              robust=robust, inputs=inputs, sensors=sensors, n_series=n_series,
+                              settings=ApproximateSettings() if settings is None else settings)
