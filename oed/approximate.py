@@ -36,15 +36,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identification import information_contributions
+from models.dynamic import merge_times, time_tolerance
 from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
-from .prior import Prior, make_prior
+from .prior import Prior, make_prior, readonly
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
 from .static_inputs import input_information
 
-__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "design_efficiencies"]
+__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
 
 ROBUST = ("bayes", "maximin")
 
@@ -97,12 +98,6 @@ class ApproximateSettings:
                 raise ValueError(f"{name}: expected an integer >= {low}, got {v!r}")
         if not (isinstance(self.merge_tol, (int, float)) and 0 <= self.merge_tol < 1):
             raise ValueError(f"merge_tol: expected a number in [0, 1), got {self.merge_tol!r}")
-
-
-def _readonly(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True)
@@ -447,12 +442,15 @@ def _time_info(model, inputs, sigma, sensors, n_series):
 
     def info(X, P):
         t = X[:, 0]
-        order = np.argsort(t)
+        # times closer than the round-off tolerance are one instant (models.dynamic.merge_times): refined grids
+        # around a support point can hold such twins, which the model's data checks refuse
+        u = merge_times(t, tol=time_tolerance(t.max()))
+        at = np.abs(t[:, None] - u[None, :]).argmin(axis=1)
         out = np.empty((t.size, len(P), model.n_p, model.n_p))
         for s, ps in enumerate(P):
-            F, _ = information_contributions(model, None, ps, inputs=inputs, times=t[order], sigma=sigma,
+            F, _ = information_contributions(model, None, ps, inputs=inputs, times=u, sigma=sigma,
                                              n_series=n_series)
-            out[order, s] = F.reshape(t.size, model.n_S, model.n_p, model.n_p)[:, k_idx].sum(axis=1)
+            out[:, s] = F.reshape(u.size, model.n_S, model.n_p, model.n_p)[:, k_idx].sum(axis=1)[at]
         return out
     return info
 
@@ -574,11 +572,11 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
         lambda P: utilities(crit, information_of(ws, info(store.X[idx], P))).u)
     order = np.argsort(store.X[:, 0], kind="stable")
     return ApproximateDesign(
-        points=_readonly(store.X[idx]), weights=_readonly(ws), names=names, criterion=crit.value, robust=mode,
+        points=readonly(store.X[idx]), weights=readonly(ws), names=names, criterion=crit.value, robust=mode,
         value=value, sensitivity_max=float(np.max(g)), reference=ref,
         efficiency_bound=bayes_efficiency_bound(crit, U, pr.weights, gap, model.n_p), worst_case_bound=float("nan"),
-        local_gaps=_readonly([]), efficiencies=_readonly([]), measure=_readonly(mu), quadrature_error=qerr,
-        checked=_readonly(store.X[order]), sensitivity=_readonly(g[order]),
+        local_gaps=readonly([]), efficiencies=readonly([]), measure=readonly(mu), quadrature_error=qerr,
+        checked=readonly(store.X[order]), sensitivity=readonly(g[order]),
         spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
         wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store))
 
@@ -616,11 +614,11 @@ def _maximin(model, info, pr: Prior, box, crit, names, settings, t0, polisher) -
         ratio = float(b.upper / b.lower)
     order = np.argsort(store.X[:, 0], kind="stable")
     return ApproximateDesign(
-        points=_readonly(store.X[idx]), weights=_readonly(ws), names=names, criterion=crit.value, robust="maximin",
+        points=readonly(store.X[idx]), weights=readonly(ws), names=names, criterion=crit.value, robust="maximin",
         value=float(np.min(eff)), sensitivity_max=float(np.max(b.sensitivity)), reference=float(np.dot(
             b.measure, kappa * U.inner)), efficiency_bound=ratio, worst_case_bound=certified,
-        local_gaps=_readonly(gaps), efficiencies=_readonly(eff), measure=_readonly(b.measure),
-        quadrature_error=float("nan"), checked=_readonly(store.X[order]), sensitivity=_readonly(b.sensitivity[order]),
+        local_gaps=readonly(gaps), efficiencies=readonly(eff), measure=readonly(b.measure),
+        quadrature_error=float("nan"), checked=readonly(store.X[order]), sensitivity=readonly(b.sensitivity[order]),
         spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
         wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store))
 
@@ -647,3 +645,15 @@ def design_efficiencies(model, design: ApproximateDesign, reference: Approximate
     if crit is Criterion.D:
         return np.exp((u - u_ref) / P.shape[1])
     return u_ref / u
+
+
+def check_approximate_route(approximate: bool, exact_args: dict) -> None:
+    """The checks shared by the ``approximate=True`` routes of the design verbs: a prior asks for an approximate
+    design, and no argument of the exact route is given."""
+    if not approximate:
+        raise ValueError("prior: exact robust designs (expected or worst-case criterion of an n-run design) are "
+                         "not implemented; use approximate=True for a robust approximate design")
+    used = [k for k, v in exact_args.items()
+            if v is not None and v is not False and not (isinstance(v, (tuple, list)) and len(v) == 0)]
+    if used:
+        raise ValueError(f"{used[0]}: not used by an approximate design (approximate=True); leave it out")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .approximate import ApproximateSettings, approximate_design
+from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .design import DesignSettings
 from .dynamic_inputs import select_dynamic_inputs
 from .static_inputs import (InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs,
@@ -111,16 +111,10 @@ def _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, 
                         criterion, exact_args):
     """The ``approximate=True`` route of :func:`select_inputs` (arguments checked, then
     :func:`oed.approximate.approximate_design` on the input range)."""
-    if not approximate:
-        raise ValueError("prior: exact robust designs (expected or worst-case criterion of an n-run design) are "
-                         "not implemented; use approximate=True for a robust approximate design")
+    check_approximate_route(approximate, exact_args)
     if getattr(model, "is_dynamic", False):
         raise ValueError("approximate: for a dynamic model the approximate design is over sampling times "
                          "(oed.select_times(..., approximate=True)); approximate input profiles are not implemented")
-    used = [k for k, v in exact_args.items()
-            if v is not None and v is not False and not (isinstance(v, (tuple, list)) and len(v) == 0)]
-    if used:
-        raise ValueError(f"{used[0]}: not used by an approximate design (approximate=True); leave it out")
     if isinstance(sensors, str) and sensors == "joint":
         raise ValueError("sensors: approximate designs take None or sensor names, not 'joint'")
     if bounds is None:

@@ -32,14 +32,15 @@ import numpy as np
 from scipy import special, stats
 from scipy.stats import qmc
 
-__all__ = ["Prior", "make_prior", "DISTRIBUTIONS"]
+__all__ = ["Prior", "make_prior", "readonly", "DISTRIBUTIONS"]
 
 #: distribution name -> number of arguments after the name
 DISTRIBUTIONS = {"uniform": 2, "normal": 2, "lognormal": 2, "truncnormal": 4}
 RULES = ("gauss", "qmc", "grid")
 
 
-def _readonly(a) -> np.ndarray:
+def readonly(a) -> np.ndarray:
+    """A float copy of ``a`` that cannot be written (the arrays of frozen results)."""
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
@@ -177,8 +178,8 @@ def _given(names, p, P, w) -> Prior:
         bad = int(np.flatnonzero(~np.isfinite(w) | (w < 0))[0]) if np.any(~np.isfinite(w) | (w < 0)) else 0
         raise ValueError(f"prior: weights w must be finite and non-negative with a positive sum; entry {bad} is "
                          f"{w[bad]!r}")
-    return Prior(points=_readonly(P), weights=_readonly(w / w.sum()), names=names, rule="points",
-                 nominal=_readonly(p))
+    return Prior(points=readonly(P), weights=readonly(w / w.sum()), names=names, rule="points",
+                 nominal=readonly(p))
 
 
 def _check_spec(spec: dict, names, p) -> dict:
@@ -267,5 +268,5 @@ def _build(names, p, spec: dict, rule: str, order: int, seed: int) -> Prior:
         P = np.tile(p, (order, 1))
         P[:, cols] = np.stack([_ppf(spec[k][0], np.asarray(spec[k][1:]), u[:, i]) for i, k in enumerate(keys)], 1)
         w = np.full(order, 1.0 / order)
-    return Prior(points=_readonly(P), weights=_readonly(w / w.sum()), names=tuple(names), rule=rule,
-                 order=order, marginals=marg, nominal=_readonly(p), seed=seed)
+    return Prior(points=readonly(P), weights=readonly(w / w.sum()), names=tuple(names), rule=rule,
+                 order=order, marginals=marg, nominal=readonly(p), seed=seed)

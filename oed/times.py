@@ -19,7 +19,7 @@ import numpy as np
 from identification import information_contributions
 from models.collocation import pair_name
 from models.dynamic import time_label
-from .approximate import ApproximateSettings, approximate_design
+from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .design import DesignResult, select_sensors_from_information
 
 __all__ = ["time_information", "select_times"]
@@ -92,13 +92,7 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
 def _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, approximate,
                        settings, exact_args):
     """The ``approximate=True`` route of :func:`select_times`."""
-    if not approximate:
-        raise ValueError("prior: exact robust designs (expected or worst-case criterion of an n-run design) are "
-                         "not implemented; use approximate=True for a robust approximate design")
-    used = [k for k, v in exact_args.items()
-            if v is not None and v is not False and not (isinstance(v, (tuple, list)) and len(v) == 0)]
-    if used:
-        raise ValueError(f"{used[0]}: not used by an approximate design (approximate=True); leave it out")
+    check_approximate_route(approximate, exact_args)
     t = np.asarray(times, float).ravel()
     if t.size == 0 or not np.all(np.isfinite(t)) or not t.max() > t.min():
         raise ValueError("times: approximate designs need a continuous range of times (at least two distinct finite "
