@@ -109,7 +109,8 @@ def test_oed_with_a_prior_writes_the_robust_design(tmp_path, capsys):
     assert np.isclose(sum(d["weights"]), 1.0) and all(0.0 <= x[0] <= 1600.0 for x in d["points"])
     assert obj["local"]["robust"] == "local" and len(obj["local_efficiencies"]) == 25
     assert np.isclose(sum(obj["prior_weights"]), 1.0)
-    assert all(0 < e <= 1 + 1e-9 for e in obj["local_efficiencies"])       # the robust design is optimal on average
+    e, w = np.array(obj["local_efficiencies"]), np.array(obj["prior_weights"])
+    assert np.all(e > 0) and w @ np.log(e) <= 1e-9       # D: the robust design is best in expected log det
     assert json.loads((tmp_path / "res" / "oed.json").read_text())["design"]["gap"] == d["gap"]
     assert "efficiency of the local design" in (tmp_path / "res" / "oed.txt").read_text()
 
@@ -142,3 +143,25 @@ def test_without_a_prior_the_output_is_the_local_route(tmp_path, capsys):
                         n_points=2, criterion="D", kind="gauss_newton")
     assert "approximate" not in obj and "design" not in obj
     assert obj["indices"] == list(ref.indices) and obj["value"] == pytest.approx(ref.value, rel=1e-12)
+
+
+def test_the_design_page_draws_the_certificate_and_the_efficiencies(tmp_path):
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+
+    from mudoe.plans import plan_without_data
+    from mudoe.study_models import build_models
+    from reports.design_pages import design_pages
+    cfg = parse_config(PLAN + 'mode = "inputs"\n' + PRIOR, str(tmp_path / "plan.toml"))
+    plan = plan_without_data(cfg)
+    models = {k: b.model for k, b in build_models(cfg).items()}
+    figs = design_pages(SimpleNamespace(plan=plan, study=SimpleNamespace(models=models)))
+    assert len(figs) == 1
+    axes = [ax for ax in figs[0].axes if ax.get_xlabel()]
+    assert [ax.get_xlabel() for ax in axes][0] == "set point (N)"
+    assert any("efficiency" in ax.get_ylabel() for ax in axes)
+    sens = axes[0]
+    assert any(abs(line.get_ydata()[0] - plan.design.reference) < 1e-12 for line in sens.get_lines()
+               if len(set(np.atleast_1d(line.get_ydata()))) == 1)          # the line at the optimum value n_p
+    plt.close(figs[0])
