@@ -62,7 +62,7 @@ def check_robust_prior(ctx: ConfigContext, o) -> None:
 
 
 def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
-    """prior / approximate are for a static study's ``mode = "inputs"`` (without refine)."""
+    """prior / approximate are for a static study's ``mode = "inputs"`` (without refine, include, exclude, costs)."""
     if not (o.prior or o.approximate):
         return
     key = "prior" if o.prior else "approximate"
@@ -74,3 +74,7 @@ def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
     if o.refine:
         raise ctx.error("oed", "refine", "an approximate design already places its points on the continuous range; "
                         "leave refine out")
+    for k in ("include", "exclude", "costs"):
+        if getattr(o, k):
+            raise ctx.error("oed", k, f"not used by an approximate design ({key} is given; every sensor is read at "
+                            "each support point); leave it out")

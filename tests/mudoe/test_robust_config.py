@@ -89,6 +89,7 @@ def test_without_the_keys_the_defaults_are_local():
     ('mode = "inputs"\nn_points = 2\nrobust = "bayes"\n', "robust", "needs a prior"),
     ('mode = "inputs"\nrobust = "minimax"\n' + PRIOR, "robust", "unknown value 'minimax'"),
     ('mode = "sensors"\n' + PRIOR, "prior", 'for mode = "inputs"'),
+    ('mode = "inputs"\nexclude = ["F_x"]\n' + PRIOR, "exclude", "not used by an approximate design"),
 ])
 def test_bad_robust_keys_exit_2_naming_key_and_line(tmp_path, capsys, extra, key, match):
     code, _, err = _run(tmp_path, capsys, extra)
