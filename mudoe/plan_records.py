@@ -61,7 +61,8 @@ class RobustPlan:
     one: support points, weights, the sensitivity function over the checked points and its certificate);
     ``local`` the local approximate design at ``p`` when ``design`` is robust (else None) and
     ``local_efficiencies`` its efficiency at every parameter vector of the prior against ``design``
-    (:func:`oed.design_efficiencies`; the prior's weights are ``design.prior.weights``).
+    (:func:`oed.design_efficiencies`; the prior's weights are ``design.prior.weights``); ``notes`` what of
+    the [oed] section the approximate design did not use.
     """
 
     variant: str
@@ -71,6 +72,7 @@ class RobustPlan:
     design: object
     local: object
     local_efficiencies: tuple
+    notes: tuple = ()
 
     mode = "inputs"
     approximate = True
@@ -86,13 +88,14 @@ class RobustPlan:
             lines += ["local design at p (for comparison):", self.local.summary(),
                       f"efficiency of the local design against the robust one across the prior: min {e.min():.6f}, "
                       f"prior mean {float(w @ e):.6f}, max {e.max():.6f} ({len(e)} parameter vectors)"]
+        lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
         """JSON-ready view: the design with its certificate, the local design and its efficiencies."""
         d = dict(variant=self.variant, mode=self.mode, planned=self.planned, approximate=True, p=list(self.p),
                  candidates=list(self.candidates), criterion=self.design.criterion, robust=self.design.robust,
-                 design=self.design.to_dict())
+                 design=self.design.to_dict(), notes=list(self.notes))
         if self.local is not None:
             e = np.asarray(self.local_efficiencies)
             d.update(local=self.local.to_dict(), local_efficiencies=e.tolist(),

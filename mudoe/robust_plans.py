@@ -60,15 +60,20 @@ def plan_robust(cfg: StudyConfig, variant: str, model, Q, q_set, p, sigma, plann
                           f"derived inputs ({', '.join(model.inputs)}); an approximate design places the model's "
                           "inputs themselves and needs a model whose one input is the set point")
     prior = config_prior(cfg, model, p)
+    notes = tuple(n for n, used in (
+        (f"n_points = {o.n_points} not used: an approximate design has as many support points as it needs",
+         o.n_points is not None),
+        ("the approximate design uses the Gauss-Newton information (kind = \"second_order\" not used)",
+         o.kind == "second_order" and not planned)) if used)
     args = dict(candidates=Q, sigma=sigma, criterion=o.criterion, n_series=o.n_series, approximate=True)
     try:
         local = select_inputs(model, p, **args)
         if prior is None:
             return RobustPlan(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), local,
-                              None, ())
+                              None, (), notes)
         design = select_inputs(model, p, prior=prior, robust=o.robust or "bayes", **args)
         eff = design_efficiencies(model, local, design, sigma=sigma, n_series=o.n_series)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
     return RobustPlan(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), design, local,
-                      tuple(float(e) for e in eff))
+                      tuple(float(e) for e in eff), notes)

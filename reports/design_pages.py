@@ -185,6 +185,8 @@ def _approximate_text(plan, kind: str) -> str:
                 f"is the better one at that parameter vector: the robust design is best over the prior as a whole).")
     txt += "\n\nThe maximum is over the checked points (a grid refined around each high local maximum), not " \
            "proven over the continuum."
+    for n in plan.notes:
+        txt += f"\nNote: {n}"
     return txt
 
 

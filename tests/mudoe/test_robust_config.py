@@ -133,6 +133,13 @@ def test_approximate_without_a_prior_is_the_local_design(tmp_path, capsys):
     code, obj, err = _run(tmp_path, capsys, 'mode = "inputs"\napproximate = true\n')
     assert code == 0, err
     assert obj["robust"] == "local" and "local" not in obj and abs(obj["design"]["gap"]) < 1e-6
+    assert obj["notes"] == []                       # planned (Gauss-Newton either way), no n_points
+
+
+def test_an_unused_n_points_is_noted(tmp_path, capsys):
+    code, obj, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\n' + PRIOR)
+    assert code == 0, err
+    assert any("n_points = 2 not used" in n for n in obj["notes"])
 
 
 def test_without_a_prior_the_output_is_the_local_route(tmp_path, capsys):
