@@ -69,6 +69,7 @@ from pathlib import Path
 
 from .checks import check_config
 from .config_errors import ConfigContext, ConfigError, EntryContext, config_error
+from .config_prior import check_robust_keys, check_robust_prior, read_prior
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
@@ -196,7 +197,11 @@ def _parse_detect(ctx, t):
 
 
 def _parse_oed(ctx, t):
-    o = OEDConfig(**read_table(ctx, "oed", OEDConfig, t))
+    kw = read_table(ctx, "oed", OEDConfig, t, skip=("prior",))
+    if "prior" in t:
+        kw["prior"] = read_prior(ctx, t["prior"])
+    o = OEDConfig(**kw)
+    check_robust_prior(ctx, o)
     if o.candidates and o.candidates_range:
         raise ctx.error("oed", "candidates_range", "give candidates or candidates_range, not both")
     if o.candidates_range:
@@ -207,7 +212,7 @@ def _parse_oed(ctx, t):
     if (not o.costs) != (o.budget is None):
         raise ctx.error("oed", "budget" if o.costs else "costs", "give both costs and budget, or neither")
     if o.mode in ("inputs", "both"):
-        if o.n_points is None:
+        if o.n_points is None and not (o.prior or o.approximate):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs n_points (how many to choose)")
         if not (o.candidates or o.candidates_range):
             raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
@@ -313,6 +318,7 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
     o = cfg.oed
+    check_robust_keys(ctx, o, cfg.dynamic is not None)
     if o.planned and not (o.candidates or o.candidates_range) and cfg.dynamic is None:   # dynamic: its experiments
         raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     check_config(cfg, ctx.error)

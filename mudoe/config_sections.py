@@ -282,6 +282,12 @@ class OEDConfig:
     n_readings : int or None       mode "discrimination": number of free (set point, sensor) readings
     refine : bool                  mode "inputs": also refine the chosen set points continuously within the
                                    candidates' range (oed.refine_inputs: Ipopt, multi-start; slow on the press)
+    prior : dict                   mode "inputs": {parameter: (distribution, *args)}, the parameter uncertainty
+                                   of a robust approximate design (mudoe.config_prior; {} = none: local)
+    robust : {"", "bayes", "maximin"}  with a prior: the pseudo-Bayesian (default) or maximin criterion
+    approximate : bool             mode "inputs": the approximate design (support points, weights and the
+                                   equivalence certificate) on the candidates' range instead of n_points
+                                   exact points (implied by a prior)
     """
 
     criterion: str = config_key("E", choices=("A", "D", "E"))
@@ -304,6 +310,9 @@ class OEDConfig:
     discrimination_criterion: str = config_key("T", choices=("T", "divergence", "T_refit"))
     n_readings: int | None = config_key(None, bounds=POSITIVE)
     refine: bool = False
+    prior: dict = field(default_factory=dict)
+    robust: str = config_key("", choices=("bayes", "maximin"))
+    approximate: bool = False
 
     def candidate_points(self) -> np.ndarray:
         """The candidate set points: ``candidates``, or ``candidates_range`` = [start, stop, count]."""

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["PlannedDesign", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
+import numpy as np
+
+__all__ = ["PlannedDesign", "RobustPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,59 @@ class PlannedDesign:
                 d.update(refined=dict(set_points=f.inputs.ravel().tolist(), value=f.value,
                                       start_values=list(f.start_values), n_failed=f.n_failed,
                                       lower=f.lower.tolist(), upper=f.upper.tolist(), wall_time=f.wall_time))
+        return d
+
+
+@dataclass(frozen=True)
+class RobustPlan:
+    """An approximate design of ``[oed] mode = "inputs"`` with a prior or ``approximate = true`` (issue 31).
+
+    ``design`` is the :class:`oed.approximate.ApproximateDesign` (robust over the prior, or local without
+    one: support points, weights, the sensitivity function over the checked points and its certificate);
+    ``local`` the local approximate design at ``p`` when ``design`` is robust (else None) and
+    ``local_efficiencies`` its efficiency at every parameter vector of the prior against ``design``
+    (:func:`oed.design_efficiencies`; the prior's weights are ``design.prior.weights``); ``notes`` what of
+    the [oed] section the approximate design did not use.
+    """
+
+    variant: str
+    planned: bool
+    p: tuple
+    candidates: tuple
+    design: object
+    local: object
+    local_efficiencies: tuple
+    notes: tuple = ()
+
+    mode = "inputs"
+    approximate = True
+
+    def summary(self) -> str:
+        """Text of the design, its certificate and the local design across the prior."""
+        head = (f"approximate input design of variant {self.variant} at p = {list(self.p)} "
+                + ("(planned before data: Gauss-Newton, S = 0)" if self.planned else "(at the estimate)"))
+        lines = [head, self.design.summary()]
+        if self.local is not None:
+            e = np.asarray(self.local_efficiencies)
+            w = np.asarray(self.design.prior.weights)
+            lines += ["local design at p (for comparison):", self.local.summary(),
+                      f"efficiency of the local design against the robust one across the prior: min {e.min():.6f}, "
+                      f"prior mean {float(w @ e):.6f}, max {e.max():.6f} ({len(e)} parameter vectors)"]
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready view: the design with its certificate, the local design and its efficiencies."""
+        d = dict(variant=self.variant, mode=self.mode, planned=self.planned, approximate=True, p=list(self.p),
+                 candidates=list(self.candidates), criterion=self.design.criterion, robust=self.design.robust,
+                 design=self.design.to_dict(), notes=list(self.notes))
+        if self.local is not None:
+            e = np.asarray(self.local_efficiencies)
+            d.update(local=self.local.to_dict(), local_efficiencies=e.tolist(),
+                     prior_points=np.asarray(self.design.prior.points).tolist(),
+                     prior_weights=np.asarray(self.design.prior.weights).tolist(),
+                     local_efficiency_min=float(e.min()),
+                     local_efficiency_mean=float(np.asarray(self.design.prior.weights) @ e))
         return d
 
 

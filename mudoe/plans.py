@@ -13,7 +13,7 @@ from models.contract import Model
 from .checks import check_model
 from .config import ConfigError, StudyConfig
 from .data_io import DataUnits, study_units
-from .plan_records import DiscriminationPlan, PlannedDesign
+from .plan_records import DiscriminationPlan, PlannedDesign, RobustPlan
 from .study_base import Progress, Study, StudyResults, VariantModel, oed_variant, require_fit
 from .study_models import build_models, config_start_values, is_dynamic_built
 
@@ -23,7 +23,7 @@ __all__ = ["PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_d
 
 # ---------------------------------------------------------------------------- designs before data (issue 13)
 def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigma, planned: bool,
-                progress: Progress | None = None, *, units: DataUnits) -> PlannedDesign:
+                progress: Progress | None = None, *, units: DataUnits) -> PlannedDesign | RobustPlan:
     """The ``[oed]`` design of ``mode`` at ``p`` without data: sensors over the candidate inputs, or inputs.
 
     ``units`` are the study's (:func:`mudoe.data_units.study_units`, resolved once by the caller): the
@@ -47,6 +47,11 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
     Q = q_set[:, None] if inputs_fn is None else np.asarray(inputs_fn(q_set), float)
     if sigma is None:
         raise ConfigError(f"{cfg.path}: [[sensors]] a design needs every sensor's sigma (give sigma = ...)")
+    if o.prior or o.approximate:
+        from .robust_plans import plan_robust
+        with progress.step(f"approximate input design ({o.criterion}, {variant}"
+                           f"{', ' + (o.robust or 'bayes') + ' over the prior' if o.prior else ', local'})"):
+            return plan_robust(cfg, variant, model, Q, q_set, p, sigma, planned)
     common = dict(criterion=o.criterion, kind=o.kind, include=o.include, exclude=o.exclude,
                   costs=list(o.costs) if o.costs else None, budget=o.budget)
     with progress.step(f"{o.mode} design ({o.criterion}, {variant}{', planned' if planned else ''})"):

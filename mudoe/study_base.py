@@ -39,7 +39,7 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from reports.view import FitAssessment
 
     from .dynamic_records import MeshSummary, Trajectories
-    from .plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign
+    from .plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
 
 __all__ = ["MissingPieceError", "FitFailedError", "Progress", "VariantModel", "Study", "StudyResults",
            "load_factory", "start_values", "run_identify", "require_fit", "oed_variant"]
@@ -175,7 +175,7 @@ class StudyResults:
     oed: DesignResult | None = None
     oed_table: DesignTable | None = None
     oed_variant: str = ""
-    plan: PlannedDesign | DiscriminationPlan | DynamicDesign | None = None
+    plan: PlannedDesign | RobustPlan | DiscriminationPlan | DynamicDesign | None = None
     design_sensors: tuple = ()
     design_how: str = ""
     detection: DetectionResult | None = None

@@ -11,8 +11,12 @@ these pages show the design of the other modes, held by ``results.plan``:
   design values (T, with data the divergence, and T_refit with the rival refitted) against the
   evenly spread design of the same budget (the paper's style) and against all candidate readings.
 
-The functions read ``results.plan`` by its attributes only (``mudoe.study.PlannedDesign`` or
-``mudoe.study.DiscriminationPlan``); they never import the study layer.
+* approximate (``[oed] prior`` or ``approximate = true``, issue 31): the sensitivity function over the
+  checked range with its maximum and the line at its optimum (the certificate), the support points and
+  weights, and with a prior the local design's efficiency across the prior against the robust one.
+
+The functions read ``results.plan`` by its attributes only (``mudoe.study.PlannedDesign``,
+``mudoe.plan_records.RobustPlan`` or ``mudoe.study.DiscriminationPlan``); they never import the study layer.
 """
 from __future__ import annotations
 
@@ -56,6 +60,8 @@ def design_pages(results) -> list:
     q_unit = model.input_units[0] if model.input_units and model.input_units[0] else ""
     if plan.mode == "discrimination":
         return _discrimination_pages(plan, q_unit, dict(zip(model.sensors, model.sensor_units)))
+    if getattr(plan, "approximate", False):
+        return _approximate_pages(plan, q_unit)
     return _input_pages(plan, q_unit, list(model.sensors))
 
 
@@ -133,6 +139,55 @@ def _pair_grid(ax, cand, r, q_unit: str, names: list) -> None:
     ax.set_ylim(-0.7, len(names) - 0.3)
     ax.set_xlabel(f"set point{f' ({q_unit})' if q_unit else ''}")
     ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), fontsize=8, ncol=2, frameon=False)
+
+
+# ---------------------------------------------------------------------------- approximate (issue 31)
+def _approximate_pages(plan, q_unit: str) -> list:
+    """The approximate design: its sensitivity function (the certificate), the design, and with a prior the local
+    design's efficiency across the prior against the robust one."""
+    from .approx_figures import efficiency_curve, sensitivity_plot
+    from .tables import draw_table
+    d, local = plan.design, plan.local
+    kind = {"local": "local", "bayes": "pseudo-Bayesian", "maximin": "maximin"}.get(d.robust, d.robust)
+    fig = _page(f"Approximate input design ({d.criterion}, {kind}, {plan.variant})")
+    x_label = f"set point{f' ({q_unit})' if q_unit else ''}"
+    wide = local is None
+    sensitivity_plot(np.asarray(d.checked)[:, 0], d.sensitivity, d.reference, np.asarray(d.points)[:, 0], x_label,
+                     ax=fig.add_axes([0.07, 0.50, 0.86 if wide else 0.40, 0.38]))
+    if not wide:
+        efficiency_curve(plan.local_efficiencies, d.prior.weights, ax=fig.add_axes([0.56, 0.50, 0.38, 0.38]))
+    head, rows = [x_label, "weight"], [[f"{x[0]:.6g}", f"{w:.4f}"] for x, w in zip(d.points, d.weights)]
+    if not wide:
+        head, rows = ["design"] + head, [["robust"] + r for r in rows]
+        rows += [["local"] + [f"{x[0]:.6g}", f"{w:.4f}"] for x, w in zip(local.points, local.weights)]
+    shown = rows[:ROWS_PER_TABLE // 2]
+    h = min(0.03 * (len(shown) + 1), 0.30)
+    draw_table(fig.add_axes([0.04, 0.38 - h, 0.34, h]), head, shown, fontsize=8)
+    _text(fig, 0.42, 0.38, _approximate_text(plan, kind), width=90)
+    return [fig]
+
+
+def _approximate_text(plan, kind: str) -> str:
+    d = plan.design
+    txt = (f"{'Planned before data at the start values' if plan.planned else 'At the estimate'} of {plan.variant}, "
+           f"p = ({', '.join(f'{v:.6g}' for v in plan.p)}); {kind} {d.criterion}-optimal approximate design over "
+           f"the candidates' range, {d.prior.n} parameter vector{'s' if d.prior.n > 1 else ''}"
+           f"{f' ({d.prior.rule} rule)' if d.prior.n > 1 else ''}.\n\n"
+           f"Certificate (equivalence theorem): the sensitivity function's maximum over the {len(d.sensitivity)} "
+           f"checked points is {d.sensitivity_max:.9g} against its optimum value {d.reference:.9g} (gap "
+           f"{d.gap:.2g}); efficiency against the optimal approximate design >= {d.efficiency_bound:.6f}.")
+    if d.robust == "maximin":
+        txt += f" Worst-case efficiency {d.value:.6f}, certified >= {d.worst_case_bound:.6f}."
+    if plan.local is not None:
+        e, w = np.asarray(plan.local_efficiencies), np.asarray(d.prior.weights)
+        txt += (f"\n\nThe local design (at p) across the prior, against the {kind} design: efficiency min "
+                f"{e.min():.4f}, prior mean {float(w @ e):.4f}, max {e.max():.4f} (right; above 1 where the local design "
+                f"is the better one at that parameter vector: the robust design is best over the prior as a whole).")
+    txt += "\n\nThe maximum is over the checked points (a grid refined around each high local maximum), not " \
+           "proven over the continuum."
+    for n in plan.notes:
+        txt += f"\nNote: {n}"
+    return txt
 
 
 # ---------------------------------------------------------------------------- discrimination

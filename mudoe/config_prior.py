@@ -1,0 +1,80 @@
+"""The robust-design keys of ``[oed]`` (issue 31): ``prior``, ``robust`` and ``approximate``.
+
+``prior`` is a table, one key per uncertain parameter, its value ``[distribution, arguments...]``::
+
+    [oed]
+    mode = "inputs"
+    prior = { k5 = ["uniform", 400.0, 700.0], k7 = ["lognormal", 470.0, 0.2] }
+    robust = "bayes"               # or "maximin"
+
+(the sub-table ``[oed.prior]`` with one line per parameter reads the same).  The distributions and
+their arguments are :func:`oed.prior.make_prior`'s: ``uniform`` lower, upper; ``normal`` mean, sd;
+``lognormal`` median, log-sd; ``truncnormal`` mean, sd, lower, upper.  What needs the model (the
+parameter exists, bounds contain its start value) is checked when the design is planned
+(:func:`mudoe.robust_plans.config_prior`); here only the form.
+"""
+from __future__ import annotations
+
+import math
+
+from .config_errors import ConfigContext, ConfigError
+
+__all__ = ["DISTRIBUTION_ARGS", "prior_error", "read_prior", "check_robust_prior", "check_robust_keys"]
+
+#: number of arguments of each distribution (the same as :data:`oed.prior.DISTRIBUTIONS`; a test checks it)
+DISTRIBUTION_ARGS = {"uniform": 2, "normal": 2, "lognormal": 2, "truncnormal": 4}
+
+
+def prior_error(ctx: ConfigContext, name: str, msg: str) -> ConfigError:
+    """A :class:`ConfigError` naming ``[oed] prior.<name>`` and its line in the file."""
+    line = ctx.line_of("oed", name) or ctx.line_of("oed.prior", name) or ctx.line_of("oed", "prior")
+    loc = f"{ctx.path}:{line}" if line else str(ctx.path)
+    return ConfigError(f"{loc}: [oed] prior.{name}: {msg}")
+
+
+def read_prior(ctx: ConfigContext, v) -> dict:
+    """``{parameter: (distribution, *float args)}`` of the TOML value of ``[oed] prior`` (form checked)."""
+    if not isinstance(v, dict) or not v:
+        raise ctx.error("oed", "prior", "expected a table {parameter = [\"distribution\", arguments...]}, "
+                        f"e.g. prior = {{ k5 = [\"uniform\", 400.0, 700.0] }}, got {v!r}")
+    out = {}
+    for name, spec in v.items():
+        if not isinstance(spec, list) or not spec or not isinstance(spec[0], str):
+            raise prior_error(ctx, name, f"expected [\"distribution\", arguments...], got {spec!r}")
+        dist, args = spec[0].strip().lower(), spec[1:]
+        if dist not in DISTRIBUTION_ARGS:
+            raise prior_error(ctx, name, f"unknown distribution {spec[0]!r}; use one of: "
+                              f"{', '.join(DISTRIBUTION_ARGS)}")
+        if len(args) != DISTRIBUTION_ARGS[dist]:
+            raise prior_error(ctx, name, f"{dist} takes {DISTRIBUTION_ARGS[dist]} numbers, got {len(args)}")
+        for a in args:
+            if isinstance(a, bool) or not isinstance(a, (int, float)) or not math.isfinite(a):
+                raise prior_error(ctx, name, f"the arguments of {dist} must be finite numbers, got {a!r}")
+        out[name] = (dist,) + tuple(float(a) for a in args)
+    return out
+
+
+def check_robust_prior(ctx: ConfigContext, o) -> None:
+    """``robust`` needs a prior."""
+    if o.robust and not o.prior:
+        raise ctx.error("oed", "robust", f"robust = {o.robust!r} needs a prior (e.g. prior = {{ k5 = "
+                        "[\"uniform\", 400.0, 700.0] }): the parameter vectors to be robust over")
+
+
+def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
+    """prior / approximate are for a static study's ``mode = "inputs"`` (without refine, include, exclude, costs)."""
+    if not (o.prior or o.approximate):
+        return
+    key = "prior" if o.prior else "approximate"
+    if o.mode != "inputs":
+        raise ctx.error("oed", key, f"robust and approximate designs are for mode = \"inputs\" (mode is {o.mode!r})")
+    if dynamic:
+        raise ctx.error("oed", key, "robust and approximate designs of a dynamic study's sampling times are not "
+                        "available in mudoe oed (use oed.select_times(..., approximate=True, prior=...))")
+    if o.refine:
+        raise ctx.error("oed", "refine", "an approximate design already places its points on the continuous range; "
+                        "leave refine out")
+    for k in ("include", "exclude", "costs"):
+        if getattr(o, k):
+            raise ctx.error("oed", k, f"not used by an approximate design ({key} is given; every sensor is read at "
+                            "each support point); leave it out")

@@ -1,0 +1,79 @@
+"""``[oed] mode = "inputs"`` with a prior (or ``approximate = true``): the robust approximate design (issue 31).
+
+:func:`plan_robust` designs on the candidates' range with :func:`oed.inputs.select_inputs`
+(``approximate=True``): the local approximate design at ``p``, and with a prior the pseudo-Bayesian or
+maximin one over the prior's parameter vectors, each with its equivalence-theorem certificate; then the
+local design's efficiency at every parameter vector of the prior against the robust design
+(:func:`oed.design_efficiencies`).  :func:`config_prior` checks the prior against the model (the
+messages name ``[oed] prior.<parameter>`` and its line).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .config import ConfigError, StudyConfig
+from .config_errors import ConfigContext
+from .config_prior import prior_error
+from .plan_records import RobustPlan
+
+__all__ = ["config_prior", "plan_robust"]
+
+
+def config_prior(cfg: StudyConfig, model, p):
+    """The :class:`oed.prior.Prior` of ``[oed] prior`` for ``model`` at the nominal ``p`` (the start values or
+    the estimate); None without a prior.
+
+    Raises
+    ------
+    ConfigError
+        A parameter the model does not have, or a distribution the library refuses (bounds that exclude the
+        nominal value, a non-positive sd, ...); the message names ``[oed] prior.<parameter>`` and its line.
+    """
+    from oed.prior import make_prior
+    spec = cfg.oed.prior
+    if not spec:
+        return None
+    ctx = ConfigContext(cfg.path, cfg.text)
+    names = tuple(model.param_names)
+    for name, dist in spec.items():
+        if name not in names:
+            raise prior_error(ctx, name, f"the model has no parameter {name!r} (it has {', '.join(names)})")
+        try:
+            make_prior({name: dist}, names, p)
+        except ValueError as exc:
+            msg = str(exc).partition(": ")[2] or str(exc)
+            if "nominal" in msg:
+                msg += (" (the nominal value: the [[parameters]] start value of a planned design, else the "
+                        "estimate)")
+            raise prior_error(ctx, name, msg) from None
+    return make_prior(dict(spec), names, p)
+
+
+def plan_robust(cfg: StudyConfig, variant: str, model, Q, q_set, p, sigma, planned: bool) -> RobustPlan:
+    """The approximate designs of ``[oed]`` (local, and robust with a prior) on the range of the candidate rows ``Q``
+    (model inputs; ``q_set`` the set points in the model's unit)."""
+    from oed import design_efficiencies
+    from oed.inputs import select_inputs
+    o = cfg.oed
+    if Q.shape[1] != 1 or not np.array_equal(Q[:, 0], q_set):
+        raise ConfigError(f"{cfg.path}: [oed] prior/approximate: variant {variant} reads the set points through "
+                          f"derived inputs ({', '.join(model.inputs)}); an approximate design places the model's "
+                          "inputs themselves and needs a model whose one input is the set point")
+    prior = config_prior(cfg, model, p)
+    notes = tuple(n for n, used in (
+        (f"n_points = {o.n_points} not used: an approximate design has as many support points as it needs",
+         o.n_points is not None),
+        ("the approximate design uses the Gauss-Newton information (kind = \"second_order\" not used)",
+         o.kind == "second_order" and not planned)) if used)
+    args = dict(candidates=Q, sigma=sigma, criterion=o.criterion, n_series=o.n_series, approximate=True)
+    try:
+        local = select_inputs(model, p, **args)
+        if prior is None:
+            return RobustPlan(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), local,
+                              None, (), notes)
+        design = select_inputs(model, p, prior=prior, robust=o.robust or "bayes", **args)
+        eff = design_efficiencies(model, local, design, sigma=sigma, n_series=o.n_series)
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
+    return RobustPlan(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), design, local,
+                      tuple(float(e) for e in eff), notes)
