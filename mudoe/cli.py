@@ -1,4 +1,4 @@
-"""The ``mudoe`` command line: identify | oed | detect | report | validate | simulate.
+"""The ``mudoe`` command line: identify | oed | detect | quantify | report | validate | simulate.
 
 Every subcommand reads a study config (TOML, see ``configs/press.toml``), runs a thin layer
 over the library and writes its outputs atomically into ``--out`` (default ``results/``).
@@ -26,6 +26,7 @@ _COMMANDS = {
     "identify": "identify the parameters of every model variant on the study's data",
     "oed": "optimal sensor selection: criteria of every sensor combination and the chosen design",
     "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
+    "quantify": "size of the model error of every variant (static models): test, error model, held-out coverage",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
     "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
     "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",
@@ -189,12 +190,16 @@ def _run_study(args, cfg, out: Path) -> int:
     progress = Progress(enabled=not args.quiet)
     if args.command == "simulate":
         return _simulate(cfg, args, progress, out)
+    if args.command == "quantify" and cfg.dynamic is not None:
+        from .config import ConfigError
+        from .model_error_runs import STATIC_ONLY
+        raise ConfigError(f"{cfg.path}: {STATIC_ONLY}")
     if args.command == "oed" and cfg.oed.planned:
         return _oed_planned(cfg, args, progress, out, t0)
     study = prepare(cfg, progress)
     results = StudyResults(study)
     handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
-               "report": _report}[args.command]
+               "report": _report, "quantify": _quantify}[args.command]
     code = handler(study, results, args, progress, out)
     if not args.quiet:
         print(f"mudoe: {args.command} finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/",
@@ -321,6 +326,20 @@ def _detect(study, results, args, progress, out) -> int:
     _write(out, {"detect.json": dumps(obj), "detect.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
+
+
+def _quantify(study, results, args, progress, out) -> int:
+    from reports.serialize import dumps
+    from .model_error_runs import quantify_dict, quantify_text, quantify_text_full, run_model_error
+    results = run_model_error(study, results, progress)
+    if not results.model_error:
+        from .study import FitFailedError
+        raise FitFailedError("; ".join(f"model error of {v}: {e}" for v, e in results.model_error_errors.items())
+                             or "no model variant")
+    obj = quantify_dict(study, results)
+    _write(out, {"quantify.json": dumps(obj), "quantify.txt": quantify_text_full(study, results) + "\n"})
+    _emit(args, quantify_text(study, results), obj)
+    return EXIT_FAILED if results.model_error_errors else EXIT_OK
 
 
 def _validate(study, results, args, progress, out) -> int:
