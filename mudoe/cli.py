@@ -414,6 +414,12 @@ def _report_results(study, results, progress):
     if study.is_dynamic:                   # what the dynamic pages draw (mudoe.dynamic_runs)
         from .dynamic_runs import run_discretisation, run_trajectories
         results = run_trajectories(study, run_discretisation(study, results), progress)
+    else:                                  # the pages "Model error of ..." (mudoe.model_error_runs)
+        from .model_error_runs import run_model_error, run_model_error_views
+        results = run_model_error_views(study, run_model_error(study, results, progress))
+        results = results.with_note("; ".join(f"model error of {v} not computed: {e}"
+                                              for v, e in results.model_error_errors.items())) \
+            if results.model_error_errors else results
     return run_uncertainty(study, run_bands(study, results), progress=progress)
 
 

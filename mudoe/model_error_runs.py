@@ -21,7 +21,7 @@ from .study import Progress, design_sensors, start_values
 from .units import convert
 
 __all__ = ["STATIC_ONLY", "run_model_error", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
-           "quantify_dict"]
+           "quantify_dict", "model_error_view", "run_model_error_views"]
 
 #: why a dynamic study is refused
 STATIC_ONLY = "model error is implemented for static models only (identification.model_error); this study is dynamic"
@@ -161,3 +161,62 @@ def quantify_dict(study, results) -> dict:
         variants[v] = d
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
             "errors": dict(results.model_error_errors)}
+
+
+# ---------------------------------------------------------------------------- what the report's pages draw
+def _to_file_z(study, z: np.ndarray, columns) -> np.ndarray:
+    """Values (..., len(columns)) of the sensors ``columns`` (indices into study.sensors) in their files'
+    units (differences: no offset)."""
+    units = sensor_units(study)
+    out = np.array(z, float)
+    for i, k in enumerate(columns):
+        file_unit, model_unit = units[study.sensors[k]]
+        if file_unit and model_unit:
+            out[..., i] = convert(out[..., i], model_unit, file_unit, difference=True)
+    return out
+
+
+def _first_input(study, q: np.ndarray) -> np.ndarray:
+    q0 = np.asarray(q, float)[:, 0]
+    return q0 if study.units is None else np.asarray(study.units.q_to_file(q0), float)
+
+
+def model_error_view(study, results, variant: str):
+    """The :class:`reports.model_error_pages.ModelErrorView` of ``variant``: its discrepancy (all data) at the
+    study's input rows, and the new-reading bands with and without the error model, each fitted on the
+    calibration part of the split of the lowest plain held-out coverage, at its validation readings (file
+    units, relative to the plain prediction)."""
+    from reports.model_error_pages import HeldOutBands, ModelErrorView
+    r = results.model_error[variant]
+    data, m = study.data[variant], study.models[variant]
+    cols = [study.sensors.index(s) for s in r.sensors]
+    units = tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors)
+    d = r.discrepancy(data.inputs, r.alpha)
+    disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
+    held = None
+    if r.heldout:
+        h = min(r.heldout, key=lambda h: h.coverage_plain)
+        split = next(sp for sp in study.splits if sp.name == h.split)
+        cal, val = split.calibration(data), split.validation(data)
+        w = np.array([1.0 if s in r.sensors else 0.0 for s in study.sensors])
+        kinds = ("none",) if r.kind == "none" else ("none", r.kind)
+        bands = [model_error(m, cal, start_values(study, variant), kind=k, weights=w, alpha=r.alpha)
+                 .predict(val.inputs, r.alpha, new_reading=True) for k in kinds]
+        mean = bands[0].mean[:, cols]
+        rel = [tuple(_to_file_z(study, getattr(b, a)[:, cols] - mean, cols) for a in ("lower", "upper"))
+               for b in bands]
+        resid = _to_file_z(study, val.z[:, :, cols] - mean[None], cols)
+        held = HeldOutBands(h.split, _first_input(study, val.inputs), resid, rel[0], rel[-1] if len(rel) > 1 else None,
+                            h.coverage_plain, h.coverage(r.kind))
+    u = study.units
+    q_label = m.inputs[0] + (f" [{u.input_file}]" if u is not None and u.input_file else "")
+    return ModelErrorView(variant=variant, result=r, sensors=r.sensors, units=units, input_label=q_label,
+                          q=_first_input(study, data.inputs), discrepancy=disc, heldout=held,
+                          embedded=embedded_parameters(results, variant))
+
+
+def run_model_error_views(study, results):
+    """``results`` with ``model_error_views``: {variant: ModelErrorView} of every variant whose model error was
+    computed (the report's pages "Model error of ...")."""
+    views = {v: model_error_view(study, results, v) for v in results.model_error}
+    return dataclasses.replace(results, model_error_views={**results.model_error_views, **views})

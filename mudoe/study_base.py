@@ -36,6 +36,7 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from oed.design import DesignResult, DesignTable
     from reports.diagnosis import Diagnosis
     from reports.figures import PredictionBands
+    from reports.model_error_pages import ModelErrorView
     from reports.uncertainty import ModelUncertainty
     from reports.view import FitAssessment
 
@@ -168,6 +169,8 @@ class StudyResults:
     model_error_errors : {variant: str}       why model_error failed for the others
     model_error_embedded : {variant: ModelErrorResult}  the embedded error (which parameters carry it) of the
                                               variants whose chosen error model is another one
+    model_error_views : {variant: ModelErrorView}  what the pages "Model error of ..." draw
+                                              (:mod:`mudoe.model_error_runs`)
     trajectories : {variant: Trajectories}    dynamic studies (:mod:`mudoe.dynamic_runs`)
     discretisation : {variant: MeshSummary}   dynamic studies (:mod:`mudoe.dynamic_runs`)
     timing : {step: seconds}
@@ -193,6 +196,7 @@ class StudyResults:
     model_error: Mapping[str, ModelErrorResult] = field(default_factory=dict)
     model_error_errors: Mapping[str, str] = field(default_factory=dict)
     model_error_embedded: Mapping[str, ModelErrorResult] = field(default_factory=dict)
+    model_error_views: Mapping[str, ModelErrorView] = field(default_factory=dict)
     trajectories: Mapping[str, Trajectories] = field(default_factory=dict)
     discretisation: Mapping[str, MeshSummary] = field(default_factory=dict)
     timing: Mapping[str, float] = field(default_factory=dict)

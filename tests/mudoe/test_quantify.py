@@ -2,6 +2,7 @@
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mudoe.cli import main
@@ -86,3 +87,40 @@ def test_unknown_config_is_bad_input(tmp_path, capsys):
 def test_quantify_is_listed_in_help(capsys):
     from mudoe.cli import build_parser
     assert "quantify" in build_parser().format_help()
+
+
+@pytest.fixture(scope="module")
+def press_views():
+    """The press study's results with the model error and the views of the report's pages."""
+    from mudoe.config import load_config
+    from mudoe.model_error_runs import run_model_error, run_model_error_views
+    from mudoe.study import StudyResults, prepare
+    study = prepare(load_config(PRESS))
+    return run_model_error_views(study, run_model_error(study, StudyResults(study)))
+
+
+def test_report_lists_one_model_error_page_per_variant(press_views):
+    from reports.builder import report_pages
+    names = [n for n, _ in report_pages(press_views, with_diagnosis=False, uncertainty="none")]
+    assert [n for n in names if n.startswith("model_error")] == ["model_error1", "model_error2", "model_error3"]
+    assert names.index("model_error1") > names.index("residuals")
+
+
+def test_model_error_page_draws_what_the_study_computed(press_views):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from reports.builder import page_texts
+    from reports.model_error_pages import model_error_pages
+    view = press_views.model_error_views["M1"]
+    assert view.units == ("um", "um") and view.input_label == "q_P [N]"
+    h = view.heldout
+    assert h.split == "loading vs unloading"            # M1's lowest plain coverage (66.1 %)
+    assert h.coverage_plain == pytest.approx(37 / 56)
+    lo, hi = h.plain
+    assert np.all(lo < 0) and np.all(hi > 0)            # the plain band is centred on the plain prediction
+    fig = model_error_pages(press_views, "M1")
+    texts = " ".join(page_texts(fig))
+    plt.close(fig)
+    assert "Model error of M1: detected, error model discrepancy" in texts
+    assert "discrepancy of F_x [um]" in texts and "loading vs unloading" in texts and "q_P [N]" in texts
