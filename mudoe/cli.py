@@ -416,7 +416,10 @@ def _report_results(study, results, progress):
         results = run_trajectories(study, run_discretisation(study, results), progress)
     else:                                  # the pages "Model error of ..." (mudoe.model_error_runs)
         from .model_error_runs import run_model_error, run_model_error_views
-        results = run_model_error_views(study, run_model_error(study, results, progress))
+        try:
+            results = run_model_error_views(study, run_model_error(study, results, progress))
+        except (MissingPieceError, FitFailedError) as exc:
+            results = results.with_note(f"model error not available: {exc}")
         results = results.with_note("; ".join(f"model error of {v} not computed: {e}"
                                               for v, e in results.model_error_errors.items())) \
             if results.model_error_errors else results
