@@ -156,21 +156,25 @@ def model_error_pages(results, variant: str):
     n_lines = _text(fig, 0.04, 0.925, _verdict(view), width=175, size=9)
     n = len(view.sensors)
     top = 0.925 - 0.019 * n_lines - 0.075              # top of the first row of axes
-    h, row2 = 0.2, top - 0.2 - 0.135
-    w = (0.88 - 0.08 * (n - 1)) / n
-    fig.text(0.04, top + 0.045, "The model error per sensor (all data): the discrepancy at every input row",
-             fontsize=10, weight="bold")
+    h, gap = 0.2, 0.08 if n <= 2 else 0.1
+    w = (0.87 - gap * (n - 1)) / n
+    if r.kind == "none":                               # no discrepancy: the held-out row moves up
+        fig.text(0.04, top + 0.045, "No error model (kind none): no discrepancy to show; the bands are the plain "
+                 "ones.", fontsize=10, weight="bold")
+        row2 = top - 0.035
+    else:
+        fig.text(0.04, top + 0.045, "The model error per sensor (all data): the discrepancy at every input row",
+                 fontsize=10, weight="bold")
+        row2 = top - h - 0.135
     if view.heldout is not None:
         fig.text(0.04, row2 + 0.045, f"Held-out split '{view.heldout.split}' (the lowest plain coverage): "
                  "new-reading bands and readings, minus the plain prediction", fontsize=10, weight="bold")
     for k in range(n):
-        x = 0.07 + k * (w + 0.08)
+        x = 0.085 + k * (w + gap)
         if r.kind != "none":
             discrepancy_plot(view, k, fig.add_axes([x, top - h, w, h]))
         if view.heldout is not None:
             heldout_band_plot(view, k, fig.add_axes([x, row2 - h, w, h]))
-    if r.kind == "none":
-        fig.text(0.07, top - 0.05, "No error model: no discrepancy to show.", fontsize=9)
     head, rows = coverage_rows(r)
     ax = fig.add_axes([0.07, 0.01, 0.86, row2 - h - 0.11])
     draw_table(ax, head, rows, fontsize=8, col_widths=[0.32, 0.09, 0.09, 0.13, 0.09, 0.12, 0.09],
