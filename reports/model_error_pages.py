@@ -13,7 +13,7 @@ import numpy as np
 
 from .page_layout import draw_text as _text, new_page as _page
 
-__all__ = ["HeldOutBands", "ModelErrorView", "discrepancy_plot", "heldout_band_plot", "coverage_rows",
+__all__ = ["HeldOutBands", "ModelErrorView", "discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread",
            "model_error_pages"]
 
 
@@ -80,6 +80,22 @@ def _legend_above(ax):
     ax.legend(fontsize=7.5, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=3, frameon=False, borderaxespad=0.2)
 
 
+def spread(q, step: float) -> np.ndarray:
+    """``q`` with the rows that share a value (e.g. loading and unloading at one set point) moved apart by
+    ``step``, centred on their value, so that their bars do not cover each other."""
+    q = np.asarray(q, float)
+    out = q.copy()
+    for value in np.unique(q):
+        idx = np.flatnonzero(q == value)
+        out[idx] = value + step * (np.arange(idx.size) - (idx.size - 1) / 2)
+    return out
+
+
+def _step(q) -> float:
+    q = np.asarray(q, float)
+    return 0.006 * (float(np.ptp(q)) if q.size > 1 and np.ptp(q) > 0 else 1.0)
+
+
 def discrepancy_plot(view: ModelErrorView, k: int, ax=None):
     """The discrepancy of sensor ``k`` at every input row with its band (vertical bars), against the first
     input; returns the figure."""
@@ -87,9 +103,10 @@ def discrepancy_plot(view: ModelErrorView, k: int, ax=None):
     mean, lo, hi = (np.asarray(a, float)[:, k] for a in view.discrepancy)
     unit = view.units[k]
     pct = f"{100 * (1 - view.result.alpha):g} %"
+    x = spread(view.q, 2 * _step(view.q))
     ax.axhline(0.0, color="0.6", lw=0.8)
-    ax.vlines(view.q, lo, hi, color="#1f77b4", alpha=0.45, lw=3, label=f"{pct} band")
-    ax.plot(view.q, mean, "o", color="#1f77b4", ms=3.5, label="discrepancy")
+    ax.vlines(x, lo, hi, color="#1f77b4", alpha=0.45, lw=3, label=f"{pct} band")
+    ax.plot(x, mean, "o", color="#1f77b4", ms=3.5, label="discrepancy")
     ax.set_xlabel(view.input_label)
     ax.set_ylabel(f"discrepancy of {view.sensors[k]} [{unit}]")
     _legend_above(ax)
@@ -103,16 +120,16 @@ def heldout_band_plot(view: ModelErrorView, k: int, ax=None):
     ax = _ax(ax)
     h = view.heldout
     unit = view.units[k]
-    span = float(np.ptp(h.q)) if h.q.size > 1 else 1.0
-    dx = 0.006 * (span or 1.0)
+    dx = _step(h.q)
+    x = spread(h.q, 4 * dx)
     ax.axhline(0.0, color="0.6", lw=0.8)
-    ax.vlines(h.q - dx, h.plain[0][:, k], h.plain[1][:, k], color="0.45", lw=2.5, alpha=0.6,
+    ax.vlines(x - dx, h.plain[0][:, k], h.plain[1][:, k], color="0.45", lw=2.5, alpha=0.6,
               label=f"plain: {100 * h.coverage_plain:.0f} % covered")
     if h.with_error is not None:
-        ax.vlines(h.q + dx, h.with_error[0][:, k], h.with_error[1][:, k], color="#d62728", lw=2.5, alpha=0.45,
+        ax.vlines(x + dx, h.with_error[0][:, k], h.with_error[1][:, k], color="#d62728", lw=2.5, alpha=0.45,
                   label=f"with {view.result.kind}: {100 * h.coverage_error:.0f} % covered")
     z = np.asarray(h.readings, float)[:, :, k]
-    qq = np.broadcast_to(h.q[None, :], z.shape)
+    qq = np.broadcast_to(x[None, :], z.shape)
     ok = np.isfinite(z)
     ax.plot(qq[ok], z[ok], "k.", ms=4, label="readings")
     ax.set_xlabel(view.input_label)
@@ -165,6 +182,9 @@ def model_error_pages(results, variant: str):
     else:
         fig.text(0.04, top + 0.045, "The model error per sensor (all data): the discrepancy at every input row",
                  fontsize=10, weight="bold")
+        if np.unique(view.q).size < view.q.size:
+            fig.text(0.96, top + 0.045, f"rows that share a value of {view.input_label} are drawn side by side, "
+                     "in the data's order", fontsize=8, style="italic", ha="right")
         row2 = top - h - 0.135
     if view.heldout is not None:
         fig.text(0.04, row2 + 0.045, f"Held-out split '{view.heldout.split}' (the lowest plain coverage): "

@@ -124,3 +124,9 @@ def test_model_error_page_draws_what_the_study_computed(press_views):
     plt.close(fig)
     assert "Model error of M1: detected, error model discrepancy" in texts
     assert "discrepancy of F_x [um]" in texts and "loading vs unloading" in texts and "q_P [N]" in texts
+
+
+def test_spread_moves_rows_of_one_value_apart_around_it():
+    from reports.model_error_pages import spread
+    x = spread([0.0, 100.0, 100.0, 200.0], 4.0)
+    assert x.tolist() == [0.0, 98.0, 102.0, 200.0]
