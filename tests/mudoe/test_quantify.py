@@ -106,6 +106,13 @@ def test_report_lists_one_model_error_page_per_variant(press_views):
     assert names.index("model_error1") > names.index("residuals")
 
 
+def test_results_json_carries_the_model_error(press_views):
+    from reports.serialize import dumps, results_dict
+    d = json.loads(dumps(results_dict(press_views)))
+    assert set(d["model_error"]) == {"M1", "M2", "M3"} and d["model_error_errors"] == {}
+    assert d["model_error"]["M1"]["kind"] == "discrepancy" and len(d["model_error"]["M1"]["heldout"]) == 4
+
+
 def test_model_error_page_draws_what_the_study_computed(press_views):
     import matplotlib
     matplotlib.use("Agg")
