@@ -1,4 +1,4 @@
-"""The ``mudoe`` command line: identify | oed | detect | report | validate | simulate.
+"""The ``mudoe`` command line: identify | oed | detect | quantify | report | validate | simulate.
 
 Every subcommand reads a study config (TOML, see ``configs/press.toml``), runs a thin layer
 over the library and writes its outputs atomically into ``--out`` (default ``results/``).
@@ -26,6 +26,7 @@ _COMMANDS = {
     "identify": "identify the parameters of every model variant on the study's data",
     "oed": "optimal sensor selection: criteria of every sensor combination and the chosen design",
     "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
+    "quantify": "size of the model error of every variant (static models): test, error model, held-out coverage",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
     "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
     "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",
@@ -189,12 +190,16 @@ def _run_study(args, cfg, out: Path) -> int:
     progress = Progress(enabled=not args.quiet)
     if args.command == "simulate":
         return _simulate(cfg, args, progress, out)
+    if args.command == "quantify" and cfg.dynamic is not None:
+        from .config import ConfigError
+        from .model_error_runs import STATIC_ONLY
+        raise ConfigError(f"{cfg.path}: {STATIC_ONLY}")
     if args.command == "oed" and cfg.oed.planned:
         return _oed_planned(cfg, args, progress, out, t0)
     study = prepare(cfg, progress)
     results = StudyResults(study)
     handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
-               "report": _report}[args.command]
+               "report": _report, "quantify": _quantify}[args.command]
     code = handler(study, results, args, progress, out)
     if not args.quiet:
         print(f"mudoe: {args.command} finished in {time.perf_counter() - t0:.1f} s; outputs in {out}/",
@@ -323,6 +328,20 @@ def _detect(study, results, args, progress, out) -> int:
     return EXIT_OK
 
 
+def _quantify(study, results, args, progress, out) -> int:
+    from reports.serialize import dumps
+    from .model_error_runs import quantify_dict, quantify_text, quantify_text_full, run_model_error
+    results = run_model_error(study, results, progress)
+    if not results.model_error:
+        from .study import FitFailedError
+        raise FitFailedError("; ".join(f"model error of {v}: {e}" for v, e in results.model_error_errors.items())
+                             or "no model variant")
+    obj = quantify_dict(study, results)
+    _write(out, {"quantify.json": dumps(obj), "quantify.txt": quantify_text_full(study, results) + "\n"})
+    _emit(args, quantify_text(study, results), obj)
+    return EXIT_FAILED if results.model_error_errors else EXIT_OK
+
+
 def _validate(study, results, args, progress, out) -> int:
     from reports.serialize import dumps, validation_dict
     from .study import run_validate
@@ -395,6 +414,15 @@ def _report_results(study, results, progress):
     if study.is_dynamic:                   # what the dynamic pages draw (mudoe.dynamic_runs)
         from .dynamic_runs import run_discretisation, run_trajectories
         results = run_trajectories(study, run_discretisation(study, results), progress)
+    else:                                  # the pages "Model error of ..." (mudoe.model_error_runs)
+        from .model_error_runs import run_model_error, run_model_error_views
+        try:
+            results = run_model_error_views(study, run_model_error(study, results, progress))
+        except (MissingPieceError, FitFailedError) as exc:
+            results = results.with_note(f"model error not available: {exc}")
+        results = results.with_note("; ".join(f"model error of {v} not computed: {e}"
+                                              for v, e in results.model_error_errors.items())) \
+            if results.model_error_errors else results
     return run_uncertainty(study, run_bands(study, results), progress=progress)
 
 

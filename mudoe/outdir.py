@@ -23,7 +23,7 @@ __all__ = ["MARKER", "check_out", "begin", "claim", "record"]
 #: the marker file mudoe writes into every output folder (JSON: study, files written)
 MARKER = ".mudoe-out.json"
 #: names mudoe writes (an output folder of a mudoe without the marker is taken over)
-_OUTPUT_NAMES = re.compile(r"(identify|oed|detect|validate)\.(json|txt)|report\.pdf|results\.json"
+_OUTPUT_NAMES = re.compile(r"(identify|oed|detect|validate|quantify)\.(json|txt)|report\.pdf|results\.json"
                            r"|page\d+_[\w.-]+\.png|measurements_[\w.-]+\.csv|campaign_long\.csv|campaign\.json"
                            r"|simulate\.json|\.report-\w+|\.[\w.-]+\.tmp")
 #: {resolved folder: resolved config path} of the runs of this process (set by :func:`begin`)

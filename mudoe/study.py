@@ -39,7 +39,7 @@ from .study_models import build_models, declare_units, config_start_values, is_d
 
 __all__ = ["Study", "StudyResults", "VariantModel", "prepare", "load_factory", "start_values", "SimulatedCampaign",
            "simulate_study", "run_identify", "run_oed", "run_detect", "run_validate", "run_diagnosis",
-           "run_uncertainty", "run_bands", "Progress", "MissingPieceError", "FitFailedError", "PlannedDesign",
+           "run_uncertainty", "run_bands", "design_sensors", "Progress", "MissingPieceError", "FitFailedError", "PlannedDesign",
            "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate", "plan_discrimination"]
 
 
@@ -186,7 +186,7 @@ def run_oed(study: Study, results: StudyResults, progress: Progress | None = Non
                                design_how=how)
 
 
-def _design_sensors(study: Study, results: StudyResults, progress: Progress) -> StudyResults:
+def design_sensors(study: Study, results: StudyResults, progress: Progress) -> StudyResults:
     """``results`` with the sensors of the tests: the OED design, all sensors, or the names given
     ([detect] sensors)."""
     d = study.cfg.detect
@@ -201,7 +201,7 @@ def run_detect(study: Study, results: StudyResults, progress: Progress | None = 
     """Algorithm 1 (lines 05-17) on every variant with the chosen sensors."""
     from identification.studies.detect import detect
     progress = progress or Progress(False)
-    results = _design_sensors(study, results, progress)
+    results = design_sensors(study, results, progress)
     design = list(results.design_sensors)
     settings = study.cfg.detect.settings()
     with progress.step(f"detect: {len(study.models)} model(s) x {len(study.splits)} splits x 2 fits"):
@@ -260,7 +260,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         results = require_fit(study, results, v, progress, "validate")
         est = results.estimates[v]
         data = study.data[v]
-        results = _design_sensors(study, results, progress)
+        results = design_sensors(study, results, progress)
         used = results.design_sensors
         w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
         model, splits, inputs, p0 = study.models[v], study.splits, data.inputs, start_values(study, v)

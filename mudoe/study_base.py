@@ -31,10 +31,12 @@ from .data_io import DataUnits
 if TYPE_CHECKING:          # the types of the results' fields (library and report records)
     from identification.inference.results import Estimate
     from identification.studies.detect import DetectionResult
+    from identification.studies.model_error import ModelErrorResult
     from identification.studies.montecarlo import MonteCarloResult
     from oed.design import DesignResult, DesignTable
     from reports.diagnosis import Diagnosis
     from reports.figures import PredictionBands
+    from reports.model_error_pages import ModelErrorView
     from reports.uncertainty import ModelUncertainty
     from reports.view import FitAssessment
 
@@ -162,6 +164,13 @@ class StudyResults:
                                               (:mod:`mudoe.uncertainty_runs`)
     bands : {variant: PredictionBands}        prediction bands of every fit (:mod:`mudoe.band_runs`)
     validation                                the Monte Carlo size study
+    model_error : {variant: ModelErrorResult}  size and place of the model error, static studies
+                                              (:mod:`mudoe.model_error_runs`)
+    model_error_errors : {variant: str}       why model_error failed for the others
+    model_error_embedded : {variant: ModelErrorResult}  the embedded error (which parameters carry it) of the
+                                              variants whose chosen error model is another one
+    model_error_views : {variant: ModelErrorView}  what the pages "Model error of ..." draw
+                                              (:mod:`mudoe.model_error_runs`)
     trajectories : {variant: Trajectories}    dynamic studies (:mod:`mudoe.dynamic_runs`)
     discretisation : {variant: MeshSummary}   dynamic studies (:mod:`mudoe.dynamic_runs`)
     timing : {step: seconds}
@@ -184,6 +193,10 @@ class StudyResults:
     uncertainty: Mapping[str, ModelUncertainty] = field(default_factory=dict)
     bands: Mapping[str, PredictionBands] = field(default_factory=dict)
     validation: MonteCarloResult | None = None
+    model_error: Mapping[str, ModelErrorResult] = field(default_factory=dict)
+    model_error_errors: Mapping[str, str] = field(default_factory=dict)
+    model_error_embedded: Mapping[str, ModelErrorResult] = field(default_factory=dict)
+    model_error_views: Mapping[str, ModelErrorView] = field(default_factory=dict)
     trajectories: Mapping[str, Trajectories] = field(default_factory=dict)
     discretisation: Mapping[str, MeshSummary] = field(default_factory=dict)
     timing: Mapping[str, float] = field(default_factory=dict)

@@ -520,6 +520,10 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
         pages.append((f"uncertainty{k}", partial(uncertainty_pages, results, v)))
     pages += [("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
               ("residuals", partial(_residual_pages, results))]
+    if results.model_error_views:                        # issue 29: every variant whose model error was computed
+        from .model_error_pages import model_error_pages
+        pages += [(f"model_error{k}", partial(model_error_pages, results, v))
+                  for k, v in enumerate(results.model_error_views, 1)]
     if results.plan is not None:                         # [oed] mode inputs / both / discrimination
         from .design_pages import design_pages
         pages.insert([n for n, _ in pages].index("oed") + 1, ("design", partial(design_pages, results)))

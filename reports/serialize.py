@@ -172,6 +172,9 @@ def results_dict(results) -> dict:
         out["detection_error"] = results.detection_error
     if results.validation is not None:
         out["validation"] = validation_dict(results.validation)
+    if results.model_error or results.model_error_errors:     # a static study's model error (issue 29)
+        out["model_error"] = {v: r.to_dict() for v, r in results.model_error.items()}
+        out["model_error_errors"] = dict(results.model_error_errors)
     out["notes"] = list(results.notes)
     return jsonable(out)
 

@@ -1,0 +1,139 @@
+"""``mudoe quantify``: the model error of every variant of a static study (issue 29, item 4)."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mudoe.cli import main
+from mudoe.outdir import MARKER
+
+REPO = Path(__file__).resolve().parents[2]
+PRESS = REPO / "configs" / "press.toml"
+
+
+@pytest.fixture(scope="module")
+def press_quantify(tmp_path_factory):
+    """``mudoe quantify configs/press.toml --json`` once: (exit code, stdout, out folder)."""
+    import io
+    from contextlib import redirect_stdout
+    out = tmp_path_factory.mktemp("quantify") / "out"
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        rc = main(["quantify", str(PRESS), "--out", str(out), "--quiet", "--json"])
+    return rc, buf.getvalue(), out
+
+
+def _one_line_error(capsys, argv, *words):
+    rc = main(argv)
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2, err
+    assert "Traceback" not in err
+    assert len(lines) == 1, err
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+def test_writes_both_files_with_the_keys(press_quantify):
+    rc, stdout, out = press_quantify
+    assert rc == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted([MARKER, "quantify.json", "quantify.txt"])
+    d = json.loads((out / "quantify.json").read_text())
+    assert json.loads(stdout) == d                     # --json prints what the file holds
+    assert set(d) == {"sensors", "design_how", "variants", "errors"}
+    assert set(d["variants"]) == {"M1", "M2", "M3"} and d["errors"] == {}
+    assert d["sensors"] == ["F_x", "B0_y"]             # the study's E-optimal design, as in the tests
+    for v, r in d["variants"].items():
+        assert {"detected", "kind", "test", "heldout", "discrepancies", "embedded_parameters", "pooled_coverage",
+                "size_file_units", "p", "conf_int"} <= set(r)
+        assert len(r["heldout"]) == 4                  # the paper's four split scenarios
+        assert [s["sensor"] for s in r["size_file_units"]] == (["F_x", "B0_y"] if r["kind"] == "discrepancy" else [])
+        assert {s["unit"] for s in r["size_file_units"]} <= {"um"}      # the files' unit, not the model's mm
+        assert [e["name"] for e in r["embedded_parameters"]] == ["k5", "k7"]
+    m1 = d["variants"]["M1"]
+    # bench/RESULTS.md "Issue 29 (first slice)": M1 is detected, 76.8 % plain and 89.3 % discrepancy coverage
+    assert m1["detected"] is True and m1["kind"] == "discrepancy"
+    assert m1["pooled_coverage"]["plain"] == pytest.approx(129 / 168)
+    assert m1["pooled_coverage"]["with_error"] == pytest.approx(150 / 168)
+    f_x = m1["size_file_units"][0]
+    assert 5.0 < f_x["amplitude"] < 10.0               # about 7 um, not 0.007 (mm)
+
+
+def test_text_file_has_the_summary_per_variant(press_quantify):
+    _, _, out = press_quantify
+    text = (out / "quantify.txt").read_text()
+    for v in ("M1", "M2", "M3"):
+        assert f"{v}: model error DETECTED" in text
+        assert f"---- {v} in full ----\nModel error of " in text     # the full ModelErrorResult.summary()
+    assert "without the model error" in text and " um " in text
+
+
+def test_dynamic_study_is_refused(tmp_path, capsys):
+    out = tmp_path / "out"
+    line = _one_line_error(capsys, ["quantify", str(REPO / "configs" / "oscillator.toml"), "--out", str(out),
+                                    "--quiet"], "static models only")
+    assert line.startswith("mudoe quantify: error:")
+    assert not (out / "quantify.json").exists() and not (out / "quantify.txt").exists()
+
+
+def test_unknown_config_is_bad_input(tmp_path, capsys):
+    out = tmp_path / "out"
+    _one_line_error(capsys, ["quantify", str(tmp_path / "none.toml"), "--out", str(out)], "config file not found")
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_quantify_is_listed_in_help(capsys):
+    from mudoe.cli import build_parser
+    assert "quantify" in build_parser().format_help()
+
+
+@pytest.fixture(scope="module")
+def press_views():
+    """The press study's results with the model error and the views of the report's pages."""
+    from mudoe.config import load_config
+    from mudoe.model_error_runs import run_model_error, run_model_error_views
+    from mudoe.study import StudyResults, prepare
+    study = prepare(load_config(PRESS))
+    return run_model_error_views(study, run_model_error(study, StudyResults(study)))
+
+
+def test_report_lists_one_model_error_page_per_variant(press_views):
+    from reports.builder import report_pages
+    names = [n for n, _ in report_pages(press_views, with_diagnosis=False, uncertainty="none")]
+    assert [n for n in names if n.startswith("model_error")] == ["model_error1", "model_error2", "model_error3"]
+    assert names.index("model_error1") > names.index("residuals")
+
+
+def test_results_json_carries_the_model_error(press_views):
+    from reports.serialize import dumps, results_dict
+    d = json.loads(dumps(results_dict(press_views)))
+    assert set(d["model_error"]) == {"M1", "M2", "M3"} and d["model_error_errors"] == {}
+    assert d["model_error"]["M1"]["kind"] == "discrepancy" and len(d["model_error"]["M1"]["heldout"]) == 4
+
+
+def test_model_error_page_draws_what_the_study_computed(press_views):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from reports.builder import page_texts
+    from reports.model_error_pages import model_error_pages
+    view = press_views.model_error_views["M1"]
+    assert view.units == ("um", "um") and view.input_label == "q_P [N]"
+    h = view.heldout
+    assert h.split == "loading vs unloading"            # M1's lowest plain coverage (66.1 %)
+    assert h.coverage_plain == pytest.approx(37 / 56)
+    lo, hi = h.plain
+    assert np.all(lo < 0) and np.all(hi > 0)            # the plain band is centred on the plain prediction
+    fig = model_error_pages(press_views, "M1")
+    texts = " ".join(page_texts(fig))
+    plt.close(fig)
+    assert "Model error of M1: detected, error model discrepancy" in texts
+    assert "discrepancy of F_x [um]" in texts and "loading vs unloading" in texts and "q_P [N]" in texts
+
+
+def test_spread_moves_rows_of_one_value_apart_around_it():
+    from reports.model_error_pages import spread
+    x = spread([0.0, 100.0, 100.0, 200.0], 4.0)
+    assert x.tolist() == [0.0, 98.0, 102.0, 200.0]
