@@ -31,7 +31,7 @@ def _explicit():
 
 def _results(plan, model):
     return SimpleNamespace(plan=plan, study=SimpleNamespace(models={plan.variant: model}, cfg=None, is_dynamic=False),
-                           validation=None, estimates={}, uncertainty={})
+                           validation=None, estimates={}, uncertainty={}, model_error_views={})
 
 
 def test_input_design_page_shows_the_exact_rows_next_to_the_refinement():
@@ -126,6 +126,7 @@ def test_report_lists_the_design_page_after_the_sensor_design_only_with_a_plan(d
                                             with_diagnosis=False)]
     assert with_plan[with_plan.index("oed") + 1] == "design"
     without = [n for n, _ in report_pages(SimpleNamespace(plan=None, study=SimpleNamespace(cfg=None, is_dynamic=False),
-                                                          estimates={}, uncertainty={}, validation=None),
+                                                          estimates={}, uncertainty={}, validation=None,
+                                                          model_error_views={}),
                                           with_diagnosis=False)]
     assert "design" not in without
