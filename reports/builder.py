@@ -11,8 +11,8 @@ them) that the new one does not have are then removed, so no stale page stays be
 
 Pages (:func:`report_pages`): verdict table and verdicts; measured data and model outputs;
 normality and sigma; optimal sensor design; estimates; confidence regions of every parameter
-pair; alpha_min tables; prediction bands; residual diagnostics; what the model misses
-(diagnostic splits); the Monte Carlo size study when run.  Every page names the study's
+pair; alpha_min tables; prediction bands; residual diagnostics; the model error of each variant;
+what the model misses (diagnostic splits); the Monte Carlo size study when run.  Every page names the study's
 own quantities (:mod:`reports.view`); grids hold at most 6 panels a row and 3 rows a page,
 tables at most 25 rows a page (more pages instead of smaller print).  ``results.json``
 holds, besides every number, the texts drawn on each page (``pages``).
@@ -131,8 +131,9 @@ def _title_page(results, cfg):
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
           "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if dyn else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
-          "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, what the model "
-          "misses."), width=165, size=8, color="0.4")
+          "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
+          + ("the model error of each variant, " if results.model_error_views else "") + "what the model misses."),
+          width=165, size=8, color="0.4")
     return fig
 
 

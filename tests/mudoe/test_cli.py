@@ -6,22 +6,11 @@ import sys
 from pathlib import Path
 
 
+from cli_texts import one_line_error as _one_line_error
 from mudoe.cli import main
 from mudoe.outdir import MARKER
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def _one_line_error(capsys, argv, *words):
-    rc = main(argv)
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert rc == 2, err
-    assert "Traceback" not in err
-    assert len(lines) == 1, err
-    for w in words:
-        assert w in lines[0], lines[0]
-    return lines[0]
 
 
 def _edit(path, old, new):

@@ -1,49 +1,13 @@
 """`mudoe oed` on a study without data, and the [oed] design keys (issue 13 item 6)."""
 import json
-import textwrap
 
 import numpy as np
 import pytest
 
+from cli_texts import PLANNED_PRESS
 from mudoe.cli import main
 
-PLAN = textwrap.dedent("""\
-    [model]
-    name = "press"
-    variants = ["M1"]
-
-    [data]
-    source = "csv"
-    directory = "no_such_folder"
-    displacement_unit = "um"
-
-    [[sensors]]
-    name = "D_y"
-    sigma = 15.0
-    [[sensors]]
-    name = "F_x"
-    sigma = 5.0
-    [[sensors]]
-    name = "B0_y"
-    sigma = 4.0
-
-    [[parameters]]
-    name = "k5"
-    start = 530.0
-    lower = 1.0
-    upper = 1.0e5
-    [[parameters]]
-    name = "k7"
-    start = 470.0
-    lower = 1.0
-    upper = 1.0e5
-
-    [oed]
-    planned = true
-    criterion = "D"
-    kind = "gauss_newton"
-    candidates_range = [0.0, 1600.0, 9]
-    """)
+PLAN = PLANNED_PRESS
 
 
 def _run(tmp_path, capsys, extra):

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_texts import one_line_error as _one_line_error
 from mudoe.cli import main
 from mudoe.outdir import MARKER
 
@@ -22,18 +23,6 @@ def press_quantify(tmp_path_factory):
     with redirect_stdout(buf):
         rc = main(["quantify", str(PRESS), "--out", str(out), "--quiet", "--json"])
     return rc, buf.getvalue(), out
-
-
-def _one_line_error(capsys, argv, *words):
-    rc = main(argv)
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert rc == 2, err
-    assert "Traceback" not in err
-    assert len(lines) == 1, err
-    for w in words:
-        assert w in lines[0], lines[0]
-    return lines[0]
 
 
 def test_writes_both_files_with_the_keys(press_quantify):

@@ -1,52 +1,16 @@
 """[oed] prior / robust / approximate and `mudoe oed` with a prior (issue 31 item 6)."""
 import json
 import re
-import textwrap
 
 import numpy as np
 import pytest
 
+from cli_texts import PLANNED_PRESS
 from mudoe.cli import main
 from mudoe.config import parse_config
 from mudoe.config_prior import DISTRIBUTION_ARGS
 
-PLAN = textwrap.dedent("""\
-    [model]
-    name = "press"
-    variants = ["M1"]
-
-    [data]
-    source = "csv"
-    directory = "no_such_folder"
-    displacement_unit = "um"
-
-    [[sensors]]
-    name = "D_y"
-    sigma = 15.0
-    [[sensors]]
-    name = "F_x"
-    sigma = 5.0
-    [[sensors]]
-    name = "B0_y"
-    sigma = 4.0
-
-    [[parameters]]
-    name = "k5"
-    start = 530.0
-    lower = 1.0
-    upper = 1.0e5
-    [[parameters]]
-    name = "k7"
-    start = 470.0
-    lower = 1.0
-    upper = 1.0e5
-
-    [oed]
-    planned = true
-    criterion = "D"
-    kind = "gauss_newton"
-    candidates_range = [0.0, 1600.0, 9]
-    """)
+PLAN = PLANNED_PRESS
 
 PRIOR = 'prior = { k5 = ["uniform", 400.0, 700.0], k7 = ["lognormal", 470.0, 0.2] }\n'
 SIGMA_MM = np.array([0.015, 0.005, 0.004])            # the PLAN's sigma (um) in the model's mm
