@@ -1,4 +1,4 @@
-"""The shape of the code (issue 21): no import circle, no file over 800 lines, no function over 80 lines of
+"""The shape of the code (issue 21): no import circle, no file over 1,000 lines (issue 28: modules cut by concept, not to a cap), no function over 80 lines of
 code in the packages.  The layer contracts themselves are checked by ``lint-imports`` (``make test``)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("models", "identification", "oed", "reports", "mudoe")
-MAX_FILE_LINES = 800
+MAX_FILE_LINES = 1000
 MAX_FUNCTION_CODE_LINES = 80
 
 
@@ -87,7 +87,7 @@ def test_the_circle_finder_sees_a_circle(tmp_path, monkeypatch):
     assert circles("circ_pkg") == [["circ_pkg.a", "circ_pkg.b"]]
 
 
-def test_no_file_over_800_lines():
+def test_no_file_over_1000_lines():
     long = {str(p.relative_to(ROOT)): n for p in _sources() if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES}
     assert long == {}
 
