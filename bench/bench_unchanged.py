@@ -4,26 +4,69 @@ Only the public API is used (``from identification import identify, ...``, :clas
 ``mudoe.config`` / ``mudoe.study.prepare`` and the ``mudoe`` CLI), so the same file runs against the tree
 before and after identification/ is split into sub-packages.
 
-``--save DIR`` writes
+``--save DIR`` writes (``--part static`` the first four items, ``--part dynamic`` the rest, ``--part all`` the
+default; ``--items`` a subset by name: fits, mc, report, dynfits, dyndesigns, dyndetect, dyncli)
 
 * ``DIR/fits.npz`` (float64, bitwise) and ``DIR/fits.json`` (status, message, notes, summary text) of the
   fits: the press variants M1, M2, M3 on the shipped campaign (configs/press.toml, series 4 and 5),
   spring chains with 30 states (k, c) and 80 states (k1, k2, c), a small two-state model stated in SX and
-  the same in MX, and the batch reactor (a dynamic model, collocated).  Per fit: p, cov, cov_gn,
-  information, S, H, objective, rss, grad_norm, iterations, status, the 95 % Wald intervals and
-  ``summary()`` (its solve time, the only run-dependent number in it, is masked).  For the SX fit also
-  ``conf_int`` by every method (wald, profile, bootstrap with n = 20 and seed 7), converted to (n_p, 2)
-  arrays whatever type ``conf_int`` returns, and the bootstrap replicates;
+  the same in MX.  Per fit: p, cov, cov_gn, information, S, H, objective, rss, grad_norm, iterations, status,
+  the 95 % Wald intervals and ``summary()`` (its solve time, the only run-dependent number in it, is masked).
+  For the SX fit also ``conf_int`` by every method (wald, profile, bootstrap with n = 20 and seed 7),
+  converted to (n_p, 2) arrays whatever type ``conf_int`` returns, and the bootstrap replicates;
 * ``DIR/mc.npz``: 100 Monte Carlo replications of the press size study (M1 on campaigns simulated from
   itself, the paper's four splits, TOL 5 %, serial in this process, seed 20261121, chunks of 50):
   per replication alpha_paper, alpha_two_sample, alpha_lr, covered, shapiro and the failed splits;
 * ``DIR/press_report/results.json``: ``python -m mudoe report configs/press.toml --out DIR/press_report``;
+* the dynamic part (issue 28 item 11), numbers in ``DIR/dynamic.npz`` (bitwise), strings in
+  ``DIR/dynamic.json`` (exact), one key per field ``NAME/field``:
+
+  - ``dynfits``: the batch reactor (collocation with discretisation error control) on solve_ivp data
+    from P0 = (1.5, 50, 1, 70) (key ``reactor``), and every variant of the shipped reactor and oscillator
+    studies (``reactor_isothermal``, ``oscillator_cubic``, ``oscillator_linear``) on their shipped campaigns
+    from the configs' starts, read by ``mudoe.config.load_config`` + ``mudoe.study.prepare``: the Estimate
+    fields of the static fits plus the discretisation record's fields;
+  - ``dyndesigns``: ``oed.select_times`` (reactor: D with 4 times, A with 5 time x sensor pairs;
+    oscillator: D with 3 of 50 times) and ``oed.select_inputs(..., times=...)`` (2 of 12 (cA0, T) rows of
+    the isothermal reactor; 1 of 4 temperature profiles of Pyomo.DoE's reactor, bench.bench_dynamic_doe;
+    its nominal experiment refined continuously, one start): chosen, indices, weights, value, lower bound,
+    gap, proven_optimal, method, status, message, notes, candidates, information share, and for input
+    designs the chosen inputs, the (row, sensor) pairs, the design and the refined levels;
+  - ``dyndetect``: ``identification.detect`` and ``identification.validate`` (size study, 8 replications,
+    seed 20261127, serial, no JIT) on the shipped reactor campaign split by experiment ("cool vs hot") and
+    the oscillator's (cubic and linear; validate only for cubic) ("small vs large steps"): per test every
+    SplitTest field (p_cal, p_val, alpha_paper, alpha_two_sample, alpha_lr, lr, ok, stage, labels, notes),
+    the verdicts, and per replication the Monte Carlo arrays.  The same on the early/late split alone under
+    ``early_late/...`` keys;
+  - ``dyncli``: ``python -m mudoe report | detect | validate --runs 5 configs/{reactor,oscillator}.toml
+    --out DIR/cli_{config}_{verb}`` in the tree's root: their ``results.json``, ``detect.json``,
+    ``validate.json`` (the report's PNGs and PDF are kept but not compared);
 * ``DIR/meta.json``: machine, date, tree, CPU seconds per item (never compared).
 
-``--compare A B`` prints per array the largest absolute and relative difference and whether it is
-bitwise identical, the differing strings, and for results.json every differing leaf; keys that are
-timings, timestamps, versions, hosts or paths (and string leaves holding absolute paths) are ignored and
-listed.  Exit code 0 when everything else is bitwise equal, 1 otherwise.
+Robust to the refactoring of issue 28: only package-level names (``from identification import identify,
+detect, validate, Split, MonteCarloSettings``, ``from oed import select_times, select_inputs``), the config
+route and the CLI are used, with these fallbacks for fields that may be renamed or moved:
+``DesignResult.chosen`` is read from ``sensors`` when absent (item 3); a dynamic fit's discretisation
+record from ``est.discretisation``, else ``est.extra["discretisation"]`` (item 7); a dynamic study's start
+from ``study.p0s[variant]`` (or ``start_values``), else ``study.p0``; the early/late split from the first of
+``identification.early_late_split``, ``identification.studies.dynamic_detect.early_late_dynamic_split``,
+``identification.studies.splits.early_late_split`` that takes the campaign (none: the ``early_late/`` keys
+hold a note and the comparison shows them missing).  A field absent from a tree is "only in A/B".
+
+Known intended change (issue 28 item 2): the early/late split rule is unified.  Static cut at
+``t <= t[(n-1)//2]``, dynamic at ``t < t[n//2]``: they differ only for an odd number of sampling times
+(the oscillator's 25; the reactor's 10 give the same partition), so detection and validation numbers on
+early/late splits may change.  ``--compare`` shows them apart: keys under ``early_late/`` and, in the JSON
+files, every leaf under a record that names an early/late split ("early (t < 0.52) vs late") or whose key
+or value names one; ``--allow-early-late`` accepts them (exit 0 when nothing else differs).  Numbers over
+all splits (a verdict, a family-wise rate) that move with them show among the other differences.
+
+``--compare A B`` compares the files either folder holds: per array the largest absolute and relative
+difference and whether it is bitwise identical, the differing strings, and for every JSON file each
+differing leaf; keys that are timings (``solve_time``, ``wall_time``, ``timing_s``), timestamps, versions,
+hosts or paths (and string leaves holding absolute paths) are ignored and listed; date-times in text and
+the wall time a Monte Carlo table prints ("serial (this process), 0.6 s") are masked.  Exit code 0 when
+everything else is bitwise equal, 1 otherwise.
 
 ``--timing`` prints the CPU seconds (time.process_time, this process) of: the press M1 warm fit (median
 of 30), 30 Monte Carlo replications serial (bench_detect --study timing --n-rep 30 --workers 1, batch
@@ -31,9 +74,13 @@ engine), the branch-and-bound D-optimal 50 x 10 with m = 10 (bench oed --sizes=5
 a profile conf_int of the SX fit and a bootstrap conf_int of it with n = 200.  Run it with
 OPENBLAS_NUM_THREADS=1 (set here when unset) on an otherwise idle machine, A and B in turn.
 
+CPU (2 cores shared, 0b6c053): the static part about N_STATIC s, the dynamic part about N_DYNAMIC s (of
+which the CLI's six runs about N_CLI s in child processes).  DIR is resolved before the CLI runs in the tree's
+root; nothing else is written (PYTHONDONTWRITEBYTECODE=1 keeps __pycache__ out of a tree read only).
+
 Run (the tree under test first on the path; the file itself may come from another tree)::
 
-    cd TREE && PYTHONPATH=TREE python bench/bench_unchanged.py --save DIR
+    cd TREE && PYTHONPATH=TREE python bench/bench_unchanged.py --save DIR [--part static|dynamic|all]
     python bench/bench_unchanged.py --compare DIR_A DIR_B          # exit code 0: unchanged
     cd TREE && PYTHONPATH=TREE OPENBLAS_NUM_THREADS=1 python bench/bench_unchanged.py --timing
 
@@ -65,8 +112,9 @@ MC_FIELDS = ("alpha_paper", "alpha_two_sample", "alpha_lr", "covered", "shapiro"
 MC_SEED, MC_REP, MC_CHUNK = 20261121, 100, 50
 BOOT_N, BOOT_SEED = 20, 7
 #: results.json keys never compared (run-dependent): a key of a leaf's path holding one of these words
-#: (split at "_" and non-letters: "solve_time", "timing_s", "versions", "base_dir"; not "validate", "times")
-IGNORED_WORDS = frozenset({"time", "timing", "created", "timestamp", "date", "duration", "elapsed", "wall", "cpu",
+#: (split at "_" and non-letters: "timing_s", "versions", "base_dir"; not "validate"), or ending in the word
+#: "time" after another ("solve_time", "wall_time"; not "time_design", "time_windows", "chosen_times")
+IGNORED_WORDS = frozenset({"timing", "created", "timestamp", "date", "duration", "elapsed", "wall", "cpu",
                            "version", "versions", "host", "hostname", "machine", "platform", "path", "dir", "pid"})
 #: date-times inside text leaves (the report's "Built 2026-11-25 18:19 UTC" line) are masked before comparing
 TIMESTAMP = re.compile(r"\d{4}-\d{2}-\d{2}[ T]\d{2}:\d{2}(:\d{2}(\.\d+)?)?( ?UTC|Z|[+-]\d{2}:?\d{2})?")
@@ -243,10 +291,8 @@ def save(out: Path, items) -> dict:
         (out / "fits.json").write_text(json.dumps(texts, indent=1, sort_keys=True))
     for name, fn in (("mc", save_mc), ("report", save_report)):
         if name in items:
-            c0 = time.process_time()
-            fn(out)
-            cpu[name] = time.process_time() - c0
-            print(f"  {name}: {cpu[name]:.1f} s CPU (this process)", flush=True)
+            cpu[name] = _cpu(lambda: fn(out))
+            print(f"  {name}: {cpu[name]:.1f} s CPU (this process and its children)", flush=True)
     fns = [fn for item, fn in (("dynfits", dynamic_fits), ("dyndesigns", dynamic_designs),
                                ("dyndetect", dynamic_detect_validate)) if item in items]
     if fns:
@@ -564,8 +610,10 @@ def leaves(x, path=()):
 
 def _ignored(path: tuple, value) -> str:
     """Why a results.json leaf is not compared ("" when it is)."""
-    if any(isinstance(k, str) and IGNORED_WORDS.intersection(re.split(r"[^a-z0-9]+|_", k.lower())) for k in path):
-        return "key"
+    for k in path:
+        words = [w for w in re.split(r"[^a-z0-9]+|_", k.lower()) if w] if isinstance(k, str) else []
+        if IGNORED_WORDS.intersection(words) or (len(words) > 1 and words[-1] == "time"):
+            return "key"
     return "absolute path" if isinstance(value, str) and os.path.isabs(value) else ""
 
 
