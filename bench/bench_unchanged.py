@@ -49,8 +49,8 @@ route and the CLI are used, with these fallbacks for fields that may be renamed 
 ``DesignResult.chosen`` is read from ``sensors`` when absent (item 3); a dynamic fit's discretisation
 record from ``est.discretisation``, else ``est.extra["discretisation"]`` (item 7); a dynamic study's start
 from ``study.p0s[variant]`` (or ``start_values``), else ``study.p0``; the early/late split from the first of
-``identification.early_late_split``, ``identification.studies.dynamic_detect.early_late_dynamic_split``,
-``identification.studies.splits.early_late_split`` that takes the campaign (none: the ``early_late/`` keys
+``identification.early_late_split``, ``early_late_dynamic_split`` of ``identification.studies.splits`` or
+``identification.studies.dynamic_detect``, ``identification.studies.splits.early_late_split`` that takes the campaign (none: the ``early_late/`` keys
 hold a note and the comparison shows them missing).  A field absent from a tree is "only in A/B".
 
 Known intended change (issue 28 item 2): the early/late split rule is unified.  Static cut at
@@ -466,11 +466,13 @@ def _input_design_record(name: str, res, arrays: dict, texts: dict) -> None:
 
 def early_late_split(data):
     """The early/late split of a dynamic campaign from the first function found (issue 28 item 2 unifies
-    the rule): ``identification.early_late_split(data)``, ``identification.studies.dynamic_detect.
-    early_late_dynamic_split(data)`` (0b6c053), ``identification.studies.splits.early_late_split(data)``;
+    the rule): ``identification.early_late_split(data)``, ``early_late_dynamic_split(data)`` from
+    ``identification.studies.splits`` or ``identification.studies.dynamic_detect`` (0b6c053),
+    ``identification.studies.splits.early_late_split(data)``;
     None when none takes the campaign."""
     import importlib
     for mod, fn in (("identification", "early_late_split"),
+                    ("identification.studies.splits", "early_late_dynamic_split"),
                     ("identification.studies.dynamic_detect", "early_late_dynamic_split"),
                     ("identification.studies.splits", "early_late_split")):
         try:
