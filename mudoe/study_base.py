@@ -20,9 +20,9 @@ import numpy as np
 from identification import identify
 from identification.progress import Progress as BaseProgress
 from identification.studies.detect import NormalityCheck
+from identification.studies.records import Presentation
 from models.campaign import Campaign
 from models.contract import Model
-from reports.view import Presentation
 
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
@@ -33,15 +33,10 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from identification.studies.detect import DetectionResult
     from identification.studies.model_error import ModelErrorResult
     from identification.studies.montecarlo import MonteCarloResult
+    from identification.studies.records import (Diagnosis, FitAssessment, MeshSummary, ModelErrorView,
+                                                ModelUncertainty, PredictionBands, Trajectories)
     from oed.design import DesignResult, DesignTable
-    from reports.diagnosis import Diagnosis
-    from reports.figures import PredictionBands
-    from reports.model_error_pages import ModelErrorView
-    from reports.uncertainty import ModelUncertainty
-    from reports.view import FitAssessment
-
-    from .dynamic_records import MeshSummary, Trajectories
-    from .plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
+    from oed.plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
 
 __all__ = ["MissingPieceError", "FitFailedError", "Progress", "VariantModel", "Study", "StudyResults",
            "load_factory", "start_values", "run_identify", "require_fit", "oed_variant"]
