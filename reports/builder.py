@@ -96,8 +96,8 @@ def _title_page(results):
     from .tables import content_widths, draw_table, verdict_rows
     fig = _page()
     s = results.study
-    cfg = s.config
-    fig.text(0.04, 0.95, cfg.title, fontsize=18, weight="bold", va="top")
+    config = s.config
+    fig.text(0.04, 0.95, config.title, fontsize=18, weight="bold", va="top")
     head, rows, flags = verdict_rows(results)
     h = 0.03 * (len(rows) + 1)
     ax = fig.add_axes([0.04, 0.87 - h, 0.92, h])
@@ -117,11 +117,11 @@ def _title_page(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.source
     dyn = s.is_dynamic
-    meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
+    meta = (f"Config: {config.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
             f"{c.n_M} series x {c.n_q} {'experiments' if dyn else 'set points'} x {len(s.sensors)} sensors; study series: "
-            f"{'all' if cfg.series is None else ', '.join(str(i + 1) for i in cfg.series)} (1-based); "
+            f"{'all' if config.series is None else ', '.join(str(i + 1) for i in config.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
     y -= 0.02 * _text(fig, 0.04, y, meta, width=175, size=7.5, color="0.35") + 0.015
@@ -614,10 +614,10 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
         raise ValueError(f"uncertainty: expected one of {', '.join(repr(c) for c in UNCERTAINTY_CHOICES)}, "
                          f"got {uncertainty!r}")
     _require_record(results)
-    cfg = results.study.config
-    uncertainty = cfg.uncertainty if uncertainty is None else uncertainty
+    config = results.study.config
+    uncertainty = config.uncertainty if uncertainty is None else uncertainty
     t0 = time.perf_counter()
-    dpi = int(dpi or cfg.dpi)
+    dpi = int(dpi or config.dpi)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     previous = _previous_pages(out)
@@ -629,7 +629,7 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
         diagnosis = results.diagnosis
         pages = report_pages(results, diagnosis, diagnose, uncertainty)
         names, texts = [], []
-        with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.title, "Creator": "mudoe"}) as pdf, \
+        with PdfPages(tmp / "report.pdf", metadata={"Title": config.title, "Creator": "mudoe"}) as pdf, \
                 (progress or Progress(False)).bar(len(pages), "report pages", unit="page") as bar:
             k = 0
             for name, make in pages:
@@ -646,7 +646,7 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
                 bar.update(1)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
-        meta = dict(config=cfg.values, config_text=cfg.text, data_sha256=results.study.source.sha256,
+        meta = dict(config=config.values, config_text=config.text, data_sha256=results.study.source.sha256,
                     versions=package_versions(), timing_s=timing,
                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                     files=["report.pdf"] + names + ["results.json"],

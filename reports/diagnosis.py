@@ -21,14 +21,19 @@ report and in the terminal.  The words are the study's; this module adds none.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import identification.studies.records as _records
-from identification.studies.records import MISSES, Diagnosis
+from identification.studies.records import MISSES
 
 from .moved import moved
 
 __all__ = ["findings_text", "MISSES"]
 
 __getattr__ = moved(__name__, _records, ("DiagnosisRow", "Diagnosis", "Explanation"))
+
+if TYPE_CHECKING:
+    from identification.studies.records import Diagnosis
 
 
 def findings_text(diagnosis: Diagnosis | None, models) -> str:

@@ -8,11 +8,12 @@ study put into its :class:`oed.study_record.StudySetup` (``study``) and the reco
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy import stats
 
 import identification.studies.records as _records
-from identification.studies.records import PredictionBands
 
 from .moved import moved
 from .view import input_label, output_display, output_label, phase_labels, sensor_unit, unit_suffix
@@ -21,6 +22,9 @@ __all__ = ["measurement_loops", "confidence_ellipses", "ellipse_points", "residu
            "VARIANT_STYLE", "prediction_band_plot", "residuals_vs_order", "normal_probability_plot"]
 
 __getattr__ = moved(__name__, _records, ("PredictionBands",))
+
+if TYPE_CHECKING:
+    from identification.studies.records import PredictionBands
 
 #: line style per model variant
 VARIANT_STYLE = {"M1": dict(color="#1f77b4", ls="-"), "M2": dict(color="#d62728", ls="--"),

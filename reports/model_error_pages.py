@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
 import identification.studies.records as _records
-from identification.studies.records import ModelErrorView
 
 from .moved import moved
 from .page_layout import draw_text as _text, new_page as _page
@@ -20,6 +21,9 @@ from .page_layout import draw_text as _text, new_page as _page
 __all__ = ["discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread", "model_error_pages"]
 
 __getattr__ = moved(__name__, _records, ("HeldOutBands", "ModelErrorView"))
+
+if TYPE_CHECKING:
+    from identification.studies.records import ModelErrorView
 
 
 def _ax(ax, figsize=(6.0, 4.0)):
