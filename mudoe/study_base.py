@@ -107,9 +107,9 @@ class Study:
     notes : tuple of str         what was done to the data
     units : DataUnits            units of the data in the files and in the model (the one conversion)
     explanations : tuple         what the study knows of its diagnostic rejections
-                                 (:class:`reports.diagnosis.Explanation`; the press: the shipped campaign's)
+                                 (:class:`identification.studies.records.Explanation`; the press's)
     presentation : Presentation  the words a built-in model's study puts on its pages
-                                 (:class:`reports.view.Presentation`; empty for an own model)
+                                 (:class:`identification.studies.records.Presentation`; empty if own)
     is_dynamic : bool            False (a :class:`mudoe.dynamic_study.DynamicStudy` is True)
     """
 

@@ -514,7 +514,7 @@ def report_pages(results: StudyRecord, diagnosis=None, with_diagnosis: bool = Tr
 
     The one place where pages are listed; every page draws what the study computed (``results``, the
     :class:`oed.study_record.StudyRecord` of :func:`mudoe.report_record.study_record`).
-    ``diagnosis`` (:class:`reports.diagnosis.Diagnosis`, the study's ``results.diagnosis``) is shown on
+    ``diagnosis`` (:class:`identification.studies.records.Diagnosis`, the study's ``results.diagnosis``) is shown on
     the page "What the model misses" when ``with_diagnosis``.  ``uncertainty`` (one of
     ``reports.uncertainty.UNCERTAINTY_CHOICES``): which of the models whose uncertainty the study
     computed (``results.uncertainty``) get the profile-likelihood / likelihood-ratio pages after the

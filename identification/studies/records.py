@@ -134,7 +134,12 @@ class OutputDisplay:
 class GoodnessOfFit:
     """chi2 = sum ((z - h) / sigma)^2 over the used values (dimensionless), its degrees of freedom and p-value.
 
-    ``pvalue`` is NaN when sigma was estimated from the residuals (chi2 = dof by construction).
+    Attributes
+    ----------
+    chi2 : float     the statistic (dimensionless)
+    dof : int        its degrees of freedom (used values - parameters)
+    pvalue : float   P(chi2_dof >= chi2); NaN when sigma was estimated from the residuals (chi2 = dof by
+                     construction)
     """
 
     chi2: float
