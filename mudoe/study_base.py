@@ -3,7 +3,8 @@
 :class:`Study` is everything a run needs, assembled from a config (:func:`mudoe.study.prepare`);
 :class:`StudyResults` is everything the commands computed, a frozen record built step by step
 (each ``run_*`` of :mod:`mudoe.study` returns a new one, :func:`dataclasses.replace`) and read by
-the CLI and the report builder (:mod:`reports`), which compute nothing.  This module imports no
+the CLI; the report builder (:mod:`reports`), which computes nothing, reads its
+:func:`mudoe.report_record.study_record` (an :class:`oed.study_record.StudyRecord`).  This module imports no
 other study module (:mod:`mudoe.study`, :mod:`mudoe.dynamic_study`, :mod:`mudoe.dynamic_runs`,
 :mod:`mudoe.plans` import it).
 """
