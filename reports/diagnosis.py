@@ -16,8 +16,8 @@ their old names here still work, deprecated).
 
 A study may know why a diagnostic split rejects a model on its data (e.g. from a benchmark
 that switched features of a simulator off): it passes
-:class:`identification.studies.records.Explanation` s (the study's ``explanations``), and every finding they match is followed by the explanation's text, in the
-report and in the terminal.  The words are the study's; this module adds none.
+:class:`identification.studies.records.Explanation` s (the study's ``explanations``), and every
+finding they match is followed by the explanation's text, in the report and in the terminal.  The words are the study's; this module adds none.
 """
 from __future__ import annotations
 
