@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 from scipy import stats
 
-from reports.figures import PredictionBands
+from identification.studies.records import PredictionBands
 
 __all__ = ["prediction_bands", "run_bands", "BAND_LEVEL"]
 

@@ -54,10 +54,15 @@ class BuiltinModel:
     build : callable                ``build(variant, cfg) -> (models.Model, inputs_fn or None)``: one
                                     variant of a study config (:class:`mudoe.config.StudyConfig`)
     explanations : callable         ``explanations(campaign, variants) -> tuple`` of
-                                    :class:`reports.diagnosis.Explanation`: what is known of its
-                                    diagnostic rejections on this campaign
+                                    :class:`identification.studies.records.Explanation`: what is known of
+                                    its diagnostic rejections on this campaign
     prototype : VirtualPrototype or None   its simulated test rig, if it has one
-    presentation : reports.view.Presentation or None   the words its report pages use (None: the generic ones)
+    presentation : identification.studies.records.Presentation or None   the words its report pages use
+                                    (None: the generic ones)
+    phases : callable or None       ``phases(q_set) -> tuple of str``, a phase label per set point (the press:
+                                    loading / unloading); the study computes the labels before the report
+                                    (:func:`mudoe.report_record.study_phases`); None: the model's own
+                                    ``mudoe_phases`` or none
     """
 
     name: str
@@ -69,3 +74,4 @@ class BuiltinModel:
     explanations: Callable
     prototype: VirtualPrototype | None = None
     presentation: object = None
+    phases: Callable | None = None

@@ -267,7 +267,8 @@ def _identify(study, results, args, progress, out) -> int:
 
 def _oed_text(results) -> str:
     from reports.tables import oed_table_text
-    return oed_table_text(results)
+    from .report_record import study_record
+    return oed_table_text(study_record(results))
 
 
 def _oed_planned(cfg, args, progress, out, t0) -> int:
@@ -316,9 +317,10 @@ def _detect(study, results, args, progress, out) -> int:
     from reports.diagnosis import findings_text
     from reports.serialize import detection_dict, diagnosis_dict, dumps
     from reports.tables import normality_labels
+    from .report_record import study_setup
     from .study import run_detect, run_diagnosis
     results = run_diagnosis(study, run_detect(study, results, progress), progress)
-    labels = normality_labels(study)
+    labels = normality_labels(study_setup(study))
     diag = results.diagnosis               # None for a dynamic study (no diagnostic split family)
     obj = dict(detection_dict(results.detection, **labels), diagnosis=None if diag is None else diagnosis_dict(diag))
     text = results.detection.summary(**labels) + ("" if diag is None else "\n\n" + findings_text(
@@ -371,6 +373,7 @@ def _report(study, results, args, progress, out) -> int:
     from reports.builder import build_report
     from reports.diagnosis import findings_text
     from .outdir import claim, record
+    from .report_record import study_record
     t0 = time.perf_counter()
     results = _report_results(study, results, progress)
     timing = dict(progress.timing)
@@ -378,7 +381,7 @@ def _report(study, results, args, progress, out) -> int:
     results = dataclasses.replace(results, timing=timing)
     with progress.step("build report"):
         claim(out)
-        paths = build_report(results, out, progress=progress)
+        paths = build_report(study_record(results), out, progress=progress)
         record(out, paths)
     text = "\n".join(str(p) for p in paths)
     obj = {"files": [str(p) for p in paths], "verdicts": {}}

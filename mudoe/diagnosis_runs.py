@@ -4,7 +4,7 @@
 declared phases, first vs second half of the study series); :func:`diagnose` runs the split tests
 of :mod:`identification.studies.detect` on it for every model and corrects the p-values
 (alpha_min) of the whole family -- the study's own splits and the diagnostic ones -- with Holm's
-step-down procedure, into a :class:`reports.diagnosis.Diagnosis` the report shows on the page
+step-down procedure, into an :class:`identification.studies.records.Diagnosis` the report shows on the page
 "What the model misses" (:mod:`reports.diagnosis` words it; the study computes it here).
 """
 from __future__ import annotations
@@ -17,8 +17,9 @@ import numpy as np
 from identification.progress import Progress
 from identification.studies.detect import run_split_tests
 from identification.studies.splits import Split, SplitError, input_range_split, series_split
-from reports.diagnosis import Diagnosis, DiagnosisRow, Explanation
-from reports.view import phase_labels
+from identification.studies.records import Diagnosis, DiagnosisRow, Explanation
+
+from .report_record import study_phases
 
 __all__ = ["DiagnosticSplit", "diagnostic_splits", "holm_adjusted", "diagnose"]
 
@@ -36,7 +37,7 @@ def diagnostic_splits(study) -> tuple:
 
     * input range: calibrate on the set points with |q| at most the median of the nonzero
       first inputs, validate on the others;
-    * phase: for every pair of declared phases (:func:`reports.view.phase_labels`), one
+    * phase: for every pair of declared phases (:func:`mudoe.report_record.study_phases`), one
       against the other (the press: loading vs unloading);
     * series: the first half of the study series against the second half (two or more series).
 
@@ -51,7 +52,7 @@ def diagnostic_splits(study) -> tuple:
         out.append(DiagnosticSplit(sp, "input range"))
     except SplitError:
         pass
-    phases = phase_labels(study)
+    phases = study_phases(study)
     if phases is not None:
         labels = list(dict.fromkeys(phases))
         for a in range(len(labels)):
@@ -93,7 +94,7 @@ def diagnose(results, statistic: str | None = None, progress: Progress | None = 
     Uses the detection's settings, start values and sensors; returns None when detection
     was not run.  Each split costs a calibration, a validation and a pooled fit per model;
     ``progress`` (an :class:`identification.progress.Progress`) shows a bar over them.
-    ``explanations`` (:class:`reports.diagnosis.Explanation` s; default the study's ``explanations``) are kept with
+    ``explanations`` (:class:`identification.studies.records.Explanation` s; default the study's ``explanations``) are kept with
     the result and follow the findings they match.
     """
     det = results.detection
@@ -121,5 +122,5 @@ def diagnose(results, statistic: str | None = None, progress: Progress | None = 
         explanations = study.explanations
     bad = [e for e in explanations if not isinstance(e, Explanation)]
     if bad:
-        raise TypeError(f"explanations: expected reports.diagnosis.Explanation, got {type(bad[0]).__name__}")
+        raise TypeError(f"explanations: expected identification.studies.records.Explanation, got {type(bad[0]).__name__}")
     return Diagnosis(st, det.settings.tol, tuple(rows), tuple(explanations))

@@ -25,13 +25,13 @@ import numpy as np
 from scipy import stats
 
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
+from identification.studies.records import MeshSummary, Trajectories
 from models.sensitivity import sensitivities
 from models.state import solve_states
+from oed.plan_records import DynamicDesign, design_rows_text
 
 from .config import ConfigError
 from .config_errors import table_line
-from .dynamic_records import MeshSummary, Trajectories
-from .plan_records import DynamicDesign, design_rows_text
 from .study_base import oed_variant, require_fit
 
 __all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "trajectories", "run_trajectories",

@@ -1,6 +1,6 @@
 """What the study says of each fit beside its numbers: goodness of fit and the trust of its linearisation.
 
-:func:`assess` gives a :class:`reports.view.FitAssessment` per estimate; :func:`mudoe.study.run_identify`
+:func:`assess` gives an :class:`identification.studies.records.FitAssessment` per estimate; :func:`mudoe.study.run_identify`
 keeps one per fit in ``StudyResults.assessments`` and the report's verdict table, verdict paragraphs
 and residual pages read them.
 """
@@ -11,7 +11,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from reports.view import FitAssessment, GoodnessOfFit
+from identification.studies.records import FitAssessment, GoodnessOfFit
 
 __all__ = ["assess", "goodness_of_fit", "linearisation_trust"]
 

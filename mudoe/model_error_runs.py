@@ -182,11 +182,11 @@ def _first_input(study, q: np.ndarray) -> np.ndarray:
 
 
 def model_error_view(study, results, variant: str):
-    """The :class:`reports.model_error_pages.ModelErrorView` of ``variant``: its discrepancy (all data) at the
+    """The :class:`identification.studies.records.ModelErrorView` of ``variant``: its discrepancy (all data) at the
     study's input rows, and the new-reading bands with and without the error model, each fitted on the
     calibration part of the split of the lowest plain held-out coverage, at its validation readings (file
     units, relative to the plain prediction)."""
-    from reports.model_error_pages import HeldOutBands, ModelErrorView
+    from identification.studies.records import HeldOutBands, ModelErrorView
     r = results.model_error[variant]
     data, m = study.data[variant], study.models[variant]
     cols = [study.sensors.index(s) for s in r.sensors]

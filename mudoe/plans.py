@@ -9,11 +9,11 @@ from __future__ import annotations
 import numpy as np
 
 from models.contract import Model
+from oed.plan_records import DiscriminationPlan, PlannedDesign, RobustPlan
 
 from .checks import check_model
 from .config import ConfigError, StudyConfig
 from .data_io import DataUnits, study_units
-from .plan_records import DiscriminationPlan, PlannedDesign, RobustPlan
 from .study_base import Progress, Study, StudyResults, VariantModel, oed_variant, require_fit
 from .study_models import build_models, config_start_values, is_dynamic_built
 

@@ -13,7 +13,7 @@ Everything here fits or trains, so it runs identification on the press model of
 * :func:`fit_candidates`: (k5, k7) identified with M1, M2, M3 on held-out series;
 * :func:`press_variant`: one candidate model of a study config with its input function;
 * :func:`diagnosis_explanations`: what is known of the diagnostic rejections on the shipped
-  campaign (:mod:`reports.diagnosis`), measured by ``bench/bench_diagnose_m3.py``;
+  campaign (:class:`identification.studies.records.Explanation`), measured by ``bench/bench_diagnose_m3.py``;
 * :func:`prototype_campaign`: the campaign of ``[data] source = "prototype"`` (the virtual prototype);
 * :data:`PRESS`: all of the above as generic study code sees the press (:class:`mudoe.builtin.BuiltinModel`,
   listed by :mod:`mudoe.registry`): its variants, scenarios, default data, candidate models, diagnosis
@@ -33,6 +33,7 @@ import numpy as np
 from identification import Measurements, identify, simulate
 from identification.errors import IdentificationError
 from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
+from identification.studies.records import Explanation, ModelCurve, Presentation
 from models.campaign import Campaign
 from models.contract import Model
 from models.fileio import atomic_write_text
@@ -43,9 +44,6 @@ from models.friction import (F_SCALE, FRICTION_JSON, Q_SCALE, FrictionError, Pre
 from models.press import K_NOMINAL, PRESS_SCENARIO_NAMES, Q_PAPER, press_model, press_scenario_rows
 from models.prototype import (CAMPAIGN_SEED, TEST_SERIES, TRAIN_SERIES, composed_sigma, generate_campaign,
                               read_campaign, write_campaign)
-from reports.diagnosis import Explanation
-from reports.press_figures import ModelCurve
-from reports.view import Presentation
 
 from .builtin import BuiltinModel, VirtualPrototype
 from .config_errors import config_error
@@ -365,7 +363,7 @@ def _is_shipped_campaign(campaign: Campaign) -> bool:
 
 
 def diagnosis_explanations(campaign: Campaign, variants: Sequence[str]) -> tuple:
-    """What the press study knows of its diagnostic rejections (:class:`reports.diagnosis.Explanation`).
+    """What the press study knows of its diagnostic rejections (:class:`identification.studies.records.Explanation`).
 
     On the shipped campaign M3 is rejected by the input-range split (low vs high set force).
     ``bench/bench_diagnose_m3.py`` regenerated that campaign from the virtual prototype with the
@@ -430,5 +428,5 @@ PRESS = BuiltinModel(
     data_directory="../data/press_campaign", build=press_variant, explanations=diagnosis_explanations,
     prototype=VirtualPrototype(campaign=prototype_campaign, check=check_prototype_data, set_points=len(Q_PAPER),
                                seed=CAMPAIGN_SEED, n_series=6, generate=generate_campaign, write=write_campaign),
-    presentation=Presentation(quantity="displacement", input_label="process force $q_P$", input_unit="N",
-                              phases=press_phases))
+    presentation=Presentation(quantity="displacement", input_label="process force $q_P$", input_unit="N"),
+    phases=press_phases)

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from oed.plan_records import RobustPlan
 from .config import ConfigError, StudyConfig
 from .config_errors import ConfigContext
 from .config_prior import prior_error
-from .plan_records import RobustPlan
 
 __all__ = ["config_prior", "plan_robust"]
 

@@ -20,9 +20,9 @@ import numpy as np
 
 from identification import Measurements, information_contributions
 from identification.studies.detect import NormalityCheck, normality_check
+from identification.studies.records import Presentation
 from identification.studies.splits import Split, random_splits
 from models.campaign import Campaign
-from reports.view import Presentation
 
 from .registry import builtin_model, scenario_splits, simulate_refusal
 from .checks import check_data, check_model, study_splits

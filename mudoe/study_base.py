@@ -3,7 +3,8 @@
 :class:`Study` is everything a run needs, assembled from a config (:func:`mudoe.study.prepare`);
 :class:`StudyResults` is everything the commands computed, a frozen record built step by step
 (each ``run_*`` of :mod:`mudoe.study` returns a new one, :func:`dataclasses.replace`) and read by
-the CLI and the report builder (:mod:`reports`), which compute nothing.  This module imports no
+the CLI; the report builder (:mod:`reports`), which computes nothing, reads its
+:func:`mudoe.report_record.study_record` (an :class:`oed.study_record.StudyRecord`).  This module imports no
 other study module (:mod:`mudoe.study`, :mod:`mudoe.dynamic_study`, :mod:`mudoe.dynamic_runs`,
 :mod:`mudoe.plans` import it).
 """
@@ -20,9 +21,9 @@ import numpy as np
 from identification import identify
 from identification.progress import Progress as BaseProgress
 from identification.studies.detect import NormalityCheck
+from identification.studies.records import Presentation
 from models.campaign import Campaign
 from models.contract import Model
-from reports.view import Presentation
 
 from .config import ConfigError, StudyConfig
 from .console import INTERRUPT
@@ -33,15 +34,10 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from identification.studies.detect import DetectionResult
     from identification.studies.model_error import ModelErrorResult
     from identification.studies.montecarlo import MonteCarloResult
+    from identification.studies.records import (Diagnosis, FitAssessment, MeshSummary, ModelErrorView,
+                                                ModelUncertainty, PredictionBands, Trajectories)
     from oed.design import DesignResult, DesignTable
-    from reports.diagnosis import Diagnosis
-    from reports.figures import PredictionBands
-    from reports.model_error_pages import ModelErrorView
-    from reports.uncertainty import ModelUncertainty
-    from reports.view import FitAssessment
-
-    from .dynamic_records import MeshSummary, Trajectories
-    from .plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
+    from oed.plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
 
 __all__ = ["MissingPieceError", "FitFailedError", "Progress", "VariantModel", "Study", "StudyResults",
            "load_factory", "start_values", "run_identify", "require_fit", "oed_variant"]
@@ -112,9 +108,9 @@ class Study:
     notes : tuple of str         what was done to the data
     units : DataUnits            units of the data in the files and in the model (the one conversion)
     explanations : tuple         what the study knows of its diagnostic rejections
-                                 (:class:`reports.diagnosis.Explanation`; the press: the shipped campaign's)
+                                 (:class:`identification.studies.records.Explanation`; the press's)
     presentation : Presentation  the words a built-in model's study puts on its pages
-                                 (:class:`reports.view.Presentation`; empty for an own model)
+                                 (:class:`identification.studies.records.Presentation`; empty if own)
     is_dynamic : bool            False (a :class:`mudoe.dynamic_study.DynamicStudy` is True)
     """
 

@@ -3,7 +3,7 @@
 For one model's fit on all study data (:func:`model_uncertainty`): the (1 - alpha) Wald and
 profile-likelihood intervals, the profiles at the pair regions' level (the extent of every
 region) and the likelihood-ratio region of every parameter pair (the other parameters
-re-optimised), as a :class:`reports.uncertainty.ModelUncertainty`.  :func:`run_uncertainty`
+re-optimised), as an :class:`identification.studies.records.ModelUncertainty`.  :func:`run_uncertainty`
 computes it for the fits the ``[report] uncertainty`` option selects (:func:`uncertainty_variants`)
 into ``StudyResults.uncertainty``; :func:`summary_intervals` gives the profile intervals
 ``Estimate.summary(intervals=...)`` shows for a fit whose curvature is not trustworthy.
@@ -18,7 +18,8 @@ import numpy as np
 
 from identification.errors import IdentificationError
 from identification.inference.profile import lr_region
-from reports.uncertainty import UNCERTAINTY_CHOICES, UNTRUSTED, ModelUncertainty, PairRegion
+from identification.studies.records import UNTRUSTED, ModelUncertainty, PairRegion
+from reports.uncertainty import UNCERTAINTY_CHOICES
 
 from .fit_assessment import linearisation_trust
 

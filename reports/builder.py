@@ -16,6 +16,9 @@ what the model misses (diagnostic splits); the Monte Carlo size study when run. 
 own quantities (:mod:`reports.view`); grids hold at most 6 panels a row and 3 rows a page,
 tables at most 25 rows a page (more pages instead of smaller print).  ``results.json``
 holds, besides every number, the texts drawn on each page (``pages``).
+
+Everything drawn comes from one :class:`oed.study_record.StudyRecord` the study filled
+(:func:`mudoe.report_record.study_record`); the builder reads nothing else and calls nothing of the study.
 """
 from __future__ import annotations
 
@@ -31,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from models.fileio import publishing, register_scratch, release_scratch
+from oed.best_designs import RankedDesignTable
+from oed.study_record import StudyRecord
 
 from .page_layout import PAGE_SIZE, ROWS_PER_PAGE, TEXT_LINE_HEIGHT
 from .page_layout import chunks as _chunks, draw_text as _text, new_page as _page, part_label as _part
@@ -87,11 +92,12 @@ def verdict_paragraphs(results) -> list[tuple[str, str]]:
     return out
 
 
-def _title_page(results, cfg):
+def _title_page(results):
     from .tables import content_widths, draw_table, verdict_rows
     fig = _page()
     s = results.study
-    fig.text(0.04, 0.95, cfg.report.title, fontsize=18, weight="bold", va="top")
+    config = s.config
+    fig.text(0.04, 0.95, config.title, fontsize=18, weight="bold", va="top")
     head, rows, flags = verdict_rows(results)
     h = 0.03 * (len(rows) + 1)
     ax = fig.add_axes([0.04, 0.87 - h, 0.92, h])
@@ -109,13 +115,13 @@ def _title_page(results, cfg):
             "covariance may be read as likelihood regions."), width=175, size=8, color="0.25") + 0.015
     for v, par in verdict_paragraphs(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
-    c = s.campaign
+    c = s.source
     dyn = s.is_dynamic
-    meta = (f"Config: {cfg.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
+    meta = (f"Config: {config.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
             f"{c.n_M} series x {c.n_q} {'experiments' if dyn else 'set points'} x {len(s.sensors)} sensors; study series: "
-            f"{'all' if cfg.data.series is None else ', '.join(str(i + 1) for i in cfg.data.series)} (1-based); "
+            f"{'all' if config.series is None else ', '.join(str(i + 1) for i in config.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
     y -= 0.02 * _text(fig, 0.04, y, meta, width=175, size=7.5, color="0.35") + 0.015
@@ -223,7 +229,8 @@ def _oed_page(results):
     value = f"log det C = {r.value:.4f}" if r.criterion == "D" else f"{r.criterion} = {r.value:.4e}"
     txt = (f"Criteria of the {results.oed_table.kind.replace('_', '-')} covariance C(w) of ({names}) "
            f"({criteria_units(results.study)}) for "
-           + (getattr(results.oed_table, "note", "") or "every sensor combination")
+           + ((results.oed_table.note if isinstance(results.oed_table, RankedDesignTable) else "")
+              or "every sensor combination")
            + ", from the information of each sensor "
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
            f"{len(r.sensors)} sensors): {', '.join(r.sensors)} (green), {value}, "
@@ -501,11 +508,13 @@ def _validation_page(results):
     return fig
 
 
-def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertainty: str = "untrusted") -> list:
+def report_pages(results: StudyRecord, diagnosis=None, with_diagnosis: bool = True,
+                 uncertainty: str = "untrusted") -> list:
     """The pages of a report in order: (name, function returning a figure or a list of figures).
 
-    The one place where pages are listed; every page draws what the study computed (``results``).
-    ``diagnosis`` (:class:`reports.diagnosis.Diagnosis`, the study's ``results.diagnosis``) is shown on
+    The one place where pages are listed; every page draws what the study computed (``results``, the
+    :class:`oed.study_record.StudyRecord` of :func:`mudoe.report_record.study_record`).
+    ``diagnosis`` (:class:`identification.studies.records.Diagnosis`, the study's ``results.diagnosis``) is shown on
     the page "What the model misses" when ``with_diagnosis``.  ``uncertainty`` (one of
     ``reports.uncertainty.UNCERTAINTY_CHOICES``): which of the models whose uncertainty the study
     computed (``results.uncertainty``) get the profile-likelihood / likelihood-ratio pages after the
@@ -513,8 +522,8 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
     """
     from .uncertainty import uncertainty_models
     from .uncertainty_pages import uncertainty_pages
-    cfg = results.study.cfg
-    pages = [("title", partial(_title_page, results, cfg)), ("loops", partial(_loops_page, results)),
+    _require_record(results)
+    pages = [("title", partial(_title_page, results)), ("loops", partial(_loops_page, results)),
              ("normality", partial(_normality_page, results)), ("oed", partial(_oed_page, results)),
              ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results))]
     for k, v in enumerate(uncertainty_models(results, uncertainty), 1):
@@ -538,6 +547,13 @@ def report_pages(results, diagnosis=None, with_diagnosis: bool = True, uncertain
     return pages
 
 
+def _require_record(results) -> None:
+    """TypeError unless ``results`` is a :class:`oed.study_record.StudyRecord` (what the study fills)."""
+    if not isinstance(results, StudyRecord):
+        raise TypeError(f"results: expected an oed.study_record.StudyRecord, got {type(results).__name__}; a "
+                        "study's results give theirs with mudoe.report_record.study_record(results)")
+
+
 def _previous_pages(out: Path) -> set:
     """The page PNGs of the report in ``out`` (the ``files`` of its results.json; empty if none)."""
     import json
@@ -549,13 +565,14 @@ def _previous_pages(out: Path) -> set:
             and Path(f).name == f}
 
 
-def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True, uncertainty: str | None = None,
-                 progress=None) -> list[Path]:
+def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose: bool = True,
+                 uncertainty: str | None = None, progress=None) -> list[Path]:
     """Write report.pdf, one PNG per page and results.json into ``out_dir`` (atomically).
 
     Parameters
     ----------
-    results : mudoe.study.StudyResults
+    results : oed.study_record.StudyRecord
+        What the study computed (:func:`mudoe.report_record.study_record` of its results).
     out_dir : path
         Created if missing.
     dpi : int, optional
@@ -596,10 +613,11 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
     if uncertainty is not None and uncertainty not in UNCERTAINTY_CHOICES:
         raise ValueError(f"uncertainty: expected one of {', '.join(repr(c) for c in UNCERTAINTY_CHOICES)}, "
                          f"got {uncertainty!r}")
-    cfg = results.study.cfg
-    uncertainty = cfg.report.uncertainty if uncertainty is None else uncertainty
+    _require_record(results)
+    config = results.study.config
+    uncertainty = config.uncertainty if uncertainty is None else uncertainty
     t0 = time.perf_counter()
-    dpi = int(dpi or cfg.report.dpi)
+    dpi = int(dpi or config.dpi)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     previous = _previous_pages(out)
@@ -611,7 +629,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
         diagnosis = results.diagnosis
         pages = report_pages(results, diagnosis, diagnose, uncertainty)
         names, texts = [], []
-        with PdfPages(tmp / "report.pdf", metadata={"Title": cfg.report.title, "Creator": "mudoe"}) as pdf, \
+        with PdfPages(tmp / "report.pdf", metadata={"Title": config.title, "Creator": "mudoe"}) as pdf, \
                 (progress or Progress(False)).bar(len(pages), "report pages", unit="page") as bar:
             k = 0
             for name, make in pages:
@@ -628,7 +646,7 @@ def build_report(results, out_dir, dpi: int | None = None, diagnose: bool = True
                 bar.update(1)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
-        meta = dict(config=cfg.as_dict(), config_text=cfg.text, data_sha256=results.study.campaign.sha256,
+        meta = dict(config=config.values, config_text=config.text, data_sha256=results.study.source.sha256,
                     versions=package_versions(), timing_s=timing,
                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                     files=["report.pdf"] + names + ["results.json"],

@@ -15,14 +15,17 @@ these pages show the design of the other modes, held by ``results.plan``:
   checked range with its maximum and the line at its optimum (the certificate), the support points and
   weights, and with a prior the local design's efficiency across the prior against the robust one.
 
-The functions read ``results.plan`` by its attributes only (``mudoe.study.PlannedDesign``,
-``mudoe.plan_records.RobustPlan`` or ``mudoe.study.DiscriminationPlan``); they never import the study layer.
+The functions read ``results.plan`` of the study's :class:`oed.study_record.StudyRecord`, one of the typed
+records of :mod:`oed.plan_records` (``PlannedDesign``, ``RobustPlan`` or ``DiscriminationPlan``); they never
+import the study layer.
 """
 from __future__ import annotations
 
 import textwrap
 
 import numpy as np
+
+from oed.plan_records import RobustPlan
 
 __all__ = ["design_pages"]
 
@@ -60,7 +63,7 @@ def design_pages(results) -> list:
     q_unit = model.input_units[0] if model.input_units and model.input_units[0] else ""
     if plan.mode == "discrimination":
         return _discrimination_pages(plan, q_unit, dict(zip(model.sensors, model.sensor_units)))
-    if getattr(plan, "approximate", False):
+    if isinstance(plan, RobustPlan):
         return _approximate_pages(plan, q_unit)
     return _input_pages(plan, q_unit, list(model.sensors))
 

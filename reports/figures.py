@@ -2,18 +2,29 @@
 
 Units on every axis come from the study (:mod:`reports.view`): the model's input, sensor
 and parameter units (lengths in mm are shown in um); standardized residuals are
-dimensionless.  No function writes files (:mod:`reports.builder` does).
+dimensionless.  No function writes files (:mod:`reports.builder` does).  The figures draw what the
+study put into its :class:`oed.study_record.StudySetup` (``study``) and the records it computed
+(:class:`identification.studies.records.PredictionBands`, whose old name here still works, deprecated).
 """
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import stats
 
+import identification.studies.records as _records
+
+from .moved import moved
 from .view import input_label, output_display, output_label, phase_labels, sensor_unit, unit_suffix
 
 __all__ = ["measurement_loops", "confidence_ellipses", "ellipse_points", "residuals_plot", "table_figure",
-           "VARIANT_STYLE", "PredictionBands", "prediction_band_plot", "residuals_vs_order",
-           "normal_probability_plot"]
+           "VARIANT_STYLE", "prediction_band_plot", "residuals_vs_order", "normal_probability_plot"]
+
+__getattr__ = moved(__name__, _records, ("PredictionBands",))
+
+if TYPE_CHECKING:
+    from identification.studies.records import PredictionBands
 
 #: line style per model variant
 VARIANT_STYLE = {"M1": dict(color="#1f77b4", ls="-"), "M2": dict(color="#d62728", ls="--"),
@@ -41,7 +52,7 @@ def measurement_loops(study, estimates: dict, sensor: str, ax=None, all_series: 
 
     Parameters
     ----------
-    study : mudoe.study.Study
+    study : oed.study_record.StudySetup
     estimates : dict {variant: identification.Estimate}
         Model outputs at the estimates (``fitted``, mm) are drawn as lines over the set points.
     sensor : str
@@ -57,7 +68,7 @@ def measurement_loops(study, estimates: dict, sensor: str, ax=None, all_series: 
     k = study.sensors.index(sensor)
     c = study.campaign
     f = output_display(study).scale
-    used = set(range(c.n_M)) if study.cfg.data.series is None else set(study.cfg.data.series)
+    used = set(range(c.n_M)) if study.config.series is None else set(study.config.series)
     for i in range(c.n_M):
         if i not in used and not all_series:
             continue
@@ -257,25 +268,6 @@ def normal_probability_plot(est, variant: str, ax=None):
     return ax.figure
 
 
-class PredictionBands:
-    """Pointwise bands of one fit's outputs at the measured inputs (model units).
-
-    Attributes
-    ----------
-    h : ndarray (n_q, n_S)          fitted outputs
-    half_mean : ndarray (n_q, n_S)  half width for the mean response, q * sqrt(g^T C g)
-    half_new : ndarray (n_q, n_S)   half width for a new observation, q * sqrt(g^T C g + sigma^2)
-    quantile : float                the t (sigma estimated) or normal quantile q used
-    level : float
-    """
-
-    __slots__ = ("h", "half_mean", "half_new", "quantile", "level")
-
-    def __init__(self, h, half_mean, half_new, quantile, level):
-        self.h, self.half_mean, self.half_new = h, half_mean, half_new
-        self.quantile, self.level = float(quantile), float(level)
-
-
 def prediction_band_plot(study, est, variant: str, sensor: str, bands: PredictionBands, ax=None):
     """One sensor: measured values, the fitted output, its mean band and its new-observation band.
 
@@ -289,7 +281,7 @@ def prediction_band_plot(study, est, variant: str, sensor: str, bands: Predictio
     f = output_display(study).scale
     c = study.campaign
     q = c.q_set
-    used = range(c.n_M) if study.cfg.data.series is None else study.cfg.data.series
+    used = range(c.n_M) if study.config.series is None else study.config.series
     for n, i in enumerate(used):
         ax.plot(q, f * c.z[i, :, k], "o", ms=2.5, color="0.45", label="measured (study series)" if n == 0 else None)
     st = _style(variant)

@@ -1,71 +1,29 @@
 """The pages "Model error of ...": what the study computed of a variant's model error (issue 29, static models).
 
-For one variant (``results.model_error_views[variant]``, a :class:`ModelErrorView` the study computed,
-:mod:`mudoe.model_error_runs`): the verdict of the 'no model error' test and the chosen error model, the
-discrepancy per sensor against the first input with its band, the new-reading bands with and without the
-error model against the held-out readings of one split, and the held-out coverage table.  Draws only.
+For one variant (``results.model_error_views[variant]``, an
+:class:`identification.studies.records.ModelErrorView` the study computed, :mod:`mudoe.model_error_runs`):
+the verdict of the 'no model error' test and the chosen error model, the discrepancy per sensor against the
+first input with its band, the new-reading bands with and without the error model against the held-out
+readings of one split, and the held-out coverage table.  Draws only.  (The records ``ModelErrorView`` and
+``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from typing import TYPE_CHECKING
+
+import identification.studies.records as _records
+
+from .moved import moved
 from .page_layout import draw_text as _text, new_page as _page
 
-__all__ = ["HeldOutBands", "ModelErrorView", "discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread",
-           "model_error_pages"]
+__all__ = ["discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread", "model_error_pages"]
 
+__getattr__ = moved(__name__, _records, ("HeldOutBands", "ModelErrorView"))
 
-@dataclass(frozen=True)
-class HeldOutBands:
-    """The validation readings of one split and the new-reading bands fitted on its calibration part, all in the
-    sensors' file units and relative to the plain prediction (so that bands of a few um show on outputs of mm).
-
-    Attributes
-    ----------
-    split : str
-    q : ndarray (n,)                    first input of the validation rows (file unit)
-    readings : ndarray (n_M, n, n_S)    reading - plain prediction (NaN: not in the validation set)
-    plain : (lower, upper)              the plain band, each (n, n_S), relative to the plain prediction
-    with_error : (lower, upper) or None the band with the error model (None: the error model is "none")
-    coverage_plain, coverage_error : float   the split's held-out coverage of the two bands
-    """
-
-    split: str
-    q: np.ndarray
-    readings: np.ndarray
-    plain: tuple
-    with_error: tuple | None
-    coverage_plain: float
-    coverage_error: float
-
-
-@dataclass(frozen=True)
-class ModelErrorView:
-    """What the page of one variant's model error draws (computed by the study).
-
-    Attributes
-    ----------
-    variant : str
-    result : identification.ModelErrorResult    the model error on all study data (kind "auto")
-    sensors, units : tuple                      the selected sensors and their file units
-    input_label : str                           the first input with its unit, e.g. "q_P [N]"
-    q : ndarray (n_q,)                          first input of the study's input rows (file unit)
-    discrepancy : (mean, lower, upper)          each (n_q, n_S): the discrepancy and its band (file units)
-    heldout : HeldOutBands or None              the split of the lowest plain held-out coverage
-    embedded : tuple of EmbeddedParameter       the embedded error (chosen or fitted beside the chosen one)
-    """
-
-    variant: str
-    result: object
-    sensors: tuple
-    units: tuple
-    input_label: str
-    q: np.ndarray
-    discrepancy: tuple
-    heldout: HeldOutBands | None
-    embedded: tuple = ()
+if TYPE_CHECKING:
+    from identification.studies.records import ModelErrorView
 
 
 def _ax(ax, figsize=(6.0, 4.0)):

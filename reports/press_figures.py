@@ -8,15 +8,19 @@ measurements of the force-displacement curve".
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
 
+import identification.studies.records as _records
 from models.prototype import TEST_SERIES, read_campaign
 
-__all__ = ["plot_campaign", "ModelCurve", "plot_models", "plot_friction"]
+from .moved import moved
+
+__all__ = ["plot_campaign", "plot_models", "plot_friction"]
+
+__getattr__ = moved(__name__, _records, ("ModelCurve",))
 
 _SERIES_MARKERS = ("s", "D", "^", "v", "o", "*")
 _MODEL_STYLE = {"M1": dict(color="tab:red", ls="-"), "M2": dict(color="tab:orange", ls="--"),
@@ -51,22 +55,6 @@ def plot_campaign(ax=None, sensor: str = "D_y", campaign=None):
     return fig
 
 
-@dataclass(frozen=True)
-class ModelCurve:
-    """The outputs of one candidate model at its estimate, as :func:`plot_models` draws them.
-
-    Attributes
-    ----------
-    outputs : ndarray (n_q, n_S)   h(y_j, p_hat, q_j) over the campaign's set points (m)
-    sensors : tuple of str         the model's sensors (columns of ``outputs``)
-    reduced_chi2 : float           the fit's reduced chi^2 (shown in the legend)
-    """
-
-    outputs: np.ndarray
-    sensors: tuple
-    reduced_chi2: float
-
-
 def plot_models(campaign, curves: dict, axes=None,
                 sensors: Sequence[str] = ("D_y", "F_x", "B0_y"), series: Sequence[int] | None = None):
     """Measured series and the outputs of M1, M2, M3 at their estimates, one panel per sensor.
@@ -74,7 +62,7 @@ def plot_models(campaign, curves: dict, axes=None,
     Parameters
     ----------
     campaign : Campaign
-    curves : dict {name: ModelCurve}
+    curves : dict {name: identification.studies.records.ModelCurve}
         The fitted outputs to draw (:func:`mudoe.press.model_curves` of the fits, e.g.
         :func:`mudoe.press.fit_candidates` on the held-out series); this function computes nothing.
     axes : array of Axes (len(sensors),), optional

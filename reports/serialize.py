@@ -143,19 +143,20 @@ def validation_dict(mc) -> dict:
 
 
 def study_dict(study) -> dict:
-    """The study's data, sigma and normality check (all series); sigma in the report's display unit."""
-    c = study.campaign
+    """The study's data, sigma and normality check (all series) of an :class:`oed.study_record.StudySetup`;
+    sigma in the report's display unit."""
+    c = study.source
     disp = sigma_display(study)
     sigma = None if study.sigma is None else [disp[s][0] * v for s, v in zip(study.sensors, study.sigma)]
     return dict(source=c.source, files=list(c.files), sha256=c.sha256, n_M=c.n_M, n_q=c.n_q,
-                sensors=list(study.sensors), series_used=study.cfg.data.series, sigma=sigma,
+                sensors=list(study.sensors), series_used=study.config.series, sigma=sigma,
                 sigma_unit=[disp[s][1] for s in study.sensors], sigma_table=list(study.sigma_table), p0=study.p0,
                 splits=[s.name for s in study.splits], normality=normality_dict(study.normality, disp, ALL_SERIES),
                 notes=list(study.notes))
 
 
 def results_dict(results) -> dict:
-    """Everything a :class:`mudoe.study.StudyResults` holds, JSON-ready (no config, no versions)."""
+    """Everything an :class:`oed.study_record.StudyRecord` holds, JSON-ready (no config, no versions)."""
     out = dict(study=study_dict(results.study),
                estimates={v: estimate_dict(e) for v, e in results.estimates.items()},
                estimate_errors=dict(results.estimate_errors),
@@ -180,7 +181,8 @@ def results_dict(results) -> dict:
 
 
 def diagnosis_dict(diag) -> dict:
-    """The diagnostic split family (:class:`reports.diagnosis.Diagnosis`) and its findings per model."""
+    """The diagnostic split family (:class:`identification.studies.records.Diagnosis`) and its findings per
+    model."""
     models = list(dict.fromkeys(r.model for r in diag.rows))
     return dict(statistic=diag.statistic, tol=diag.tol, rows=jsonable(diag.rows),
                 misses={m: diag.misses(m) for m in models})

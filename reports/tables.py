@@ -1,13 +1,16 @@
 """Tables of a study as formatted text and as matplotlib tables (no LaTeX).
 
-Every function takes a :class:`mudoe.study.StudyResults` (or the library object it names)
-and returns text, or a list of rows for :func:`draw_table`.
+Every function takes the study's :class:`oed.study_record.StudyRecord` (``results``), its
+:class:`oed.study_record.StudySetup` (``study``) or the library object it names, and returns text, or a
+list of rows for :func:`draw_table`.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from oed.best_designs import RankedDesignTable
 
 from .view import (fmt_p, fmt_pct, fmt_value, output_display, param_units, sensor_unit,
                    unit_suffix)
@@ -116,7 +119,7 @@ def oed_rows(results) -> tuple[list, list]:
     chosen = results.oed.sensors if results.oed is not None else ()
     head = ["combination", "sensors", "Psi_A (trace C)", "Psi_D (log det C)", "Psi_E (max eig C)", "flag"]
     rows = []
-    ranked = getattr(t, "ranked", False)            # the ten best designs (oed.best_designs), not every one
+    ranked = isinstance(t, RankedDesignTable)       # the ten best designs (oed.best_designs), not every one
     if ranked:
         head[0] = "rank"
     for k, r in enumerate(t.rows, 1):
@@ -135,7 +138,8 @@ def oed_table_text(results) -> str:
     crit = f"{r.criterion} = {r.value:.6g}" + (" (log det C)" if r.criterion == "D" else "")
     lines = [f"Optimal sensor design ({r.criterion}-criterion, {r.kind} covariance) from the {results.oed_variant} "
              f"estimate of ({names}); {criteria_units(results.study)}",
-             getattr(results.oed_table, "note", "every combination") + ":", _text_table(head, rows), "",
+             (results.oed_table.note if isinstance(results.oed_table, RankedDesignTable) else "every combination")
+             + ":", _text_table(head, rows), "",
              f"chosen: {', '.join(r.sensors)} ({crit}; method {r.method}, "
              f"{'proven optimal' if r.proven_optimal else 'not proven optimal'})"]
     lines += [f"note: {n}" for n in r.notes]

@@ -1,6 +1,6 @@
 """The pages "Uncertainty of ...": what the study computed of a fit whose linearisation may not be trusted.
 
-For one model (``results.uncertainty[variant]``, a :class:`reports.uncertainty.ModelUncertainty`
+For one model (``results.uncertainty[variant]``, an :class:`identification.studies.records.ModelUncertainty`
 the study computed, :mod:`mudoe.uncertainty_runs`): the profile-likelihood intervals next to the
 Wald ones with the sentence that says which to believe, the profile-t curves, and the
 likelihood-ratio region of every parameter pair next to its ellipse.  Draws only.

@@ -70,6 +70,7 @@ def test_terminal_json_and_report_agree_on_units_labels_and_words(tmp_path, caps
     computed on, and the decision word are the same in `mudoe detect`'s terminal text, its JSON and
     the report's pages (the builder's text model: what the PDF shows)."""
     from mudoe.config import load_config
+    from mudoe.report_record import study_record
     from mudoe.study import StudyResults, prepare, run_detect, run_identify, run_oed
     from reports.builder import page_texts, report_pages
 
@@ -80,7 +81,7 @@ def test_terminal_json_and_report_agree_on_units_labels_and_words(tmp_path, caps
 
     study = prepare(load_config(cfg_path))
     results = run_detect(study, run_oed(study, run_identify(study, StudyResults(study))))
-    pages = dict(report_pages(results, None, with_diagnosis=False))
+    pages = dict(report_pages(study_record(results), None, with_diagnosis=False))
     title, normality = pages["title"](), pages["normality"]()
     normality = normality if isinstance(normality, list) else [normality]
     title_texts = page_texts(title)

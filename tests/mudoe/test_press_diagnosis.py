@@ -8,7 +8,8 @@ import pytest
 from mudoe.config import DEFAULT_CONFIG, parse_config
 from mudoe.press import M3_INPUT_RANGE_BENCH, diagnosis_explanations
 from models.prototype import read_campaign
-from reports.diagnosis import Diagnosis, DiagnosisRow, Explanation, findings_text
+from identification.studies.records import Diagnosis, DiagnosisRow, Explanation
+from reports.diagnosis import findings_text
 
 
 def test_explanation_only_for_the_shipped_campaign_and_M3():
@@ -39,6 +40,7 @@ def test_findings_carry_the_matching_explanation_only():
 def test_press_report_page_and_terminal_state_the_finding(tmp_path, capsys):
     """M3 alone on the shipped campaign: the 'What the model misses' page and `mudoe detect` say why
     the input-range split rejects it."""
+    from mudoe.report_record import study_record
     from mudoe.study import StudyResults, prepare, run_detect, run_diagnosis, run_identify
     from reports.builder import page_texts, report_pages
     text = DEFAULT_CONFIG.read_text().replace('variants = ["M1", "M2", "M3"]', 'variants = ["M3"]')
@@ -49,7 +51,7 @@ def test_press_report_page_and_terminal_state_the_finding(tmp_path, capsys):
     results = run_diagnosis(study, run_detect(study, results))
     row = next(r for r in results.diagnosis.rows if r.split == "low vs high input")
     assert row.rejected and row.alpha == pytest.approx(M3_INPUT_RANGE_BENCH["as shipped"], rel=0.05)
-    pages = dict(report_pages(results, results.diagnosis))
+    pages = dict(report_pages(study_record(results), results.diagnosis))
     figs = pages["misses"]()
     shown = " ".join(" ".join(page_texts(f)) for f in (figs if isinstance(figs, list) else [figs]))
     assert "low vs high input" in shown and "without the gauges' linearity error" in " ".join(shown.split())

@@ -89,15 +89,17 @@ def press_views():
 
 
 def test_report_lists_one_model_error_page_per_variant(press_views):
+    from mudoe.report_record import study_record
     from reports.builder import report_pages
-    names = [n for n, _ in report_pages(press_views, with_diagnosis=False, uncertainty="none")]
+    names = [n for n, _ in report_pages(study_record(press_views), with_diagnosis=False, uncertainty="none")]
     assert [n for n in names if n.startswith("model_error")] == ["model_error1", "model_error2", "model_error3"]
     assert names.index("model_error1") > names.index("residuals")
 
 
 def test_results_json_carries_the_model_error(press_views):
+    from mudoe.report_record import study_record
     from reports.serialize import dumps, results_dict
-    d = json.loads(dumps(results_dict(press_views)))
+    d = json.loads(dumps(results_dict(study_record(press_views))))
     assert set(d["model_error"]) == {"M1", "M2", "M3"} and d["model_error_errors"] == {}
     assert d["model_error"]["M1"]["kind"] == "discrepancy" and len(d["model_error"]["M1"]["heldout"]) == 4
 
@@ -106,6 +108,7 @@ def test_model_error_page_draws_what_the_study_computed(press_views):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from mudoe.report_record import study_record
     from reports.builder import page_texts
     from reports.model_error_pages import model_error_pages
     view = press_views.model_error_views["M1"]
@@ -115,7 +118,7 @@ def test_model_error_page_draws_what_the_study_computed(press_views):
     assert h.coverage_plain == pytest.approx(37 / 56)
     lo, hi = h.plain
     assert np.all(lo < 0) and np.all(hi > 0)            # the plain band is centred on the plain prediction
-    fig = model_error_pages(press_views, "M1")
+    fig = model_error_pages(study_record(press_views), "M1")
     texts = " ".join(page_texts(fig))
     plt.close(fig)
     assert "Model error of M1: detected, error model discrepancy" in texts

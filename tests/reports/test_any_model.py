@@ -109,10 +109,11 @@ def toy_results(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def toy_report(toy_results):
+    from mudoe.report_record import study_record
     from reports.builder import build_report
     r, tmp = toy_results
     out = tmp / "report"
-    build_report(r, out)
+    build_report(study_record(r), out)
     meta = json.loads((out / "results.json").read_text())
     return r, meta, {p["file"]: p["texts"] for p in meta["pages"]}
 

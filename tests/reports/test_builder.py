@@ -9,12 +9,13 @@ import pytest
 def results():
     """M1 on the shipped campaign (the paper's two held-out series), OED design, four paper splits."""
     from mudoe.config import DEFAULT_CONFIG, parse_config
+    from mudoe.report_record import study_record
     from mudoe.study import StudyResults, prepare, run_bands, run_detect, run_diagnosis, run_identify, run_oed
     text = DEFAULT_CONFIG.read_text().replace('variants = ["M1", "M2", "M3"]', 'variants = ["M1"]')
     text = text.replace('variant = "M3"', 'variant = "M1"').replace("[report]", "[report]\ndpi = 40")
     study = prepare(parse_config(text, "press_m1.toml", DEFAULT_CONFIG.parent))
     r = run_detect(study, run_oed(study, run_identify(study, StudyResults(study))))
-    return run_bands(study, run_diagnosis(study, r))
+    return study_record(run_bands(study, run_diagnosis(study, r)))
 
 
 def test_build_report_writes_pdf_pngs_and_results_json(results, tmp_path):

@@ -1,6 +1,5 @@
 """The report's design page of [oed] mode inputs / both / discrimination (issue 13 item 6)."""
 import textwrap
-from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -12,6 +11,8 @@ from mudoe.study import PlannedDesign, plan_without_data
 from oed.inputs import select_inputs
 from reports.builder import page_texts, report_pages
 from reports.design_pages import design_pages
+
+from record_stub import stub_record
 
 
 def _texts(figs):
@@ -30,8 +31,7 @@ def _explicit():
 
 
 def _results(plan, model):
-    return SimpleNamespace(plan=plan, study=SimpleNamespace(models={plan.variant: model}, cfg=None, is_dynamic=False),
-                           validation=None, estimates={}, uncertainty={}, model_error_views={})
+    return stub_record({plan.variant: model}, plan=plan)
 
 
 def test_input_design_page_shows_the_exact_rows_next_to_the_refinement():
@@ -125,8 +125,5 @@ def test_report_lists_the_design_page_after_the_sensor_design_only_with_a_plan(d
     with_plan = [n for n, _ in report_pages(_results(discrimination_plan, candidate_models()["M3"]),
                                             with_diagnosis=False)]
     assert with_plan[with_plan.index("oed") + 1] == "design"
-    without = [n for n, _ in report_pages(SimpleNamespace(plan=None, study=SimpleNamespace(cfg=None, is_dynamic=False),
-                                                          estimates={}, uncertainty={}, validation=None,
-                                                          model_error_views={}),
-                                          with_diagnosis=False)]
+    without = [n for n, _ in report_pages(stub_record({}), with_diagnosis=False)]
     assert "design" not in without

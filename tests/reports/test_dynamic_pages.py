@@ -8,6 +8,7 @@ import pytest
 
 matplotlib.use("Agg")
 
+from identification.studies.records import Trajectories
 from oed.best_designs import best_designs
 from oed.criteria import batch_criteria
 from reports.dynamic_pages import residual_time_plot, trajectory_plot
@@ -38,13 +39,9 @@ def test_best_designs_of_many_candidates_rank_the_chosen_neighbourhood():
     assert len(t.rows) == 11 and t.rows[-1].sensors == tuple(f"c{k}" for k in range(8))   # chosen, not among the best
 
 
-class _Traj:
-    t = np.linspace(0, 1, 11)
-    h = np.tile(np.linspace(0, 1, 11)[None, :, None], (2, 1, 2))
-    half_mean = np.full((2, 11, 2), 0.01)
-    half_new = np.full((2, 11, 2), 0.02)
-    level, quantile = 0.95, "normal"
-    residuals = np.zeros((1, 2, 3, 2))
+_Traj = Trajectories(t=np.linspace(0, 1, 11), h=np.tile(np.linspace(0, 1, 11)[None, :, None], (2, 1, 2)),
+                     half_mean=np.full((2, 11, 2), 0.01), half_new=np.full((2, 11, 2), 0.02), level=0.95,
+                     quantile="normal", residuals=np.zeros((1, 2, 3, 2)))
 
 
 class _Data:

@@ -40,8 +40,9 @@ def _overflowing_cells(fig) -> list:
 
 def test_estimates_table_shows_the_full_model_name(reactor):
     import matplotlib.pyplot as plt
+    from mudoe.report_record import study_record
     from reports.builder import _estimate_pages, page_texts
-    fig, = _estimate_pages(reactor)
+    fig, = _estimate_pages(study_record(reactor))
     fig.canvas.draw()
     assert "isothermal" in page_texts(fig)
     assert _overflowing_cells(fig) == []          # "isotherma" was drawn under the next column
@@ -68,10 +69,11 @@ def test_content_widths_fit_long_labels_and_shrink_print_only_when_needed():
 
 def test_dynamic_report_states_the_discretisation(reactor, tmp_path):
     """results.json's page texts hold the mesh line on the estimates page and the note on the title page."""
+    from mudoe.report_record import study_record
     from reports.builder import build_report
     m = reactor.discretisation["isothermal"]
     assert m.bounded and m.degree == 3 and m.n_elements > 0 and 0 <= m.error_pct <= m.tol_pct == 1.0
-    build_report(reactor, tmp_path, dpi=20, diagnose=False, uncertainty="none")
+    build_report(study_record(reactor), tmp_path, dpi=20, diagnose=False, uncertainty="none")
     meta = json.loads((tmp_path / "results.json").read_text())
     pages = {p["file"]: " ".join(p["texts"]).replace("\n", " ") for p in meta["pages"]}
     line = (f"isothermal: Radau IIA collocation, degree 3, {m.n_elements} elements; largest discretisation error "
@@ -86,14 +88,15 @@ def test_dynamic_report_states_the_discretisation(reactor, tmp_path):
 def test_a_fit_whose_error_is_not_bounded_says_so_in_red(reactor):
     import matplotlib.pyplot as plt
     from mudoe.dynamic_runs import mesh_summary
+    from mudoe.report_record import study_record
     from reports.builder import _estimate_pages, _title_page
     est = reactor.estimates["isothermal"]
     rec = dataclasses.replace(est.extra["discretisation"], bounded=False, error_sigma=0.034,
                               reason="no mesh within 4000 elements")
     m = mesh_summary(dataclasses.replace(est, extra={**est.extra, "discretisation": rec}))
     assert not m.bounded and "3.4 % of sigma" in m.text() and "NOT bounded" in m.text()
-    bad = dataclasses.replace(reactor, discretisation={"isothermal": m})
-    for fig in (_estimate_pages(bad)[0], _title_page(bad, bad.study.cfg)):
+    bad = study_record(dataclasses.replace(reactor, discretisation={"isothermal": m}))
+    for fig in (_estimate_pages(bad)[0], _title_page(bad)):
         red = [t for t in fig.texts if "NOT bounded" in t.get_text().replace("\n", " ")]
         assert red and all(matplotlib.colors.to_hex(t.get_color()) == matplotlib.colors.to_hex("tab:red")
                            for t in red)
@@ -105,10 +108,11 @@ def test_trajectory_grid_merges_times_that_differ_by_rounding_and_states_its_err
     collocation error; the caption reads the grid's discretisation error the study computed."""
     import matplotlib.pyplot as plt
     from mudoe.dynamic_runs import trajectories
+    from mudoe.report_record import study_record
     from reports.dynamic_pages import _trajectory_pages
     tr = trajectories(reactor.study, reactor.estimates["isothermal"], "isothermal", n_fine=401)
     assert 1.4 in tr.t and tr.t.size == 401 and 0 <= tr.error_sigma <= tr.tol_sigma
-    r = dataclasses.replace(reactor, trajectories={"isothermal": tr})
+    r = study_record(dataclasses.replace(reactor, trajectories={"isothermal": tr}))
     words = " ".join(t.get_text() for t in _trajectory_pages(r)[0].texts).replace("\n", " ")
     assert f"discretisation error at most {100 * tr.error_sigma:.2g} % of sigma, below 1 %" in words
     plt.close("all")

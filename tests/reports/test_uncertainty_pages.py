@@ -35,9 +35,10 @@ def truss():
 @pytest.fixture(scope="module")
 def truss_pages(truss):
     import matplotlib.pyplot as plt
+    from mudoe.report_record import study_record
     from reports.builder import page_texts, report_pages
     pages = {}
-    for name, make in report_pages(truss, None, False):
+    for name, make in report_pages(study_record(truss), None, False):
         if name.startswith("uncertainty"):
             figs = make()
             for k, fig in enumerate(figs if isinstance(figs, list) else [figs]):
@@ -113,8 +114,9 @@ def test_identify_prints_the_profile_intervals_of_an_untrusted_fit(tmp_path, cap
 
 
 def test_verdict_paragraph_points_to_the_uncertainty_pages(truss):
+    from mudoe.report_record import study_record
     from reports.builder import verdict_paragraphs
-    (v, par), = verdict_paragraphs(truss)
+    (v, par), = verdict_paragraphs(study_record(truss))
     assert "linearisation is NOT trustworthy" in par and "'Uncertainty of linear'" in par
 
 
@@ -128,6 +130,7 @@ def _linear_results():
 
 def test_which_models_get_the_pages():
     from mudoe.uncertainty_runs import model_uncertainty, uncertainty_variants
+    from record_stub import stub_record
     from reports.uncertainty import uncertainty_models
     r = _linear_results()
     assert uncertainty_variants(r.estimates) == []                 # trustworthy: no pages by default
@@ -135,7 +138,7 @@ def test_which_models_get_the_pages():
     with pytest.raises(ValueError, match="uncertainty: expected one of"):
         uncertainty_variants(r.estimates, "some")
     mu = model_uncertainty(r.estimates["lin"], "lin", n_grid=7)
-    shown = SimpleNamespace(uncertainty={"lin": mu})               # the report draws what the study computed
+    shown = stub_record({"lin": r.estimates["lin"].model}, uncertainty={"lin": mu})   # what the study computed
     assert uncertainty_models(shown) == [] and uncertainty_models(shown, "all") == ["lin"]
     with pytest.raises(ValueError, match="uncertainty: expected one of"):
         uncertainty_models(shown, "some")
@@ -178,6 +181,7 @@ def test_valley_grid_reoptimises_the_other_parameters_against_scipy():
 def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
     """[report] uncertainty reaches build_report (default "untrusted"); a bad value names the key."""
     from mudoe.config import ConfigError, load_config
+    from mudoe.report_record import study_record
     from mudoe.study import StudyResults, prepare
     import reports.builder as builder
     text = CONFIG.read_text().replace('"../data/truss_one_sensor"',
@@ -189,7 +193,7 @@ def test_report_uncertainty_key_selects_the_pages(tmp_path, monkeypatch):
         load_config(bad)
     none = tmp_path / "none.toml"
     none.write_text(text.replace("[report]", '[report]\nuncertainty = "none"'))
-    r = StudyResults(prepare(load_config(none)))
+    r = study_record(StudyResults(prepare(load_config(none))))
 
     class Seen(Exception):
         pass
@@ -209,6 +213,7 @@ def test_the_uncertainty_pages_only_draw_what_the_study_computed(truss, monkeypa
     """No profile, region or fit runs while the pages are drawn: they read ``results.uncertainty``."""
     import matplotlib.pyplot as plt
     import identification.inference.profile as profile
+    from mudoe.report_record import study_record
     from reports.builder import page_texts, report_pages
     est = type(truss.estimates["linear"])
 
@@ -219,7 +224,7 @@ def test_the_uncertainty_pages_only_draw_what_the_study_computed(truss, monkeypa
     monkeypatch.setattr(profile, "lr_region", no_computation)
     monkeypatch.setattr(profile, "profile_intervals", no_computation, raising=False)
     texts = []
-    for name, make in report_pages(truss, None, False):
+    for name, make in report_pages(study_record(truss), None, False):
         if name.startswith("uncertainty"):
             for fig in make():
                 texts += page_texts(fig)
