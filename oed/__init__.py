@@ -3,7 +3,7 @@ r"""Optimal design of experiments (paper section 3).
 Solves :math:`\min_{w\in\{0,1\}^{n_c}} \Psi(C(w))` over candidates c on one axis (sensors, sampling
 times, (time, sensor) pairs, input rows or (row, sensor) pairs) subject to design constraints, where
 :math:`C` is the second-order or Gauss-Newton covariance and :math:`\Psi` the A-, D- or
-E-criterion.  One information function, :func:`information` (:mod:`oed.information`), gives every
+E-criterion.  One information function, :func:`information` (:mod:`oed.candidate_information`), gives every
 candidate's information on any axis, for static and dynamic models alike; one engine,
 :func:`select_sensors_from_information` (:mod:`oed.design`), chooses.  Front doors:
 :func:`select_sensors` (sensors; with ``data=None`` planned before measuring), :func:`select_times`
@@ -16,7 +16,7 @@ maximin over a prior, with the equivalence-theorem certificate): :func:`approxim
 :func:`select_inputs` and :func:`select_times`.
 """
 from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
-from .information import AXES, CandidateInformation, information
+from .candidate_information import AXES, CandidateInformation, information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
 from .discrimination import DiscriminationResult, select_discriminating

@@ -4,7 +4,7 @@ An approximate design :math:`\xi = \{(x_i, w_i)\}_{i=1}^k`, :math:`w_i > 0`, :ma
 share :math:`w_i` of the runs at the point :math:`x_i` (an input row of a static model, or a sampling time of
 a dynamic model's experiments) in the box :math:`[\ell, u]`; its information at the parameter vector
 :math:`P_s` is :math:`M_s(\xi) = \sum_i w_i F_s(x_i)`, with :math:`F_s(x)` the exact (CasADi AD) planned
-information of one run at x (:func:`oed.information.information`, axis ``inputs`` or ``times``).  Solved:
+information of one run at x (:func:`oed.candidate_information.information`, axis ``inputs`` or ``times``).  Solved:
 
 .. math::
 
@@ -40,7 +40,7 @@ from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
 from .prior import Prior, make_prior, readonly
-from .information import information, is_dynamic
+from .candidate_information import information, is_dynamic
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
 
@@ -439,7 +439,7 @@ def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None, polish
 def _information_source(model, sigma, inputs, sensors, n_series, axis):
     """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run
     at every point X (axis ``inputs``: input rows; ``times``: sampling times of the experiments ``inputs``, every
-    chosen instrument) at every parameter vector, by :func:`oed.information.information`; arguments checked."""
+    chosen instrument) at every parameter vector, by :func:`oed.candidate_information.information`; arguments checked."""
     if sensors is not None:
         sensors = [sensors] if isinstance(sensors, str) else list(sensors)
         unknown = [s for s in sensors if s not in model.sensors]
@@ -562,7 +562,9 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
     info, names = _information_source(model, sigma, inputs, sensors, n_series, axis)
     pr, mode = _resolve_prior(model, p, prior, robust, settings)
 
-    def polisher(P):
+    def polisher(P):      # the support points of input rows of an explicit model move continuously
+        if axis != "inputs":
+            return None
         return explicit_polisher(model, P, sigma, None if sensors is None else list(np.atleast_1d(sensors)),
                                  n_series)
     if mode == "maximin":

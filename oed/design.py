@@ -35,7 +35,7 @@ from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batc
                        screening_values, validate_information)
 from .design_tables import design_frame, design_html, table_frame
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
-from .information import CandidateInformation, information
+from .candidate_information import CandidateInformation, information
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
            "design_table", "select_sensors"]
@@ -132,7 +132,7 @@ class DesignResult:
         tr(M^-1 F_k) / n_p per candidate, M the chosen design's Gauss-Newton information
         (dimensionless; the chosen sensors' shares add up to 1); empty when no design was found.
     axis : str
-        The candidates' axis (:data:`oed.information.AXES`): ``"sensors"``, ``"times"``, ``"pairs"``,
+        The candidates' axis (:data:`oed.candidate_information.AXES`): ``"sensors"``, ``"times"``, ``"pairs"``,
         ``"inputs"`` or ``"input_pairs"``.
     sensors : tuple of str
         The chosen sensors: ``chosen`` of a sensor design (deprecated alias, with a warning, on another axis).
@@ -216,9 +216,9 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
 
     Parameters
     ----------
-    F : array_like, shape (n_S, n_p, n_p), or oed.information.CandidateInformation
+    F : array_like, shape (n_S, n_p, n_p), or oed.candidate_information.CandidateInformation
         Gauss-Newton information contributions :math:`F_k=J_k^TJ_k` (symmetric PSD); or the candidates'
-        information (:func:`oed.information.information`), whose ``F``, ``S``, ``labels`` and ``axis`` are
+        information (:func:`oed.candidate_information.information`), whose ``F``, ``S``, ``labels`` and ``axis`` are
         used (``S`` and ``sensor_names`` must then be None).
     S : array_like or None, shape (n_S, n_p, n_p)
         Second-order terms (symmetric); required for ``kind="second_order"`` unless zero.
@@ -543,7 +543,7 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
 def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times=None, **kw) -> DesignResult:
     r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model at ``p``.
 
-    Calls :func:`oed.information.information` (axis ``sensors``) for the per-sensor information
+    Calls :func:`oed.candidate_information.information` (axis ``sensors``) for the per-sensor information
     (shapes ``(n_S, n_p, n_p)``) and passes it and the other keyword arguments to
     :func:`select_sensors_from_information`.
 

@@ -7,14 +7,14 @@ or, jointly, an input-sensor pair :math:`(q_j, k)`; its information is
 .. math::  F_c = n_\text{series}\sum_{k\in c} G_{jk}^TG_{jk}/\sigma_k^2,\qquad
            G_{jk} = \partial h_k/\partial p\,(y_j(p), p, q_j)\ \ (\text{1/param unit} \times \text{sensor unit}),
 
-(:func:`oed.information.information`, axis ``inputs`` or ``input_pairs``), and
+(:func:`oed.candidate_information.information`, axis ``inputs`` or ``input_pairs``), and
 :func:`oed.design.select_sensors_from_information` chooses ``n_points`` candidates minimising
 :math:`\Psi((\sum_c w_cF_c)^{-1})` by the same enumeration / branch-and-bound / SCIP routes as the
 sensor selection.  Planned before measuring, the expected residual at the nominal ``p`` is 0, so the
 second-order term vanishes and the design is Gauss-Newton.  A dynamic model's experiment j is its
 input row (the constants, then every control's values at its grid points) read by every instrument k
 at the sampling times t: its rows are evaluated on the Radau IIA collocation of a mesh whose output
-error at p is within the discretisation tolerance at every candidate (:class:`oed.information.InputProblem`),
+error at p is within the discretisation tolerance at every candidate (:class:`oed.candidate_information.InputProblem`),
 a static model whose outputs are the (sensor, time) pairs; that is the only difference.
 
 Refinement: the chosen input levels are then moved continuously within bounds to minimise
@@ -40,7 +40,7 @@ from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .criteria import Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
-from .information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
+from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
                           input_problem, is_dynamic, measured_sensors, row_information)
 from .input_nlp import information_nlp
 from . import refine_child

@@ -20,7 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from .design import DesignResult, select_sensors_from_information
-from .information import information
+from .candidate_information import information
 
 __all__ = ["SequentialStep", "SequentialResult", "sequential_design"]
 

@@ -1,7 +1,7 @@
 r"""Choosing sampling times of a dynamic model (optimal design over time).
 
 With F_{kt} the information of sensor k at time t summed over the experiments (planned at p,
-:func:`oed.information.information` on axis ``times`` or ``pairs``),
+:func:`oed.candidate_information.information` on axis ``times`` or ``pairs``),
 
 .. math::
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .design import DesignResult, select_sensors_from_information
-from .information import information
+from .candidate_information import information
 
 __all__ = ["time_information", "select_times"]
 

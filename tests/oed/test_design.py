@@ -167,14 +167,14 @@ def test_design_table_press_style():
 
 def test_select_sensors_passes_through(monkeypatch):
     import types
-    import oed.information
+    import oed.candidate_information
     F = rank_one(11, 6, 2)
     calls = {}
 
     def info(model, data, p, states=None, **kw):
         calls["args"] = (model, data, p)
         return F, None
-    monkeypatch.setattr(oed.information, "information_contributions", info)
+    monkeypatch.setattr(oed.candidate_information, "information_contributions", info)
     model = types.SimpleNamespace(sensors=tuple("abcdef"))
     r = select_sensors(model, "DATA", [1.0, 2.0], criterion="D", n_sensors=3)
     assert calls["args"] == (model, "DATA", [1.0, 2.0]) and len(r.indices) == 3
