@@ -41,6 +41,9 @@ __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select
            "design_table", "select_sensors"]
 
 _METHODS = ("auto", "scip", "bnb", "enumerate")
+#: how a summary names the candidates of each axis
+_AXIS_WORDS = {"sensors": "sensors", "times": "sampling times", "pairs": "readings", "inputs": "input rows",
+               "input_pairs": "readings"}
 
 
 @dataclass(frozen=True)
@@ -182,7 +185,8 @@ class DesignResult:
         lines = [
             f"OED ({self.kind}, {self.criterion}-criterion) via {self.method}: status {self.status}"
             + (" (proven optimal)" if self.proven_optimal else ""),
-            f"  {self.axis} ({len(self.indices)}): {', '.join(self.chosen) if self.chosen else '-'}",
+            f"  {_AXIS_WORDS.get(self.axis, self.axis)} ({len(self.indices)}): "
+            f"{', '.join(self.chosen) if self.chosen else '-'}",
             f"  value: {self.value:.10g}" + (f"  (det C = {self.det:.6g})" if self.det is not None else ""),
             f"  lower bound: {self.lower_bound:.10g}  gap: {self.gap:.3g}",
             f"  wall time: {self.wall_time:.3f} s",
