@@ -288,14 +288,10 @@ def _times(model, p, times, inputs, sigma, sensors, n_series, axis) -> Candidate
 def _sensors(model, p, data, inputs, times, sigma, n_series, states) -> CandidateInformation:
     r"""Axis ``sensors``: a static model's F_k, S_k (:func:`identification.information_contributions`); a dynamic
     model's per instrument l, :math:`F_l = \sum_t F_{(l, t)}` (and S) over its (sensor, time) readings."""
+    F, S = information_contributions(model, data, p, states, inputs=inputs, sigma=sigma, n_series=n_series,
+                                     times=times)
     if not is_dynamic(model):
-        if times is not None:
-            raise ValueError("times: only for a dynamic model (models.Model.ode)")
-        F, S = information_contributions(model, data, p, states, inputs=inputs, sigma=sigma, n_series=n_series)
         return CandidateInformation("sensors", tuple(model.sensors), F, S)
-    if states is not None:
-        raise ValueError("states: not used for a dynamic model")
-    F, S = information_contributions(model, data, p, inputs=inputs, times=times, sigma=sigma, n_series=n_series)
     readings = data.pairs if data is not None else [(s, v) for v in np.asarray(times, float).ravel()
                                                     for s in model.sensors]
     idx = np.array([model.sensors.index(s) for s, _ in readings])
