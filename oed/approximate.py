@@ -40,7 +40,7 @@ from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
 from .prior import Prior, make_prior, readonly
-from .candidate_information import information, is_dynamic
+from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
 
@@ -473,7 +473,7 @@ def _information_source(model, sigma, inputs, sensors, n_series, axis):
 
 def _axis(model) -> str:
     """The axis of an approximate design: a static model's input rows, a dynamic model's sampling times."""
-    return "times" if is_dynamic(model) else "inputs"
+    return "times" if getattr(model, "is_dynamic", False) else "inputs"
 
 
 def _check_box(model, bounds, dynamic):

@@ -35,7 +35,7 @@ from models.dynamic import time_label
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
-__all__ = ["AXES", "CandidateInformation", "information", "is_dynamic", "InputProblem", "input_problem",
+__all__ = ["AXES", "CandidateInformation", "information", "InputProblem", "input_problem",
            "row_information", "candidate_rows", "check_candidates", "check_p", "check_sigma", "measured_sensors"]
 
 #: the candidate axes of a design: sensors, sampling times, (time, sensor) pairs, input rows, (row, sensor) pairs
@@ -69,11 +69,6 @@ class CandidateInformation:
             raise ValueError(f"axis: expected one of {AXES}, got {self.axis!r}")
         if len(self.labels) != np.shape(self.F)[0]:
             raise ValueError(f"labels: expected {np.shape(self.F)[0]} (one per candidate), got {len(self.labels)}")
-
-
-def is_dynamic(model) -> bool:
-    """True for a dynamic model (:meth:`models.Model.ode`): its readings are taken along trajectories."""
-    return bool(getattr(model, "is_dynamic", False))
 
 
 # ---------------------------------------------------------------------------- argument checks
@@ -215,7 +210,7 @@ def input_problem(model, p, candidates, sigma, sensors=None, *, times=None,
     """The :class:`InputProblem` of candidate rows: a static model as it is (``times`` and ``discretisation``
     must be None); a dynamic model sampled at ``times`` (one ``sigma`` per instrument, ``sensors`` instrument
     names) collocated on a mesh controlled at p over every candidate row."""
-    if not is_dynamic(model):
+    if not getattr(model, "is_dynamic", False):
         if times is not None or discretisation is not None:
             raise ValueError("times/discretisation: only for a dynamic model (models.Model.ode)")
         return InputProblem(model=model, sigma=sigma, sensors=sensors, source=model)
@@ -273,7 +268,7 @@ def _instrument_names(model, sensors) -> list:
 def _times(model, p, times, inputs, sigma, sensors, n_series, axis) -> CandidateInformation:
     """Axis ``times`` (every chosen instrument at each time) or ``pairs`` ((time, sensor), time-major), summed
     over the experiments ``inputs``."""
-    if not is_dynamic(model):
+    if not getattr(model, "is_dynamic", False):
         raise TypeError(f"model: expected a dynamic model (models.Model.ode), got {type(model).__name__}")
     names = _instrument_names(model, sensors)
     t = np.asarray(times, float).ravel()
@@ -290,7 +285,7 @@ def _sensors(model, p, data, inputs, times, sigma, n_series, states) -> Candidat
     model's per instrument l, :math:`F_l = \sum_t F_{(l, t)}` (and S) over its (sensor, time) readings."""
     F, S = information_contributions(model, data, p, states, inputs=inputs, sigma=sigma, n_series=n_series,
                                      times=times)
-    if not is_dynamic(model):
+    if not getattr(model, "is_dynamic", False):
         return CandidateInformation("sensors", tuple(model.sensors), F, S)
     readings = data.pairs if data is not None else [(s, v) for v in np.asarray(times, float).ravel()
                                                     for s in model.sensors]

@@ -41,7 +41,7 @@ from .approximate import ApproximateSettings, approximate_design, check_approxim
 from .criteria import Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
 from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
-                          input_problem, is_dynamic, measured_sensors, row_information)
+                          input_problem, measured_sensors, row_information)
 from .input_nlp import information_nlp
 from . import refine_child
 
@@ -323,7 +323,7 @@ def _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, 
     """The ``approximate=True`` route of :func:`select_inputs` (arguments checked, then
     :func:`oed.approximate.approximate_design` on the input range)."""
     check_approximate_route(approximate, exact_args)
-    if is_dynamic(model):
+    if getattr(model, "is_dynamic", False):
         raise ValueError("approximate: for a dynamic model the approximate design is over sampling times "
                          "(oed.select_times(..., approximate=True)); approximate input profiles are not implemented")
     if isinstance(sensors, str) and sensors == "joint":
