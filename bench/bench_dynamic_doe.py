@@ -11,7 +11,7 @@ measured at the grid points with sigma 0.01, parameters scaled by their nominal 
   ``select_inputs(model, p, times=t, candidates=[nominal], n_points=1, refine=True, bounds=...)``
   (exact design, then the full-space refinement, 4 starts) against ``run_doe``;
 * the 9 x 9 factorial of (CA0, T0) (T = 300 after t = 0.125): mudoe's
-  ``oed.dynamic_inputs.dynamic_input_information`` over the 81 rows against
+  ``oed.information(..., axis="inputs")`` over the 81 rows against
   ``compute_FIM_full_factorial``;
 
 every log det also evaluated in the ODE itself (bench.dynamic_reference, exact sensitivities).
@@ -77,7 +77,7 @@ def mudoe_part(rep=10, doe_rep=3, factorial_rep=2):
     """mudoe's three measurements (module docstring) with their ODE log dets."""
     from identification import information_contributions
     from oed import select_inputs
-    from oed.dynamic_inputs import dynamic_input_information
+    from oed import information
 
     model = reactor()
     first, warm, (F, _) = _timed(lambda: information_contributions(model, None, P, inputs=[NOMINAL], times=GRID,
@@ -95,7 +95,8 @@ def mudoe_part(rep=10, doe_rep=3, factorial_rep=2):
                      "start_values": list(res.refined.start_values), "notes": list(res.notes)}
     C, T0 = (g.ravel() for g in np.meshgrid(np.linspace(1, 5, 9), np.linspace(300, 700, 9), indexing="ij"))
     Q = np.column_stack([C, T0, np.tile(NOMINAL[2:], (C.size, 1))])
-    first, warm, Fq = _timed(lambda: dynamic_input_information(model, P, Q, GRID, 0.01), factorial_rep)
+    first, warm, Fq = _timed(lambda: information(model, P, axis="inputs", candidates=Q, times=GRID,
+                                                      sigma=0.01).F, factorial_rep)
     ld = np.array([scaled_log10_det(f) for f in Fq])
     _, _, ode = dr.pyomo_doe_reactor_factorial()
     ok = np.isfinite(ode)

@@ -49,8 +49,8 @@ def _timed(fn, rep):
 
 
 def _fine_information(model, P, T):
-    from oed.static_inputs import input_information
-    return np.stack([input_information(model, p, T[:, None], 1.0)[:, 0] for p in P], axis=1)
+    from oed import information
+    return np.stack([information(model, p, axis="inputs", candidates=T[:, None], sigma=1.0).F for p in P], axis=1)
 
 
 def brute_multiplicative(F, prior_w, n_p, tol=5e-5, max_iter=20000):
@@ -152,7 +152,7 @@ def _exact(rep):
     from identification import information_contributions
     from mudoe.example_reactor import P_TRUE, TIMES, build
     from models.press import K_NOMINAL, press_model
-    from oed import make_prior, time_information
+    from oed import information, make_prior
     from oed.robust_exact import select_robust_exact
     for extra, sizes in ((False, (2,)), (True, (2, 3, 4))):
         m = press_model(extra_sensors=extra)
@@ -169,7 +169,8 @@ def _exact(rep):
     Q = np.array([[1.0, 330.0], [2.0, 350.0], [2.0, 370.0]])
     pr = make_prior({"E1": ("uniform", 55.0, 65.0), "E2": ("uniform", 75.0, 85.0)}, m, P_TRUE, order=3)
     t0 = time.perf_counter()
-    F = np.stack([time_information(m, ps, TIMES, Q, np.array([0.01, 0.008]))[0] for ps in pr.points], axis=1)
+    F = np.stack([information(m, ps, axis="times", times=TIMES, inputs=Q, sigma=np.array([0.01, 0.008])).F
+                  for ps in pr.points], axis=1)
     t_info = time.perf_counter() - t0
     from oed.approximate import ApproximateSettings, approximate_design
     ap = approximate_design(m, P_TRUE, sigma=np.array([0.01, 0.008]), bounds=(TIMES.min(), TIMES.max()), inputs=Q,

@@ -42,8 +42,7 @@ __all__ = ["DynamicDesign", "time_design", "run_oed_dynamic", "Trajectories", "t
 def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> DynamicDesign:
     """The [oed] criterion's design of [dynamic] n_times candidate times (or pairs) at p."""
     from oed.best_designs import best_designs
-    from oed.design import select_sensors_from_information
-    from oed.times import time_information
+    from oed import information, select_sensors_from_information
     dyn, o = cfg.dynamic, cfg.oed
     if o.mode != "sensors":
         raise ConfigError(f"{cfg.path}: [oed] mode = {o.mode!r}: a dynamic study designs sampling times "
@@ -51,11 +50,10 @@ def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> Dy
     if sigma is None:
         raise ConfigError(f"{cfg.path}: [[sensors]] a sampling-time design needs every instrument's sigma")
     cand = np.asarray(dyn.candidates(), float)
-    F, names = time_information(model, p, cand, inputs, sigma, pairs=dyn.pairs)
-    n = dyn.n_times or min(model.n_p, len(names))
-    res = select_sensors_from_information(F, None, criterion=o.criterion, kind="gauss_newton", n_sensors=n,
-                                          sensor_names=names)
-    table = best_designs(F, None, names, n, o.criterion, kind="gauss_newton", chosen=res.indices)
+    info = information(model, p, axis="pairs" if dyn.pairs else "times", times=cand, inputs=inputs, sigma=sigma)
+    n = dyn.n_times or min(model.n_p, len(info.labels))
+    res = select_sensors_from_information(info, criterion=o.criterion, kind="gauss_newton", n_sensors=n)
+    table = best_designs(info.F, None, list(info.labels), n, o.criterion, kind="gauss_newton", chosen=res.indices)
     return DynamicDesign(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in cand), dyn.pairs,
                          res, table)
 

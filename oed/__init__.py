@@ -1,27 +1,33 @@
-r"""Optimal sensor selection (optimal design of experiments, paper section 3).
+r"""Optimal design of experiments (paper section 3).
 
-Solves :math:`\min_{w\in\{0,1\}^{n_S}} \Psi(C(w))` subject to design constraints, where
+Solves :math:`\min_{w\in\{0,1\}^{n_c}} \Psi(C(w))` over candidates c on one axis (sensors, sampling
+times, (time, sensor) pairs, input rows or (row, sensor) pairs) subject to design constraints, where
 :math:`C` is the second-order or Gauss-Newton covariance and :math:`\Psi` the A-, D- or
-E-criterion.  Front doors: :func:`select_sensors_from_information` / :func:`select_sensors`
-(sensors; with ``data=None`` planned before measuring) and :func:`select_inputs` (input points, or
-input x sensor pairs, through the same engine, with a continuous Ipopt refinement; dynamic models:
-experiment inputs with control profiles, :mod:`oed.dynamic_inputs`); see :mod:`oed.design` and
-:mod:`oed.inputs`.  Approximate designs (support points and weights on a continuous range, local,
-pseudo-Bayesian or maximin over a prior, with the equivalence-theorem certificate):
-:func:`approximate_design` (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as
-``approximate=True`` of :func:`select_inputs` and :func:`select_times`.
+E-criterion.  One information function, :func:`information` (:mod:`oed.candidate_information`), gives every
+candidate's information on any axis, for static and dynamic models alike; one engine,
+:func:`select_sensors_from_information` (:mod:`oed.design`), chooses.  Front doors:
+:func:`select_sensors` (sensors; with ``data=None`` planned before measuring), :func:`select_times`
+(a dynamic model's sampling times, :mod:`oed.times`) and :func:`select_inputs` (input rows, or input x
+sensor pairs, with a continuous Ipopt refinement; dynamic models: experiment inputs with control
+profiles, :mod:`oed.inputs`).  Every design result names its ``axis`` and its ``chosen`` candidates.
+Approximate designs (support points and weights on a continuous range, local, pseudo-Bayesian or
+maximin over a prior, with the equivalence-theorem certificate): :func:`approximate_design`
+(:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
+:func:`select_inputs` and :func:`select_times`.
 """
 from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
+from .candidate_information import AXES, CandidateInformation, information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
 from .discrimination import DiscriminationResult, select_discriminating
-from .inputs import InputDesignResult, RefinedInputs, RefineSettings, input_information, refine_inputs, select_inputs
+from .inputs import (InputDesignResult, RefinedInputs, RefineSettings, dynamic_input_information, input_information,
+                     refine_inputs, select_dynamic_inputs, select_inputs)
 from .times import select_times, time_information
-from .dynamic_inputs import dynamic_input_information, select_dynamic_inputs
 from .prior import Prior, make_prior
 from .approximate import ApproximateDesign, ApproximateSettings, approximate_design, design_efficiencies
 
 __all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
+           "AXES", "CandidateInformation", "information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",
            "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating",

@@ -51,8 +51,9 @@ class SensitivityPolisher:
 
 
 def explicit_polisher(model, P, sigma, sensors, n_series) -> SensitivityPolisher | None:
-    """The polisher of an explicit static model (None for implicit or dynamic models)."""
-    if getattr(model, "is_dynamic", False) or getattr(model, "n_y", 1) != 0:
+    """The polisher of an explicit static model (None for an implicit one; a dynamic model's design points are
+    times, which :func:`oed.approximate.approximate_design` does not polish)."""
+    if getattr(model, "n_y", 1) != 0:
         return None
     sig = np.broadcast_to(np.asarray(sigma, float).ravel(), (model.n_S,))
     chosen = range(model.n_S) if sensors is None else [model.sensors.index(s) for s in sensors]

@@ -4,7 +4,7 @@ An approximate design :math:`\xi = \{(x_i, w_i)\}_{i=1}^k`, :math:`w_i > 0`, :ma
 share :math:`w_i` of the runs at the point :math:`x_i` (an input row of a static model, or a sampling time of
 a dynamic model's experiments) in the box :math:`[\ell, u]`; its information at the parameter vector
 :math:`P_s` is :math:`M_s(\xi) = \sum_i w_i F_s(x_i)`, with :math:`F_s(x)` the exact (CasADi AD) planned
-information of one run at x (:func:`oed.input_information`, :func:`identification.information_contributions`).  Solved:
+information of one run at x (:func:`oed.candidate_information.information`, axis ``inputs`` or ``times``).  Solved:
 
 .. math::
 
@@ -31,19 +31,18 @@ spacing), not a proven maximum over the continuum.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from identification import information_contributions
 from models.dynamic import merge_times, time_tolerance
 from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import Criterion
 from .prior import Prior, make_prior, readonly
+from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
-from .static_inputs import input_information
 
 __all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
 
@@ -148,6 +147,10 @@ class ApproximateDesign:
         certificate uses the eigenspace average, a valid but possibly loose bound); 1 otherwise.
     wall_time : float
     notes : tuple of str
+    axis : str
+        The design points' axis: ``"inputs"`` (input rows) or ``"times"`` (sampling times).
+    chosen : tuple of tuple of float
+        The support points (rows of ``points``), with the weights ``weights``.
     """
 
     points: np.ndarray
@@ -171,6 +174,12 @@ class ApproximateDesign:
     multiplicity: int = 1
     wall_time: float = 0.0
     notes: tuple = field(default_factory=tuple)
+    axis: str = "inputs"
+
+    @property
+    def chosen(self) -> tuple:
+        """The support points (rows of ``points``)."""
+        return tuple(tuple(float(v) for v in x) for x in self.points)
 
     @property
     def gap(self) -> float:
@@ -427,20 +436,28 @@ def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None, polish
 
 
 # ---------------------------------------------------------------------------- the front door
-def _static_info(model, sigma, sensors, n_series):
-    k_idx = list(range(model.n_S)) if sensors is None else [model.sensors.index(s) for s in sensors]
+def _information_source(model, sigma, inputs, sensors, n_series, axis):
+    """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run
+    at every point X (axis ``inputs``: input rows; ``times``: sampling times of the experiments ``inputs``, every
+    chosen instrument) at every parameter vector, by :func:`oed.candidate_information.information`; arguments checked."""
+    if sensors is not None:
+        sensors = [sensors] if isinstance(sensors, str) else list(sensors)
+        unknown = [s for s in sensors if s not in model.sensors]
+        if unknown or not sensors:
+            raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {list(model.sensors)}")
+    if axis == "inputs":
+        if inputs is not None:
+            raise ValueError("inputs: only for a dynamic model (the static model's inputs are the design points)")
 
-    def info(X, P):
-        return np.stack([input_information(model, ps, X, sigma, n_series)[:, k_idx].sum(axis=1) for ps in P], axis=1)
-    return info
+        def rows(X, P):
+            return np.stack([information(model, ps, axis="inputs", candidates=X, sigma=sigma, sensors=sensors,
+                                         n_series=n_series).F for ps in P], axis=1)
+        return rows, tuple(model.inputs)
+    if inputs is None:
+        raise ValueError("inputs: a dynamic model needs the experiments (rows of inputs) sampled at the times")
+    inputs = np.atleast_2d(np.asarray(inputs, float))
 
-
-def _time_info(model, inputs, sigma, sensors, n_series):
-    """Information per sampling time summed over the chosen instruments and the experiments (as
-    :func:`oed.time_information`), at every parameter vector."""
-    k_idx = list(range(model.n_S)) if sensors is None else [model.sensors.index(s) for s in sensors]
-
-    def info(X, P):
+    def times(X, P):
         t = X[:, 0]
         # times closer than the round-off tolerance are one instant (models.dynamic.merge_times): refined grids
         # around a support point can hold such twins, which the model's data checks refuse
@@ -448,27 +465,15 @@ def _time_info(model, inputs, sigma, sensors, n_series):
         at = np.abs(t[:, None] - u[None, :]).argmin(axis=1)
         out = np.empty((t.size, len(P), model.n_p, model.n_p))
         for s, ps in enumerate(P):
-            F, _ = information_contributions(model, None, ps, inputs=inputs, times=u, sigma=sigma,
-                                             n_series=n_series)
-            out[:, s] = F.reshape(u.size, model.n_S, model.n_p, model.n_p)[:, k_idx].sum(axis=1)[at]
+            out[:, s] = information(model, ps, axis="times", times=u, inputs=inputs, sigma=sigma, sensors=sensors,
+                                    n_series=n_series).F[at]
         return out
-    return info
+    return times, ("t",)
 
 
-def _information_source(model, sigma, inputs, sensors, n_series):
-    """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns), arguments checked."""
-    if sensors is not None:
-        sensors = [sensors] if isinstance(sensors, str) else list(sensors)
-        unknown = [s for s in sensors if s not in model.sensors]
-        if unknown or not sensors:
-            raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {list(model.sensors)}")
-    if getattr(model, "is_dynamic", False):
-        if inputs is None:
-            raise ValueError("inputs: a dynamic model needs the experiments (rows of inputs) sampled at the times")
-        return _time_info(model, np.atleast_2d(np.asarray(inputs, float)), sigma, sensors, n_series), ("t",)
-    if inputs is not None:
-        raise ValueError("inputs: only for a dynamic model (the static model's inputs are the design points)")
-    return _static_info(model, sigma, sensors, n_series), tuple(model.inputs)
+def _axis(model) -> str:
+    """The axis of an approximate design: a static model's input rows, a dynamic model's sampling times."""
+    return "times" if getattr(model, "is_dynamic", False) else "inputs"
 
 
 def _check_box(model, bounds, dynamic):
@@ -551,17 +556,19 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
         Bad input; the message names the argument or key.
     """
     t0 = time.perf_counter()
-    dynamic = bool(getattr(model, "is_dynamic", False))
+    axis = _axis(model)
     crit = Criterion.parse(criterion)
-    lo, hi = _check_box(model, bounds, dynamic)
-    info, names = _information_source(model, sigma, inputs, sensors, n_series)
+    lo, hi = _check_box(model, bounds, axis == "times")
+    info, names = _information_source(model, sigma, inputs, sensors, n_series, axis)
     pr, mode = _resolve_prior(model, p, prior, robust, settings)
 
-    def polisher(P):
+    def polisher(P):      # the support points of input rows of an explicit model move continuously
+        if axis != "inputs":
+            return None
         return explicit_polisher(model, P, sigma, None if sensors is None else list(np.atleast_1d(sensors)),
                                  n_series)
     if mode == "maximin":
-        return _maximin(model, info, pr, (lo, hi), crit, names, settings, t0, polisher)
+        return replace(_maximin(model, info, pr, (lo, hi), crit, names, settings, t0, polisher), axis=axis)
     store = _Store(info, pr.points, (lo, hi))
     sol = _solve(store, (lo, hi), crit, "bayes", pr.weights, None, settings, polisher=polisher(pr.points))
     idx, ws, g, ref, mu, U, h = sol.idx, sol.weights, sol.sens.g, sol.sens.reference, sol.sens.measure, sol.sens.U, \
@@ -578,7 +585,7 @@ def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, ro
         local_gaps=readonly([]), efficiencies=readonly([]), measure=readonly(mu), quadrature_error=qerr,
         checked=readonly(store.X[order]), sensitivity=readonly(g[order]),
         spacing=float(np.max(h[hi > lo] / (hi - lo)[hi > lo])), prior=pr, multiplicity=int(np.max(U.multiplicity)),
-        wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store))
+        wall_time=time.perf_counter() - t0, notes=_notes(crit, U, store), axis=axis)
 
 
 def _notes(crit, U, store) -> tuple:
@@ -637,7 +644,7 @@ def design_efficiencies(model, design: ApproximateDesign, reference: Approximate
     """
     if design.names != reference.names:
         raise ValueError(f"design: its columns {design.names} are not the reference's {reference.names}")
-    info, _ = _information_source(model, sigma, inputs, sensors, n_series)
+    info, _ = _information_source(model, sigma, inputs, sensors, n_series, _axis(model))
     crit = Criterion.parse(reference.criterion)
     P = reference.prior.points
     u = utilities(crit, information_of(design.weights, info(np.asarray(design.points), P))).u

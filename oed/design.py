@@ -24,6 +24,7 @@ fallback is recorded in :attr:`DesignResult.notes`.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -34,11 +35,15 @@ from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batc
                        screening_values, validate_information)
 from .design_tables import design_frame, design_html, table_frame
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
+from .candidate_information import CandidateInformation, information
 
 __all__ = ["DesignSettings", "DesignResult", "DesignRow", "DesignTable", "select_sensors_from_information",
            "design_table", "select_sensors"]
 
 _METHODS = ("auto", "scip", "bnb", "enumerate")
+#: how a summary names the candidates of each axis
+_AXIS_WORDS = {"sensors": "sensors", "times": "sampling times", "pairs": "readings", "inputs": "input rows",
+               "input_pairs": "readings"}
 
 
 @dataclass(frozen=True)
@@ -92,15 +97,15 @@ class DesignSettings:
 
 @dataclass(frozen=True)
 class DesignResult:
-    """Immutable outcome of a sensor selection.
+    """Immutable outcome of a selection of candidates (sensors, sampling times, pairs or input rows).
 
     Attributes
     ----------
-    sensors : tuple of str
-        Names of the chosen sensors.
+    chosen : tuple of str
+        Labels of the chosen candidates (sensor names, times, ``cA@0.5`` pairs, ``q<j>`` rows).
     indices : tuple of int
     weights : tuple of bool
-        Boolean weight per candidate sensor.
+        Boolean weight per candidate.
     criterion, kind : str
     value : float
         Criterion value (D: log det C).  ``inf`` if no regular design was found.
@@ -129,9 +134,14 @@ class DesignResult:
     information_share : tuple of float
         tr(M^-1 F_k) / n_p per candidate, M the chosen design's Gauss-Newton information
         (dimensionless; the chosen sensors' shares add up to 1); empty when no design was found.
+    axis : str
+        The candidates' axis (:data:`oed.candidate_information.AXES`): ``"sensors"``, ``"times"``, ``"pairs"``,
+        ``"inputs"`` or ``"input_pairs"``.
+    sensors : tuple of str
+        The chosen sensors: ``chosen`` of a sensor design (deprecated alias, with a warning, on another axis).
     """
 
-    sensors: tuple
+    chosen: tuple
     indices: tuple
     weights: tuple
     criterion: str
@@ -152,6 +162,15 @@ class DesignResult:
     include: tuple = ()
     exclude: tuple = ()
     information_share: tuple = ()
+    axis: str = "sensors"
+
+    @property
+    def sensors(self) -> tuple:
+        """The chosen sensors (``chosen``); on another axis a deprecated alias of ``chosen``."""
+        if self.axis != "sensors":
+            warnings.warn(f"DesignResult.sensors of a design over {self.axis} is deprecated; use DesignResult.chosen",
+                          DeprecationWarning, stacklevel=2)
+        return self.chosen
 
     def to_frame(self):
         """A pandas DataFrame with one row per candidate sensor: selected, cost (with a budget), fixed
@@ -166,7 +185,8 @@ class DesignResult:
         lines = [
             f"OED ({self.kind}, {self.criterion}-criterion) via {self.method}: status {self.status}"
             + (" (proven optimal)" if self.proven_optimal else ""),
-            f"  sensors ({len(self.indices)}): {', '.join(self.sensors) if self.sensors else '-'}",
+            f"  {_AXIS_WORDS.get(self.axis, self.axis)} ({len(self.indices)}): "
+            f"{', '.join(self.chosen) if self.chosen else '-'}",
             f"  value: {self.value:.10g}" + (f"  (det C = {self.det:.6g})" if self.det is not None else ""),
             f"  lower bound: {self.lower_bound:.10g}  gap: {self.gap:.3g}",
             f"  wall time: {self.wall_time:.3f} s",
@@ -195,12 +215,15 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
                                     max_sensors=None, costs=None, budget=None, include=(), exclude=(),
                                     method="auto", time_limit=60.0, sensor_names=None, *,
                                     settings: DesignSettings = DesignSettings()) -> DesignResult:
-    r"""Optimal sensor subset :math:`\arg\min_{w} \Psi(C(w))` from per-sensor information.
+    r"""Optimal sensor subset :math:`\arg\min_{w} \Psi(C(w))` from per-sensor information (or per-candidate
+    information on any axis).
 
     Parameters
     ----------
-    F : array_like, shape (n_S, n_p, n_p)
-        Gauss-Newton information contributions :math:`F_k=J_k^TJ_k` (symmetric PSD).
+    F : array_like, shape (n_S, n_p, n_p), or oed.candidate_information.CandidateInformation
+        Gauss-Newton information contributions :math:`F_k=J_k^TJ_k` (symmetric PSD); or the candidates'
+        information (:func:`oed.candidate_information.information`), whose ``F``, ``S``, ``labels`` and ``axis`` are
+        used (``S`` and ``sensor_names`` must then be None).
     S : array_like or None, shape (n_S, n_p, n_p)
         Second-order terms (symmetric); required for ``kind="second_order"`` unless zero.
     criterion : {"A", "D", "E"}
@@ -230,13 +253,18 @@ def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton
         When no method could produce a design (e.g. SCIP failed and enumeration is too big).
     """
     t0 = time.perf_counter()
+    axis = "sensors"
+    if isinstance(F, CandidateInformation):
+        if S is not None or sensor_names is not None:
+            raise ValueError("S/sensor_names: given by the CandidateInformation (leave them None)")
+        F, S, sensor_names, axis = F.F, F.S, F.labels, F.axis
     req = _design_request(F, S, criterion, kind, n_sensors, max_sensors, costs, budget, include, exclude, method,
                           time_limit, sensor_names, settings)
     chosen, note = _route(req, settings)
     outcome = _run_method(req, chosen, settings)
     if note:
         outcome = replace(outcome, notes=(note,) + outcome.notes)
-    return _assemble_result(req, outcome, settings, t0)
+    return replace(_assemble_result(req, outcome, settings, t0), axis=axis)
 
 
 @dataclass(frozen=True)
@@ -433,7 +461,7 @@ def _assemble_result(req: _DesignRequest, out: _MethodOutcome, settings: DesignS
     wt = np.zeros(req.F.shape[0], dtype=bool) if w is None else np.asarray(w, dtype=bool)
     idx = tuple(int(k) for k in np.flatnonzero(wt))
     share = () if w is None else _information_share(req.F, wt)
-    return DesignResult(sensors=tuple(req.names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
+    return DesignResult(chosen=tuple(req.names[k] for k in idx), indices=idx, weights=tuple(bool(x) for x in wt),
                         criterion=crit.value, kind=req.kind.value, value=float(value), det=det,
                         lower_bound=float(lb), gap=gap, proven_optimal=bool(proven), method=out.method,
                         status=status, message=message, wall_time=time.perf_counter() - t0, near_singular=near,
@@ -516,16 +544,18 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
     return DesignTable(kind=kind_e.value, rows=tuple(rows))
 
 
-def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, **kw) -> DesignResult:
+def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times=None, **kw) -> DesignResult:
     r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model at ``p``.
 
-    Calls ``identification.information_contributions`` for the per-sensor information
-    (shapes ``(n_S, n_p, n_p)``) and passes ``F``, ``S`` and the other keyword arguments to
+    Calls :func:`oed.candidate_information.information` (axis ``sensors``) for the per-sensor information
+    (shapes ``(n_S, n_p, n_p)``) and passes it and the other keyword arguments to
     :func:`select_sensors_from_information`.
 
     Parameters
     ----------
     model : models.Model
+        Static, or dynamic (:meth:`models.Model.ode`; then one candidate per instrument, its readings at every
+        time summed).
     data : identification.Measurements or None
         Measurements; ``None`` plans the design before measuring, from ``inputs`` and ``sigma``.
     p : array_like, shape (n_p,)
@@ -536,6 +566,8 @@ def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, **kw)
         Standard deviation of each sensor, in the sensor's unit (only with ``data=None``).
     n_series : int
         Repetitions of every input (only with ``data=None``; default 1).
+    times : array_like, optional
+        A dynamic model's sampling times (only with ``data=None``).
 
     Notes
     -----
@@ -543,15 +575,16 @@ def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, **kw)
     vanishes: ``kind="second_order"`` then gives the Gauss-Newton covariance at the nominal
     ``p`` (recorded in :attr:`DesignResult.notes`).
     """
-    from identification import information_contributions
     if data is None:
-        F, S = information_contributions(model, None, p, inputs=inputs, sigma=sigma, n_series=n_series)
+        info = information(model, p, inputs=inputs, sigma=sigma, n_series=n_series, times=times)
     else:
-        if inputs is not None or sigma is not None:
+        if inputs is not None or sigma is not None or times is not None:
             raise ValueError("inputs/sigma: give them only with data=None (measurements carry their own)")
-        F, S = information_contributions(model, data, p)
-    kw.setdefault("sensor_names", model.sensors)
-    res = select_sensors_from_information(F, S, **kw)
+        info = information(model, p, data=data)
+    names = kw.pop("sensor_names", None)
+    if names is not None:
+        info = replace(info, labels=tuple(names))
+    res = select_sensors_from_information(info, **kw)
     if data is None:
         note = (f"designed without data at the nominal parameters ({n_series} series of {np.atleast_1d(inputs).shape[0]} "
                 "inputs): expected residual 0, so S = 0 and the second-order covariance is the Gauss-Newton one")

@@ -122,6 +122,10 @@ class DiscriminationResult:
     candidate_sensors : tuple of str
     n_designs : int
         Designs (or one side's subsets) evaluated.
+    axis : str
+        The candidates' axis: ``"input_pairs"`` (every reading is a (row, sensor) pair).
+    chosen : tuple of str
+        The chosen readings' labels ``q<i>:<sensor>`` (as :attr:`oed.InputDesignResult.chosen`).
     """
 
     indices: tuple
@@ -136,6 +140,13 @@ class DiscriminationResult:
     difference: np.ndarray
     candidate_sensors: tuple
     n_designs: int
+
+    axis = "input_pairs"
+
+    @property
+    def chosen(self) -> tuple:
+        """The chosen readings' labels ``q<i>:<sensor>``."""
+        return tuple(f"q{i}:{s}" for i, s in self.readings)
 
     def summary(self) -> str:
         """Human-readable summary."""

@@ -217,7 +217,7 @@ class DynamicDesign:
     def to_dict(self) -> dict:
         r = self.result
         return dict(variant=self.variant, mode="times", planned=self.planned, p=list(self.p),
-                    candidates=list(self.candidates), pairs=self.pairs, chosen=list(r.sensors),
+                    candidates=list(self.candidates), pairs=self.pairs, chosen=list(r.chosen),
                     chosen_times=list(self.chosen_times()), criterion=r.criterion, value=r.value,
                     lower_bound=r.lower_bound, proven_optimal=r.proven_optimal, method=r.method,
                     notes=list(r.notes), table_note=self.table.note,

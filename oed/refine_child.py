@@ -3,8 +3,8 @@
 Building the refinement's NLP (:mod:`oed.input_nlp`: the criterion's and the constraints' exact
 Hessians, symbolically) is one CasADi call that Python cannot interrupt; for a collocated dynamic
 model it grows faster than the number of rows (the DC motor of issue 30, 120 elements: 17 s for one
-row, 187 s for two, over 11 minutes for four).  :func:`oed.static_inputs.refine_inputs` therefore runs an
-NLP with more than :attr:`oed.static_inputs.RefineSettings.child_above` variables under a time limit here:
+row, 187 s for two, over 11 minutes for four).  :func:`oed.inputs.refine_inputs` therefore runs an
+NLP with more than :attr:`oed.inputs.RefineSettings.child_above` variables under a time limit here:
 a fresh interpreter (``python -c``: it imports no ``__main__``, so a plain script needs no guard) reads the
 problem from its stdin (:func:`models.shipping.dumps`), builds and solves it, and writes the result to its
 own copy of stdout (Ipopt's output goes to stderr).  At the time limit the child is killed, whatever phase

@@ -1,7 +1,11 @@
 r"""Pyomo models of the sensor-selection MINLP (paper eq. 9) solved by SCIP (``scip_direct``).
 
-.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k\ge n_p,\
-           \sum_k w_k = m\ (\text{or}\le m),\ c^Tw\le B,\ w_I = 1,\ w_O = 0.
+.. math::  \min_{w\in\{0,1\}^{n_S}} \Psi(C(w))\quad\text{s.t.}\quad \sum_k w_k\ge s_{\min},\
+           \sum_k w_k = m\ (\text{or}\le m),\ c^Tw\le B,\ w_I = 1,\ w_O = 0,
+
+with :math:`s_{\min}` the smallest admissible design size (:attr:`oed.constraints.DesignConstraints.min_size`:
+m when the size is fixed, else the larger of ``min_sensors`` (default 1) and the number of forced-in
+candidates); a design with singular information is inadmissible by its criterion, not by its size.
 
 This is the only module that imports Pyomo's ``SolverFactory``.  Formulations:
 

@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from .design import DesignResult, select_sensors_from_information
+from .candidate_information import information
 
 __all__ = ["SequentialStep", "SequentialResult", "sequential_design"]
 
@@ -38,9 +39,28 @@ class SequentialStep:
 
 @dataclass(frozen=True)
 class SequentialResult:
+    """The designs and estimates of :func:`sequential_design`, one :class:`SequentialStep` per experiment.
+
+    Attributes
+    ----------
+    steps : tuple of SequentialStep
+    param_names, sensor_names : tuple of str
+    axis : str
+        The candidates' axis of every design (``"sensors"``).
+    chosen : tuple of tuple of str
+        The chosen sensors of every experiment's design.
+    """
+
     steps: tuple
     param_names: tuple
     sensor_names: tuple
+
+    axis = "sensors"
+
+    @property
+    def chosen(self) -> tuple:
+        """The chosen sensors of every experiment's design (``steps[k].design.chosen``)."""
+        return tuple(s.design.chosen for s in self.steps)
 
     def summary(self) -> str:
         """One line per experiment: design, estimate, standard errors, ellipsoid volume."""
@@ -50,23 +70,11 @@ class SequentialResult:
         for k, s in enumerate(self.steps, 1):
             est = ", ".join(f"{n} = {v:.6g} +- {e:.3g}" for n, v, e in zip(self.param_names, s.p, s.stderr))
             pd = ", ".join(f"{v:.6g}" for v in s.p_design)
-            change = "" if prev is None else ("  (same design)" if s.design.sensors == prev else "  (design changed)")
-            lines.append(f"{k}: at ({pd}) chose {'+'.join(s.design.sensors)} [{s.design.criterion} = "
+            change = "" if prev is None else ("  (same design)" if s.design.chosen == prev else "  (design changed)")
+            lines.append(f"{k}: at ({pd}) chose {'+'.join(s.design.chosen)} [{s.design.criterion} = "
                          f"{s.design.value:.4g}, {s.design.method}]; {est}; volume {s.ellipsoid_volume:.4g}{change}")
-            prev = s.design.sensors
+            prev = s.design.chosen
         return "\n".join(lines)
-
-
-def _per_instrument(model, data, F, S):
-    r"""F_l = \sum_t F_{(l, t)}, S_l = \sum_t S_{(l, t)}: the (sensor, time) contributions of a dynamic
-    model's data (``data.pairs`` order) summed per instrument l (n_S, n_p, n_p)."""
-    idx = np.array([model.sensors.index(s) for s, _ in data.pairs])
-    out = []
-    for M in (F, S):
-        acc = np.zeros((model.n_S,) + M.shape[1:])
-        np.add.at(acc, idx, M)
-        out.append(acc)
-    return tuple(out)
 
 
 def sequential_design(model, experiments: Sequence, p_nominal, initial=None, criterion="E",
@@ -101,7 +109,7 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
     identification.NotBoundedError
         When the data of an experiment do not bound the parameters (no estimate to design at).
     """
-    from identification import identify, information_contributions   # identification sits above oed
+    from identification import identify
 
     experiments = list(experiments)
     if not experiments:
@@ -111,11 +119,9 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
     info_data = experiments[0] if initial is None else initial
     steps = []
     for data in experiments:
-        F, S = information_contributions(model, info_data, p_design)
-        if getattr(model, "is_dynamic", False):
-            F, S = _per_instrument(model, info_data, F, S)
-        design = select_sensors_from_information(F, S, criterion=criterion, kind=kind, n_sensors=n_sensors,
-                                                 sensor_names=model.sensors, **design_kw)
+        info = information(model, p_design, data=info_data)      # per sensor (a dynamic model's: per instrument)
+        design = select_sensors_from_information(info, criterion=criterion, kind=kind, n_sensors=n_sensors,
+                                                 **design_kw)
         est = identify(model, data, p_nominal, weights=np.asarray(design.weights, float))
         est.require_bounded(f"sequential design, experiment {len(steps) + 1} (the next design is computed at its "
                             "estimate)")

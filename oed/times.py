@@ -1,7 +1,7 @@
 r"""Choosing sampling times of a dynamic model (optimal design over time).
 
 With F_{kt} the information of sensor k at time t summed over the experiments (planned at p,
-:func:`identification.information_contributions` with ``times``),
+:func:`oed.candidate_information.information` on axis ``times`` or ``pairs``),
 
 .. math::
 
@@ -14,33 +14,27 @@ bound).
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
-from identification import information_contributions
-from models.collocation import pair_name
-from models.dynamic import time_label
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .design import DesignResult, select_sensors_from_information
+from .candidate_information import information
 
 __all__ = ["time_information", "select_times"]
 
 
 def time_information(model, p, times, inputs, sigma, sensors=None, pairs: bool = False, n_series: int = 1):
-    """(F, names): the planned information per sampling time (all chosen instruments), shape (n_t, n_p, n_p),
-    or per (time, sensor) pair (``pairs=True``, time-major), and the candidates' names
-    (``0.5`` or ``cA@0.5``), summed over the experiments ``inputs``."""
-    if not getattr(model, "is_dynamic", False):
-        raise TypeError(f"model: expected a dynamic model (models.Model.ode), got {type(model).__name__}")
-    names = list(model.sensors) if sensors is None else list(sensors)
-    unknown = [s for s in names if s not in model.sensors]
-    if unknown or not names:
-        raise ValueError(f"sensors: unknown {unknown or 'empty selection'}; the model has {', '.join(model.sensors)}")
-    t = np.asarray(times, float).ravel()
-    F, _ = information_contributions(model, None, p, inputs=inputs, times=t, sigma=sigma, n_series=n_series)
-    F = F.reshape(t.size, model.n_S, model.n_p, model.n_p)[:, [model.sensors.index(s) for s in names]]
-    if pairs:
-        return F.reshape(-1, model.n_p, model.n_p), [pair_name(s, v) for v in t for s in names]
-    return F.sum(axis=1), [time_label(v) for v in t]
+    """Deprecated: :func:`oed.information` with ``axis="times"`` (or ``"pairs"``).  (F, names): the planned
+    information per sampling time (all chosen instruments), shape (n_t, n_p, n_p), or per (time, sensor) pair
+    (``pairs=True``, time-major), and the candidates' names (``0.5`` or ``cA@0.5``), summed over the
+    experiments ``inputs``."""
+    warnings.warn('oed.time_information is deprecated; use oed.information(model, p, axis="times" (or "pairs"), '
+                  'times=..., inputs=..., sigma=...)', DeprecationWarning, stacklevel=2)
+    info = information(model, p, axis="pairs" if pairs else "times", times=times, inputs=inputs, sigma=sigma,
+                       sensors=sensors, n_series=n_series)
+    return info.F, list(info.labels)
 
 
 def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None, pairs: bool = False,
@@ -75,18 +69,19 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
 
     Returns
     -------
-    DesignResult, or oed.approximate.ApproximateDesign with ``approximate=True``
+    DesignResult (``axis`` "times" or "pairs", ``chosen`` the labels), or oed.approximate.ApproximateDesign
+    with ``approximate=True``
     """
     if approximate or prior is not None:
         return _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
                                   approximate, approx_settings,
                                   dict(n_times=n_times, max_times=max_times, pairs=pairs, costs=costs, budget=budget,
                                        include=include, exclude=exclude))
-    F, names = time_information(model, p, times, inputs, sigma, sensors, pairs, n_series)
-    return select_sensors_from_information(F, None, criterion=criterion, kind="gauss_newton", n_sensors=n_times,
+    info = information(model, p, axis="pairs" if pairs else "times", times=times, inputs=inputs, sigma=sigma,
+                       sensors=sensors, n_series=n_series)
+    return select_sensors_from_information(info, criterion=criterion, kind="gauss_newton", n_sensors=n_times,
                                            max_sensors=max_times, costs=costs, budget=budget, include=include,
-                                           exclude=exclude, method=method, time_limit=time_limit,
-                                           sensor_names=names)
+                                           exclude=exclude, method=method, time_limit=time_limit)
 
 
 def _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, approximate,

@@ -213,7 +213,7 @@ def _oed_page(results):
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig
     head, rows = oed_rows(results)
-    chosen = [tuple(r.sensors) == tuple(results.oed.sensors) for r in results.oed_table.rows]
+    chosen = [tuple(r.sensors) == tuple(results.oed.chosen) for r in results.oed_table.rows]
     figs = []
     parts = _chunks(len(rows), ROWS_PER_PAGE)
     for n, part in enumerate(parts):
@@ -233,7 +233,7 @@ def _oed_page(results):
               or "every sensor combination")
            + ", from the information of each sensor "
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
-           f"{len(r.sensors)} sensors): {', '.join(r.sensors)} (green), {value}, "
+           f"{len(r.chosen)} sensors): {', '.join(r.chosen)} (green), {value}, "
            f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "
            "The detection tests use these sensors.")
     for nt in r.notes:

@@ -220,7 +220,7 @@ def _design_page(results):
             f"sampling times{_unit(model.time_unit)}" if not plan.pairs else "readings", ""]
     rows, chosen = [], []
     for k, row in enumerate(plan.table.rows, 1):
-        is_c = tuple(row.sensors) == tuple(r.sensors)
+        is_c = tuple(row.sensors) == tuple(r.chosen)
         rows.append([str(k) if k <= 10 else "-", f"{row.logdet:.4f}", f"{row.A:.4e}", f"{row.E:.4e}",
                      ", ".join(row.sensors), ("chosen " if is_c else "") + (row.flag or "")])
         chosen.append(is_c)
@@ -233,7 +233,7 @@ def _design_page(results):
         f"{plan.table.note[0].upper() + plan.table.note[1:]} ({'readings' if plan.pairs else 'sampling times'}), by "
         f"the {r.criterion}-criterion of the Gauss-Newton covariance C of ({names}) planned at the {plan.variant} "
         f"estimate for the study's {len(results.study.inputs)} experiments, every instrument reading at each chosen "
-        f"time. Chosen: {', '.join(r.sensors)} (green), {value}, "
+        f"time. Chosen: {', '.join(r.chosen)} (green), {value}, "
         f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). The tests of "
         f"Algorithm 1 use every reading of the data; the design is for the next campaign. Criteria: "
         f"{criteria_units(results.study)}."),

@@ -117,7 +117,7 @@ def oed_dict(res, table, variant: str) -> dict:
     """The chosen design and the table of all combinations."""
     rows = [dict(mask=r.mask, sensors=r.sensors, A=r.A, det=r.det, logdet=r.logdet, E=r.E, flag=r.flag,
                  reason=r.reason) for r in table.rows]
-    return dict(variant=variant, chosen=dict(sensors=res.sensors, weights=res.weights, criterion=res.criterion,
+    return dict(variant=variant, chosen=dict(sensors=res.chosen, weights=res.weights, criterion=res.criterion,
                                              kind=res.kind, value=res.value, proven_optimal=res.proven_optimal,
                                              method=res.method, status=res.status, notes=list(res.notes)),
                 kind=table.kind, table=rows)

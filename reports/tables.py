@@ -116,7 +116,7 @@ def oed_rows(results) -> tuple[list, list]:
     The D criterion is shown as log det C (as in the text and the optimiser).
     """
     t = results.oed_table
-    chosen = results.oed.sensors if results.oed is not None else ()
+    chosen = results.oed.chosen if results.oed is not None else ()
     head = ["combination", "sensors", "Psi_A (trace C)", "Psi_D (log det C)", "Psi_E (max eig C)", "flag"]
     rows = []
     ranked = isinstance(t, RankedDesignTable)       # the ten best designs (oed.best_designs), not every one

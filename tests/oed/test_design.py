@@ -166,21 +166,19 @@ def test_design_table_press_style():
 
 
 def test_select_sensors_passes_through(monkeypatch):
-    import sys
     import types
+    import oed.candidate_information
     F = rank_one(11, 6, 2)
     calls = {}
 
-    def info(model, data, p):
+    def info(model, data, p, states=None, **kw):
         calls["args"] = (model, data, p)
         return F, None
-    fake = types.ModuleType("identification")
-    fake.information_contributions = info
-    monkeypatch.setitem(sys.modules, "identification", fake)
+    monkeypatch.setattr(oed.candidate_information, "information_contributions", info)
     model = types.SimpleNamespace(sensors=tuple("abcdef"))
     r = select_sensors(model, "DATA", [1.0, 2.0], criterion="D", n_sensors=3)
     assert calls["args"] == (model, "DATA", [1.0, 2.0]) and len(r.indices) == 3
-    assert set(r.sensors) <= set("abcdef")
+    assert set(r.sensors) <= set("abcdef") and r.axis == "sensors" and r.chosen == r.sensors
 
 
 def test_unfinished_bnb_reports_gap_not_optimality():

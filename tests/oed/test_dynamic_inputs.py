@@ -1,12 +1,11 @@
-"""oed.dynamic_inputs / select_inputs on a dynamic model: experiment design with control profiles."""
+"""oed.information / select_inputs on a dynamic model: experiment design with control profiles."""
 import numpy as np
 import pytest
 
 from bench import dynamic_reference as dr
 from bench.bench_dynamic_doe import GRID, LOWER, NOMINAL, P, UPPER, reactor, scaled_log10_det
-from oed import RefineSettings, refine_inputs, select_inputs
-from oed.dynamic_inputs import dynamic_input_information
-from oed.static_inputs import _share
+from oed import RefineSettings, information, refine_inputs, select_inputs
+from oed.inputs import _share
 
 #: a time limit that never decides a result here (issue 27)
 UNTIMED = 1e9
@@ -16,7 +15,7 @@ def test_factorial_information_equals_the_odes():
     # per-experiment FIMs of Pyomo.DoE's reactor at factorial points (T = 300 after t = 0.125) against
     # the ODE's exact FIM (closed form, complex-step sensitivities)
     Q = np.array([np.r_[c, t, NOMINAL[2:]] for c, t in [(5.0, 500.0), (1.0, 450.0), (3.0, 700.0)]])
-    F = dynamic_input_information(reactor(), P, Q, GRID, 0.01)
+    F = information(reactor(), P, axis="inputs", candidates=Q, times=GRID, sigma=0.01).F
     for q, f in zip(Q, F):
         ref = dr.log10_det(dr.pyomo_doe_reactor_fim(q[0], q[1:], method="closed"))
         assert abs(scaled_log10_det(f) - ref) < 1e-4, (q[:2], scaled_log10_det(f), ref)
@@ -42,7 +41,7 @@ def test_exact_design_over_profiles_is_the_best_candidate():
                   np.r_[4.0, 600.0, [300.0] * 8]])
     m = reactor()
     res = select_inputs(m, P, times=GRID, candidates=Q, sigma=0.01, n_points=1)
-    F = dynamic_input_information(m, P, Q, GRID, 0.01)
+    F = information(m, P, axis="inputs", candidates=Q, times=GRID, sigma=0.01).F
     assert res.indices == (int(np.argmax([np.linalg.slogdet(f)[1] for f in F])),) and res.proven_optimal
     with pytest.raises(ValueError, match="times: a dynamic model needs"):
         select_inputs(m, P, candidates=Q, sigma=0.01, n_points=1)

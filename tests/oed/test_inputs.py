@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from models import Model
-from oed.inputs import RefineSettings, input_information, refine_inputs, select_inputs
+from oed import information
+from oed.inputs import RefineSettings, refine_inputs, select_inputs
 
 
 def _exp_model(n_sensors=1):
@@ -41,7 +42,9 @@ def test_select_inputs_matches_brute_force(seed, crit):
     sig = np.array([0.5, 0.2])
     n_series = 3
     Fjk = np.array([[n_series * np.outer(g, g) / s ** 2 for g, s in zip(_grad(P, x), sig)] for x in Q])
-    np.testing.assert_allclose(input_information(m, P, Q, sig, n_series), Fjk, rtol=1e-10)
+    info = information(m, P, axis="input_pairs", candidates=Q, sigma=sig, n_series=n_series)
+    np.testing.assert_allclose(info.F, Fjk.reshape(-1, 2, 2), rtol=1e-10)
+    assert info.labels[:3] == ("q0:y1", "q0:y2", "q1:y1") and info.S is None
     # every sensor at each chosen input
     best = min(itertools.combinations(range(len(Q)), 3), key=lambda c: _value(Fjk[list(c)].sum((0, 1)), crit))
     r = select_inputs(m, P, candidates=Q, sigma=sig, n_points=3, criterion=crit, n_series=n_series)
@@ -60,6 +63,7 @@ def test_select_inputs_matches_brute_force(seed, crit):
     r = select_inputs(m, P, candidates=Q, sigma=sig, n_points=3, sensors="joint", criterion=crit,
                       n_series=n_series)
     assert r.proven_optimal and r.pairs == tuple((c // 2, m.sensors[c % 2]) for c in best)
+    assert r.axis == r.design.axis == "input_pairs" and r.chosen == tuple(info.labels[c] for c in best)
     assert r.value == pytest.approx(_value(Fp[list(best)].sum(0), crit), rel=1e-8)
 
 

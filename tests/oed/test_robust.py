@@ -10,7 +10,7 @@ import pytest
 
 from models import Model, Parameter
 from oed.approximate import ApproximateSettings, approximate_design
-from oed.static_inputs import input_information
+from oed import information
 
 P0 = np.array([0.05884, 4.298, 21.80])
 NARROW = {"theta1": ("uniform", 0.04884, 0.06884), "theta2": ("uniform", 3.298, 5.298)}
@@ -25,7 +25,7 @@ def model():
 
 def _fine_information(model, P, T):
     """(n_t, n_s, 3, 3): the information of one observation at every time and parameter vector."""
-    return np.stack([input_information(model, p, T[:, None], 1.0)[:, 0] for p in P], axis=1)
+    return np.stack([information(model, p, axis="inputs", candidates=T[:, None], sigma=1.0).F for p in P], axis=1)
 
 
 def _sensitivity(F_design, w, F_fine, prior_w):

@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 from models import Model
-from oed import approximate_design, make_prior, select_times, time_information
+from oed import approximate_design, information, make_prior, select_times
 from oed.approximate import ApproximateSettings
 from oed.robust_exact import select_robust_exact
-from oed.static_inputs import input_information
 
 Q = np.array([[1.0, 330.0], [2.0, 350.0], [2.0, 370.0]])
 SIGMA = np.array([0.01, 0.008])
@@ -21,17 +20,17 @@ def reactor():
     from mudoe.example_reactor import P_TRUE, TIMES, build
     m = build()
     pr = make_prior({"E1": ("uniform", 55.0, 65.0), "E2": ("uniform", 75.0, 85.0)}, m, P_TRUE, order=2)
-    F = np.stack([time_information(m, ps, TIMES, Q, SIGMA)[0] for ps in pr.points], axis=1)
+    F = np.stack([information(m, ps, axis="times", times=TIMES, inputs=Q, sigma=SIGMA).F for ps in pr.points], axis=1)
     return m, P_TRUE, TIMES, pr, F
 
 
 def test_one_vector_reproduces_the_existing_exact_engine(reactor):
     m, p, times, _, _ = reactor
-    F1 = time_information(m, p, times, Q, SIGMA)[0][:, None]
+    F1 = information(m, p, axis="times", times=times, inputs=Q, sigma=SIGMA).F[:, None]
     names = [f"{t:g}" for t in times]
     r = select_robust_exact(F1, [1.0], 4, names=names)
     assert r.proven_optimal and r.n_designs == 210
-    assert sorted(r.names) == sorted(select_times(m, p, times, Q, SIGMA, n_times=4).sensors)
+    assert sorted(r.names) == sorted(select_times(m, p, times, Q, SIGMA, n_times=4).chosen)
 
 
 def test_bayesian_exact_sampling_times_against_brute_force_and_the_approximate_design(reactor):
@@ -55,7 +54,7 @@ def test_maximin_exact_design_against_brute_force():
     pr = make_prior({"theta1": ("uniform", 0.04884, 0.06884), "theta2": ("uniform", 2.298, 6.298)}, m, P0,
                     rule="grid", order=2)
     T = np.r_[0.25, np.arange(1.0, 25.0, 1.0)]
-    F = np.stack([input_information(m, ps, T[:, None], 1.0)[:, 0] for ps in pr.points], axis=1)
+    F = np.stack([information(m, ps, axis="inputs", candidates=T[:, None], sigma=1.0).F for ps in pr.points], axis=1)
     u_star = np.array([approximate_design(m, ps, sigma=1.0, bounds=(0.0, 24.0)).value for ps in pr.points])
     r = select_robust_exact(F, pr.weights, 3, robust="maximin", u_star=u_star)
     effs = {c: min(np.exp((np.linalg.slogdet(F[list(c), s].sum(0) / 3)[1] - u_star[s]) / 3) for s in range(pr.n))
