@@ -1,6 +1,6 @@
 """What a report draws of a dynamic study, as records: trajectories with bands, the mesh of each fit.
 
-Computed by :mod:`mudoe.dynamic_runs` into ``StudyResults.trajectories`` and ``.discretisation``.
+Computed by :mod:`mudoe.kind.time_series` into ``StudyResults.trajectories`` and ``.discretisation``.
 """
 from __future__ import annotations
 

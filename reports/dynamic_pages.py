@@ -2,7 +2,7 @@
 sampling-time design.
 
 The figures take ``ax=None`` and what the study computed (``results.trajectories``: per variant a
-:class:`mudoe.dynamic_runs.Trajectories` with the outputs on a fine time grid, the delta-method band
+:class:`mudoe.dynamic_records.Trajectories` with the outputs on a fine time grid, the delta-method band
 half-widths and the standardized residuals; ``results.plan``: the sampling-time design) and return
 the figure; :func:`dynamic_pages` replaces the static pages (outputs against the set point, the
 sensor-combination table, bands and residuals against the input, the diagnostic splits) in the
