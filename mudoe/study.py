@@ -19,12 +19,11 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 
-from .config import ConfigError, StudyConfig
+from .config import StudyConfig
 from .kind import study_kind
 from .kind.base import Simulation
 from .kind.static import SimulatedCampaign, simulate_study
 from .plans import (DiscriminationPlan, PlannedDesign, plan_at_estimate, plan_design, plan_discrimination)
-from .registry import simulate_refusal
 from .study_base import (FitFailedError, MissingPieceError, Progress, Study, StudyResults, VariantModel,
                          design_sensors, load_factory, require_fit, run_identify, run_oed, start_values)
 from .study_models import build_models
@@ -62,10 +61,8 @@ def plan_without_data(cfg: StudyConfig, progress: Progress | None = None):
 
 def simulate(cfg: StudyConfig, seed: int | None = None) -> Simulation:
     """``mudoe simulate`` of an own model: the campaign of the study's kind (:meth:`Simulation.write
-    <mudoe.kind.base.Simulation.write>` writes it; a built-in model without a virtual prototype is refused)."""
-    refusal = simulate_refusal(cfg.model.name)
-    if refusal is not None:
-        raise ConfigError(f"{cfg.path}: {refusal}")
+    <mudoe.kind.base.Simulation.write>` writes it; a built-in model without a virtual prototype is refused,
+    :func:`mudoe.kind.static.simulate_study`)."""
     built = build_models(cfg)
     return study_kind(cfg, built).simulate(cfg, built, seed)
 
