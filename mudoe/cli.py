@@ -192,7 +192,7 @@ def _run_study(args, cfg, out: Path) -> int:
         return _simulate(cfg, args, progress, out)
     if args.command == "oed" and cfg.oed.planned:
         return _oed_planned(cfg, args, progress, out, t0)
-    study = prepare(cfg, progress)
+    study = prepare(cfg, progress, command=args.command)
     results = StudyResults(study)
     handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
                "report": _report, "quantify": _quantify}[args.command]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 
-from .config import StudyConfig
+from .config import ConfigError, StudyConfig
 from .kind import study_kind
 from .kind.base import Simulation
 from .kind.static import SimulatedCampaign, simulate_study
@@ -35,21 +35,26 @@ __all__ = ["Study", "StudyResults", "VariantModel", "prepare", "load_factory", "
            "plan_without_data", "plan_at_estimate", "plan_discrimination"]
 
 
-def prepare(cfg: StudyConfig, progress: Progress | None = None) -> Study:
+def prepare(cfg: StudyConfig, progress: Progress | None = None, command: str = "") -> Study:
     """Build the models, choose the study's kind from them, and let the kind load the data, compose sigma and
-    the splits (:meth:`mudoe.kind.base.StudyKind.prepare`).
+    the splits (:meth:`mudoe.kind.base.StudyKind.prepare`); a ``command`` the kind cannot run is refused before
+    the data are read (:meth:`mudoe.kind.base.StudyKind.refusal`).
 
     Raises
     ------
     ConfigError, DataFileError, identification.DataError, identification.studies.splits.SplitError
-        Bad config or data (the message names the file / key).
+        Bad config or data (the message names the file / key), or a command the kind cannot run.
     MissingPieceError
         A model variant needs a package that is not available yet.
     """
     progress = progress or Progress(False)
     with progress.step("build models " + ", ".join(cfg.model.variants), announce=False):
         built = build_models(cfg)
-    return study_kind(cfg, built).prepare(cfg, built, progress)
+    kind = study_kind(cfg, built)
+    why = kind.refusal(command)
+    if why:
+        raise ConfigError(f"{cfg.path}: {why}")
+    return kind.prepare(cfg, built, progress)
 
 
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None):

@@ -49,6 +49,10 @@ class StudyKind:
     report_pages = ""
     model_error_refusal = ""
 
+    def refusal(self, command: str) -> str:
+        """Why this kind cannot run the CLI ``command`` ("" when it can): ``quantify`` needs a model error."""
+        return self.model_error_refusal if command == "quantify" else ""
+
     def prepare(self, cfg, built: dict, progress):
         """The :class:`mudoe.study_base.Study` of the built variants ({variant: VariantModel}): data, sigma,
         splits, start values."""
