@@ -40,8 +40,6 @@ def prediction_bands(est, level: float = 0.95) -> PredictionBands:
 
 def run_bands(study, results, level: float = BAND_LEVEL):
     """``results`` with ``bands``: {variant: PredictionBands} of every fit on all study data at ``level`` (a
-    dynamic study's bands are its trajectories', :func:`mudoe.dynamic_runs.run_trajectories`)."""
-    if study.is_dynamic:
-        return results
+    static study's; a time-series study's bands are its trajectories', :mod:`mudoe.kind.time_series`)."""
     return dataclasses.replace(results, bands={**results.bands, **{v: prediction_bands(e, level)
                                                                    for v, e in results.estimates.items()}})

@@ -190,13 +190,9 @@ def _run_study(args, cfg, out: Path) -> int:
     progress = Progress(enabled=not args.quiet)
     if args.command == "simulate":
         return _simulate(cfg, args, progress, out)
-    if args.command == "quantify" and cfg.dynamic is not None:
-        from .config import ConfigError
-        from .model_error_runs import STATIC_ONLY
-        raise ConfigError(f"{cfg.path}: {STATIC_ONLY}")
     if args.command == "oed" and cfg.oed.planned:
         return _oed_planned(cfg, args, progress, out, t0)
-    study = prepare(cfg, progress)
+    study = prepare(cfg, progress, command=args.command)
     results = StudyResults(study)
     handler = {"identify": _identify, "oed": _oed, "detect": _detect, "validate": _validate,
                "report": _report, "quantify": _quantify}[args.command]
@@ -284,30 +280,10 @@ def _oed_planned(cfg, args, progress, out, t0) -> int:
     return 0
 
 
-def _oed_inputs(study, results, args, progress, out) -> int:
-    """``[oed] mode`` inputs / both / discrimination with data: the design at the estimate of the variant."""
-    from reports.serialize import dumps
-    from .study import plan_at_estimate
-    plan = plan_at_estimate(study, results, progress)
-    text = plan.summary()
-    _write(out, {"oed.json": dumps(plan.to_dict()), "oed.txt": text + "\n"})
-    _emit(args, text, plan.to_dict())
-    return 0
-
-
 def _oed(study, results, args, progress, out) -> int:
-    from reports.serialize import dumps, oed_dict
-    from .study import run_oed
-    if study.is_dynamic:                     # a sampling-time design (mudoe.dynamic_runs)
-        results = run_oed(study, results, progress)
-        _write(out, {"oed.json": dumps(results.plan.to_dict()), "oed.txt": results.plan.summary() + "\n"})
-        _emit(args, results.plan.summary(), results.plan.to_dict())
-        return EXIT_OK
-    if study.cfg.oed.mode != "sensors":
-        return _oed_inputs(study, results, args, progress, out)
-    results = run_oed(study, results, progress)
-    obj = oed_dict(results.oed, results.oed_table, results.oed_variant)
-    text = _oed_text(results)
+    from reports.serialize import dumps
+    from .study import oed_files
+    text, obj = oed_files(study, results, progress)
     _write(out, {"oed.json": dumps(obj), "oed.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK
@@ -398,7 +374,7 @@ def _report(study, results, args, progress, out) -> int:
 def _report_results(study, results, progress):
     """Everything the report shows, computed by the study (the report only draws it)."""
     from .study import (FitFailedError, MissingPieceError, plan_at_estimate, run_bands, run_detect, run_diagnosis,
-                        run_identify, run_oed, run_uncertainty)
+                        run_identify, run_oed, run_report_pages, run_uncertainty)
     results = run_identify(study, results, progress)
     try:
         results = run_oed(study, results, progress)
@@ -413,19 +389,7 @@ def _report_results(study, results, progress):
     except _bad_input_types() as exc:      # e.g. the normality gate failed: report it, do not hide it
         results = dataclasses.replace(results, detection_error=f"{type(exc).__name__}: {exc}")
         results = results.with_note(f"detection stopped: {exc}")
-    results = run_diagnosis(study, results, progress)
-    if study.is_dynamic:                   # what the dynamic pages draw (mudoe.dynamic_runs)
-        from .dynamic_runs import run_discretisation, run_trajectories
-        results = run_trajectories(study, run_discretisation(study, results), progress)
-    else:                                  # the pages "Model error of ..." (mudoe.model_error_runs)
-        from .model_error_runs import run_model_error, run_model_error_views
-        try:
-            results = run_model_error_views(study, run_model_error(study, results, progress))
-        except (MissingPieceError, FitFailedError) as exc:
-            results = results.with_note(f"model error not available: {exc}")
-        results = results.with_note("; ".join(f"model error of {v} not computed: {e}"
-                                              for v, e in results.model_error_errors.items())) \
-            if results.model_error_errors else results
+    results = run_report_pages(study, run_diagnosis(study, results, progress), progress)
     return run_uncertainty(study, run_bands(study, results), progress=progress)
 
 
@@ -463,42 +427,15 @@ def _interrupt_check() -> None:
 
 
 def _simulate_study(cfg, args, progress, out) -> int:
-    """An own model's campaign in the study's [data] layout, file names and units (plus simulate.json)."""
-    import json
-    from .data_io import atomic_write_text, write_paper_layout, write_tidy_layout
-    from .study import simulate_study
-    if cfg.dynamic is not None:              # a dynamic study: the long-format CSV (mudoe.dynamic_study)
-        from .dynamic_study import write_simulation
-        from .outdir import claim, record as record_files
-        with progress.step(f"simulate {cfg.model.name}", announce=False):
-            sim_text = write_simulation(cfg, args.seed, None)
-        _interrupt_check()
-        claim(out)
-        paths, record = write_simulation(cfg, args.seed, out, sim_text)
-        record_files(out, paths)
-        _emit(args, "\n".join(str(p) for p in paths), record)
-        return EXIT_OK
-    with progress.step(f"simulate {cfg.model.name}", announce=False):
-        sim = simulate_study(cfg, args.seed)
-    c, u, d = sim.campaign, sim.units, cfg.data
-    _interrupt_check()
+    """An own model's campaign in its kind's data format (the study's [data] layout, file names and units, or
+    the long time-series CSV), plus simulate.json."""
     from .outdir import claim, record as record_files
+    from .study import simulate
+    with progress.step(f"simulate {cfg.model.name}", announce=False):
+        sim = simulate(cfg, args.seed)
+    _interrupt_check()
     claim(out)
-    if d.layout == "tidy":
-        paths = [write_tidy_layout(out / Path(d.file).name, c.q_set, c.z, c.sensors, units=u)]
-    else:
-        paths = write_paper_layout(out, c.q_set, c.z, c.sensors, units=u)
-        for k, s in enumerate(c.sensors):
-            if s in d.files:                      # the study's own file name of the sensor
-                target = out / Path(d.files[s]).name
-                os.replace(paths[k], target)
-                paths[k] = target
-    record = dict(model=cfg.model.name, variant=sim.variant, seed=sim.seed, n_series=c.n_M,
-                  truth=sim.truth, truth_units=sim.truth_units,
-                  sigma_model_units=dict(zip(c.sensors, sim.sigma)), layout=d.layout,
-                  input_unit=u.input_file, output_units=dict(zip(c.sensors, u.output_file)),
-                  files=[str(p) for p in paths])
-    paths.append(atomic_write_text(out / "simulate.json", json.dumps(record, indent=1) + "\n"))
+    paths, record = sim.write(cfg, out)
     record_files(out, paths)
     _emit(args, "\n".join(str(p) for p in paths), record)
     return EXIT_OK

@@ -22,7 +22,6 @@ the checks across sections) and re-exports the names of the modules it is built 
 * :mod:`mudoe.config_readers` -- the reader and validator of each kind of TOML value;
 * :mod:`mudoe.config_errors` -- :class:`ConfigError` and the line lookup of its messages
   (:func:`config_error`);
-* :mod:`mudoe.dynamic_config` -- the ``[dynamic]`` section;
 * :mod:`mudoe.registry` -- the built-in models (variants, scenarios, defaults, virtual prototype),
   each described by its own study module (the press: :mod:`mudoe.press`);
 * :mod:`mudoe.checks` -- the cross-key checks (:func:`mudoe.checks.check_config`).
@@ -62,6 +61,7 @@ and have no settings dataclass: ``[oed]`` holds the arguments of
 """
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from dataclasses import fields
@@ -73,15 +73,15 @@ from .config_prior import check_robust_keys, check_robust_prior, read_prior
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
-from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, ModelConfig, OEDConfig, ParameterConfig,
-                              RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig, SplitsConfig,
+from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, DynamicConfig, ModelConfig, OEDConfig,
+                              ParameterConfig, RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig, SplitsConfig,
                               StudyConfig, ValidateConfig)
 from .registry import known_scenarios, known_variants, virtual_prototype
 from .units import known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
-           "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
+           "DynamicConfig", "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
            "settings_values", "config_error"]
 
@@ -274,9 +274,68 @@ def _parse_report(ctx, t):
     return ReportConfig(**read_table(ctx, "report", ReportConfig, t))
 
 
-def _parse_dynamic(ctx, t):
-    from .dynamic_config import parse_dynamic
-    return parse_dynamic(ctx, t)
+_DYNAMIC_KEYS = ("times", "candidate_times", "n_times", "pairs", "experiments")
+
+
+def _dynamic_times(ctx, key, v) -> tuple:
+    if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                   for x in v):
+        raise ctx.error("dynamic", key, f"expected a non-empty list of numbers (times), got {v!r}")
+    t = tuple(float(x) for x in v)
+    bad = [x for x in t if not math.isfinite(x) or x < 0]
+    if bad:
+        raise ctx.error("dynamic", key, f"sampling times must be finite and >= 0, got {bad[0]:g}")
+    for a, b in zip(t, t[1:]):
+        if not b > a:
+            raise ctx.error("dynamic", key, f"sampling times must be strictly increasing; {b:g} follows {a:g}")
+    return t
+
+
+def _dynamic_experiment(ctx, k: int, t) -> dict:
+    if not isinstance(t, dict):       # empty: an experiment of a model without inputs
+        raise ctx.error("dynamic.experiments", "", f"experiment {k + 1}: expected a table of input values")
+    out = {}
+    for name, v in t.items():
+        vals = v if isinstance(v, list) else [v]
+        if not vals or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                               for x in vals):
+            raise ctx.error("dynamic.experiments", name, f"experiment {k + 1}: expected a finite number (or a list "
+                            f"of numbers for a control), got {v!r}")
+        out[name] = tuple(float(x) for x in vals) if isinstance(v, list) else float(v)
+    return out
+
+
+def _parse_dynamic(ctx, t) -> DynamicConfig:
+    """The ``[dynamic]`` table checked for what needs no model (``ctx``: the config's error context)."""
+    if not isinstance(t, dict):
+        raise ctx.error("", "dynamic", f"expected a table, got {type(t).__name__}")
+    for k in t:
+        if k not in _DYNAMIC_KEYS:
+            raise ctx.error("dynamic", k, f"unknown key {k!r}; allowed keys: {', '.join(_DYNAMIC_KEYS)}")
+    if "times" not in t:
+        raise ctx.error("dynamic", next(iter(t), "times"), "a dynamic study needs times = [...] (the sampling times)")
+    kw = dict(times=_dynamic_times(ctx, "times", t["times"]))
+    if "candidate_times" in t:
+        kw["candidate_times"] = _dynamic_times(ctx, "candidate_times", t["candidate_times"])
+    if "n_times" in t:
+        n = t["n_times"]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ctx.error("dynamic", "n_times", f"expected an integer >= 1, got {n!r}")
+        if n > len(kw.get("candidate_times", kw["times"])):
+            raise ctx.error("dynamic", "n_times", f"{n} times asked for but only "
+                            f"{len(kw.get('candidate_times', kw['times']))} candidates")
+        kw["n_times"] = n
+    if "pairs" in t:
+        if not isinstance(t["pairs"], bool):
+            raise ctx.error("dynamic", "pairs", f"expected true or false, got {t['pairs']!r}")
+        kw["pairs"] = t["pairs"]
+    exps = t.get("experiments")
+    if not isinstance(exps, list) or not exps:
+        raise ctx.error("dynamic", "experiments" if "experiments" in t else "times",
+                        "a dynamic study needs its experiments: one [[dynamic.experiments]] table each")
+    kw["experiments"] = tuple(_dynamic_experiment(EntryContext(ctx, "dynamic.experiments", k), k, e)
+                              for k, e in enumerate(exps))
+    return DynamicConfig(**kw)
 
 
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,

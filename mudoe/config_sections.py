@@ -1,7 +1,7 @@
 """The sections of a study config as frozen dataclasses: the schema of the TOML file.
 
 One dataclass per section ([model], [data], [[sensors]], [[parameters]], [splits], [simulate],
-[detect], [oed], [validate], [report]) and :class:`StudyConfig`, the whole study.  A section's fields
+[detect], [oed], [validate], [report], [dynamic]) and :class:`StudyConfig`, the whole study.  A section's fields
 are its allowed keys and their defaults (:mod:`mudoe.config_schema`); the defaults that belong to a
 built-in model (the default model, its variants, its data folder, its virtual prototype's seed and
 series) are read from :mod:`mudoe.registry`.  The file is read into them by :mod:`mudoe.config`.
@@ -24,7 +24,7 @@ from .units import convert
 
 __all__ = ["ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig", "RandomSplitConfig",
            "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
-           "StudyConfig"]
+           "DynamicConfig", "StudyConfig"]
 
 
 def _default_variants() -> tuple:
@@ -362,6 +362,44 @@ class ReportConfig:
 
 
 @dataclass(frozen=True)
+class DynamicConfig:
+    """The ``[dynamic]`` section of a time-series study (an ODE/DAE model, ``Model.ode``; :mod:`mudoe.kind.time_series`)::
+
+        [dynamic]
+        times = [0.2, 0.4, 0.6]          # sampling times of the data (the model's time unit)
+        candidate_times = [...]          # candidates of the sampling-time design (default: times)
+        n_times = 4                      # sampling times chosen (default: one per parameter)
+        pairs = false                    # choose (time, instrument) pairs instead of times
+        [[dynamic.experiments]]          # one table per experiment: its inputs by name (model units);
+                                         # empty for a model without inputs (one empty table per run)
+        cA0 = 1.0                        # a constant input
+        T = [350, 360, 370]              # a control: one value per grid point of its grid
+
+    Every instrument has one sigma ([[sensors]], not one per time).  The checks that need the model
+    (times within the horizon, input names, the number of grid values of a control) are made when the
+    study is prepared (:func:`mudoe.kind.time_series.experiment_rows`).
+
+    Attributes
+    ----------
+    times : tuple of float             sampling times of the data / of a simulated campaign
+    candidate_times : tuple of float   candidates of the time design (empty: ``times``)
+    n_times : int or None              times (or pairs) chosen by the design (None: n_p)
+    pairs : bool                       design over (time, instrument) pairs
+    experiments : tuple of dict        {input name: value, or list of control grid values}
+    """
+
+    times: tuple = ()
+    candidate_times: tuple = ()
+    n_times: int | None = None
+    pairs: bool = False
+    experiments: tuple = ()
+
+    def candidates(self) -> tuple:
+        """The candidate sampling times of the design."""
+        return self.candidate_times or self.times
+
+
+@dataclass(frozen=True)
 class StudyConfig:
     """A whole study (see the module docstring and README "Config reference")."""
 
@@ -375,7 +413,7 @@ class StudyConfig:
     oed: OEDConfig = field(default_factory=OEDConfig)
     validate: ValidateConfig = field(default_factory=ValidateConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
-    dynamic: Any = None              # mudoe.dynamic_config.DynamicConfig of a dynamic study
+    dynamic: DynamicConfig | None = None   # [dynamic]: a time-series study (mudoe.kind.time_series)
     path: str = "<string>"
     base_dir: str = "."
     text: str = ""

@@ -17,7 +17,7 @@ from identification import model_error
 from identification.errors import IdentificationError
 
 from .config import ConfigError
-from .study import Progress, design_sensors, start_values
+from .study_base import Progress, design_sensors, start_values
 from .units import convert
 
 __all__ = ["STATIC_ONLY", "run_model_error", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
@@ -34,10 +34,10 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05):
     Raises
     ------
     ConfigError
-        The study is dynamic (:data:`STATIC_ONLY`).
+        The study's kind has no model error (a time-series study: :data:`STATIC_ONLY`).
     """
-    if study.is_dynamic:
-        raise ConfigError(f"{study.cfg.path}: {STATIC_ONLY}")
+    if study.kind.model_error_refusal:
+        raise ConfigError(f"{study.cfg.path}: {study.kind.model_error_refusal}")
     progress = progress or Progress(False)
     results = design_sensors(study, results, progress)
     used = set(results.design_sensors)

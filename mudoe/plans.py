@@ -15,7 +15,7 @@ from .checks import check_model
 from .config import ConfigError, StudyConfig
 from .data_io import DataUnits, study_units
 from .study_base import Progress, Study, StudyResults, VariantModel, oed_variant, require_fit
-from .study_models import build_models, config_start_values, is_dynamic_built
+from .study_models import build_models, config_start_values
 
 __all__ = ["PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_data", "plan_at_estimate",
            "plan_discrimination"]
@@ -73,12 +73,11 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
 
 
-def plan_without_data(cfg: StudyConfig, progress: Progress | None = None) -> PlannedDesign:
-    """``[oed] planned = true``: the design at the [[parameters]] start values, no data read."""
-    built = build_models(cfg)
-    if is_dynamic_built(cfg, built):
-        from .dynamic_runs import plan_dynamic
-        return plan_dynamic(cfg, {k: b.model for k, b in built.items()}, progress or Progress(False))
+def plan_without_data(cfg: StudyConfig, progress: Progress | None = None, built: dict | None = None) -> PlannedDesign:
+    """``[oed] planned = true`` of a static study: the design at the [[parameters]] start values, no data read
+    (``built``: the study's variants, default built here; :func:`mudoe.study.plan_without_data` designs for
+    any kind of study)."""
+    built = build_models(cfg) if built is None else built
     v = cfg.oed.variant or list(built)[-1]
     model, fn = built[v].model, built[v].inputs_fn
     check_model(cfg, model)

@@ -4,9 +4,10 @@
 :class:`StudyResults` is everything the commands computed, a frozen record built step by step
 (each ``run_*`` of :mod:`mudoe.study` returns a new one, :func:`dataclasses.replace`) and read by
 the CLI; the report builder (:mod:`reports`), which computes nothing, reads its
-:func:`mudoe.report_record.study_record` (an :class:`oed.study_record.StudyRecord`).  This module imports no
-other study module (:mod:`mudoe.study`, :mod:`mudoe.dynamic_study`, :mod:`mudoe.dynamic_runs`,
-:mod:`mudoe.plans` import it).
+:func:`mudoe.report_record.study_record` (an :class:`oed.study_record.StudyRecord`).  A study carries its kind
+(:mod:`mudoe.kind`: static or time series), and what differs between kinds is asked of it
+(``study.kind.run_oed(...)``), never of the model.  This module imports no other study module
+(:mod:`mudoe.study`, :mod:`mudoe.kind`, :mod:`mudoe.plans` import it).
 """
 from __future__ import annotations
 
@@ -39,8 +40,10 @@ if TYPE_CHECKING:          # the types of the results' fields (library and repor
     from oed.design import DesignResult, DesignTable
     from oed.plan_records import DiscriminationPlan, DynamicDesign, PlannedDesign, RobustPlan
 
+    from .kind.base import StudyKind
+
 __all__ = ["MissingPieceError", "FitFailedError", "Progress", "VariantModel", "Study", "StudyResults",
-           "load_factory", "start_values", "run_identify", "require_fit", "oed_variant"]
+           "load_factory", "start_values", "run_identify", "require_fit", "oed_variant", "run_oed", "design_sensors"]
 
 
 class MissingPieceError(RuntimeError):
@@ -111,7 +114,12 @@ class Study:
                                  (:class:`identification.studies.records.Explanation`; the press's)
     presentation : Presentation  the words a built-in model's study puts on its pages
                                  (:class:`identification.studies.records.Presentation`; empty if own)
-    is_dynamic : bool            False (a :class:`mudoe.dynamic_study.DynamicStudy` is True)
+    kind : StudyKind             what differs between static and time-series studies (:mod:`mudoe.kind`;
+                                 chosen once from the built models, :func:`mudoe.kind.study_kind`)
+    inputs : ndarray or None     a time-series study: the experiments' input rows (model units)
+    times : tuple of float       a time-series study: the [dynamic] sampling times
+    p0s : dict {variant: ndarray}  start values per variant where they differ (a time-series study's
+                                 variants may differ in parameters); else ``p0``
     """
 
     cfg: StudyConfig
@@ -129,11 +137,20 @@ class Study:
     units: DataUnits | None = None
     explanations: tuple = ()
     presentation: Presentation = Presentation()
-    is_dynamic = False
+    kind: StudyKind | None = None
+    inputs: np.ndarray | None = None
+    times: tuple = ()
+    p0s: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def start_values(self, variant: str) -> np.ndarray:
-        """The start values of a variant's fits (here the same for every variant)."""
-        return self.p0
+        """The start values of a variant's fits (``p0s`` of the variant, else ``p0``)."""
+        return self.p0s.get(variant, self.p0)
+
+    @property
+    def is_dynamic(self) -> bool:
+        """Whether the report draws the time-series pages (what :mod:`reports` reads until it draws the typed
+        study record of issue 28 item 6; the study itself asks ``kind``)."""
+        return self.kind is not None and self.kind.report_pages == "trajectories"
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,8 +184,8 @@ class StudyResults:
                                               variants whose chosen error model is another one
     model_error_views : {variant: ModelErrorView}  what the pages "Model error of ..." draw
                                               (:mod:`mudoe.model_error_runs`)
-    trajectories : {variant: Trajectories}    dynamic studies (:mod:`mudoe.dynamic_runs`)
-    discretisation : {variant: MeshSummary}   dynamic studies (:mod:`mudoe.dynamic_runs`)
+    trajectories : {variant: Trajectories}    time-series studies (:mod:`mudoe.kind.time_series`)
+    discretisation : {variant: MeshSummary}   time-series studies (:mod:`mudoe.kind.time_series`)
     timing : {step: seconds}
     notes : tuple of str
     """
@@ -270,3 +287,26 @@ def require_fit(study: Study, results: StudyResults, v: str, progress: Progress,
     if v not in results.estimates:
         raise FitFailedError(f"{command}: the fit of variant {v} failed ({results.estimate_errors.get(v)}){why}")
     return results
+
+
+# ---------------------------------------------------------------------------- the design, the test sensors
+def run_oed(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
+    """Lines 02-03 of Algorithm 1 at the estimate of the [oed] variant: the design of the study's kind
+    (:meth:`mudoe.kind.base.StudyKind.run_oed`: sensors of a static study, sampling times of a time-series one)."""
+    try:
+        import oed.best_designs  # noqa: F401 -- the design pieces every kind needs
+        import oed.design  # noqa: F401
+    except ImportError as exc:
+        raise MissingPieceError(f"oed: oed.design is not available ({exc})") from None
+    return study.kind.run_oed(study, results, progress or Progress(False))
+
+
+def design_sensors(study: Study, results: StudyResults, progress: Progress) -> StudyResults:
+    """``results`` with the sensors of the tests: the OED design, all sensors, or the names given
+    ([detect] sensors)."""
+    d = study.cfg.detect
+    if d.sensors == "oed":
+        return results if results.design_sensors else run_oed(study, results, progress)
+    if d.sensors == "all":
+        return dataclasses.replace(results, design_sensors=tuple(study.sensors), design_how="all sensors")
+    return dataclasses.replace(results, design_sensors=tuple(d.sensors), design_how="sensors given in [detect] sensors")

@@ -12,6 +12,7 @@ from typing import Callable
 import numpy as np
 
 from models.contract import Model, ModelError
+from models.labels import LabelledModel
 from models.shipping import ModelSource
 
 from .registry import builtin_model
@@ -21,11 +22,13 @@ from .data_io import DataUnits
 from .parameter_units import model_parameters
 from .study_base import VariantModel, load_factory
 
-__all__ = ["build_models", "apply_parameters", "declare_units", "config_start_values", "is_dynamic_built"]
+__all__ = ["build_models", "apply_parameters", "declare_units", "config_start_values"]
 
 
 def build_models(cfg: StudyConfig) -> dict:
-    """{variant: VariantModel} of the config's variants (a dynamic model is kept as built, without inputs)."""
+    """{variant: VariantModel} of the config's variants: a :class:`models.Model` bounded by [[parameters]],
+    a model of another kind (an ODE/DAE model) kept as built, without inputs (its study kind bounds it,
+    :mod:`mudoe.kind`; :func:`mudoe.kind.study_kind` refuses what is no model)."""
     builtin = builtin_model(cfg.model.name)
     if builtin is not None:
         out = {}
@@ -37,15 +40,10 @@ def build_models(cfg: StudyConfig) -> dict:
     out = {}
     for v in cfg.model.variants:
         m = call_factory(factory, cfg.model.name, v, lambda msg: config_error(cfg, "model", "name", msg))
-        if getattr(m, "is_dynamic", False):           # an ODE/DAE model: mudoe.dynamic_study
-            m.origin = ModelSource(cfg.model.name, v)
-            out[v] = VariantModel(m)
-            continue
-        if not isinstance(m, Model):
-            raise ConfigError(f"{cfg.path}: [model] name: {cfg.model.name}({v!r}) returned "
-                              f"{type(m).__name__}, expected a models.Model")
-        m.origin = ModelSource(cfg.model.name, v)     # worker processes may rebuild it from here
-        out[v] = VariantModel(apply_parameters(cfg, m), getattr(m, "mudoe_inputs", None))
+        if isinstance(m, LabelledModel):
+            m.origin = ModelSource(cfg.model.name, v)     # worker processes may rebuild it from here
+        out[v] = VariantModel(apply_parameters(cfg, m), getattr(m, "mudoe_inputs", None)) if isinstance(m, Model) \
+            else VariantModel(m)
     return out
 
 
@@ -97,8 +95,3 @@ def config_start_values(cfg: StudyConfig, m: Model) -> np.ndarray:
         raise ConfigError(f"{cfg.path}: [[parameters]] give start values for {', '.join(m.param_names)}")
     return np.asarray(nominal, float)
 
-
-def is_dynamic_built(cfg: StudyConfig, built: dict) -> bool:
-    """Whether the built variants are dynamic models (:func:`mudoe.dynamic_study.is_dynamic_study`)."""
-    from .dynamic_study import is_dynamic_study
-    return is_dynamic_study(cfg, built)

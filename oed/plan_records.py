@@ -1,6 +1,6 @@
 """The designs a study plans, as records: sensors / inputs / both, discrimination, sampling times.
 
-Built by :mod:`mudoe.plans` and :mod:`mudoe.dynamic_runs`; read by the CLI (``summary``, ``to_dict``)
+Built by :mod:`mudoe.plans` and :mod:`mudoe.kind.time_series`; read by the CLI (``summary``, ``to_dict``)
 and the report (:attr:`oed.study_record.StudyRecord.plan`).  Every plan has ``variant``, ``mode`` and
 ``planned``.  (Moved from ``mudoe.plan_records``, which re-exports them, so that the report, below the
 study layer, reads them as typed records.)

@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parents[2]
 def reactor():
     """The shipped reactor study fitted on all study data (no detection: fast)."""
     from mudoe.config import load_config
-    from mudoe.dynamic_runs import run_discretisation
+    from mudoe.kind.time_series import run_discretisation
     from mudoe.study import StudyResults, prepare, run_identify
     study = prepare(load_config(REPO / "configs" / "reactor.toml"))
     return run_discretisation(study, run_identify(study, StudyResults(study)))
@@ -87,7 +87,7 @@ def test_dynamic_report_states_the_discretisation(reactor, tmp_path):
 
 def test_a_fit_whose_error_is_not_bounded_says_so_in_red(reactor):
     import matplotlib.pyplot as plt
-    from mudoe.dynamic_runs import mesh_summary
+    from mudoe.kind.time_series import mesh_summary
     from mudoe.report_record import study_record
     from reports.builder import _estimate_pages, _title_page
     est = reactor.estimates["isothermal"]
@@ -107,7 +107,7 @@ def test_trajectory_grid_merges_times_that_differ_by_rounding_and_states_its_err
     """401 points over 2 h put 1.4000000000000001 next to the sampling time 1.4: one time, not a
     collocation error; the caption reads the grid's discretisation error the study computed."""
     import matplotlib.pyplot as plt
-    from mudoe.dynamic_runs import trajectories
+    from mudoe.kind.time_series import trajectories
     from mudoe.report_record import study_record
     from reports.dynamic_pages import _trajectory_pages
     tr = trajectories(reactor.study, reactor.estimates["isothermal"], "isothermal", n_fine=401)

@@ -1,0 +1,74 @@
+"""mudoe.kind: one strategy per kind of study, chosen once from the built models (issue 28 item 5)."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from mudoe.config import ConfigError, load_config, parse_config
+from mudoe.kind import STATIC, TIME_SERIES, kind_of, study_kind
+from mudoe.study_base import VariantModel
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_kind_of_a_model():
+    from mudoe.example_cstr import build as cstr
+    from mudoe.example_reactor import build as reactor
+    assert kind_of(reactor("isothermal")) is TIME_SERIES
+    assert kind_of(cstr("arrhenius")) is STATIC
+    assert kind_of({"not": "a model"}) is None
+
+
+def _cfg(tmp_path, extra: str = ""):
+    text = (REPO / "configs" / "cstr.toml").read_text().replace('directory = "../data/cstr"',
+                                                               f'directory = "{REPO / "data" / "cstr"}"')
+    return parse_config(text + extra, str(tmp_path / "study.toml"))
+
+
+def test_study_kind_refuses_mixed_variants_and_no_model(tmp_path):
+    from mudoe.example_cstr import build as cstr
+    from mudoe.example_reactor import build as reactor
+    cfg = _cfg(tmp_path)
+    with pytest.raises(ConfigError, match="mix dynamic"):
+        study_kind(cfg, {"a": VariantModel(reactor("isothermal")), "b": VariantModel(cstr("arrhenius"))})
+    with pytest.raises(ConfigError, match=r"\('b'\) returned dict, expected a models.Model"):
+        study_kind(cfg, {"a": VariantModel(cstr("arrhenius")), "b": VariantModel({})})
+    assert study_kind(cfg, {"a": VariantModel(cstr("arrhenius"))}) is STATIC
+
+
+def test_a_dynamic_section_needs_dynamic_models(tmp_path):
+    from mudoe.example_cstr import build as cstr
+    cfg = _cfg(tmp_path, "\n[dynamic]\ntimes = [1.0, 2.0]\n[[dynamic.experiments]]\n")
+    with pytest.raises(ConfigError, match=r"\[dynamic\] is for dynamic models"):
+        study_kind(cfg, {"a": VariantModel(cstr("arrhenius"))})
+
+
+@pytest.mark.parametrize("name, kind, pages", [("oscillator", TIME_SERIES, "trajectories"), ("cstr", STATIC, "fits")])
+def test_a_prepared_study_carries_its_kind(name, kind, pages):
+    from mudoe.study import prepare
+    study = prepare(load_config(REPO / "configs" / f"{name}.toml"))
+    assert study.kind is kind and study.kind.report_pages == pages
+    assert study.is_dynamic is (kind is TIME_SERIES)          # what the report reads until issue 28 item 6
+
+
+def test_quantify_of_a_time_series_study_is_refused_before_the_data(tmp_path):
+    from mudoe.study import prepare
+    text = (REPO / "configs" / "oscillator.toml").read_text().replace('directory = "../data/oscillator"',
+                                                                      f'directory = "{tmp_path / "none"}"')
+    cfg = parse_config(text, str(tmp_path / "osc.toml"))
+    with pytest.raises(ConfigError, match="static models only"):
+        prepare(cfg, command="quantify")
+
+
+def test_only_the_kind_choice_reads_the_models_kind():
+    """The static/dynamic question is asked once (mudoe/kind/__init__.py); the study's ``is_dynamic`` is the
+    report's view of its kind (issue 28 target: the switches of the whole repository <= 4)."""
+    found = []
+    for p in sorted((REPO / "mudoe").rglob("*.py")):
+        for k, line in enumerate(p.read_text().splitlines(), 1):
+            if re.search(r"is_dynamic|isinstance\(.*Dynamic", line):
+                found.append(f"{p.relative_to(REPO)}:{line.strip()}")
+    assert found == ['mudoe/kind/__init__.py:if getattr(model, "is_dynamic", False):',
+                     "mudoe/study_base.py:def is_dynamic(self) -> bool:"]
