@@ -59,16 +59,17 @@ def study_setup(study) -> StudySetup:
     """What a report shows of a :class:`mudoe.study.Study` (static or dynamic)."""
     c = study.campaign
     source = DataSource(source=c.source, files=tuple(c.files), sha256=c.sha256, n_M=c.n_M, n_q=c.n_q)
-    dynamic = bool(study.is_dynamic)
+    kind = study.kind
+    rows = kind.report_pages == "fits"                      # the pages against the set point: campaign and phases
     shown = study.presentation
     if shown.phases is not None:                            # the labels are data below; the callable stays here
         shown = dataclasses.replace(shown, phases=None)
-    return StudySetup(config=config_record(study.cfg), source=source, campaign=None if dynamic else c,
+    return StudySetup(config=config_record(study.cfg), source=source, campaign=c if rows else None,
                       sensors=tuple(study.sensors), sigma=study.sigma, sigma_table=tuple(study.sigma_table),
                       normality=study.normality, models=dict(study.models), data=dict(study.data), p0=study.p0,
                       splits=tuple(study.splits), notes=tuple(study.notes), presentation=shown,
-                      phases=None if dynamic else study_phases(study),
-                      inputs=study.inputs if dynamic else None, is_dynamic=dynamic)
+                      phases=study_phases(study) if rows else None, inputs=None if rows else study.inputs,
+                      pages=kind.report_pages, input_rows=kind.input_rows, normality_over=kind.normality_over)
 
 
 def study_record(results) -> StudyRecord:

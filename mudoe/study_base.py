@@ -146,12 +146,6 @@ class Study:
         """The start values of a variant's fits (``p0s`` of the variant, else ``p0``)."""
         return self.p0s.get(variant, self.p0)
 
-    @property
-    def is_dynamic(self) -> bool:
-        """Whether the report draws the time-series pages (what :mod:`reports` reads until it draws the typed
-        study record of issue 28 item 6; the study itself asks ``kind``)."""
-        return self.kind is not None and self.kind.report_pages == "trajectories"
-
 
 @dataclass(frozen=True, eq=False)
 class StudyResults:

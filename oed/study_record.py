@@ -105,7 +105,10 @@ class StudySetup:
     presentation : Presentation   the words a built-in model's study puts on its pages
     phases : tuple of str or None   a phase label per set point (the press: loading / unloading), None: none
     inputs : ndarray (n_q, d_q) or None   a dynamic study's experiments (input rows); None static
-    is_dynamic : bool             the models are dynamic (ODE/DAE): the pages against time
+    pages : str                   the pages the study's kind draws beyond the fits: "fits" (bands against the
+                                  set point, diagnosis, model error) or "trajectories" (the pages against time)
+    input_rows : str              what the study calls its input rows ("set points", "experiments")
+    normality_over : str          which readings the normality gate pools (words for the report)
     """
 
     config: ConfigRecord
@@ -123,7 +126,9 @@ class StudySetup:
     presentation: Presentation = Presentation()
     phases: tuple | None = None
     inputs: np.ndarray | None = None
-    is_dynamic: bool = False
+    pages: str = "fits"
+    input_rows: str = "set points"
+    normality_over: str = "all set points"
 
 
 @dataclass(frozen=True, eq=False)

@@ -116,11 +116,10 @@ def _title_page(results):
     for v, par in verdict_paragraphs(results):
         y -= 0.021 * _text(fig, 0.04, y, par, width=170, size=8.5) + 0.012
     c = s.source
-    dyn = s.is_dynamic
     meta = (f"Config: {config.path}    Data: {c.source}" + (f" ({', '.join(Path(f).name for f in c.files)})"
                                                           if c.files else "")
             + f"\nsha256 of the data: {c.sha256}\n"
-            f"{c.n_M} series x {c.n_q} {'experiments' if dyn else 'set points'} x {len(s.sensors)} sensors; study series: "
+            f"{c.n_M} series x {c.n_q} {s.input_rows} x {len(s.sensors)} sensors; study series: "
             f"{'all' if config.series is None else ', '.join(str(i + 1) for i in config.series)} (1-based); "
             f"sensors used by the tests: {', '.join(results.design_sensors) or 'n/a'} ({results.design_how or 'n/a'})\n"
             f"Built {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}")
@@ -135,7 +134,7 @@ def _title_page(results):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5,
                               **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
-          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if dyn else
+          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if s.pages == "trajectories" else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
           + ("the model error of each variant, " if results.model_error_views else "") + "what the model misses."),
@@ -193,8 +192,7 @@ def _normality_page(results):
                     + ("passed" if chk.passed else ("FAILED (overridden)" if chk.overridden else "FAILED"))
                     + (f" for the sensors used by the tests ({', '.join(chk.gated)})" if chk is gate else "")
                     + (f" (failing: {', '.join(chk.failing())})" if chk.failing() else ""))
-    over = "every (experiment, time) reading, pooled per instrument" if s.is_dynamic else \
-        "all set points"
+    over = s.normality_over
     txt = (f"Normality gate: {(gate or s.normality).gate_text()} (one test per sensor, on the differences of "
            f"consecutive series over {over}), {'; '.join(said)}. sigma_rep = std(differences)/sqrt(2). The sigma used by every "
            "fit is composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2) with sigma_rep on all series, unless "
@@ -541,7 +539,7 @@ def report_pages(results: StudyRecord, diagnosis=None, with_diagnosis: bool = Tr
         pages.append(("misses", partial(_misses_pages, results, diagnosis)))
     if results.validation is not None:
         pages.append(("validation", partial(_validation_page, results)))
-    if results.study.is_dynamic:                         # time series: reports.dynamic_pages
+    if results.study.pages == "trajectories":            # time series: reports.dynamic_pages
         from .dynamic_pages import dynamic_pages
         pages = dynamic_pages(pages, results)
     return pages

@@ -43,11 +43,15 @@ class StudyKind:
     report_pages : str     what the report draws beyond the fits: "fits" (bands, diagnosis, model error)
                            or "trajectories" (trajectories with bands, the mesh of each fit)
     model_error_refusal : str   why ``mudoe quantify`` cannot run on this kind ("" when it can)
+    input_rows : str       what the report calls the input rows ("set points", "experiments")
+    normality_over : str   which readings the normality gate pools (words for the report)
     """
 
     name = ""
     report_pages = ""
     model_error_refusal = ""
+    input_rows = "set points"
+    normality_over = "all set points"
 
     def refusal(self, command: str) -> str:
         """Why this kind cannot run the CLI ``command`` ("" when it can): ``quantify`` needs a model error."""

@@ -562,6 +562,8 @@ class TimeSeriesKind(StudyKind):
     name = "time series"
     report_pages = "trajectories"
     model_error_refusal = STATIC_ONLY
+    input_rows = "experiments"
+    normality_over = "every (experiment, time) reading, pooled per instrument"
 
     def prepare(self, cfg, built, progress):
         return prepare_dynamic(cfg, {v: b.model for v, b in built.items()}, progress)

@@ -50,7 +50,6 @@ def test_a_prepared_study_carries_its_kind(name, kind, pages):
     from mudoe.study import prepare
     study = prepare(load_config(REPO / "configs" / f"{name}.toml"))
     assert study.kind is kind and study.kind.report_pages == pages
-    assert study.is_dynamic is (kind is TIME_SERIES)          # what the report reads until issue 28 item 6
 
 
 def test_quantify_of_a_time_series_study_is_refused_before_the_data(tmp_path):
@@ -63,12 +62,11 @@ def test_quantify_of_a_time_series_study_is_refused_before_the_data(tmp_path):
 
 
 def test_only_the_kind_choice_reads_the_models_kind():
-    """The static/dynamic question is asked once (mudoe/kind/__init__.py); the study's ``is_dynamic`` is the
-    report's view of its kind (issue 28 target: the switches of the whole repository <= 4)."""
+    """The static/dynamic question is asked once in mudoe (mudoe/kind/__init__.py); the report reads the pages the
+    kind chose from the study record (issue 28 target: the switches of the whole repository <= 4)."""
     found = []
     for p in sorted((REPO / "mudoe").rglob("*.py")):
         for k, line in enumerate(p.read_text().splitlines(), 1):
             if re.search(r"is_dynamic|isinstance\(.*Dynamic", line):
                 found.append(f"{p.relative_to(REPO)}:{line.strip()}")
-    assert found == ['mudoe/kind/__init__.py:if getattr(model, "is_dynamic", False):',
-                     "mudoe/study_base.py:def is_dynamic(self) -> bool:"]
+    assert found == ['mudoe/kind/__init__.py:if getattr(model, "is_dynamic", False):']

@@ -21,4 +21,4 @@ def test_a_record_without_results_is_empty():
                        sigma_table=(), normality=None, models={}, data={}, p0=None, splits=())
     r = StudyRecord(study=setup)
     assert r.plan is None and r.detection is None and dict(r.estimates) == {} and r.notes == ()
-    assert setup.phases is None and setup.presentation.quantity == "" and not setup.is_dynamic
+    assert setup.phases is None and setup.presentation.quantity == "" and setup.pages == "fits"
