@@ -199,7 +199,7 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
 
 def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
     """The splits of [splits]: custom and random over the experiments, time windows, early vs late."""
-    from identification.studies.dynamic_detect import early_late_dynamic_split, time_window_splits
+    from identification.studies.splits import early_late_dynamic_split, time_window_splits
     s = cfg.splits
     if s.scenarios:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
