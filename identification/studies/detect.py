@@ -48,7 +48,7 @@ pooled per instrument over every (experiment, time) reading (one gate, :class:`_
 
 Static and dynamic models take one path: the arguments are checked, the design resolved, the gate
 run, the split tests and the decisions computed the same way; what differs is the kind of campaign
-(chosen once from the model, :func:`_kind`): a static model's :class:`Measurements` are split by
+(chosen once from the model, :func:`takes_time_series`): a static model's :class:`Measurements` are split by
 input rows, series and sensors and :func:`run_split_tests` fits every set, a dynamic model's
 :class:`DynamicMeasurements` by experiments and half-open time windows
 (:func:`identification.studies.splits.window_rows`: the split tests run on the collocation of the
@@ -316,6 +316,7 @@ class _Rows:
     and sensors; :func:`run_split_tests` fits every set."""
 
     def checked_splits(self, splits) -> tuple:
+        """The splits (:func:`_checked_splits`), none by time window."""
         splits = _checked_splits(splits)
         for sp in splits:
             if sp.timed:
@@ -324,11 +325,13 @@ class _Rows:
         return splits
 
     def checked_design(self, design, weights, discretisation) -> None:
+        """``design`` / ``weights`` (:func:`_checked_design`); no ``discretisation``."""
         _checked_design(design, weights)
         if discretisation is not None:
             raise DataError("discretisation: only the fits of a dynamic model take a discretisation control")
 
     def model_tests(self, run: _Run, name: str, m: Model, data, p0) -> _ModelTests:
+        """Lines 02-08 for the model ``m`` (named ``name``) on its campaign ``data`` from the start ``p0``."""
         data = _checked_data(name, data, run.splits)
         w, how = _design_weights(m, data, run.design, run.weights, run.design_how)     # resolved once, passed down
         _check_split_sizes(run.splits, data, m, w)
@@ -352,6 +355,7 @@ class _TimeSeries:
     "discretisation", its reason recorded), never a rejection."""
 
     def checked_splits(self, splits) -> tuple:
+        """The splits (:func:`_checked_splits`), by experiment and time window only."""
         splits = _checked_splits(splits)
         for sp in splits:
             if sp.cal_series is not None or sp.val_series is not None:
@@ -363,10 +367,12 @@ class _TimeSeries:
         return splits
 
     def checked_design(self, design, weights, discretisation) -> None:
+        """``design`` only (instrument names), no ``weights``."""
         if weights is not None:
             raise DataError("weights: a dynamic model takes design= (instrument or sensor@time names)")
 
     def model_tests(self, run: _Run, name: str, m, data, p0) -> _ModelTests:
+        """Lines 02-08 for the dynamic model ``m`` (named ``name``) on its time series ``data`` from ``p0``."""
         if not isinstance(data, DynamicMeasurements):
             raise TypeError(f"measurements[{name!r}]: a dynamic model needs identification.DynamicMeasurements, "
                             f"got {type(data).__name__}")
@@ -454,9 +460,16 @@ def _series_fits(model, data, splits, p0, w, run: _Run) -> tuple:
 _ROWS, _TIME_SERIES = _Rows(), _TimeSeries()
 
 
+def takes_time_series(model) -> bool:
+    """Whether ``model`` is tested on a campaign of time series (a dynamic model: its splits select
+    experiments and time windows, its fits take a discretisation) rather than on input rows: the one
+    static / dynamic switch of the studies (:func:`detect`, :func:`identification.studies.montecarlo.validate`)."""
+    return bool(getattr(model, "is_dynamic", False))
+
+
 def _kind(model):
     """The kind of campaign a model is tested on: time series for a dynamic model, else input rows."""
-    return _TIME_SERIES if getattr(model, "is_dynamic", False) else _ROWS
+    return _TIME_SERIES if takes_time_series(model) else _ROWS
 
 
 # ---------------------------------------------------------------------------- main entry

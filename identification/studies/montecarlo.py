@@ -23,6 +23,10 @@ computed for all replications of a chunk at once with the same formulas
 replication with a failed fit or an invalid covariance, which records the failure;
 ``MonteCarloSettings.fits=ONE_BY_ONE``: one identify call per fit).
 
+A dynamic model is validated the same way on the collocation of its campaign fit, a static model
+over the (sensor, time) outputs (:func:`flat_size_study`; splits by time window become splits of
+those columns, :func:`identification.studies.splits.flat_split`).
+
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
 depend on the number of workers or on the backend (serial, local processes, Dask: the
@@ -43,7 +47,7 @@ from scipy import stats
 from models.contract import Model
 from identification import cluster
 from identification.replicate import ReplicationTask, replicate
-from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field
+from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, takes_time_series
 from identification.errors import DataError, IdentificationError
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
@@ -818,7 +822,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
     """
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
-    if getattr(model, "is_dynamic", False):         # the kind of campaign: time series, sized on the flat data
+    if takes_time_series(model):                    # a dynamic model: sized on the flat data of its campaign
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")

@@ -32,12 +32,17 @@ collocated model (:func:`flat_split`).  :func:`time_window_splits` (t < e agains
 times, the cut is t_c = t_(n // 2) and the early readings are those at t < t_c, the late ones
 those at t >= t_c (the half-open windows (-inf, t_c) and [t_c, inf)): for an odd n the middle
 time is late.  :func:`early_late_split` (columns of the flat data) and
-:func:`early_late_dynamic_split` (windows of the time series) both use it.  Before issue 28
-``early_late_split`` cut at t <= t_((n-1) // 2), which put the middle time of an odd n into the
-early set; the shipped studies (configs/*.toml: the press has no sampling times, the dynamic
-examples split with ``early_late_dynamic_split``, already this rule) give the same numbers; the
-tests that split an odd number of times by ``early_late_split`` (tests/identification/studies/
-test_dynamic_unchanged.py: 5 times, early {0.4, 0.8} instead of {0.4, 0.8, 1.2}) changed.
+:func:`early_late_dynamic_split` (windows of the time series) both use it, so that the same study
+is split the same way on either path, and an early/late split is the time window split at t_c
+(``time_windows = [t_c]``).  Until issue 28 ``early_late_split`` cut at t <= t_((n-1) // 2) (the
+same partition for an even n, the middle time early for an odd n; a given ``t_split`` itself was
+early, now it is late).  What changed, measured: the shipped studies (configs/*.toml) not at all
+(the press has no sampling times; reactor and oscillator split early/late with
+``early_late_dynamic_split``, already this rule: detect identical, bench/detect_unchanged.py); the
+tests splitting 5 times with ``early_late_split`` (tests/identification/studies/
+test_dynamic_unchanged.py: early {0.4, 0.8} h instead of {0.4, 0.8, 1.2} h; e.g. the reactor's
+alpha_LR 81.8 % -> 95.5 %, the wrong rate law's LR 1445 -> 1827, every assertion still holds) and
+the split names ("early t < 1.5 vs late t >= 1.5" instead of "early t <= 1 vs late t > 1").
 
 Constructors: :func:`splits_from_scenarios` (a model's named scenario table, e.g. the
 paper's four press scenarios :func:`models.press.press_scenario_rows`), :func:`random_splits`
