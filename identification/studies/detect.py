@@ -93,7 +93,8 @@ from identification.studies.splits import Split, SplitError, reading_mask, readi
 
 __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
            "NormalityError", "normality_check", "run_split_tests", "decide", "STATISTICS", "CORRECTIONS",
-           "DEFAULT_STATISTIC", "alpha_field", "model_decisions", "series_text", "FitFailure"]
+           "DEFAULT_STATISTIC", "alpha_field", "model_decisions", "series_text", "FitFailure", "takes_time_series",
+           "POOLED_NOTE"]
 
 
 # ---------------------------------------------------------------------------- detect: validation

@@ -557,7 +557,7 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
     w = np.ones(model.n_S) if weights is None else np.asarray(weights, float)
     if not (0.0 < float(tol) < 1.0):
         raise ValueError(f"tol: must lie in (0, 1), got {tol}")
-    splits = tuple(splits)
+    splits = _row_splits(splits)
     for sp in splits:
         sp.check(q.shape[0], n_M, model.n_p, int(np.count_nonzero(w > 0)))
     Y = solve_states(model, p_true, q)
@@ -601,6 +601,20 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
 
 
 # ---------------------------------------------------------------------------- drivers
+def _row_splits(splits) -> tuple:
+    """The splits as a non-empty tuple of splits of rows (SplitError for none, or for a split by time window:
+    the replications simulate static campaigns, a dynamic model's over its (sensor, time) columns)."""
+    splits = tuple(splits)
+    if not splits:
+        raise SplitError("splits: at least one split is needed")
+    timed = [sp.name for sp in splits if sp.timed]
+    if timed:
+        raise SplitError(f"splits {timed} select readings by time window; a Monte Carlo study of a static model "
+                         "takes splits of rows and sensor columns (validate(dynamic model, data=...) converts them, "
+                         "identification.studies.splits.flat_split)")
+    return splits
+
+
 def _per_model(what: str, value, names: tuple) -> tuple:
     """One value per model name: ``value[name]`` from a mapping (DataError when one is missing), else ``value``."""
     if isinstance(value, Mapping):
@@ -637,9 +651,7 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     if not isinstance(models, Mapping) or not models:
         raise TypeError("models: expected a models.Model or a non-empty mapping {name: Model}")
     names = tuple(models)
-    splits = tuple(splits)
-    if not splits:
-        raise SplitError("splits: at least one split is needed")
+    splits = _row_splits(splits)
     p0s = tuple(np.asarray(v, float).ravel() for v in _per_model("p0", p0, names))
     for n, m, v in zip(names, models.values(), p0s):
         if v.shape != (m.n_p,):

@@ -82,6 +82,11 @@ def test_detect_checks_the_split_against_the_kind_of_campaign():
         detect({"static": m, "dynamic": R.build()}, data, [Split("a", [0, 1, 2], [3, 4, 5])], [1.0, 1.0])
     with pytest.raises(SplitError, match="splits of series are not supported on dynamic data"):
         detect(R.build(), series(), [Split("s", [0], [1], cal_series=[0], val_series=[1])], R.P_TRUE)
+    from identification import linearized_size, size_study
+    with pytest.raises(SplitError, match="select readings by time window; a Monte Carlo study"):
+        size_study(m, [1.0, 1.0], data.inputs, [0.1, 0.1], time_window_splits([0.5]))
+    with pytest.raises(SplitError, match="select readings by time window"):
+        linearized_size(m, [1.0, 1.0], data.inputs, [0.1, 0.1], time_window_splits([0.5]))
 
 
 def test_one_normality_gate_pooled_per_instrument_on_time_series():
