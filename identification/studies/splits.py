@@ -24,9 +24,9 @@ select readings by time: ``cal_window`` / ``val_window`` are half-open windows [
 (a reading at time t belongs to the set when t_lo <= t < t_hi; None: every time), and the rows
 are the experiments (None: every experiment).  Such a split is tested on the dynamic model itself
 (:func:`identification.studies.detect.detect`, each fit with its own discretisation control;
-:meth:`Split.readings`, :func:`window_rows`) or, as a split of the (sensor, time) columns, on the
-collocated model (:func:`flat_split`).  :func:`time_window_splits` (t < e against t >= e) and
-:func:`early_late_dynamic_split` build them.
+:func:`window_rows`, :func:`reading_mask`, :func:`readings`) or, as a split of the (sensor, time)
+columns, on the collocated model (:func:`flat_split`).  :func:`time_window_splits` (t < e against
+t >= e) and :func:`early_late_dynamic_split` build them.
 
 **One early/late rule** (:func:`early_late_cut`): with t_(0) < ... < t_(n-1) the distinct sampling
 times, the cut is t_c = t_(n // 2) and the early readings are those at t < t_c, the late ones
