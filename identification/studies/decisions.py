@@ -107,8 +107,8 @@ def decide(tests: Sequence[SplitTest], tol: float, statistic: str = DEFAULT_STAT
 
 def model_decisions(tests: tuple, names: tuple, settings: DetectSettings) -> tuple:
     """(primary decision per model, every model x statistic x correction decision) of split tests
-    (lines 09-17; :func:`identification.studies.detect.detect` and
-    :mod:`identification.studies.dynamic_detect` after marking undecided splits)."""
+    (lines 09-17; :func:`identification.studies.detect.detect`, for a dynamic model after marking the
+    splits whose discretisation error is not bounded undecided)."""
     all_dec, primary = [], []
     for name in names:
         mt = [t for t in tests if t.model == name]

@@ -43,41 +43,58 @@ that disagree by more than a factor 100 across the decision line get a numbered 
 Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
 series z_2 - z_1, z_4 - z_3, ... over all inputs, at the family-wise level over the gated
 sensors (Holm by default; :mod:`identification.studies.normality_gate`); the repeatability standard deviation
-of a sensor is std(differences) / sqrt(2) (same unit as z).
+of a sensor is std(differences) / sqrt(2) (same unit as z).  A campaign of time series is gated
+pooled per instrument over every (experiment, time) reading (one gate, :class:`_NormalityGate`).
+
+Static and dynamic models take one path: the arguments are checked, the design resolved, the gate
+run, the split tests and the decisions computed the same way; what differs is the kind of campaign
+(chosen once from the model, :func:`takes_time_series`): a static model's :class:`Measurements` are split by
+input rows, series and sensors and :func:`run_split_tests` fits every set, a dynamic model's
+:class:`DynamicMeasurements` by experiments and half-open time windows
+(:func:`identification.studies.splits.window_rows`: the split tests run on the collocation of the
+campaign fit over (experiment, window) rows) and every fit is a dynamic fit with its own
+discretisation control (:func:`identification.fit.dynamic_fit.identify_dynamic`: the mesh refined
+until the output error at the readings is below ``tol_sigma`` sigmas and the estimate's shift below
+``tol_se`` standard errors).  A split one of whose fits could not bound that error is *undecided*
+(stage "discretisation", its reason recorded), never a rejection: detect does not report
+discretisation error as model inadequacy.
 
 The pieces, bottom up: :mod:`~identification.studies.detect_settings` (the settings and statistics),
 :mod:`~identification.studies.normality` (line 05), :mod:`~identification.studies.split_tests` (lines
 06-08: the fits and statistics of one split), :mod:`~identification.studies.decisions` (lines 09-17),
 :mod:`~identification.studies.detection_result` (the result and its summaries); this module checks
-the arguments, runs them in order, and sends dynamic models to
-:func:`identification.studies.dynamic_detect.detect_dynamic`.  Their public names are importable
-from here too.
+the arguments and runs them in order.  Their public names are importable from here too.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from models.contract import Model
+from models.labels import LabelledModel
 from models.state import solve_states
 from identification.errors import DataError, IdentificationError
+from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
+from identification.inference.identify import identify
 from identification.progress import Progress
 from identification.studies.decisions import ModelDecision, decide, model_decisions
 from identification.studies.detect_settings import (CORRECTIONS, DEFAULT_STATISTIC, STATISTICS, DetectSettings,
                                                     alpha_field)
 from identification.studies.detection_result import DetectionResult
-from identification.studies.dynamic_detect import detect_dynamic
 from identification.studies.normality import NormalityCheck, NormalityError, normality_check, series_text
 from identification.studies.split_tests import FitFailure, SplitTest, run_split_tests
-from identification.studies.splits import Split, SplitError
+from identification.studies.splits import Split, SplitError, reading_mask, readings, window_rows, window_text
 
 __all__ = ["detect", "DetectSettings", "DetectionResult", "SplitTest", "ModelDecision", "NormalityCheck",
            "NormalityError", "normality_check", "run_split_tests", "decide", "STATISTICS", "CORRECTIONS",
-           "DEFAULT_STATISTIC", "alpha_field", "model_decisions", "series_text", "FitFailure"]
+           "DEFAULT_STATISTIC", "alpha_field", "model_decisions", "series_text", "FitFailure", "takes_time_series",
+           "POOLED_NOTE"]
 
 
 # ---------------------------------------------------------------------------- detect: validation
@@ -111,20 +128,25 @@ def _checked_splits(splits) -> tuple:
     return splits
 
 
-def _checked_models(model) -> dict:
-    """{name: Model} from one Model or a non-empty mapping of them (TypeError, DataError)."""
+def _checked_models(model) -> tuple:
+    """({name: model}, the kind of campaign they are tested on) from one model or a non-empty mapping of them,
+    all static or all dynamic (TypeError, DataError)."""
     if isinstance(model, Mapping):
         models = dict(model)
         if not models:
             raise DataError("model: the mapping of models is empty")
-    elif isinstance(model, Model):
+    elif isinstance(model, LabelledModel):
         models = {model.name: model}
     else:
         raise TypeError(f"model: expected a models.Model or a mapping of them, got {type(model).__name__}")
     for name, m in models.items():
-        if not isinstance(m, Model):
+        if not isinstance(m, LabelledModel):
             raise TypeError(f"model[{name!r}]: expected a models.Model, got {type(m).__name__}")
-    return models
+    kinds = {_kind(m) for m in models.values()}
+    if len(kinds) > 1:
+        raise DataError(f"model: {', '.join(models)} mix static and dynamic models; test them in separate calls "
+                        "(their data differ)")
+    return models, kinds.pop()
 
 
 def _as_mapping(what, value, names):
@@ -199,17 +221,25 @@ def _check_split_sizes(splits: tuple, data: Measurements, model: Model, w: np.nd
 
 
 # ---------------------------------------------------------------------------- detect: normality gate (line 05)
+#: the note of a gate pooled per instrument over a campaign of time series
+POOLED_NOTE = "pooled per instrument over every (experiment, time) reading"
+
+
 class _NormalityGate:
     """Line 05 once per distinct campaign z and sensor selection: :func:`normality_check`, then
-    raise :class:`NormalityError` (normality="check") or record the override in ``notes``."""
+    raise :class:`NormalityError` (normality="check") or record the override in ``notes``.  A campaign
+    of time series is gated pooled per instrument (its :meth:`DynamicMeasurements.by_instrument`, the
+    note :data:`POOLED_NOTE`), not per (sensor, time) pair, whose few differences each would make the
+    gate blind and its multiplicity correction over hundreds of pairs meaningless."""
 
     def __init__(self, settings: DetectSettings, notes: list):
         self.settings = settings
         self.notes = notes
         self.seen: list = []          # (z, selection weights, NormalityCheck) already checked
 
-    def check(self, data: Measurements, wk: np.ndarray) -> NormalityCheck:
-        """The gate on ``data`` with the sensors of the validated weights ``wk`` (n_S,)."""
+    def check(self, data: Measurements, wk: np.ndarray, pooled: str = "") -> NormalityCheck:
+        """The gate on ``data`` with the sensors of the validated weights ``wk`` (n_S,); ``pooled`` (a
+        note, e.g. :data:`POOLED_NOTE`) says how the readings were pooled into ``data``'s columns."""
         found = None
         for z, w_seen, chk in self.seen:
             if z is data.z or (z.shape == data.z.shape and np.array_equal(z, data.z, equal_nan=True)):
@@ -218,6 +248,8 @@ class _NormalityGate:
         if found is not None:
             return found
         chk = normality_check(data, self.settings.normality_level, wk, self.settings.normality_correction)
+        if pooled:
+            chk = dataclasses.replace(chk, note=pooled + (f"; {chk.note}" if chk.note else ""))
         if not chk.passed:
             chk = self._failed(chk)
         self.seen.append((data.z, wk, chk))
@@ -255,16 +287,197 @@ def _split_tests_shown(progress: Progress | None, model: Model, data: Measuremen
         return run_split_tests(model, data, splits, *args, model_name=model_name, bar=bar, **kwargs)
 
 
-def _dynamic(model) -> bool:
-    ms = model.values() if isinstance(model, Mapping) else (model,)
-    return any(getattr(m, "is_dynamic", False) for m in ms)
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """What the models of one :func:`detect` call share."""
+
+    settings: DetectSettings
+    splits: tuple
+    design: object
+    weights: object
+    design_how: str | None
+    progress: Progress | None
+    discretisation: object
+    gate: _NormalityGate
+    notes: list
+
+
+@dataclass(frozen=True)
+class _ModelTests:
+    """The outcome of one model: its design entry, normality check, split tests and the splits tested."""
+
+    design: tuple
+    normality: NormalityCheck
+    tests: tuple
+    splits: tuple
+
+
+class _Rows:
+    """A static model on a campaign of input rows (:class:`Measurements`): a split selects rows, series
+    and sensors; :func:`run_split_tests` fits every set."""
+
+    def checked_splits(self, splits) -> tuple:
+        """The splits (:func:`_checked_splits`), none by time window."""
+        splits = _checked_splits(splits)
+        for sp in splits:
+            if sp.timed:
+                raise SplitError(f"split {sp.name!r} selects readings by time window; a static model's data have no "
+                                 "sampling times")
+        return splits
+
+    def checked_design(self, design, weights, discretisation) -> None:
+        """``design`` / ``weights`` (:func:`_checked_design`); no ``discretisation``."""
+        _checked_design(design, weights)
+        if discretisation is not None:
+            raise DataError("discretisation: only the fits of a dynamic model take a discretisation control")
+
+    def model_tests(self, run: _Run, name: str, m: Model, data, p0) -> _ModelTests:
+        """Lines 02-08 for the model ``m`` (named ``name``) on its campaign ``data`` from the start ``p0``."""
+        data = _checked_data(name, data, run.splits)
+        w, how = _design_weights(m, data, run.design, run.weights, run.design_how)     # resolved once, passed down
+        _check_split_sizes(run.splits, data, m, w)
+        design = (name, tuple(s for k, s in enumerate(m.sensors) if w[k] > 0), how)
+        chk = run.gate.check(data, w)
+        if data.sigma is None:
+            run.notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
+                             "approximate")
+        p0v = _start_values(name, p0, m)
+        tests = _split_tests_shown(run.progress, m, data, run.splits, p0v, weights=w, settings=run.settings,
+                                   model_name=name, states0=_start_states(m, p0v, data), curvature=True)
+        return _ModelTests(design, chk, tests, run.splits)
+
+
+class _TimeSeries:
+    """A dynamic model on a campaign of time series (:class:`DynamicMeasurements`): a split selects
+    experiments and a time window (:func:`identification.studies.splits.window_rows`); every fit
+    (campaign, calibration, validation, pooled) is a dynamic fit with its own discretisation control.
+    The split tests run on the collocation of the campaign fit over the (experiment, window) rows with
+    these fits; a split one of whose fits could not bound the discretisation error is undecided (stage
+    "discretisation", its reason recorded), never a rejection."""
+
+    def checked_splits(self, splits) -> tuple:
+        """The splits (:func:`_checked_splits`), by experiment and time window only."""
+        splits = _checked_splits(splits)
+        for sp in splits:
+            if sp.cal_series is not None or sp.val_series is not None:
+                raise SplitError(f"split {sp.name!r}: splits of series are not supported on dynamic data")
+            if sp.cal_sensors is not None or sp.val_sensors is not None:
+                raise SplitError(f"split {sp.name!r}: a split of a dynamic model's time series selects experiments "
+                                 "and time windows, not sensor columns (those are splits of the flat data, "
+                                 "identification.studies.splits.flat_split)")
+        return splits
+
+    def checked_design(self, design, weights, discretisation) -> None:
+        """``design`` only (instrument names), no ``weights``."""
+        if weights is not None:
+            raise DataError("weights: a dynamic model takes design= (instrument or sensor@time names)")
+
+    def model_tests(self, run: _Run, name: str, m, data, p0) -> _ModelTests:
+        """Lines 02-08 for the dynamic model ``m`` (named ``name``) on its time series ``data`` from ``p0``."""
+        if not isinstance(data, DynamicMeasurements):
+            raise TypeError(f"measurements[{name!r}]: a dynamic model needs identification.DynamicMeasurements, "
+                            f"got {type(data).__name__}")
+        w = _instrument_weights(m, run.design)
+        design = (name, tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0),
+                  run.design_how or ("instruments given" if run.design is not None else "all instruments"))
+        inst = data.by_instrument()
+        chk = run.gate.check(inst, inst.sensor_weights(w), pooled=POOLED_NOTE)
+        rows, row_splits = window_rows(data, run.splits)
+        whole = identify(m, data, _start_values(name, p0, m), weights=w, settings=run.settings.identify,
+                         discretisation=run.discretisation)
+        fits, pooled, unbounded = _series_fits(m, data, tuple(zip(run.splits, row_splits)), whole.p, w, run)
+        res = _split_tests_shown(run.progress, whole.model, rows, row_splits, whole.p, settings=run.settings,
+                                 model_name=name, curvature=True, fits=fits, pooled=pooled)
+        labels = {sp.name: (_series_label(sp.cal_inputs, sp.cal_window), _series_label(sp.val_inputs, sp.val_window))
+                  for sp in run.splits}
+        res = [dataclasses.replace(t, cal_label=labels[t.split][0], val_label=labels[t.split][1]) for t in res]
+        tests = tuple(_undecided(t, unbounded[t.split]) if t.split in unbounded else t for t in res)
+        rec = whole.extra["discretisation"]
+        run.notes.append(f"{name}: every split's fits by Radau IIA collocation with discretisation error control "
+                         f"(whole campaign: {rec.n_elements} elements, {100 * rec.error_sigma:.2g} % of sigma); the "
+                         "normality gate is pooled per instrument")
+        return _ModelTests(design, chk, tests, row_splits)
+
+
+def _instrument_weights(model, design):
+    """Instrument weights (n_S,) from instrument names (None: every instrument)."""
+    if design is None:
+        return None
+    if not all(isinstance(x, str) for x in design):
+        raise DataError("design: a dynamic model takes instrument names (each measured at every sampling time)")
+    unknown = [x for x in design if x not in model.sensors]
+    if unknown:
+        raise DataError(f"design: unknown instrument(s) {unknown}; the model has {list(model.sensors)}")
+    return np.array([1.0 if s in design else 0.0 for s in model.sensors])
+
+
+def _series_label(exps, window) -> str:
+    """A set of a split of time series in words: "experiment(s) 1, 2, 3; t < 1.2" (1-based)."""
+    e = "all experiments" if exps is None else "experiment(s) " + ", ".join(str(j + 1) for j in exps)
+    return e if window is None else f"{e}; {window_text(window)}"
+
+
+def _undecided(t: SplitTest, msg: str) -> SplitTest:
+    """The split test ``t`` made undecided: no p-value, the reason recorded."""
+    nan = math.nan
+    return dataclasses.replace(t, ok=False, stage="discretisation", error=msg, alpha_paper=nan,
+                               alpha_two_sample=nan, alpha_lr=nan, lr_error=msg)
+
+
+def _series_fit(model, data, p0, weights, run: _Run, failed: str = ""):
+    """A dynamic fit of a set, or the :class:`FitFailure` of the error it raised (reason
+    "<failed><ErrorType>: <message>"; recorded by the split test, never raised)."""
+    try:
+        return identify(model, data, p0, weights=weights, settings=run.settings.identify,
+                        discretisation=run.discretisation)
+    except (IdentificationError, DataError) as exc:
+        return FitFailure.from_error(exc, failed)
+
+
+def _unbounded(est) -> str:
+    """Why the discretisation error of the fit ``est`` is not bounded ("" when it is, or the fit failed)."""
+    rec = est.extra.get("discretisation") if not isinstance(est, FitFailure) else None
+    return "" if rec is None or rec.bounded else rec.reason or "not bounded"
+
+
+def _series_fits(model, data, splits, p0, w, run: _Run) -> tuple:
+    """(fits [(cal, val)], pooled {points: fit}, unbounded {split: reason}) of every (split, split of rows)."""
+    fits, pooled, unbounded = [], {}, {}
+    for sp, st in splits:
+        masks = [reading_mask(data, sp.cal_inputs, sp.cal_window), reading_mask(data, sp.val_inputs, sp.val_window)]
+        pair = tuple(_series_fit(model, readings(data, mk), p0, w, run) for mk in masks)
+        fits.append(pair)
+        key = st.pooled_points(data.n_M)
+        if key not in pooled:
+            pooled[key] = _series_fit(model, readings(data, masks[0] | masks[1]), p0, w, run,
+                                      failed="pooled fit failed: ")
+        why = [f"{what} fit: {_unbounded(e)}" for what, e in zip(("calibration", "validation", "pooled"),
+                                                               pair + (pooled[key],)) if _unbounded(e)]
+        if why:
+            unbounded[sp.name] = "discretisation error not bounded (" + "; ".join(why) + ")"
+    return fits, pooled, unbounded
+
+
+_ROWS, _TIME_SERIES = _Rows(), _TimeSeries()
+
+
+def takes_time_series(model) -> bool:
+    """Whether ``model`` is tested on a campaign of time series (a dynamic model: its splits select
+    experiments and time windows, its fits take a discretisation) rather than on input rows: the one
+    static / dynamic switch of the studies (:func:`detect`, :func:`identification.studies.montecarlo.validate`)."""
+    return bool(getattr(model, "is_dynamic", False))
+
+
+def _kind(model):
+    """The kind of campaign a model is tested on: time series for a dynamic model, else input rows."""
+    return _TIME_SERIES if takes_time_series(model) else _ROWS
 
 
 # ---------------------------------------------------------------------------- main entry
 def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None = None, statistic: str | None = None,
            correction: str | None = None, weights=None, design=None, normality: str | None = None,
            settings: DetectSettings | None = None, design_how: str | None = None,
-           progress: Progress | None = None) -> DetectionResult:
+           progress: Progress | None = None, discretisation=None) -> DetectionResult:
     r"""Algorithm 1: is the model rejected by calibration / validation tests?
 
     For each split: p_cal, C_cal and p_val, C_val by :func:`identify` (eqs. 3, 7), then
@@ -285,12 +498,16 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     Parameters
     ----------
     model : models.Model or mapping {name: Model}
-        One candidate, or several (e.g. M1, M2, M3) tested on the same splits.
+        One candidate, or several (e.g. M1, M2, M3) tested on the same splits; all static or all
+        dynamic (ODE/DAE models).
     measurements : Measurements or mapping {name: Measurements}
-        The campaign (per model when their inputs differ).  sigma per sensor should be known
-        (the paper fixes it); with sigma=None it is estimated and the chi^2 law is approximate.
+        The campaign (per model when their inputs differ); :class:`DynamicMeasurements` for a
+        dynamic model.  sigma per sensor should be known (the paper fixes it); with sigma=None it
+        is estimated and the chi^2 law is approximate.
     splits : sequence of Split
-        The n_tests scenarios (e.g. ``splits_from_scenarios(models.press.PRESS_SCENARIOS, 29)``).
+        The n_tests scenarios (e.g. ``splits_from_scenarios(models.press.PRESS_SCENARIOS, 29)``); on
+        time series by experiment and time window (e.g. ``time_window_splits([e])``,
+        ``early_late_dynamic_split(data)``), not by series or sensor columns.
     p0 : array_like (n_p,) or mapping {name: array}
         Start values of every fit.
     tol : float, optional
@@ -301,7 +518,8 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     weights : array_like (n_S,), optional
         Sensor weights (0/1) of the fits; exclusive with ``design``.
     design : None, sequence of str or array_like (n_S,)
-        Lines 02-03, chosen beforehand: sensor names or weights.  An optimal design is chosen
+        Lines 02-03, chosen beforehand: sensor names or weights (a dynamic model: instrument names,
+        each measured at every sampling time).  An optimal design is chosen
         with ``oed.select_sensors(model, data, p, criterion=...)``; pass its ``sensors``.
     normality : {"check", "override"}, optional
         "check" (default) raises :class:`NormalityError` when a selected sensor fails the
@@ -314,6 +532,9 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         "all sensors given".
     progress : identification.progress.Progress, optional
         A bar advanced per split fitted (models x splits; default None: no output).
+    discretisation : identification.fit.dynamic_fit.DiscretisationSettings, optional
+        The discretisation error control of every fit of a dynamic model (default
+        ``DiscretisationSettings()``); a static model takes none.
 
     Returns
     -------
@@ -334,35 +555,20 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         unless another split rejects it.
     """
     settings = _detect_settings(settings, tol=tol, statistic=statistic, correction=correction, normality=normality)
-    if _dynamic(model):           # ODE/DAE models: their collocation, splits by experiment and time window
-        if weights is not None:
-            raise DataError("weights: a dynamic model takes design= (instrument or sensor@time names)")
-        return detect_dynamic(model, measurements, splits, p0, settings=settings, design=design,
-                              design_how=design_how, progress=progress)
-    splits = _checked_splits(splits)
-    models = _checked_models(model)
+    models, kind = _checked_models(model)
     names = tuple(models)
+    splits = kind.checked_splits(splits)
     datas = _as_mapping("measurements", measurements, names)
     p0s = _as_mapping("p0", p0, names)
-    _checked_design(design, weights)
+    kind.checked_design(design, weights, discretisation)
     if progress is not None and not isinstance(progress, Progress):
         raise TypeError(f"progress: expected an identification.progress.Progress or None, got {type(progress).__name__}")
-    notes, tests, normal, designs = [], [], [], []
-    gate = _NormalityGate(settings, notes)
-    for name in names:
-        m = models[name]
-        data = _checked_data(name, datas[name], splits)
-        w, how = _design_weights(m, data, design, weights, design_how)     # resolved once, passed down
-        _check_split_sizes(splits, data, m, w)
-        designs.append((name, tuple(s for k, s in enumerate(m.sensors) if w[k] > 0), how))
-        normal.append((name, gate.check(data, w)))
-        if data.sigma is None:
-            notes.append(f"{name}: sigma unknown and estimated per fit; the chi^2 law of alpha_min is then "
-                         "approximate")
-        p0v = _start_values(name, p0s[name], m)
-        tests.extend(_split_tests_shown(progress, m, data, splits, p0v, weights=w, settings=settings, model_name=name,
-                                        states0=_start_states(m, p0v, data), curvature=True))
-    primary, all_decisions = model_decisions(tuple(tests), names, settings)
-    return DetectionResult(settings=settings, models=names, splits=splits, tests=tuple(tests), decisions=primary,
-                           all_decisions=all_decisions, normality=tuple(normal), design=tuple(designs),
-                           notes=tuple(notes))
+    notes = []
+    run = _Run(settings=settings, splits=splits, design=design, weights=weights, design_how=design_how,
+               progress=progress, discretisation=discretisation, gate=_NormalityGate(settings, notes), notes=notes)
+    outs = [kind.model_tests(run, name, models[name], datas[name], p0s[name]) for name in names]
+    tests = tuple(t for o in outs for t in o.tests)
+    primary, all_decisions = model_decisions(tests, names, settings)
+    return DetectionResult(settings=settings, models=names, splits=outs[-1].splits, tests=tests, decisions=primary,
+                           all_decisions=all_decisions, normality=tuple((n, o.normality) for n, o in zip(names, outs)),
+                           design=tuple(o.design for o in outs), notes=tuple(notes))

@@ -23,6 +23,10 @@ computed for all replications of a chunk at once with the same formulas
 replication with a failed fit or an invalid covariance, which records the failure;
 ``MonteCarloSettings.fits=ONE_BY_ONE``: one identify call per fit).
 
+A dynamic model is validated the same way on the collocation of its campaign fit, a static model
+over the (sensor, time) outputs (:func:`flat_size_study`; splits by time window become splits of
+those columns, :func:`identification.studies.splits.flat_split`).
+
 Replications are independent: replication r uses the random stream
 ``numpy.random.default_rng(SeedSequence(seed).spawn(n_rep)[r])``, so the numbers do not
 depend on the number of workers or on the backend (serial, local processes, Dask: the
@@ -41,23 +45,24 @@ import numpy as np
 from scipy import stats
 
 from models.contract import Model
-from models.dynamic import DynamicModel
 from identification import cluster
 from identification.replicate import ReplicationTask, replicate
-from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field
-from identification.studies.dynamic_validate import dynamic_size_study
+from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, takes_time_series
 from identification.errors import DataError, IdentificationError
+from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
+from identification.inference.identify import identify
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
 from identification.studies.split_fits import (BATCHED, ONE_BY_ONE, SplitFits, batched_split_tests,
                                                shapiro_pvalues)
-from identification.studies.splits import Split, SplitError
+from identification.studies.splits import Split, SplitError, flat_split
 from models.state import simulate, solve_states
 
 __all__ = ["validate", "size_study", "power_study", "run_monte_carlo", "MonteCarloSettings", "MonteCarloResult",
            "Rate", "clopper_pearson", "ModelCampaign", "linearized_size", "LinearizedSize", "batched_split_tests",
-           "shapiro_pvalues", "BATCHED", "ONE_BY_ONE", "Replication", "SplitFailure", "SizeStudyTask"]
+           "shapiro_pvalues", "BATCHED", "ONE_BY_ONE", "Replication", "SplitFailure", "SizeStudyTask", "FlatSizeStudy",
+           "flat_size_study"]
 
 
 # ---------------------------------------------------------------------------- statistics helpers
@@ -552,7 +557,7 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
     w = np.ones(model.n_S) if weights is None else np.asarray(weights, float)
     if not (0.0 < float(tol) < 1.0):
         raise ValueError(f"tol: must lie in (0, 1), got {tol}")
-    splits = tuple(splits)
+    splits = _row_splits(splits)
     for sp in splits:
         sp.check(q.shape[0], n_M, model.n_p, int(np.count_nonzero(w > 0)))
     Y = solve_states(model, p_true, q)
@@ -596,6 +601,20 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
 
 
 # ---------------------------------------------------------------------------- drivers
+def _row_splits(splits) -> tuple:
+    """The splits as a non-empty tuple of splits of rows (SplitError for none, or for a split by time window:
+    the replications simulate static campaigns, a dynamic model's over its (sensor, time) columns)."""
+    splits = tuple(splits)
+    if not splits:
+        raise SplitError("splits: at least one split is needed")
+    timed = [sp.name for sp in splits if sp.timed]
+    if timed:
+        raise SplitError(f"splits {timed} select readings by time window; a Monte Carlo study of a static model "
+                         "takes splits of rows and sensor columns (validate(dynamic model, data=...) converts them, "
+                         "identification.studies.splits.flat_split)")
+    return splits
+
+
 def _per_model(what: str, value, names: tuple) -> tuple:
     """One value per model name: ``value[name]`` from a mapping (DataError when one is missing), else ``value``."""
     if isinstance(value, Mapping):
@@ -632,9 +651,7 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
     if not isinstance(models, Mapping) or not models:
         raise TypeError("models: expected a models.Model or a non-empty mapping {name: Model}")
     names = tuple(models)
-    splits = tuple(splits)
-    if not splits:
-        raise SplitError("splits: at least one split is needed")
+    splits = _row_splits(splits)
     p0s = tuple(np.asarray(v, float).ravel() for v in _per_model("p0", p0, names))
     for n, m, v in zip(names, models.values(), p0s):
         if v.shape != (m.n_p,):
@@ -689,6 +706,90 @@ def power_study(models, generator: Callable, splits: Sequence[Split], p0, weight
                            description=description)
 
 
+# ---------------------------------------------------------------------------- a dynamic model's size study
+@dataclass(frozen=True, eq=False)
+class FlatSizeStudy:
+    """The size study of a dynamic model as a static one: the arguments of :func:`size_study`.
+
+    Attributes
+    ----------
+    model : Model                  the collocated model at the campaign fit (outputs (sensor, time))
+    p_true : ndarray (n_p,)        truth of the simulated campaigns
+    inputs : ndarray (n_q, d_q)    the experiments' inputs
+    sigma : ndarray (n_S,)         sigma per (sensor, time) output
+    splits : tuple of Split        the splits on the flat outputs
+    p0 : array_like or None        start values of every replication (None: p_true)
+    weights : ndarray or None      weight per (sensor, time) output
+    name : str                     the model's label in tables
+    """
+
+    model: object
+    p_true: np.ndarray
+    inputs: np.ndarray
+    sigma: np.ndarray
+    splits: tuple
+    p0: object
+    weights: object
+    name: str
+
+
+def flat_size_study(model, data, splits, p0=None, *, p_true=None, weights=None, identify_settings=None,
+                    name: str | None = None, discretisation=None) -> FlatSizeStudy:
+    r"""The size study of a dynamic model on its collocation at the campaign fit.
+
+    The campaign is fitted once (:func:`identification.fit.dynamic_fit.identify_dynamic`: Radau IIA
+    collocation with the discretisation error controlled at p̂); the size study then runs on that
+    collocated model (``est.model``, a static model over the (sensor, time) outputs) with its flat data,
+
+    .. math::
+
+        z^{(r)}_{ijk} = h_{k}(y_j(p^*), p^*, q_j) + \sigma_k \varepsilon^{(r)}_{ijk},\qquad k = (l, t),
+
+    every experiment simulated at every sampling time of the campaign (the union of the experiments'
+    times).  Splits of experiments apply to the rows; splits by time window (half-open, e.g.
+    :func:`identification.studies.splits.early_late_dynamic_split`) become splits of the (sensor, time)
+    columns (:func:`identification.studies.splits.flat_split`); splits with sensor columns
+    (:func:`identification.studies.splits.time_window_split`) are used as they are.
+
+    Parameters
+    ----------
+    model : models.dynamic.DynamicModel
+    data : DynamicMeasurements          the campaign (known sigma): inputs, sampling times, mesh
+    splits : sequence of Split
+    p0 : array_like (n_p,), optional     start values of the campaign fit and of every replication
+                                         (default ``p_true``)
+    p_true : array_like (n_p,), optional truth of the simulated campaigns (default: the campaign fit p̂)
+    weights : array_like (n_S,), optional  instrument weights (each instrument at every sampling time)
+    identify_settings : IdentifySettings, optional   settings of the campaign fit
+    name : str, optional                 the model's label in tables
+    discretisation : DiscretisationSettings, optional
+
+    Returns
+    -------
+    FlatSizeStudy
+    """
+    if not isinstance(data, DynamicMeasurements):
+        raise DataError(f"data: validate on a dynamic model needs the campaign as identification."
+                        f"DynamicMeasurements (inputs, sampling times, sigma), got {type(data).__name__}")
+    if data.sigma is None:
+        raise DataError("data.sigma: a size study simulates noise of known sigma; give sigma with the data")
+    start = p0 if p0 is not None else p_true
+    if start is None:
+        raise DataError("p0, p_true: give start values (p0) or the truth (p_true) of the dynamic model")
+    w = None
+    if weights is not None:
+        w = np.asarray(weights, float).ravel()
+        if w.shape != (model.n_S,):
+            raise DataError(f"weights: expected {model.n_S} instrument weights ({', '.join(model.sensors)}), got "
+                            f"shape {w.shape}")
+    est = identify(model, data, start, weights=w, settings=identify_settings, discretisation=discretisation)
+    cm, flat = est.model, est.data
+    flat_splits = tuple(flat_split(sp, cm.outputs, flat.n_q) for sp in splits)
+    w_flat = None if w is None else np.array([w[model.sensors.index(s)] for s, _ in cm.outputs])
+    truth = est.p if p_true is None else np.asarray(p_true, float).ravel()
+    return FlatSizeStudy(cm, truth, flat.inputs, flat.sigma, flat_splits, p0, w_flat, name or model.name)
+
+
 def _validate_settings(settings: MonteCarloSettings | None, tol: float | None, **given) -> MonteCarloSettings:
     """The settings of :func:`validate`: ``settings``, or the keywords given (None = the default of
     :class:`MonteCarloSettings`; ``tol`` goes to its :class:`DetectSettings`, normality "override").
@@ -728,18 +829,17 @@ def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=Non
 
     A dynamic model (:class:`models.dynamic.DynamicModel`) takes its campaign ``data``
     (DynamicMeasurements) instead of ``inputs`` / ``sigma``, instrument ``weights``, and splits by
-    experiment, time window or early against late; the size study runs on its collocation at the
-    campaign fit (:func:`identification.studies.dynamic_validate.dynamic_size_study`; ``p_true`` defaults to
-    that fit).
+    experiment, time window or early against late (:class:`Split`); the same size study runs on its
+    collocation at the campaign fit (:func:`flat_size_study`; ``p_true`` defaults to that fit).
     """
     settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
-    if isinstance(model, DynamicModel):
+    if takes_time_series(model):                    # a dynamic model: sized on the flat data of its campaign
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")
-        dyn = dynamic_size_study(model, data, splits, p0, p_true=p_true, weights=weights,
-                                 identify_settings=settings.detect.identify, name=name)
+        dyn = flat_size_study(model, data, splits, p0, p_true=p_true, weights=weights,
+                              identify_settings=settings.detect.identify, name=name)
         return size_study(dyn.model, dyn.p_true, dyn.inputs, dyn.sigma, dyn.splits, dyn.p0, n_M, dyn.weights,
                           settings, name=dyn.name)
     if generator is None:

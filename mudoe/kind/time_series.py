@@ -197,7 +197,7 @@ def _load(cfg: StudyConfig, model, Q, sigma) -> tuple:
 
 def dynamic_splits(cfg: StudyConfig, data: DynamicMeasurements) -> tuple:
     """The splits of [splits]: custom and random over the experiments, time windows, early vs late."""
-    from identification.studies.dynamic_detect import early_late_dynamic_split, time_window_splits
+    from identification.studies.splits import early_late_dynamic_split, time_window_splits
     s = cfg.splits
     if s.scenarios:
         raise config_error(cfg, "splits", "scenarios", "the press scenarios do not apply to a dynamic study; set "
@@ -447,8 +447,8 @@ def validation_problem(study, results, est, used) -> tuple:
     """(model, splits, weights) of ``mudoe validate`` on a dynamic study: the collocated model of the
     estimate (mesh controlled at p̂) over its (sensor, time) outputs, every split of the study (by
     experiment; by time window and early against late as splits of the (sensor, time) columns,
-    :func:`identification.studies.dynamic_detect.flat_split`), the instruments ``used`` at every time."""
-    from identification.studies.dynamic_detect import flat_split
+    :func:`identification.studies.splits.flat_split`), the instruments ``used`` at every time."""
+    from identification.studies.splits import flat_split
     from identification.studies.splits import SplitError
     try:
         splits = tuple(flat_split(sp, est.model.outputs, est.data.n_q) for sp in study.splits)

@@ -6,9 +6,8 @@ import dataclasses
 import numpy as np
 
 from identification.studies.detect import detect
-from identification.studies.dynamic_detect import early_late_dynamic_split, time_window_splits
 from identification.fit.dynamic_fit import simulate_campaign
-from identification.studies.splits import Split
+from identification.studies.splits import Split, early_late_dynamic_split, time_window_splits
 from mudoe import example_reactor as R
 
 
@@ -32,12 +31,11 @@ def test_detect_dispatches_on_a_dynamic_model():
 
 def test_unbounded_discretisation_makes_a_split_undecided():
     from identification.studies.detect import DetectSettings
-    from identification.studies.dynamic_detect import detect_dynamic
     from identification.fit.dynamic_fit import DiscretisationSettings
     m, d = _campaign()
     never = DiscretisationSettings(tol_sigma=1e-12, max_refinements=0)     # an error that cannot be bounded
-    res = detect_dynamic(m, d, [Split("exp 1-2 vs 3-4", [0, 1], [2, 3])], R.P_TRUE, settings=DetectSettings(),
-                         discretisation=never)
+    res = detect(m, d, [Split("exp 1-2 vs 3-4", [0, 1], [2, 3])], R.P_TRUE, settings=DetectSettings(),
+                 discretisation=never)
     t = res.tests[0]
     assert not t.ok and t.stage == "discretisation" and "not bounded" in t.error and np.isnan(t.alpha_lr)
     assert res.verdicts[m.name] == "undecided"

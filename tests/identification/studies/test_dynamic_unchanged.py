@@ -75,7 +75,7 @@ def test_algorithm_1_splits_by_experiment_time_window_and_early_late(fitted):
     pairs = [(s.split("@")[0], float(s.split("@")[1])) for s in est.data.sensors]
     splits = [BY_EXPERIMENT, time_window_split(pairs, len(Q), (0.4, 0.8), (1.6, 2.0)),
               early_late_split(pairs, len(Q))]
-    assert splits[2].name == "early t <= 1.2 vs late t > 1.2"
+    assert splits[2].name == "early t < 1.2 vs late t >= 1.2"         # 5 times: the middle one (1.2) is late
     res = detect(est.model, est.data, splits, est.p)            # the Holm-corrected normality gate applies
     assert [t.ok for t in res.tests] == [True] * 3 and all(t.alpha_lr > 0.05 / 3 for t in res.tests)
     # each time split fits the early / late columns only: values per fit = experiments x series x columns

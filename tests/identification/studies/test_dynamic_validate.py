@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 
 from identification import MonteCarloSettings, Split, identify, validate
-from identification.studies.dynamic_detect import DynamicSplit, flat_split
 from identification.fit.dynamic_fit import simulate_campaign
 from identification.studies.split_fits import ONE_BY_ONE
-from identification.studies.splits import SplitError, time_window_split
+from identification.studies.splits import SplitError, flat_split, time_window_split
 from mudoe.example_reactor import P_TRUE, build
 
 Q = np.array([[1.0, 330.0], [2.0, 330.0], [1.0, 370.0], [2.0, 370.0]])     # mol/L, K
 TIMES = np.linspace(0.4, 2.0, 5)                                            # h
 SIGMA = np.array([0.01, 0.01])                                              # mol/L
-EARLY_LATE = DynamicSplit("early vs late", None, None, (-np.inf, 1.2), (1.2, np.inf), "early vs late")
+EARLY_LATE = Split("early vs late", None, None, description="early vs late", cal_window=(-np.inf, 1.2),
+                   val_window=(1.2, np.inf))
 
 
 @pytest.fixture(scope="module")
@@ -28,11 +28,11 @@ def test_flat_split_of_a_time_window_masks_the_columns_of_its_times(campaign):
     ref = time_window_split(data.pairs, data.n_q, (0.4, 0.8), (1.2, 2.0))
     assert (sp.cal_sensors, sp.val_sensors) == (ref.cal_sensors, ref.val_sensors)
     assert sp.cal_inputs == sp.val_inputs == (0, 1, 2, 3)
-    by_exp = DynamicSplit("exp", (0, 2), (1, 3), (-np.inf, 1.0), None)
+    by_exp = Split("exp", (0, 2), (1, 3), cal_window=(-np.inf, 1.0))
     sp2 = flat_split(by_exp, data.pairs, data.n_q)
     assert sp2.cal_inputs == (0, 2) and sp2.val_sensors is None and sp2.cal_sensors == (0, 1, 2, 3)
     with pytest.raises(SplitError, match="holds no sampling time"):
-        flat_split(DynamicSplit("none", None, None, (5.0, 6.0), (0.0, 1.0)), data.pairs, data.n_q)
+        flat_split(Split("none", None, None, cal_window=(5.0, 6.0), val_window=(0.0, 1.0)), data.pairs, data.n_q)
 
 
 def test_validate_takes_the_dynamic_model_and_its_campaign(campaign):

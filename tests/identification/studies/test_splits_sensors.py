@@ -17,7 +17,7 @@ def test_early_late_split_masks_the_other_times_and_pools_exactly_the_union():
     data = campaign()
     sp = early_late_split(PAIRS, data.n_q)
     assert sp.cal_sensors == (0, 1, 2, 3) and sp.val_sensors == (4, 5, 6, 7)
-    assert sp.name == "early t <= 1 vs late t > 1" and sp.label()[0] == "q1,q2,q3 [sensors s1,s2,s3,s4]"
+    assert sp.name == "early t < 1.5 vs late t >= 1.5" and sp.label()[0] == "q1,q2,q3 [sensors s1,s2,s3,s4]"
     cal, val, pooled = sp.calibration(data), sp.validation(data), sp.pooled(data)
     np.testing.assert_array_equal(np.isfinite(cal.z), np.broadcast_to(np.arange(8) < 4, cal.z.shape))
     np.testing.assert_array_equal(np.isfinite(val.z), np.broadcast_to(np.arange(8) >= 4, val.z.shape))
@@ -57,8 +57,10 @@ def test_sensor_split_errors_name_the_argument():
         time_window_split(PAIRS, 3, (3, 4), (0, 1))
     with pytest.raises(SplitError, match="val_window: the window \\(2, 1\\) ends before it starts"):
         time_window_split(PAIRS, 3, (0, 1), (2, 1))
-    with pytest.raises(SplitError, match="t_split: 2 leaves the late set empty"):
-        early_late_split(PAIRS, 3, t_split=2.0)
+    with pytest.raises(SplitError, match="t_split: 2.5 leaves the late set empty"):
+        early_late_split(PAIRS, 3, t_split=2.5)
+    with pytest.raises(SplitError, match="t_split: 0.5 leaves the early set empty"):
+        early_late_split(PAIRS, 3, t_split=0.5)              # early is t < t_split (half-open)
     with pytest.raises(SplitError, match="pairs: expected the \\(sensor, time\\) pairs"):
         early_late_split(["cA@0.5", "cB@0.5"], 3)
     # too few values: 1 input x 1 series x 2 columns = 2 values for 4 parameters
