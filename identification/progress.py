@@ -4,16 +4,28 @@ One helper for every long-running loop or step: :meth:`Progress.bar` is a tqdm b
 known number of items (e.g. Monte Carlo replications), :meth:`Progress.step` times a step
 (seconds, wall clock) and prints ``<prefix><label> ...`` / ``<prefix><label> done in 1.2 s``.
 A disabled helper prints nothing; its bar is a disabled tqdm (same calls, no output).
+:func:`bar_line_open` says whether a bar drawn here is still open (its line on the stream has no end yet), so
+that a last message written around the stream (an interrupt) starts on a line of its own.
 """
 from __future__ import annotations
 
 import sys
 import time
+import weakref
 from contextlib import contextmanager
 
 from tqdm import tqdm
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "bar_line_open"]
+
+#: the bars :meth:`Progress.bar` made (weak: a bar that is gone is not open)
+_BARS: "weakref.WeakSet[tqdm]" = weakref.WeakSet()
+
+
+def bar_line_open() -> bool:
+    """Whether a bar of :meth:`Progress.bar` is drawn and not closed: its line (``\\r`` updates) has no
+    newline yet (tqdm sets ``disable`` when a bar closes)."""
+    return any(not b.disable for b in list(_BARS))
 
 
 class Progress:
@@ -46,8 +58,10 @@ class Progress:
 
     def bar(self, total: int, desc: str, unit: str = "rep") -> tqdm:
         """A tqdm bar over ``total`` items (call ``update(n)`` and ``close()``, or use it in ``with``)."""
-        return tqdm(total=total, desc=desc, unit=unit, file=self.stream or sys.stderr, smoothing=0.1,
-                    disable=not self.enabled)
+        b = tqdm(total=total, desc=desc, unit=unit, file=self.stream or sys.stderr, smoothing=0.1,
+                 disable=not self.enabled)
+        _BARS.add(b)
+        return b
 
     @contextmanager
     def step(self, label: str, announce: bool = True):

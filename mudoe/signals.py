@@ -26,6 +26,7 @@ signal ends it the same way at once.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -174,6 +175,11 @@ class Interrupt:
         with self._said:
             if not self._told:
                 self._told = True
+                from identification.progress import bar_line_open
+                if bar_line_open():         # a progress bar's line has no end yet: the message gets its own line
+                    with contextlib.suppress(OSError, ValueError):
+                        sys.stderr.flush()
+                    os.write(self.stderr_fd, b"\n")
                 if write is not None:
                     write(self.message)
                 else:
