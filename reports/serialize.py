@@ -1,7 +1,10 @@
 """Plain-JSON views of the library's results (NaN/inf become null / strings, arrays lists).
 
 The report builder and the CLI write every JSON file through :func:`dumps`; the provenance
-of a results file (Python and package versions) comes from :func:`package_versions`.
+of a results file (Python and package versions) comes from :func:`package_versions`.  The view of
+one result (an Estimate, a DetectionResult, a MonteCarloResult, a design) is that result's own
+``to_dict()`` (the result protocol, :mod:`identification.results_protocol`); this module assembles
+them with the study's data into results.json.
 """
 from __future__ import annotations
 
@@ -10,7 +13,7 @@ import importlib.metadata
 import json
 import platform
 
-from identification.results_protocol import jsonable   # noqa: F401  (re-exported: reports.serialize.jsonable)
+from identification.results_protocol import jsonable
 
 from .tables import ALL_SERIES, normality_labels, sigma_display
 
