@@ -96,7 +96,7 @@ def main(argv=None):
         res = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, not args.per_fit)
         _save(args.save, res)
         print(res.description)
-        print(res.table())
+        print(res.summary())
         for st in ("paper", "two_sample", "likelihood_ratio"):
             r = res.rejection_rate("M1", st)
             print(f"size {st}: {r}")
@@ -108,7 +108,7 @@ def main(argv=None):
         res = run_power(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, not args.per_fit)
         _save(args.save, res)
         print(res.description)
-        print(res.table())
+        print(res.summary())
         for m in res.models:
             for st in ("paper", "two_sample", "likelihood_ratio"):
                 print(f"rejection rate {m} {st}: {res.rejection_rate(m, st)}")
@@ -127,7 +127,7 @@ def run_timing(args):
     par = run_size(args.n_rep, args.workers, args.seed, args.scheduler, not args.no_progress, batch=True)
     runs.append(("batch engine", par, _cpu() - c0))
     _save(args.save, par)
-    print(par.table())
+    print(par.summary())
     n_cmp = min(args.n_rep, 200) if args.compare_rep is None else args.compare_rep
     if n_cmp:
         c0 = _cpu()

@@ -137,7 +137,7 @@ def montecarlo(n_rep: int = 1000, workers: int = 2, seed: int = 0):
     return {"n_rep": n_rep, "workers": workers, "wall_s": w, "cpu_s_parent": c, "cpu_s_workers": children,
             "n_y": est.model.n_y,
             "rejection_rate": str(res.rejection_rate()), "gate_failure_rate": str(res.gate_failure_rate()),
-            "coverage": str(res.coverage()), "table": res.table()}
+            "coverage": str(res.coverage()), "table": res.summary()}
 
 
 def _machine():

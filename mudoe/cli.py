@@ -339,7 +339,7 @@ def _validate(study, results, args, progress, out) -> int:
                           "e.g. tcp://10.0.0.5:8786, or leave the option out for local processes")
     results = run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
-    text = results.validation.table()
+    text = results.validation.summary()
     _write(out, {"validate.json": dumps(obj), "validate.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK

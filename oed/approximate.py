@@ -43,6 +43,7 @@ from .prior import Prior, make_prior, readonly
 from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
+from identification.results_protocol import ResultProtocol
 
 __all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
 
@@ -100,8 +101,9 @@ class ApproximateSettings:
 
 
 @dataclass(frozen=True)
-class ApproximateDesign:
-    r"""An approximate design with its equivalence-theorem certificate.
+class ApproximateDesign(ResultProtocol):
+    r"""An approximate design with its equivalence-theorem certificate (the result protocol:
+    :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------

@@ -34,6 +34,7 @@ from .constraints import DesignConstraints, make_constraints
 from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
                        screening_values, validate_information)
 from .design_tables import design_frame, design_html, table_frame
+from identification.results_protocol import ResultProtocol, jsonable
 from .enumeration import EnumerationSettings, enumerate_designs, iter_designs
 from .candidate_information import CandidateInformation, information
 
@@ -96,8 +97,9 @@ class DesignSettings:
 
 
 @dataclass(frozen=True)
-class DesignResult:
-    """Immutable outcome of a selection of candidates (sensors, sampling times, pairs or input rows).
+class DesignResult(ResultProtocol):
+    """Immutable outcome of a selection of candidates (sensors, sampling times, pairs or input rows; the result
+    protocol: :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -198,6 +200,13 @@ class DesignResult:
         for n in self.notes:
             lines.append(f"  note: {n}")
         return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """The chosen design as JSON-safe values (what a report's results.json holds under "oed" / "chosen"):
+        sensors, weights, criterion, kind, value (``inf`` as "inf"), proven_optimal, method, status, notes."""
+        return jsonable(dict(sensors=self.chosen, weights=self.weights, criterion=self.criterion, kind=self.kind,
+                             value=self.value, proven_optimal=self.proven_optimal, method=self.method,
+                             status=self.status, notes=list(self.notes)))
 
 
 def _names(sensor_names, n):
@@ -490,8 +499,9 @@ class DesignRow:
 
 
 @dataclass(frozen=True)
-class DesignTable:
-    """All admissible combinations (rows) for a press-style table."""
+class DesignTable(ResultProtocol):
+    """All admissible combinations (rows) for a press-style table (the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``)."""
 
     kind: str
     rows: tuple
@@ -510,6 +520,17 @@ class DesignTable:
             out.append(f"{r.mask:<14}{r.A:>14.4e}{r.det:>14.4e}{r.logdet:>12.4f}{r.E:>14.4e}  "
                        + r.reason)
         return "\n".join(out)
+
+    def summary(self) -> str:
+        """A head (the covariance kind, the number of combinations) and the fixed-width :meth:`to_text` table."""
+        return f"Sensor combinations ({self.kind} covariance): {len(self.rows)} rows\n\n" + self.to_text()
+
+    def to_dict(self) -> dict:
+        """JSON-safe: ``kind`` and ``rows`` (mask, sensors, A, det, logdet, E, flag, reason per combination;
+        what a report's results.json holds under "oed" as "kind" and "table")."""
+        return jsonable(dict(kind=self.kind, rows=[dict(mask=r.mask, sensors=r.sensors, A=r.A, det=r.det,
+                                                        logdet=r.logdet, E=r.E, flag=r.flag, reason=r.reason)
+                                                   for r in self.rows]))
 
 
 def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, max_rows=100_000,

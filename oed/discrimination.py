@@ -82,6 +82,7 @@ import numpy as np
 from models.contract import Model
 from models.sensitivity import sensitivities
 from models.state import solve_states
+from identification.results_protocol import ResultProtocol, jsonable
 
 __all__ = ["DiscriminationResult", "DiscriminationError", "select_discriminating", "reading_divergences", "top_k",
            "refit_values"]
@@ -94,8 +95,9 @@ class DiscriminationError(ValueError):
 
 
 @dataclass(frozen=True)
-class DiscriminationResult:
-    """Immutable outcome of :func:`select_discriminating`.
+class DiscriminationResult(ResultProtocol):
+    """Immutable outcome of :func:`select_discriminating` (the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -157,6 +159,27 @@ class DiscriminationResult:
             f"  sensors: {', '.join(self.sensors)}",
             f"  value: {self.value:.6g} over {len(self.readings)} readings",
         ])
+
+    def to_frame(self):
+        """One row per chosen reading (candidate ``row``, ``sensor``): its divergence d_is (dimensionless) and
+        the difference h_a - h_b (output units); ``.attrs``: criterion, value, upper_bound, proven_optimal,
+        method."""
+        import pandas as pd
+        cols = list(self.candidate_sensors)
+        rows = [dict(row=int(j), sensor=s, divergence=float(self.divergences[j, cols.index(s)]),
+                     difference=float(self.difference[j, cols.index(s)])) for j, s in self.readings]
+        df = pd.DataFrame(rows, columns=["row", "sensor", "divergence", "difference"])
+        df.attrs.update(criterion=self.criterion, value=self.value, upper_bound=self.upper_bound,
+                        proven_optimal=self.proven_optimal, method=self.method)
+        return df
+
+    def to_dict(self) -> dict:
+        """JSON-safe: the chosen indices, sensors and readings, value, upper_bound, proven_optimal, method,
+        criterion, candidate_sensors, n_designs and the per-candidate divergences and differences (n_q, n_S)."""
+        return jsonable(dict(indices=self.indices, sensors=self.sensors, readings=self.readings, value=self.value,
+                             upper_bound=self.upper_bound, proven_optimal=self.proven_optimal, method=self.method,
+                             criterion=self.criterion, candidate_sensors=self.candidate_sensors,
+                             n_designs=self.n_designs, divergences=self.divergences, difference=self.difference))
 
 
 def top_k(scores, k: int) -> np.ndarray:

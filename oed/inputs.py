@@ -37,6 +37,7 @@ import numpy as np
 from identification.errors import IdentificationError, StateSolveError
 from identification.fit.dynamic_fit import DiscretisationSettings
 from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
+from identification.results_protocol import ResultProtocol, jsonable, notes_lines
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .criteria import Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
@@ -81,8 +82,9 @@ class RefineSettings:
 
 
 @dataclass(frozen=True)
-class RefinedInputs:
-    """Continuous refinement of the exact design's input levels.
+class RefinedInputs(ResultProtocol):
+    """Continuous refinement of the exact design's input levels (the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -109,10 +111,34 @@ class RefinedInputs:
     upper: np.ndarray
     wall_time: float
 
+    def summary(self) -> str:
+        """The refined rows, the value reached and the starts, with the failed starts' messages as notes."""
+        lines = [f"refined input levels: value {self.value:.10g} ({len(self.start_values)} starts, {self.n_failed} "
+                 f"failed), bounds {np.array2string(np.asarray(self.lower), precision=6)} to "
+                 f"{np.array2string(np.asarray(self.upper), precision=6)}", ""]
+        lines += [f"  row {j}: {np.array2string(np.asarray(r), precision=6)}"
+                  for j, r in enumerate(np.atleast_2d(self.inputs))]
+        return "\n".join(lines + notes_lines(self.messages))
+
+    def to_frame(self):
+        """The refined input rows as a pandas DataFrame (columns ``q0``, ``q1``, ...; model input units)."""
+        import pandas as pd
+        X = np.atleast_2d(np.asarray(self.inputs, float))
+        df = pd.DataFrame(X, columns=[f"q{k}" for k in range(X.shape[1])])
+        df.attrs.update(value=self.value, n_failed=self.n_failed)
+        return df
+
+    def to_dict(self) -> dict:
+        """JSON-safe: inputs (rows), value, start_values, n_failed, messages, lower, upper, wall_time (s)."""
+        return jsonable(dict(inputs=self.inputs, value=self.value, start_values=self.start_values,
+                             n_failed=self.n_failed, messages=self.messages, lower=self.lower, upper=self.upper,
+                             wall_time=self.wall_time))
+
 
 @dataclass(frozen=True)
-class InputDesignResult:
-    """An exact input design (and optionally its continuous refinement).
+class InputDesignResult(ResultProtocol):
+    """An exact input design (and optionally its continuous refinement; the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -163,6 +189,30 @@ class InputDesignResult:
                          f"{self.refined.n_failed} failed)")
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
+
+    def to_frame(self):
+        """One row per chosen candidate (joint designs: per chosen (row, sensor) pair): the candidate ``row``,
+        its ``sensor`` ("" for a whole row) and the input levels ``q0``, ``q1``, ... (model input units);
+        ``.attrs``: criterion, value, lower_bound, gap, proven_optimal, method, status."""
+        import pandas as pd
+        X = np.asarray(self.inputs, float).reshape(len(self.indices), -1)
+        sensors = [s for _, s in self.pairs] if len(self.pairs) == len(self.indices) else [""] * len(self.indices)
+        df = pd.DataFrame(X, columns=[f"q{k}" for k in range(X.shape[1])])
+        df.insert(0, "sensor", sensors)
+        df.insert(0, "row", [int(j) for j in self.indices])
+        df.attrs.update(criterion=self.criterion, value=self.value, lower_bound=self.lower_bound, gap=self.gap,
+                        proven_optimal=self.proven_optimal, method=self.method, status=self.status)
+        return df
+
+    def to_dict(self) -> dict:
+        """JSON-safe: indices, pairs, inputs, value, lower_bound, gap, proven_optimal, criterion, method, status,
+        design (the engine's :meth:`DesignResult.to_dict`), refined (:meth:`RefinedInputs.to_dict` or None),
+        notes."""
+        return jsonable(dict(indices=self.indices, pairs=self.pairs, inputs=self.inputs, value=self.value,
+                             lower_bound=self.lower_bound, gap=self.gap, proven_optimal=self.proven_optimal,
+                             criterion=self.criterion, method=self.method, status=self.status,
+                             design=self.design.to_dict(),
+                             refined=None if self.refined is None else self.refined.to_dict(), notes=self.notes))
 
 
 def _readonly(a):

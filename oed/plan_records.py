@@ -11,11 +11,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from identification.results_protocol import ResultProtocol, jsonable
+
 __all__ = ["PlannedDesign", "RobustPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
 
 
 @dataclass(frozen=True)
-class PlannedDesign:
+class PlannedDesign(ResultProtocol):
     """A design of ``[oed] mode`` (sensors, inputs or both) at parameters ``p``.
 
     ``result`` is an :class:`oed.DesignResult` (mode sensors) or an :class:`oed.inputs.InputDesignResult`;
@@ -52,11 +54,18 @@ class PlannedDesign:
                 d.update(refined=dict(set_points=f.inputs.ravel().tolist(), value=f.value,
                                       start_values=list(f.start_values), n_failed=f.n_failed,
                                       lower=f.lower.tolist(), upper=f.upper.tolist(), wall_time=f.wall_time))
-        return d
+        return jsonable(d)
+
+    def to_frame(self):
+        """The design's table (:meth:`oed.DesignResult.to_frame` or :meth:`oed.InputDesignResult.to_frame`);
+        ``.attrs`` also holds variant, mode and planned."""
+        df = self.result.to_frame()
+        df.attrs.update(variant=self.variant, mode=self.mode, planned=self.planned)
+        return df
 
 
 @dataclass(frozen=True)
-class RobustPlan:
+class RobustPlan(ResultProtocol):
     """An approximate design of ``[oed] mode = "inputs"`` with a prior or ``approximate = true`` (issue 31).
 
     ``design`` is the :class:`oed.approximate.ApproximateDesign` (robust over the prior, or local without
@@ -105,11 +114,18 @@ class RobustPlan:
                      prior_weights=np.asarray(self.design.prior.weights).tolist(),
                      local_efficiency_min=float(e.min()),
                      local_efficiency_mean=float(np.asarray(self.design.prior.weights) @ e))
-        return d
+        return jsonable(d)
+
+    def to_frame(self):
+        """The support points and weights (:meth:`oed.ApproximateDesign.to_frame`); ``.attrs``: variant,
+        robust, criterion."""
+        df = self.design.to_frame()
+        df.attrs.update(variant=self.variant, robust=self.design.robust, criterion=self.design.criterion)
+        return df
 
 
 @dataclass(frozen=True)
-class DiscriminationPlan:
+class DiscriminationPlan(ResultProtocol):
     r"""A discrimination design (``[oed] mode = "discrimination"``) and its reference designs.
 
     ``result`` is the :class:`oed.DiscriminationResult` (variant assumed true, rival to be refuted);
@@ -171,10 +187,24 @@ class DiscriminationPlan:
             lines.append(f"    {name}: {len(readings)} readings/series, {vals}")
         return "\n".join(lines)
 
+    def to_frame(self):
+        """One row per chosen reading: its set point (``candidate``), ``sensor``, h_true - h_rival and the
+        per-series scores (``T``, with data ``divergence``); ``.attrs``: variant, rival, criterion."""
+        import pandas as pd
+        r = self.result
+        rows = []
+        for j, sn in r.readings:
+            k = r.candidate_sensors.index(sn)
+            rows.append(dict(candidate=self.candidates[j], sensor=sn, difference=float(r.difference[j, k]),
+                             **{name: float(d[j, k]) for name, d in self.scores.items()}))
+        df = pd.DataFrame(rows)
+        df.attrs.update(variant=self.variant, rival=self.rival, criterion=r.criterion)
+        return df
+
     def to_dict(self) -> dict:
         """JSON-ready view: chosen readings (set point, sensor), values, proof and the references."""
         r = self.result
-        return dict(variant=self.variant, rival=self.rival, mode=self.mode, planned=self.planned,
+        return jsonable(dict(variant=self.variant, rival=self.rival, mode=self.mode, planned=self.planned,
                     p=list(self.p), p_rival=list(self.p_rival), candidates=list(self.candidates),
                     n_series=self.n_series, criterion=r.criterion, value=self.n_series * r.value,
                     upper_bound=self.n_series * r.upper_bound, proven_optimal=r.proven_optimal, method=r.method,
@@ -184,11 +214,11 @@ class DiscriminationPlan:
                     values=self.design_values("chosen"),
                     references={name: dict(readings=[[self.candidates[j], sn] for j, sn in rd],
                                            values=self.design_values(name))
-                                for name, rd in self.references.items()})
+                                for name, rd in self.references.items()}))
 
 
 @dataclass(frozen=True)
-class DynamicDesign:
+class DynamicDesign(ResultProtocol):
     """A sampling-time design: the :class:`oed.DesignResult`, the ranked table, the candidates."""
 
     variant: str
@@ -214,15 +244,26 @@ class DynamicDesign:
         text = self.result.summary().replace("  sensors (", "  readings (" if self.pairs else "  sampling times (", 1)
         return head + "\n" + text + "\n" + self.table.note + ":\n" + design_rows_text(self.table)
 
+    def to_frame(self):
+        """The ranked designs, one row per design (``rank`` 1 = best): log det C, trace C (A), max eig C (E),
+        the flag and the candidates (joined by ", "); ``.attrs``: variant, chosen_times."""
+        import pandas as pd
+        df = pd.DataFrame([dict(logdet=x.logdet, A=x.A, E=x.E, flag=x.flag, candidates=", ".join(x.sensors))
+                           for x in self.table.rows],
+                          index=pd.RangeIndex(1, len(self.table.rows) + 1, name="rank"))
+        df.attrs.update(variant=self.variant, chosen_times=self.chosen_times())
+        return df
+
     def to_dict(self) -> dict:
+        """JSON-ready view: the chosen times (readings), value, proof and the ranked table."""
         r = self.result
-        return dict(variant=self.variant, mode="times", planned=self.planned, p=list(self.p),
+        return jsonable(dict(variant=self.variant, mode="times", planned=self.planned, p=list(self.p),
                     candidates=list(self.candidates), pairs=self.pairs, chosen=list(r.chosen),
                     chosen_times=list(self.chosen_times()), criterion=r.criterion, value=r.value,
                     lower_bound=r.lower_bound, proven_optimal=r.proven_optimal, method=r.method,
                     notes=list(r.notes), table_note=self.table.note,
                     table=[dict(candidates=list(x.sensors), A=x.A, logdet=x.logdet, E=x.E, flag=x.flag)
-                           for x in self.table.rows])
+                           for x in self.table.rows]))
 
 
 def design_rows_text(table) -> str:

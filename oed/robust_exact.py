@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from identification.results_protocol import ResultProtocol, jsonable
 from .approx_weights import standardized
 from .criteria import Criterion
 from .robust import utilities
@@ -37,8 +38,9 @@ ROBUST = ("bayes", "maximin")
 
 
 @dataclass(frozen=True)
-class RobustExactDesign:
-    """An exact n-run design under a prior.
+class RobustExactDesign(ResultProtocol):
+    """An exact n-run design under a prior (the result protocol: :meth:`summary`, :meth:`to_frame`,
+    :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -76,6 +78,19 @@ class RobustExactDesign:
         return (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
                 f"{self.value:.9g} ({'proven optimal' if self.proven_optimal else 'not proven'}, {self.n_designs} "
                 f"sets evaluated), efficiency {self.efficiency:.6f}, {self.wall_time:.2f} s")
+
+    def to_frame(self):
+        """The chosen candidates (``index``, ``name``), one row each; ``.attrs``: value, efficiency, criterion,
+        robust, proven_optimal."""
+        import pandas as pd
+        df = pd.DataFrame({"index": [int(i) for i in self.indices], "name": list(self.names)})
+        df.attrs.update(value=self.value, efficiency=self.efficiency, criterion=self.criterion, robust=self.robust,
+                        proven_optimal=self.proven_optimal)
+        return df
+
+    def to_dict(self) -> dict:
+        """JSON-safe: every field (per_sample a list; NaN efficiency as null)."""
+        return jsonable(self)
 
 
 def _check(F, prior_w, n, robust, u_star, names):

@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from identification.results_protocol import ResultProtocol, jsonable
 from .design import DesignResult, select_sensors_from_information
 from .candidate_information import information
 
@@ -38,8 +39,9 @@ class SequentialStep:
 
 
 @dataclass(frozen=True)
-class SequentialResult:
-    """The designs and estimates of :func:`sequential_design`, one :class:`SequentialStep` per experiment.
+class SequentialResult(ResultProtocol):
+    """The designs and estimates of :func:`sequential_design`, one :class:`SequentialStep` per experiment
+    (the result protocol: :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -75,6 +77,27 @@ class SequentialResult:
                          f"{s.design.value:.4g}, {s.design.method}]; {est}; volume {s.ellipsoid_volume:.4g}{change}")
             prev = s.design.chosen
         return "\n".join(lines)
+
+    def to_frame(self):
+        """One row per experiment (``experiment`` 1, 2, ...): the chosen sensors (joined by "+"), the criterion
+        value and method, the estimate and standard error of every parameter (columns ``<name>`` and
+        ``se <name>``, parameter units) and the ellipsoid volume."""
+        import pandas as pd
+        rows = []
+        for s in self.steps:
+            row = dict(sensors="+".join(s.design.sensors), value=s.design.value, method=s.design.method)
+            row.update({n: float(v) for n, v in zip(self.param_names, s.p)})
+            row.update({f"se {n}": float(e) for n, e in zip(self.param_names, s.stderr)})
+            row["ellipsoid_volume"] = s.ellipsoid_volume
+            rows.append(row)
+        return pd.DataFrame(rows, index=pd.RangeIndex(1, len(rows) + 1, name="experiment"))
+
+    def to_dict(self) -> dict:
+        """JSON-safe: param_names, sensor_names and per step p_design, the design (:meth:`DesignResult.to_dict`),
+        p, stderr, cov and ellipsoid_volume."""
+        return jsonable(dict(param_names=self.param_names, sensor_names=self.sensor_names,
+                             steps=[dict(p_design=s.p_design, design=s.design.to_dict(), p=s.p, stderr=s.stderr,
+                                         cov=s.cov, ellipsoid_volume=s.ellipsoid_volume) for s in self.steps]))
 
 
 def sequential_design(model, experiments: Sequence, p_nominal, initial=None, criterion="E",

@@ -502,7 +502,7 @@ def page_texts(fig) -> list[str]:
 
 def _validation_page(results):
     fig = _page("Monte Carlo check of the test (size study)")
-    _text(fig, 0.04, 0.88, results.validation.table(), width=200, size=7.5, family="monospace")
+    _text(fig, 0.04, 0.88, results.validation.summary(), width=200, size=7.5, family="monospace")
     return fig
 
 

@@ -7,6 +7,7 @@ from functools import cached_property
 import numpy as np
 
 from identification.errors import NotBoundedError
+from identification.fit.diagnostics import FitDiagnostics
 from identification.fit.identifiability import SloppyDirection, sloppy_direction
 
 __all__ = ["FitRecord"]
@@ -46,6 +47,7 @@ class FitRecord:
                                   infinity along ``unbounded.direction`` (:mod:`identification.fit.unbounded`);
                                   p is then a point on that path, the standard errors of the parameters
                                   that run off are inf, status is "Not_Bounded".  None: a finite optimum
+    extra : dict                  the run's record by string keys (deprecated: read the typed :attr:`diagnostics`)
     """
 
     p: np.ndarray
@@ -137,6 +139,13 @@ class FitRecord:
     def record_fields(self) -> dict:
         """The dataclass fields of this record by name (to build a richer result from it)."""
         return {f.name: getattr(self, f.name) for f in fields(FitRecord)}
+
+    @property
+    def diagnostics(self) -> FitDiagnostics:
+        """How the fit ran, as typed attributes (solver, Newton decrement, singular values, timings, the
+        discretisation of a dynamic fit, ...; :class:`identification.fit.diagnostics.FitDiagnostics`): the
+        replacement of the string keys of :attr:`extra`."""
+        return FitDiagnostics.from_extra(self.extra)
 
     def __repr__(self):
         if self.unbounded is not None:

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from identification.results_protocol import ResultProtocol, jsonable, notes_lines
+
 __all__ = ["ConfidenceIntervals", "validate_alpha", "resolve_params", "profile_threshold", "region_threshold"]
 
 
@@ -70,8 +72,9 @@ def region_threshold(alpha: float, sigma_estimated: bool, dof: int) -> float:
 
 
 @dataclass(frozen=True)
-class ConfidenceIntervals:
-    """Marginal (1 - alpha) confidence intervals of selected parameters.
+class ConfidenceIntervals(ResultProtocol):
+    """Marginal (1 - alpha) confidence intervals of selected parameters (the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -145,3 +148,23 @@ class ConfidenceIntervals:
             lines.append(f"  {n}: {e:.7g} in [{lo:.7g}, {up:.7g}]")
         lines += [f"  [{k}] {note}" for k, note in enumerate(self.notes, 1)]
         return "\n".join(lines)
+
+    def summary(self) -> str:
+        """A table of the estimates and the interval ends per parameter, ending with the numbered notes."""
+        w = max(9, max((len(n) for n in self.param_names), default=0))
+        pct = f"{100 * (1 - self.alpha):g} %"
+        lines = [f"{pct} {self.method} confidence intervals" + (f" ({len(self.replicates)} bootstrap refits, "
+                                                                 f"{self.n_failed} failed)"
+                                                                 if self.method == "bootstrap" else ""),
+                 "", f"{'parameter':<{w}} {'estimate':>14} {'lower':>14} {'upper':>14}"]
+        lines += [f"{n:<{w}} {e:>14.7g} {lo:>14.7g} {up:>14.7g}"
+                  for n, e, lo, up in zip(self.param_names, self.estimate, self.lower, self.upper)]
+        return "\n".join(lines + notes_lines(self.notes))
+
+    def to_dict(self) -> dict:
+        """The intervals as JSON-safe values: method, alpha, params, estimate, lower, upper (an unbounded side
+        as "-inf" / "inf"), notes, n_failed and fallbacks (bootstrap); the profiles and the replicates are left
+        out (``profiles``, ``replicates`` on the object)."""
+        return jsonable(dict(method=self.method, alpha=self.alpha, params=list(self.param_names),
+                             estimate=self.estimate, lower=self.lower, upper=self.upper, notes=list(self.notes),
+                             n_failed=self.n_failed, fallbacks=list(self.fallbacks)))

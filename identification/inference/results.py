@@ -15,15 +15,17 @@ from identification.inference.intervals import ConfidenceIntervals, resolve_para
 from identification.inference.profile import profile_intervals
 from identification.inference.regions import Ellipsoid
 from identification.inference.unbounded_intervals import unbounded_summary
+from identification.results_protocol import ResultProtocol, jsonable
 
 __all__ = ["Estimate"]
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class Estimate(FitRecord):
+class Estimate(FitRecord, ResultProtocol):
     """Result of :func:`identification.identify`: a :class:`identification.fit.record.FitRecord` (the
     fields listed there) with marginal intervals (:meth:`conf_int`), the joint ellipsoid, the
-    Bates-Watts curvature and :meth:`summary`."""
+    Bates-Watts curvature and the result protocol (:meth:`summary`, :meth:`to_frame`, :meth:`to_dict`,
+    ``_repr_html_``; :mod:`identification.results_protocol`)."""
 
     @classmethod
     def from_record(cls, record: FitRecord) -> "Estimate":
@@ -232,3 +234,16 @@ class Estimate(FitRecord):
                 lines.append(f"[{k}] {note}")
         return "\n".join(lines)
 
+    def to_dict(self) -> dict:
+        """The essentials as JSON-safe values (what a report's results.json holds per variant): model, params,
+        units, p, stderr, stderr_gn, cov, cov_gn, correlation, conf_int_95 (the 95 % Wald intervals, (n_p, 2)
+        [lower, upper] rows), status, message, iterations, solve_time (s), n_data, dof, objective, rss,
+        reduced_chi2, sigma, sigma_estimated, sensors, weights and notes (NaN as null, +-inf as "inf"/"-inf")."""
+        return jsonable(dict(model=self.model_name, params=list(self.param_names), units=list(self.param_units),
+                             p=self.p, stderr=self.stderr, stderr_gn=self.stderr_gn, cov=self.cov, cov_gn=self.cov_gn,
+                             correlation=self.correlation, conf_int_95=np.asarray(self.conf_int(0.05)),
+                             status=self.status, message=self.message, iterations=self.iterations,
+                             solve_time=self.solve_time, n_data=self.n_data, dof=self.dof, objective=self.objective,
+                             rss=self.rss, reduced_chi2=self.reduced_chi2, sigma=self.sigma,
+                             sigma_estimated=self.sigma_estimated, sensors=list(self.sensors), weights=self.weights,
+                             notes=list(self.notes)))

@@ -55,6 +55,7 @@ from identification.inference.identify import identify
 from identification.fit.measurements import Measurements
 from identification.studies.split_fits import BATCHED, SplitFits
 from identification.progress import Progress
+from identification.results_protocol import ResultProtocol, jsonable
 from identification.studies.splits import Split, SplitError
 
 __all__ = ["BootstrapDetection", "bootstrap_detect"]
@@ -152,8 +153,9 @@ def _exceedance_pvalue(boot: np.ndarray, observed: float) -> tuple:
 
 
 @dataclass(frozen=True, eq=False)
-class BootstrapDetection:
-    """Bootstrap and asymptotic p-values of every split test of one model (immutable).
+class BootstrapDetection(ResultProtocol):
+    """Bootstrap and asymptotic p-values of every split test of one model (immutable; the result protocol:
+    :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Columns follow :data:`identification.studies.detect.STATISTICS` ("likelihood_ratio", "two_sample", "paper").
 
@@ -254,6 +256,37 @@ class BootstrapDetection:
         for sp, text in self.observed_errors:
             notes.append(f"split {sp!r} of the data: {text}")
         return "\n".join(lines + [""] + [f"[{k}] {t}" for k, t in enumerate(notes, 1)])
+
+    def to_frame(self):
+        """One row per split and the family-wise (min-p) row, indexed by ``split``: per statistic the observed
+        value ``<st>`` (chi^2 or F units), the asymptotic p-value ``<st> asymptotic`` and the bootstrap p-value
+        ``<st> bootstrap`` (in [0, 1]; NaN: not computed); ``.attrs``: model, n_boot, seed."""
+        import pandas as pd
+        rows = []
+        for s, name in enumerate(self.splits):
+            row = {}
+            for k, st in enumerate(self.statistics):
+                row.update({st: self.observed[s, k], f"{st} asymptotic": self.asymptotic[s, k],
+                            f"{st} bootstrap": self.pvalue[s, k]})
+            rows.append(row)
+        fam = {}
+        for k, st in enumerate(self.statistics):
+            fam.update({st: np.nan, f"{st} asymptotic": self.family_asymptotic[k],
+                        f"{st} bootstrap": self.family_pvalue[k]})
+        df = pd.DataFrame(rows + [fam], index=pd.Index(list(self.splits) + ["family (min-p)"], name="split"))
+        df.attrs.update(model=self.model, n_boot=self.n_boot, seed=self.seed)
+        return df
+
+    def to_dict(self) -> dict:
+        """JSON-safe: model, splits, statistics, observed, asymptotic and bootstrap p-values (n_splits, 3),
+        n_valid, the family-wise p-values, n_boot, seed, p_null, sigma, sigma_estimated, errors,
+        observed_errors, backend, wall_time (s); the campaigns' statistics and the split tests are left out."""
+        return jsonable(dict(model=self.model, splits=self.splits, statistics=self.statistics,
+                             observed=self.observed, asymptotic=self.asymptotic, pvalue=self.pvalue,
+                             n_valid=self.n_valid, family_asymptotic=self.family_asymptotic,
+                             family_pvalue=self.family_pvalue, n_boot=self.n_boot, seed=self.seed, p_null=self.p_null,
+                             sigma=self.sigma, sigma_estimated=self.sigma_estimated, errors=self.errors,
+                             observed_errors=self.observed_errors, backend=self.backend, wall_time=self.wall_time))
 
 
 # ---------------------------------------------------------------------------- front door

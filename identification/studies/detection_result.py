@@ -13,6 +13,7 @@ import numpy as np
 from identification.studies.decisions import ModelDecision
 from identification.studies.detect_settings import CORRECTIONS, STATISTICS, DetectSettings
 from identification.studies.split_tests import SplitTest
+from identification.results_protocol import ResultProtocol, jsonable
 
 __all__ = ["DetectionResult"]
 
@@ -55,8 +56,9 @@ def _disagreement(t: SplitTest, threshold: float, tol: float) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class DetectionResult:
-    """Immutable result of :func:`~identification.studies.detect.detect`.
+class DetectionResult(ResultProtocol):
+    """Immutable result of :func:`~identification.studies.detect.detect` (the result protocol:
+    :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -248,3 +250,27 @@ class DetectionResult:
         v = ", ".join(f"{m}: {d}" for m, d in self.verdicts.items())
         return f"DetectionResult({v}; {len(self.splits)} splits, statistic={self.settings.statistic})"
 
+    #: the fields of every split test in :meth:`to_dict` (key: attribute of :class:`SplitTest`)
+    DICT_TEST_FIELDS = dict(model="model", split="split", calibration="cal_label", validation="val_label", ok="ok",
+                            stage="stage", error="error", p_cal="p_cal", p_val="p_val", C_cal="C_cal", C_val="C_val",
+                            d2_paper="d2_paper", d2_two_sample="d2_two_sample", alpha_paper="alpha_paper",
+                            alpha_two_sample="alpha_two_sample", lr="lr", alpha_lr="alpha_lr", lr_error="lr_error",
+                            n_cal="n_cal", n_val="n_val")
+
+    def to_dict(self, units: Mapping | None = None, data_name: str = "series") -> dict:
+        """Every split test and every decision as JSON-safe values (what a report's results.json holds under
+        "detection"): settings, models, splits (:meth:`Split.to_dict`), verdicts, tests (the p-values and
+        statistics of :attr:`DICT_TEST_FIELDS`, chi^2 units; NaN as null), decisions (``primary``: the settings'
+        statistic and correction), normality (:meth:`NormalityCheck.to_dict`, labelled by ``units``
+        {sensor: (factor, unit)} and ``data_name`` as in :meth:`summary`), design and notes."""
+        tests = [dict({k: getattr(t, f) for k, f in self.DICT_TEST_FIELDS.items()}, notes=list(t.notes))
+                 for t in self.tests]
+        decisions = [jsonable(d) for d in self.all_decisions]
+        for d, dd in zip(self.all_decisions, decisions):
+            dd["primary"] = (d.statistic == self.settings.statistic and d.correction == self.settings.correction)
+        norm = [dict(model=m, **c.to_dict(units, data_name)) for m, c in self.normality]
+        return jsonable(dict(settings=jsonable(self.settings), models=list(self.models),
+                             splits=[s.to_dict() for s in self.splits], verdicts=dict(self.verdicts), tests=tests,
+                             decisions=decisions, normality=norm,
+                             design=[dict(model=m, sensors=u, how=h) for m, u, h in self.design],
+                             notes=list(self.notes)))

@@ -9,6 +9,7 @@ from scipy import stats
 
 from identification.inference.intervals import ConfidenceIntervals, validate_alpha
 from identification.studies.model_error_fit import Band, ErrorFit
+from identification.results_protocol import ResultProtocol
 
 __all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest"]
 
@@ -110,8 +111,9 @@ def _jsonable(v):
 
 
 @dataclass(frozen=True, eq=False)
-class ModelErrorResult:
-    """The model error of a static model (:func:`identification.studies.model_error.model_error`).
+class ModelErrorResult(ResultProtocol):
+    """The model error of a static model (:func:`identification.studies.model_error.model_error`; the result
+    protocol: :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------

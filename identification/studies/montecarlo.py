@@ -37,6 +37,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -54,6 +55,7 @@ from identification.fit.measurements import Measurements
 from identification.inference.identify import identify
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
+from identification.results_protocol import ResultProtocol, jsonable
 from identification.studies.split_fits import (BATCHED, ONE_BY_ONE, SplitFits, batched_split_tests,
                                                shapiro_pvalues)
 from identification.studies.splits import Split, SplitError, flat_split
@@ -357,8 +359,9 @@ def _execute(task: SizeStudyTask, settings: MonteCarloSettings, desc: str) -> tu
 
 # ---------------------------------------------------------------------------- result
 @dataclass(frozen=True, eq=False)
-class MonteCarloResult:
-    """Monte Carlo rejection rates and coverages (immutable).
+class MonteCarloResult(ResultProtocol):
+    """Monte Carlo rejection rates and coverages (immutable; the result protocol: :meth:`summary`,
+    :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -473,7 +476,7 @@ class MonteCarloResult:
         c = c[np.isfinite(c)]
         return clopper_pearson(int(c.sum()), int(c.size), self.ci_level)
 
-    def table(self) -> str:
+    def summary(self) -> str:
         """Markdown table of rejection rates (all three statistics) and, for size studies, coverage."""
         lev = 100 * self.tol / len(self.splits)
         lines = [f"{self.kind} study: {self.n_rep} replications, TOL = {100 * self.tol:g} %, "
@@ -508,6 +511,49 @@ class MonteCarloResult:
                 lines.append("of them, fits whose data did not bound the parameters (the best fit ran off to infinity; "
                              "counted as undecided): " + ", ".join(f"{m} {k}" for m, k in nb.items()))
         return "\n".join(lines)
+
+    def table(self) -> str:
+        """Deprecated alias of :meth:`summary` (the result protocol's name); warns."""
+        warnings.warn("MonteCarloResult.table() is deprecated; use MonteCarloResult.summary()", DeprecationWarning,
+                      stacklevel=2)
+        return self.summary()
+
+    def to_frame(self):
+        """One row per (model, statistic), indexed by both: the family-wise rejection rate (a fraction in
+        [0, 1]) with its Clopper-Pearson interval ``lo``, ``hi``, the counts ``k`` / ``n``, the undecided
+        replications and the rejection rate of each split's hypothesis (columns ``split <name>``); ``.attrs``:
+        kind, n_rep, tol, seed."""
+        import pandas as pd
+        rows = []
+        for m in self.models:
+            for st in ("paper", "two_sample", "likelihood_ratio"):
+                r = self.rejection_rate(m, st)
+                rows.append(dict(model=m, statistic=st, rate=r.rate, lo=r.lo, hi=r.hi, k=r.k, n=r.n,
+                                 undecided=self.n_undecided(m, st),
+                                 **{f"split {sp.name}": self.split_rejection_rate(j, m, st).rate
+                                    for j, sp in enumerate(self.splits)}))
+        df = pd.DataFrame(rows).set_index(["model", "statistic"])
+        df.attrs.update(kind=self.kind, n_rep=self.n_rep, tol=self.tol, seed=self.seed)
+        return df
+
+    def to_dict(self) -> dict:
+        """Rejection rates (all three statistics), coverage (size studies) and the :meth:`summary` text as
+        JSON-safe values (what a report's results.json holds under "validation")."""
+        out = dict(kind=self.kind, models=list(self.models), n_rep=self.n_rep, tol=self.tol, seed=self.seed,
+                   wall_time=self.wall_time, description=self.description, rates={})
+        for m in self.models:
+            for st in ("paper", "two_sample", "likelihood_ratio"):
+                r = self.rejection_rate(m, st)
+                out["rates"][f"{m}/{st}"] = dict(rate=r.rate, lo=r.lo, hi=r.hi, k=r.k, n=r.n)
+        if self.kind == "size":
+            cov = {}
+            for m in self.models:
+                for j, sp in enumerate(self.splits):
+                    c, v = self.coverage(m, j, "cal"), self.coverage(m, j, "val")
+                    cov[f"{m}/{sp.name}"] = dict(cal=c.rate, val=v.rate)
+            out["coverage"] = cov
+        out["table"] = self.summary()
+        return jsonable(out)
 
 
 # ---------------------------------------------------------------------------- linearised prediction

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import stats
 
 from identification.errors import DataError
+from identification.results_protocol import ResultProtocol, jsonable, notes_lines
 from identification.fit.measurements import Measurements
 from identification.studies.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, check_correction, correction_text
 
@@ -37,8 +38,9 @@ class NormalityError(DataError):
 
 
 @dataclass(frozen=True)
-class NormalityCheck:
-    """Shapiro-Wilk test of z_{2m} - z_{2m-1} (m = 1..n_M/2, all inputs) per sensor.
+class NormalityCheck(ResultProtocol):
+    """Shapiro-Wilk test of z_{2m} - z_{2m-1} (m = 1..n_M/2, all inputs) per sensor (the result protocol:
+    :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).
 
     Attributes
     ----------
@@ -119,6 +121,39 @@ class NormalityCheck:
             lines.append(f"{s:<10} {100 * pv:>{wp}.2f} {factor * self.sigma_rep[k]:>{ws}.4g} {unit or '-':<8} "
                          f"{int(self.n_diff[k]):>4}  " + (f"{100 * self.adjusted[k]:>14.2f}  " if adj else "") + ok)
         return "\n".join(lines)
+
+    def summary(self, units: Mapping | None = None, data_name: str = "series") -> str:
+        """The gate and its verdict, the per-sensor :meth:`table` and the note (numbered)."""
+        status = "passed" if self.passed else ("FAILED, overridden by the user" if self.overridden else "FAILED")
+        head = (f"Normality gate, {self.gate_text()} on the differences {self.pairs_text()} of the {data_name} "
+                f"{self.series_text()}".rstrip() + f": {status}")
+        return "\n".join([head, self.table(units, data_name)] + notes_lines([self.note] if self.note else []))
+
+    def to_frame(self):
+        """One row per sensor: Shapiro-Wilk p-value and adjusted p-value (in [0, 1]), sigma_rep (unit of z),
+        the number of differences and the gate ("pass", "FAIL", "" for a sensor not gated); ``.attrs``: level,
+        correction, passed."""
+        import pandas as pd
+        bad = self.failing()
+        df = pd.DataFrame({"pvalue": self.pvalue, "pvalue_adjusted": self.adjusted, "sigma_rep": self.sigma_rep,
+                           "n_diff": self.n_diff.astype(int),
+                           "gate": ["" if s not in self.gated else ("FAIL" if s in bad else "pass")
+                                    for s in self.sensors]},
+                          index=pd.Index(list(self.sensors), name="sensor"))
+        df.attrs.update(level=self.level, correction=self.correction, passed=self.passed, overridden=self.overridden)
+        return df
+
+    def to_dict(self, units: Mapping | None = None, data_name: str = "series") -> dict:
+        """The check as JSON-safe values (what results.json holds): p-values, sigma_rep as factor * value in
+        unit (``units`` {sensor: (factor, unit)}), the series it was computed on (named by ``data_name``)."""
+        units = units or {}
+        fu = [units.get(s, (1.0, "")) for s in self.sensors]
+        return jsonable(dict(computed_on=f"{data_name} {self.series_text()}".strip(), series=list(self.series),
+                             sensors=self.sensors, pvalue=self.pvalue,
+                             sigma_rep=[f * v for (f, _), v in zip(fu, self.sigma_rep)],
+                             sigma_rep_unit=[u for _, u in fu], passed=self.passed, overridden=self.overridden,
+                             level=self.level, correction=self.correction, pvalue_adjusted=self.adjusted,
+                             gated=list(self.gated), gate=self.gate_text(), note=self.note))
 
 
 def _series_numbers(labels) -> list:

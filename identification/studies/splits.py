@@ -359,6 +359,16 @@ class Split:
                      val_series=self.cal_series, description=self.description, cal_sensors=self.val_sensors,
                      val_sensors=self.cal_sensors, cal_window=self.val_window, val_window=self.cal_window)
 
+    def to_dict(self) -> dict:
+        """The split as a dict of its fields (``Split(**d)`` rebuilds it; JSON-safe: tuples as lists);
+        ``cal_sensors`` / ``val_sensors`` are the 0-based sensor columns of each set (None: all), e.g. the
+        (sensor, time) columns of a split by sampling time."""
+        def lst(v):
+            return None if v is None else [int(x) for x in v]
+        return dict(name=self.name, cal_inputs=lst(self.cal_inputs), val_inputs=lst(self.val_inputs),
+                    cal_series=lst(self.cal_series), val_series=lst(self.val_series), description=self.description,
+                    cal_sensors=lst(self.cal_sensors), val_sensors=lst(self.val_sensors))
+
 
 # ---------------------------------------------------------------------------- constructors
 def splits_from_scenarios(scenarios, n_q: int, series: Sequence[int] | None = None) -> tuple:

@@ -1,7 +1,7 @@
 """A split by sampling time keeps its sensor columns in results.json (reports.serialize)."""
 import json
-from types import SimpleNamespace
 
+from identification import DetectionResult, DetectSettings
 from identification.studies.splits import Split, time_window_split
 from reports.serialize import detection_dict, dumps, split_dict
 
@@ -12,8 +12,8 @@ def test_a_time_split_round_trips_through_results_json_with_its_sensor_columns()
     sp = time_window_split(PAIRS, 3, (0.5, 1.0), (2.0, 2.0), inputs=[0, 2], series=[1])
     assert (sp.cal_sensors, sp.val_sensors) == ((0, 1, 2, 3), (4, 5))
     by_exp = Split("exp", [0], [1, 2])
-    det = SimpleNamespace(tests=[], all_decisions=[], normality=[], settings=None, models=("m",),
-                          splits=(sp, by_exp), verdicts={"m": "not rejected"}, design=[], notes=[])
+    det = DetectionResult(settings=DetectSettings(), models=("m",), splits=(sp, by_exp), tests=(), decisions=(),
+                          all_decisions=(), normality=(), design=())
     back = json.loads(dumps(detection_dict(det)))["splits"]
     assert back[0]["cal_sensors"] == [0, 1, 2, 3] and back[0]["val_sensors"] == [4, 5]
     assert back[1]["cal_sensors"] is None and back[1]["val_sensors"] is None

@@ -118,7 +118,7 @@ def test_monte_carlo_counts_fits_that_are_not_bounded(fits):
     nb = res.n_not_bounded()
     assert nb >= 1                      # a single series of 5 points far below saturation: often unbounded
     assert nb == sum(1 for e in res.errors if "not bounded:" in e[4])
-    assert res.n_undecided() >= nb and "did not bound the parameters" in res.table()
+    assert res.n_undecided() >= nb and "did not bound the parameters" in res.summary()
 
 
 def test_sigma_unknown_run_off_is_not_bounded_with_the_F_profile():

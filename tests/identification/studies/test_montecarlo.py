@@ -76,7 +76,7 @@ def test_size_of_both_statistics_and_coverage(model):
     # 95 % ellipsoids: coverage of the calibration fits of one split (binomial, N = 200)
     cov = res.coverage(split=0, which="cal")
     assert abs(cov.rate - 0.95) <= 3.5 * math.sqrt(0.95 * 0.05 / N_REP), cov
-    text = res.table()
+    text = res.summary()
     assert "family-wise rejection rate" in text and "Coverage" in text
     # the normality gate (Holm over both sensors, as detect's): its failure rate from the stored p-values
     gate = res.gate_failure_rate()
