@@ -59,8 +59,8 @@ _EXPORTS = {
     "DesignResult": "oed", "DesignTable": "oed", "InputDesignResult": "oed", "RefinedInputs": "oed",
     "DiscriminationResult": "oed", "ApproximateDesign": "oed", "SequentialResult": "oed.sequential",
     "RobustExactDesign": "oed.robust_exact",
-    "PlannedDesign": "mudoe.plan_records", "RobustPlan": "mudoe.plan_records",
-    "DiscriminationPlan": "mudoe.plan_records", "DynamicDesign": "mudoe.plan_records",
+    "PlannedDesign": "oed.plan_records", "RobustPlan": "oed.plan_records",
+    "DiscriminationPlan": "oed.plan_records", "DynamicDesign": "oed.plan_records",
     # errors
     "IdentificationError": "identification", "DataError": "identification", "ConvergenceError": "identification",
     "NotBoundedError": "identification", "IdentifiabilityError": "identification",

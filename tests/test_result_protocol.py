@@ -32,7 +32,8 @@ RESULT_SUFFIXES = ("Result", "Estimate", "Design", "Intervals", "Table", "Plan",
 NOT_RESULTS = {"Measurements", "DynamicMeasurements", "Model", "Parameter", "Split", "Prior", "Criterion", "DesignRow",
                "IdentifySettings", "IpoptSettings", "DetectSettings", "MonteCarloSettings", "CriteriaSettings",
                "DesignSettings", "RefineSettings", "ApproximateSettings", "DiscretisationSettings", "Ellipsoid",
-               "ResultProtocol"}
+               "ResultProtocol",
+               "CandidateInformation"}   # the matrices the design verbs read (oed.information), not a result
 
 
 def public_classes() -> dict:
