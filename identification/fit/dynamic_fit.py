@@ -1,7 +1,7 @@
 r"""Identification of a dynamic model with discretisation error control.
 
 The model is collocated on a mesh (:mod:`models.collocation`) and fitted as any static model
-(:func:`identification.fit.entry.fit_model`).  At the estimate p̂ the outputs at the sampling
+(:func:`identification.fit.estimator.fit_static`).  At the estimate p̂ the outputs at the sampling
 times are recomputed on the mesh with every element halved; Radau IIA of degree d converges
 with order 2d - 1 at element boundaries, so the difference
 
@@ -230,9 +230,10 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
 
     Returns
     -------
-    Estimate
-        Of the collocated model (``est.model``) on the flat data (``est.data``), with
-        ``est.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note.
+    identification.fit.record.FitRecord
+        Of the collocated model (``rec.model``) on the flat data (``rec.data``), with
+        ``rec.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note
+        (:func:`identification.identify` returns it as an Estimate).
     """
     ds = discretisation or DiscretisationSettings()
     if not isinstance(ds, DiscretisationSettings):

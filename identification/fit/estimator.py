@@ -222,7 +222,7 @@ def fit_static(model: Model, data: Measurements, p0, weights=None,
     ----------
     model : models.Model
         A static model; a dynamic one (:meth:`models.Model.ode`) goes through
-        :func:`identification.fit.entry.fit_model` (collocation with error control).
+        :meth:`identification.fit.problem.Problem.fit` (collocation with error control).
     data : Measurements
         z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
     p0 : array_like (n_p,)
@@ -309,7 +309,7 @@ def static_information(model: Model, data: Measurements | None, p, states=None, 
     planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
     nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
 
-    A dynamic model goes through :func:`identification.fit.entry.information_contributions`.
+    A dynamic model goes through :meth:`identification.fit.problem.Problem.information`.
 
     Returns
     -------
