@@ -24,7 +24,7 @@ import numpy as np
 
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.collocation import collocate, pair_name
-from models.collocation_map import mapped_outputs, outputs_and_sensitivities
+from models.trajectory import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from .static_inputs import (InputDesignResult, RefineSettings, input_information, refine_inputs,
                             select_static_inputs)

@@ -29,10 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.collocation import Mesh, collocate, DEFAULT_ELEMENTS
-from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from models.dynamic import DynamicModel
-from models.trajectory import interpolate_states, trajectory_numerics
+from models.trajectory import interpolate_states, mapped_outputs, outputs_and_sensitivities, trajectory_numerics
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.estimator import fit_static, static_information
@@ -388,7 +387,7 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
             return static_information(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
         if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
             raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
-        _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.collocation_map)
+        _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.trajectory)
         F = float(n_series) * np.einsum("k,jkp,jkr->kpr", 1.0 / sig ** 2, G, G)
         return F, np.zeros_like(F)
     if times is not None or inputs is not None or sigma is not None:
