@@ -216,10 +216,14 @@ class CollocatedModel(Model):
         element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        traj = trajectory_numerics(self)      # an ODE: all experiments at once, element by element
-        if traj is not None:
-            return traj.outputs(p, inputs)
-        return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])
+        return self.state_numerics.integrated_outputs(p, inputs)
+
+    @property
+    def state_numerics(self):
+        """The element marcher of an ODE (:class:`models.trajectory.TrajectoryNumerics`: all experiments at once,
+        element by element); a DAE keeps the generic solves (:attr:`models.Model.state_numerics`), its state
+        guess marched (:meth:`_integrate`)."""
+        return super().state_numerics if self.dynamic.n_z else trajectory_numerics(self)
 
     # ------------------------------------------------------------------ state guess
     def element_symbols(self) -> tuple:

@@ -33,6 +33,8 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
+from .sensitivity import Sensitivities
+from .state import numerics, solve_states_generic
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states", "march", "march_functions",
            "march_failure", "element_failures", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
@@ -160,13 +162,60 @@ def _march_symbolic(cm, p, q):
     return ca.vertcat(x0, ca.vec(Vs)), crit(Vs, R)
 
 
+class _TrajectorySensitivities(Sensitivities):
+    """A collocated ODE (:mod:`models.trajectory`): h, G and y' of all inputs by forward substitution
+    through the elements; the adjoints and second derivatives factor dE/dy per input when first asked."""
+
+    __slots__ = ("_yp", "_traj", "_model", "_blocks")
+
+    def __init__(self, h, G, traj, p, inputs, Y, yp, blocks):
+        super().__init__(h, G, None, p, inputs, Y, None)
+        self._yp, self._traj, self._model, self._blocks = yp, traj, traj.model, blocks
+
+    @property
+    def state_derivatives(self) -> np.ndarray:
+        return self._yp
+
+    def _filled(self) -> None:
+        if self._cache is not None:
+            return
+        num = numerics(self._model)
+        n_p = self.G.shape[2]
+        cache = []
+        for j in range(self._inputs.shape[0]):
+            _, Ey, _, hy, _ = num.point("sens")(self._Y[j], self._p, self._inputs[j])
+            cache.append((num.factor(Ey), hy, np.vstack([self._yp[j], np.eye(n_p)])))
+        self._num, self._cache = num, cache
+
+    def adjoint(self, lam: np.ndarray) -> np.ndarray:
+        self._filled()
+        return super().adjoint(lam)
+
+    def hessians(self, lam: np.ndarray) -> np.ndarray:
+        return self._traj.hessians(self._p, self._inputs, self._Y, self._yp, *self._blocks, np.asarray(lam, float))
+
+    def output_hessians(self) -> np.ndarray:
+        self._filled()
+        return super().output_hessians()
+
+
 class TrajectoryNumerics:
-    """The element functions of one collocated ODE model (see the module docstring).
+    """The numerics of one collocated ODE model (:attr:`models.Model.state_numerics`; see the module
+    docstring): its trajectories marched element by element, all experiments at once, and their exact
+    sensitivities by forward substitution through the elements.  The same operations as the generic
+    strategy :class:`models.sensitivity.StateSolve`.
 
     Attributes
     ----------
     model : models.collocation.CollocatedModel
+    reduced_space : bool    True: the states are solved to round-off for any number of experiments, so a
+                            fit stays in the reduced space (no NLP, no state scalings)
+    merges_fits : bool      True: batched fits run every member's fit with their evaluations merged
+                            (:func:`run_merged`)
     """
+
+    reduced_space = True
+    merges_fits = True
 
     def __init__(self, cm):
         dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
@@ -204,6 +253,36 @@ class TrajectoryNumerics:
         self.x0_hessian = ca.Function("traj_x0_hess", [p, q, mu0], [ca.hessian(ca.dot(mu0, x0), p)[0]])
         self.steps = np.diff(b)
         self._maps = {}
+
+    # ------------------------------------------------------------------ the strategy's operations
+    def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
+        """The collocation solution (n_q, n_y) at p (:meth:`states`); when that fails from a guess ``Y0``,
+        the generic solves from it (:func:`models.state.solve_states_generic`)."""
+        try:
+            return self.states(p, inputs, Y0)
+        except StateSolveError:
+            if Y0 is None:
+                raise
+        return solve_states_generic(self.model, p, inputs, Y0)
+
+    def sensitivities(self, p: np.ndarray, inputs: np.ndarray, Y) -> Sensitivities:
+        """h, G = dh/dp and y'(p) of every experiment at the states Y (:meth:`sweep`, one forward
+        substitution through the elements for all experiments)."""
+        Y = np.asarray(Y, float)
+        yp, RV, Rx = self.sweep(p, inputs, Y)
+        h, G = self.outputs_and_sensitivities(p, inputs, Y, yp)
+        return _TrajectorySensitivities(h, G, self, p, inputs, Y, yp, (RV, Rx))
+
+    def marched_states(self, p, inputs, guess) -> np.ndarray:
+        """The states at p from a predicted ``guess`` (Newton on all trajectories), else marched (:meth:`states`)."""
+        return self.states(p, inputs, guess)
+
+    def integrated_outputs(self, p, inputs, guess=None) -> np.ndarray:
+        """h (n_q, n_S) of the collocation solution at p, from the states ``guess`` when given (e.g.
+        another mesh's trajectories interpolated, :func:`interpolate_states`)."""
+        if guess is None:
+            return self.outputs(p, inputs)
+        return self.outputs(p, inputs, self.states(p, inputs, guess))
 
     # ------------------------------------------------------------------ states
     def _elements(self, Y: np.ndarray, n_x: int) -> tuple:

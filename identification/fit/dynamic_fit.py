@@ -31,7 +31,7 @@ import numpy as np
 from models.collocation import Mesh, collocate, DEFAULT_ELEMENTS
 from models.contract import ModelError
 from models.dynamic import DynamicModel
-from models.trajectory import interpolate_states, mapped_outputs, outputs_and_sensitivities, trajectory_numerics
+from models.trajectory import interpolate_states, mapped_outputs, outputs_and_sensitivities
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.estimator import fit_static, static_information
@@ -197,12 +197,8 @@ def _error(model, data, est, mesh, w):
     halved, o = 2 d - 1 the order at the element boundaries."""
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
     order = 2 * mesh.degree - 1
-    traj = trajectory_numerics(fine)
-    if traj is not None and est.states is not None:       # Newton from the fit's trajectories interpolated
-        h_fine = traj.outputs(est.p, data.inputs, traj.states(est.p, data.inputs,
-                                                             interpolate_states(est.model, fine, est.states)))
-    else:
-        h_fine = fine.integrated_outputs(est.p, data.inputs)
+    guess = None if est.states is None else interpolate_states(est.model, fine, est.states)
+    h_fine = fine.state_numerics.integrated_outputs(est.p, data.inputs, guess)   # from the fit's trajectories
     dh = (h_fine - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2

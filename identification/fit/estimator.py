@@ -50,7 +50,6 @@ from identification.fit.start import (Start, as_start_vector, decrement_unit, ma
                                       scalings)
 from models.sensitivity import sensitivities
 from models.state import solve_states
-from models.trajectory import trajectory_numerics
 
 __all__ = ["fit_static", "static_information", "IdentifySettings", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector", "LAZY_PASS_MAX_ITER"]
@@ -101,7 +100,7 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
         if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
                 np.all(got[1].p < model.upper - 1e-6 * s_p):
             warm = got[1], got[2]
-            if trajectory_numerics(model) is not None:
+            if model.state_numerics.reduced_space:
                 # a collocated ODE: the reduced optimum (states solved to round-off element by element,
                 # decrement at round-off) is the estimate, as for explicit models; no NLP is built
                 if clock is not None:
