@@ -122,7 +122,7 @@ STATIC, COLLOCATED = StaticStrategy(), CollocatedStrategy()
 
 
 def strategy_for(model) -> ProblemStrategy:
-    """The strategy of a model: :class:`CollocatedStrategy` for a dynamic model (``model.is_dynamic``,
+    """The strategy of a model: :class:`CollocatedStrategy` for a dynamic model (an ODE/DAE,
     :class:`models.dynamic.DynamicModel`), else :class:`StaticStrategy`.  The one place where the
     kind of a model is asked."""
     return COLLOCATED if getattr(model, "is_dynamic", False) else STATIC
