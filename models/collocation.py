@@ -292,14 +292,13 @@ class CollocatedModel(Model):
 
     def _integrate(self, p, q) -> np.ndarray:
         """The collocation solution at (p, q), element by element (:func:`models.trajectory.march`)."""
-        dyn, N, b = self.dynamic, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
+        dyn, N = self.dynamic, self.mesh.n_elements
         p, q = np.asarray(p, float).ravel(), np.asarray(q, float).ravel()
         Umap = march_functions(self)[2]
         u0 = self.initial_input(q)
         x0 = np.asarray(dyn.x0_fun(p, u0)).ravel()
         w0 = np.r_[x0, self._initial_algebraic(x0, p, u0)]
-        P = np.vstack([np.tile(p[:, None], (1, N)), (Umap @ q).reshape(N, -1).T, np.diff(b)[None, :]])
-        V = march(self, w0[None, :], P.T[None], p, q[None, :])[0]
+        V = march(self, w0[None, :], p, (Umap @ q).reshape(N, -1)[None], q[None, :])[0]
         return np.r_[w0, V.ravel()]
 
 

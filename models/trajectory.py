@@ -110,16 +110,23 @@ def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
         "or give a finer mesh")
 
 
-def march(cm, W0: np.ndarray, P: np.ndarray, p, inputs) -> np.ndarray:
+def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
     r"""The element marcher: every experiment's collocation solution element after element (Newton on
-    R(V_k; w_k0, p, U_k, h_k) = 0, the module docstring), all experiments in one CasADi call.
+    R(V_k; w_k0, p, U_k, h_k) = 0, the module docstring), all experiments at once.
+
+    Up to :data:`MARCH_IN_CASADI_MAX` experiments (or with algebraic states) in one CasADi call (the
+    ``mapaccum`` of CasADi's rootfinder, :func:`march_functions`, mapped over the experiments); more
+    experiments of an ODE element by element with batched NumPy Newton steps
+    (:meth:`TrajectoryNumerics.element_newton`, fewer calls per point).  Every element's residual is
+    checked (:func:`element_failures`).
 
     Parameters
     ----------
     cm : models.collocation.CollocatedModel
     W0 : ndarray (n, n_w)          the initial points (x(0), z(0)) of the n experiments
-    P : ndarray (n, N, n_par)      every element's parameters (p, U_k, h_k)
-    p, inputs                      the parameters (n_p,) or (n, n_p) and input rows (n, d_q), for the message
+    p : ndarray (n_p,) or (n, n_p) the parameters, shared or one row per experiment
+    U : ndarray (n, N, n_u d)      the inputs at every element's d points
+    inputs : ndarray (n, d_q)      the experiments' input rows (named in the failure message)
 
     Returns
     -------
@@ -130,7 +137,16 @@ def march(cm, W0: np.ndarray, P: np.ndarray, p, inputs) -> np.ndarray:
     StateSolveError
         :func:`march_failure` of the first element whose residual is above the tolerance.
     """
-    n, N = P.shape[0], P.shape[1]
+    n, N = U.shape[0], U.shape[1]
+    steps = np.diff(np.asarray(cm.mesh.boundaries))
+    if n > MARCH_IN_CASADI_MAX and not cm.dynamic.n_z:
+        num, xs, V = cm.state_numerics, W0, []
+        for k in range(N):
+            V.append(num.element_newton(xs, p, U[:, k], steps[k], inputs, k))
+            xs = V[-1][:, -W0.shape[1]:]
+        return np.stack(V, axis=1)
+    P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U,
+                        np.broadcast_to(steps[None, :, None], (n, N, 1))], axis=2)   # (n, N, n_par)
     march_f = march_functions(cm)[0]
     fm = cm.cache.get_or_make("march_map", n, lambda: march_f.map(n), maxsize=8)
     W_end, V = (np.asarray(a) for a in fm(ca.DM(np.ascontiguousarray(W0.T)),
@@ -313,20 +329,9 @@ class TrajectoryNumerics:
             Y = self._newton(p, inputs, np.asarray(guess, float))
             if Y is not None:
                 return Y
-        n, d, N = inputs.shape[0], self.d, self.N
+        n = inputs.shape[0]
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
-        n_x = x0.shape[1]
-        U = self._controls(inputs)
-        if n <= MARCH_IN_CASADI_MAX:
-            return self._march(p, inputs, x0, U)
-        Y = np.empty((n, n_x * (1 + N * d)))
-        Y[:, :n_x] = x0
-        xs = x0
-        for k in range(N):
-            V = self._element(xs, p, U[:, k], self.steps[k], inputs, k)
-            Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
-            xs = V[:, -n_x:]
-        return Y
+        return np.concatenate([x0, march(self.model, x0, p, self._controls(inputs), inputs).reshape(n, -1)], axis=1)
 
     def _stacked_solve(self, RV, Rx, B):
         """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)) by forward substitution through the
@@ -382,15 +387,10 @@ class TrajectoryNumerics:
                 return Y
         return None
 
-    def _march(self, p, inputs, x0, U):
-        """The element-by-element Newton solves of every experiment in one CasADi call (:func:`march`)."""
-        n, N = inputs.shape[0], self.N
-        P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
-                           axis=2)                                   # (n, N, n_par): column k of experiment j
-        return np.concatenate([x0, march(self.model, x0, P, p, inputs).reshape(n, -1)], axis=1)
-
-    def _element(self, xs, p, U, hk, inputs, k):
-        """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
+    def element_newton(self, xs, p, U, hk, inputs, k):
+        """The NumPy step of :func:`march` for many experiments of an ODE: Newton on element k for every
+        experiment from V = (x_start, ..., x_start), batched (one mapped evaluation and one batched LAPACK
+        solve per iteration); an experiment
         stops when max |R| <= 1e-13 or its step is below 1e-12 (the tests of CasADi's rootfinder in
         :meth:`models.collocation.CollocatedModel.element_functions`), and is then left as it is."""
         n = xs.shape[0]
