@@ -3,7 +3,8 @@ from identification.errors import (ConvergenceError, DataError, IdentifiabilityE
                      StateSolveError)
 from identification.fit.measurements import Measurements
 from identification.fit.dynamic_data import DynamicMeasurements
-from identification.fit.entry import information_contributions
+from identification.fit.dynamic_fit import DiscretisationSettings
+from identification.fit.problem import Problem, information_contributions
 from identification.fit.estimator import IdentifySettings, covariance_from_terms
 from identification.inference.identify import identify
 from identification.fit.ipopt_solver import IpoptSettings
@@ -27,5 +28,5 @@ __all__ = [
     "MonteCarloResult", "MonteCarloSettings", "clopper_pearson", "linearized_size", "power_study", "size_study",
     "validate",
     "ModelErrorResult", "model_error",
-    "DynamicMeasurements",
+    "DynamicMeasurements", "DiscretisationSettings", "Problem",
 ]

@@ -32,8 +32,7 @@ import numpy as np
 
 from .contract import Model, ModelError
 from .dynamic import DynamicModel, merge_times, register_collocation, time_label, time_tolerance
-from .errors import StateSolveError
-from .trajectory import trajectory_numerics
+from .trajectory import march, march_functions, trajectory_numerics
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
 
@@ -159,7 +158,7 @@ class CollocatedModel(Model):
                          name=dynamic.name, sensor_units=[units[s] for s, _ in self.outputs],
                          input_units=list(dynamic.input_units[:len(dynamic.constants)]) + c_units,
                          description=dynamic.description)
-        self._element_solver = self._march = None
+        self._element_solver = None
 
     # ------------------------------------------------------------------ layout
     def _point(self, y, k: int, r: int):
@@ -217,10 +216,14 @@ class CollocatedModel(Model):
         element, no solve of the whole trajectory: cheaper than :meth:`simulate` for a model used once)."""
         p = np.asarray(p, float).ravel()
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        traj = trajectory_numerics(self)      # an ODE: all experiments at once, element by element
-        if traj is not None:
-            return traj.outputs(p, inputs)
-        return np.array([np.asarray(self.h_fun(self._integrate(p, q), p, q)).ravel() for q in inputs])
+        return self.state_numerics.integrated_outputs(p, inputs)
+
+    @property
+    def state_numerics(self):
+        """The element marcher of an ODE (:class:`models.trajectory.TrajectoryNumerics`: all experiments at once,
+        element by element); a DAE keeps the generic solves (:attr:`models.Model.state_numerics`), its state
+        guess marched (:meth:`_integrate`)."""
+        return super().state_numerics if self.dynamic.n_z else trajectory_numerics(self)
 
     # ------------------------------------------------------------------ state guess
     def element_symbols(self) -> tuple:
@@ -266,18 +269,8 @@ class CollocatedModel(Model):
         return np.asarray(rf(np.ones(dyn.n_z), ca.DM(0, 1))).ravel()
 
     def march_functions(self):
-        """(march, residuals, Umap): march(w_0, P) -> (W_end, V) solves the elements one after the other
-        (``mapaccum`` of one element's Newton solve; column k of P is (p, U_k, h_k)); residuals(V, (x_start,
-        P)) are the elements' collocation residuals; U = Umap q the inputs at every point (linear in q)."""
-        if self._march is None:
-            dyn, d, N = self.dynamic, self.mesh.degree, self.mesh.n_elements
-            rf, R = self.element_functions()
-            n_w = dyn.n_x + dyn.n_z
-            ws, par = ca.SX.sym("ws", n_w), ca.SX.sym("par", dyn.n_p + dyn.n_u * d + 1)
-            V = rf(ca.repmat(ws, d, 1), ca.vertcat(ws[:dyn.n_x], par))
-            march = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
-            self._march = (march, R.map(N), self.point_input_map())
-        return self._march
+        """(march, residuals, Umap) of the element marcher (:func:`models.trajectory.march_functions`)."""
+        return march_functions(self)
 
     # ------------------------------------------------------------------ inputs at the points
     def initial_input(self, q):
@@ -298,25 +291,15 @@ class CollocatedModel(Model):
         return np.asarray(ca.evalf(ca.jacobian(U, q))) if self.dynamic.n_q_dim else np.zeros((U.size1(), 0))
 
     def _integrate(self, p, q) -> np.ndarray:
-        """The collocation solution at (p, q), element by element (Newton on each element)."""
-        dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
+        """The collocation solution at (p, q), element by element (:func:`models.trajectory.march`)."""
+        dyn, N = self.dynamic, self.mesh.n_elements
         p, q = np.asarray(p, float).ravel(), np.asarray(q, float).ravel()
-        march, residuals, Umap = self.march_functions()
+        Umap = march_functions(self)[2]
         u0 = self.initial_input(q)
         x0 = np.asarray(dyn.x0_fun(p, u0)).ravel()
         w0 = np.r_[x0, self._initial_algebraic(x0, p, u0)]
-        P = np.vstack([np.tile(p[:, None], (1, N)), (Umap @ q).reshape(N, -1).T, np.diff(b)[None, :]])
-        W_end, V = (np.asarray(a) for a in march(w0, P))
-        res = np.asarray(residuals(V, np.vstack([np.column_stack([x0, W_end[:dyn.n_x, :-1]]), P])))
-        scale = 1.0 + np.max(np.abs(V), axis=0)
-        bad = ~(np.all(np.isfinite(V), axis=0) & (np.max(np.abs(res), axis=0) <= 1e-8 * scale))
-        if np.any(bad):
-            k = int(np.flatnonzero(bad)[0])
-            raise StateSolveError(
-                f"integration of {dyn.name!r} failed at p = {p.tolist()}, inputs {q.tolist()}: no collocation "
-                f"solution on the element [{b[k]:g}, {b[k + 1]:g}] (the trajectory blows up or is too stiff for "
-                "the element); check p0 and the inputs, or give a finer mesh")
-        return np.r_[w0, V.T.ravel()]
+        V = march(self, w0[None, :], p, (Umap @ q).reshape(N, -1)[None], q[None, :])[0]
+        return np.r_[w0, V.ravel()]
 
 
 def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: int = 3,

@@ -23,6 +23,7 @@ import numpy as np
 
 from .cache import Cache
 from .labels import LabelledModel, ModelError, Parameter, as_column, as_parameters, check_names
+from .sensitivity import StateSolve
 
 __all__ = ["Parameter", "LabelledModel", "Model", "ModelError", "pickling_as_recipe", "recipe_reducer"]
 
@@ -190,6 +191,15 @@ class Model(LabelledModel):
                 raise ModelError(f"unknown sensor {n!r}; this model has {', '.join(self.sensors)}")
             idx.append(self.sensors.index(n))
         return idx
+
+    @property
+    def state_numerics(self):
+        """How this model's states and sensitivities are computed (one strategy per model, cached): the generic
+        solves of E(y, p, q) = 0 (:class:`models.sensitivity.StateSolve`) here; a collocated ODE marches its
+        elements (:class:`models.trajectory.TrajectoryNumerics`).  Operations: ``solve_states``,
+        ``sensitivities``, ``marched_states``, ``integrated_outputs``; capabilities ``reduced_space`` and
+        ``merges_fits``."""
+        return self.cache.get_or_make("state_numerics", None, lambda: StateSolve(self))
 
     @property
     def has_y_guess(self) -> bool:

@@ -18,8 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from .state import numerics
-from .trajectory import trajectory_numerics
+from .state import numerics, solve_states_generic
 
 __all__ = ["Sensitivities", "sensitivities"]
 
@@ -171,54 +170,17 @@ def _dense(a) -> np.ndarray:
     return a.toarray() if sps.issparse(a) else np.asarray(a, float)
 
 
-class _TrajectorySensitivities(Sensitivities):
-    """A collocated ODE (:mod:`models.trajectory`): h, G and y' of all inputs by forward substitution
-    through the elements; the adjoints and second derivatives factor dE/dy per input when first asked."""
-
-    __slots__ = ("_yp", "_model", "_blocks")
-
-    def __init__(self, h, G, model, p, inputs, Y, yp, blocks):
-        super().__init__(h, G, None, p, inputs, Y, None)
-        self._yp, self._model, self._blocks = yp, model, blocks
-
-    @property
-    def state_derivatives(self) -> np.ndarray:
-        return self._yp
-
-    def _filled(self) -> None:
-        if self._cache is not None:
-            return
-        num = numerics(self._model)
-        n_p = self.G.shape[2]
-        cache = []
-        for j in range(self._inputs.shape[0]):
-            _, Ey, _, hy, _ = num.point("sens")(self._Y[j], self._p, self._inputs[j])
-            cache.append((num.factor(Ey), hy, np.vstack([self._yp[j], np.eye(n_p)])))
-        self._num, self._cache = num, cache
-
-    def adjoint(self, lam: np.ndarray) -> np.ndarray:
-        self._filled()
-        return super().adjoint(lam)
-
-    def hessians(self, lam: np.ndarray) -> np.ndarray:
-        return trajectory_numerics(self._model).hessians(self._p, self._inputs, self._Y, self._yp, *self._blocks,
-                                                         np.asarray(lam, float))
-
-    def output_hessians(self) -> np.ndarray:
-        self._filled()
-        return super().output_hessians()
-
-
 def sensitivities(model, p, inputs, Y) -> Sensitivities:
-    """Outputs h and total sensitivities G = dh/dp at every input (exact, by AD + IFT)."""
+    """Outputs h and total sensitivities G = dh/dp at every input (exact, by AD + IFT), by the model's
+    numerics (:attr:`models.Model.state_numerics`)."""
     p = np.asarray(p, float).ravel()
     inputs = np.atleast_2d(np.asarray(inputs, float))
-    traj = trajectory_numerics(model)
-    if traj is not None:
-        Y = np.asarray(Y, float)
-        yp, RV, Rx = traj.sweep(p, inputs, Y)
-        h, G = traj.outputs_and_sensitivities(p, inputs, Y, yp)
-        return _TrajectorySensitivities(h, G, model, p, inputs, Y, yp, (RV, Rx))
+    return model.state_numerics.sensitivities(p, inputs, Y)
+
+
+def generic_sensitivities(model, p: np.ndarray, inputs: np.ndarray, Y) -> Sensitivities:
+    """:func:`sensitivities` by the generic solves y'(p) = -(dE/dy)^{-1} dE/dp input by input (sparse LU), or all
+    inputs in one batched call for a small (dense) state."""
     num = numerics(model)
     n_q = inputs.shape[0]
     if num.dense:
@@ -245,3 +207,42 @@ def sensitivities(model, p, inputs, Y) -> Sensitivities:
             Z = np.eye(model.n_p)
         cache.append((solve, hy, Z))
     return Sensitivities(h, G, num, p, inputs, Y, cache)
+
+
+class StateSolve:
+    r"""The generic numerics of a model E(y, p, q) = 0 (:attr:`models.Model.state_numerics`): the states by
+    Newton input by input (sparse LU of dE/dy; small dense states all inputs at once,
+    :func:`models.state.solve_states_generic`), the sensitivities y'(p) = -(dE/dy)^{-1} dE/dp likewise
+    (:func:`generic_sensitivities`).  The other strategy is the element marcher of a collocated ODE
+    (:class:`models.trajectory.TrajectoryNumerics`); both have the same operations and capabilities.
+
+    Attributes
+    ----------
+    model : models.Model
+    reduced_space : bool    False: the fit solves the full-space NLP (the states are unknowns)
+    merges_fits : bool      False: batched fits use the batch engine, not merged member fits
+    """
+
+    reduced_space = False
+    merges_fits = False
+
+    def __init__(self, model):
+        self.model = model
+
+    def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
+        """The states y_j (n_q, n_y) solving E(y_j, p, q_j) = 0 (:func:`models.state.solve_states_generic`)."""
+        return solve_states_generic(self.model, p, inputs, Y0)
+
+    def sensitivities(self, p: np.ndarray, inputs: np.ndarray, Y) -> Sensitivities:
+        """h and G = dh/dp at the states Y (:func:`generic_sensitivities`)."""
+        return generic_sensitivities(self.model, p, inputs, Y)
+
+    def marched_states(self, p, inputs, guess):
+        """None: no solve of all inputs from a predicted guess of its own (the caller's solve is used)."""
+        return None
+
+    def integrated_outputs(self, p: np.ndarray, inputs: np.ndarray, guess=None) -> np.ndarray:
+        """h (n_q, n_S) at the states the model integrates by itself, its own state guess (``y_guess``: for a
+        collocated DAE the element march, :func:`models.trajectory.march`); ``guess`` is not used."""
+        model = self.model
+        return np.array([np.asarray(model.h_fun(model.y_guess(p, q), p, q)).ravel() for q in inputs])

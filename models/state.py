@@ -25,10 +25,9 @@ from .batched import BatchedFunction, batched_function
 from .cache import Cache
 from .errors import StateSolveError
 from .jit_cache import JitCache, JitCompileError, JitStats
-from .trajectory import trajectory_numerics
 from .vectorised import VectorisedSX, vectorisable
 
-__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "simulate", "Numerics", "set_jit",
+__all__ = ["batched_function", "numerics", "solve_state", "solve_states", "solve_states_generic", "simulate", "Numerics", "set_jit",
            "jit_scope", "jit_enabled", "JitConfig", "JIT"]
 
 _DENSE_LIMIT = 60
@@ -561,19 +560,20 @@ def solve_states(model, p, inputs, Y0=None) -> np.ndarray:
     ``Y0``, each solve starts from the previous input's state (continuation); with at least
     :data:`BATCH_START_MIN` inputs and a dense state, all inputs are first solved at once by
     damped Newton from the model's guesses and only the inputs where that fails are solved one
-    by one.  An explicit model (no state) returns an (n_q, 0) array.
+    by one (:func:`solve_states_generic`).  A collocated ODE marches its elements instead, all inputs
+    at once: the model's numerics (:attr:`models.Model.state_numerics`) solve.  An explicit model (no
+    state) returns an (n_q, 0) array.
     """
     inputs = np.atleast_2d(np.asarray(inputs, float))
     p = np.asarray(p, float).ravel()
     if not model.n_y:
         return np.zeros((inputs.shape[0], 0))
-    traj = trajectory_numerics(model)       # a collocated ODE: element after element, all inputs at once
-    if traj is not None:
-        try:
-            return traj.states(p, inputs, Y0)
-        except StateSolveError:
-            if Y0 is None:
-                raise
+    return model.state_numerics.solve_states(p, inputs, Y0)
+
+
+def solve_states_generic(model, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
+    """:func:`solve_states` by the generic solves (batched dense Newton, or input by input with continuation);
+    ``inputs`` (n_q, d_q) and ``p`` (n_p,) as arrays, a model with states."""
     dense = numerics(model).dense
     if Y0 is not None and dense:
         Y = _solve_states_batched(model, p, inputs, Y0)

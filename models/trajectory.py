@@ -33,8 +33,12 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
+from .sensitivity import Sensitivities
+from .state import numerics, solve_states_generic
 
-__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states"]
+__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states", "march", "march_functions",
+           "march_failure", "element_failures", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
+           "outputs_and_sensitivities"]
 
 #: the broker of this thread's member fit in :func:`run_merged` (None outside one)
 _LOCAL = threading.local()
@@ -67,13 +71,167 @@ def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
     return fm(*args)
 
 
+# ---------------------------------------------------------------------------- the element marcher
+#: an element's collocation solution is accepted when max |R| <= RESIDUAL_TOL (1 + max |V|)
+RESIDUAL_TOL = 1e-8
+
+
+def march_functions(cm) -> tuple:
+    """(march, residuals, Umap) of a collocated model: march(w_0, P) -> (W_end, V) solves the elements one
+    after the other (``mapaccum`` of one element's Newton solve, CasADi's rootfinder of
+    :meth:`models.collocation.CollocatedModel.element_functions`; column k of P is (p, U_k, h_k));
+    residuals(V, (x_start, P)) are the elements' collocation residuals; U = Umap q the inputs at every
+    point (linear in q).  Cached on the model."""
+    def build():
+        dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
+        rf, R = cm.element_functions()
+        n_w = dyn.n_x + dyn.n_z
+        ws, par = ca.SX.sym("ws", n_w), ca.SX.sym("par", dyn.n_p + dyn.n_u * d + 1)
+        V = rf(ca.repmat(ws, d, 1), ca.vertcat(ws[:dyn.n_x], par))
+        march_f = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
+        return march_f, R.map(N), cm.point_input_map()
+    return cm.cache.get_or_make("march_functions", None, build)
+
+
+def element_failures(V: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Rows (one element of one experiment) whose unknowns V are not finite or whose collocation residual
+    R is above RESIDUAL_TOL (1 + max |V|): the element's Newton solve failed."""
+    return ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(V), axis=1))))
+
+
+def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
+    """The one failure of the marcher: no collocation solution on element k of experiment j (0-based)."""
+    b = np.asarray(cm.mesh.boundaries)
+    p = p if np.ndim(p) == 1 else np.asarray(p)[j]
+    return StateSolveError(
+        f"integration of {cm.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
+        f"{np.asarray(inputs)[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of "
+        f"experiment {j + 1} (the trajectory blows up or is too stiff for the element); check p and the inputs, "
+        "or give a finer mesh")
+
+
+def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
+    r"""The element marcher: every experiment's collocation solution element after element (Newton on
+    R(V_k; w_k0, p, U_k, h_k) = 0, the module docstring), all experiments at once.
+
+    Up to :data:`MARCH_IN_CASADI_MAX` experiments (or with algebraic states) in one CasADi call (the
+    ``mapaccum`` of CasADi's rootfinder, :func:`march_functions`, mapped over the experiments); more
+    experiments of an ODE element by element with batched NumPy Newton steps
+    (:meth:`TrajectoryNumerics.element_newton`, fewer calls per point).  Every element's residual is
+    checked (:func:`element_failures`).
+
+    Parameters
+    ----------
+    cm : models.collocation.CollocatedModel
+    W0 : ndarray (n, n_w)          the initial points (x(0), z(0)) of the n experiments
+    p : ndarray (n_p,) or (n, n_p) the parameters, shared or one row per experiment
+    U : ndarray (n, N, n_u d)      the inputs at every element's d points
+    inputs : ndarray (n, d_q)      the experiments' input rows (named in the failure message)
+
+    Returns
+    -------
+    V : ndarray (n, N, n_w d)      every element's unknowns at its d Radau points
+
+    Raises
+    ------
+    StateSolveError
+        :func:`march_failure` of the first element whose residual is above the tolerance.
+    """
+    n, N = U.shape[0], U.shape[1]
+    steps = np.diff(np.asarray(cm.mesh.boundaries))
+    if n > MARCH_IN_CASADI_MAX and not cm.dynamic.n_z:
+        num, xs, V = cm.state_numerics, W0, []
+        for k in range(N):
+            V.append(num.element_newton(xs, p, U[:, k], steps[k], inputs, k))
+            xs = V[-1][:, -W0.shape[1]:]
+        return np.stack(V, axis=1)
+    P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U,
+                        np.broadcast_to(steps[None, :, None], (n, N, 1))], axis=2)   # (n, N, n_par)
+    march_f = march_functions(cm)[0]
+    fm = cm.cache.get_or_make("march_map", n, lambda: march_f.map(n), maxsize=8)
+    W_end, V = (np.asarray(a) for a in fm(ca.DM(np.ascontiguousarray(W0.T)),
+                                          ca.DM(np.ascontiguousarray(P.reshape(n * N, -1).T))))
+    V, W_end = V.T.reshape(n, N, -1), W_end.T.reshape(n, N, -1)
+    n_x, m = cm.dynamic.n_x, n * N
+    XS = np.concatenate([W0[:, None, :n_x], W_end[:, :-1, :n_x]], axis=1)
+    residual = cm.cache.get_or_make("element_residual_map", m, lambda: cm.element_functions()[1].map(m), maxsize=8)
+    R = np.asarray(residual(V.reshape(m, -1).T, np.concatenate([XS, P], axis=2).reshape(m, -1).T)).T
+    bad = element_failures(V.reshape(m, -1), R)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise march_failure(cm, p, inputs, i // N, i % N)
+    return V
+
+
+def _march_symbolic(cm, p, q):
+    """(y, max residual / (1 + max |V|) per element) of the collocation solution of an ODE as CasADi
+    expressions of p and q: :func:`march_functions`' march in a graph (for its exact derivatives)."""
+    dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
+    march_f, residuals, _ = march_functions(cm)
+    U_all = ca.horzcat(*cm.point_inputs(q))
+    P = ca.vertcat(ca.repmat(p, 1, N), ca.reshape(U_all, dyn.n_u * d, N), ca.DM(np.diff(cm.mesh.boundaries)).T)
+    x0 = dyn.x0_fun(p, cm.initial_input(q))
+    W_end, Vs = march_f(x0, P)
+    R = residuals(Vs, ca.vertcat(ca.horzcat(x0, W_end[:, :-1]), P))
+    v, r = ca.MX.sym("v", Vs.size1()), ca.MX.sym("r", R.size1())
+    crit = ca.Function("crit", [v, r], [ca.mmax(ca.fabs(r)) / (1.0 + ca.mmax(ca.fabs(v)))]).map(N)
+    return ca.vertcat(x0, ca.vec(Vs)), crit(Vs, R)
+
+
+class _TrajectorySensitivities(Sensitivities):
+    """A collocated ODE (:mod:`models.trajectory`): h, G and y' of all inputs by forward substitution
+    through the elements; the adjoints and second derivatives factor dE/dy per input when first asked."""
+
+    __slots__ = ("_yp", "_traj", "_model", "_blocks")
+
+    def __init__(self, h, G, traj, p, inputs, Y, yp, blocks):
+        super().__init__(h, G, None, p, inputs, Y, None)
+        self._yp, self._traj, self._model, self._blocks = yp, traj, traj.model, blocks
+
+    @property
+    def state_derivatives(self) -> np.ndarray:
+        return self._yp
+
+    def _filled(self) -> None:
+        if self._cache is not None:
+            return
+        num = numerics(self._model)
+        n_p = self.G.shape[2]
+        cache = []
+        for j in range(self._inputs.shape[0]):
+            _, Ey, _, hy, _ = num.point("sens")(self._Y[j], self._p, self._inputs[j])
+            cache.append((num.factor(Ey), hy, np.vstack([self._yp[j], np.eye(n_p)])))
+        self._num, self._cache = num, cache
+
+    def adjoint(self, lam: np.ndarray) -> np.ndarray:
+        self._filled()
+        return super().adjoint(lam)
+
+    def hessians(self, lam: np.ndarray) -> np.ndarray:
+        return self._traj.hessians(self._p, self._inputs, self._Y, self._yp, *self._blocks, np.asarray(lam, float))
+
+    def output_hessians(self) -> np.ndarray:
+        self._filled()
+        return super().output_hessians()
+
+
 class TrajectoryNumerics:
-    """The element functions of one collocated ODE model (see the module docstring).
+    """The numerics of one collocated ODE model (:attr:`models.Model.state_numerics`; see the module
+    docstring): its trajectories marched element by element, all experiments at once, and their exact
+    sensitivities by forward substitution through the elements.  The same operations as the generic
+    strategy :class:`models.sensitivity.StateSolve`.
 
     Attributes
     ----------
     model : models.collocation.CollocatedModel
+    reduced_space : bool    True: the states are solved to round-off for any number of experiments, so a
+                            fit stays in the reduced space (no NLP, no state scalings)
+    merges_fits : bool      True: batched fits run every member's fit with their evaluations merged
+                            (:func:`run_merged`)
     """
+
+    reduced_space = True
+    merges_fits = True
 
     def __init__(self, cm):
         dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
@@ -112,6 +270,36 @@ class TrajectoryNumerics:
         self.steps = np.diff(b)
         self._maps = {}
 
+    # ------------------------------------------------------------------ the strategy's operations
+    def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
+        """The collocation solution (n_q, n_y) at p (:meth:`states`); when that fails from a guess ``Y0``,
+        the generic solves from it (:func:`models.state.solve_states_generic`)."""
+        try:
+            return self.states(p, inputs, Y0)
+        except StateSolveError:
+            if Y0 is None:
+                raise
+        return solve_states_generic(self.model, p, inputs, Y0)
+
+    def sensitivities(self, p: np.ndarray, inputs: np.ndarray, Y) -> Sensitivities:
+        """h, G = dh/dp and y'(p) of every experiment at the states Y (:meth:`sweep`, one forward
+        substitution through the elements for all experiments)."""
+        Y = np.asarray(Y, float)
+        yp, RV, Rx = self.sweep(p, inputs, Y)
+        h, G = self.outputs_and_sensitivities(p, inputs, Y, yp)
+        return _TrajectorySensitivities(h, G, self, p, inputs, Y, yp, (RV, Rx))
+
+    def marched_states(self, p, inputs, guess) -> np.ndarray:
+        """The states at p from a predicted ``guess`` (Newton on all trajectories), else marched (:meth:`states`)."""
+        return self.states(p, inputs, guess)
+
+    def integrated_outputs(self, p, inputs, guess=None) -> np.ndarray:
+        """h (n_q, n_S) of the collocation solution at p, from the states ``guess`` when given (e.g.
+        another mesh's trajectories interpolated, :func:`interpolate_states`)."""
+        if guess is None:
+            return self.outputs(p, inputs)
+        return self.outputs(p, inputs, self.states(p, inputs, guess))
+
     # ------------------------------------------------------------------ states
     def _elements(self, Y: np.ndarray, n_x: int) -> tuple:
         """(W, XS) of the trajectories Y (n, n_y): every element's unknowns (n, N, n_x d) and its start
@@ -141,20 +329,9 @@ class TrajectoryNumerics:
             Y = self._newton(p, inputs, np.asarray(guess, float))
             if Y is not None:
                 return Y
-        n, d, N = inputs.shape[0], self.d, self.N
+        n = inputs.shape[0]
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
-        n_x = x0.shape[1]
-        U = self._controls(inputs)
-        if n <= MARCH_IN_CASADI_MAX:
-            return self._march(p, inputs, x0, U)
-        Y = np.empty((n, n_x * (1 + N * d)))
-        Y[:, :n_x] = x0
-        xs = x0
-        for k in range(N):
-            V = self._element(xs, p, U[:, k], self.steps[k], inputs, k)
-            Y[:, n_x * (1 + k * d):n_x * (1 + (k + 1) * d)] = V
-            xs = V[:, -n_x:]
-        return Y
+        return np.concatenate([x0, march(self.model, x0, p, self._controls(inputs), inputs).reshape(n, -1)], axis=1)
 
     def _stacked_solve(self, RV, Rx, B):
         """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)) by forward substitution through the
@@ -210,34 +387,10 @@ class TrajectoryNumerics:
                 return Y
         return None
 
-    def _march(self, p, inputs, x0, U):
-        """The same element-by-element Newton solves in one CasADi call for all experiments: the
-        model's ``mapaccum`` of CasADi's rootfinder over the elements
-        (:meth:`models.collocation.CollocatedModel.march_functions`), mapped over the experiments;
-        then every element's residual checked as in :meth:`_element`."""
-        n, d, N, n_x = inputs.shape[0], self.d, self.N, x0.shape[1]
-        fm = self._maps.get(("march", n))
-        if fm is None:
-            march = self.model.march_functions()[0]
-            fm = self._maps[("march", n)] = march.map(n)
-        P = np.concatenate([np.broadcast_to(p.reshape(-1, 1, p.shape[-1]), (n, N, p.shape[-1])), U, np.broadcast_to(self.steps[None, :, None], (n, N, 1))],
-                           axis=2)                                   # (n, N, n_par): column k of experiment j
-        _, V = fm(ca.DM(np.ascontiguousarray(x0.T)), ca.DM(np.ascontiguousarray(P.reshape(n * N, -1).T)))
-        V = np.asarray(V).T.reshape(n, N, n_x * d)
-        XS = np.concatenate([x0[:, None, :], V[:, :-1, -n_x:]], axis=1)
-        m = n * N
-        R = _mapped_call(self._maps, self.newton, m, [V.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N),
-                                                      U.reshape(m, -1),
-                                                      np.tile(self.steps, n)[:, None]])[0][:, :, 0]
-        Vf = V.reshape(m, -1)
-        bad = ~(np.all(np.isfinite(Vf), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(Vf), axis=1))))
-        if np.any(bad):
-            i = int(np.flatnonzero(bad)[0])
-            self._fail(inputs, i // N, i % N, p)
-        return np.concatenate([x0, V.reshape(n, -1)], axis=1)
-
-    def _element(self, xs, p, U, hk, inputs, k):
-        """Newton on element k for every experiment from V = (x_start, ..., x_start); an experiment
+    def element_newton(self, xs, p, U, hk, inputs, k):
+        """The NumPy step of :func:`march` for many experiments of an ODE: Newton on element k for every
+        experiment from V = (x_start, ..., x_start), batched (one mapped evaluation and one batched LAPACK
+        solve per iteration); an experiment
         stops when max |R| <= 1e-13 or its step is below 1e-12 (the tests of CasADi's rootfinder in
         :meth:`models.collocation.CollocatedModel.element_functions`), and is then left as it is."""
         n = xs.shape[0]
@@ -267,18 +420,13 @@ class TrajectoryNumerics:
                 break
         if not fresh:
             R = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])[0][:, :, 0]
-        bad = ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= 1e-8 * (1 + np.max(np.abs(V), axis=1))))
+        bad = element_failures(V, R)
         if np.any(bad):
             self._fail(inputs, int(np.flatnonzero(bad)[0]), k, p)
         return V
 
     def _fail(self, inputs, j, k, p):
-        b = np.asarray(self.model.mesh.boundaries)
-        p = p if np.ndim(p) == 1 else p[j]
-        raise StateSolveError(
-            f"integration of {self.model.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
-            f"{inputs[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment "
-            f"{j + 1} (the trajectory blows up or is too stiff for the element); check p0 and the inputs, or give a finer mesh")
+        raise march_failure(self.model, p, inputs, j, k)
 
     # ------------------------------------------------------------------ sensitivities
     def state_derivatives(self, p, inputs, Y) -> np.ndarray:
@@ -537,3 +685,62 @@ def interpolate_states(coarse, fine, Y) -> np.ndarray:
         np.add.at(L, (np.arange(tf.size), k * d + j), basis[:, j])
     n, n_w = Y.shape[0], coarse.dynamic.n_x + coarse.dynamic.n_z
     return np.einsum("fc,ncx->nfx", L, np.asarray(Y, float).reshape(n, -1, n_w)).reshape(n, -1)
+
+
+# ---------------------------------------------------------------------------- outputs and sensitivities, mapped
+def output_sensitivity_function(cm, derivatives: bool = True) -> ca.Function:
+    r"""``(p, q) -> (h (n_S,), G (n_S, n_p), residual (1, N))`` of a collocated ODE model, or without G
+    (``derivatives=False``); cached on the model.  The outputs h at the sampling times of the marched
+    solution (:func:`march_functions`) and G = dh/dp = h_y dy/dp + h_p by CasADi's derivative of that chain
+    (the implicit-function theorem on every element: one small dense solve per element, i.e. the
+    block-bidiagonal solve of E_y S = -E_p); each element's relative residual after Newton is returned as
+    well, so that a failed element is never silent."""
+    if cm.dynamic.n_z:
+        raise ValueError("cm: the mapped outputs are for ODE models (no algebraic states)")
+
+    def build():
+        p, q = ca.MX.sym("p", cm.n_p), ca.MX.sym("q", cm.n_q_dim)
+        y, bad = _march_symbolic(cm, p, q)
+        h = cm.h_fun(y, p, q)
+        if derivatives:
+            return ca.Function("outputs", [p, q], [h, ca.jacobian(h, p), bad], ["p", "q"], ["h", "G", "residual"])
+        return ca.Function("outputs", [p, q], [h, bad], ["p", "q"], ["h", "residual"])
+    return cm.cache.get_or_make("output_sensitivity_function", derivatives, build)
+
+
+def _mapped(cm, derivatives, n):
+    f = output_sensitivity_function(cm, derivatives)
+    return cm.cache.get_or_make("output_sensitivity_map", (derivatives, n), lambda: f.map(n), maxsize=8)
+
+
+def mapped_outputs(cm, p, inputs, tol: float = RESIDUAL_TOL) -> np.ndarray:
+    """Outputs (n_q, n_S) of a collocated ODE model at p for every input row (one mapped call; the
+    collocation solution of :meth:`models.collocation.CollocatedModel.integrated_outputs`)."""
+    Q = np.atleast_2d(np.asarray(inputs, float))
+    p = np.asarray(p, float).ravel()
+    h, bad = (np.asarray(a) for a in _mapped(cm, False, Q.shape[0])(p, Q.T))
+    _check(cm, p, Q, h, bad, tol)
+    return h.T
+
+
+def _check(cm, p, Q, h, bad, tol):
+    """:func:`march_failure` naming the experiment and element whose Newton solve failed."""
+    bad = bad.reshape(Q.shape[0], -1)
+    wrong = ~np.isfinite(bad) | (bad > tol)
+    if np.any(wrong) or not np.all(np.isfinite(h)):
+        j, k = np.argwhere(wrong)[0] if np.any(wrong) else (int(np.argwhere(~np.isfinite(h.T))[0][0]), 0)
+        raise march_failure(cm, p, Q, int(j), int(k))
+
+
+def outputs_and_sensitivities(cm, p, inputs, tol: float = RESIDUAL_TOL):
+    """(h (n_q, n_S), G (n_q, n_S, n_p)) of a collocated ODE model at p for every input row, one
+    mapped call (:func:`output_sensitivity_function`); raises :class:`models.errors.StateSolveError`
+    naming the experiment and element when an element's Newton solve did not converge (relative
+    residual above ``tol``)."""
+    Q = np.atleast_2d(np.asarray(inputs, float))
+    p = np.asarray(p, float).ravel()
+    h, G, bad = (np.asarray(a) for a in _mapped(cm, True, Q.shape[0])(p, Q.T))
+    _check(cm, p, Q, h, bad, tol)
+    if not np.all(np.isfinite(G)):
+        raise StateSolveError(f"sensitivities of {cm.dynamic.name!r} at p = {p.tolist()} are not finite")
+    return h.T, G.reshape(cm.n_S, Q.shape[0], cm.n_p).transpose(1, 0, 2)

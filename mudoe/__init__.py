@@ -29,9 +29,10 @@ _EXPORTS = {
     "read_long_csv": "mudoe.dynamic_io", "write_long_csv": "mudoe.dynamic_io",
     "write_paper_layout": "mudoe.data_io", "read_paper_layout": "mudoe.data_io",
     # identification
-    "identify": "identification", "IdentifySettings": "identification", "IpoptSettings": "identification",
+    "identify": "identification", "Problem": "identification", "IdentifySettings": "identification",
+    "IpoptSettings": "identification", "information": "oed",
     "information_contributions": "identification", "simulate": "identification",
-    "solve_states": "identification", "DiscretisationSettings": "identification.fit.dynamic_fit",
+    "solve_states": "identification", "DiscretisationSettings": "identification",
     "predict": "identification.fit.dynamic_fit", "simulate_campaign": "identification.fit.dynamic_fit",
     "lr_region": "identification.inference.likelihood_region",
     # studies: Algorithm 1, Monte Carlo, model error

@@ -29,7 +29,7 @@ import numpy as np
 from identification import information_contributions
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
 from models.collocation import collocate, pair_name
-from models.collocation_map import mapped_outputs
+from models.trajectory import mapped_outputs
 from models.contract import ModelError
 from models.dynamic import time_label
 from models.sensitivity import sensitivities

@@ -78,7 +78,6 @@ import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
-from models.trajectory import trajectory_numerics
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.assembly import sigma_rescaling
 from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, BatchMember, BatchSettings,
@@ -286,7 +285,7 @@ class _BatchRun:
         """Every member by identify (the batch engine cannot be used)."""
         model, R = self.model, self.R
         n_y = model.n_y
-        if n_y and trajectory_numerics(model) is not None and self.fallback_on:
+        if n_y and model.state_numerics.merges_fits and self.fallback_on:
             # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
             results, errors = fit_members(model, [self.data.member(r) for r in range(R)], self.p0, self.weights,
                                           self.settings, starts)

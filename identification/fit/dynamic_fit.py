@@ -1,7 +1,7 @@
 r"""Identification of a dynamic model with discretisation error control.
 
 The model is collocated on a mesh (:mod:`models.collocation`) and fitted as any static model
-(:func:`identification.fit.entry.fit_model`).  At the estimate p̂ the outputs at the sampling
+(:func:`identification.fit.estimator.fit_static`).  At the estimate p̂ the outputs at the sampling
 times are recomputed on the mesh with every element halved; Radau IIA of degree d converges
 with order 2d - 1 at element boundaries, so the difference
 
@@ -29,10 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.collocation import Mesh, collocate, DEFAULT_ELEMENTS
-from models.collocation_map import mapped_outputs, outputs_and_sensitivities
 from models.contract import ModelError
 from models.dynamic import DynamicModel
-from models.trajectory import interpolate_states, trajectory_numerics
+from models.trajectory import interpolate_states, mapped_outputs, outputs_and_sensitivities
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.estimator import fit_static, static_information
@@ -198,12 +197,8 @@ def _error(model, data, est, mesh, w):
     halved, o = 2 d - 1 the order at the element boundaries."""
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
     order = 2 * mesh.degree - 1
-    traj = trajectory_numerics(fine)
-    if traj is not None and est.states is not None:       # Newton from the fit's trajectories interpolated
-        h_fine = traj.outputs(est.p, data.inputs, traj.states(est.p, data.inputs,
-                                                             interpolate_states(est.model, fine, est.states)))
-    else:
-        h_fine = fine.integrated_outputs(est.p, data.inputs)
+    guess = None if est.states is None else interpolate_states(est.model, fine, est.states)
+    h_fine = fine.state_numerics.integrated_outputs(est.p, data.inputs, guess)   # from the fit's trajectories
     dh = (h_fine - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
@@ -230,9 +225,10 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
 
     Returns
     -------
-    Estimate
-        Of the collocated model (``est.model``) on the flat data (``est.data``), with
-        ``est.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note.
+    identification.fit.record.FitRecord
+        Of the collocated model (``rec.model``) on the flat data (``rec.data``), with
+        ``rec.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note
+        (:func:`identification.identify` returns it as an Estimate).
     """
     ds = discretisation or DiscretisationSettings()
     if not isinstance(ds, DiscretisationSettings):
@@ -387,7 +383,7 @@ def dynamic_information(model: DynamicModel, data, p, *, inputs=None, times=None
             return static_information(cm, None, p, inputs=q, sigma=sig, n_series=n_series)
         if isinstance(n_series, bool) or not isinstance(n_series, (int, np.integer)) or n_series < 1:
             raise DataError(f"n_series: expected an integer >= 1, got {n_series!r}")
-        _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.collocation_map)
+        _, G = outputs_and_sensitivities(cm, p, q)          # exact, one mapped call (models.trajectory)
         F = float(n_series) * np.einsum("k,jkp,jkr->kpr", 1.0 / sig ** 2, G, G)
         return F, np.zeros_like(F)
     if times is not None or inputs is not None or sigma is not None:

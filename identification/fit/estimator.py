@@ -50,7 +50,6 @@ from identification.fit.start import (Start, as_start_vector, decrement_unit, ma
                                       scalings)
 from models.sensitivity import sensitivities
 from models.state import solve_states
-from models.trajectory import trajectory_numerics
 
 __all__ = ["fit_static", "static_information", "IdentifySettings", "check_identifiability",
            "covariance_from_terms", "param_scale", "as_start_vector", "LAZY_PASS_MAX_ITER"]
@@ -101,7 +100,7 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
         if got is not None and np.all(got[1].p > model.lower + 1e-6 * s_p) and \
                 np.all(got[1].p < model.upper - 1e-6 * s_p):
             warm = got[1], got[2]
-            if trajectory_numerics(model) is not None:
+            if model.state_numerics.reduced_space:
                 # a collocated ODE: the reduced optimum (states solved to round-off element by element,
                 # decrement at round-off) is the estimate, as for explicit models; no NLP is built
                 if clock is not None:
@@ -222,7 +221,7 @@ def fit_static(model: Model, data: Measurements, p0, weights=None,
     ----------
     model : models.Model
         A static model; a dynamic one (:meth:`models.Model.ode`) goes through
-        :func:`identification.fit.entry.fit_model` (collocation with error control).
+        :meth:`identification.fit.problem.Problem.fit` (collocation with error control).
     data : Measurements
         z (n_M, n_q, n_S); sigma per sensor, or None for a common unknown sigma.
     p0 : array_like (n_p,)
@@ -309,7 +308,7 @@ def static_information(model: Model, data: Measurements | None, p, states=None, 
     planned before measuring: c_jk = n_series and the expected residual zbar - h is 0 at the
     nominal p, so S_k = 0 and the second-order covariance equals the Gauss-Newton one.
 
-    A dynamic model goes through :func:`identification.fit.entry.information_contributions`.
+    A dynamic model goes through :meth:`identification.fit.problem.Problem.information`.
 
     Returns
     -------

@@ -12,7 +12,6 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.state import numerics
-from models.trajectory import trajectory_numerics
 from identification.fit import dense
 from identification.fit import newton as newton_core
 from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms
@@ -281,7 +280,7 @@ def reduced_start(st: Start, settings: IdentifySettings):
     """
     model = st.model
     min_inputs = settings.reduced_start_inputs
-    trajectory = trajectory_numerics(model) is not None     # a collocated ODE: any number of inputs
+    trajectory = model.state_numerics.reduced_space     # e.g. a collocated ODE: any number of inputs
     if (not model.n_y or min_inputs is None or
             not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None

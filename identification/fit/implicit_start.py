@@ -28,7 +28,6 @@ import numpy as np
 from models.errors import StateSolveError
 from models.sensitivity import sensitivities
 from models.state import numerics
-from models.trajectory import trajectory_numerics
 from identification.fit.explicit_kernel import ExplicitTerms
 from identification.fit.refinement import ReducedPoint, ReducedProblem
 
@@ -166,13 +165,11 @@ class ImplicitObjective:
             return near[2]
         problem = self._problem
         p = x * self._sp
-        Y = None
-        traj = trajectory_numerics(problem.model)
-        if traj is not None:          # a collocated ODE: Newton on all trajectories from the prediction, else marched
-            guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
-            Y = traj.states(p, problem.data.inputs, guess)
-        elif near[2] is not None:                 # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
-            guess = near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+        # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
+        guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+        # the model's own solve from it (a collocated ODE: Newton on all trajectories, else marched), if it has one
+        Y = problem.model.state_numerics.marched_states(p, problem.data.inputs, guess)
+        if Y is None and guess is not None:
             try:
                 Y = solve_states_from(problem.model, p, problem.data.inputs, guess)
             except StateSolveError:

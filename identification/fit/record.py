@@ -15,7 +15,7 @@ __all__ = ["FitRecord"]
 
 @dataclass(frozen=True, eq=False)
 class FitRecord:
-    """The plain result of one fit (:func:`identification.fit.entry.fit_model`): the numbers, no
+    """The plain result of one fit (:func:`identification.fit.problem.fit_model`): the numbers, no
     inference.  :class:`identification.Estimate` adds intervals, regions, curvature and the summary.
 
     Attributes

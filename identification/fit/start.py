@@ -17,7 +17,6 @@ import scipy.sparse as sps
 from models.contract import Model
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
-from models.trajectory import trajectory_numerics
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit import newton as newton_core
 from identification.fit.implicit_start import solve_states_from
@@ -235,7 +234,7 @@ def make_start(model, data, p0, weights, Y0) -> Start:
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
         # a collocated ODE is solved in the reduced space (no NLP): its scalings are made when Ipopt needs them
-        s_y, e_scale = ((None, None) if trajectory_numerics(model) is not None
+        s_y, e_scale = ((None, None) if model.state_numerics.reduced_space
                         else scalings(model, p0, data.inputs, Y_init, Y0 is None))
     return Start(model, data, p0, w, n, selected, sig, Y_init, s_p, s_y, e_scale,
                   ReducedProblem.of(model, data, w, sig, s_p))

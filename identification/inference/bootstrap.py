@@ -38,7 +38,7 @@ from identification.replicate import ReplicationTask, replicate
 from identification.fit.batch import BatchData, fit_batch
 from identification.errors import DataError, IdentificationError, NotBoundedError, StateSolveError
 from identification.fit.unbounded import not_bounded_reason
-from identification.fit.entry import fit_model
+from identification.fit.problem import fit_model
 from identification.fit.measurements import Measurements
 from identification.inference.intervals import ConfidenceIntervals, resolve_params, validate_alpha
 from identification.progress import Progress
@@ -110,7 +110,7 @@ class BatchRefits(Refits):
 
 
 class OneByOneRefits(Refits):
-    """Every replicate refitted by its own :func:`identification.fit.entry.fit_model` call."""
+    """Every replicate refitted by its own :func:`identification.fit.problem.fit_model` call."""
 
     max_chunk = 20
 
@@ -180,7 +180,7 @@ def _refit_record(index: int, res, n_p: int, fallback: str = "") -> Refit:
 
 
 def _replicate(task: _Task, index: int, seed: np.random.SeedSequence, fallback: str = "") -> Refit:
-    """The Refit of one simulated campaign by identify (:func:`identification.fit.entry.fit_model`)."""
+    """The Refit of one simulated campaign by identify (:func:`identification.fit.problem.fit_model`)."""
     try:
         data = simulated_campaign(task, seed)
         est = fit_model(task.model, data, task.p0, weights=task.weights, Y0=task.states)

@@ -1,8 +1,8 @@
-"""identify: the fit (:func:`identification.fit.entry.fit_model`) returned as the Estimate users get."""
+"""identify: the fit of the problem (:meth:`identification.fit.problem.Problem.fit`) returned as the Estimate users get."""
 from __future__ import annotations
 
-from identification.fit.entry import fit_model
 from identification.fit.estimator import IdentifySettings
+from identification.fit.problem import Problem
 from identification.inference.results import Estimate
 
 __all__ = ["identify"]
@@ -13,9 +13,12 @@ def identify(model, data, p0, weights=None, settings: IdentifySettings | None = 
     """Weighted nonlinear least squares in full space (paper eq. 3), with covariance (eq. 7):
     min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 subject to E(y_j, p, q_j) = 0.
 
-    The numbers are those of :func:`identification.fit.entry.fit_model` (see it for the
-    parameters, the pipeline and the errors raised); the result is an :class:`Estimate`, which adds
-    the intervals (:meth:`Estimate.conf_int`), the ellipsoid, the curvature and :meth:`Estimate.summary`.
+    The numbers are those of :meth:`identification.fit.problem.Problem.fit` on
+    ``Problem(model, data, discretisation)`` (see :func:`identification.fit.estimator.fit_static` for
+    the parameters, the pipeline and the errors raised; a dynamic model is collocated with its
+    discretisation error controlled, :func:`identification.fit.dynamic_fit.identify_dynamic`); the
+    result is an :class:`Estimate`, which adds the intervals (:meth:`Estimate.conf_int`), the
+    ellipsoid, the curvature and :meth:`Estimate.summary`.
 
     Parameters
     ----------
@@ -31,5 +34,5 @@ def identify(model, data, p0, weights=None, settings: IdentifySettings | None = 
     -------
     Estimate
     """
-    return Estimate.from_record(fit_model(model, data, p0, weights=weights, settings=settings, Y0=Y0,
-                                         discretisation=discretisation))
+    problem = Problem(model, data, discretisation)
+    return Estimate.from_record(problem.fit(p0, weights=weights, settings=settings, Y0=Y0))

@@ -1,7 +1,7 @@
 """The constrained solver of the profile computations (:mod:`identification.inference.profile`):
 min Phi(p) over the parameters except a fixed set, by exact reduced Newton steps (Hessian
 J^T Omega J + S from AD, backtracking line search, bounds as an active set), falling back to Ipopt
-(:func:`identification.fit.entry.fit_model` on a model copy with lower = upper for the fixed
+(:func:`identification.fit.problem.fit_model` on a model copy with lower = upper for the fixed
 parameters)."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from models.contract import Model
 from models.errors import StateSolveError
 from identification.errors import IdentificationError
 from identification.fit import newton as newton_core
-from identification.fit.entry import fit_model
+from identification.fit.problem import fit_model
 from identification.fit.measurements import Measurements
 from identification.fit.refinement import ReducedPoint, ReducedProblem
 

@@ -1,9 +1,9 @@
-"""models.collocation_map: mapped outputs and sensitivities of a collocated ODE."""
+"""Mapped outputs and sensitivities of a collocated ODE (models.trajectory; formerly models.collocation_map)."""
 import numpy as np
 import pytest
 
 from models import Model
-from models.collocation_map import mapped_outputs, outputs_and_sensitivities
+from models.trajectory import mapped_outputs, outputs_and_sensitivities
 from models.errors import StateSolveError
 from models.sensitivity import sensitivities
 from models.state import solve_states
@@ -25,5 +25,14 @@ def test_blow_up_names_the_experiment_and_element():
                   h=lambda x, p, u: x, horizon=2.0)
     cm = m.collocate([0.5, 2.0], max_step=0.5)
     assert np.isfinite(mapped_outputs(cm, [1.0], [[0.1]])).all()
-    with pytest.raises(StateSolveError, match=r"experiment 2 .* on the element \[0.5, 1\]"):
+    with pytest.raises(StateSolveError, match=r"inputs \[1.0\]: no collocation solution on the element \[0.5, 1\] of experiment 2"):
         outputs_and_sensitivities(cm, [1.0], [[0.1], [1.0]])
+
+
+def test_the_old_module_warns_and_names_the_new_one():
+    import importlib
+    import sys
+    sys.modules.pop("models.collocation_map", None)
+    with pytest.warns(DeprecationWarning, match="models.trajectory"):
+        old = importlib.import_module("models.collocation_map")
+    assert old.mapped_outputs is mapped_outputs

@@ -70,6 +70,29 @@ def test_dae_models_keep_the_generic_solves():
     assert trajectory_numerics(build()) is None          # not collocated
 
 
+def test_every_model_carries_one_numerics_strategy_with_the_same_operations():
+    from models.sensitivity import StateSolve
+    from models.state import solve_states
+    dae = Model.ode(["k"], ["x"], ["x0"], ["w"], rhs=lambda x, z, p, u: -p[0] * z[0],
+                    alg=lambda x, z, p, u: z[0] - x[0] ** 2, algebraic=["w"], x0=lambda p, u: u[0],
+                    h=lambda x, z, p, u: z, horizon=1.0)
+    cm, cdae = collocate(build(), TIMES), collocate(dae, [0.5, 1.0])
+    assert isinstance(cm.state_numerics, trajectory.TrajectoryNumerics) and cm.state_numerics is trajectory_numerics(cm)
+    assert isinstance(cdae.state_numerics, StateSolve) and not cdae.state_numerics.reduced_space
+    assert cm.state_numerics.reduced_space and cm.state_numerics.merges_fits
+    for num in (cm.state_numerics, cdae.state_numerics):
+        assert all(callable(getattr(num, op)) for op in ("solve_states", "sensitivities", "marched_states",
+                                                          "integrated_outputs"))
+    # the DAE's integrated outputs are its marched state guess; its states the generic solve from there
+    h = cdae.integrated_outputs([0.8], [[2.0]])
+    Y = solve_states(cdae, [0.8], [[2.0]])
+    assert np.abs(h - np.asarray(cdae.h_fun(Y[0], [0.8], [2.0])).T).max() <= 1e-10
+    assert cdae.state_numerics.marched_states([0.8], np.array([[2.0]]), Y) is None
+    # the ODE's marched states from a guess are its states
+    Yo = solve_states(cm, P_TRUE, Q[:2])
+    assert np.abs(cm.state_numerics.marched_states(P_TRUE, Q[:2], Yo * (1 + 1e-6)) - Yo).max() <= 1e-12 * np.abs(Yo).max()
+
+
 def _campaign(seed):
     return simulate_campaign(build(), P_TRUE, Q[:6], TIMES, [0.01, 0.008], n_series=1, seed=seed)
 

@@ -1,0 +1,229 @@
+r"""The one estimation problem every verb takes: a model, its data and, for a dynamic model, its discretisation.
+
+Every verb solves, at some p, the static problem
+
+.. math::
+
+    \min_p \tfrac12 \sum_{ijk} w_k \bigl((z_{ijk} - h_k(y_j, p, q_j)) / \sigma_k\bigr)^2
+    \quad \text{s.t.} \quad E(y_j, p, q_j) = 0 \qquad \text{(paper eq. 3)}.
+
+A static model states E and h directly.  A dynamic model dx/dt = f(x, z, p, u), 0 = g(x, z, p, u)
+becomes one by Radau IIA collocation on a mesh (:mod:`models.collocation`) whose discretisation
+error is controlled at p (:mod:`identification.fit.dynamic_fit`).  :class:`Problem` holds the
+model and its data and asks its :class:`ProblemStrategy` for that static problem; the verbs
+(:func:`fit_model`, :func:`information_contributions`, and through them identify, detect,
+validate, the designs) are written once against it.  The only difference between the kinds is
+in the strategy: :class:`StaticStrategy` (the identity) and :class:`CollocatedStrategy` (the
+discretisation and its error control).  A third kind of model (e.g. a PDE discretised by the
+user) adds a strategy and its entry in :func:`strategy_for`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identification.fit.dynamic_fit import (DiscretisationSettings, collocated_problem, dynamic_information,
+                                            identify_dynamic)
+from identification.fit.estimator import IdentifySettings, fit_static, static_information
+from identification.fit.record import FitRecord
+
+__all__ = ["Problem", "ProblemStrategy", "StaticStrategy", "CollocatedStrategy", "strategy_for", "fit_model",
+           "information_contributions"]
+
+
+class ProblemStrategy:
+    """How a kind of model becomes the static problem E(y, p, q) = 0, z = h(y, p, q) + eps at p.
+
+    A strategy is stateless; :class:`Problem` passes itself to every method.  Subclasses
+    implement :meth:`static`, :meth:`fit` and :meth:`information`, and :meth:`check` for the
+    arguments only their kind takes.
+
+    Attributes
+    ----------
+    kind : str      "static" or "collocated" (printed, never compared by the verbs)
+    """
+
+    kind = ""
+
+    def check(self, problem: "Problem") -> None:
+        """Raise TypeError for an argument this kind does not take (e.g. a discretisation of a static model)."""
+
+    def static(self, problem: "Problem", p=None) -> tuple:
+        """(static model, static data) of the problem, on a discretisation controlled at p when p is given."""
+        raise NotImplementedError
+
+    def fit(self, problem: "Problem", p0, weights=None, settings: IdentifySettings | None = None,
+            Y0=None) -> FitRecord:
+        """The weighted least-squares fit (paper eq. 3) and its covariance (eq. 7) from ``p0``."""
+        raise NotImplementedError
+
+    def information(self, problem: "Problem", p, states=None, *, inputs=None, sigma=None, n_series=1,
+                    times=None) -> tuple:
+        """(F, S) per sensor (static) or per (sensor, time) pair (collocated) at p."""
+        raise NotImplementedError
+
+
+class StaticStrategy(ProblemStrategy):
+    """A static model E(y, p, q) = 0: its own static problem (the identity); fitted by
+    :func:`identification.fit.estimator.fit_static`, its information by
+    :func:`identification.fit.estimator.static_information`."""
+
+    kind = "static"
+
+    def check(self, problem: "Problem") -> None:
+        if problem.discretisation is not None:
+            raise TypeError("discretisation: only for a dynamic model")
+
+    def static(self, problem: "Problem", p=None) -> tuple:
+        return problem.model, problem.data
+
+    def fit(self, problem: "Problem", p0, weights=None, settings: IdentifySettings | None = None,
+            Y0=None) -> FitRecord:
+        return fit_static(problem.model, problem.data, p0, weights=weights, settings=settings, Y0=Y0)
+
+    def information(self, problem: "Problem", p, states=None, *, inputs=None, sigma=None, n_series=1,
+                    times=None) -> tuple:
+        if times is not None:
+            raise TypeError("times: only for a dynamic model")
+        return static_information(problem.model, problem.data, p, states, inputs=inputs, sigma=sigma,
+                                  n_series=n_series)
+
+
+class CollocatedStrategy(ProblemStrategy):
+    """A dynamic model dx/dt = f(x, z, p, u), 0 = g(x, z, p, u): Radau IIA collocation on a mesh whose
+    output error at p is within the discretisation tolerance (:mod:`identification.fit.dynamic_fit`).
+    The fit refines the mesh until the error at the estimate is bounded
+    (:func:`identification.fit.dynamic_fit.identify_dynamic`); the information is that of the
+    collocated model on a mesh controlled at p, per (sensor, time) pair."""
+
+    kind = "collocated"
+
+    def static(self, problem: "Problem", p=None) -> tuple:
+        ds = problem.discretisation or DiscretisationSettings()
+        return collocated_problem(problem.model, problem.data, degree=ds.degree, elements=ds.elements, p=p,
+                                  discretisation=problem.discretisation)
+
+    def fit(self, problem: "Problem", p0, weights=None, settings: IdentifySettings | None = None,
+            Y0=None) -> FitRecord:
+        if Y0 is not None:
+            raise TypeError("Y0: not used for a dynamic model (its trajectories start from an integration at p0)")
+        return identify_dynamic(problem.model, problem.data, p0, weights=weights, settings=settings,
+                                discretisation=problem.discretisation)
+
+    def information(self, problem: "Problem", p, states=None, *, inputs=None, sigma=None, n_series=1,
+                    times=None) -> tuple:
+        if states is not None:
+            raise TypeError("states: not used for a dynamic model")
+        return dynamic_information(problem.model, problem.data, p, inputs=inputs, times=times, sigma=sigma,
+                                   n_series=n_series, discretisation=problem.discretisation)
+
+
+#: the strategies, one per kind of model
+STATIC, COLLOCATED = StaticStrategy(), CollocatedStrategy()
+
+
+def strategy_for(model) -> ProblemStrategy:
+    """The strategy of a model: :class:`CollocatedStrategy` for a dynamic model (an ODE/DAE,
+    :class:`models.dynamic.DynamicModel`), else :class:`StaticStrategy`.  The one place where the
+    kind of a model is asked."""
+    return COLLOCATED if getattr(model, "is_dynamic", False) else STATIC
+
+
+class Problem:
+    r"""An estimation problem: a model with its data and, for a dynamic model, its discretisation control.
+
+    Asked at p it gives the static problem E(y_j, p, q_j) = 0, z_ijk = h_k(y_j, p, q_j) + eps_ijk
+    (:meth:`static`): a static model and its data as they are; a dynamic model dx/dt = f(x, z, p, u),
+    0 = g(x, z, p, u) collocated (Radau IIA) on a mesh whose output error at p is within
+    ``discretisation.tol_sigma`` sigmas, with its data flattened to (sensor, time) pairs.  The verbs
+    are written once against it: :meth:`fit` solves paper eq. 3 (min_p 0.5 sum_ijk w_k ((z_ijk -
+    h_k) / sigma_k)^2) with the covariance of eq. 7; :meth:`information` gives the per-sensor
+    information F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2 (1 / (unit of p)^2) and second-order terms S_k.
+
+    Parameters
+    ----------
+    model : models.Model
+        A static model, or a dynamic one (:meth:`models.Model.ode`, :class:`models.dynamic.DynamicModel`).
+    data : identification.Measurements or identification.DynamicMeasurements or None
+        The measurements (a dynamic model needs DynamicMeasurements); None to plan without data
+        (:meth:`information` then takes ``inputs``, ``sigma`` and, for a dynamic model, ``times``).
+    discretisation : identification.DiscretisationSettings, optional
+        The collocation and its error control (dynamic models only; default DiscretisationSettings()).
+
+    Attributes
+    ----------
+    model, data, discretisation : as given
+    strategy : ProblemStrategy
+        :class:`StaticStrategy` or :class:`CollocatedStrategy` (:func:`strategy_for`).
+
+    Raises
+    ------
+    TypeError
+        A discretisation for a static model.
+
+    Examples
+    --------
+    >>> problem = Problem(model, data)                       # doctest: +SKIP
+    >>> record = problem.fit(p0)                             # doctest: +SKIP
+    >>> static_model, static_data = problem.static(record.p)  # doctest: +SKIP
+    """
+
+    def __init__(self, model, data=None, discretisation: DiscretisationSettings | None = None):
+        self.model, self.data, self.discretisation = model, data, discretisation
+        self.strategy = strategy_for(model)
+        self.strategy.check(self)
+
+    @property
+    def kind(self) -> str:
+        """The strategy's kind: "static" or "collocated"."""
+        return self.strategy.kind
+
+    def __repr__(self) -> str:
+        return f"Problem({getattr(self.model, 'name', type(self.model).__name__)!r}, {self.kind})"
+
+    def static(self, p=None) -> tuple:
+        """(static model, static data) at p: a static model and its data as they are; a dynamic one
+        collocated on a mesh whose output error at p is within the tolerance (without p: the first mesh
+        of the discretisation settings) and its data as (sensor, time) pairs (Measurements)."""
+        return self.strategy.static(self, None if p is None else np.asarray(p, float))
+
+    def fit(self, p0, weights=None, settings: IdentifySettings | None = None, Y0=None) -> FitRecord:
+        """min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 s.t. E(y_j, p, q_j) = 0 (paper
+        eq. 3) from ``p0`` (units of the parameters), with the second-order covariance (eq. 7).
+
+        ``weights`` (n_S,) are the sensor (instrument) weights, ``Y0`` (n_q, n_y) a guess of the states
+        (static models only).  A dynamic model's mesh is refined until its error at the estimate is within
+        the tolerances (``record.extra["discretisation"]``).  Returns the plain
+        :class:`identification.fit.record.FitRecord` (:func:`identification.identify` wraps it as an Estimate).
+        """
+        return self.strategy.fit(self, p0, weights=weights, settings=settings, Y0=Y0)
+
+    def information(self, p, states=None, *, inputs=None, sigma=None, n_series=1, times=None) -> tuple:
+        """Per-sensor information F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2 and second-order terms S_k at p
+        (:func:`identification.fit.estimator.static_information`), shapes (n_S, n_p, n_p); for a dynamic
+        model one matrix per (sensor, time) pair on a mesh controlled at p, with ``times`` the common
+        sampling times when planning (data None).  ``states`` (static models) are the states at p."""
+        return self.strategy.information(self, p, states, inputs=inputs, sigma=sigma, n_series=n_series,
+                                         times=times)
+
+
+def fit_model(model, data, p0, weights=None, settings: IdentifySettings | None = None, Y0=None,
+              discretisation=None) -> FitRecord:
+    """min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 s.t. E(y_j, p, q_j) = 0 (paper eq. 3),
+    with the second-order covariance (eq. 7): ``Problem(model, data, discretisation).fit(p0, ...)``
+    (:meth:`Problem.fit`).  ``Y0`` static models only, ``discretisation`` (a
+    :class:`identification.fit.dynamic_fit.DiscretisationSettings`) dynamic models only.
+    """
+    return Problem(model, data, discretisation).fit(p0, weights=weights, settings=settings, Y0=Y0)
+
+
+def information_contributions(model, data, p, states=None, *, inputs=None, sigma=None, n_series=1, times=None):
+    """Per-sensor information F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2 and second-order terms S_k at p
+    (1 / (unit of p)^2): ``Problem(model, data).information(p, ...)`` (:meth:`Problem.information`).  A
+    dynamic model takes ``times`` (sampling times, when data is None) and returns one matrix per (sensor,
+    time) pair (:func:`identification.fit.dynamic_fit.dynamic_information`).
+
+    Returns
+    -------
+    F, S : ndarray (n_S, n_p, n_p)
+    """
+    return Problem(model, data).information(p, states, inputs=inputs, sigma=sigma, n_series=n_series, times=times)
