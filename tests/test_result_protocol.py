@@ -33,7 +33,8 @@ NOT_RESULTS = {"Measurements", "DynamicMeasurements", "Model", "Parameter", "Spl
                "IdentifySettings", "IpoptSettings", "DetectSettings", "MonteCarloSettings", "CriteriaSettings",
                "DesignSettings", "RefineSettings", "ApproximateSettings", "DiscretisationSettings", "Ellipsoid",
                "ResultProtocol",
-               "CandidateInformation"}   # the matrices the design verbs read (oed.information), not a result
+               "CandidateInformation",   # the matrices the design verbs read (oed.information), not a result
+               "Problem"}                # a model with its data and discretisation: what the verbs read
 
 
 def public_classes() -> dict:
