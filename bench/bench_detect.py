@@ -73,7 +73,7 @@ def run_size(n_rep: int, workers: int | None, seed: int, scheduler=None, progres
                                   detect=DetectSettings(tol=0.05, normality="override"),
                                   fits=BATCHED if batch else ONE_BY_ONE)
     return size_study(model, model.p_nominal, np.array(Q_PAPER)[:, None], SIGMA_PAPER_MM, PAPER_SPLITS,
-                      p0=P0, n_M=2, weights=WEIGHTS_110, settings=settings, name="M1")
+                      p0=P0, n_series=2, weights=WEIGHTS_110, settings=settings, name="M1")
 
 
 def main(argv=None):

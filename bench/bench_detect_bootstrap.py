@@ -72,7 +72,7 @@ def one_campaign(args: tuple) -> tuple:
     h = P_TRUE[0] * X / (P_TRUE[1] + X)
     z = h[None, :, None] + SIGMA * rng.standard_normal((2, X.size, 1))
     data = Measurements(X, z, [SIGMA])
-    res = bootstrap_detect(model, data, SPLITS, P_TRUE, n_boot=n_boot, seed=int(seed.generate_state(1)[0]))
+    res = bootstrap_detect(model, data, SPLITS, P_TRUE, n_rep=n_boot, seed=int(seed.generate_state(1)[0]))
     a = np.vstack([res.asymptotic, res.family_asymptotic])
     p = np.vstack([res.pvalue, res.family_pvalue])
     return r, a, p, len(res.errors)
@@ -112,12 +112,12 @@ def compare(n_boot: int, seed: int) -> None:
         try:
             for label, model, data, splits, p0, w in compare_cases(seed):
                 # warm-up (compilation, caches; the batch engine maps its functions once per batch size)
-                bootstrap_detect(model, data, splits, p0, w, n_boot=4, seed=seed + 1, fits=ONE_BY_ONE, jit=jit)
-                bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed + 1, jit=jit)
+                bootstrap_detect(model, data, splits, p0, w, n_rep=4, seed=seed + 1, fits=ONE_BY_ONE, jit=jit)
+                bootstrap_detect(model, data, splits, p0, w, n_rep=n_boot, seed=seed + 1, jit=jit)
                 res, cpu = {}, {}
                 for batch in (False, True):
                     c0 = _cpu()
-                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_boot=n_boot, seed=seed,
+                    res[batch] = bootstrap_detect(model, data, splits, p0, w, n_rep=n_boot, seed=seed,
                                                   fits=BATCHED if batch else ONE_BY_ONE, jit=jit)
                     cpu[batch] = (_cpu() - c0) / n_boot
                 a, b = res[False].boot_statistics, res[True].boot_statistics

@@ -131,7 +131,7 @@ def montecarlo(n_rep: int = 1000, workers: int = 2, seed: int = 0):
     split = Split("early vs late experiments", [0, 2, 4], [1, 3, 5])
     settings = MonteCarloSettings(n_rep=n_rep, seed=seed, workers=workers)
     ch0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    res, w, c = _timed(lambda: size_study(est.model, est.p, Q, est.data.sigma, [split], n_M=2, settings=settings))
+    res, w, c = _timed(lambda: size_study(est.model, est.p, Q, est.data.sigma, [split], n_series=2, settings=settings))
     ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     children = (ch1.ru_utime + ch1.ru_stime) - (ch0.ru_utime + ch0.ru_stime)
     return {"n_rep": n_rep, "workers": workers, "wall_s": w, "cpu_s_parent": c, "cpu_s_workers": children,

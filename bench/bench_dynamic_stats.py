@@ -246,7 +246,7 @@ def tabulate(out: str) -> None:
         print(f"  failed split tests: {sum(int(x['n_errors']) for x in arr)}")
         if study != "power":
             cm, gen, splits, *_ = problem(study)
-            lin = linearized_size(cm, er.P_TRUE, INPUTS, gen.sigma, splits, n_M=N_M, tol=TOL)
+            lin = linearized_size(cm, er.P_TRUE, INPUTS, gen.sigma, splits, n_series=N_M, alpha=TOL)
             print(f"  linearised model (no fits, {lin.n_draws} draws, se <= {100 * lin.mc_se:.2f} %): family-wise size of "
                   f"the two-sample Wald = LR statistic {100 * lin.family_two_sample:.2f} %, per split at TOL/"
                   f"{len(splits)}: {np.round(100 * lin.split_two_sample, 2).tolist()} %; paper statistic "

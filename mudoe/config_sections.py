@@ -17,6 +17,7 @@ import numpy as np
 
 from identification.studies.detect import DetectSettings
 from identification.studies.montecarlo import MonteCarloSettings
+from oed.criteria import DEFAULT_CRITERION
 
 from .config_schema import NON_NEGATIVE, OPEN_UNIT, POSITIVE, Bounds, config_key, setting, settings_values
 from .registry import DEFAULT_MODEL, default_model, known_variants, virtual_prototype
@@ -290,7 +291,7 @@ class OEDConfig:
                                    exact points (implied by a prior)
     """
 
-    criterion: str = config_key("E", choices=("A", "D", "E"))
+    criterion: str = config_key(DEFAULT_CRITERION, choices=("A", "D", "E"))
     kind: str = config_key("second_order", choices=("second_order", "gauss_newton"))
     n_sensors: int | None = config_key(None, bounds=POSITIVE)
     min_sensors: int | None = config_key(None, bounds=POSITIVE)

@@ -150,6 +150,6 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
         inputs, p0 = data.inputs, start_values(study, v)
         where = "" if address is None else f" on the Dask scheduler {address}"
         with progress.step(f"validate: Monte Carlo size study of {v}, {vc.n_runs} replications{where}"):
-            validation = validate(model, splits, p0, p_true=est.p, inputs=inputs, sigma=est.sigma,
-                                  n_M=data.n_M, weights=w, name=v, settings=settings)
+            validation = validate(model, splits, p0, p=est.p, inputs=inputs, sigma=est.sigma,
+                                  n_series=data.n_M, weights=w, name=v, settings=settings)
     return dataclasses.replace(results, validation=validation)

@@ -15,7 +15,7 @@ maximin over a prior, with the equivalence-theorem certificate): :func:`approxim
 (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
 :func:`select_inputs` and :func:`select_times`.
 """
-from .criteria import Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
+from .criteria import DEFAULT_CRITERION, Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .candidate_information import AXES, CandidateInformation, information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
                      select_sensors_from_information)
@@ -26,7 +26,7 @@ from .times import select_times, time_information
 from .prior import Prior, make_prior
 from .approximate import ApproximateDesign, ApproximateSettings, approximate_design, design_efficiencies
 
-__all__ = ["Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
+__all__ = ["DEFAULT_CRITERION", "Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "AXES", "CandidateInformation", "information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
            "select_sensors_from_information", "InputDesignResult", "RefinedInputs", "RefineSettings",

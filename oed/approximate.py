@@ -38,7 +38,7 @@ import numpy as np
 from models.dynamic import merge_times, time_tolerance
 from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
-from .criteria import Criterion
+from .criteria import DEFAULT_CRITERION, Criterion
 from .prior import Prior, make_prior, readonly
 from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
@@ -518,7 +518,7 @@ def _resolve_prior(model, p, prior, robust, settings) -> tuple:
     return pr, robust
 
 
-def approximate_design(model, p, *, sigma, bounds, criterion="D", prior=None, robust: str = "bayes", inputs=None,
+def approximate_design(model, p, *, sigma, bounds, criterion=DEFAULT_CRITERION, prior=None, robust: str = "bayes", inputs=None,
                        sensors=None, n_series: int = 1,
                        settings: ApproximateSettings = ApproximateSettings()) -> ApproximateDesign:
     r"""The approximate design :math:`\max_\xi \sum_s\pi_s u(M_s(\xi))` or :math:`\max_\xi\min_s c_s(\xi)` on a

@@ -31,7 +31,7 @@ import numpy as np
 
 from .bnb import BnBSettings, branch_and_bound
 from .constraints import DesignConstraints, make_constraints
-from .criteria import (DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
+from .criteria import (DEFAULT_CRITERION, DEFAULT_SETTINGS, Criterion, CriteriaSettings, Kind, batch_criteria, gap_tolerance,
                        screening_values, validate_information)
 from .design_tables import design_frame, design_html, table_frame
 from identification.results_protocol import ResultProtocol, jsonable
@@ -220,7 +220,7 @@ def _names(sensor_names, n):
     return names
 
 
-def select_sensors_from_information(F, S=None, criterion="E", kind="gauss_newton", n_sensors=None,
+def select_sensors_from_information(F, S=None, criterion=DEFAULT_CRITERION, kind="gauss_newton", n_sensors=None,
                                     max_sensors=None, costs=None, budget=None, include=(), exclude=(),
                                     method="auto", time_limit=60.0, sensor_names=None, *,
                                     settings: DesignSettings = DesignSettings()) -> DesignResult:

@@ -39,7 +39,7 @@ from identification.fit.dynamic_fit import DiscretisationSettings
 from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
 from identification.results_protocol import ResultProtocol, jsonable, notes_lines
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
-from .criteria import Criterion, Kind
+from .criteria import DEFAULT_CRITERION, Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
 from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
                           input_problem, measured_sensors, row_information)
@@ -221,7 +221,7 @@ def _readonly(a):
     return a
 
 
-def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, criterion="D", kind="gauss_newton",
+def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, criterion=DEFAULT_CRITERION, kind="gauss_newton",
                   costs=None, budget=None, include=(), exclude=(), n_series=1, method="auto", time_limit=60.0,
                   refine=False, bounds=None, refine_settings: RefineSettings = RefineSettings(),
                   settings: DesignSettings = DesignSettings(), times=None,
@@ -450,7 +450,7 @@ def _check_bounds(model, start, bounds):
     return X0, lo, hi
 
 
-def refine_inputs(model, p, start, sigma, *, criterion="D", sensors=None, n_series=1, bounds,
+def refine_inputs(model, p, start, sigma, *, criterion=DEFAULT_CRITERION, sensors=None, n_series=1, bounds,
                   settings: RefineSettings = RefineSettings(), time_limit: float | None = None) -> RefinedInputs:
     r"""Move ``n_points`` input rows continuously within ``bounds`` to minimise :math:`\Psi(M(q)^{-1})`.
 

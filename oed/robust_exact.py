@@ -29,7 +29,7 @@ import numpy as np
 
 from identification.results_protocol import ResultProtocol, jsonable
 from .approx_weights import standardized
-from .criteria import Criterion
+from .criteria import DEFAULT_CRITERION, Criterion
 from .robust import utilities
 
 __all__ = ["RobustExactDesign", "select_robust_exact"]
@@ -128,7 +128,7 @@ def _batch_values(crit, F, combos, n, w, robust, u_star):
     return np.min(c, axis=1), u
 
 
-def select_robust_exact(F, prior_w, n, *, criterion="D", robust="bayes", u_star=None, names=None,
+def select_robust_exact(F, prior_w, n, *, criterion=DEFAULT_CRITERION, robust="bayes", u_star=None, names=None,
                         approximate=None, max_designs: int = 5_000_000, batch_size: int = 4096) -> RobustExactDesign:
     r"""The exact n-run design :math:`\max_{|S|=n}` of the robust criterion (module docstring) by complete
     enumeration.

@@ -20,6 +20,8 @@ from typing import Sequence
 import numpy as np
 
 from identification.results_protocol import ResultProtocol, jsonable
+from identification.vocabulary import renamed_arguments
+from .criteria import DEFAULT_CRITERION
 from .design import DesignResult, select_sensors_from_information
 from .candidate_information import information
 
@@ -100,20 +102,21 @@ class SequentialResult(ResultProtocol):
                                          cov=s.cov, ellipsoid_volume=s.ellipsoid_volume) for s in self.steps]))
 
 
-def sequential_design(model, experiments: Sequence, p_nominal, initial=None, criterion="E",
+@renamed_arguments(experiments="data", p_nominal="p0")
+def sequential_design(model, data: Sequence, p0, initial=None, criterion=DEFAULT_CRITERION,
                       kind="gauss_newton", n_sensors=None, alpha: float = 0.05, **design_kw) -> SequentialResult:
     """Re-solve the sensor selection with the parameters identified from each experiment.
 
     Parameters
     ----------
     model : models.Model or models.dynamic.DynamicModel
-    experiments : sequence of identification.Measurements (DynamicMeasurements for a dynamic model)
+    data : sequence of identification.Measurements (DynamicMeasurements for a dynamic model)
         The experiments in the order they are made (known sigma, all candidate sensors present).
         A dynamic model is designed per instrument (each measured at every sampling time of the
         experiment): F_l = sum_t F_(l, t) over the (sensor, time) contributions of its collocation
         (exact, since the weight of every (l, t) pair is w_l), and identified with those weights.
-    p_nominal : array_like (n_p,)
-        Parameters for the first design (and the start value of every identification).
+    p0 : array_like (n_p,)
+        Parameters for the first design and the start value of every identification.
     initial : Measurements, optional
         Data for the first design's information (the paper's z^ini); default: the first experiment.
     criterion, kind, n_sensors, **design_kw
@@ -128,28 +131,28 @@ def sequential_design(model, experiments: Sequence, p_nominal, initial=None, cri
     Raises
     ------
     ValueError
-        When ``experiments`` is empty.  Identification and design errors propagate unchanged.
+        When ``data`` is empty.  Identification and design errors propagate unchanged.
     identification.NotBoundedError
         When the data of an experiment do not bound the parameters (no estimate to design at).
     """
     from identification import identify
 
-    experiments = list(experiments)
+    experiments = list(data)
     if not experiments:
-        raise ValueError("experiments: give at least one experiment (Measurements)")
-    p_nominal = np.asarray(p_nominal, float).ravel()
-    p_design = p_nominal
+        raise ValueError("data: give at least one experiment (Measurements)")
+    p0 = np.asarray(p0, float).ravel()
+    p_design = p0
     info_data = experiments[0] if initial is None else initial
     steps = []
-    for data in experiments:
+    for experiment in experiments:
         info = information(model, p_design, data=info_data)      # per sensor (a dynamic model's: per instrument)
         design = select_sensors_from_information(info, criterion=criterion, kind=kind, n_sensors=n_sensors,
                                                  **design_kw)
-        est = identify(model, data, p_nominal, weights=np.asarray(design.weights, float))
+        est = identify(model, experiment, p0, weights=np.asarray(design.weights, float))
         est.require_bounded(f"sequential design, experiment {len(steps) + 1} (the next design is computed at its "
                             "estimate)")
         steps.append(SequentialStep(p_design=p_design.copy(), design=design, p=est.p.copy(),
                                     stderr=est.stderr.copy(), cov=est.cov.copy(),
                                     ellipsoid_volume=est.ellipsoid(alpha).volume()))
-        p_design, info_data = est.p.copy(), data
+        p_design, info_data = est.p.copy(), experiment
     return SequentialResult(tuple(steps), model.param_names, model.sensors)

@@ -18,6 +18,7 @@ import warnings
 
 import numpy as np
 
+from .criteria import DEFAULT_CRITERION
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .design import DesignResult, select_sensors_from_information
 from .candidate_information import information
@@ -38,7 +39,7 @@ def time_information(model, p, times, inputs, sigma, sensors=None, pairs: bool =
 
 
 def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None, pairs: bool = False,
-                 sensors=None, criterion: str = "D", costs=None, budget=None, include=(), exclude=(),
+                 sensors=None, criterion: str = DEFAULT_CRITERION, costs=None, budget=None, include=(), exclude=(),
                  method: str = "auto", time_limit: float = 60.0, n_series: int = 1, approximate: bool = False,
                  prior=None, robust: str = "bayes", approx_settings=None):
     """The sampling times (or time x sensor pairs) minimising the A, D or E criterion of the planned

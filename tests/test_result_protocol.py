@@ -110,7 +110,7 @@ def _detection():
 def _bootstrap():
     import mudoe
     model, data = _line()
-    return mudoe.bootstrap_detect(model, data, _splits(), [0.0, 0.0], n_boot=4, seed=5)
+    return mudoe.bootstrap_detect(model, data, _splits(), [0.0, 0.0], n_rep=4, seed=5)
 
 
 def _monte_carlo():

@@ -79,6 +79,7 @@ from models.contract import Model
 from models.labels import LabelledModel
 from models.state import solve_states
 from identification.errors import DataError, IdentificationError
+from identification.vocabulary import renamed_arguments
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
 from identification.inference.identify import identify
@@ -474,7 +475,8 @@ def _kind(model):
 
 
 # ---------------------------------------------------------------------------- main entry
-def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None = None, statistic: str | None = None,
+@renamed_arguments(measurements="data", tol="alpha")
+def detect(model, data, splits: Sequence[Split], p0, alpha: float | None = None, statistic: str | None = None,
            correction: str | None = None, weights=None, design=None, normality: str | None = None,
            settings: DetectSettings | None = None, design_how: str | None = None,
            progress: Progress | None = None, discretisation=None) -> DetectionResult:
@@ -500,7 +502,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     model : models.Model or mapping {name: Model}
         One candidate, or several (e.g. M1, M2, M3) tested on the same splits; all static or all
         dynamic (ODE/DAE models).
-    measurements : Measurements or mapping {name: Measurements}
+    data : Measurements or mapping {name: Measurements}
         The campaign (per model when their inputs differ); :class:`DynamicMeasurements` for a
         dynamic model.  sigma per sensor should be known (the paper fixes it); with sigma=None it
         is estimated and the chi^2 law is approximate.
@@ -510,7 +512,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         ``early_late_dynamic_split(data)``), not by series or sensor columns.
     p0 : array_like (n_p,) or mapping {name: array}
         Start values of every fit.
-    tol : float, optional
+    alpha : float, optional
         Family-wise level TOL in (0, 1) (default :class:`DetectSettings`' 5 %).
     statistic : {"likelihood_ratio", "two_sample", "paper"}, optional
         Which alpha_min decides (all three are always reported; default likelihood_ratio).
@@ -525,7 +527,7 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         "check" (default) raises :class:`NormalityError` when a selected sensor fails the
         Shapiro-Wilk gate; "override" records the failure and continues.
     settings : DetectSettings, optional
-        All settings at once; exclusive with tol, statistic, correction and normality.
+        All settings at once; exclusive with alpha, statistic, correction and normality.
     design_how : str, optional
         How the design was chosen (e.g. "E-optimal design of 2 sensors"), recorded in
         ``DetectionResult.design``; default "sensor names given", "sensor weights given" or
@@ -543,9 +545,9 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
     Raises
     ------
     ValueError
-        tol outside (0, 1), unknown statistic / correction / normality.
+        alpha outside (0, 1), unknown statistic / correction / normality.
     TypeError
-        ``settings`` together with tol, statistic, correction or normality; bad argument types
+        ``settings`` together with alpha, statistic, correction or normality; bad argument types
         (e.g. ``progress`` not a Progress).
     NormalityError
         Line 05 failed and normality="check".
@@ -554,11 +556,11 @@ def detect(model, measurements, splits: Sequence[Split], p0, tol: float | None =
         on a split does not raise: it is recorded and the model's verdict becomes "undecided"
         unless another split rejects it.
     """
-    settings = _detect_settings(settings, tol=tol, statistic=statistic, correction=correction, normality=normality)
+    settings = _detect_settings(settings, tol=alpha, statistic=statistic, correction=correction, normality=normality)
     models, kind = _checked_models(model)
     names = tuple(models)
     splits = kind.checked_splits(splits)
-    datas = _as_mapping("measurements", measurements, names)
+    datas = _as_mapping("data", data, names)
     p0s = _as_mapping("p0", p0, names)
     kind.checked_design(design, weights, discretisation)
     if progress is not None and not isinstance(progress, Progress):

@@ -55,6 +55,7 @@ from identification.inference.identify import identify
 from identification.fit.measurements import Measurements
 from identification.studies.split_fits import BATCHED, SplitFits
 from identification.progress import Progress
+from identification.vocabulary import renamed_arguments
 from identification.results_protocol import ResultProtocol, jsonable
 from identification.studies.splits import Split, SplitError
 
@@ -298,7 +299,7 @@ def _check_arguments(model, data, n_boot, workers, chunk_size, fits, jit, settin
     if not isinstance(data, Measurements):
         raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
     if not (isinstance(n_boot, (int, np.integer)) and not isinstance(n_boot, bool) and n_boot >= 1):
-        raise ValueError(f"n_boot: the number of bootstrap campaigns must be an integer >= 1, got {n_boot!r}")
+        raise ValueError(f"n_rep: the number of bootstrap campaigns must be an integer >= 1, got {n_boot!r}")
     if workers is not None and not (isinstance(workers, (int, np.integer)) and workers >= 1):
         raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
     if chunk_size is not None and not (isinstance(chunk_size, (int, np.integer)) and chunk_size >= 1):
@@ -351,8 +352,9 @@ def _pvalues(T_obs: np.ndarray, A_obs: np.ndarray, T: np.ndarray, A: np.ndarray)
     return pv, nv, fam_obs, fam_p
 
 
+@renamed_arguments(n_boot="n_rep")
 def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], p0, weights=None, *,
-                     n_boot: int = 199, seed=0, settings: DetectSettings | None = None,
+                     n_rep: int = 199, seed=0, settings: DetectSettings | None = None,
                      workers: int | None = 1, scheduler=None, progress: Progress | None = None,
                      chunk_size: int | None = None, model_name: str | None = None,
                      fits: SplitFits = BATCHED, jit: bool = True) -> BootstrapDetection:
@@ -365,14 +367,14 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     splits : sequence of Split
     p0 : array_like (n_p,)          start of the null fit (then every fit starts at the null estimate)
     weights : array_like (n_S,), optional   sensor weights (0/1 selects sensors)
-    n_boot : int >= 1               bootstrap campaigns B
+    n_rep : int >= 1               bootstrap campaigns B
     seed : int or SeedSequence entropy      root of the per-campaign seeds
     settings : DetectSettings, optional     covariance kind and identify settings of the fits
     workers : int or None           local processes (1: serial; None: all cores)
     scheduler : str or distributed.Client, optional   run on a Dask cluster instead of ``workers``
     progress : Progress, optional   a tqdm bar over the campaigns
     chunk_size : int, optional      campaigns per task (None: about 4 tasks per worker, with BATCHED
-                                    min(n_boot, 16) to 50 campaigns, with ONE_BY_ONE at most 20; the
+                                    min(n_rep, 16) to 50 campaigns, with ONE_BY_ONE at most 20; the
                                     numbers do not depend on it)
     model_name : str, optional      label (default the model's name)
     fits : SplitFits                BATCHED: fit the campaigns of a chunk together with the batch engine
@@ -395,7 +397,7 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
         Dask is not installed or the scheduler cannot be reached.
     """
     import time
-    settings, splits = _check_arguments(model, data, n_boot, workers, chunk_size, fits, jit, settings, splits, seed)
+    settings, splits = _check_arguments(model, data, n_rep, workers, chunk_size, fits, jit, settings, splits, seed)
     scheduler = cluster.check_scheduler(scheduler)
     name = model_name or model.name
     t0 = time.perf_counter()
@@ -408,9 +410,9 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
                  np.asarray(null.p, float), None if weights is None else np.asarray(weights, float), settings,
                  None if null.states is None or null.states.size == 0 else np.asarray(null.states, float),
                  fits, bool(jit))
-    bar = (progress or Progress(enabled=False)).bar(int(n_boot), "bootstrap campaigns")
+    bar = (progress or Progress(enabled=False)).bar(int(n_rep), "bootstrap campaigns")
     try:
-        reps = replicate(task, int(n_boot), functools.partial(_seed_chunks, int(n_boot), seed, chunk_size, fits),
+        reps = replicate(task, int(n_rep), functools.partial(_seed_chunks, int(n_rep), seed, chunk_size, fits),
                          workers=workers, scheduler=scheduler, bar=bar)
     finally:
         bar.close()
@@ -421,7 +423,7 @@ def bootstrap_detect(model: Model, data: Measurements, splits: Sequence[Split], 
     return BootstrapDetection(
         model=name, splits=tuple(sp.name for sp in splits), statistics=STATISTICS, observed=T_obs,
         asymptotic=A_obs, pvalue=pv, n_valid=nv, family_asymptotic=fam_obs, family_pvalue=fam_p,
-        boot_statistics=T, boot_asymptotic=A, n_boot=int(n_boot),
+        boot_statistics=T, boot_asymptotic=A, n_boot=int(n_rep),
         seed=seed if isinstance(seed, (int, np.integer)) else str(seed), p_null=np.asarray(null.p, float),
         sigma=np.asarray(null.sigma, float), sigma_estimated=data.sigma is None,
         errors=tuple(sorted(errors, key=lambda e: (e[0], str(e[1])))), observed_errors=tuple(obs_err),

@@ -55,6 +55,7 @@ from identification.fit.measurements import Measurements
 from identification.inference.identify import identify
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
+from identification.vocabulary import renamed_arguments
 from identification.results_protocol import ResultProtocol, jsonable
 from identification.studies.split_fits import (BATCHED, ONE_BY_ONE, SplitFits, batched_split_tests,
                                                shapiro_pvalues)
@@ -88,13 +89,16 @@ class Rate:
         return f"{100 * self.rate:.2f} % [{100 * self.lo:.2f}, {100 * self.hi:.2f}] ({self.k}/{self.n})"
 
 
-def clopper_pearson(k: int, n: int, level: float = 0.95) -> Rate:
-    """Exact binomial interval: lo = B^{-1}(a/2; k, n-k+1), hi = B^{-1}(1-a/2; k+1, n-k), a = 1 - level."""
+@renamed_arguments(level=("alpha", lambda c: 1.0 - c))
+def clopper_pearson(k: int, n: int, alpha: float = 0.05) -> Rate:
+    """Exact binomial interval of confidence level 1 - alpha: lo = B^{-1}(a/2; k, n-k+1), hi = B^{-1}(1-a/2; k+1, n-k),
+    a = 1 - level (``level=`` is the old keyword, deprecated)."""
     k, n = int(k), int(n)
     if n < 0 or not (0 <= k <= max(n, 0)):
         raise ValueError(f"k, n: need 0 <= k <= n, got k={k}, n={n}")
-    if not (0.0 < level < 1.0):
-        raise ValueError(f"level: must lie in (0, 1), got {level}")
+    if not (0.0 < alpha < 1.0):
+        raise ValueError(f"alpha: must lie in (0, 1), got {alpha}")
+    level = 1.0 - alpha
     if n == 0:
         return Rate(0, 0, math.nan, math.nan, level)
     a = 1.0 - level
@@ -579,8 +583,9 @@ class LinearizedSize:
     mc_se: float
 
 
-def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split], n_M: int = 2, weights=None,
-                    tol: float = 0.05, n_draws: int = 200_000, seed: int = 0) -> LinearizedSize:
+@renamed_arguments(p_true="p", n_M="n_series", tol="alpha")
+def linearized_size(model: Model, p, inputs, sigma, splits: Sequence[Split], n_series: int = 2, weights=None,
+                    alpha: float = 0.05, n_draws: int = 200_000, seed: int = 0) -> LinearizedSize:
     r"""Size of the Wald statistics when the model is linear in p near p* (exact for linear models).
 
     For a linear model the likelihood ratio equals the two-sample Wald statistic, so
@@ -597,33 +602,33 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
     the linearisation (and the chi^2 law) hold for a nonlinear model.
     """
     from models.sensitivity import sensitivities
-    p_true = np.asarray(p_true, float).ravel()
+    p = np.asarray(p, float).ravel()
     q = np.atleast_2d(np.asarray(inputs, float))
     sig = np.broadcast_to(np.asarray(sigma, float), (model.n_S,)).copy()
     w = np.ones(model.n_S) if weights is None else np.asarray(weights, float)
-    if not (0.0 < float(tol) < 1.0):
-        raise ValueError(f"tol: must lie in (0, 1), got {tol}")
+    if not (0.0 < float(alpha) < 1.0):
+        raise ValueError(f"alpha: must lie in (0, 1), got {alpha}")
     splits = _row_splits(splits)
     for sp in splits:
-        sp.check(q.shape[0], n_M, model.n_p, int(np.count_nonzero(w > 0)))
-    Y = solve_states(model, p_true, q)
-    G = sensitivities(model, p_true, q, Y).G                      # (n_q, n_S, n_p)
+        sp.check(q.shape[0], n_series, model.n_p, int(np.count_nonzero(w > 0)))
+    Y = solve_states(model, p, q)
+    G = sensitivities(model, p, q, Y).G                      # (n_q, n_S, n_p)
     n_p = model.n_p
-    thr = stats.chi2.ppf(1 - tol / len(splits), n_p)
+    thr = stats.chi2.ppf(1 - alpha / len(splits), n_p)
     rng = np.random.default_rng(seed)
 
     n_q, n_S = q.shape[0], model.n_S
 
     def est_map(qi, si, ki):
-        """(M, C): p_hat - p* = vec(eps)^T M for eps (n_M, n_q, n_S); C the covariance of p_hat."""
-        ser = list(range(n_M)) if si is None else list(si)
+        """(M, C): p_hat - p* = vec(eps)^T M for eps (n_series, n_q, n_S); C the covariance of p_hat."""
+        ser = list(range(n_series)) if si is None else list(si)
         qi = list(qi)
         Gq = G[qi]
         wk = w if ki is None else w * np.isin(np.arange(n_S), ki)       # a sensor split: the set's sensors only
         F = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, wk / sig ** 2)
         F2 = len(ser) * np.einsum("jkp,jkr,k->pr", Gq, Gq, wk ** 2 / sig ** 2)
         A = np.linalg.solve(F, np.eye(n_p))
-        M = np.zeros((n_M, n_q, n_S, n_p))
+        M = np.zeros((n_series, n_q, n_S, n_p))
         M[np.ix_(ser, qi)] = (Gq * (wk / sig ** 2)[None, :, None]) @ A
         return M.reshape(-1, n_p), A @ F2 @ A
 
@@ -636,7 +641,7 @@ def linearized_size(model: Model, p_true, inputs, sigma, splits: Sequence[Split]
     block = 50000
     for b0 in range(0, n_draws, block):
         nb = min(block, n_draws - b0)
-        eps = (rng.standard_normal((nb, n_M, n_q, n_S)) * sig).reshape(nb, -1)
+        eps = (rng.standard_normal((nb, n_series, n_q, n_S)) * sig).reshape(nb, -1)
         for js, (MD, Wp, Wt) in enumerate(Dmaps):
             D = eps @ MD
             rej_p[b0:b0 + nb, js] = np.einsum("bp,pr,br->b", D, Wp, D) > thr
@@ -730,19 +735,20 @@ def run_monte_carlo(models, generator: Callable, splits: Sequence[Split], p0, we
         normality_level=settings.detect.normality_level, normality_correction=settings.detect.normality_correction)
 
 
-def size_study(model: Model, p_true, inputs, sigma, splits: Sequence[Split], p0=None, n_M: int = 2,
+@renamed_arguments(p_true="p", n_M="n_series")
+def size_study(model: Model, p, inputs, sigma, splits: Sequence[Split], p0=None, n_series: int = 2,
                weights=None, settings: MonteCarloSettings | None = None, name: str | None = None) -> MonteCarloResult:
     """Size and coverage: campaigns simulated by ``model`` at p* (z = h(p*) + sigma eps), tested with ``model``.
 
     The family-wise rejection rate estimates the type-I error of Algorithm 1 (target: <= TOL).
     ``p0`` defaults to p*.
     """
-    gen = ModelCampaign(model, p_true, inputs, sigma, n_M)
+    gen = ModelCampaign(model, p, inputs, sigma, n_series)
     nm = name or model.name
     return run_monte_carlo({nm: model}, gen, splits, gen.p_true if p0 is None else p0, weights, gen.p_true,
                            kind="size", settings=settings,
                            description=f"data from {nm} at p* = {gen.p_true.tolist()}, sigma = {gen.sigma.tolist()}, "
-                                       f"n_M = {n_M}, n_q = {gen.inputs.shape[0]}")
+                                       f"n_M = {n_series}, n_q = {gen.inputs.shape[0]}")
 
 
 def power_study(models, generator: Callable, splits: Sequence[Split], p0, weights=None,
@@ -855,45 +861,46 @@ def _validate_settings(settings: MonteCarloSettings | None, tol: float | None, *
     return settings
 
 
-def validate(model, splits: Sequence[Split], p0=None, *, p_true=None, inputs=None, sigma=None, n_M: int = 2,
-             generator: Callable | None = None, weights=None, n_rep: int | None = None, tol: float | None = None,
+@renamed_arguments(p_true="p", n_M="n_series", tol="alpha")
+def validate(model, splits: Sequence[Split], p0=None, *, p=None, inputs=None, sigma=None, n_series: int = 2,
+             generator: Callable | None = None, weights=None, n_rep: int | None = None, alpha: float | None = None,
              seed: int | None = None, workers: int | None = None, scheduler=None, progress: bool | None = None,
              settings: MonteCarloSettings | None = None, name: str | None = None, data=None) -> MonteCarloResult:
     """Front door (``mudoe validate``): a size study without ``generator``, a power study with one.
 
     ``name`` labels the model in tables (size study; default the model's own name).
 
-    Size: data from ``model`` at ``p_true`` with noise ``sigma`` at ``inputs`` (n_M series);
+    Size: data from ``model`` at ``p`` with noise ``sigma`` at ``inputs`` (n_series series);
     the rejection rate at TOL should not exceed TOL for a calibrated statistic.  Power: data
     from ``generator(rng)``; the rejection rate of each model in ``model`` (a Model or a
     mapping {name: Model}).  Replications run on local processes (``workers``) or on a Dask
     cluster (``scheduler`` address or Client); the numbers do not depend on either.
 
-    ``n_rep``, ``tol``, ``seed``, ``workers``, ``scheduler`` and ``progress`` (None: the
+    ``n_rep``, ``alpha``, ``seed``, ``workers``, ``scheduler`` and ``progress`` (None: the
     defaults of :class:`MonteCarloSettings`, TOL 5 %) or ``settings`` with all of them; giving
     ``settings`` and one of those keywords raises TypeError.
 
     A dynamic model (:class:`models.dynamic.DynamicModel`) takes its campaign ``data``
     (DynamicMeasurements) instead of ``inputs`` / ``sigma``, instrument ``weights``, and splits by
     experiment, time window or early against late (:class:`Split`); the same size study runs on its
-    collocation at the campaign fit (:func:`flat_size_study`; ``p_true`` defaults to that fit).
+    collocation at the campaign fit (:func:`flat_size_study`; ``p`` defaults to that fit).
     """
-    settings = _validate_settings(settings, tol, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
+    settings = _validate_settings(settings, alpha, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
     if takes_time_series(model):                    # a dynamic model: sized on the flat data of its campaign
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")
-        dyn = flat_size_study(model, data, splits, p0, p_true=p_true, weights=weights,
+        dyn = flat_size_study(model, data, splits, p0, p_true=p, weights=weights,
                               identify_settings=settings.detect.identify, name=name)
-        return size_study(dyn.model, dyn.p_true, dyn.inputs, dyn.sigma, dyn.splits, dyn.p0, n_M, dyn.weights,
+        return size_study(dyn.model, dyn.p_true, dyn.inputs, dyn.sigma, dyn.splits, dyn.p0, n_series, dyn.weights,
                           settings, name=dyn.name)
     if generator is None:
         if isinstance(model, Mapping):
             raise DataError("model: a size study takes one model (the data generator itself)")
-        if p_true is None or inputs is None or sigma is None:
-            raise DataError("p_true, inputs, sigma: a size study needs the truth, the inputs and the noise level")
-        return size_study(model, p_true, inputs, sigma, splits, p0, n_M, weights, settings, name=name)
+        if p is None or inputs is None or sigma is None:
+            raise DataError("p, inputs, sigma: a size study needs the truth, the inputs and the noise level")
+        return size_study(model, p, inputs, sigma, splits, p0, n_series, weights, settings, name=name)
     if p0 is None:
         raise DataError("p0: a power study needs start values for the fits")
     return power_study(model, generator, splits, p0, weights, settings)

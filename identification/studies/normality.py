@@ -11,6 +11,7 @@ import dataclasses
 import math
 import re
 from collections.abc import Mapping
+from identification.vocabulary import renamed_arguments
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,14 +176,15 @@ def series_text(labels) -> str:
     return ", ".join(nums)
 
 
-def normality_check(data: Measurements, level: float = 0.05, weights=None,
+@renamed_arguments(level="alpha")
+def normality_check(data: Measurements, alpha: float = 0.05, weights=None,
                     correction: str = GATE_CORRECTIONS[0]) -> NormalityCheck:
-    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor, at a family-wise level.
+    """Line 05: Shapiro-Wilk on the differences of pairs of series, per sensor, at a family-wise level alpha.
 
     tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q}; the pairs are
     consecutive series (an odd last series is left out).  Returns the p-values and the
     repeatability sigma std(tilde z_k) / sqrt(2) (unit of z); never raises on a failed test.
-    The gate passes when every gated sensor (weight > 0) has an adjusted p-value >= ``level``;
+    The gate passes when every gated sensor (weight > 0) has an adjusted p-value >= ``alpha``;
     ``correction`` ("holm", "bonferroni" or "none", the paper's per-sensor gate) adjusts over the
     gated sensors (:func:`identification.studies.normality_gate.adjusted_pvalues`).
     """
@@ -198,7 +200,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None,
     nd = np.zeros(data.n_S)
     notes = []
     if n_pairs == 0:
-        return NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=level, gated=gated,
+        return NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=alpha, gated=gated,
                               passed=False, pairs=pairs,
                               note="only one series: differences of repeated series cannot be formed",
                               series=tuple(data.series), correction=correction)
@@ -215,7 +217,7 @@ def normality_check(data: Measurements, level: float = 0.05, weights=None,
         else:
             notes.append(f"sensor {data.sensors[k]!r}: {d.size} differences"
                          + (" all equal" if d.size >= 3 else "") + "; Shapiro-Wilk not computable")
-    chk = NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=float(level), gated=gated,
+    chk = NormalityCheck(sensors=data.sensors, pvalue=pv, sigma_rep=sig, n_diff=nd, level=float(alpha), gated=gated,
                          passed=False, pairs=pairs,
                          note="; ".join(notes), series=tuple(data.series), correction=correction)
     return dataclasses.replace(chk, passed=not chk.failing())

@@ -23,7 +23,7 @@ BODY = textwrap.dedent("""\
 
     m = Model.explicit(["a", "b"], ["x"], ["y"], h=lambda p, q: p[0] + p[1] * q[0])
     """)
-CALL = ('res = validate(m, [Split("half", [0, 1], [2, 3])], [1.0, 1.0], p_true=[1.0, 2.0], '
+CALL = ('res = validate(m, [Split("half", [0, 1], [2, 3])], [1.0, 1.0], p=[1.0, 2.0], '
         'inputs=np.arange(4.0)[:, None], sigma=[0.1], '
         'settings=MonteCarloSettings(n_rep=4, seed=1, workers=2, progress=False, jit=False))\n'
         'print("BACKEND", res.backend)\n')

@@ -48,7 +48,7 @@ def test_second_order_criterion_can_favour_the_collinear_pair_on_noisy_data():
 def test_sequential_design_redesigns_at_identified_parameters():
     model = press_model()
     exps = _experiments(model, [560.0, 430.0], n_exp=2, seed=3)
-    res = sequential_design(model, exps, p_nominal=[500.0, 500.0], criterion="E", n_sensors=2)
+    res = sequential_design(model, exps, p0=[500.0, 500.0], criterion="E", n_sensors=2)
     assert len(res.steps) == 2
     s1, s2 = res.steps
     np.testing.assert_allclose(s1.p_design, [500.0, 500.0])
@@ -61,5 +61,5 @@ def test_sequential_design_redesigns_at_identified_parameters():
         assert np.all(np.abs(s.p - [560.0, 430.0]) < 5 * s.stderr)
         assert s.ellipsoid_volume > 0
     assert "Sequential design" in res.summary() and "design" in res.summary()
-    with pytest.raises(ValueError, match="experiments"):
-        sequential_design(model, [], p_nominal=[500.0, 500.0])
+    with pytest.raises(ValueError, match="data: give at least one experiment"):
+        sequential_design(model, [], p0=[500.0, 500.0])

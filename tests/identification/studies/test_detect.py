@@ -151,7 +151,7 @@ def test_tol_and_option_errors(model):
     data = campaign(model, 5)
     for tol in (0.0, 1.0, -0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="tol"):
-            detect(model, data, PAPER_SPLITS, p0=[1, 2], tol=tol)
+            detect(model, data, PAPER_SPLITS, p0=[1, 2], alpha=tol)
     with pytest.raises(ValueError, match="statistic"):
         detect(model, data, PAPER_SPLITS, p0=[1, 2], statistic="wald")
     with pytest.raises(ValueError, match="correction"):
@@ -259,14 +259,14 @@ def test_keywords_and_settings_together_are_an_error(model):
     data = campaign(model, 10)
     s = DetectSettings(tol=0.1)
     with pytest.raises(TypeError, match="settings and tol"):
-        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], tol=0.05, settings=s)
+        detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], alpha=0.05, settings=s)
     with pytest.raises(TypeError, match="settings and statistic, normality"):
         detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], statistic="paper", normality="override", settings=s)
     with pytest.raises(TypeError, match="settings: expected DetectSettings"):
         detect(model, data, PAPER_SPLITS, p0=[0.5, 1.5], settings={"tol": 0.1})
     res = detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], settings=s)
     assert res.settings is s and res.decision().tol == 0.1
-    assert detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], tol=0.1).settings == s
+    assert detect(model, data, PAPER_SPLITS[:1], p0=[0.5, 1.5], alpha=0.1).settings == s
 
 
 def test_likelihood_ratio_with_unknown_sigma_is_the_chow_f_test(model):

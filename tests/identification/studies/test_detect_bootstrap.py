@@ -35,7 +35,7 @@ def _line(offset=0.0, sigma=0.1, known=True, seed=3):
 
 def test_pvalues_follow_the_definition_and_match_the_observed_tests():
     model, data = _line()
-    res = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_boot=19, seed=5)
+    res = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_rep=19, seed=5)
     obs = run_split_tests(model, data, SPLITS, [0.0, 0.0])
     assert res.statistics == STATISTICS and res.splits == ("low/high", "odd/even")
     np.testing.assert_allclose(res.asymptotic[:, 0], [t.alpha_lr for t in obs], rtol=1e-10)
@@ -59,7 +59,7 @@ def test_pvalues_follow_the_definition_and_match_the_observed_tests():
 def test_a_model_error_gives_the_smallest_bootstrap_pvalue():
     """An offset of 10 sigma on the high inputs: no bootstrap campaign reaches the observed statistic."""
     model, data = _line(offset=1.0, known=False)
-    res = bootstrap_detect(model, data, SPLITS[:1], [0.0, 0.0], n_boot=9, seed=1)
+    res = bootstrap_detect(model, data, SPLITS[:1], [0.0, 0.0], n_rep=9, seed=1)
     assert res.sigma_estimated
     assert res.pvalues("likelihood_ratio")[0] == pytest.approx(0.1)      # 1 / (B + 1)
     assert res.rejected(0.1) and not res.rejected(0.05)                  # 0.1 is the smallest attainable
@@ -68,21 +68,21 @@ def test_a_model_error_gives_the_smallest_bootstrap_pvalue():
 def test_same_seed_same_numbers_serial_and_dask():
     distributed = pytest.importorskip("distributed", reason="dask[distributed] is in the test extras (make setup)")
     model, data = _line(known=False)
-    a = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_boot=6, seed=7)
+    a = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_rep=6, seed=7)
     out = io.StringIO()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cl:
-        b = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_boot=6, seed=7, scheduler=cl.scheduler_address,
+        b = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_rep=6, seed=7, scheduler=cl.scheduler_address,
                              chunk_size=2, progress=Progress(stream=out))
     assert a.backend == "serial" and b.backend.startswith("dask (")
     np.testing.assert_array_equal(a.boot_statistics, b.boot_statistics)
     np.testing.assert_array_equal(a.pvalue, b.pvalue)
     assert "bootstrap campaigns" in out.getvalue() and "6/6" in out.getvalue()
-    c = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_boot=6, seed=8)
+    c = bootstrap_detect(model, data, SPLITS, [0.0, 0.0], n_rep=6, seed=8)
     assert not np.array_equal(a.boot_statistics, c.boot_statistics)
 
 
 @pytest.mark.parametrize("kw, match", [
-    (dict(n_boot=0), "n_boot"), (dict(n_boot=2.5), "n_boot"), (dict(workers=0), "workers"),
+    (dict(n_rep=0), "n_rep"), (dict(n_rep=2.5), "n_rep"), (dict(workers=0), "workers"),
     (dict(scheduler=""), "scheduler"), (dict(chunk_size=0), "chunk_size"), (dict(seed=-1), "seed"),
     (dict(settings="lr"), "settings"),
 ])
@@ -94,7 +94,7 @@ def test_bad_arguments_name_the_argument(kw, match):
         bootstrap_detect(model, data, [], [0.0, 0.0])
     with pytest.raises(TypeError, match="data"):
         bootstrap_detect(model, np.zeros(3), SPLITS, [0.0, 0.0])
-    res = bootstrap_detect(model, data, SPLITS[:1], [0.0, 0.0], n_boot=2, seed=0)
+    res = bootstrap_detect(model, data, SPLITS[:1], [0.0, 0.0], n_rep=2, seed=0)
     with pytest.raises(ValueError, match="statistic"):
         res.pvalues("wald")
     with pytest.raises(ValueError, match="tol"):
@@ -118,7 +118,7 @@ def test_batched_campaigns_give_the_numbers_of_one_fit_at_a_time(known):
     (a split whose validation input cannot identify Vm and K fails in every campaign)."""
     mm, data = _mm(known)
     splits = SPLITS + (Split("one input", range(0, 7), [7]),)
-    kw = dict(n_boot=12, seed=9, chunk_size=6)
+    kw = dict(n_rep=12, seed=9, chunk_size=6)
     a = bootstrap_detect(mm, data, splits, [1.0, 5.0], fits=ONE_BY_ONE, **kw)
     b = bootstrap_detect(mm, data, splits, [1.0, 5.0], **kw)
     assert np.array_equal(np.isnan(a.boot_statistics), np.isnan(b.boot_statistics))
@@ -135,7 +135,7 @@ def test_batched_campaigns_give_the_numbers_of_one_fit_at_a_time(known):
 def test_fits_must_be_a_strategy():
     mm, data = _mm()
     with pytest.raises(TypeError, match="fits: expected BATCHED"):
-        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, fits=True)
+        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_rep=2, fits=True)
 
 
 def test_jit_gives_the_same_numbers_and_restores_the_setting():
@@ -144,7 +144,7 @@ def test_jit_gives_the_same_numbers_and_restores_the_setting():
     import shutil
     from models.state import JIT
     mm, data = _mm()
-    kw = dict(n_boot=6, seed=4, chunk_size=3)
+    kw = dict(n_rep=6, seed=4, chunk_size=3)
     before = JIT.enabled
     a = bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], jit=False, **kw)
     used = JIT.stats.compiled + JIT.stats.loaded
@@ -155,4 +155,4 @@ def test_jit_gives_the_same_numbers_and_restores_the_setting():
     if shutil.which("gcc") is not None:
         assert JIT.stats.compiled + JIT.stats.loaded > used      # the compiled path was really taken
     with pytest.raises(TypeError, match="jit"):
-        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_boot=2, jit="yes")
+        bootstrap_detect(mm, data, SPLITS, [1.0, 5.0], n_rep=2, jit="yes")

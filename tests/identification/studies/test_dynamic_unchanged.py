@@ -118,7 +118,7 @@ def mc_problem(fitted):
 @pytest.mark.slow       # process and Dask start-up: as the static model's test in test_montecarlo.py
 def test_monte_carlo_validate_same_numbers_serial_local_processes_and_dask(mc_problem):
     est, splits = mc_problem
-    common = dict(p_true=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_M=2)
+    common = dict(p=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_series=2)
     mc = dict(n_rep=4, seed=5, progress=False, jit=False, chunk_size=2)
     serial = validate(est.model, splits, **common, settings=MonteCarloSettings(workers=1, **mc))
     local = validate(est.model, splits, **common, settings=MonteCarloSettings(workers=2, **mc))
@@ -196,6 +196,6 @@ def test_validate_on_a_dynamic_model_says_what_to_do(fitted):
     from identification import DataError
     model, _, _ = fitted
     with pytest.raises(DataError, match="a dynamic model is validated by a size study on its campaign: give data="):
-        validate(model, [BY_EXPERIMENT], p_true=P_TRUE, inputs=Q, sigma=SIGMA, n_rep=2)
+        validate(model, [BY_EXPERIMENT], p=P_TRUE, inputs=Q, sigma=SIGMA, n_rep=2)
     with pytest.raises(DataError, match="data: validate on a dynamic model needs the campaign"):
-        validate(model, [BY_EXPERIMENT], p_true=P_TRUE, n_rep=2)
+        validate(model, [BY_EXPERIMENT], p=P_TRUE, n_rep=2)

@@ -41,12 +41,12 @@ def test_validate_takes_the_dynamic_model_and_its_campaign(campaign):
               time_window_split(data.pairs, data.n_q, (0.4, 0.8), (1.6, 2.0))]
     # the per-fit path is what this test is about (the merged batch path: the test below)
     mc = dict(n_rep=3, seed=5, workers=1, progress=False, jit=False, chunk_size=3, fits=ONE_BY_ONE)
-    res = validate(model, splits, P_TRUE, p_true=P_TRUE, data=data, n_M=2, settings=MonteCarloSettings(**mc))
+    res = validate(model, splits, P_TRUE, p=P_TRUE, data=data, n_series=2, settings=MonteCarloSettings(**mc))
     assert not res.errors and res.alpha_lr.shape[-1] == 3 and np.all(np.isfinite(res.alpha_lr))
     # the same numbers as the size study written by hand on the collocation of the campaign fit
     est = identify(model, data, P_TRUE)
     by_hand = validate(est.model, [flat_split(sp, est.model.outputs, data.n_q) for sp in splits], P_TRUE,
-                       p_true=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_M=2,
+                       p=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_series=2,
                        settings=MonteCarloSettings(**mc))
     # (equal up to rounding: the two collocated models are separate CasADi functions on the same mesh)
     np.testing.assert_allclose(res.alpha_lr, by_hand.alpha_lr, rtol=1e-10, atol=1e-14)
@@ -66,7 +66,7 @@ data = simulate_campaign(model, P_TRUE, Q, np.linspace(0.4, 2.0, 5), np.array([0
 est = identify(model, data, P_TRUE)
 splits = [Split("cA0 = 1 vs 2", [0, 2], [1, 3]), time_window_split(data.pairs, 4, (0.4, 0.8), (1.2, 2.0)),
           time_window_split(data.pairs, 4, (0.4, 0.8), (1.6, 2.0))]
-r = validate(est.model, splits, P_TRUE, p_true=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_M=2,
+r = validate(est.model, splits, P_TRUE, p=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma, n_series=2,
              settings=MonteCarloSettings(n_rep=3, seed=5, workers=1, progress=False, jit=False, chunk_size=3))
 print(json.dumps(np.asarray(r.alpha_lr).tolist()))
 """
@@ -91,8 +91,8 @@ def test_merged_batch_fits_of_a_collocated_model_run_and_equal_the_per_fit_path(
     est = identify(model, data, P_TRUE)
     splits = [Split("cA0 = 1 vs 2", [0, 2], [1, 3]), time_window_split(data.pairs, 4, (0.4, 0.8), (1.2, 2.0)),
               time_window_split(data.pairs, 4, (0.4, 0.8), (1.6, 2.0))]
-    per_fit = validate(est.model, splits, P_TRUE, p_true=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma,
-                       n_M=2, settings=MonteCarloSettings(n_rep=3, seed=5, workers=1, progress=False, jit=False,
+    per_fit = validate(est.model, splits, P_TRUE, p=P_TRUE, inputs=est.data.inputs, sigma=est.data.sigma,
+                       n_series=2, settings=MonteCarloSettings(n_rep=3, seed=5, workers=1, progress=False, jit=False,
                                                           chunk_size=3, fits=ONE_BY_ONE))
     # the same fits to round-off (1.4e-13 relative measured): 1e-9 leaves room for other BLAS kernels
     np.testing.assert_allclose(batched, per_fit.alpha_lr, rtol=1e-9, atol=1e-14)

@@ -50,7 +50,7 @@ def test_linearized_size_is_exact_for_equal_information(model):
     # P(2 chi2_2 > chi2_2(1 - a)) = exp(-chi2_2(1 - a) / 4)
     from identification.studies.splits import Split
     sp = Split("mirror", range(1, 14), range(15, 28))
-    r = linearized_size(model, P_TRUE, Q, SIGMA, [sp], tol=0.05, n_draws=200_000)
+    r = linearized_size(model, P_TRUE, Q, SIGMA, [sp], alpha=0.05, n_draws=200_000)
     thr = stats.chi2.ppf(0.95, 2)
     assert np.allclose(r.eig_ratio[0], 2.0)
     assert r.split_paper[0] == pytest.approx(math.exp(-thr / 4), abs=4 * r.mc_se)   # 22.4 %
@@ -61,7 +61,7 @@ def test_size_of_both_statistics_and_coverage(model):
     splits = PAPER_SPLITS[3:]            # loading+unloading interleaved
     settings = MonteCarloSettings(n_rep=N_REP, seed=7, workers=1, progress=False)
     res = size_study(model, P_TRUE, Q, SIGMA, splits, p0=[0.5, 1.5], settings=settings)
-    pred = linearized_size(model, P_TRUE, Q, SIGMA, splits, tol=0.05, n_draws=200_000)
+    pred = linearized_size(model, P_TRUE, Q, SIGMA, splits, alpha=0.05, n_draws=200_000)
     assert res.n_rep == N_REP and not res.errors
     for st, p in (("paper", pred.family_paper), ("two_sample", pred.family_two_sample)):
         r = res.rejection_rate(statistic=st)
@@ -118,7 +118,7 @@ def test_power_against_a_wrong_model_and_errors(model):
         MonteCarloSettings(n_rep=0)
     with pytest.raises(TypeError, match="generator"):
         run_monte_carlo(model, 3, PAPER_SPLITS, [1, 2])
-    with pytest.raises(Exception, match="p_true"):
+    with pytest.raises(Exception, match="p, inputs, sigma: a size study needs the truth"):
         validate(model, PAPER_SPLITS, inputs=Q, sigma=SIGMA)
     with pytest.raises(Exception, match="p_true"):
         ModelCampaign(model, [1.0], Q, SIGMA)
@@ -128,12 +128,12 @@ def test_power_against_a_wrong_model_and_errors(model):
 
 def test_validate_keywords_and_settings_together_are_an_error(model):
     s = MonteCarloSettings(n_rep=2, workers=1, progress=False)
-    common = dict(p_true=P_TRUE, inputs=Q, sigma=SIGMA)
+    common = dict(p=P_TRUE, inputs=Q, sigma=SIGMA)
     with pytest.raises(TypeError, match="settings and n_rep, seed"):
         validate(model, PAPER_SPLITS[2:3], n_rep=5, seed=3, settings=s, **common)
     with pytest.raises(TypeError, match="settings and tol"):
-        validate(model, PAPER_SPLITS[2:3], tol=0.1, settings=s, **common)
-    res = validate(model, PAPER_SPLITS[2:3], n_rep=2, workers=1, progress=False, tol=0.1, **common)
+        validate(model, PAPER_SPLITS[2:3], alpha=0.1, settings=s, **common)
+    res = validate(model, PAPER_SPLITS[2:3], n_rep=2, workers=1, progress=False, alpha=0.1, **common)
     assert res.n_rep == 2 and res.tol == 0.1
     assert validate(model, PAPER_SPLITS[2:3], settings=s, **common).tol == 0.05
 
