@@ -73,7 +73,18 @@ MINIMUM, NOT_BOUNDED, FAILED = "minimum", "not bounded", "failed"
 
 
 class MultiStartError(IdentificationError):
-    """Every start of a multi-start fit failed (the message names each start's error)."""
+    """Every start of a multi-start fit failed (the message names the first starts' errors).
+
+    Attributes
+    ----------
+    starts : ndarray (N, n_p)   the start values (row 0: p0)
+    errors : tuple of str       per start, why its fit failed
+    """
+
+    def __init__(self, message: str, starts=None, errors=()):
+        super().__init__(message, status="all starts failed")
+        self.starts = starts
+        self.errors = tuple(errors)
 
 
 # ---------------------------------------------------------------------------- the starts
@@ -269,7 +280,8 @@ class LocalMinimum:
     Attributes
     ----------
     objective : float        Phi at the minimum (the estimate's objective units)
-    p : ndarray (n_p,)       the parameters of its first start
+    p : ndarray (n_p,)       the parameters there (the best minimum: the estimate's; another: those of its
+                             start of lowest objective)
     starts : tuple of int    the starts (0-based rows) that reached it
     """
 
@@ -357,7 +369,7 @@ class MultiStartRecord:
         bad = self.failed
         if bad:
             parts.append(f"{len(bad)} start{'s' if len(bad) > 1 else ''} failed ("
-                         + "; ".join(f"start {i + 1}: {self.errors[i][:120]}" for i in bad[:3])
+                         + "; ".join(f"start {i + 1}: {_short(self.errors[i])}" for i in bad[:3])
                          + ("; ..." if len(bad) > 3 else "") + ")")
         nb = [i for i, o in enumerate(self.outcome) if o == NOT_BOUNDED]
         if nb:
@@ -383,9 +395,11 @@ class MultiStartRecord:
 
 
 # ---------------------------------------------------------------------------- the driver
-def _minima(fits, objective, tol, se) -> tuple:
-    """The distinct minima among the starts that reached one, best first."""
-    order = sorted((f.index for f in fits if f.outcome == MINIMUM), key=lambda i: (objective[i], i))
+def _minima(fits, objective, tol, se, chosen: int) -> tuple:
+    """The distinct minima among the starts that reached one: the minimum of the ``chosen`` start first (its
+    objective and parameters), then the others by objective (each with its lowest start's values)."""
+    order = [chosen] + sorted((f.index for f in fits if f.outcome == MINIMUM and f.index != chosen),
+                              key=lambda i: (objective[i], i))
     groups = []
     for i in order:
         p = fits[i].p
@@ -395,14 +409,20 @@ def _minima(fits, objective, tol, se) -> tuple:
                 break
         else:
             groups.append((objective[i], p, [i]))
-    return tuple(LocalMinimum(float(o), np.array(p), tuple(s)) for o, p, s in groups)
+    groups = groups[:1] + sorted(groups[1:], key=lambda g: g[0])
+    return tuple(LocalMinimum(float(o), np.array(p), tuple(sorted(s))) for o, p, s in groups)
 
 
-def _failure(fits, n: int) -> MultiStartError:
-    lines = "; ".join(f"start {f.index + 1}{' (p0)' if f.index == 0 else ''}: {f.error}" for f in fits[:5])
-    more = f"; and {n - 5} more" if n > 5 else ""
+def _short(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else text[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def _failure(fits, n: int, X: np.ndarray) -> MultiStartError:
+    lines = "; ".join(f"start {f.index + 1}{' (p0)' if f.index == 0 else ''}: {_short(f.error, 300)}"
+                      for f in fits[:3])
+    more = f"; and {n - 3} more" if n > 3 else ""
     return MultiStartError(f"all {n} starts failed: {lines}{more}; try other start values, bounds on the "
-                           "parameters or more starts", status="all starts failed")
+                           "parameters or more starts", X, tuple(f.error for f in fits))
 
 
 def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None, seed=0, workers: int | None = 1,
@@ -434,7 +454,7 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
     if not ok:
         unb = [f for f in fits if f.outcome == NOT_BOUNDED]
         if not unb:
-            raise _failure(fits, n)
+            raise _failure(fits, n, X)
         chosen = unb[0]             # no finite minimum: the first fit that runs off, as one start would give
         objective, tol, minima, reached = np.full(n, np.nan), float("nan"), (), 0
     else:
@@ -446,7 +466,7 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         chosen = near[0]
         best_rec = chosen.record if chosen.record is not None else _refit(problem, X[chosen.index], chosen.index, weights, settings, Y0)
         se = np.where(np.isfinite(best_rec.stderr) & (best_rec.stderr > 0), best_rec.stderr, param_scale(model, X[0]))
-        minima, reached = _minima(fits, objective, tol, se), len(near)
+        minima, reached = _minima(fits, objective, tol, se, chosen.index), len(near)
         chosen = StartFit(chosen.index, chosen.outcome, chosen.p, chosen.objective, chosen.sigma0, chosen.status,
                           "", chosen.warnings, chosen.fit_time, best_rec)
     rec = chosen.record if chosen.record is not None else _refit(problem, X[chosen.index], chosen.index, weights, settings, Y0)
