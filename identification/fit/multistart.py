@@ -196,7 +196,8 @@ class StartFit:
     index : int              the start (0: p0)
     outcome : str            "minimum", "not bounded" or "failed"
     p : ndarray (n_p,)       the estimate (NaN when failed)
-    objective : float        the fit's objective (NaN when failed)
+    objective : float        the fit's objective; for a fit that runs off, the infimum its objective tends to
+                             (NaN when failed)
     sigma0 : float           the common sigma the fit estimated (sigma unknown), else 1
     status : str             the solver's status, or the error's
     error : str              why the start failed ("" otherwise)
@@ -241,7 +242,8 @@ def _fit_one(problem, p0, index: int, weights, settings, Y0, capture: bool, keep
         return StartFit(index, FAILED, nan, float("nan"), 1.0, status, err, tuple(caught), dt)
     outcome = MINIMUM if rec.unbounded is None else NOT_BOUNDED
     sigma0 = float(rec.sigma[0]) if rec.sigma_estimated and np.size(rec.sigma) else 1.0
-    return StartFit(index, outcome, np.array(rec.p, float), float(rec.objective), sigma0, str(rec.status), "",
+    phi = float(rec.objective if rec.unbounded is None else rec.unbounded.objective_limit)
+    return StartFit(index, outcome, np.array(rec.p, float), phi, sigma0, str(rec.status), "",
                     tuple(caught), dt, rec if keep else None)
 
 
@@ -303,7 +305,8 @@ class MultiStartRecord:
     param_names : tuple of str
     starts : ndarray (N, n_p)     the start values (row 0: p0), parameter units
     p : ndarray (N, n_p)          each start's estimate (NaN where it failed)
-    objective : ndarray (N,)      each start's Phi in the estimate's objective units (NaN unless a minimum)
+    objective : ndarray (N,)      each start's Phi in the estimate's objective units: at its minimum, or for a
+                                  fit the data do not bound the infimum its objective tends to; NaN when failed
     outcome : tuple of str        per start: "minimum", "not bounded" or "failed"
     status : tuple of str         per start: the solver's status, or the error's
     errors : tuple of str         per start: why it failed ("" otherwise)
@@ -373,8 +376,13 @@ class MultiStartRecord:
                          + ("; ..." if len(bad) > 3 else "") + ")")
         nb = [i for i, o in enumerate(self.outcome) if o == NOT_BOUNDED]
         if nb:
+            limit = float(np.min(self.objective[nb]))
+            below = (": below the best minimum, which is then only local; the lowest objective is approached at "
+                     "infinity, where the data do not bound the parameters"
+                     if limit < self.minima[0].objective - self.objective_tol else "")
             parts.append(f"{len(nb)} start{'s' if len(nb) > 1 else ''} ended on a fit the data do not bound "
-                         f"(start{'s' if len(nb) > 1 else ''} {', '.join(str(i + 1) for i in nb[:5])})")
+                         f"(start{'s' if len(nb) > 1 else ''} {', '.join(str(i + 1) for i in nb[:5])}; the "
+                         f"objective tends to {limit:.6g} as the parameters run off{below})")
         parts.append(f"starts: p0 and {n - 1} Latin-hypercube points ({'; '.join(self.rules)}; seed {self.seed}), "
                      f"{self.backend}; the table: est.diagnostics.starts.to_frame()")
         return "; ".join(parts)
@@ -456,11 +464,12 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         if not unb:
             raise _failure(fits, n, X)
         chosen = unb[0]             # no finite minimum: the first fit that runs off, as one start would give
-        objective, tol, minima, reached = np.full(n, np.nan), float("nan"), (), 0
+        objective = np.array([f.objective if f.outcome == NOT_BOUNDED else np.nan for f in fits])
+        tol, minima, reached = float("nan"), (), 0
     else:
         raw = np.array([f.objective * f.sigma0 ** 2 for f in fits])
         low = min(ok, key=lambda f: (raw[f.index], f.index))
-        objective = np.where([f.outcome == MINIMUM for f in fits], raw / low.sigma0 ** 2, np.nan)
+        objective = np.where([f.outcome != FAILED for f in fits], raw / low.sigma0 ** 2, np.nan)
         tol = OBJECTIVE_RTOL * max(1.0, abs(objective[low.index]))
         near = [f for f in ok if objective[f.index] - objective[low.index] <= tol]
         chosen = near[0]

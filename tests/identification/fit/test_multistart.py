@@ -195,3 +195,35 @@ def test_a_dynamic_model_at_its_global_minimum_gives_the_single_start_estimate()
     assert ms.reached_best == 3 and len(ms.minima) == 1
     assert np.all(np.abs(ms.p - one.p) <= 1e-6 * one.stderr)
     assert three.diagnostics.discretisation is not None and one.notes == three.notes[:-1]
+
+
+def michaelis_menten(lower=-np.inf):
+    """y = Vm x / (K + x), Vm = 10, K = 20 seen at x = 0.5..4 only (seed 3: the fit from the truth runs off along
+    Vm / K = const, tests/identification/fit/test_unbounded.py)."""
+    model = Model.explicit(params=[Parameter("Vm", lower), Parameter("K", lower)], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] * q[0] / (p[1] + q[0]), name="Michaelis-Menten")
+    x = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
+    z = (10.0 * x / (20.0 + x))[None, :, None] + 0.1 * np.random.default_rng(3).standard_normal((2, x.size, 1))
+    return model, Measurements(x[:, None], z, [0.1])
+
+
+def test_a_start_that_runs_off_is_recorded_with_the_limit_of_its_objective():
+    """Without bounds a start finds a finite minimum (Vm, K < 0: a pole beyond the data) below the run-off's limit."""
+    model, data = michaelis_menten()
+    one = identify(model, data, [10.0, 20.0])
+    est = identify(model, data, [10.0, 20.0], starts=4)
+    ms = est.diagnostics.starts
+    assert not one.bounded and est.bounded and ms.outcome[0] == "not bounded" and ms.best != 0
+    assert ms.objective[0] == one.unbounded.objective_limit and est.objective < one.unbounded.objective_limit - 0.5
+    assert est.p[1] < -4.0                                        # the pole lies beyond the largest input
+    assert f"the objective tends to {one.unbounded.objective_limit:.6g} as the parameters run off" in est.notes[-1]
+
+
+def test_when_no_start_reaches_a_finite_minimum_the_first_run_off_is_returned():
+    model, data = michaelis_menten(lower=0.0)
+    one = identify(model, data, [10.0, 20.0])
+    est = identify(model, data, [10.0, 20.0], starts=4)
+    ms = est.diagnostics.starts
+    assert not est.bounded and ms.minima == () and ms.outcome == ("not bounded",) * 4 and ms.best == 0
+    assert np.array_equal(est.p, one.p)
+    assert est.notes[-1].startswith("multi-start: none of the 4 starts reached a finite minimum")
