@@ -41,6 +41,7 @@ every backend.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import math
@@ -118,7 +119,7 @@ def _checked_p0(model, p0) -> np.ndarray:
 
 
 def start_rules(model, p0) -> tuple:
-    """Per parameter, how starts 2..N are drawn from a uniform u in [0, 1) (see the module docstring):
+    """x = rule(u), u uniform in [0, 1): per parameter, how starts 2..N are drawn (see the module docstring):
     (kind, a, b) with kind "fixed" (value a), "log" (a (b / a)^u), "uniform" (a + u (b - a)), "above"
     (a + b 10^(2u - 1)), "below" (a - b 10^(2u - 1)) or "around" (a + 3 b (2u - 1))."""
     p0 = _checked_p0(model, p0)
@@ -159,8 +160,8 @@ def _latin_hypercube(d: int, n: int, ss: np.random.SeedSequence) -> np.ndarray:
 
 
 def draw_starts(model, p0, n: int, seed=0) -> tuple:
-    """The ``n`` starts of a multi-start fit: row 0 is p0, rows 1..n-1 a Latin hypercube in [0, 1)^n_p drawn from
-    ``seed`` (an int >= 0, a SeedSequence, or None for fresh entropy) and mapped by :func:`start_rules`.
+    """x_s = rule(u_s), u_s in [0, 1)^n_p the rows of a Latin hypercube: the ``n`` starts of a multi-start fit
+    (parameter units); row 0 is p0, rows 1..n-1 the hypercube drawn from ``seed`` (an int >= 0, a SeedSequence, or None for fresh entropy) and mapped by :func:`start_rules`.
 
     Returns
     -------
@@ -224,7 +225,7 @@ def _fit_one(problem, p0, index: int, weights, settings, Y0, capture: bool, keep
     t0 = time.perf_counter()
     caught = []
     nan = np.full(np.size(p0), np.nan)
-    with warnings.catch_warnings(record=True) if capture else _no_capture() as got:
+    with warnings.catch_warnings(record=True) if capture else contextlib.nullcontext(()) as got:
         if capture:
             warnings.simplefilter("always")
         try:
@@ -245,16 +246,6 @@ def _fit_one(problem, p0, index: int, weights, settings, Y0, capture: bool, keep
     phi = float(rec.objective if rec.unbounded is None else rec.unbounded.objective_limit)
     return StartFit(index, outcome, np.array(rec.p, float), phi, sigma0, str(rec.status), "",
                     tuple(caught), dt, rec if keep else None)
-
-
-class _no_capture:
-    """A context manager that does nothing (start 1's warnings go to the caller as in a single fit)."""
-
-    def __enter__(self):
-        return ()
-
-    def __exit__(self, *exc):
-        return False
 
 
 @dataclass(frozen=True, eq=False)
@@ -435,8 +426,19 @@ def _failure(fits, n: int, X: np.ndarray) -> MultiStartError:
 
 def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None, seed=0, workers: int | None = 1,
                scheduler=None) -> FitRecord:
-    """The multi-start fit of ``problem`` (see the module docstring): the record of the best local minimum with
-    ``extra["starts"]`` a :class:`MultiStartRecord` and its note.
+    """min over the local minima p_s of Phi (paper eq. 3, objective units) reached from p0 and ``starts - 1`` drawn
+    starts (see the module docstring): the record of the best with ``extra["starts"]`` a
+    :class:`MultiStartRecord` and its note.
+
+    Parameters
+    ----------
+    problem : identification.fit.problem.Problem
+    p0 : array_like (n_p,)          start 1 (inside the bounds), parameter units
+    starts : int >= 1               the number of starts, p0 included
+    weights, settings, Y0           as for :meth:`Problem.fit` (``Y0`` for start 1 only)
+    seed : int >= 0, SeedSequence or None   draws starts 2..N (:func:`draw_starts`)
+    workers : int or None           local processes (1: serially here; None: every core)
+    scheduler : Dask address or distributed.Client, optional
 
     Raises
     ------
