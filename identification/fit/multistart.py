@@ -375,8 +375,17 @@ class MultiStartRecord:
                          f"(start{'s' if len(nb) > 1 else ''} {', '.join(str(i + 1) for i in nb[:5])}; the "
                          f"objective tends to {limit:.6g} as the parameters run off{below})")
         parts.append(f"starts: p0 and {n - 1} Latin-hypercube points ({'; '.join(self.rules)}; seed {self.seed}), "
-                     f"{self.backend}; the table: est.diagnostics.starts.to_frame()")
+                     f"{self.backend}; the tables: est.diagnostics.starts.to_frame() and .minima_frame()")
         return "; ".join(parts)
+
+    def minima_frame(self):
+        """The distinct local minima, best first (``minimum`` 1, 2, ...): objective, how many starts reached each,
+        which (numbered from 1) and the parameters there."""
+        import pandas as pd
+        cols = {"objective": [m.objective for m in self.minima], "starts": [m.count for m in self.minima],
+                "reached from": [", ".join(str(i + 1) for i in m.starts) for m in self.minima]}
+        cols.update({nm: [m.p[i] for m in self.minima] for i, nm in enumerate(self.param_names)})
+        return pd.DataFrame(cols, index=pd.Index(np.arange(1, len(self.minima) + 1), name="minimum"))
 
     def to_frame(self):
         """One row per start (1-based ``start``): its values, outcome, status, objective, estimate, the minimum it

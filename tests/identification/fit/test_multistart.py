@@ -75,6 +75,10 @@ def test_the_record_counts_the_starts_and_the_distinct_minima(twenty):
     assert "p0 (start 1) ended at objective" in note and note in est.summary()
     frame = ms.to_frame()
     assert list(frame.index) == list(range(1, 21)) and int((frame["minimum"] == 1).sum()) == ms.minima[0].count
+    minima = ms.minima_frame()
+    assert list(minima["starts"]) == [m.count for m in ms.minima] and minima["starts"].sum() == int(ok.sum())
+    assert minima["objective"].iloc[0] == est.objective and minima["w"].iloc[0] == est.p[1]
+    assert str(ms.best + 1) in minima["reached from"].iloc[0].split(", ")
 
 
 def test_the_starts_are_reproducible_with_the_seed():
