@@ -159,9 +159,26 @@ def _latin_hypercube(d: int, n: int, ss: np.random.SeedSequence) -> np.ndarray:
     return engine.random(n)
 
 
+def _mapped(rule: tuple, u: np.ndarray) -> np.ndarray:
+    """The values x = rule(u) of one parameter (:func:`start_rules`)."""
+    kind, a, b = rule
+    if kind == "fixed":
+        return np.full_like(u, a)
+    if kind == "log":
+        return a * (b / a) ** u
+    if kind == "uniform":
+        return a + u * (b - a)
+    if kind == "above":
+        return a + b * 10.0 ** (2 * u - 1)
+    if kind == "below":
+        return a - b * 10.0 ** (2 * u - 1)
+    return a + 3 * b * (2 * u - 1)                 # "around"
+
+
 def draw_starts(model, p0, n: int, seed=0) -> tuple:
     """x_s = rule(u_s), u_s in [0, 1)^n_p the rows of a Latin hypercube: the ``n`` starts of a multi-start fit
-    (parameter units); row 0 is p0, rows 1..n-1 the hypercube drawn from ``seed`` (an int >= 0, a SeedSequence, or None for fresh entropy) and mapped by :func:`start_rules`.
+    (parameter units); row 0 is p0, rows 1..n-1 the hypercube drawn from ``seed`` (an int >= 0, a SeedSequence,
+    or None for fresh entropy) and mapped by :func:`start_rules`.
 
     Returns
     -------
@@ -176,13 +193,9 @@ def draw_starts(model, p0, n: int, seed=0) -> tuple:
     out = np.tile(p0, (n, 1))
     if n > 1:
         u = _latin_hypercube(model.n_p, n - 1, ss)
-        for i, (kind, a, b) in enumerate(rules):
-            col = u[:, i]
-            x = {"fixed": lambda: np.full_like(col, a), "log": lambda: a * (b / a) ** col,
-                 "uniform": lambda: a + col * (b - a), "above": lambda: a + b * 10.0 ** (2 * col - 1),
-                 "below": lambda: a - b * 10.0 ** (2 * col - 1), "around": lambda: a + 3 * b * (2 * col - 1)}[kind]()
+        for i, rule in enumerate(rules):
             par = model.params[i]
-            out[1:, i] = np.clip(x, par.lower, par.upper)
+            out[1:, i] = np.clip(_mapped(rule, u[:, i]), par.lower, par.upper)
     names = tuple(par.name for par in model.params)
     return out, tuple(_rule_text(nm, r) for nm, r in zip(names, rules)), int(ss.entropy)
 
@@ -474,39 +487,42 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         unb = [f for f in fits if f.outcome == NOT_BOUNDED]
         if not unb:
             raise _failure(fits, n, X)
-        chosen = unb[0]             # no finite minimum: the first fit that runs off, as one start would give
+        chosen = unb[0].index       # no finite minimum: the first fit that runs off, as one start would give
         objective = np.array([f.objective if f.outcome == NOT_BOUNDED else np.nan for f in fits])
         tol, minima, reached = float("nan"), (), 0
+        rec = _record(problem, fits[chosen], X, weights, settings, Y0)
     else:
         raw = np.array([f.objective * f.sigma0 ** 2 for f in fits])
         low = min(ok, key=lambda f: (raw[f.index], f.index))
         objective = np.where([f.outcome != FAILED for f in fits], raw / low.sigma0 ** 2, np.nan)
         tol = OBJECTIVE_RTOL * max(1.0, abs(objective[low.index]))
-        near = [f for f in ok if objective[f.index] - objective[low.index] <= tol]
-        chosen = near[0]
-        best_rec = chosen.record if chosen.record is not None else _refit(problem, X[chosen.index], chosen.index, weights, settings, Y0)
-        se = np.where(np.isfinite(best_rec.stderr) & (best_rec.stderr > 0), best_rec.stderr, param_scale(model, X[0]))
-        minima, reached = _minima(fits, objective, tol, se, chosen.index), len(near)
-        chosen = StartFit(chosen.index, chosen.outcome, chosen.p, chosen.objective, chosen.sigma0, chosen.status,
-                          "", chosen.warnings, chosen.fit_time, best_rec)
-    rec = chosen.record if chosen.record is not None else _refit(problem, X[chosen.index], chosen.index, weights, settings, Y0)
-    ms = MultiStartRecord(tuple(par.name for par in model.params), X, np.array([f.p for f in fits]), objective,
-                          tuple(f.outcome for f in fits), tuple(f.status for f in fits),
-                          tuple(f.error for f in fits), tuple(f.warnings for f in fits),
-                          np.array([f.fit_time for f in fits]), chosen.index, reached, minima, tol,
-                          PARAMETER_TOL_SE, rules, entropy, str(reps.backend), time.perf_counter() - t0)
+        near = [f.index for f in ok if objective[f.index] - objective[low.index] <= tol]
+        chosen, reached = near[0], len(near)
+        rec = _record(problem, fits[chosen], X, weights, settings, Y0)
+        se = np.where(np.isfinite(rec.stderr) & (rec.stderr > 0), rec.stderr, param_scale(model, X[0]))
+        minima = _minima(fits, objective, tol, se, chosen)
+    ms = MultiStartRecord(param_names=tuple(par.name for par in model.params), starts=X,
+                          p=np.array([f.p for f in fits]), objective=objective,
+                          outcome=tuple(f.outcome for f in fits), status=tuple(f.status for f in fits),
+                          errors=tuple(f.error for f in fits), warnings=tuple(f.warnings for f in fits),
+                          fit_time=np.array([f.fit_time for f in fits]), best=chosen, reached_best=reached,
+                          minima=minima, objective_tol=tol, parameter_tol_se=PARAMETER_TOL_SE, rules=rules,
+                          seed=entropy, backend=str(reps.backend), wall_time=time.perf_counter() - t0)
     note = ms.note() if minima else (f"multi-start: none of the {n} starts reached a finite minimum; the estimate is "
-                                     f"that of start {chosen.index + 1}, whose fit the data do not bound")
+                                     f"that of start {chosen + 1}, whose fit the data do not bound")
     return _with_starts(rec, ms, note)
 
 
-def _refit(problem, p, index: int, weights, settings, Y0) -> FitRecord:
-    """The full record of the start ``index`` in this process (its fit ran in another one)."""
-    fit = _fit_one(problem, p, index, weights, settings, Y0 if index == 0 else None, capture=index > 0, keep=True)
-    if fit.record is None:
-        raise IdentificationError(f"multi-start: the fit of start {index + 1} succeeded on a worker but failed "
-                                  f"again in this process: {fit.error}", status=fit.status)
-    return fit.record
+def _record(problem, fit: StartFit, X: np.ndarray, weights, settings, Y0) -> FitRecord:
+    """The full record of the start ``fit``: its own, or (when it ran in another process) its fit again here."""
+    if fit.record is not None:
+        return fit.record
+    i = fit.index
+    again = _fit_one(problem, X[i], i, weights, settings, Y0 if i == 0 else None, capture=i > 0, keep=True)
+    if again.record is None:
+        raise IdentificationError(f"multi-start: the fit of start {i + 1} succeeded on a worker but failed "
+                                  f"again in this process: {again.error}", status=again.status)
+    return again.record
 
 
 def _with_starts(rec: FitRecord, ms: MultiStartRecord, note: str) -> FitRecord:
