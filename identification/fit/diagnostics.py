@@ -5,8 +5,9 @@ The estimator records its run in the string-keyed dict ``FitRecord.extra`` (kept
 per key: the solver that ran, the Newton decrement :math:`\delta = g^T H^{-1} g` at the estimate (the predicted
 decrease of the objective, dimensionless objective units), Ipopt's iterations and passes, the singular values of
 the column-normalised weighted Jacobian :math:`W^{1/2} J D` (their ratio is the condition of the fit), the
-eigenvalues of the scaled Hessian, why the Newton refinement stopped, the saddle points escaped, the timings and,
-for a dynamic model, the discretisation record.  Keys it does not know are kept in ``other``.
+eigenvalues of the scaled Hessian, why the Newton refinement stopped, the saddle points escaped, the timings,
+for a dynamic model the discretisation record and, for a multi-start fit, the record of its starts.  Keys it does
+not know are kept in ``other``.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ __all__ = ["FitDiagnostics", "EXTRA_KEYS"]
 
 #: the keys of ``FitRecord.extra`` that :class:`FitDiagnostics` turns into attributes of the same name
 EXTRA_KEYS = ("solver", "newton_decrement", "ipopt_iterations", "ipopt_passes", "singular_values",
-              "hessian_eigenvalues", "refinement_stop", "saddle_escapes", "ipopt_timing", "timing", "discretisation")
+              "hessian_eigenvalues", "refinement_stop", "saddle_escapes", "ipopt_timing", "timing", "discretisation",
+              "starts")
 
 
 def _array(v):
@@ -53,6 +55,8 @@ class FitDiagnostics:
     ipopt_timing : Mapping or None  Ipopt's build / nlpsol / solve / callback times (s)
     timing : Mapping or None       {phase: (wall s, CPU s)} of identify (``IdentifySettings`` timing on)
     discretisation : DiscretisationRecord or None   the mesh and its error (dynamic models)
+    starts : MultiStartRecord or None   every start of a multi-start fit (``identify(..., starts=N)``,
+                                   :mod:`identification.fit.multistart`); None for a single start
     other : Mapping                the keys of ``extra`` not listed above
     """
 
@@ -67,6 +71,7 @@ class FitDiagnostics:
     ipopt_timing: Mapping | None = None
     timing: Mapping | None = None
     discretisation: object = None
+    starts: object = None
     other: Mapping = field(default_factory=dict)
 
     @classmethod
@@ -80,7 +85,7 @@ class FitDiagnostics:
                    refinement_stop=str(e.get("refinement_stop", "") or ""),
                    saddle_escapes=tuple(dict(s) for s in e.get("saddle_escapes", ())),
                    ipopt_timing=_mapping(e.get("ipopt_timing")), timing=_mapping(e.get("timing")),
-                   discretisation=e.get("discretisation"),
+                   discretisation=e.get("discretisation"), starts=e.get("starts"),
                    other={k: v for k, v in e.items() if k not in EXTRA_KEYS})
 
     @property

@@ -24,6 +24,7 @@ import numpy as np
 from identification.fit.dynamic_fit import (DiscretisationSettings, collocated_problem, dynamic_information,
                                             identify_dynamic)
 from identification.fit.estimator import IdentifySettings, fit_static, static_information
+from identification.fit.multistart import check_starts, fit_starts
 from identification.fit.record import FitRecord
 
 __all__ = ["Problem", "ProblemStrategy", "StaticStrategy", "CollocatedStrategy", "strategy_for", "fit_model",
@@ -186,16 +187,27 @@ class Problem:
         of the discretisation settings) and its data as (sensor, time) pairs (Measurements)."""
         return self.strategy.static(self, None if p is None else np.asarray(p, float))
 
-    def fit(self, p0, weights=None, settings: IdentifySettings | None = None, Y0=None) -> FitRecord:
+    def fit(self, p0, weights=None, settings: IdentifySettings | None = None, Y0=None, *, starts: int = 1, seed=0,
+            workers: int | None = 1, scheduler=None) -> FitRecord:
         """min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 s.t. E(y_j, p, q_j) = 0 (paper
         eq. 3) from ``p0`` (units of the parameters), with the second-order covariance (eq. 7).
 
         ``weights`` (n_S,) are the sensor (instrument) weights, ``Y0`` (n_q, n_y) a guess of the states
-        (static models only).  A dynamic model's mesh is refined until its error at the estimate is within
-        the tolerances (``record.extra["discretisation"]``).  Returns the plain
+        (static models only; used for the start p0 only).  A dynamic model's mesh is refined until its error at
+        the estimate is within the tolerances (``record.extra["discretisation"]``).  Returns the plain
         :class:`identification.fit.record.FitRecord` (:func:`identification.identify` wraps it as an Estimate).
+
+        ``starts`` > 1: a multi-start fit (:mod:`identification.fit.multistart`): besides p0, ``starts - 1``
+        starts drawn from ``seed`` (an int >= 0, a numpy SeedSequence, or None for fresh entropy, recorded) in
+        the bounds, each fitted with the same settings on ``workers`` local processes (1: serially here; None:
+        every core) or a Dask ``scheduler``; the record of the best local minimum is returned with every start in
+        ``record.extra["starts"]`` (``est.diagnostics.starts``, a MultiStartRecord) and a note.  ``starts=1``
+        (default) is the single fit from p0 (``seed``, ``workers`` and ``scheduler`` unused).
         """
-        return self.strategy.fit(self, p0, weights=weights, settings=settings, Y0=Y0)
+        if check_starts(starts) == 1:
+            return self.strategy.fit(self, p0, weights=weights, settings=settings, Y0=Y0)
+        return fit_starts(self, p0, starts, weights=weights, settings=settings, Y0=Y0, seed=seed, workers=workers,
+                          scheduler=scheduler)
 
     def information(self, p, states=None, *, inputs=None, sigma=None, n_series=1, times=None) -> tuple:
         """Per-sensor information F_k = sum_j c_jk G_jk^T G_jk / sigma_k^2 and second-order terms S_k at p
@@ -207,13 +219,15 @@ class Problem:
 
 
 def fit_model(model, data, p0, weights=None, settings: IdentifySettings | None = None, Y0=None,
-              discretisation=None) -> FitRecord:
+              discretisation=None, *, starts: int = 1, seed=0, workers: int | None = 1, scheduler=None) -> FitRecord:
     """min_p 0.5 sum_ijk w_k ((z_ijk - h_k(y_j, p, q_j)) / sigma_k)^2 s.t. E(y_j, p, q_j) = 0 (paper eq. 3),
     with the second-order covariance (eq. 7): ``Problem(model, data, discretisation).fit(p0, ...)``
-    (:meth:`Problem.fit`).  ``Y0`` static models only, ``discretisation`` (a
-    :class:`identification.fit.dynamic_fit.DiscretisationSettings`) dynamic models only.
+    (:meth:`Problem.fit`; ``starts``, ``seed``, ``workers``, ``scheduler``: a multi-start fit there).  ``Y0``
+    static models only, ``discretisation`` (a :class:`identification.fit.dynamic_fit.DiscretisationSettings`)
+    dynamic models only.
     """
-    return Problem(model, data, discretisation).fit(p0, weights=weights, settings=settings, Y0=Y0)
+    return Problem(model, data, discretisation).fit(p0, weights=weights, settings=settings, Y0=Y0, starts=starts,
+                                                    seed=seed, workers=workers, scheduler=scheduler)
 
 
 def information_contributions(model, data, p, states=None, *, inputs=None, sigma=None, n_series=1, times=None):

@@ -1,0 +1,529 @@
+r"""Multi-start fits: the least-squares problem solved from N starts, the best local minimum kept (issue 30 item 2).
+
+Every start solves the same problem (paper eq. 3, dimensionless objective units)
+
+.. math::
+
+    \min_p \Phi(p) = \tfrac12 \sum_{ijk} w_k \bigl((z_{ijk} - h_k(y_j, p, q_j)) / \sigma_k\bigr)^2
+    \quad \text{s.t.} \quad E(y_j, p, q_j) = 0,\quad \text{lower} \le p \le \text{upper},
+
+with the same settings, by :meth:`identification.fit.problem.Problem.fit` (static and dynamic models alike:
+the multi-start wraps the problem's strategy, it is not a second estimator).  Start 1 is ``p0``; starts 2..N are
+the rows of a Latin hypercube (``scipy.stats.qmc.LatinHypercube``, scrambled, drawn from ``seed``) mapped per
+parameter by the documented rule of :func:`start_rules`:
+
+* both bounds finite, ``lower > 0`` and ``upper / lower >= 100`` (a positive parameter whose bounds span two
+  decades or more): log-uniform in [lower, upper];
+* both bounds finite otherwise (a rate bounded at 0 included): uniform in [lower, upper];
+* only a lower bound: ``lower + d 10^U`` with U uniform in (-1, 1) and d = p0 - lower (d = the parameter's scale
+  when p0 is on the bound): log scale around p0, a decade either way, never below the bound; only an upper
+  bound: the mirror image;
+* no bound: ``p0 + 3 s U`` with U uniform in (-1, 1) and s the parameter's scale (its declared scale, else
+  |p0|, else 1).
+
+A start *reaches a minimum* when its fit passes every check of the estimator (Ipopt's termination or the exact
+Newton verification, the second-order test of a minimum, identifiability, finite standard errors); a start that
+raises is recorded with its error (never silent), one whose fit does not bound the parameters is recorded as
+"not bounded".  The result is the estimate of the lowest objective; among the starts within the objective
+tolerance of it (:data:`OBJECTIVE_RTOL`), the first (p0 first): when p0 reaches the global minimum the estimate
+is the single-start one, bit for bit.  Two starts found the same minimum when their objectives agree within the
+tolerance and their parameters within :data:`PARAMETER_TOL_SE` standard errors of the best estimate.
+
+With sigma unknown every fit estimates its own s, and its objective is 0.5 (n - n_p) by construction; starts are
+then compared by 0.5 sum w_k r^2 / s_best^2 (the objective of each start with the best estimate's s), so that
+the best start's value is the estimate's objective.
+
+Messages number the starts from 1 (start 1 is p0); the arrays of :class:`MultiStartRecord` are indexed from 0.
+The starts run on the replication engine (:mod:`identification.replicate`): serially in this process
+(``workers=1``), on local processes or a Dask scheduler; with more than one process the estimate of the best
+start is fitted once more in this process (its full record is not shipped back), so the estimate is the same on
+every backend.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import functools
+import math
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import qmc
+
+from models.state import jit_enabled
+from identification import cluster
+from identification.errors import DataError, IdentificationError
+from identification.fit.record import FitRecord
+from identification.fit.start import as_start_vector, param_scale
+from identification.replicate import ReplicationTask, replicate
+
+__all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
+           "check_starts", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES"]
+
+#: a start reached the best minimum when its objective is within this of the best, relative to max(1, |best|)
+OBJECTIVE_RTOL = 1e-6
+#: two starts at one minimum: parameters within this many standard errors (of the best estimate) of each other
+PARAMETER_TOL_SE = 1e-2
+#: a positive parameter whose bounds span this ratio (two decades) or more is sampled in log scale
+LOG_DECADES = 100.0
+
+#: the outcomes of a start
+MINIMUM, NOT_BOUNDED, FAILED = "minimum", "not bounded", "failed"
+
+
+class MultiStartError(IdentificationError):
+    """Every start of a multi-start fit failed (the message names the first starts' errors).
+
+    Attributes
+    ----------
+    starts : ndarray (N, n_p)   the start values (row 0: p0)
+    errors : tuple of str       per start, why its fit failed
+    """
+
+    def __init__(self, message: str, starts=None, errors=()):
+        super().__init__(message, status="all starts failed")
+        self.starts = starts
+        self.errors = tuple(errors)
+
+
+# ---------------------------------------------------------------------------- the starts
+def check_starts(starts) -> int:
+    """``starts`` as an int >= 1; ValueError naming the argument otherwise."""
+    if isinstance(starts, (bool, np.bool_)) or not isinstance(starts, (int, np.integer)) or starts < 1:
+        raise ValueError(f"starts: expected a positive integer (1: the fit from p0 alone), got {starts!r}")
+    return int(starts)
+
+
+def _seed_sequence(seed) -> np.random.SeedSequence:
+    if isinstance(seed, np.random.SeedSequence):
+        return seed
+    if seed is None:
+        return np.random.SeedSequence()
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed: expected an integer >= 0, a numpy SeedSequence or None (fresh entropy, recorded), "
+                         f"got {seed!r}")
+    return np.random.SeedSequence(int(seed))
+
+
+def _checked_p0(model, p0) -> np.ndarray:
+    p0 = as_start_vector(model, p0)
+    for i, par in enumerate(model.params):
+        if not math.isfinite(p0[i]):
+            raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
+        if p0[i] < par.lower or p0[i] > par.upper:
+            raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
+                            f"[{par.lower:g}, {par.upper:g}]")
+    return p0
+
+
+def start_rules(model, p0) -> tuple:
+    """x = rule(u), u uniform in [0, 1): per parameter, how starts 2..N are drawn (see the module docstring):
+    (kind, a, b) with kind "fixed" (value a), "log" (a (b / a)^u), "uniform" (a + u (b - a)), "above"
+    (a + b 10^(2u - 1)), "below" (a - b 10^(2u - 1)) or "around" (a + 3 b (2u - 1))."""
+    p0 = _checked_p0(model, p0)
+    s = param_scale(model, p0)
+    rules = []
+    for i, par in enumerate(model.params):
+        lo, up = par.lower, par.upper
+        if math.isfinite(lo) and math.isfinite(up):
+            if up == lo:
+                rules.append(("fixed", lo, lo))
+            elif lo > 0 and up / lo >= LOG_DECADES:
+                rules.append(("log", lo, up))
+            else:
+                rules.append(("uniform", lo, up))
+        elif math.isfinite(lo):
+            rules.append(("above", lo, p0[i] - lo if p0[i] > lo else s[i]))
+        elif math.isfinite(up):
+            rules.append(("below", up, up - p0[i] if p0[i] < up else s[i]))
+        else:
+            rules.append(("around", p0[i], s[i]))
+    return tuple(rules)
+
+
+def _rule_text(name: str, rule: tuple) -> str:
+    kind, a, b = rule
+    return {"fixed": f"{name} = {a:g} (lower = upper)", "log": f"{name} log-uniform in [{a:g}, {b:g}]",
+            "uniform": f"{name} uniform in [{a:g}, {b:g}]", "above": f"{name} = {a:g} + {b:g} 10^U(-1,1)",
+            "below": f"{name} = {a:g} - {b:g} 10^U(-1,1)", "around": f"{name} = {a:g} +- 3 x {b:g} U(-1,1)"}[kind]
+
+
+def _latin_hypercube(d: int, n: int, ss: np.random.SeedSequence) -> np.ndarray:
+    rng = np.random.default_rng(ss)
+    try:
+        engine = qmc.LatinHypercube(d, rng=rng)
+    except TypeError:                       # scipy < 1.15 names the generator ``seed``
+        engine = qmc.LatinHypercube(d, seed=rng)
+    return engine.random(n)
+
+
+def _mapped(rule: tuple, u: np.ndarray) -> np.ndarray:
+    """The values x = rule(u) of one parameter (:func:`start_rules`)."""
+    kind, a, b = rule
+    if kind == "fixed":
+        return np.full_like(u, a)
+    if kind == "log":
+        return a * (b / a) ** u
+    if kind == "uniform":
+        return a + u * (b - a)
+    if kind == "above":
+        return a + b * 10.0 ** (2 * u - 1)
+    if kind == "below":
+        return a - b * 10.0 ** (2 * u - 1)
+    return a + 3 * b * (2 * u - 1)                 # "around"
+
+
+def draw_starts(model, p0, n: int, seed=0) -> tuple:
+    """x_s = rule(u_s), u_s in [0, 1)^n_p the rows of a Latin hypercube: the ``n`` starts of a multi-start fit
+    (parameter units); row 0 is p0, rows 1..n-1 the hypercube drawn from ``seed`` (an int >= 0, a SeedSequence,
+    or None for fresh entropy) and mapped by :func:`start_rules`.
+
+    Returns
+    -------
+    starts : ndarray (n, n_p)    parameter units, inside the bounds
+    rules : tuple of str         how each parameter was drawn
+    entropy : int                the seed's entropy (``seed=entropy`` draws the same starts again)
+    """
+    n = check_starts(n)
+    ss = _seed_sequence(seed)
+    p0 = _checked_p0(model, p0)
+    rules = start_rules(model, p0)
+    out = np.tile(p0, (n, 1))
+    if n > 1:
+        u = _latin_hypercube(model.n_p, n - 1, ss)
+        for i, rule in enumerate(rules):
+            par = model.params[i]
+            out[1:, i] = np.clip(_mapped(rule, u[:, i]), par.lower, par.upper)
+    names = tuple(par.name for par in model.params)
+    return out, tuple(_rule_text(nm, r) for nm, r in zip(names, rules)), int(ss.entropy)
+
+
+# ---------------------------------------------------------------------------- one start
+@dataclass(frozen=True, eq=False)
+class StartFit:
+    """The fit from one start (the record of :class:`StartTask`; ``record`` None when it ran in another process).
+
+    Attributes
+    ----------
+    index : int              the start (0: p0)
+    outcome : str            "minimum", "not bounded" or "failed"
+    p : ndarray (n_p,)       the estimate (NaN when failed)
+    objective : float        the fit's objective; for a fit that runs off, the infimum its objective tends to
+                             (NaN when failed)
+    sigma0 : float           the common sigma the fit estimated (sigma unknown), else 1
+    status : str             the solver's status, or the error's
+    error : str              why the start failed ("" otherwise)
+    warnings : tuple of str  the warnings its fit issued (start 1's, when it runs in this process, go to the
+                             caller as in a single fit and are not repeated here)
+    fit_time : float         s
+    record : FitRecord or None
+    """
+
+    index: int
+    outcome: str
+    p: np.ndarray
+    objective: float
+    sigma0: float
+    status: str
+    error: str
+    warnings: tuple
+    fit_time: float
+    record: object = None
+
+
+def _fit_one(problem, p0, index: int, weights, settings, Y0, capture: bool, keep: bool) -> StartFit:
+    """Fit ``problem`` from ``p0`` and record the outcome (an error of the solver is recorded, not raised)."""
+    t0 = time.perf_counter()
+    caught = []
+    nan = np.full(np.size(p0), np.nan)
+    with warnings.catch_warnings(record=True) if capture else contextlib.nullcontext(()) as got:
+        if capture:
+            warnings.simplefilter("always")
+        try:
+            rec = problem.strategy.fit(problem, p0, weights=weights, settings=settings, Y0=Y0)
+        except (RuntimeError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            # IdentificationError, ConvergenceError, StateSolveError (all RuntimeError), CasADi's evaluation
+            # errors; bad input (DataError, TypeError) is not caught: it is the same for every start
+            rec = None
+            err = f"{type(exc).__name__}: {exc}"
+            status = str(getattr(exc, "status", "") or type(exc).__name__)
+        if capture:
+            caught = [f"{w.category.__name__}: {w.message}" for w in got]
+    dt = time.perf_counter() - t0
+    if rec is None:
+        return StartFit(index, FAILED, nan, float("nan"), 1.0, status, err, tuple(caught), dt)
+    outcome = MINIMUM if rec.unbounded is None else NOT_BOUNDED
+    sigma0 = float(rec.sigma[0]) if rec.sigma_estimated and np.size(rec.sigma) else 1.0
+    phi = float(rec.objective if rec.unbounded is None else rec.unbounded.objective_limit)
+    return StartFit(index, outcome, np.array(rec.p, float), phi, sigma0, str(rec.status), "",
+                    tuple(caught), dt, rec if keep else None)
+
+
+@dataclass(frozen=True, eq=False)
+class StartTask(ReplicationTask):
+    """The starts of one multi-start fit (sent once to every worker): chunk [(index, seed)] -> [StartFit]."""
+
+    problem: object
+    starts: np.ndarray
+    weights: object
+    settings: object
+    Y0: object
+    keep_records: bool
+    jit: bool
+
+    def run_chunk(self, chunk: list) -> list:
+        return [_fit_one(self.problem, self.starts[i], i, self.weights, self.settings, self.Y0 if i == 0 else None,
+                         capture=i > 0 or not self.keep_records, keep=self.keep_records) for i, _ in chunk]
+
+
+# ---------------------------------------------------------------------------- the record
+@dataclass(frozen=True, eq=False)
+class LocalMinimum:
+    """One distinct local minimum found by the starts.
+
+    Attributes
+    ----------
+    objective : float        Phi at the minimum (the estimate's objective units)
+    p : ndarray (n_p,)       the parameters there (the best minimum: the estimate's; another: those of its
+                             start of lowest objective)
+    starts : tuple of int    the starts (0-based rows) that reached it
+    """
+
+    objective: float
+    p: np.ndarray
+    starts: tuple
+
+    @property
+    def count(self) -> int:
+        return len(self.starts)
+
+
+@dataclass(frozen=True, eq=False)
+class MultiStartRecord:
+    r"""How the starts of a multi-start fit ended (``est.diagnostics.starts``; see the module docstring).
+
+    Attributes
+    ----------
+    param_names : tuple of str
+    starts : ndarray (N, n_p)     the start values (row 0: p0), parameter units
+    p : ndarray (N, n_p)          each start's estimate (NaN where it failed)
+    objective : ndarray (N,)      each start's Phi in the estimate's objective units: at its minimum, or for a
+                                  fit the data do not bound the infimum its objective tends to; NaN when failed
+    outcome : tuple of str        per start: "minimum", "not bounded" or "failed"
+    status : tuple of str         per start: the solver's status, or the error's
+    errors : tuple of str         per start: why it failed ("" otherwise)
+    warnings : tuple of tuple     per start: the warnings its fit issued (start 1's in this process: issued to
+                                  the caller as in a single fit instead)
+    fit_time : ndarray (N,)       per start, s
+    best : int                    the start whose estimate is returned
+    reached_best : int            starts whose objective is within ``objective_tol`` of the best
+    minima : tuple of LocalMinimum    the distinct minima, best first
+    objective_tol : float         absolute, objective units (OBJECTIVE_RTOL max(1, |best|))
+    parameter_tol_se : float      PARAMETER_TOL_SE
+    rules : tuple of str          how each parameter's starts were drawn
+    seed : int                    the entropy of the seed (``seed=`` draws the same starts)
+    backend : str                 where the starts ran ("serial", "2 local processes", ...)
+    wall_time : float             s, all starts
+    """
+
+    param_names: tuple
+    starts: np.ndarray
+    p: np.ndarray
+    objective: np.ndarray
+    outcome: tuple
+    status: tuple
+    errors: tuple
+    warnings: tuple
+    fit_time: np.ndarray
+    best: int
+    reached_best: int
+    minima: tuple
+    objective_tol: float
+    parameter_tol_se: float
+    rules: tuple
+    seed: int
+    backend: str
+    wall_time: float
+
+    @property
+    def n_starts(self) -> int:
+        return int(self.starts.shape[0])
+
+    @property
+    def failed(self) -> tuple:
+        """The 0-based rows of the starts that failed."""
+        return tuple(i for i, o in enumerate(self.outcome) if o == FAILED)
+
+    def note(self) -> str:
+        """The summary's note: how many starts reached the best minimum, the other minima, the failures."""
+        n, m = self.n_starts, len(self.minima)
+        parts = [f"multi-start: {self.reached_best} of {n} starts reached the best minimum (objective "
+                 f"{self.minima[0].objective:.6g}, within {self.objective_tol:.2g}); {m} distinct local "
+                 f"minim{'um' if m == 1 else 'a'}"]
+        if m > 1:
+            nxt = self.minima[1]
+            same = " (the same objective at other parameters: the minimum is not unique)" \
+                if nxt.objective - self.minima[0].objective <= self.objective_tol else ""
+            parts[0] += (f", the next best at objective {nxt.objective:.6g}{same} ("
+                         + ", ".join(f"{nm} = {v:.4g}" for nm, v in zip(self.param_names, nxt.p))
+                         + f"; {nxt.count} start{'s' if nxt.count > 1 else ''})")
+        if self.best != 0:
+            p0_end = (f"ended at objective {self.objective[0]:.6g}" if self.outcome[0] == MINIMUM
+                      else f"{self.outcome[0]} ({self.status[0]})")
+            parts.append(f"the estimate is that of start {self.best + 1}; p0 (start 1) {p0_end}")
+        bad = self.failed
+        if bad:
+            parts.append(f"{len(bad)} start{'s' if len(bad) > 1 else ''} failed ("
+                         + "; ".join(f"start {i + 1}: {_short(self.errors[i])}" for i in bad[:3])
+                         + ("; ..." if len(bad) > 3 else "") + ")")
+        nb = [i for i, o in enumerate(self.outcome) if o == NOT_BOUNDED]
+        if nb:
+            limit = float(np.min(self.objective[nb]))
+            below = (": below the best minimum, which is then only local; the lowest objective is approached at "
+                     "infinity, where the data do not bound the parameters"
+                     if limit < self.minima[0].objective - self.objective_tol else "")
+            parts.append(f"{len(nb)} start{'s' if len(nb) > 1 else ''} ended on a fit the data do not bound "
+                         f"(start{'s' if len(nb) > 1 else ''} {', '.join(str(i + 1) for i in nb[:5])}; the "
+                         f"objective tends to {limit:.6g} as the parameters run off{below})")
+        parts.append(f"starts: p0 and {n - 1} Latin-hypercube points ({'; '.join(self.rules)}; seed {self.seed}), "
+                     f"{self.backend}; the tables: est.diagnostics.starts.to_frame() and .minima_frame()")
+        return "; ".join(parts)
+
+    def minima_frame(self):
+        """The distinct local minima, best first (``minimum`` 1, 2, ...): objective, how many starts reached each,
+        which (numbered from 1) and the parameters there."""
+        import pandas as pd
+        cols = {"objective": [m.objective for m in self.minima], "starts": [m.count for m in self.minima],
+                "reached from": [", ".join(str(i + 1) for i in m.starts) for m in self.minima]}
+        cols.update({nm: [m.p[i] for m in self.minima] for i, nm in enumerate(self.param_names)})
+        return pd.DataFrame(cols, index=pd.Index(np.arange(1, len(self.minima) + 1), name="minimum"))
+
+    def to_frame(self):
+        """One row per start (1-based ``start``): its values, outcome, status, objective, estimate, the minimum it
+        reached (1 = best, 0 = none) and the error."""
+        import pandas as pd
+        rank = np.zeros(self.n_starts, int)
+        for k, mnm in enumerate(self.minima, 1):
+            rank[list(mnm.starts)] = k
+        cols = {"outcome": list(self.outcome), "status": list(self.status), "objective": self.objective,
+                "minimum": rank}
+        cols.update({f"start {nm}": self.starts[:, i] for i, nm in enumerate(self.param_names)})
+        cols.update({nm: self.p[:, i] for i, nm in enumerate(self.param_names)})
+        cols["error"] = list(self.errors)
+        return pd.DataFrame(cols, index=pd.Index(np.arange(1, self.n_starts + 1), name="start"))
+
+
+# ---------------------------------------------------------------------------- the driver
+def _minima(fits, objective, tol, se, chosen: int) -> tuple:
+    """The distinct minima among the starts that reached one: the minimum of the ``chosen`` start first (its
+    objective and parameters), then the others by objective (each with its lowest start's values)."""
+    order = [chosen] + sorted((f.index for f in fits if f.outcome == MINIMUM and f.index != chosen),
+                              key=lambda i: (objective[i], i))
+    groups = []
+    for i in order:
+        p = fits[i].p
+        for g in groups:
+            if abs(objective[i] - g[0]) <= tol and np.all(np.abs(p - g[1]) <= PARAMETER_TOL_SE * se):
+                g[2].append(i)
+                break
+        else:
+            groups.append((objective[i], p, [i]))
+    groups = groups[:1] + sorted(groups[1:], key=lambda g: g[0])
+    return tuple(LocalMinimum(float(o), np.array(p), tuple(sorted(s))) for o, p, s in groups)
+
+
+def _short(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else text[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def _failure(fits, n: int, X: np.ndarray) -> MultiStartError:
+    lines = "; ".join(f"start {f.index + 1}{' (p0)' if f.index == 0 else ''}: {_short(f.error, 300)}"
+                      for f in fits[:3])
+    more = f"; and {n - 3} more" if n > 3 else ""
+    return MultiStartError(f"all {n} starts failed: {lines}{more}; try other start values, bounds on the "
+                           "parameters or more starts", X, tuple(f.error for f in fits))
+
+
+def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None, seed=0, workers: int | None = 1,
+               scheduler=None) -> FitRecord:
+    """min over the local minima p_s of Phi (paper eq. 3, objective units) reached from p0 and ``starts - 1`` drawn
+    starts (see the module docstring): the record of the best with ``extra["starts"]`` a
+    :class:`MultiStartRecord` and its note.
+
+    Parameters
+    ----------
+    problem : identification.fit.problem.Problem
+    p0 : array_like (n_p,)          start 1 (inside the bounds), parameter units
+    starts : int >= 1               the number of starts, p0 included
+    weights, settings, Y0           as for :meth:`Problem.fit` (``Y0`` for start 1 only)
+    seed : int >= 0, SeedSequence or None   draws starts 2..N (:func:`draw_starts`)
+    workers : int or None           local processes (1: serially here; None: every core)
+    scheduler : Dask address or distributed.Client, optional
+
+    Raises
+    ------
+    ValueError
+        ``starts``, ``seed`` or ``workers`` malformed (the message names it).
+    MultiStartError
+        Every start failed (the message names each error).
+    """
+    n = check_starts(starts)
+    if workers is not None and (isinstance(workers, (bool, np.bool_)) or not isinstance(workers, (int, np.integer))
+                                or workers < 1):
+        raise ValueError(f"workers: must be an integer >= 1 or None (all cores), got {workers!r}")
+    scheduler = cluster.check_scheduler(scheduler)
+    model = problem.model
+    X, rules, entropy = draw_starts(model, p0, n, seed)
+    t0 = time.perf_counter()
+    keep = scheduler is None and workers == 1
+    task = StartTask(problem, X, weights, settings, Y0, keep, jit_enabled())
+    reps = replicate(task, n, functools.partial(cluster.seed_chunks, n, 0, chunk_size=1), workers=workers,
+                     scheduler=scheduler)
+    fits = list(reps.records)
+    ok = [f for f in fits if f.outcome == MINIMUM]
+    if not ok:
+        unb = [f for f in fits if f.outcome == NOT_BOUNDED]
+        if not unb:
+            raise _failure(fits, n, X)
+        chosen = unb[0].index       # no finite minimum: the first fit that runs off, as one start would give
+        objective = np.array([f.objective if f.outcome == NOT_BOUNDED else np.nan for f in fits])
+        tol, minima, reached = float("nan"), (), 0
+        rec = _record(problem, fits[chosen], X, weights, settings, Y0)
+    else:
+        raw = np.array([f.objective * f.sigma0 ** 2 for f in fits])
+        low = min(ok, key=lambda f: (raw[f.index], f.index))
+        objective = np.where([f.outcome != FAILED for f in fits], raw / low.sigma0 ** 2, np.nan)
+        tol = OBJECTIVE_RTOL * max(1.0, abs(objective[low.index]))
+        near = [f.index for f in ok if objective[f.index] - objective[low.index] <= tol]
+        chosen, reached = near[0], len(near)
+        rec = _record(problem, fits[chosen], X, weights, settings, Y0)
+        se = np.where(np.isfinite(rec.stderr) & (rec.stderr > 0), rec.stderr, param_scale(model, X[0]))
+        minima = _minima(fits, objective, tol, se, chosen)
+    ms = MultiStartRecord(param_names=tuple(par.name for par in model.params), starts=X,
+                          p=np.array([f.p for f in fits]), objective=objective,
+                          outcome=tuple(f.outcome for f in fits), status=tuple(f.status for f in fits),
+                          errors=tuple(f.error for f in fits), warnings=tuple(f.warnings for f in fits),
+                          fit_time=np.array([f.fit_time for f in fits]), best=chosen, reached_best=reached,
+                          minima=minima, objective_tol=tol, parameter_tol_se=PARAMETER_TOL_SE, rules=rules,
+                          seed=entropy, backend=str(reps.backend), wall_time=time.perf_counter() - t0)
+    note = ms.note() if minima else (f"multi-start: none of the {n} starts reached a finite minimum; the estimate is "
+                                     f"that of start {chosen + 1}, whose fit the data do not bound")
+    return _with_starts(rec, ms, note)
+
+
+def _record(problem, fit: StartFit, X: np.ndarray, weights, settings, Y0) -> FitRecord:
+    """The full record of the start ``fit``: its own, or (when it ran in another process) its fit again here."""
+    if fit.record is not None:
+        return fit.record
+    i = fit.index
+    again = _fit_one(problem, X[i], i, weights, settings, Y0 if i == 0 else None, capture=i > 0, keep=True)
+    if again.record is None:
+        raise IdentificationError(f"multi-start: the fit of start {i + 1} succeeded on a worker but failed "
+                                  f"again in this process: {again.error}", status=again.status)
+    return again.record
+
+
+def _with_starts(rec: FitRecord, ms: MultiStartRecord, note: str) -> FitRecord:
+    return dataclasses.replace(rec, notes=tuple(rec.notes) + (note,), extra={**rec.extra, "starts": ms})
