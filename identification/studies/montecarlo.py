@@ -436,13 +436,13 @@ class MonteCarloResult(ResultProtocol):
         """Fraction of the campaigns failing the normality gate (its correction over the gated sensors;
         :func:`identification.studies.normality_gate.gate_fails`, as :func:`identification.studies.detect.normality_check`)."""
         fail = gate_fails(self.shapiro, self.normality_level, self.normality_correction, self.gated or None)
-        return clopper_pearson(int(np.sum(fail)), int(fail.size), self.ci_level)
+        return clopper_pearson(int(np.sum(fail)), int(fail.size), alpha=1.0 - self.ci_level)
 
     def rejection_rate(self, model=None, statistic: str = DEFAULT_STATISTIC) -> Rate:
         """Family-wise rejection rate over the decided replications, with Clopper-Pearson CI."""
         d = self.decisions(model, statistic)
         ok = np.isfinite(d)
-        return clopper_pearson(int(np.sum(d[ok])), int(ok.sum()), self.ci_level)
+        return clopper_pearson(int(np.sum(d[ok])), int(ok.sum()), alpha=1.0 - self.ci_level)
 
     def n_undecided(self, model=None, statistic: str = DEFAULT_STATISTIC) -> int:
         return int(np.sum(~np.isfinite(self.decisions(model, statistic))))
@@ -459,7 +459,7 @@ class MonteCarloResult(ResultProtocol):
         a = self._alpha(statistic)[:, self._im(model), split]
         lev = self.tol / len(self.splits) if level is None else level
         ok = np.isfinite(a)
-        return clopper_pearson(int(np.sum(a[ok] < lev)), int(ok.sum()), self.ci_level)
+        return clopper_pearson(int(np.sum(a[ok] < lev)), int(ok.sum()), alpha=1.0 - self.ci_level)
 
     def coverage(self, model=None, split: int | None = None, which: str = "both") -> Rate:
         """Fraction of fits whose (1 - coverage_alpha) ellipsoid contains p* (size studies only).
@@ -478,7 +478,7 @@ class MonteCarloResult(ResultProtocol):
         elif which != "both":
             raise ValueError(f"which: expected 'cal', 'val' or 'both', got {which!r}")
         c = c[np.isfinite(c)]
-        return clopper_pearson(int(c.sum()), int(c.size), self.ci_level)
+        return clopper_pearson(int(c.sum()), int(c.size), alpha=1.0 - self.ci_level)
 
     def summary(self) -> str:
         """Markdown table of rejection rates (all three statistics) and, for size studies, coverage."""

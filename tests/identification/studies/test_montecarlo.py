@@ -42,6 +42,9 @@ def test_clopper_pearson_matches_scipy():
     assert clopper_pearson(0, 10).hi == pytest.approx(1 - 0.025 ** 0.1)
     with pytest.raises(ValueError, match="k, n"):
         clopper_pearson(5, 3)
+    with pytest.warns(DeprecationWarning, match="level= is deprecated, use alpha="):
+        old = clopper_pearson(3, 10, level=0.9)           # the old keyword: a confidence level
+    assert (old.lo, old.hi, old.level) == (clopper_pearson(3, 10, alpha=0.1).lo, clopper_pearson(3, 10, alpha=0.1).hi, 0.9)
 
 
 def test_linearized_size_is_exact_for_equal_information(model):
@@ -114,6 +117,9 @@ def test_power_against_a_wrong_model_and_errors(model):
     res = run_monte_carlo(model, gen, PAPER_SPLITS[2:3], [0.5, 1.5], kind="power",
                           settings=MonteCarloSettings(n_rep=20, seed=3, workers=1, progress=False))
     assert res.rejection_rate().rate >= 0.9
+    r = res.rejection_rate()                      # the intervals of a study are 95 % ones (ci_level)
+    ci = stats.binomtest(r.k, r.n).proportion_ci(0.95, method="exact")
+    assert r.level == 0.95 and r.lo == pytest.approx(ci.low, abs=1e-12) and r.hi == pytest.approx(ci.high, abs=1e-12)
     with pytest.raises(ValueError, match="n_rep"):
         MonteCarloSettings(n_rep=0)
     with pytest.raises(TypeError, match="generator"):
