@@ -641,8 +641,8 @@ def early_late_paths(x, path=()) -> set:
     ("early (t < 1.2) vs late"), or a key naming it; a leaf under one of them, a leaf whose key names the
     split, or a string leaf naming it is an early/late leaf."""
     out = set()
-    if isinstance(x, dict):
-        if any(_mentions_early(v) for v in x.values()):
+    if isinstance(x, dict):                 # a name or label (one short line), not a text that lists every split
+        if any(_mentions_early(v) and "\n" not in v and len(v) < 100 for v in x.values()):
             out.add(path)
         for k, v in x.items():
             out |= early_late_paths(v, path + (str(k),))
