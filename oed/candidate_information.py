@@ -28,7 +28,7 @@ import numpy as np
 
 from identification import information_contributions
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
-from identification.fit.problem import Problem, strategy_for
+from identification.fit.problem import strategy_for
 from models.collocation import collocate, pair_name
 from models.trajectory import mapped_outputs
 from models.contract import ModelError
@@ -284,10 +284,11 @@ def _times(model, p, times, inputs, sigma, sensors, n_series, axis) -> Candidate
 def _sensors(model, p, data, inputs, times, sigma, n_series, states) -> CandidateInformation:
     r"""Axis ``sensors``: a static model's F_k, S_k (:func:`identification.information_contributions`); a dynamic
     model's per instrument l, :math:`F_l = \sum_t F_{(l, t)}` (and S) over its (sensor, time) readings."""
-    problem = Problem(model, data)
-    F, S = problem.information(p, states, inputs=inputs, sigma=sigma, n_series=n_series, times=times)
-    return CandidateInformation("sensors", tuple(model.sensors), problem.strategy.per_instrument(problem, F, times),
-                                problem.strategy.per_instrument(problem, S, times))
+    F, S = information_contributions(model, data, p, states, inputs=inputs, sigma=sigma, n_series=n_series,
+                                     times=times)
+    strategy = strategy_for(model)
+    return CandidateInformation("sensors", tuple(model.sensors), strategy.per_instrument(model, F, data, times),
+                                strategy.per_instrument(model, S, data, times))
 
 
 def information(model, p, *, axis: str = "sensors", data=None, inputs=None, candidates=None, times=None, sigma=None,

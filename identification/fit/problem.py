@@ -91,7 +91,7 @@ class ProblemStrategy:
         if not isinstance(data, self.data_type):
             raise error(f"{argument}: {need or self.data_need}, got {type(data).__name__}")
 
-    def per_instrument(self, problem: "Problem", M: np.ndarray, times=None) -> np.ndarray:
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
         """M_l = sum over the outputs k of instrument l of M_k: the matrices per output of :meth:`information`
         (n_outputs, ...), e.g. F_k (1 / (unit of p)^2), summed per instrument (n_S, ...).  A static model's
         outputs are its instruments; a dynamic model's are its (sensor, time) readings."""
@@ -128,7 +128,7 @@ class StaticStrategy(ProblemStrategy):
         if problem.discretisation is not None:
             raise TypeError("discretisation: only for a dynamic model")
 
-    def per_instrument(self, problem: "Problem", M: np.ndarray, times=None) -> np.ndarray:
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
         return M
 
     def static(self, problem: "Problem", p=None) -> tuple:
@@ -164,12 +164,11 @@ class CollocatedStrategy(ProblemStrategy):
         if problem.data is not None:
             self.check_data(problem.data)
 
-    def per_instrument(self, problem: "Problem", M: np.ndarray, times=None) -> np.ndarray:
-        """Sum over the readings (sensor, time): ``problem.data.pairs``, or every instrument at each of the
-        planned ``times`` (time-major, as :meth:`information` returns them without data)."""
-        model = problem.model
-        readings = problem.data.pairs if problem.data is not None else [
-            (s, v) for v in np.asarray(times, float).ravel() for s in model.sensors]
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
+        """Sum over the readings (sensor, time): ``data.pairs``, or without data every instrument at each of
+        the planned ``times`` (time-major, as :meth:`information` returns them)."""
+        readings = data.pairs if data is not None else [(s, v) for v in np.asarray(times, float).ravel()
+                                                         for s in model.sensors]
         acc = np.zeros((model.n_S,) + M.shape[1:])
         np.add.at(acc, np.array([model.sensors.index(s) for s, _ in readings]), M)
         return acc

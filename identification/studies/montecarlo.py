@@ -51,7 +51,7 @@ from identification.replicate import ReplicationTask, replicate
 from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field
 from identification.errors import DataError, IdentificationError
 from identification.fit.measurements import Measurements
-from identification.fit.problem import strategy_for
+from identification.fit.problem import COLLOCATED, strategy_for
 from identification.inference.identify import identify
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
@@ -820,8 +820,8 @@ def flat_size_study(model, data, splits, p0=None, *, p_true=None, weights=None, 
     -------
     FlatSizeStudy
     """
-    strategy_for(model).check_data(data, need="validate on a dynamic model needs the campaign as identification."
-                                   "DynamicMeasurements (inputs, sampling times, sigma)", error=DataError)
+    COLLOCATED.check_data(data, need="validate on a dynamic model needs the campaign as identification."
+                          "DynamicMeasurements (inputs, sampling times, sigma)", error=DataError)
     if data.sigma is None:
         raise DataError("data.sigma: a size study simulates noise of known sigma; give sigma with the data")
     start = p0 if p0 is not None else p_true

@@ -89,10 +89,10 @@ def test_per_instrument_sums_the_readings_of_each_instrument():
     campaign = simulate_campaign(build(), P_TRUE, Q, TIMES, SIGMA, seed=1)
     problem = Problem(build(), campaign)
     F, _ = problem.information(P_TRUE)
-    by_instrument = problem.strategy.per_instrument(problem, F)
+    by_instrument = problem.strategy.per_instrument(problem.model, F, campaign)
     for k, s in enumerate(build().sensors):
         assert np.array_equal(by_instrument[k], sum(F[i] for i, (name, _) in enumerate(campaign.pairs) if name == s))
     model, data = static_case()
     static = Problem(model, data)
     F, _ = static.information([2.0, 0.5])
-    assert static.strategy.per_instrument(static, F) is F
+    assert static.strategy.per_instrument(model, F, data) is F
