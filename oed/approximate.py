@@ -43,6 +43,7 @@ from .prior import Prior, make_prior, readonly
 from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
+from identification.fit.problem import strategy_for
 from identification.results_protocol import ResultProtocol
 
 __all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
@@ -474,8 +475,9 @@ def _information_source(model, sigma, inputs, sensors, n_series, axis):
 
 
 def _axis(model) -> str:
-    """The axis of an approximate design: a static model's input rows, a dynamic model's sampling times."""
-    return "times" if getattr(model, "is_dynamic", False) else "inputs"
+    """The axis of an approximate design: a static model's input rows, a dynamic model's sampling times (the
+    model's strategy answers, :attr:`identification.fit.problem.ProblemStrategy.design_axis`)."""
+    return strategy_for(model).design_axis
 
 
 def _check_box(model, bounds, dynamic):

@@ -28,6 +28,7 @@ import numpy as np
 
 from identification import information_contributions
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
+from identification.fit.problem import strategy_for
 from models.collocation import collocate, pair_name
 from models.trajectory import mapped_outputs
 from models.contract import ModelError
@@ -210,7 +211,7 @@ def input_problem(model, p, candidates, sigma, sensors=None, *, times=None,
     """The :class:`InputProblem` of candidate rows: a static model as it is (``times`` and ``discretisation``
     must be None); a dynamic model sampled at ``times`` (one ``sigma`` per instrument, ``sensors`` instrument
     names) collocated on a mesh controlled at p over every candidate row."""
-    if not getattr(model, "is_dynamic", False):
+    if strategy_for(model).design_axis == "inputs":
         if times is not None or discretisation is not None:
             raise ValueError("times/discretisation: only for a dynamic model (models.Model.ode)")
         return InputProblem(model=model, sigma=sigma, sensors=sensors, source=model)
@@ -268,7 +269,7 @@ def _instrument_names(model, sensors) -> list:
 def _times(model, p, times, inputs, sigma, sensors, n_series, axis) -> CandidateInformation:
     """Axis ``times`` (every chosen instrument at each time) or ``pairs`` ((time, sensor), time-major), summed
     over the experiments ``inputs``."""
-    if not getattr(model, "is_dynamic", False):
+    if strategy_for(model).design_axis != "times":
         raise TypeError(f"model: expected a dynamic model (models.Model.ode), got {type(model).__name__}")
     names = _instrument_names(model, sensors)
     t = np.asarray(times, float).ravel()
@@ -285,17 +286,9 @@ def _sensors(model, p, data, inputs, times, sigma, n_series, states) -> Candidat
     model's per instrument l, :math:`F_l = \sum_t F_{(l, t)}` (and S) over its (sensor, time) readings."""
     F, S = information_contributions(model, data, p, states, inputs=inputs, sigma=sigma, n_series=n_series,
                                      times=times)
-    if not getattr(model, "is_dynamic", False):
-        return CandidateInformation("sensors", tuple(model.sensors), F, S)
-    readings = data.pairs if data is not None else [(s, v) for v in np.asarray(times, float).ravel()
-                                                    for s in model.sensors]
-    idx = np.array([model.sensors.index(s) for s, _ in readings])
-    out = []
-    for M in (F, S):
-        acc = np.zeros((model.n_S,) + M.shape[1:])
-        np.add.at(acc, idx, M)
-        out.append(acc)
-    return CandidateInformation("sensors", tuple(model.sensors), out[0], out[1])
+    strategy = strategy_for(model)
+    return CandidateInformation("sensors", tuple(model.sensors), strategy.per_instrument(model, F, data, times),
+                                strategy.per_instrument(model, S, data, times))
 
 
 def information(model, p, *, axis: str = "sensors", data=None, inputs=None, candidates=None, times=None, sigma=None,

@@ -37,6 +37,7 @@ import numpy as np
 from identification.errors import IdentificationError, StateSolveError
 from identification.fit.dynamic_fit import DiscretisationSettings
 from identification.fit.ipopt_solver import IpoptSettings, solve_nlp
+from identification.fit.problem import strategy_for
 from identification.results_protocol import ResultProtocol, jsonable, notes_lines
 from .approximate import ApproximateSettings, approximate_design, check_approximate_route
 from .criteria import DEFAULT_CRITERION, Criterion, Kind
@@ -373,7 +374,7 @@ def _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, 
     """The ``approximate=True`` route of :func:`select_inputs` (arguments checked, then
     :func:`oed.approximate.approximate_design` on the input range)."""
     check_approximate_route(approximate, exact_args)
-    if getattr(model, "is_dynamic", False):
+    if strategy_for(model).design_axis != "inputs":
         raise ValueError("approximate: for a dynamic model the approximate design is over sampling times "
                          "(oed.select_times(..., approximate=True)); approximate input profiles are not implemented")
     if isinstance(sensors, str) and sensors == "joint":

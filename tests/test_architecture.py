@@ -1,8 +1,10 @@
 """The shape of the code (issue 21): no import circle, no file over 1,000 lines (issue 28: modules cut by concept, not to a cap), no function over 80 lines of
-code in the packages.  The layer contracts themselves are checked by ``lint-imports`` (``make test``)."""
+code in the packages, at most 4 static/dynamic switches (issue 28).  The layer contracts themselves are checked by
+``lint-imports`` (``make test``)."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import grimp
@@ -12,11 +14,23 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("models", "identification", "oed", "reports", "mudoe")
 MAX_FILE_LINES = 1000
 MAX_FUNCTION_CODE_LINES = 80
+#: a static/dynamic switch: what ``grep -rn "is_dynamic\|isinstance(.*Dynamic" models identification oed reports mudoe
+#: --include=*.py`` finds
+SWITCH = re.compile(r"is_dynamic|isinstance\(.*Dynamic")
+#: issue 28's target: the kind of a model is asked by its fit strategy (identification.fit.problem.strategy_for), the rest
+#: read what differs from the strategy
+MAX_SWITCHES = 4
 
 
-def _sources():
+def _sources(root: Path = ROOT):
     for pkg in PACKAGES:
-        yield from sorted((ROOT / pkg).rglob("*.py"))
+        yield from sorted((root / pkg).rglob("*.py"))
+
+
+def static_dynamic_switches(root: Path = ROOT) -> list:
+    """Every line of the packages under ``root`` that asks whether a model or its data are dynamic, as "path:line: text"."""
+    return [f"{p.relative_to(root)}:{k}: {line.strip()}" for p in _sources(root)
+            for k, line in enumerate(p.read_text().splitlines(), 1) if SWITCH.search(line)]
 
 
 def _code_lines(lines: list, node) -> int:
@@ -109,6 +123,21 @@ def test_the_size_rules_see_a_long_function():
     lines = ["def f():", '    """doc', '    string"""'] + ["    x = 1", "    # a comment", ""] * 81 + ["    return x"]
     node = ast.parse("\n".join(lines)).body[0]
     assert _code_lines(lines, node) == 83            # def, 81 assignments, return
+
+
+def test_at_most_four_static_dynamic_switches():
+    """Issue 28: the static/dynamic question is asked once (identification.fit.problem.strategy_for); the studies, the
+    designs and mudoe read what differs from the strategy."""
+    found = static_dynamic_switches()
+    assert len(found) <= MAX_SWITCHES, f"{len(found)} static/dynamic switches (at most {MAX_SWITCHES}):\n" + "\n".join(found)
+
+
+def test_the_switch_count_sees_a_switch(tmp_path):
+    (tmp_path / "oed").mkdir()
+    (tmp_path / "oed" / "a.py").write_text('x = 1\nif getattr(model, "is_dynamic", False):\n    pass\n'
+                                           "ok = isinstance(data, DynamicMeasurements)\n")
+    assert static_dynamic_switches(tmp_path) == ['oed/a.py:2: if getattr(model, "is_dynamic", False):',
+                                                 "oed/a.py:4: ok = isinstance(data, DynamicMeasurements)"]
 
 
 @pytest.mark.parametrize("name", ["identification.fit", "identification.inference", "identification.studies"])

@@ -135,10 +135,9 @@ class DiscretisationRecord:
 
 
 def _dynamic_data(model: DynamicModel, data) -> DynamicMeasurements:
-    """The data checked against the model (sensor names set to the model's when left at the default)."""
-    if not isinstance(data, DynamicMeasurements):
-        raise TypeError(f"data: a dynamic model needs identification.DynamicMeasurements (values over sampling "
-                        f"times), got {type(data).__name__}")
+    """The data checked against the model (sensor names set to the model's when left at the default); their
+    type is the collocated strategy's (:meth:`identification.fit.problem.CollocatedStrategy.check`, run by
+    every :class:`identification.fit.problem.Problem` of a dynamic model)."""
     if data.inputs.shape[1] != model.n_q_dim:
         raise DataError(f"data.inputs: has {data.inputs.shape[1]} columns but model {model.name!r} takes "
                         f"{model.n_q_dim} ({', '.join(model.inputs)}: the constants, then every control's values "

@@ -21,9 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from models.contract import Model
+from models.dynamic import DynamicModel
+from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.dynamic_fit import (DiscretisationSettings, collocated_problem, dynamic_information,
                                             identify_dynamic)
 from identification.fit.estimator import IdentifySettings, fit_static, static_information
+from identification.fit.measurements import Measurements
 from identification.fit.multistart import check_starts, fit_starts
 from identification.fit.record import FitRecord
 
@@ -35,18 +39,63 @@ class ProblemStrategy:
     """How a kind of model becomes the static problem E(y, p, q) = 0, z = h(y, p, q) + eps at p.
 
     A strategy is stateless; :class:`Problem` passes itself to every method.  Subclasses
-    implement :meth:`static`, :meth:`fit` and :meth:`information`, and :meth:`check` for the
-    arguments only their kind takes.
+    implement :meth:`static`, :meth:`fit` and :meth:`information`, :meth:`check` for the
+    arguments only their kind takes, and :meth:`per_instrument`.  The layers above (the studies,
+    the designs, mudoe's study kind) ask :func:`strategy_for` and read these attributes instead of
+    asking whether a model is dynamic: what differs between the kinds is answered here.
 
     Attributes
     ----------
-    kind : str      "static" or "collocated" (printed, never compared by the verbs)
+    kind : str
+        "static" or "collocated" (printed, never compared by the verbs).
+    model_type : type
+        The type of the kind's models (:class:`models.Model`, :class:`models.dynamic.DynamicModel`).
+    data_type : type
+        The type of the kind's data (:class:`identification.Measurements`,
+        :class:`identification.DynamicMeasurements`); :meth:`check_data` checks it.
+    data_need : str
+        What :meth:`check_data` says the data must be.
+    takes_time_series : bool
+        The data are time series: a campaign's splits select experiments and time windows and every fit
+        takes a discretisation (:func:`identification.studies.detect.detect`, ``validate``), rather than
+        input rows.
+    design_axis : str
+        The candidate axis of an approximate design (:mod:`oed.approximate`): "inputs" (input rows, a
+        static model) or "times" (sampling times, a dynamic model); the information axes "times" and
+        "pairs" (:func:`oed.information`) exist only where it is "times".
+    quantifies_model_error : bool
+        Whether :func:`identification.studies.model_error.model_error` covers the kind.
     """
 
     kind = ""
+    model_type: type = object
+    data_type: type = object
+    data_need = ""
+    takes_time_series = False
+    design_axis = ""
+    quantifies_model_error = False
 
     def check(self, problem: "Problem") -> None:
         """Raise TypeError for an argument this kind does not take (e.g. a discretisation of a static model)."""
+
+    def check_data(self, data, argument: str = "data", *, need: str | None = None,
+                   error: type[Exception] = TypeError) -> None:
+        """Check that ``data`` is a :attr:`data_type` (the kind's measurements z_ijk).
+
+        Raises
+        ------
+        TypeError (or ``error``)
+            "<argument>: <need>, got <type of data>", ``need`` defaulting to :attr:`data_need` (which names
+            the expected type).
+        """
+        if not isinstance(data, self.data_type):
+            raise error(f"{argument}: {need or self.data_need}, got {type(data).__name__}")
+
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
+        """M_l = sum over the outputs k of instrument l of M_k: the matrices per output of :meth:`information`
+        (n_outputs, ...), e.g. F_k (1 / (unit of p)^2), summed per instrument (n_S, ...).  A static model's
+        outputs are its instruments; a dynamic model's are its (sensor, time) readings."""
+        raise NotImplementedError
 
     def static(self, problem: "Problem", p=None) -> tuple:
         """(static model, static data) of the problem, on a discretisation controlled at p when p is given."""
@@ -69,10 +118,18 @@ class StaticStrategy(ProblemStrategy):
     :func:`identification.fit.estimator.static_information`."""
 
     kind = "static"
+    model_type = Model
+    data_type = Measurements
+    data_need = "expected an identification.Measurements"
+    design_axis = "inputs"
+    quantifies_model_error = True
 
     def check(self, problem: "Problem") -> None:
         if problem.discretisation is not None:
             raise TypeError("discretisation: only for a dynamic model")
+
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
+        return M
 
     def static(self, problem: "Problem", p=None) -> tuple:
         return problem.model, problem.data
@@ -97,6 +154,24 @@ class CollocatedStrategy(ProblemStrategy):
     collocated model on a mesh controlled at p, per (sensor, time) pair."""
 
     kind = "collocated"
+    model_type = DynamicModel
+    data_type = DynamicMeasurements
+    data_need = "a dynamic model needs identification.DynamicMeasurements (values over sampling times)"
+    takes_time_series = True
+    design_axis = "times"
+
+    def check(self, problem: "Problem") -> None:
+        if problem.data is not None:
+            self.check_data(problem.data)
+
+    def per_instrument(self, model, M: np.ndarray, data=None, times=None) -> np.ndarray:
+        """Sum over the readings (sensor, time): ``data.pairs``, or without data every instrument at each of
+        the planned ``times`` (time-major, as :meth:`information` returns them)."""
+        readings = data.pairs if data is not None else [(s, v) for v in np.asarray(times, float).ravel()
+                                                         for s in model.sensors]
+        acc = np.zeros((model.n_S,) + M.shape[1:])
+        np.add.at(acc, np.array([model.sensors.index(s) for s, _ in readings]), M)
+        return acc
 
     def static(self, problem: "Problem", p=None) -> tuple:
         ds = problem.discretisation or DiscretisationSettings()
@@ -125,7 +200,7 @@ STATIC, COLLOCATED = StaticStrategy(), CollocatedStrategy()
 def strategy_for(model) -> ProblemStrategy:
     """The strategy of a model: :class:`CollocatedStrategy` for a dynamic model (an ODE/DAE,
     :class:`models.dynamic.DynamicModel`), else :class:`StaticStrategy`.  The one place where the
-    kind of a model is asked."""
+    kind of a model is asked: the layers above read what differs from the strategy (its attributes)."""
     return COLLOCATED if getattr(model, "is_dynamic", False) else STATIC
 
 
@@ -159,7 +234,7 @@ class Problem:
     Raises
     ------
     TypeError
-        A discretisation for a static model.
+        A discretisation for a static model; data of a dynamic model that are not DynamicMeasurements.
 
     Examples
     --------

@@ -80,8 +80,8 @@ from models.labels import LabelledModel
 from models.state import solve_states
 from identification.errors import DataError, IdentificationError
 from identification.vocabulary import renamed_arguments
-from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
+from identification.fit.problem import strategy_for
 from identification.inference.identify import identify
 from identification.progress import Progress
 from identification.studies.decisions import ModelDecision, decide, model_decisions
@@ -375,9 +375,7 @@ class _TimeSeries:
 
     def model_tests(self, run: _Run, name: str, m, data, p0) -> _ModelTests:
         """Lines 02-08 for the dynamic model ``m`` (named ``name``) on its time series ``data`` from ``p0``."""
-        if not isinstance(data, DynamicMeasurements):
-            raise TypeError(f"measurements[{name!r}]: a dynamic model needs identification.DynamicMeasurements, "
-                            f"got {type(data).__name__}")
+        strategy_for(m).check_data(data, f"measurements[{name!r}]")
         w = _instrument_weights(m, run.design)
         design = (name, tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0),
                   run.design_how or ("instruments given" if run.design is not None else "all instruments"))
@@ -464,14 +462,15 @@ _ROWS, _TIME_SERIES = _Rows(), _TimeSeries()
 
 def takes_time_series(model) -> bool:
     """Whether ``model`` is tested on a campaign of time series (a dynamic model: its splits select
-    experiments and time windows, its fits take a discretisation) rather than on input rows: the one
-    static / dynamic switch of the studies (:func:`detect`, :func:`identification.studies.montecarlo.validate`)."""
-    return bool(getattr(model, "is_dynamic", False))
+    experiments and time windows, its fits take a discretisation) rather than on input rows: the model's
+    strategy answers (:attr:`identification.fit.problem.ProblemStrategy.takes_time_series`), for
+    :func:`detect` and :func:`identification.studies.montecarlo.validate`."""
+    return strategy_for(model).takes_time_series
 
 
 def _kind(model):
     """The kind of campaign a model is tested on: time series for a dynamic model, else input rows."""
-    return _TIME_SERIES if takes_time_series(model) else _ROWS
+    return _TIME_SERIES if strategy_for(model).takes_time_series else _ROWS
 
 
 # ---------------------------------------------------------------------------- main entry

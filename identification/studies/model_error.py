@@ -47,6 +47,7 @@ from scipy import stats
 
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
+from identification.fit.problem import strategy_for
 from identification.inference.intervals import validate_alpha
 from identification.studies.discrepancy_gp import InputScaling
 from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
@@ -64,11 +65,10 @@ _ERROR_KINDS = ("none", "discrepancy", "embedded")
 
 # ---------------------------------------------------------------------------- validation
 def _checked_model_data(model, data) -> None:
-    if not isinstance(model, Model) or getattr(model, "is_dynamic", False):
+    if not isinstance(model, Model) or not strategy_for(model).quantifies_model_error:
         raise TypeError(f"model: expected a static models.Model, got {type(model).__name__} (model_error covers "
                         "static models only)")
-    if not isinstance(data, Measurements):
-        raise TypeError(f"data: expected an identification.Measurements, got {type(data).__name__}")
+    strategy_for(model).check_data(data)
     if data.d_q != model.n_q_dim:
         raise DataError(f"data: the inputs have {data.d_q} columns but the model has {model.n_q_dim} "
                         f"({', '.join(model.inputs)})")

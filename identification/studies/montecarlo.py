@@ -48,10 +48,10 @@ from scipy import stats
 from models.contract import Model
 from identification import cluster
 from identification.replicate import ReplicationTask, replicate
-from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field, takes_time_series
+from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alpha_field
 from identification.errors import DataError, IdentificationError
-from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.measurements import Measurements
+from identification.fit.problem import COLLOCATED, strategy_for
 from identification.inference.identify import identify
 from identification.studies.normality_gate import correction_text, gate_fails
 from identification.progress import Progress
@@ -820,9 +820,8 @@ def flat_size_study(model, data, splits, p0=None, *, p_true=None, weights=None, 
     -------
     FlatSizeStudy
     """
-    if not isinstance(data, DynamicMeasurements):
-        raise DataError(f"data: validate on a dynamic model needs the campaign as identification."
-                        f"DynamicMeasurements (inputs, sampling times, sigma), got {type(data).__name__}")
+    COLLOCATED.check_data(data, need="validate on a dynamic model needs the campaign as identification."
+                          "DynamicMeasurements (inputs, sampling times, sigma)", error=DataError)
     if data.sigma is None:
         raise DataError("data.sigma: a size study simulates noise of known sigma; give sigma with the data")
     start = p0 if p0 is not None else p_true
@@ -887,7 +886,7 @@ def validate(model, splits: Sequence[Split], p0=None, *, p=None, inputs=None, si
     """
     settings = _validate_settings(settings, alpha, n_rep=n_rep, seed=seed, workers=workers, scheduler=scheduler,
                                   progress=progress)
-    if takes_time_series(model):                    # a dynamic model: sized on the flat data of its campaign
+    if strategy_for(model).takes_time_series:       # a dynamic model: sized on the flat data of its campaign
         if generator is not None or inputs is not None or sigma is not None:
             raise DataError("generator/inputs/sigma: a dynamic model is validated by a size study on its campaign: "
                             "give data= (DynamicMeasurements with its inputs, sampling times and sigma)")

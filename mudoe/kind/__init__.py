@@ -4,12 +4,12 @@
 the design run, what the report draws, how models are bounded and started, the template);
 :data:`STATIC` (:mod:`mudoe.kind.static`: a model of set points, wide CSV) and
 :data:`TIME_SERIES` (:mod:`mudoe.kind.time_series`: an ODE/DAE model, long time-series CSV,
-``[dynamic]``) implement it.  :func:`study_kind` is the one place that looks at the models to choose;
-everything else asks ``study.kind``.
+``[dynamic]``) implement it.  :func:`study_kind` is the one place that looks at the models to choose,
+by their fit strategy (:func:`kind_of`); everything else asks ``study.kind``.
 """
 from __future__ import annotations
 
-from models.contract import Model
+from identification.fit.problem import CollocatedStrategy, StaticStrategy, strategy_for
 
 from ..config import ConfigError, StudyConfig
 from .base import Simulation, StudyKind
@@ -20,12 +20,17 @@ __all__ = ["StudyKind", "Simulation", "StaticKind", "TimeSeriesKind", "STATIC", 
            "study_kind"]
 
 
+#: the study kind of each of the fit floor's strategies (:mod:`identification.fit.problem`)
+_BY_STRATEGY = {StaticStrategy: STATIC, CollocatedStrategy: TIME_SERIES}
+
+
 def kind_of(model) -> StudyKind | None:
-    """The kind of study of one model: :data:`TIME_SERIES` for an ODE/DAE model, :data:`STATIC` for a
-    :class:`models.Model`, None for anything else (not a model mudoe can study)."""
-    if getattr(model, "is_dynamic", False):
-        return TIME_SERIES
-    return STATIC if isinstance(model, Model) else None
+    """The kind of study of one model: that of its fit strategy
+    (:func:`identification.fit.problem.strategy_for`, the one place the kind of a model is asked):
+    :data:`TIME_SERIES` for an ODE/DAE model (collocated), :data:`STATIC` for a static
+    :class:`models.Model`; None for anything else (not a model mudoe can study)."""
+    strategy = strategy_for(model)
+    return _BY_STRATEGY[type(strategy)] if isinstance(model, strategy.model_type) else None
 
 
 def study_kind(cfg: StudyConfig, built: dict) -> StudyKind:

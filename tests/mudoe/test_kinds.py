@@ -61,12 +61,16 @@ def test_quantify_of_a_time_series_study_is_refused_before_the_data(tmp_path):
         prepare(cfg, command="quantify")
 
 
-def test_only_the_kind_choice_reads_the_models_kind():
-    """The static/dynamic question is asked once in mudoe (mudoe/kind/__init__.py); the report reads the pages the
-    kind chose from the study record (issue 28 target: the switches of the whole repository <= 4)."""
+def test_only_the_fit_strategy_reads_the_models_kind():
+    """The static/dynamic question is asked once, by the fit strategy (identification.fit.problem.strategy_for);
+    mudoe's kind_of maps the strategy to a study kind and asks nothing itself (issue 28 target: the switches of the
+    whole repository <= 4: the DynamicModel's flag, strategy_for, the collocation of a DynamicModel)."""
     found = []
-    for p in sorted((REPO / "mudoe").rglob("*.py")):
-        for k, line in enumerate(p.read_text().splitlines(), 1):
-            if re.search(r"is_dynamic|isinstance\(.*Dynamic", line):
-                found.append(f"{p.relative_to(REPO)}:{line.strip()}")
-    assert found == ['mudoe/kind/__init__.py:if getattr(model, "is_dynamic", False):']
+    for pkg in ("models", "identification", "oed", "reports", "mudoe"):
+        for p in sorted((REPO / pkg).rglob("*.py")):
+            for line in p.read_text().splitlines():
+                if re.search(r"is_dynamic|isinstance\(.*Dynamic", line):
+                    found.append(f"{p.relative_to(REPO)}:{line.strip()}")
+    assert found == ["models/collocation.py:if not isinstance(dynamic, DynamicModel):",
+                     "models/dynamic.py:is_dynamic = True",
+                     "identification/fit/problem.py:return COLLOCATED if getattr(model, \"is_dynamic\", False) else STATIC"]

@@ -61,3 +61,38 @@ def test_arguments_of_the_other_kind_are_refused():
         dyn.fit(P_TRUE, Y0=np.zeros((2, 3)))
     with pytest.raises(TypeError, match="states: not used for a dynamic model"):
         dyn.information(P_TRUE, states=np.zeros((2, 3)))
+
+
+def test_the_strategy_answers_what_differs_between_the_kinds():
+    """Issue 28: the layers above read these instead of asking whether a model is dynamic."""
+    from identification import DataError
+    from identification.fit.problem import strategy_for
+    model, data = static_case()
+    static, dyn = strategy_for(model), strategy_for(build())
+    assert (static.design_axis, dyn.design_axis) == ("inputs", "times")
+    assert (static.takes_time_series, dyn.takes_time_series) == (False, True)
+    assert (static.quantifies_model_error, dyn.quantifies_model_error) == (True, False)
+    assert isinstance(model, static.model_type) and isinstance(build(), dyn.model_type)
+    static.check_data(data)
+    with pytest.raises(TypeError, match=r"^data: expected an identification.Measurements, got list$"):
+        static.check_data([1.0])
+    with pytest.raises(TypeError, match=r"^measurements\['m'\]: a dynamic model needs identification."
+                                        r"DynamicMeasurements \(values over sampling times\), got Measurements$"):
+        dyn.check_data(data, "measurements['m']")
+    with pytest.raises(DataError, match=r"^data: validate needs a campaign, got NoneType$"):
+        dyn.check_data(None, need="validate needs a campaign", error=DataError)
+    with pytest.raises(TypeError, match="data: a dynamic model needs identification.DynamicMeasurements"):
+        Problem(build(), data)
+
+
+def test_per_instrument_sums_the_readings_of_each_instrument():
+    campaign = simulate_campaign(build(), P_TRUE, Q, TIMES, SIGMA, seed=1)
+    problem = Problem(build(), campaign)
+    F, _ = problem.information(P_TRUE)
+    by_instrument = problem.strategy.per_instrument(problem.model, F, campaign)
+    for k, s in enumerate(build().sensors):
+        assert np.array_equal(by_instrument[k], sum(F[i] for i, (name, _) in enumerate(campaign.pairs) if name == s))
+    model, data = static_case()
+    static = Problem(model, data)
+    F, _ = static.information([2.0, 0.5])
+    assert static.strategy.per_instrument(model, F, data) is F
