@@ -172,7 +172,7 @@ def _checked_design(design, weights) -> None:
 def _checked_data(name: str, data, splits: tuple) -> Measurements:
     """The campaign of one model, checked against every split's indices (TypeError, SplitError)."""
     if not isinstance(data, Measurements):
-        raise TypeError(f"measurements[{name!r}]: expected an identification.Measurements, got {type(data).__name__}")
+        raise TypeError(f"data[{name!r}]: expected an identification.Measurements, got {type(data).__name__}")
     for sp in splits:
         sp.check(data.n_q, data.n_M)
     return data
@@ -375,7 +375,7 @@ class _TimeSeries:
 
     def model_tests(self, run: _Run, name: str, m, data, p0) -> _ModelTests:
         """Lines 02-08 for the dynamic model ``m`` (named ``name``) on its time series ``data`` from ``p0``."""
-        strategy_for(m).check_data(data, f"measurements[{name!r}]")
+        strategy_for(m).check_data(data, f"data[{name!r}]")
         w = _instrument_weights(m, run.design)
         design = (name, tuple(s for k, s in enumerate(m.sensors) if w is None or w[k] > 0),
                   run.design_how or ("instruments given" if run.design is not None else "all instruments"))
