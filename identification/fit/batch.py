@@ -56,7 +56,7 @@ rows (same q and the same state at p0) are evaluated once per member (their data
 pooled exactly).  With per-member inputs every member is evaluated at its own n_q rows.
 Models with more than 60 states (sparse state Jacobians) are not batched: every member is
 fitted by identify; for a collocated ODE model the members' fits run together with their
-trajectory evaluations merged (:mod:`identification.fit.batch_trajectory`: no state-size ceiling).
+trajectory evaluations merged (:func:`fit_members`: no state-size ceiling).
 
 A member that does not converge (or fails a check, or ends on or outside a parameter bound)
 is fitted by the full-space Ipopt estimator :func:`identification.identify` instead, and the
@@ -78,6 +78,7 @@ import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
+from models.trajectory import run_merged
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.assembly import sigma_rescaling
 from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, BatchMember, BatchSettings,
@@ -85,7 +86,6 @@ from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, Bat
 from identification.fit.batch_iteration import iterate
 from identification.fit.batch_points import Points
 from identification.fit.batch_sweep import Iteration, Prepared, prepare
-from identification.fit.batch_trajectory import decrements, fit_members
 from identification.fit.checks import CheckFailure, failed_check, rank_ok
 from identification.fit.unbounded import not_bounded_reason
 from identification.fit.estimator import IdentifySettings, as_start_vector, fit_static, param_scale
@@ -286,7 +286,7 @@ class _BatchRun:
         model, R = self.model, self.R
         n_y = model.n_y
         if n_y and model.state_numerics.merges_fits and self.fallback_on:
-            # a collocated ODE: every member by identify, their trajectory evaluations merged (batch_trajectory)
+            # a collocated ODE: every member by identify, their trajectory evaluations merged (fit_members)
             results, errors = fit_members(model, [self.data.member(r) for r in range(R)], self.p0, self.weights,
                                           self.settings, starts)
             # a failed fit, or an estimate the data do not bound (kept, ok False), is recorded with its reason
@@ -379,6 +379,46 @@ class _BatchRun:
             except (IdentificationError, DataError) as exc:
                 self.records.append(FallbackRecord(int(r), why, f"{type(exc).__name__}: {exc}"))
                 self.results[r] = exc
+
+
+# ---------------------------------------------------------------------------- merged fits of a collocated ODE
+# Batched fits of a collocated ODE model (no state-size ceiling): every member by identify, merged.
+#
+# The batch engine (above) advances members of models with small dense states
+# by its own full-space Newton sweeps.  A collocated dynamic model (:mod:`models.collocation`) has
+# hundreds of states per experiment, but its state Jacobian is block lower-triangular in the
+# elements: :mod:`models.trajectory` solves the trajectories and their exact first and second
+# derivatives element by element for all experiments at once.  Here every member is fitted by
+# :func:`identification.identify` itself (reduced-space Newton on the trajectories, its checks,
+# refinement and covariance) in its own thread, and the members' trajectory evaluations are merged
+# (:func:`models.trajectory.run_merged`): each step evaluates all members' experiments, each at its
+# own member's p, in one set of mapped CasADi calls and batched LAPACK solves.  The estimates are
+# identify's (the same computations, to round-off).
+
+
+def fit_members(model, members, p0, weights, settings, starts=None) -> tuple:
+    """identify(model, members[r], p0_r, weights, settings) for every member, merged (see the section's comment); p0_r is row r of ``starts`` where it is finite (e.g. the pooled start of a split
+    test), else p0.  Returns (results, errors): each member's Estimate or the IdentificationError /
+    DataError identify raised (any other exception is raised here, as identify would)."""
+    p0 = np.asarray(p0, float)
+    starts = None if starts is None else np.asarray(starts, float).reshape(len(members), -1)
+    first = [s if starts is not None and np.all(np.isfinite(s)) else p0
+             for s in (starts if starts is not None else [None] * len(members))]
+    tasks = [lambda d=d, s=s: fit_static(model, d, s, weights=weights, settings=settings) for d, s in zip(members, first)]
+    results = run_merged(tasks)
+    errors = {}
+    for r, res in enumerate(results):
+        if isinstance(res, (IdentificationError, DataError)):
+            errors[r] = f"{type(res).__name__}: {res}"
+        elif isinstance(res, Exception):
+            raise res
+    return results, errors
+
+
+def decrements(results) -> np.ndarray:
+    """The Newton decrement of every member's estimate (NaN for a failed fit)."""
+    return np.array([np.nan if isinstance(r, Exception) else float(r.extra.get("newton_decrement", np.nan))
+                     for r in results])
 
 
 def _collect(model, results, records, converged, decrement, sweeps, dense_sweeps: int = 0) -> BatchFit:
