@@ -258,6 +258,12 @@ def _estimate_pages(results):
             widths, size = content_widths(head, rows, 8, 0.92 * PAGE_SIZE[0])     # every page of a part alike
             draw_table(ax, head, chunk, fontsize=size, col_widths=widths)
             discretisation_lines(fig, results, 0.90 - h - 0.03)
+            truth = results.study.truth
+            if truth is not None:
+                units = {p.name: p.unit for m in results.study.models.values() for p in m.params}
+                _text(fig, 0.04, 0.075, f"Truth of the simulated data ({truth.source}): " + ", ".join(
+                      f"{n} = {v:.6g}{(' ' + units.get(n, '')) if units.get(n) else ''}"
+                      for n, v in truth.values.items()) + ".", width=175, size=8.5, weight="bold")
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)
@@ -266,7 +272,8 @@ def _estimate_pages(results):
 
 
 def _ellipse_pages(results):
-    """Every parameter pair of every model, one panel per split; at most MAX_ROWS x MAX_COLS panels a page."""
+    """Every parameter pair of every model: a model of two parameters one panel per split (at most MAX_ROWS x
+    MAX_COLS panels a page); a model of more one page of all its pairs, the splits overlaid (GRID_SPLITS a page)."""
     from .figures import confidence_ellipses
     det = results.detection
     if det is None:
@@ -281,14 +288,17 @@ def _ellipse_pages(results):
     for m in det.models:
         model = results.study.models[m]
         n = model.n_p
-        rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
+        if n == 2:                                       # one pair: a panel per split (more: a grid of the pairs)
+            rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
     scols = _chunks(ns, MAX_COLS)
-    rparts = _chunks(len(rows), MAX_ROWS)
+    rparts = _chunks(len(rows), MAX_ROWS) if rows else []
+    grids = [(m, part) for m in det.models if results.study.models[m].n_p > 2 for part in _chunks(ns, GRID_SPLITS)]
     figs = []
-    total = len(scols) * len(rparts)
-    for ci, cols in enumerate(scols):
+    total = len(scols) * len(rparts) + len(grids)
+    title = "Confidence regions: calibration vs validation estimates"
+    for ci, cols in enumerate(scols if rows else []):
         for ri, rr in enumerate(rparts):
-            fig = _page("Confidence regions: calibration vs validation estimates" + _part(len(figs), total))
+            fig = _page(title + _part(len(figs), total))
             ncol = MAX_COLS if len(scols) > 1 else max(len(cols), 2)
             axes = fig.subplots(MAX_ROWS if len(rparts) > 1 else len(rr), ncol, squeeze=False)
             for a, r in enumerate(rr):
@@ -311,6 +321,40 @@ def _ellipse_pages(results):
                   "split's hypothesis is rejected by the decision statistic. The likelihood-ratio statistic has no "
                   "drawn region.", width=175, size=8)
             figs.append(fig)
+    figs += _pair_grid_pages(results, grids, level, title, len(figs), total)
+    return figs
+
+
+#: splits overlaid on one grid of parameter pairs (more: another page)
+GRID_SPLITS = 4
+
+
+def _pair_grid_pages(results, grids, level, title, first, total):
+    """Models of 3 or more parameters: one page per model (and per GRID_SPLITS splits), every pair in a
+    lower-triangular grid with the splits overlaid (:func:`reports.region_figures.split_pair_grid`)."""
+    from .region_figures import split_pair_grid
+    det = results.detection
+    st = det.settings.statistic
+    second = "two_sample" if st != "two_sample" else "likelihood_ratio"
+    truth = results.study.truth
+    figs = []
+    for k, (m, part) in enumerate(grids):
+        model = results.study.models[m]
+        tests = [det.tests_of(m)[j] for j in part]
+        known = truth is not None and all(n in truth.values for n in model.param_names)
+        fig = _page(f"{title}, model {m}" + _part(first + k, total))
+        split_pair_grid(fig, tests, level, model.param_names, [p.unit for p in model.params], statistic=st,
+                        second_statistic=second, truth=[truth.values[n] for n in model.param_names] if known else None,
+                        rect=(0.08, 0.16, 0.97, 0.9))
+        _text(fig, 0.04, 0.075, f"Every pair of the parameters of {m}, the splits overlaid (one colour each), regions "
+              f"at level 1 - TOL/n_tests = {100 * level:.4g} % (Bonferroni) projected on the pair. Solid: G(TOL/n, "
+              "p_cal, C_cal) (paper); dashed: region of p_val; dotted: two-sample region around p_cal with C_cal + "
+              f"C_val. Legend: alpha_min of the decision statistic ({STATISTIC_WORDS[st]}) and of the "
+              f"{STATISTIC_WORDS[second]} statistic per split; a red-edged square: the split's hypothesis is rejected "
+              "by the decision statistic. The likelihood-ratio statistic has no drawn region."
+              + (f" Star: the true parameters of the simulated data ({truth.source})." if known else ""),
+              width=175, size=8)
+        figs.append(fig)
     return figs
 
 
@@ -633,6 +677,8 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
             for name, make in pages:
                 figs = make()
                 figs = figs if isinstance(figs, list) else [figs]
+                bar.total += len(figs) - 1          # the bar counts the pages written (a maker may give several)
+                bar.refresh()
                 for i, fig in enumerate(figs):
                     k += 1
                     pdf.savefig(fig)
@@ -641,7 +687,7 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
                     names.append(png)
                     texts.append(dict(file=png, texts=page_texts(fig)))
                     plt.close(fig)
-                bar.update(1)
+                    bar.update(1)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
         meta = dict(config=config.values, config_text=config.text, data_sha256=results.study.source.sha256,
