@@ -1,5 +1,7 @@
-"""Report pages of a dynamic (ODE/DAE) study: trajectories against time, residuals against time, the
-sampling-time design.
+"""Report pages of a dynamic (ODE/DAE) study: the experiments' inputs (a model with controls: the full table
+once), trajectories against time (the controls u(t) and constants beside them, titles a short summary of the
+inputs, repeated series in their own marker and colour side by side), residuals against time and against
+every output of the model at the estimate, the sampling-time design.
 
 The figures take ``ax=None`` and what the study computed (``results.trajectories``: per variant a
 :class:`identification.studies.records.Trajectories` with the outputs on a fine time grid, the delta-method
