@@ -41,7 +41,7 @@ from .page_layout import PAGE_SIZE, ROWS_PER_PAGE, TEXT_LINE_HEIGHT
 from .page_layout import chunks as _chunks, draw_text as _text, new_page as _page, part_label as _part
 from .view import STATISTIC_WORDS, fmt_pct, fmt_value
 
-__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
+__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "pair_grid_sets", "PAGE_SIZE"]
 
 def verdict_paragraphs(results) -> list[tuple[str, str]]:
     """One paragraph per model: the verdict of Algorithm 1 with its numbers and goodness of fit (plain text)."""
@@ -292,7 +292,8 @@ def _ellipse_pages(results):
             rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
     scols = _chunks(ns, MAX_COLS)
     rparts = _chunks(len(rows), MAX_ROWS) if rows else []
-    grids = [(m, part) for m in det.models if results.study.models[m].n_p > 2 for part in _chunks(ns, GRID_SPLITS)]
+    grids = [(m, part, idx) for m in det.models if results.study.models[m].n_p > 2 for part in _chunks(ns, GRID_SPLITS)
+             for idx in pair_grid_sets(results.study.models[m].n_p)]
     figs = []
     total = len(scols) * len(rparts) + len(grids)
     title = "Confidence regions: calibration vs validation estimates"
@@ -325,8 +326,17 @@ def _ellipse_pages(results):
     return figs
 
 
-#: splits overlaid on one grid of parameter pairs (more: another page)
-GRID_SPLITS = 4
+#: splits overlaid on one grid of parameter pairs (more: another page); parameters of one grid
+GRID_SPLITS, GRID_PARAMS = 4, 6
+
+
+def pair_grid_sets(n_p: int) -> list:
+    """The parameter indices of each grid of pairs: all of them up to GRID_PARAMS; beyond, blocks of
+    GRID_PARAMS / 2 taken two at a time (every pair on some grid)."""
+    if n_p <= GRID_PARAMS:
+        return [tuple(range(n_p))]
+    blocks = _chunks(n_p, GRID_PARAMS // 2)
+    return [tuple(blocks[i]) + tuple(blocks[j]) for i in range(len(blocks)) for j in range(i + 1, len(blocks))]
 
 
 def _pair_grid_pages(results, grids, level, title, first, total):
@@ -338,14 +348,16 @@ def _pair_grid_pages(results, grids, level, title, first, total):
     second = "two_sample" if st != "two_sample" else "likelihood_ratio"
     truth = results.study.truth
     figs = []
-    for k, (m, part) in enumerate(grids):
+    for k, (m, part, idx) in enumerate(grids):
         model = results.study.models[m]
         tests = [det.tests_of(m)[j] for j in part]
         known = truth is not None and all(n in truth.values for n in model.param_names)
-        fig = _page(f"{title}, model {m}" + _part(first + k, total))
+        some = "" if len(idx) == model.n_p else f" ({', '.join(model.param_names[i] for i in idx)})"
+        fig = _page(f"{title}, model {m}{some}" + _part(first + k, total))
         split_pair_grid(fig, tests, level, model.param_names, [p.unit for p in model.params], statistic=st,
-                        second_statistic=second, truth=[truth.values[n] for n in model.param_names] if known else None,
-                        rect=(0.08, 0.16, 0.97, 0.9))
+                        second_statistic=second,
+                        truth=[truth.values[n] for n in model.param_names] if known else None,
+                        rect=(0.08, 0.16, 0.97, 0.9), indices=idx)
         _text(fig, 0.04, 0.075, f"Every pair of the parameters of {m}, the splits overlaid (one colour each), regions "
               f"at level 1 - TOL/n_tests = {100 * level:.4g} % (Bonferroni) projected on the pair. Solid: G(TOL/n, "
               "p_cal, C_cal) (paper); dashed: region of p_val; dotted: two-sample region around p_cal with C_cal + "

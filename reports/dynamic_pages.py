@@ -101,7 +101,8 @@ def trajectory_plot(traj, data, model, j: int, k: int, chosen_times=(), ax=None)
     for i in range(data.n_M):
         mk, col, off = series_style(i, data.n_M, _horizon(traj))
         ax.plot(data.times[j, :n] + off, data.z[i, j, :n, k], mk, ms=2.8, color=col, alpha=0.8 if i else 1.0,
-                mfc=col if i == 0 else "none", mew=0.8, label="measured" + (f" (series {i + 1})" if data.n_M > 1 else ""))
+                mfc=col if i == 0 else "none", mew=0.8,
+                label="measured" + (f" (series {i + 1})" if data.n_M > 1 else ""))
     if len(chosen_times):
         ax.plot(chosen_times, np.zeros(len(chosen_times)), transform=ax.get_xaxis_transform(),
                 label="chosen sampling times", **_MARK)
@@ -172,8 +173,8 @@ def control_plot(model, row, horizon: float, ax=None):
             axes.append(a)
         t = np.r_[np.asarray(c.grid, float), horizon]
         col = ("tab:purple", "tab:olive", "tab:cyan")[n % 3]
-        a.plot(t, np.r_[v, v[-1]], color=col, lw=1.3, drawstyle="steps-post" if c.kind == "constant" else "default",
-               label=f"{c.name}(t)")
+        a.plot(t, np.r_[v, v[-1]], color=col, lw=1.3, label=f"{c.name}(t)",
+               drawstyle="steps-post" if c.kind == "constant" else "default")
         a.set_ylabel(f"{c.name}{_unit(c.unit)}", fontsize=8, color=col)
         a.tick_params(labelsize=7)
     units = list(model.input_units) + [""] * len(row)
@@ -279,10 +280,10 @@ def _trajectory_pages(results):
                                 wspace=0.22 if not inputs else 0.32, hspace=0.55)
             said = (" Left column: the experiment's inputs, each control u(t) over its grid (the constants in "
                     "the box; every value in the table 'Experiments')." if inputs else "")
+            apart = f"{_SERIES_OFFSET * _horizon(traj):.2g}{' ' + model.time_unit if model.time_unit else ''}"
             series = (f" Series {', '.join(str(i + 1) for i in range(data.n_M))}: "
-                      f"{', '.join(_marker_words(i) for i in range(data.n_M))}, drawn side by side "
-                      f"({_SERIES_OFFSET * _horizon(traj):.2g}{' ' + model.time_unit if model.time_unit else ''} "
-                      "apart)." if data.n_M > 1 else "")
+                      f"{', '.join(_marker_words(i) for i in range(data.n_M))}, drawn side by side ({apart} apart)."
+                      if data.n_M > 1 else "")
             _text(fig, 0.04, 0.06, f"Measured readings and the outputs h(x(t)) of {v} at its estimate on a fine time "
                   f"grid ({_grid_error(traj)}). Bands at {100 * traj.level:g} %: h +- q "
                   "sqrt(g^T C g) for the mean (shaded) and h +- q sqrt(g^T C g + sigma^2) for a new reading "
@@ -357,8 +358,8 @@ def _residual_pages(results):
                    bbox_to_anchor=(0.5, 0.1))
         fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.3, wspace=0.25)
         _text(fig, 0.04, 0.08, "Standardized residuals (z - h)/sigma of every reading against its sampling time, one "
-              "colour per experiment (filled circles: series 1; open, other markers: later series, drawn side by side). Dashed: +-2. A trend over time shared "
-              "by the experiments shows dynamics the model misses (a rate law, a delay, a missing state); residuals "
+              "colour per experiment (filled circles: series 1; open, other markers: later series, drawn side by "
+              "side). Dashed: +-2. A trend over time shared by the experiments shows dynamics the model misses (a rate law, a delay, a missing state); residuals "
               "growing with time point at an error that accumulates. Red triangles: the chosen sampling times.")
         figs.append(fig)
     return figs
@@ -386,8 +387,8 @@ def _residual_output_pages(results):
         fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), fontsize=8, frameon=False,
                    bbox_to_anchor=(0.5, 0.075))
         fig.subplots_adjust(left=0.07, right=0.98, top=0.91, bottom=0.2, wspace=0.25, hspace=0.35)
-        _text(fig, 0.04, 0.06, "Standardized residuals (z - h)/sigma of each instrument (rows) against each output of "
-              "the model at the estimate at the same reading (columns), one colour per experiment (filled: series "
+        _text(fig, 0.04, 0.06, "Standardized residuals (z - h)/sigma of each instrument (rows) against each output "
+              "of the model at the estimate at the same reading (columns), one colour per experiment (filled: series "
               "1, open: later series). Dashed: +-2. A trend or a step against an output shows an effect the model "
               "misses that depends on that state (e.g. a friction that depends on the sign of a speed: a step of the "
               "residuals where the speed changes sign).")

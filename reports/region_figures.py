@@ -118,7 +118,7 @@ SPLIT_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b")
 
 
 def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic: str = "two_sample",
-                    second_statistic: str | None = None, truth=None, rect=(0.08, 0.1, 0.97, 0.88)):
+                    second_statistic: str | None = None, truth=None, rect=(0.08, 0.1, 0.97, 0.88), indices=None):
     """Every parameter pair of one model in one lower-triangular grid of panels, the splits overlaid.
 
     Panel (a, b), b < a, holds parameter b across and a up; for every split (one colour each) the region
@@ -135,6 +135,8 @@ def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic
     level : float                  confidence level of the regions (1 - TOL / n_tests)
     param_names, units : sequences of str   every parameter of the model
     truth : sequence of float or None
+    indices : sequence of int, optional   the parameters drawn (default all; a model of many parameters
+                                   draws its pairs on several grids)
 
     Returns
     -------
@@ -144,13 +146,16 @@ def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic
     from matplotlib.ticker import MaxNLocator
 
     from .figures import ellipse_points
-    names = tuple(param_names)
+    every = tuple(param_names)
+    idx = list(range(len(every)) if indices is None else indices)
+    names = tuple(every[k] for k in idx)
     n = len(names)
     if n < 2:
         raise ValueError(f"param_names: a grid of pairs needs at least two parameters, got {n}")
     if len(tests) > len(SPLIT_COLOURS):
         raise ValueError(f"tests: at most {len(SPLIT_COLOURS)} splits on one grid, got {len(tests)}")
-    units = tuple(u or "" for u in (units if units is not None else ("",) * n))
+    units = tuple(u or "" for u in (units if units is not None else ("",) * len(every)))
+    units = tuple(units[k] for k in idx)
     left, bottom, right, top = rect
     gs = fig.add_gridspec(n - 1, n - 1, left=left, bottom=bottom, right=right, top=top, wspace=0.12, hspace=0.12)
     short = {"likelihood_ratio": "LR", "two_sample": "2-sample", "paper": "paper"}
@@ -165,8 +170,9 @@ def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic
                 if not t.ok:
                     continue
                 c = SPLIT_COLOURS[s]
-                ix = np.ix_([b, a], [b, a])
-                pc, pv = t.p_cal[[b, a]], t.p_val[[b, a]]
+                pair = [idx[b], idx[a]]
+                ix = np.ix_(pair, pair)
+                pc, pv = t.p_cal[pair], t.p_val[pair]
                 for pts, style in ((ellipse_points(pc, t.C_cal[ix], level), dict(ls="-", lw=1.0)),
                                    (ellipse_points(pv, t.C_val[ix], level), dict(ls="--", lw=0.8)),
                                    (ellipse_points(pc, t.C_cal[ix] + t.C_val[ix], level),
@@ -177,7 +183,7 @@ def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic
                 ax.plot(*pc, "o", color=c, ms=3)
                 ax.plot(*pv, "s", color=c, ms=3.5, mec="#d62728" if rejected else c, mew=1.5 if rejected else 0.5)
             if truth is not None:
-                ax.plot(truth[b], truth[a], "*", color="k", ms=7, zorder=5)
+                ax.plot(truth[idx[b]], truth[idx[a]], "*", color="k", ms=7, zorder=5)
             ax.xaxis.set_major_locator(MaxNLocator(3))
             ax.yaxis.set_major_locator(MaxNLocator(3))
             ax.tick_params(labelsize=6.5, length=2)

@@ -138,3 +138,24 @@ def test_progress_bar_counts_the_pages_written_not_the_page_makers(tmp_path, mon
     paths = b.build_report(stub_record({"coulomb": motor}), tmp_path, progress=Progress(True, stream=stream))
     assert len([p for p in paths if p.suffix == ".png"]) == 4
     assert "4/4" in stream.getvalue().split("\r")[-1]           # the estimate grows as makers give several pages
+
+
+@pytest.mark.parametrize("n_p", [3, 6, 7, 11])
+def test_grids_of_many_parameters_cover_every_pair_with_at_most_six_a_grid(n_p):
+    import itertools
+
+    from reports.builder import pair_grid_sets as sets
+    plan = sets(n_p)
+    assert all(len(s) <= 6 for s in plan) and len(plan) == (1 if n_p <= 6 else {7: 3, 11: 6}[n_p])
+    covered = {pair for s in plan for pair in itertools.combinations(sorted(s), 2)}
+    assert covered == set(itertools.combinations(range(n_p), 2))
+
+
+def test_a_grid_of_some_parameters_draws_their_pairs_only():
+    fig = plt.figure(figsize=(11.69, 8.27))
+    axes = split_pair_grid(fig, [_Test("a", 0.05, 0.3, n=9)], 0.975, list("ABCDEFGHI"), truth=np.arange(1.0, 10.0),
+                           indices=(0, 1, 2, 6, 7, 8))
+    assert len(axes) == 15 and [ax.get_xlabel() for ax in axes if ax.get_xlabel()] == list("ABCGH")
+    star = [ln for ln in axes[-1].lines if ln.get_marker() == "*"][0]       # panel (I, H): truth 8, 9
+    assert (star.get_xdata()[0], star.get_ydata()[0]) == (8.0, 9.0)
+    plt.close(fig)
