@@ -263,7 +263,7 @@ def _estimate_pages(results):
                 units = {p.name: p.unit for m in results.study.models.values() for p in m.params}
                 _text(fig, 0.04, 0.075, f"Truth of the simulated data ({truth.source}): " + ", ".join(
                       f"{n} = {v:.6g}{(' ' + units.get(n, '')) if units.get(n) else ''}"
-                      for n, v in truth.values.items()) + ".", width=175, size=8.5, weight="bold")
+                      for n, v in truth.values.items()) + ".", width=150, size=8.5, weight="bold")
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)
@@ -301,7 +301,7 @@ def _ellipse_pages(results):
         for ri, rr in enumerate(rparts):
             fig = _page(title + _part(len(figs), total))
             ncol = MAX_COLS if len(scols) > 1 else max(len(cols), 2)
-            axes = fig.subplots(MAX_ROWS if len(rparts) > 1 else len(rr), ncol, squeeze=False)
+            axes = fig.subplots(MAX_ROWS, ncol, squeeze=False)          # every panel the same size
             for a, r in enumerate(rr):
                 m, pair = rows[r]
                 model = results.study.models[m]
@@ -351,7 +351,7 @@ def _pair_grid_pages(results, grids, level, title, first, total):
     for k, (m, part, idx) in enumerate(grids):
         model = results.study.models[m]
         tests = [det.tests_of(m)[j] for j in part]
-        known = truth is not None and all(n in truth.values for n in model.param_names)
+        known = truth is not None and truth.variant == m and all(n in truth.values for n in model.param_names)
         some = "" if len(idx) == model.n_p else f" ({', '.join(model.param_names[i] for i in idx)})"
         fig = _page(f"{title}, model {m}{some}" + _part(first + k, total))
         split_pair_grid(fig, tests, level, model.param_names, [p.unit for p in model.params], statistic=st,

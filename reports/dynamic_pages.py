@@ -267,12 +267,9 @@ def _trajectory_pages(results):
                     control_plot(model, s.inputs[j], _horizon(traj) + traj.t[0], ax=axes[r, 0])
                 for k in range(min(model.n_S, _COLS)):
                     trajectory_plot(traj, data, model, j, k, _chosen(results), ax=axes[r, inputs + k])
-                    if not inputs:
-                        axes[r, k].set_title(f"experiment {j + 1}: {inputs_summary(model, s.inputs[j])}"
-                                             if k == 0 else "", fontsize=8, loc="left")
-                if inputs:
-                    axes[r, 0].set_title(f"experiment {j + 1}: {inputs_summary(model, s.inputs[j])}", fontsize=8,
-                                         loc="left")
+                summary = inputs_summary(model, s.inputs[j])
+                axes[r, 0].set_title(f"experiment {j + 1}" + (f": {summary}" if summary else ""), fontsize=8,
+                                     loc="left")
             handles, labels = axes[0, inputs].get_legend_handles_labels()
             fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False,
                        bbox_to_anchor=(0.5, 0.075))
