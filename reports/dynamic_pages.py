@@ -166,11 +166,8 @@ def control_plot(model, row, horizon: float, ax=None):
     steps; linear: lines between the grid points, the last value held to the horizon); the constants
     written in the panel."""
     ax = _ax(ax)
-    axes = [ax]
     for n, (c, v) in enumerate(_control_values(model, row)):
-        a = ax if n == 0 else ax.twinx()
-        if n:
-            axes.append(a)
+        a = ax if n == 0 else ax.twinx()                # a second control on its own axis (its unit)
         t = np.r_[np.asarray(c.grid, float), horizon]
         col = ("tab:purple", "tab:olive", "tab:cyan")[n % 3]
         a.plot(t, np.r_[v, v[-1]], color=col, lw=1.3, label=f"{c.name}(t)",
