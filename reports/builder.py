@@ -272,8 +272,9 @@ def _estimate_pages(results):
 
 
 def _ellipse_pages(results):
-    """Every parameter pair of every model: a model of two parameters one panel per split (at most MAX_ROWS x
-    MAX_COLS panels a page); a model of more one page of all its pairs, the splits overlaid (GRID_SPLITS a page)."""
+    """Every parameter pair of every model, one panel per split (at most MAX_ROWS x MAX_COLS panels a page); a
+    time series' model of three or more parameters one page of all its pairs, the splits overlaid (GRID_SPLITS a
+    page, GRID_PARAMS parameters a grid)."""
     from .figures import confidence_ellipses
     det = results.detection
     if det is None:
@@ -285,14 +286,15 @@ def _ellipse_pages(results):
     st = det.settings.statistic
     second = "two_sample" if st != "two_sample" else "likelihood_ratio"
     rows = []
+    gridded = [m for m in det.models if results.study.pages == "trajectories" and results.study.models[m].n_p > 2]
     for m in det.models:
         model = results.study.models[m]
         n = model.n_p
-        if n == 2:                                       # one pair: a panel per split (more: a grid of the pairs)
-            rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
+        if m not in gridded:                             # a panel per split (a time series' model of 3 or more
+            rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]      # parameters: a grid of pairs)
     scols = _chunks(ns, MAX_COLS)
     rparts = _chunks(len(rows), MAX_ROWS) if rows else []
-    grids = [(m, part, idx) for m in det.models if results.study.models[m].n_p > 2 for part in _chunks(ns, GRID_SPLITS)
+    grids = [(m, part, idx) for m in gridded for part in _chunks(ns, GRID_SPLITS)
              for idx in pair_grid_sets(results.study.models[m].n_p)]
     figs = []
     total = len(scols) * len(rparts) + len(grids)
