@@ -69,7 +69,8 @@ def study_setup(study) -> StudySetup:
                       normality=study.normality, models=dict(study.models), data=dict(study.data), p0=study.p0,
                       splits=tuple(study.splits), notes=tuple(study.notes), presentation=shown,
                       phases=study_phases(study) if rows else None, inputs=None if rows else study.inputs,
-                      pages=kind.report_pages, input_rows=kind.input_rows, normality_over=kind.normality_over)
+                      pages=kind.report_pages, input_rows=kind.input_rows, normality_over=kind.normality_over,
+                      truth=study.truth)
 
 
 def study_record(results) -> StudyRecord:

@@ -22,7 +22,7 @@ import numpy as np
 from identification import identify
 from identification.progress import Progress as BaseProgress
 from identification.studies.detect import NormalityCheck
-from identification.studies.records import Presentation
+from identification.studies.records import Presentation, SimulationTruth
 from models.campaign import Campaign
 from models.contract import Model
 
@@ -120,6 +120,8 @@ class Study:
     times : tuple of float       a time-series study: the [dynamic] sampling times
     p0s : dict {variant: ndarray}  start values per variant where they differ (a time-series study's
                                  variants may differ in parameters); else ``p0``
+    truth : SimulationTruth or None  a time-series study whose data are the config's [simulate] campaign:
+                                 its true parameters (:func:`mudoe.kind.time_series.simulation_truth`)
     """
 
     cfg: StudyConfig
@@ -141,6 +143,7 @@ class Study:
     inputs: np.ndarray | None = None
     times: tuple = ()
     p0s: Mapping[str, np.ndarray] = field(default_factory=dict)
+    truth: SimulationTruth | None = None
 
     def start_values(self, variant: str) -> np.ndarray:
         """The start values of a variant's fits (``p0s`` of the variant, else ``p0``)."""

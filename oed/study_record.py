@@ -30,7 +30,7 @@ from identification.studies.detect import DetectionResult, NormalityCheck
 from identification.studies.model_error import ModelErrorResult
 from identification.studies.montecarlo import MonteCarloResult
 from identification.studies.records import (Diagnosis, FitAssessment, MeshSummary, ModelErrorView, ModelUncertainty,
-                                            PredictionBands, Presentation, Trajectories)
+                                            PredictionBands, Presentation, SimulationTruth, Trajectories)
 from models.campaign import Campaign
 from models.contract import Model
 
@@ -109,6 +109,8 @@ class StudySetup:
                                   set point, diagnosis, model error) or "trajectories" (the pages against time)
     input_rows : str              what the study calls its input rows ("set points", "experiments")
     normality_over : str          which readings the normality gate pools (words for the report)
+    truth : SimulationTruth or None   the true parameters when the data are a simulation the config
+                                  describes (marked on the estimates and confidence regions); None otherwise
     """
 
     config: ConfigRecord
@@ -129,6 +131,7 @@ class StudySetup:
     pages: str = "fits"
     input_rows: str = "set points"
     normality_over: str = "all set points"
+    truth: SimulationTruth | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -41,7 +41,7 @@ from .page_layout import PAGE_SIZE, ROWS_PER_PAGE, TEXT_LINE_HEIGHT
 from .page_layout import chunks as _chunks, draw_text as _text, new_page as _page, part_label as _part
 from .view import STATISTIC_WORDS, fmt_pct, fmt_value
 
-__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "PAGE_SIZE"]
+__all__ = ["build_report", "report_pages", "verdict_paragraphs", "page_texts", "pair_grid_sets", "PAGE_SIZE"]
 
 def verdict_paragraphs(results) -> list[tuple[str, str]]:
     """One paragraph per model: the verdict of Algorithm 1 with its numbers and goodness of fit (plain text)."""
@@ -134,7 +134,8 @@ def _title_page(results):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5,
                               **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
-          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time." if s.pages == "trajectories" else
+          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time and against the "
+          "outputs." if s.pages == "trajectories" else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
           + ("the model error of each variant, " if results.model_error_views else "") + "what the model misses."),
@@ -258,6 +259,12 @@ def _estimate_pages(results):
             widths, size = content_widths(head, rows, 8, 0.92 * PAGE_SIZE[0])     # every page of a part alike
             draw_table(ax, head, chunk, fontsize=size, col_widths=widths)
             discretisation_lines(fig, results, 0.90 - h - 0.03)
+            truth = results.study.truth
+            if truth is not None:
+                units = {p.name: p.unit for m in results.study.models.values() for p in m.params}
+                _text(fig, 0.04, 0.075, f"Truth of the simulated data ({truth.source}): " + ", ".join(
+                      f"{n} = {v:.6g}{(' ' + units.get(n, '')) if units.get(n) else ''}"
+                      for n, v in truth.values.items()) + ".", width=150, size=8.5, weight="bold")
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
                      "decimal). 'largest |corr|': the strongest correlation between two parameters of that fit.",
                      fontsize=8)
@@ -266,7 +273,9 @@ def _estimate_pages(results):
 
 
 def _ellipse_pages(results):
-    """Every parameter pair of every model, one panel per split; at most MAX_ROWS x MAX_COLS panels a page."""
+    """Every parameter pair of every model, one panel per split (at most MAX_ROWS x MAX_COLS panels a page); a
+    time series' model of three or more parameters one page of all its pairs, the splits overlaid (GRID_SPLITS a
+    page, GRID_PARAMS parameters a grid)."""
     from .figures import confidence_ellipses
     det = results.detection
     if det is None:
@@ -278,19 +287,24 @@ def _ellipse_pages(results):
     st = det.settings.statistic
     second = "two_sample" if st != "two_sample" else "likelihood_ratio"
     rows = []
+    gridded = [m for m in det.models if results.study.pages == "trajectories" and results.study.models[m].n_p > 2]
     for m in det.models:
         model = results.study.models[m]
         n = model.n_p
-        rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]
+        if m not in gridded:                             # a panel per split (a time series' model of 3 or more
+            rows += [(m, (i, j)) for i in range(n) for j in range(i + 1, n)]      # parameters: a grid of pairs)
     scols = _chunks(ns, MAX_COLS)
-    rparts = _chunks(len(rows), MAX_ROWS)
+    rparts = _chunks(len(rows), MAX_ROWS) if rows else []
+    grids = [(m, part, idx) for m in gridded for part in _chunks(ns, GRID_SPLITS)
+             for idx in pair_grid_sets(results.study.models[m].n_p)]
     figs = []
-    total = len(scols) * len(rparts)
-    for ci, cols in enumerate(scols):
+    total = len(scols) * len(rparts) + len(grids)
+    title = "Confidence regions: calibration vs validation estimates"
+    for ci, cols in enumerate(scols if rows else []):
         for ri, rr in enumerate(rparts):
-            fig = _page("Confidence regions: calibration vs validation estimates" + _part(len(figs), total))
+            fig = _page(title + _part(len(figs), total))
             ncol = MAX_COLS if len(scols) > 1 else max(len(cols), 2)
-            axes = fig.subplots(MAX_ROWS if len(rparts) > 1 else len(rr), ncol, squeeze=False)
+            axes = fig.subplots(MAX_ROWS, ncol, squeeze=False)          # every panel the same size
             for a, r in enumerate(rr):
                 m, pair = rows[r]
                 model = results.study.models[m]
@@ -311,6 +325,51 @@ def _ellipse_pages(results):
                   "split's hypothesis is rejected by the decision statistic. The likelihood-ratio statistic has no "
                   "drawn region.", width=175, size=8)
             figs.append(fig)
+    figs += _pair_grid_pages(results, grids, level, title, len(figs), total)
+    return figs
+
+
+#: splits overlaid on one grid of parameter pairs (more: another page); parameters of one grid
+GRID_SPLITS, GRID_PARAMS = 4, 6
+
+
+def pair_grid_sets(n_p: int) -> list:
+    """The parameter indices of each grid of pairs: all of them up to GRID_PARAMS; beyond, blocks of
+    GRID_PARAMS / 2 taken two at a time (every pair on some grid)."""
+    if n_p <= GRID_PARAMS:
+        return [tuple(range(n_p))]
+    blocks = _chunks(n_p, GRID_PARAMS // 2)
+    return [tuple(blocks[i]) + tuple(blocks[j]) for i in range(len(blocks)) for j in range(i + 1, len(blocks))]
+
+
+def _pair_grid_pages(results, grids, level, title, first, total):
+    """Models of 3 or more parameters: one page per model (and per GRID_SPLITS splits), every pair in a
+    lower-triangular grid with the splits overlaid (:func:`reports.region_figures.split_pair_grid`)."""
+    from .region_figures import split_pair_grid
+    det = results.detection
+    st = det.settings.statistic
+    second = "two_sample" if st != "two_sample" else "likelihood_ratio"
+    truth = results.study.truth
+    figs = []
+    for k, (m, part, idx) in enumerate(grids):
+        model = results.study.models[m]
+        tests = [det.tests_of(m)[j] for j in part]
+        known = truth is not None and truth.variant == m and all(n in truth.values for n in model.param_names)
+        some = "" if len(idx) == model.n_p else f" ({', '.join(model.param_names[i] for i in idx)})"
+        fig = _page(f"{title}, model {m}{some}" + _part(first + k, total))
+        split_pair_grid(fig, tests, level, model.param_names, [p.unit for p in model.params], statistic=st,
+                        second_statistic=second,
+                        truth=[truth.values[n] for n in model.param_names] if known else None,
+                        rect=(0.08, 0.16, 0.97, 0.9), indices=idx)
+        _text(fig, 0.04, 0.075, f"Every pair of the parameters of {m}, the splits overlaid (one colour each), regions "
+              f"at level 1 - TOL/n_tests = {100 * level:.4g} % (Bonferroni) projected on the pair. Solid: G(TOL/n, "
+              "p_cal, C_cal) (paper); dashed: region of p_val; dotted: two-sample region around p_cal with C_cal + "
+              f"C_val. Legend: alpha_min of the decision statistic ({STATISTIC_WORDS[st]}) and of the "
+              f"{STATISTIC_WORDS[second]} statistic per split; a red-edged square: the split's hypothesis is rejected "
+              "by the decision statistic. The likelihood-ratio statistic has no drawn region."
+              + (f" Star: the true parameters of the simulated data ({truth.source})." if known else ""),
+              width=175, size=8)
+        figs.append(fig)
     return figs
 
 
@@ -633,6 +692,8 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
             for name, make in pages:
                 figs = make()
                 figs = figs if isinstance(figs, list) else [figs]
+                bar.total += len(figs) - 1          # the bar counts the pages written (a maker may give several)
+                bar.refresh()
                 for i, fig in enumerate(figs):
                     k += 1
                     pdf.savefig(fig)
@@ -641,7 +702,7 @@ def build_report(results: StudyRecord, out_dir, dpi: int | None = None, diagnose
                     names.append(png)
                     texts.append(dict(file=png, texts=page_texts(fig)))
                     plt.close(fig)
-                bar.update(1)
+                    bar.update(1)
         timing = dict(results.timing)
         timing["report_build"] = time.perf_counter() - t0
         meta = dict(config=config.values, config_text=config.text, data_sha256=results.study.source.sha256,

@@ -10,7 +10,7 @@ import numpy as np
 
 from identification.inference.regions import Ellipsoid
 
-__all__ = ["lr_region_figure", "profile_figure"]
+__all__ = ["lr_region_figure", "profile_figure", "split_pair_grid", "SPLIT_COLOURS"]
 
 
 def _ax(ax, figsize=(5.5, 4.5)):
@@ -111,3 +111,115 @@ def profile_figure(profile, stderr: float, unit: str = "", ax=None, title: str |
     ax.legend(fontsize=8, loc="best")
     ax.grid(alpha=0.3)
     return ax.figure
+
+
+#: colours of the splits on one grid of pair panels (at most this many splits a page)
+SPLIT_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b")
+
+
+def split_pair_grid(fig, tests, level: float, param_names, units=None, statistic: str = "two_sample",
+                    second_statistic: str | None = None, truth=None, rect=(0.08, 0.1, 0.97, 0.88), indices=None):
+    """Every parameter pair of one model in one lower-triangular grid of panels, the splits overlaid.
+
+    Panel (a, b), b < a, holds parameter b across and a up; for every split (one colour each) the region
+    G(1 - level, p_cal, C_cal) (solid), the validation region (dashed) and the two-sample region around
+    p_cal with C_cal + C_val (dotted), projected on the pair, with p_cal (dot) and p_val (square, red edge
+    when the split's hypothesis is rejected at 1 - level by ``statistic``); the true parameters, when
+    given (``truth``: one value per parameter), as a black star.  Tick labels only on the outer panels,
+    at most three a side; the legend (upper right) names each split with its alpha_min.
+
+    Parameters
+    ----------
+    fig : matplotlib Figure        drawn into ``rect`` = (left, bottom, right, top) in figure fractions
+    tests : sequence of identification.studies.detect.SplitTest   the splits of one model
+    level : float                  confidence level of the regions (1 - TOL / n_tests)
+    param_names, units : sequences of str   every parameter of the model
+    truth : sequence of float or None
+    indices : sequence of int, optional   the parameters drawn (default all; a model of many parameters
+                                   draws its pairs on several grids)
+
+    Returns
+    -------
+    list of matplotlib Axes        the panels, row by row
+    """
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
+
+    from .figures import ellipse_points
+    every = tuple(param_names)
+    idx = list(range(len(every)) if indices is None else indices)
+    names = tuple(every[k] for k in idx)
+    n = len(names)
+    if n < 2:
+        raise ValueError(f"param_names: a grid of pairs needs at least two parameters, got {n}")
+    if len(tests) > len(SPLIT_COLOURS):
+        raise ValueError(f"tests: at most {len(SPLIT_COLOURS)} splits on one grid, got {len(tests)}")
+    units = tuple(u or "" for u in (units if units is not None else ("",) * len(every)))
+    units = tuple(units[k] for k in idx)
+    left, bottom, right, top = rect
+    gs = fig.add_gridspec(n - 1, n - 1, left=left, bottom=bottom, right=right, top=top, wspace=0.12, hspace=0.12)
+    short = {"likelihood_ratio": "LR", "two_sample": "2-sample", "paper": "paper"}
+    axes, cols, rows = [], {}, {}
+    for a in range(1, n):
+        for b in range(a):
+            ax = fig.add_subplot(gs[a - 1, b], sharex=cols.get(b), sharey=rows.get(a))
+            cols.setdefault(b, ax)
+            rows.setdefault(a, ax)
+            axes.append(ax)
+            for s, t in enumerate(tests):
+                if not t.ok:
+                    continue
+                c = SPLIT_COLOURS[s]
+                pair = [idx[b], idx[a]]
+                ix = np.ix_(pair, pair)
+                pc, pv = t.p_cal[pair], t.p_val[pair]
+                for pts, style in ((ellipse_points(pc, t.C_cal[ix], level), dict(ls="-", lw=1.0)),
+                                   (ellipse_points(pv, t.C_val[ix], level), dict(ls="--", lw=0.8)),
+                                   (ellipse_points(pc, t.C_cal[ix] + t.C_val[ix], level),
+                                    dict(ls=":", lw=0.7, alpha=0.8))):
+                    ax.plot(pts[:, 0], pts[:, 1], color=c, **style)
+                al = t.alpha(statistic)
+                rejected = np.isfinite(al) and al < 1 - level
+                ax.plot(*pc, "o", color=c, ms=3)
+                ax.plot(*pv, "s", color=c, ms=3.5, mec="#d62728" if rejected else c, mew=1.5 if rejected else 0.5)
+            if truth is not None:
+                ax.plot(truth[idx[b]], truth[idx[a]], "*", color="k", ms=7, zorder=5)
+            ax.xaxis.set_major_locator(MaxNLocator(3))
+            ax.yaxis.set_major_locator(MaxNLocator(3))
+            ax.tick_params(labelsize=6.5, length=2)
+            ax.grid(alpha=0.3)
+            if a == n - 1:
+                ax.set_xlabel(f"{names[b]}{f' ({units[b]})' if units[b] else ''}", fontsize=7.5)
+                for lab in ax.get_xticklabels():
+                    lab.set_rotation(30)
+                    lab.set_ha("right")
+            else:
+                ax.tick_params(labelbottom=False)
+            if b == 0:
+                ax.set_ylabel(f"{names[a]}{f' ({units[a]})' if units[a] else ''}", fontsize=7.5)
+            else:
+                ax.tick_params(labelleft=False)
+            ax.xaxis.get_offset_text().set_fontsize(6)
+            ax.yaxis.get_offset_text().set_fontsize(6)
+    handles = []
+    for s, t in enumerate(tests):
+        al = t.alpha(statistic) if t.ok else float("nan")
+        rejected = t.ok and np.isfinite(al) and al < 1 - level
+        text = (f"{t.split}: {short.get(statistic, statistic)} {_pct(al)}"
+                + (f", {short.get(second_statistic, second_statistic)} {_pct(t.alpha(second_statistic))}"
+                   if second_statistic and t.ok else "")
+                + (" REJECTED" if rejected else "") + ("" if t.ok else f" (failed at the {t.stage})"))
+        handles.append(Line2D([], [], color=SPLIT_COLOURS[s], lw=2, label=text))
+    handles += [Line2D([], [], color="0.3", lw=1.0, label="calibration region G (paper)"),
+                Line2D([], [], color="0.3", lw=0.8, ls="--", label="validation region"),
+                Line2D([], [], color="0.3", lw=0.7, ls=":", label="two-sample region (C_cal + C_val)"),
+                Line2D([], [], color="0.3", marker="o", ls="none", ms=3, label="$p_{cal}$"),
+                Line2D([], [], color="0.3", marker="s", ls="none", ms=3.5, label="$p_{val}$ (red edge: rejected)")]
+    if truth is not None:
+        handles.append(Line2D([], [], color="k", marker="*", ls="none", ms=7, label="truth (simulated data)"))
+    fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(right, top), fontsize=7.5, frameon=False)
+    return axes
+
+
+def _pct(a) -> str:
+    return f"{100 * a:.3g} %" if a is not None and np.isfinite(a) else "failed"

@@ -15,6 +15,7 @@ few methods only word what the record holds (e.g. :meth:`Diagnosis.misses`,
 * a fit whose linearisation may not be trusted: :class:`ModelUncertainty` of :class:`PairRegion` s;
 * the model error of a variant: :class:`ModelErrorView` with its :class:`HeldOutBands`;
 * a dynamic study: :class:`Trajectories` on a fine time grid and :class:`MeshSummary` of each fit;
+* a simulated study: :class:`SimulationTruth` (the true parameters, marked on the estimates);
 * the press's figures: :class:`ModelCurve`.
 
 This module imports nothing above :mod:`identification.studies`; the report re-exports the records
@@ -34,7 +35,7 @@ from identification.studies.model_error_result import ModelErrorResult
 __all__ = ["unit_suffix", "fmt_value", "fmt_p", "fmt_pct", "Presentation", "OutputDisplay", "GoodnessOfFit",
            "FitAssessment", "MISSES", "Explanation", "DiagnosisRow", "Diagnosis", "PredictionBands",
            "UNTRUSTED", "PairRegion", "ModelUncertainty", "HeldOutBands", "ModelErrorView", "Trajectories",
-           "MeshSummary", "ModelCurve"]
+           "SimulationTruth", "MeshSummary", "ModelCurve"]
 
 
 # ---------------------------------------------------------------------------- number formats
@@ -479,6 +480,8 @@ class Trajectories:
     residuals : ndarray (n_M, n_q, n_t_data, n_S) or None   (z - h) / sigma at the data's times (dimensionless)
     error_sigma : float                      largest discretisation error of h on the fine grid, in sigmas
     tol_sigma : float                        its tolerance (sigmas)
+    fitted : ndarray (n_q, n_t_data, n_S) or None   h at the data's times (model units; NaN past an
+                                             experiment's last time): the abscissa of residuals against outputs
     """
 
     t: np.ndarray
@@ -490,6 +493,23 @@ class Trajectories:
     residuals: np.ndarray | None = None
     error_sigma: float = math.nan
     tol_sigma: float = math.nan
+    fitted: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class SimulationTruth:
+    """The true parameters of a simulated campaign, as the study's config knows them.
+
+    Attributes
+    ----------
+    variant : str       the model variant simulated
+    values : dict       {parameter: true value} (model units)
+    source : str        where the study found that the data are this simulation (words for the report)
+    """
+
+    variant: str
+    values: dict
+    source: str = ""
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from scipy import stats
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
 from identification.studies.detect import normality_check
-from identification.studies.records import MeshSummary, Trajectories
+from identification.studies.records import MeshSummary, SimulationTruth, Trajectories
 from identification.studies.splits import Split, random_splits
 from models.cache import Cache
 from models.contract import ModelError, Parameter
@@ -63,8 +63,8 @@ from ..units import UnitError, convert
 from .base import Simulation, StudyKind
 
 __all__ = ["TimeSeriesKind", "TIME_SERIES", "DynamicCampaign", "experiment_rows", "instrument_sigma", "build_dynamic",
-           "prepare_dynamic", "dynamic_splits", "SimulatedDynamic", "simulate_dynamic", "time_design",
-           "run_oed_dynamic", "plan_dynamic", "trajectories", "run_trajectories", "mesh_summary",
+           "prepare_dynamic", "simulation_truth", "dynamic_splits", "SimulatedDynamic", "simulate_dynamic",
+           "time_design", "run_oed_dynamic", "plan_dynamic", "trajectories", "run_trajectories", "mesh_summary",
            "run_discretisation", "validation_problem", "dynamic_template_text"]
 
 
@@ -270,7 +270,39 @@ def prepare_dynamic(cfg: StudyConfig, built: dict, progress=None) -> Study:
              "instrument",)
     return Study(cfg, camp, tuple(first.sensors), given, rows, norm, models, {v: data for v in models},
                  {v: data_all for v in models}, p0s[next(iter(models))], splits, notes, None, (), kind=TIME_SERIES,
-                 inputs=Q, times=tuple(cfg.dynamic.times), p0s=p0s)
+                 inputs=Q, times=tuple(cfg.dynamic.times), p0s=p0s, truth=simulation_truth(cfg, models, p0s))
+
+
+def simulation_truth(cfg: StudyConfig, models: dict, p0s: dict) -> SimulationTruth | None:
+    """The true parameters of the study's data when they are the config's own simulation, else None.
+
+    Known when the config has a ``[simulate] truth`` and the data file's folder holds the
+    ``simulate.json`` that ``mudoe simulate`` wrote beside it naming the same model, variant and true
+    values (the [simulate] truth completed with the [[parameters]] starts, as :func:`simulate_dynamic`
+    does, equal to 1e-12 relative); real data beside a [simulate] section show no truth.
+    """
+    sc = cfg.simulate
+    if not sc.truth or cfg.data.source != "csv":
+        return None
+    variant = sc.variant or next(iter(models))
+    if variant not in models:
+        return None
+    truth = dict(zip(models[variant].param_names, (float(v) for v in p0s[variant])))
+    truth.update({k: float(v) for k, v in sc.truth.items()})
+    try:
+        rec = json.loads((cfg.resolve(cfg.data.directory) / "simulate.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(rec, dict) or rec.get("model") != cfg.model.name or rec.get("variant") != variant:
+        return None
+    told = rec.get("truth")
+    if not isinstance(told, dict) or set(told) != set(truth) or Path(cfg.data.file).name not in rec.get("files", ()):
+        return None
+    if not all(isinstance(told[n], (int, float)) and math.isclose(told[n], v, rel_tol=1e-12, abs_tol=0.0)
+               for n, v in truth.items()):
+        return None
+    return SimulationTruth(variant, truth, f"[simulate] truth of {Path(cfg.path).name}, the campaign's simulate.json "
+                                           f"(variant {variant}, seed {rec.get('seed')})")
 
 
 # ---------------------------------------------------------------------------- simulate
@@ -404,12 +436,14 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 40
         q, name = float(stats.norm.ppf(0.5 + level / 2)), "normal"
     s2 = np.asarray(sigma, float)[None, None, :] ** 2
     res = np.full(data.z.shape, np.nan)
+    fitted = np.full(data.z.shape[1:], np.nan)
     for j in range(n_q):
         n = int(np.isfinite(data.times[j]).sum())
         at = np.searchsorted(t, data.times[j, :n])
+        fitted[j, :n] = h[j, at]
         res[:, j, :n] = (data.z[:, j, :n] - h[j, at][None]) / np.asarray(sigma, float)
     return Trajectories(t, h, q * np.sqrt(np.maximum(var, 0)), q * np.sqrt(np.maximum(var, 0) + s2), level, name,
-                        res, float(err), DiscretisationSettings().tol_sigma)
+                        res, float(err), DiscretisationSettings().tol_sigma, fitted=fitted)
 
 
 def run_trajectories(study, results, progress):

@@ -32,7 +32,7 @@ def _small(tmp_path, name, edits, data_dir=None):
     return path
 
 
-@pytest.mark.parametrize("name", ["reactor", "oscillator"])
+@pytest.mark.parametrize("name", ["reactor", "oscillator", "motor"])
 def test_shipped_data_regenerate_identically(tmp_path, capsys, name):
     cfg = REPO / "configs" / f"{name}.toml"
     rc, _, _ = _run(capsys, "simulate", str(cfg), "--out", str(tmp_path))
