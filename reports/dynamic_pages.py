@@ -269,8 +269,8 @@ def _trajectory_pages(results):
                                      loc="left")
             handles, labels = axes[0, inputs].get_legend_handles_labels()
             fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False,
-                       bbox_to_anchor=(0.5, 0.075))
-            fig.subplots_adjust(left=0.07, right=0.98 if not inputs else 0.985, top=0.9, bottom=0.2,
+                       bbox_to_anchor=(0.5, 0.1))
+            fig.subplots_adjust(left=0.07, right=0.98 if not inputs else 0.985, top=0.9, bottom=0.22,
                                 wspace=0.22 if not inputs else 0.32, hspace=0.55)
             said = (" Left column: the experiment's inputs, each control u(t) over its grid (the constants in "
                     "the box; every value in the table 'Experiments')." if inputs else "")
@@ -278,7 +278,7 @@ def _trajectory_pages(results):
             series = (f" Series {', '.join(str(i + 1) for i in range(data.n_M))}: "
                       f"{', '.join(_marker_words(i) for i in range(data.n_M))}, drawn side by side ({apart} apart)."
                       if data.n_M > 1 else "")
-            _text(fig, 0.04, 0.06, f"Measured readings and the outputs h(x(t)) of {v} at its estimate on a fine time "
+            _text(fig, 0.04, 0.088, f"Measured readings and the outputs h(x(t)) of {v} at its estimate on a fine time "
                   f"grid ({_grid_error(traj)}). Bands at {100 * traj.level:g} %: h +- q "
                   "sqrt(g^T C g) for the mean (shaded) and h +- q sqrt(g^T C g + sigma^2) for a new reading "
                   f"(dashed), g = dh/dp exact, C the second-order covariance, q the {traj.quantile} quantile. Red "

@@ -56,7 +56,7 @@ from models.state import jit_enabled
 from identification import cluster
 from identification.errors import DataError, IdentificationError
 from identification.fit.record import FitRecord
-from identification.fit.start import as_start_vector, param_scale
+from identification.fit.start import checked_start, param_scale
 from identification.replicate import ReplicationTask, replicate
 
 __all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
@@ -107,22 +107,11 @@ def _seed_sequence(seed) -> np.random.SeedSequence:
     return np.random.SeedSequence(int(seed))
 
 
-def _checked_p0(model, p0) -> np.ndarray:
-    p0 = as_start_vector(model, p0)
-    for i, par in enumerate(model.params):
-        if not math.isfinite(p0[i]):
-            raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
-        if p0[i] < par.lower or p0[i] > par.upper:
-            raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
-                            f"[{par.lower:g}, {par.upper:g}]")
-    return p0
-
-
 def start_rules(model, p0) -> tuple:
     """x = rule(u), u uniform in [0, 1): per parameter, how starts 2..N are drawn (see the module docstring):
     (kind, a, b) with kind "fixed" (value a), "log" (a (b / a)^u), "uniform" (a + u (b - a)), "above"
     (a + b 10^(2u - 1)), "below" (a - b 10^(2u - 1)) or "around" (a + 3 b (2u - 1))."""
-    p0 = _checked_p0(model, p0)
+    p0 = checked_start(model, p0)
     s = param_scale(model, p0)
     rules = []
     for i, par in enumerate(model.params):
@@ -188,7 +177,7 @@ def draw_starts(model, p0, n: int, seed=0) -> tuple:
     """
     n = check_starts(n)
     ss = _seed_sequence(seed)
-    p0 = _checked_p0(model, p0)
+    p0 = checked_start(model, p0)
     rules = start_rules(model, p0)
     out = np.tile(p0, (n, 1))
     if n > 1:

@@ -23,10 +23,24 @@ from identification.fit.implicit_start import solve_states_from
 from identification.fit.measurements import Measurements, common_spread
 from identification.fit.refinement import ReducedProblem
 
-__all__ = ["Start", "make_start", "scalings", "predictor", "as_start_vector", "param_scale", "decrement_unit"]
+__all__ = ["Start", "make_start", "scalings", "predictor", "as_start_vector", "checked_start", "param_scale",
+           "decrement_unit"]
 
 
 # ---------------------------------------------------------------------------- validation
+def checked_start(model, p0) -> np.ndarray:
+    """p0 as a float vector (n_p,) (:func:`as_start_vector`), finite and within every parameter's bounds
+    [lower, upper] (model units); a DataError names the parameter otherwise."""
+    p0 = as_start_vector(model, p0)
+    for i, par in enumerate(model.params):
+        if not math.isfinite(p0[i]):
+            raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
+        if p0[i] < par.lower or p0[i] > par.upper:
+            raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
+                            f"[{par.lower:g}, {par.upper:g}]")
+    return p0
+
+
 def _validate(model, data, p0, weights):
     if not isinstance(model, Model):
         raise TypeError(f"model: expected a models.Model, got {type(model).__name__}")
@@ -42,13 +56,7 @@ def _validate(model, data, p0, weights):
     if data.sensors != default_names and data.sensors != model.sensors:
         raise DataError(f"data.sensors {list(data.sensors)} do not match the model's sensors "
                         f"{list(model.sensors)}; use data.select(model.sensors)")
-    p0 = as_start_vector(model, p0)
-    for i, par in enumerate(model.params):
-        if not math.isfinite(p0[i]):
-            raise DataError(f"p0: start value of {par.name!r} is not finite ({p0[i]})")
-        if p0[i] < par.lower or p0[i] > par.upper:
-            raise DataError(f"p0: start value {p0[i]:g} of {par.name!r} lies outside its bounds "
-                            f"[{par.lower:g}, {par.upper:g}]")
+    p0 = checked_start(model, p0)
     w = data.sensor_weights(weights)
     if not np.any(w > 0):
         raise DataError("weights: no sensor is selected (all weights are zero)")
