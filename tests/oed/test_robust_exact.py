@@ -1,4 +1,4 @@
-"""oed.robust_exact: exact n-run designs under a prior, by complete enumeration."""
+"""oed.robust_exact: exact n-run designs under a prior, by complete enumeration and by branch-and-bound."""
 import itertools
 
 import casadi as ca
@@ -70,8 +70,63 @@ def test_maximin_exact_design_against_brute_force():
     (dict(F=np.tile(np.eye(2), (3, 1, 1, 1)), prior_w=[1.0], n=4), r"n: expected an integer in 1..3"),
     (dict(F=np.tile(np.eye(2), (3, 1, 1, 1)), prior_w=[1.0], n=2, robust="worst"), r"robust: expected one of"),
     (dict(F=np.tile(np.eye(2), (3, 1, 1, 1)), prior_w=[1.0], n=2, robust="maximin"), r"u_star: the maximin"),
-    (dict(F=np.tile(np.eye(2), (30, 1, 1, 1)), prior_w=[1.0], n=15, max_designs=1000), r"n: 155117520 sets"),
+    (dict(F=np.tile(np.eye(2), (30, 1, 1, 1)), prior_w=[1.0], n=15, max_designs=1000, method="enumerate"),
+     r"n: 155117520 sets"),
+    (dict(F=np.tile(np.eye(2), (3, 1, 1, 1)), prior_w=[1.0], n=2, method="scip"), r"method: expected one of"),
+    (dict(F=np.tile(np.eye(2), (3, 1, 1, 1)), prior_w=[1.0], n=2, time_limit=0), r"time_limit: expected seconds"),
 ])
 def test_bad_input_names_the_argument(kwargs, match):
     with pytest.raises(ValueError, match=match):
         select_robust_exact(**kwargs)
+
+
+def _random_instance(rng, C, S, p):
+    """Rank-1 or rank-2 information per (candidate, sample), the samples a perturbation of a common direction."""
+    A = rng.normal(size=(C, 1, 2, p)) + 0.4 * rng.normal(size=(C, S, 2, p))
+    A[:, :, 1] *= rng.integers(0, 2, size=(C, 1, 1))
+    return np.einsum("csri,csrj->csij", A, A), rng.uniform(0.2, 1.0, S)
+
+
+@pytest.mark.parametrize("criterion", ["A", "D", "E"])
+@pytest.mark.parametrize("robust", ["bayes", "maximin"])
+def test_branch_and_bound_agrees_with_enumeration_on_random_instances(criterion, robust):
+    rng = np.random.default_rng(31 + ord(criterion) + len(robust))
+    for _ in range(6):
+        C, S, p = int(rng.integers(7, 12)), int(rng.integers(1, 4)), int(rng.integers(2, 4))
+        n = int(rng.integers(p, p + 3))
+        F, w = _random_instance(rng, C, S, p)
+        u_star = None
+        if robust == "maximin":     # each vector's own exact optimum
+            u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, criterion=criterion).value for s in range(S)])
+        e = select_robust_exact(F, w, n, criterion=criterion, robust=robust, u_star=u_star, method="enumerate")
+        b = select_robust_exact(F, w, n, criterion=criterion, robust=robust, u_star=u_star, method="bnb")
+        assert e.method == "enumerate" and b.method == "bnb" and b.nodes >= 1
+        assert b.proven_optimal and b.status == "optimal" and b.gap == 0.0
+        assert b.value == pytest.approx(e.value, rel=1e-9, abs=1e-9)
+        # the reported value is the set's value as enumeration computes it
+        again = select_robust_exact(F[list(b.indices)], w, n, criterion=criterion, robust=robust, u_star=u_star)
+        assert again.value == b.value
+
+
+def test_auto_routes_large_sizes_to_branch_and_bound_proven_optimal():
+    rng = np.random.default_rng(7)
+    F, w = _random_instance(rng, 30, 4, 3)
+    r = select_robust_exact(F, w, 8, method="auto", time_limit=60.0)     # 5.9 million sets
+    assert r.method == "bnb" and r.proven_optimal and r.gap == 0.0 and r.upper_bound == r.value
+    assert r.n_designs < 100_000 and "branch-and-bound" in r.summary()
+    small = select_robust_exact(F[:10], w, 4, method="auto")
+    assert small.method == "enumerate" and small.n_designs == 210
+
+
+def test_time_limit_is_honoured_and_reported():
+    rng = np.random.default_rng(8)
+    F, w = _random_instance(rng, 60, 6, 4)
+    for method in ("bnb", "enumerate"):
+        with pytest.warns(RuntimeWarning, match="not proven optimal"):
+            r = select_robust_exact(F, w, 12, criterion="E", method=method, time_limit=0.05, max_designs=10 ** 13)
+        assert r.status == "time_limit" and not r.proven_optimal and r.wall_time < 5.0
+        assert "NOT proven" in r.summary()
+        if method == "bnb":
+            assert np.isfinite(r.gap) and r.gap > 0 and r.upper_bound >= r.value
+        else:
+            assert r.gap == np.inf and np.isnan(r.upper_bound)
