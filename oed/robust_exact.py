@@ -34,7 +34,7 @@ from .approx_weights import standardized
 from .criteria import DEFAULT_CRITERION, Criterion
 from .robust_bnb import RobustBnBSettings, robust_branch_and_bound, robust_set_values
 
-__all__ = ["RobustExactDesign", "select_robust_exact"]
+__all__ = ["RobustExactDesign", "select_robust_exact", "set_efficiencies", "ExactOverPrior", "exact_over_prior"]
 
 ROBUST = ("bayes", "maximin")
 METHODS = ("auto", "enumerate", "bnb")
@@ -96,9 +96,10 @@ class RobustExactDesign(ResultProtocol):
         proof = ("proven optimal" if self.proven_optimal else
                  f"NOT proven: {self.status}, proven gap {self.gap:.3g} (upper bound {self.upper_bound:.9g})")
         via = f"branch-and-bound, {self.nodes} nodes" if self.method == "bnb" else "enumeration"
+        eff = "" if not np.isfinite(self.efficiency) else (
+            f", {'worst-case ' if self.robust == 'maximin' else ''}efficiency {self.efficiency:.6f}")
         return (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
-                f"{self.value:.9g} ({proof}; {via}, {self.n_designs} sets evaluated), efficiency "
-                f"{self.efficiency:.6f}, {self.wall_time:.2f} s")
+                f"{self.value:.9g} ({proof}; {via}, {self.n_designs} sets evaluated){eff}, {self.wall_time:.2f} s")
 
     def to_frame(self):
         """The chosen candidates (``index``, ``name``), one row each; ``.attrs``: value, efficiency, criterion,
@@ -242,3 +243,56 @@ def _solve_bnb(F, w, n, crit, robust, u_star, time_limit, settings) -> dict:
                                 settings)
     return dict(indices=r.indices, value=r.value, status=r.status, count=r.n_evaluated, method="bnb",
                 nodes=r.nodes, upper_bound=r.upper_bound, gap=r.gap)
+
+
+def set_efficiencies(criterion, F, design, reference) -> np.ndarray:
+    r"""Efficiency of the n-run set ``design`` against the set ``reference`` (candidate indices, same size) at every
+    parameter vector: D :math:`\exp((u_s(M_s(design)) - u_s(M_s(reference)))/n_p)`, A, E
+    :math:`u_s(reference)/u_s(design)` (ratios of trace of the inverse / inverse smallest eigenvalue), with
+    :math:`M_s = \frac1n\sum F_{c,s}`; ``F`` of shape (n_candidates, n_samples, n_p, n_p).  Returns (n_samples,)."""
+    crit = Criterion.parse(criterion)
+    F = np.asarray(F, float)
+    a, b = np.asarray(design, int)[None], np.asarray(reference, int)[None]
+    if a.shape != b.shape:
+        raise ValueError(f"design: {a.shape[1]} candidates, reference {b.shape[1]}: the sets must have the same size")
+    w = np.full(F.shape[1], 1.0 / F.shape[1])
+    ua = robust_set_values(crit, F, a, a.shape[1], w, "bayes", None)[1][0]
+    ub = robust_set_values(crit, F, b, b.shape[1], w, "bayes", None)[1][0]
+    return np.exp((ua - ub) / F.shape[2]) if crit is Criterion.D else ub / ua
+
+
+@dataclass(frozen=True)
+class ExactOverPrior:
+    """The exact robust design of n runs over a prior, the local exact design at the nominal parameters, and the
+    local design's efficiency at every parameter vector against the robust one (:func:`set_efficiencies`).
+
+    Attributes
+    ----------
+    design, local : RobustExactDesign
+    local_efficiencies : ndarray (n_samples,)
+    u_star : ndarray (n_samples,) or None
+        Maximin: each vector's own exact n-run optimum (the standard of the worst-case efficiency).
+    """
+
+    design: RobustExactDesign
+    local: RobustExactDesign
+    local_efficiencies: np.ndarray
+    u_star: np.ndarray | None
+
+
+def exact_over_prior(information_at, prior, p, n, *, criterion=DEFAULT_CRITERION, robust="bayes", names=None,
+                     time_limit: float = 60.0) -> ExactOverPrior:
+    r""":math:`\max_{|S|=n}` of the robust criterion over ``prior`` (:func:`select_robust_exact`, enumeration or
+    branch-and-bound) and the local n-run design at ``p``, with ``information_at(p_row) -> F (n_candidates, n_p,
+    n_p)`` the information of one run of every candidate.  Maximin standardizes by each parameter vector's own
+    exact n-run optimum (so the worst-case efficiency is against the best n-run design at that vector)."""
+    F = np.stack([np.asarray(information_at(ps), float) for ps in prior.points], axis=1)
+    F0 = np.asarray(information_at(np.asarray(p, float)), float)[:, None]
+    kw = dict(criterion=criterion, names=names, time_limit=time_limit)
+    local = select_robust_exact(F0, [1.0], n, **kw)
+    u_star = None
+    if robust == "maximin":
+        u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, **kw).value for s in range(F.shape[1])])
+    design = select_robust_exact(F, prior.weights, n, robust=robust, u_star=u_star, **kw)
+    return ExactOverPrior(design=design, local=local, u_star=u_star,
+                          local_efficiencies=set_efficiencies(criterion, F, local.indices, design.indices))
