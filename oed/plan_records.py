@@ -151,6 +151,12 @@ class RobustExactPlan(ResultProtocol):
 
     approximate = False
 
+    def chosen_times(self) -> tuple:
+        """A sampling-time design's chosen times, sorted (from the labels ``0.5`` or ``cA@0.5``); () for sensors."""
+        if self.mode != "times":
+            return ()
+        return tuple(sorted({float(str(n).rpartition("@")[2]) for n in self.design.names}))
+
     def summary(self) -> str:
         """Text of the robust design, its proof, the local design and its efficiency across the prior."""
         what = "sampling-time" if self.mode == "times" else "sensor"
