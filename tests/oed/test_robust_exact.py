@@ -135,3 +135,17 @@ def test_time_limit_is_honoured_and_reported():
     with pytest.warns(RuntimeWarning, match="node_limit"):
         r = select_robust_exact(F, w, 12, criterion="E", method="bnb", bnb_settings=RobustBnBSettings(node_limit=3))
     assert r.status == "node_limit" and r.gap > 0 and r.upper_bound > r.value
+
+
+def test_select_times_with_a_prior_and_not_approximate_is_the_exact_robust_design(reactor):
+    m, p, times, pr, F = reactor
+    prior = {"E1": ("uniform", 55.0, 65.0), "E2": ("uniform", 75.0, 85.0)}
+    ref = select_robust_exact(F, pr.weights, 4, names=[f"{t:g}" for t in times])
+    for method in ("enumerate", "bnb"):
+        r = select_times(m, p, times, Q, SIGMA, n_times=4, prior=make_prior(prior, m, p, order=2), method=method)
+        assert r.method == method and r.proven_optimal and r.names == ref.names
+        assert r.value == pytest.approx(ref.value, rel=1e-12)
+    with pytest.raises(ValueError, match="costs: not used by the exact robust design"):
+        select_times(m, p, times, Q, SIGMA, n_times=4, prior=prior, costs=[1.0] * times.size, budget=3.0)
+    with pytest.raises(ValueError, match="method: the exact robust design takes"):
+        select_times(m, p, times, Q, SIGMA, n_times=4, prior=prior, method="scip")
