@@ -149,3 +149,24 @@ def test_select_times_with_a_prior_and_not_approximate_is_the_exact_robust_desig
         select_times(m, p, times, Q, SIGMA, n_times=4, prior=prior, costs=[1.0] * times.size, budget=3.0)
     with pytest.raises(ValueError, match="method: the exact robust design takes"):
         select_times(m, p, times, Q, SIGMA, n_times=4, prior=prior, method="scip")
+
+
+def test_select_sensors_with_a_prior_is_the_exact_robust_design():
+    from identification import information_contributions
+    from models.press import press_model
+    from oed import select_sensors
+    m, p = press_model(extra_sensors=True), np.array([500.0, 500.0])
+    prior = {"k5": ("uniform", 400.0, 600.0), "k7": ("uniform", 400.0, 600.0)}
+    pr = make_prior(prior, m, p, order=3)
+    Q = np.array([[500.0]])
+    F = np.stack([information_contributions(m, None, ps, inputs=Q, sigma=0.01)[0] for ps in pr.points], axis=1)
+    ref = select_robust_exact(F, pr.weights, 4, criterion="E", names=list(m.sensors), method="enumerate")
+    r = select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, criterion="E",
+                       kind="gauss_newton", prior=pr, method="bnb")
+    assert r.method == "bnb" and r.proven_optimal and r.names == ref.names
+    assert r.value == pytest.approx(ref.value, rel=1e-9)
+    with pytest.raises(ValueError, match="exclude: not used by the exact robust design"):
+        select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, prior=pr, exclude=["D_y"],
+                       kind="gauss_newton")
+    with pytest.raises(ValueError, match="kind: the exact robust design uses the Gauss-Newton"):
+        select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, prior=pr, kind="second_order")
