@@ -233,8 +233,9 @@ def _robust_exact_text(plan, kind: str) -> str:
     e, w = np.asarray(plan.local_efficiencies), np.asarray(plan.prior_weights)
     proof = (f"proven optimal by {'complete enumeration' if d.method == 'enumerate' else 'branch-and-bound'}"
              if d.proven_optimal else f"NOT proven optimal: stopped at the {d.status}, proven gap {d.gap:.3g}")
-    crit = {"D": "expected log det of the information per run", "A": "expected -trace of its inverse",
-            "E": "expected -1/smallest eigenvalue"}[d.criterion] if d.robust == "bayes" else "worst-case efficiency"
+    crit = ({"D": "expected log det of the information per run", "A": "expected -trace of its inverse",
+             "E": "expected -1/smallest eigenvalue"}[d.criterion] if d.robust == "bayes" else
+            f"worst-case efficiency {d.efficiency:.6f}; standardized worst case")
     txt = (f"{'Planned before data at the start values' if plan.planned else 'At the estimate'} of {plan.variant}, "
            f"p = ({', '.join(f'{v:.6g}' for v in plan.p)}); the prior: {len(w)} parameter vectors. "
            f"{kind[0].upper() + kind[1:]} {d.criterion}-optimal choice of {len(d.indices)} of the {len(plan.candidates)} "
@@ -244,8 +245,7 @@ def _robust_exact_text(plan, kind: str) -> str:
            "(right; above 1 where the local design is the better one at that parameter vector: the robust design is "
            "best over the prior as a whole).")
     if d.robust == "maximin":
-        txt += (" The worst-case efficiency is against each parameter vector's own best design of as many runs "
-                f"(exact): {d.efficiency:.6f}.")
+        txt += " The worst-case efficiency is against each parameter vector's own best design of as many runs (exact)."
     for n in plan.notes:
         txt += f"\nNote: {n}"
     return txt
