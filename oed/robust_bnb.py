@@ -238,6 +238,7 @@ def evaluate_points(prob: RobustProblem, X, free, on, r) -> _Point:
         c = np.where(ok, prob.std(np.where(ok, u, 0.0)), np.inf)
         cmin = c.min(axis=1, keepdims=True)
         e = np.exp(-MAXIMIN_BETA * (c - np.where(np.isfinite(cmin), cmin, 0.0)))
+        e[~allok] = 1.0                                            # (rows without a tangent: unused)
         mu = e / e.sum(axis=1, keepdims=True)
         obj = np.where(allok, cmin[:, 0] - np.log(e.sum(axis=1)) / MAXIMIN_BETA, -np.inf)
         grad = np.einsum("bcs,bs->bc", qa, mu * prob.kappa)
