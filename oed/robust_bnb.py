@@ -21,15 +21,17 @@ every :math:`v\in P`:
 * D: :math:`u_s(M_s(v)) \le \log\det X_s - n_p + \operatorname{tr}(X_s^{-1}M_s(v))` (concavity of log det);
 * A: :math:`u_s(M_s(v)) \le -2\operatorname{tr}X_s^{-1} + \operatorname{tr}(X_s^{-2}M_s(v))`;
 * E: :math:`\lambda_{\min}(M_s(v)) \le t_s(v) = z_s^TM_s(v)z_s` (``z_s`` the unit eigenvector of
-  :math:`\lambda_{\min}(X_s)`), so :math:`u_s \le -1/t_s` (:math:`-\infty` where :math:`t_s\le 0`).
+  :math:`\lambda_{\min}(X_s)`), so :math:`u_s \le -1/t_s` (:math:`-\infty` where :math:`t_s\le 0`), and by
+  concavity of :math:`-1/t` the affine :math:`u_s \le -2/t_0 + t_s(v)/t_0^2`, :math:`t_0 = \lambda_{\min}(X_s)`.
 
-Each right-hand side is affine in ``v`` (E: through :math:`t_s`), so its maximum over ``P`` is a fixed-in sum
-plus a top-``r`` sum over the free candidates: :math:`B_s` bounds :math:`u_s` over the node.  Then
+Each right-hand side is affine in ``v`` (E's first one through :math:`t_s`), so its maximum over ``P`` is a
+fixed-in sum plus a top-``r`` sum over the free candidates: :math:`B_s` (the smaller of E's two) bounds
+:math:`u_s` over the node.  Then
 
-* bayes: :math:`\Phi \le \sum_s\pi_s B_s` (the sum of per-sample bounds); for A and D the tighter
-  :math:`\max_{v\in P}\sum_s\pi_s(\text{affine}_s(v))` (one top-``r`` sum of the prior-averaged linear form,
-  never above the sum of the per-sample maxima) is used;
-* maximin: :math:`\Phi \le \min_s c_s(B_s)` (the minimum of the per-sample bounds), and for A, D also
+* bayes: :math:`\Phi \le \sum_s\pi_s B_s` (the sum of per-sample bounds) and
+  :math:`\Phi \le \max_{v\in P}\sum_s\pi_s(\text{affine}_s(v))` (one top-``r`` sum of the prior-averaged
+  linear form, never above the sum of the affine per-sample maxima); the smaller is kept;
+* maximin: :math:`\Phi \le \min_s c_s(B_s)` (the minimum of the per-sample bounds) and
   :math:`\Phi\le\max_{v\in P}\sum_s\mu_s c_s(\text{affine}_s(v))` for the soft-min weights :math:`\mu` of the
   relaxed point (:math:`\min_s c_s \le \sum_s\mu_s c_s`); the smaller is kept.
 
