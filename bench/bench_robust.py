@@ -14,15 +14,19 @@ theta = (0.05884, 4.298, 21.80) (Atkinson, Donev & Tobias 2007, ch. 17-18), with
   efficiency on a 21 x 21 parameter grid (each point's own local optimum by the engine, certified);
 * the batch reactor (mudoe.example_reactor): Bayesian D sampling times with E1 ~ U(55, 65), E2 ~ U(75, 85)
   (3 x 3 Gauss), three experiments;
-* exact robust n-run designs (:func:`oed.robust_exact.select_robust_exact`, complete enumeration) for the press
-  sensors and the reactor's sampling times, with the efficiency against the approximate design.
+* exact robust n-run designs (:func:`oed.robust_exact.select_robust_exact`, complete enumeration and the
+  branch-and-bound of :mod:`oed.robust_bnb`, compared on every instance) for the press sensors (the paper's 3 and
+  the 20 extended ones) and the reactor's sampling times (the shipped configs/reactor.toml: 6 experiments, 4 of
+  10 times; and 4..8 of 40 times), with the efficiency against the approximate design and the local design's
+  efficiency across the prior (``--exact-only`` runs just these).
 
 Times are wall seconds, median of ``--rep`` runs (default 3), on the machine and date printed.
 
-Run: ``python -m bench robust [--rep=3] [--no-brute]``
+Run: ``python -m bench robust [--rep=3] [--no-brute] [--exact-only]``
 """
 from __future__ import annotations
 
+import math
 import platform
 import time
 from datetime import datetime, timezone
@@ -146,47 +150,127 @@ def _reactor(rep):
               f"{t:.2f} s")
 
 
-def _exact(rep):
-    """Exact robust designs at the shipped studies' sizes: press sensors (2 of 3; and 2..4 of the 20 extended
-    sensors) with k5, k7 ~ U(+-20 %), reactor sampling times (4 of 10) with E1, E2 ~ U(+-5)."""
-    from identification import information_contributions
-    from mudoe.example_reactor import P_TRUE, TIMES, build
-    from models.press import K_NOMINAL, press_model
-    from oed import information, make_prior
+def _exact_line(label, F, w, n, names, crit="D", robust="bayes", u_star=None, rep=1, enum_max=300_000):
+    """Both routes of select_robust_exact on one instance (enumeration only up to enum_max sets): one line."""
     from oed.robust_exact import select_robust_exact
-    for extra, sizes in ((False, (2,)), (True, (2, 3, 4))):
+    kw = dict(criterion=crit, robust=robust, u_star=u_star, names=names, time_limit=30.0)
+    b, tb = _timed(lambda: select_robust_exact(F, w, n, method="bnb", **kw), rep)
+    total = math.comb(F.shape[0], n)
+    enum = "enumeration not run"
+    if total <= enum_max:
+        e, te = _timed(lambda: select_robust_exact(F, w, n, method="enumerate", max_designs=10 ** 9, **kw), rep)
+        same = "same value" if abs(e.value - b.value) <= 1e-9 * max(1.0, abs(e.value)) else "DIFFERENT VALUE"
+        enum = f"enumeration {te:.3f} s ({same}{', same set' if e.indices == b.indices else ''})"
+    print(f"{label}: {robust} {crit}, {n} of {F.shape[0]} ({total} sets), {F.shape[1]} vectors: {list(b.names)}, "
+          f"value {b.value:.9g}, {b.status} (gap {b.gap:.1e}), B&B {tb:.3f} s, {b.nodes} nodes, {b.n_designs} sets "
+          f"evaluated; {enum}", flush=True)
+    return b
+
+
+def _u_star(F, n, crit):
+    from oed.robust_exact import select_robust_exact
+    return np.array([select_robust_exact(F[:, [s]], [1.0], n, criterion=crit, time_limit=30.0).value
+                     for s in range(F.shape[1])])
+
+
+def _exact(rep):
+    """Exact robust n-run designs (enumeration and branch-and-bound) at the shipped studies' sizes and beyond: press
+    sensors (2 of the paper's 3; 2..10 of the 20 extended sensors) with k5, k7 ~ U(400, 600), the reactor's sampling
+    times (4 of the shipped 10; 4..8 of 40) with E1 ~ U(55, 65), E2 ~ U(75, 85); efficiency against the approximate
+    design and the local design's efficiency across the prior."""
+    from identification import information_contributions
+    from models.press import K_NOMINAL, press_model
+    from oed import make_prior
+    from oed.robust_exact import set_efficiencies
+    for extra, sizes in ((False, (2,)), (True, (2, 3, 4, 6, 8, 10))):
         m = press_model(extra_sensors=extra)
         p = np.array(K_NOMINAL)
         pr = make_prior({"k5": ("uniform", 400.0, 600.0), "k7": ("uniform", 400.0, 600.0)}, m, p, order=5)
-        F = np.stack([information_contributions(m, None, ps, inputs=np.array([[500.0]]), sigma=0.01)[0]
-                      for ps in pr.points], axis=1)
+        info = lambda ps: information_contributions(m, None, ps, inputs=np.array([[500.0]]), sigma=0.01)[0]
+        F, F0 = np.stack([info(ps) for ps in pr.points], axis=1), info(p)[:, None]
         for n in sizes:
             for crit in ("D", "E"):
-                r, t = _timed(lambda: select_robust_exact(F, pr.weights, n, criterion=crit, names=m.sensors), rep)
-                print(f"press ({m.n_S} sensors) bayes {crit}, {n} sensors, 5 x 5 prior: {list(r.names)}, "
-                      f"proven optimal {r.proven_optimal} ({r.n_designs} sets), {t:.3f} s")
-    m = build()
-    Q = np.array([[1.0, 330.0], [2.0, 350.0], [2.0, 370.0]])
-    pr = make_prior({"E1": ("uniform", 55.0, 65.0), "E2": ("uniform", 75.0, 85.0)}, m, P_TRUE, order=3)
-    t0 = time.perf_counter()
-    F = np.stack([information(m, ps, axis="times", times=TIMES, inputs=Q, sigma=np.array([0.01, 0.008])).F
-                  for ps in pr.points], axis=1)
-    t_info = time.perf_counter() - t0
+                for robust in ("bayes", "maximin"):
+                    us = _u_star(F, n, crit) if robust == "maximin" else None
+                    b = _exact_line(f"press ({m.n_S} sensors)", F, pr.weights, n, list(m.sensors), crit, robust, us,
+                                    rep)
+                    if robust == "bayes":
+                        loc = _exact_line("  local at p", F0, [1.0], n, list(m.sensors), crit, rep=1)
+                        e = set_efficiencies(crit, F, loc.indices, b.indices)
+                        print(f"  local design {list(loc.names)} across the prior against the robust one: min "
+                              f"{e.min():.6f}, mean {pr.weights @ e:.6f}, max {e.max():.6f}")
+    _exact_reactor(rep)
+    _exact_synthetic(rep)
+
+
+def _exact_synthetic(rep):
+    """A size far beyond enumeration: random rank-1 information (a common direction per candidate plus 0.3 x a
+    per-vector perturbation), 40 candidates, 9 vectors, n_p = 4, choose 10 (848 million sets), seed 1."""
+    rng = np.random.default_rng(1)
+    C, S, p, n = 40, 9, 4, 10
+    A = rng.normal(size=(C, 1, 1, p)) + 0.3 * rng.normal(size=(C, S, 1, p))
+    F = np.einsum("csri,csrj->csij", A, A)
+    for crit in "DAE":
+        _exact_line("synthetic", F, np.full(S, 1.0 / S), n, [f"c{k}" for k in range(C)], crit, rep=rep)
+
+
+def _exact_reactor(rep):
+    from mudoe.config import load_config
+    from mudoe.example_reactor import P_TRUE, build
+    from oed import information, make_prior
     from oed.approximate import ApproximateSettings, approximate_design
-    ap = approximate_design(m, P_TRUE, sigma=np.array([0.01, 0.008]), bounds=(TIMES.min(), TIMES.max()), inputs=Q,
-                            prior=pr, settings=ApproximateSettings(grid=37, rounds=6))
-    for n in (3, 4, 5):
-        r, t = _timed(lambda: select_robust_exact(F, pr.weights, n, approximate=ap, names=[f"{v:g}" for v in TIMES]),
-                      rep)
-        print(f"reactor bayes D, {n} of {TIMES.size} times, 3 x 3 prior: {list(r.names)}, proven optimal "
-              f"{r.proven_optimal} ({r.n_designs} sets), efficiency vs approximate (gap {ap.gap:.1e}) "
-              f"{r.efficiency:.6f}, {t:.3f} s (+ {t_info:.2f} s information)")
+    from oed.robust_exact import set_efficiencies
+    from pathlib import Path
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "reactor.toml")
+    from mudoe.kind.time_series import experiment_rows
+    Q = experiment_rows(cfg, build())
+    sigma = np.array([s.sigma for s in cfg.sensors], float)
+    m = build()
+    narrow = {"E1": ("uniform", 55.0, 65.0), "E2": ("uniform", 75.0, 85.0)}
+    wide = {"E1": ("uniform", 45.0, 75.0), "E2": ("uniform", 65.0, 95.0)}
+    shipped = np.asarray(cfg.dynamic.times, float)
+    for times, sizes, order, prior in ((shipped, (cfg.dynamic.n_times,), 3, narrow),
+                                       (shipped, (cfg.dynamic.n_times,), 5, narrow),
+                                       (shipped, (cfg.dynamic.n_times,), 5, wide),
+                                       (np.linspace(0.05, 2.0, 40), (4, 6, 8), 3, narrow),
+                                       (np.linspace(0.05, 2.0, 40), (6,), 5, wide)):
+        pr = make_prior(prior, m, P_TRUE, order=order)
+        print(f"prior: {prior}", flush=True)
+        t0 = time.perf_counter()
+        info = lambda ps: information(m, ps, axis="times", times=times, inputs=Q, sigma=sigma).F
+        F, F0 = np.stack([info(ps) for ps in pr.points], axis=1), info(P_TRUE)[:, None]
+        t_info = time.perf_counter() - t0
+        ap, t_ap = _timed(lambda: approximate_design(m, P_TRUE, sigma=sigma, bounds=(times.min(), times.max()),
+                                                     inputs=Q, prior=pr, settings=ApproximateSettings(grid=41,
+                                                                                                      rounds=6)), 1)
+        print(f"reactor ({Q.shape[0]} experiments of configs/reactor.toml, {times.size} times, {pr.n} vectors): "
+              f"information {t_info:.2f} s; Bayesian D approximate design t = {np.round(ap.points[:, 0], 4).tolist()} "
+              f"w = {np.round(ap.weights, 3).tolist()} (gap {ap.gap:.1e}), {t_ap:.2f} s", flush=True)
+        names = [f"{t:g}" for t in times]
+        for n in sizes:
+            for crit in ("D", "A", "E"):
+                b = _exact_line("reactor", F, pr.weights, n, names, crit, rep=rep)
+                loc = _exact_line("  local at P_TRUE", F0, [1.0], n, names, crit, rep=1)
+                e = set_efficiencies(crit, F, loc.indices, b.indices)
+                msg = ""
+                if crit == "D":
+                    msg = (f"; exact design's efficiency against the approximate one "
+                           f"{np.exp((b.value - ap.value) / F.shape[2]):.6f}")
+                print(f"  local design across the prior against the robust one: min {e.min():.6f}, mean "
+                      f"{pr.weights @ e:.6f}, max {e.max():.6f}{msg}")
+            us = _u_star(F, n, "D")
+            _exact_line("reactor", F, pr.weights, n, names, "D", "maximin", us, rep)
 
 
 def main(argv=None) -> None:
     argv = list(argv or [])
     rep = next((int(a.split("=")[1]) for a in argv if a.startswith("--rep=")), 3)
     brute = "--no-brute" not in argv
+    if "--exact-only" in argv:
+        print(f"machine: {platform.node()} {platform.machine()}, python {platform.python_version()}; "
+              f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
+        _exact(rep)
+        return
     print(f"machine: {platform.node()} {platform.machine()}, python {platform.python_version()}; "
           f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
     model = compartmental()

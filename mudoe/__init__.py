@@ -60,7 +60,7 @@ _EXPORTS = {
     "DesignResult": "oed", "DesignTable": "oed", "InputDesignResult": "oed", "RefinedInputs": "oed",
     "DiscriminationResult": "oed", "ApproximateDesign": "oed", "SequentialResult": "oed.sequential",
     "RobustExactDesign": "oed.robust_exact",
-    "PlannedDesign": "oed.plan_records", "RobustPlan": "oed.plan_records",
+    "PlannedDesign": "oed.plan_records", "RobustPlan": "oed.plan_records", "RobustExactPlan": "oed.plan_records",
     "DiscriminationPlan": "oed.plan_records", "DynamicDesign": "oed.plan_records",
     # errors
     "IdentificationError": "identification", "DataError": "identification", "ConvergenceError": "identification",

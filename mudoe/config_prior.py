@@ -1,5 +1,8 @@
 """The robust-design keys of ``[oed]`` (issue 31): ``prior``, ``robust`` and ``approximate``.
 
+With ``mode = "sensors"`` (and ``approximate = false``) a prior gives the exact robust n-run design: a static
+study's sensors (``planned = true``) or a dynamic study's sampling times (:mod:`mudoe.robust_plans`).
+
 ``prior`` is a table, one key per uncertain parameter, its value ``[distribution, arguments...]``::
 
     [oed]
@@ -19,7 +22,8 @@ import math
 
 from .config_errors import ConfigContext, ConfigError
 
-__all__ = ["DISTRIBUTION_ARGS", "prior_error", "read_prior", "check_robust_prior", "check_robust_keys"]
+__all__ = ["DISTRIBUTION_ARGS", "prior_error", "read_prior", "check_robust_prior", "check_robust_keys",
+           "check_exact_robust_keys"]
 
 #: number of arguments of each distribution (the same as :data:`oed.prior.DISTRIBUTIONS`; a test checks it)
 DISTRIBUTION_ARGS = {"uniform": 2, "normal": 2, "lognormal": 2, "truncnormal": 4}
@@ -62,15 +66,25 @@ def check_robust_prior(ctx: ConfigContext, o) -> None:
 
 
 def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
-    """prior / approximate are for a static study's ``mode = "inputs"`` (without refine, include, exclude, costs)."""
+    """prior / approximate: the approximate design is for a static study's ``mode = "inputs"`` (without refine,
+    include, exclude, costs); a prior with ``mode = "sensors"`` (and approximate = false) asks for the exact
+    robust n-run design of a static study's sensors (planned = true) or of a dynamic study's sampling times
+    (:func:`check_exact_robust_keys`)."""
     if not (o.prior or o.approximate):
         return
     key = "prior" if o.prior else "approximate"
+    if o.prior and not o.approximate and o.mode == "sensors":
+        check_exact_robust_keys(ctx, o, dynamic)
+        return
     if o.mode != "inputs":
-        raise ctx.error("oed", key, f"robust and approximate designs are for mode = \"inputs\" (mode is {o.mode!r})")
+        extra = (" (a prior with mode = \"sensors\" and approximate = false gives the exact robust design)"
+                 if o.mode == "sensors" else "")
+        raise ctx.error("oed", key, f"robust and approximate designs are for mode = \"inputs\" (mode is {o.mode!r})"
+                        + extra)
     if dynamic:
-        raise ctx.error("oed", key, "robust and approximate designs of a dynamic study's sampling times are not "
-                        "available in mudoe oed (use oed.select_times(..., approximate=True, prior=...))")
+        raise ctx.error("oed", key, "approximate designs of a dynamic study's sampling times are not available in "
+                        "mudoe oed (use oed.select_times(..., approximate=True, prior=...)); a prior with "
+                        "approximate = false and mode = \"sensors\" gives the exact robust sampling times")
     if o.refine:
         raise ctx.error("oed", "refine", "an approximate design already places its points on the continuous range; "
                         "leave refine out")
@@ -78,3 +92,15 @@ def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
         if getattr(o, k):
             raise ctx.error("oed", k, f"not used by an approximate design ({key} is given; every sensor is read at "
                             "each support point); leave it out")
+
+
+def check_exact_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
+    """The exact robust design (``prior`` with mode = "sensors", approximate = false) chooses exactly ``n`` candidates:
+    no include, exclude, costs, budget or max_sensors; a static study's is planned before data."""
+    if not dynamic and not o.planned:
+        raise ctx.error("oed", "prior", "the exact robust sensor design of a static study is planned before data "
+                        "(set planned = true with candidates): with data, the sensor design is the estimate's")
+    for k in ("include", "exclude", "costs", "budget", "max_sensors"):
+        if getattr(o, k) not in ((), None):
+            raise ctx.error("oed", k, "not used by the exact robust design (prior is given: it chooses exactly "
+                            "n_sensors candidates, or [dynamic] n_times sampling times); leave it out")

@@ -283,8 +283,9 @@ class OEDConfig:
     n_readings : int or None       mode "discrimination": number of free (set point, sensor) readings
     refine : bool                  mode "inputs": also refine the chosen set points continuously within the
                                    candidates' range (oed.refine_inputs: Ipopt, multi-start; slow on the press)
-    prior : dict                   mode "inputs": {parameter: (distribution, *args)}, the parameter uncertainty
-                                   of a robust approximate design (mudoe.config_prior; {} = none: local)
+    prior : dict                   {parameter: (distribution, *args)}, the parameter uncertainty of a robust
+                                   approximate design (mode "inputs") or of the exact robust design of sensors
+                                   or sampling times (mode "sensors"; mudoe.config_prior; {} = none: local)
     robust : {"", "bayes", "maximin"}  with a prior: the pseudo-Bayesian (default) or maximin criterion
     approximate : bool             mode "inputs": the approximate design (support points, weights and the
                                    equivalence certificate) on the candidates' range instead of n_points

@@ -4,6 +4,6 @@ from __future__ import annotations
 import oed.plan_records as _moved
 from reports.moved import moved
 
-__all__ = ["PlannedDesign", "RobustPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
+__all__ = ["PlannedDesign", "RobustPlan", "RobustExactPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
 
 __getattr__ = moved(__name__, _moved, __all__)

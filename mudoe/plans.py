@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from models.contract import Model
-from oed.plan_records import DiscriminationPlan, PlannedDesign, RobustPlan
+from oed.plan_records import DiscriminationPlan, PlannedDesign, RobustExactPlan, RobustPlan
 
 from .checks import check_model
 from .config import ConfigError, StudyConfig
@@ -23,7 +23,7 @@ __all__ = ["PlannedDesign", "DiscriminationPlan", "plan_design", "plan_without_d
 
 # ---------------------------------------------------------------------------- designs before data (issue 13)
 def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigma, planned: bool,
-                progress: Progress | None = None, *, units: DataUnits) -> PlannedDesign | RobustPlan:
+                progress: Progress | None = None, *, units: DataUnits) -> PlannedDesign | RobustPlan | RobustExactPlan:
     """The ``[oed]`` design of ``mode`` at ``p`` without data: sensors over the candidate inputs, or inputs.
 
     ``units`` are the study's (:func:`mudoe.data_units.study_units`, resolved once by the caller): the
@@ -47,6 +47,13 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
     Q = q_set[:, None] if inputs_fn is None else np.asarray(inputs_fn(q_set), float)
     if sigma is None:
         raise ConfigError(f"{cfg.path}: [[sensors]] a design needs every sensor's sigma (give sigma = ...)")
+    if o.prior and not o.approximate and o.mode == "sensors":
+        from .robust_plans import plan_robust_exact
+        n = o.n_sensors if o.n_sensors is not None else model.n_p
+        with progress.step(f"exact robust sensor design ({o.criterion}, {variant}, {o.robust or 'bayes'} over the "
+                           "prior)"):
+            return plan_robust_exact(cfg, variant, model, lambda ps: select_information(model, ps, Q, sigma, o),
+                                     tuple(model.sensors), n, p, planned, "sensors")
     if o.prior or o.approximate:
         from .robust_plans import plan_robust
         with progress.step(f"approximate input design ({o.criterion}, {variant}"
@@ -71,6 +78,12 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
             res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
                                 sensors="joint" if o.mode == "both" else None, refine=o.refine, **common)
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
+
+
+def select_information(model: Model, p, Q, sigma, o):
+    """Planned Gauss-Newton information of every sensor at ``p`` (inputs ``Q``, ``[oed] n_series``), (n_S, n_p, n_p)."""
+    from oed import information
+    return information(model, p, inputs=Q, sigma=sigma, n_series=o.n_series).F
 
 
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None, built: dict | None = None) -> PlannedDesign:

@@ -4,19 +4,22 @@
 (``approximate=True``): the local approximate design at ``p``, and with a prior the pseudo-Bayesian or
 maximin one over the prior's parameter vectors, each with its equivalence-theorem certificate; then the
 local design's efficiency at every parameter vector of the prior against the robust design
-(:func:`oed.design_efficiencies`).  :func:`config_prior` checks the prior against the model (the
+(:func:`oed.design_efficiencies`).  :func:`plan_robust_exact` is ``mode = "sensors"`` with a prior (approximate =
+false): the exact robust n-run design of the sensors, or of a dynamic study's sampling times
+(:func:`oed.robust_exact.exact_over_prior`: enumeration or branch-and-bound, proven optimal or with its proven
+gap).  :func:`config_prior` checks the prior against the model (the
 messages name ``[oed] prior.<parameter>`` and its line).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from oed.plan_records import RobustPlan
+from oed.plan_records import RobustExactPlan, RobustPlan
 from .config import ConfigError, StudyConfig
 from .config_errors import ConfigContext
 from .config_prior import prior_error
 
-__all__ = ["config_prior", "plan_robust"]
+__all__ = ["config_prior", "plan_robust", "plan_robust_exact"]
 
 
 def config_prior(cfg: StudyConfig, model, p):
@@ -77,3 +80,25 @@ def plan_robust(cfg: StudyConfig, variant: str, model, Q, q_set, p, sigma, plann
         raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
     return RobustPlan(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), design, local,
                       tuple(float(e) for e in eff), notes)
+
+
+def plan_robust_exact(cfg: StudyConfig, variant: str, model, information_at, labels, n: int, p, planned: bool,
+                      mode: str) -> RobustExactPlan:
+    """The exact robust design of ``n`` of the candidates ``labels`` over ``[oed] prior``, with
+    ``information_at(p_row) -> F (n_candidates, n_p, n_p)`` (Gauss-Newton information of one run of every
+    candidate), and the local exact design at ``p`` across the prior; ``mode`` "sensors" or "times"."""
+    from oed.robust_exact import exact_over_prior
+    o = cfg.oed
+    prior = config_prior(cfg, model, p)
+    if not 1 <= n <= len(labels):
+        what = "[dynamic] n_times" if mode == "times" else "[oed] n_sensors"
+        raise ConfigError(f"{cfg.path}: {what}: the exact robust design chooses 1..{len(labels)} candidates, got {n}")
+    try:
+        r = exact_over_prior(information_at, prior, p, n, criterion=o.criterion, robust=o.robust or "bayes",
+                             names=[str(x) for x in labels])
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
+    return RobustExactPlan(variant, mode, planned, tuple(float(x) for x in p), tuple(labels), r.design, r.local,
+                           tuple(float(e) for e in r.local_efficiencies),
+                           tuple(tuple(float(v) for v in row) for row in prior.points),
+                           tuple(float(w) for w in prior.weights), tuple(model.param_names))

@@ -13,7 +13,9 @@ profiles, :mod:`oed.inputs`).  Every design result names its ``axis`` and its ``
 Approximate designs (support points and weights on a continuous range, local, pseudo-Bayesian or
 maximin over a prior, with the equivalence-theorem certificate): :func:`approximate_design`
 (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
-:func:`select_inputs` and :func:`select_times`.
+:func:`select_inputs` and :func:`select_times`.  Exact n-run designs under a prior (expected or worst-case
+criterion of the chosen set): :func:`oed.robust_exact.select_robust_exact`, by enumeration or the branch-and-bound
+with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``.
 """
 from .criteria import DEFAULT_CRITERION, Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .candidate_information import AXES, CandidateInformation, information

@@ -565,7 +565,36 @@ def design_table(F, S=None, sensor_names=None, min_sensors=None, *, kind=None, m
     return DesignTable(kind=kind_e.value, rows=tuple(rows))
 
 
-def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times=None, **kw) -> DesignResult:
+def _robust_sensors(model, p, info_at, prior, robust, kw):
+    """The ``prior=`` route of :func:`select_sensors`: the exact robust design of ``n_sensors`` sensors."""
+    from .prior import make_prior
+    from .robust_exact import METHODS, select_robust_exact
+    allowed = ("n_sensors", "criterion", "method", "time_limit", "sensor_names", "kind")
+    bad = [k for k, v in kw.items() if k not in allowed and v not in (None, (), [])]
+    if bad:
+        raise ValueError(f"{bad[0]}: not used by the exact robust design (prior is given: it chooses exactly "
+                         "n_sensors sensors); leave it out")
+    if kw.get("kind", "gauss_newton") != "gauss_newton":
+        raise ValueError(f"kind: the exact robust design uses the Gauss-Newton information at every parameter vector; "
+                         f"give kind='gauss_newton' (got {kw['kind']!r})")
+    method = kw.get("method", "auto")
+    if method not in METHODS:
+        raise ValueError(f"method: the exact robust design takes 'auto', 'enumerate' or 'bnb', got {method!r}")
+    pr = make_prior(prior, model, p)
+    infos = [info_at(ps) for ps in pr.points]
+    F = np.stack([i.F for i in infos], axis=1)
+    n = kw.get("n_sensors") or min(model.n_p, F.shape[0])
+    names = kw.get("sensor_names") or list(infos[0].labels)
+    opts = dict(criterion=kw.get("criterion", DEFAULT_CRITERION), method=method,
+                time_limit=kw.get("time_limit", 60.0), names=list(names))
+    u_star = None
+    if robust == "maximin":
+        u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, **opts).value for s in range(F.shape[1])])
+    return select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **opts)
+
+
+def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times=None, prior=None, robust="bayes",
+                   **kw):
     r"""Model-level front door: :math:`\min_w \Psi(C(w))` with :math:`(F, S)` from the model at ``p``.
 
     Calls :func:`oed.candidate_information.information` (axis ``sensors``) for the per-sensor information
@@ -589,6 +618,18 @@ def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times
         Repetitions of every input (only with ``data=None``; default 1).
     times : array_like, optional
         A dynamic model's sampling times (only with ``data=None``).
+    prior : None, (P, w), dict or oed.prior.Prior
+        Parameter uncertainty (:func:`oed.prior.make_prior` around ``p``): the exact robust design of ``n_sensors``
+        sensors (:func:`oed.robust_exact.select_robust_exact`, Gauss-Newton information at every parameter
+        vector; ``criterion``, ``method`` ("auto", "enumerate", "bnb"), ``time_limit`` and ``sensor_names`` are
+        read from the keyword arguments, the others refused), returned as a
+        :class:`oed.robust_exact.RobustExactDesign`.
+    robust : {"bayes", "maximin"}
+        With a prior: the expected criterion or the worst-case efficiency against each vector's own exact optimum.
+
+    Returns
+    -------
+    DesignResult, or oed.robust_exact.RobustExactDesign with a prior
 
     Notes
     -----
@@ -596,12 +637,16 @@ def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times
     vanishes: ``kind="second_order"`` then gives the Gauss-Newton covariance at the nominal
     ``p`` (recorded in :attr:`DesignResult.notes`).
     """
-    if data is None:
-        info = information(model, p, inputs=inputs, sigma=sigma, n_series=n_series, times=times)
-    else:
-        if inputs is not None or sigma is not None or times is not None:
-            raise ValueError("inputs/sigma: give them only with data=None (measurements carry their own)")
-        info = information(model, p, data=data)
+    if data is not None and (inputs is not None or sigma is not None or times is not None):
+        raise ValueError("inputs/sigma: give them only with data=None (measurements carry their own)")
+
+    def info_at(pp):
+        if data is None:
+            return information(model, pp, inputs=inputs, sigma=sigma, n_series=n_series, times=times)
+        return information(model, pp, data=data)
+    if prior is not None:
+        return _robust_sensors(model, p, info_at, prior, robust, kw)
+    info = info_at(p)
     names = kw.pop("sensor_names", None)
     if names is not None:
         info = replace(info, labels=tuple(names))

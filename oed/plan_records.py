@@ -13,7 +13,7 @@ import numpy as np
 
 from identification.results_protocol import ResultProtocol, jsonable
 
-__all__ = ["PlannedDesign", "RobustPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
+__all__ = ["PlannedDesign", "RobustPlan", "RobustExactPlan", "DiscriminationPlan", "DynamicDesign", "design_rows_text"]
 
 
 @dataclass(frozen=True)
@@ -121,6 +121,74 @@ class RobustPlan(ResultProtocol):
         robust, criterion."""
         df = self.design.to_frame()
         df.attrs.update(variant=self.variant, robust=self.design.robust, criterion=self.design.criterion)
+        return df
+
+
+@dataclass(frozen=True)
+class RobustExactPlan(ResultProtocol):
+    """An exact n-run design over a prior (``[oed] prior`` with ``approximate = false``, issue 31): sensors of a
+    static study (``mode = "sensors"``) or a dynamic study's sampling times (``mode = "times"``).
+
+    ``design`` is the :class:`oed.robust_exact.RobustExactDesign` (pseudo-Bayesian or maximin, by enumeration or
+    branch-and-bound, proven optimal or with its proven gap), ``local`` the local exact design at ``p``,
+    ``local_efficiencies`` the local design's efficiency at every parameter vector of the prior against the
+    robust one (:func:`oed.robust_exact.set_efficiencies`), ``prior_points`` / ``prior_weights`` the prior's rule,
+    ``candidates`` the candidates' labels (sensor names, times, or ``sensor@time`` pairs).
+    """
+
+    variant: str
+    mode: str
+    planned: bool
+    p: tuple
+    candidates: tuple
+    design: object
+    local: object
+    local_efficiencies: tuple
+    prior_points: tuple
+    prior_weights: tuple
+    param_names: tuple = ()
+    notes: tuple = ()
+
+    approximate = False
+
+    def chosen_times(self) -> tuple:
+        """A sampling-time design's chosen times, sorted (from the labels ``0.5`` or ``cA@0.5``); () for sensors."""
+        if self.mode != "times":
+            return ()
+        return tuple(sorted({float(str(n).rpartition("@")[2]) for n in self.design.names}))
+
+    def summary(self) -> str:
+        """Text of the robust design, its proof, the local design and its efficiency across the prior."""
+        what = "sampling-time" if self.mode == "times" else "sensor"
+        head = (f"exact robust {what} design of variant {self.variant} over a prior of {len(self.prior_weights)} "
+                f"parameter vectors, nominal p = {list(self.p)} "
+                + ("(planned before data: Gauss-Newton)" if self.planned else "(at the estimate)"))
+        e, w = np.asarray(self.local_efficiencies), np.asarray(self.prior_weights)
+        lines = [head, self.design.summary(), "local design at p (for comparison):", self.local.summary(),
+                 f"efficiency of the local design against the robust one across the prior: min {e.min():.6f}, "
+                 f"prior mean {float(w @ e):.6f}, max {e.max():.6f} ({len(e)} parameter vectors)"]
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready view: the robust and local designs (chosen, value, proof), the prior and the efficiencies."""
+        d, e = self.design, np.asarray(self.local_efficiencies)
+        return jsonable(dict(variant=self.variant, mode=self.mode, planned=self.planned, approximate=False,
+                             p=list(self.p), candidates=list(self.candidates), criterion=d.criterion, robust=d.robust,
+                             chosen=list(d.names), indices=list(d.indices), value=d.value,
+                             proven_optimal=d.proven_optimal, status=d.status, gap=d.gap, method=d.method,
+                             design=d.to_dict(), local=self.local.to_dict(), local_efficiencies=e.tolist(),
+                             local_efficiency_min=float(e.min()),
+                             local_efficiency_mean=float(np.asarray(self.prior_weights) @ e),
+                             param_names=list(self.param_names),
+                             prior_points=[list(x) for x in self.prior_points],
+                             prior_weights=list(self.prior_weights), notes=list(self.notes)))
+
+    def to_frame(self):
+        """The chosen candidates of the robust design (:meth:`oed.RobustExactDesign.to_frame`); ``.attrs`` also
+        variant, mode and the local design's chosen candidates."""
+        df = self.design.to_frame()
+        df.attrs.update(variant=self.variant, mode=self.mode, local=list(self.local.names))
         return df
 
 

@@ -63,16 +63,29 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
     n_series : int                 repeated series per experiment
     approximate : bool             the approximate design on [min(times), max(times)] (n_times, costs,
                                    budget, include, exclude, max_times and pairs are then not used)
-    prior : None, (P, w), dict     parameter uncertainty (:func:`oed.prior.make_prior`), only with
-                                   ``approximate=True`` (exact robust designs are not implemented)
+    prior : None, (P, w), dict     parameter uncertainty (:func:`oed.prior.make_prior`): with ``approximate=True``
+                                   the robust approximate design, else the exact robust design of n_times
+                                   candidates (:func:`oed.robust_exact.select_robust_exact`: enumeration or
+                                   branch-and-bound with a proven gap; ``method`` "auto", "enumerate" or "bnb";
+                                   maximin standardized by each parameter vector's own exact n_times optimum)
     robust : {"bayes", "maximin"}
     approx_settings : oed.approximate.ApproximateSettings or None
 
     Returns
     -------
-    DesignResult (``axis`` "times" or "pairs", ``chosen`` the labels), or oed.approximate.ApproximateDesign
-    with ``approximate=True``
+    DesignResult (``axis`` "times" or "pairs", ``chosen`` the labels), oed.approximate.ApproximateDesign
+    with ``approximate=True``, or oed.robust_exact.RobustExactDesign with a prior and ``approximate=False``
     """
+    if prior is not None and not approximate:
+        for k, v in dict(max_times=max_times, costs=costs, budget=budget).items():
+            if v is not None:
+                raise ValueError(f"{k}: not used by the exact robust design (prior is given: it chooses exactly "
+                                 "n_times candidates); leave it out")
+        if len(include) or len(exclude):
+            raise ValueError(f"{'include' if len(include) else 'exclude'}: not used by the exact robust design "
+                             "(prior is given); leave it out")
+        return _robust_exact_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
+                                   n_times, pairs, method, time_limit)
     if approximate or prior is not None:
         return _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
                                   approximate, approx_settings,
@@ -83,6 +96,27 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
     return select_sensors_from_information(info, criterion=criterion, kind="gauss_newton", n_sensors=n_times,
                                            max_sensors=max_times, costs=costs, budget=budget, include=include,
                                            exclude=exclude, method=method, time_limit=time_limit)
+
+
+def _robust_exact_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, n_times, pairs,
+                        method, time_limit):
+    """The exact robust route of :func:`select_times` (a prior, ``approximate=False``)."""
+    from .prior import make_prior
+    from .robust_exact import METHODS, select_robust_exact
+    if method not in METHODS:
+        raise ValueError(f"method: the exact robust design takes 'auto', 'enumerate' or 'bnb', got {method!r}")
+    pr = make_prior(prior, model, p)
+    axis = "pairs" if pairs else "times"
+    infos = [information(model, ps, axis=axis, times=times, inputs=inputs, sigma=sigma, sensors=sensors,
+                         n_series=n_series) for ps in pr.points]
+    F = np.stack([i.F for i in infos], axis=1)
+    n = min(model.n_p, F.shape[0]) if n_times is None else n_times
+    kw = dict(criterion=criterion, method=method, time_limit=time_limit,
+              names=list(infos[0].labels))
+    u_star = None
+    if robust == "maximin":
+        u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, **kw).value for s in range(F.shape[1])])
+    return select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **kw)
 
 
 def _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, approximate,

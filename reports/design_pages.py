@@ -25,9 +25,9 @@ import textwrap
 
 import numpy as np
 
-from oed.plan_records import RobustPlan
+from oed.plan_records import RobustExactPlan, RobustPlan
 
-__all__ = ["design_pages"]
+__all__ = ["design_pages", "robust_exact_page"]
 
 PAGE_SIZE = (11.69, 8.27)
 ROWS_PER_TABLE = 22
@@ -65,6 +65,8 @@ def design_pages(results) -> list:
         return _discrimination_pages(plan, q_unit, dict(zip(model.sensors, model.sensor_units)))
     if isinstance(plan, RobustPlan):
         return _approximate_pages(plan, q_unit)
+    if isinstance(plan, RobustExactPlan):
+        return [robust_exact_page(plan)]
     return _input_pages(plan, q_unit, list(model.sensors))
 
 
@@ -188,6 +190,62 @@ def _approximate_text(plan, kind: str) -> str:
                 f"is the better one at that parameter vector: the robust design is best over the prior as a whole).")
     txt += "\n\nThe maximum is over the checked points (a grid refined around each high local maximum), not " \
            "proven over the continuum."
+    for n in plan.notes:
+        txt += f"\nNote: {n}"
+    return txt
+
+
+def robust_exact_page(plan, axis_label: str = "") -> object:
+    """The exact robust design over a prior (:class:`oed.plan_records.RobustExactPlan`): the candidates with the
+    robust and the local designs' choices, the local design's efficiency across the prior against the robust one,
+    and the proof (method, status, gap).  ``axis_label``: the candidates' axis (times with their unit); sensors
+    are drawn by name."""
+    from .approx_figures import efficiency_curve
+    d, local = plan.design, plan.local
+    kind = {"bayes": "pseudo-Bayesian", "maximin": "maximin"}.get(d.robust, d.robust)
+    what = "sampling-time" if plan.mode == "times" else "sensor"
+    fig = _page(f"Exact robust {what} design ({d.criterion}, {kind}, {plan.variant})")
+    ax = fig.add_axes([0.07, 0.50, 0.40, 0.38])
+    labels = list(plan.candidates)
+    try:
+        x = np.array([float(v) for v in labels])
+    except ValueError:                                 # sensors, or sensor@time pairs: by position
+        x = np.arange(len(labels), dtype=float)
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, rotation=90 if len(labels) > 8 else 0, fontsize=7)
+    ax.plot(x, np.zeros_like(x), "|", color="0.6", ms=18, label="candidates")
+    ax.plot(x[list(d.indices)], np.full(len(d.indices), 0.25), "o", color="tab:green", ms=10, label=f"{kind} design")
+    ax.plot(x[list(local.indices)], np.full(len(local.indices), -0.25), "s", mfc="none", color="tab:red", ms=10,
+            label="local design at p")
+    ax.set_ylim(-0.8, 0.9)
+    ax.set_yticks([])
+    ax.set_xlabel(axis_label or ("time" if plan.mode == "times" else "sensor"))
+    ax.legend(loc="upper left", fontsize=8, ncol=3, frameon=False)
+    for side in ("left", "right", "top"):
+        ax.spines[side].set_visible(False)
+    efficiency_curve(plan.local_efficiencies, plan.prior_weights, ax=fig.add_axes([0.56, 0.50, 0.38, 0.38]))
+    _text(fig, 0.07, 0.38, _robust_exact_text(plan, kind), width=150)
+    return fig
+
+
+def _robust_exact_text(plan, kind: str) -> str:
+    d, local = plan.design, plan.local
+    e, w = np.asarray(plan.local_efficiencies), np.asarray(plan.prior_weights)
+    proof = (f"proven optimal by {'complete enumeration' if d.method == 'enumerate' else 'branch-and-bound'}"
+             if d.proven_optimal else f"NOT proven optimal: stopped at the {d.status}, proven gap {d.gap:.3g}")
+    crit = ({"D": "expected log det of the information per run", "A": "expected -trace of its inverse",
+             "E": "expected -1/smallest eigenvalue"}[d.criterion] if d.robust == "bayes" else
+            f"worst-case efficiency {d.efficiency:.6f}; standardized worst case")
+    txt = (f"{'Planned before data at the start values' if plan.planned else 'At the estimate'} of {plan.variant}, "
+           f"p = ({', '.join(f'{v:.6g}' for v in plan.p)}); the prior: {len(w)} parameter vectors. "
+           f"{kind[0].upper() + kind[1:]} {d.criterion}-optimal choice of {len(d.indices)} of the {len(plan.candidates)} "
+           f"candidates: {', '.join(d.names)} ({crit} {d.value:.9g}; {proof}, {d.n_designs} sets evaluated, "
+           f"{d.wall_time:.2f} s).\n\nThe local design at p: {', '.join(local.names)}.  Its efficiency against the "
+           f"{kind} design across the prior: min {e.min():.4f}, prior mean {float(w @ e):.4f}, max {e.max():.4f} "
+           "(right; above 1 where the local design is the better one at that parameter vector: the robust design is "
+           "best over the prior as a whole).")
+    if d.robust == "maximin":
+        txt += " The worst-case efficiency is against each parameter vector's own best design of as many runs (exact)."
     for n in plan.notes:
         txt += f"\nNote: {n}"
     return txt

@@ -18,6 +18,8 @@ from functools import partial
 
 import numpy as np
 
+from oed.plan_records import RobustExactPlan
+
 __all__ = ["trajectory_plot", "residual_time_plot", "residual_output_plot", "control_plot", "time_design_plot",
            "dynamic_pages", "discretisation_lines", "inputs_summary", "series_style"]
 
@@ -397,6 +399,11 @@ def _design_page(results):
     if plan is None or plan.mode != "times":
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig
+    if isinstance(plan, RobustExactPlan):
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        from .design_pages import robust_exact_page
+        return robust_exact_page(plan, f"time{_unit(results.study.models[plan.variant].time_unit)}")
     r, model = plan.result, results.study.models[plan.variant]
     head = ["rank", "log det C", "trace C", "max eig C",
             f"sampling times{_unit(model.time_unit)}" if not plan.pairs else "readings", ""]

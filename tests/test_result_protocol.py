@@ -177,6 +177,15 @@ def _robust_plan():
                             design=_approximate(), local=None, local_efficiencies=())
 
 
+def _robust_exact_plan():
+    import mudoe
+    r = _robust_exact()
+    return mudoe.RobustExactPlan(variant="v", mode="sensors", planned=True, p=(1.0, 2.0),
+                                 candidates=tuple(f"c{k}" for k in range(5)), design=r, local=r,
+                                 local_efficiencies=(1.0, 1.0), prior_points=((1.0, 2.0), (1.1, 2.0)),
+                                 prior_weights=(0.5, 0.5), param_names=("a", "b"))
+
+
 def _discrimination_plan():
     import mudoe
     r = _discrimination()
@@ -214,6 +223,7 @@ FACTORIES = {
     "RobustExactDesign": _robust_exact,
     "PlannedDesign": _planned,
     "RobustPlan": _robust_plan,
+    "RobustExactPlan": _robust_exact_plan,
     "DiscriminationPlan": _discrimination_plan,
     "DynamicDesign": _dynamic_design,
 }

@@ -50,7 +50,7 @@ from models.contract import ModelError, Parameter
 from models.fileio import atomic_write_texts
 from models.sensitivity import sensitivities
 from models.state import solve_states
-from oed.plan_records import DynamicDesign
+from oed.plan_records import DynamicDesign, RobustExactPlan
 
 from ..config import ConfigError, StudyConfig, config_error
 from ..config_errors import entry_error, table_line
@@ -360,8 +360,10 @@ def simulate_dynamic(cfg: StudyConfig, built: dict, seed: int | None = None) -> 
 
 
 # ---------------------------------------------------------------------------- the sampling-time design, the pages
-def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> DynamicDesign:
-    """The [oed] criterion's design of [dynamic] n_times candidate times (or pairs) at p."""
+def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool):
+    """The [oed] criterion's design of [dynamic] n_times candidate times (or pairs) at p: a
+    :class:`oed.plan_records.DynamicDesign`, or with ``[oed] prior`` the exact robust design over the prior
+    (:class:`oed.plan_records.RobustExactPlan`)."""
     from oed.best_designs import best_designs
     from oed import information, select_sensors_from_information
     dyn, o = cfg.dynamic, cfg.oed
@@ -371,8 +373,14 @@ def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool) -> Dy
     if sigma is None:
         raise ConfigError(f"{cfg.path}: [[sensors]] a sampling-time design needs every instrument's sigma")
     cand = np.asarray(dyn.candidates(), float)
-    info = information(model, p, axis="pairs" if dyn.pairs else "times", times=cand, inputs=inputs, sigma=sigma)
+    axis = "pairs" if dyn.pairs else "times"
+    info = information(model, p, axis=axis, times=cand, inputs=inputs, sigma=sigma)
     n = dyn.n_times or min(model.n_p, len(info.labels))
+    if o.prior:     # the exact robust sampling times over the prior (issue 31)
+        from ..robust_plans import plan_robust_exact
+        return plan_robust_exact(cfg, variant, model, lambda ps: information(model, ps, axis=axis, times=cand,
+                                                                             inputs=inputs, sigma=sigma).F,
+                                 info.labels, n, p, planned, "times")
     res = select_sensors_from_information(info, criterion=o.criterion, kind="gauss_newton", n_sensors=n)
     table = best_designs(info.F, None, list(info.labels), n, o.criterion, kind="gauss_newton", chosen=res.indices)
     return DynamicDesign(variant, planned, tuple(float(x) for x in p), tuple(float(x) for x in cand), dyn.pairs,
@@ -388,8 +396,10 @@ def run_oed_dynamic(study, results, progress):
     sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
     with progress.step(f"sampling-time design ({study.cfg.oed.criterion}, {v})"):
         d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False)
+    robust = isinstance(d, RobustExactPlan)          # (no DesignResult nor ranked table of the local engine)
     return dataclasses.replace(
-        results, plan=d, oed=d.result, oed_table=d.table, oed_variant=v, design_sensors=tuple(study.sensors),
+        results, plan=d, oed=None if robust else d.result, oed_table=None if robust else d.table, oed_variant=v,
+        design_sensors=tuple(study.sensors),
         design_how="all instruments at every sampling time of the data (the sampling-time design is for the next "
                    "campaign)")
 
