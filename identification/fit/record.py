@@ -8,7 +8,7 @@ import numpy as np
 
 from identification.errors import NotBoundedError
 from identification.fit.diagnostics import FitDiagnostics
-from identification.fit.identifiability import SloppyDirection, sloppy_direction
+from identification.fit.checks import SloppyDirection, sloppy_direction
 
 __all__ = ["FitRecord"]
 
