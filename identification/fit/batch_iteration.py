@@ -4,8 +4,8 @@ and the step (Gauss-Newton far from the optimum, exact Newton near it) of every 
 
 One sweep: the members' data terms on the unique inputs (:func:`prepare`), their per-member
 iteration state (:class:`Iteration`) and the model terms of a sweep at the active members
-(:func:`evaluate`, :func:`evaluate_fused`, :func:`evaluate_shared`): the states' Newton correction, y', G, the gradient at the corrected
-states, J^T Omega J and S.
+(:func:`evaluate`, :func:`evaluate_fused`, :func:`evaluate_shared`): the states' Newton correction,
+y', G, the gradient at the corrected states, J^T Omega J and S.
 """
 from __future__ import annotations
 
