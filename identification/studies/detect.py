@@ -82,7 +82,7 @@ from identification.errors import DataError, IdentificationError
 from identification.vocabulary import renamed_arguments
 from identification.fit.measurements import Measurements
 from identification.fit.problem import strategy_for
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.progress import Progress
 from identification.studies.decisions import ModelDecision, decide, model_decisions
 from identification.studies.detect_settings import (CORRECTIONS, DEFAULT_STATISTIC, STATISTICS, DetectSettings,
