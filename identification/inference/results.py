@@ -16,9 +16,8 @@ from identification.fit.record import FitRecord
 from identification.inference.curvature import Curvature, estimate_curvature
 from identification.inference.bootstrap import bootstrap_intervals
 from identification.inference.intervals import ConfidenceIntervals, resolve_params, validate_alpha
-from identification.inference.profile import profile_intervals
+from identification.inference.profile import profile_intervals, unbounded_summary
 from identification.inference.regions import Ellipsoid
-from identification.inference.unbounded_intervals import unbounded_summary
 from identification.results_protocol import ResultProtocol, jsonable
 
 __all__ = ["Estimate", "identify"]
