@@ -2,11 +2,11 @@
 (identifiability), plausibility (|p| and finite standard errors), the covariances from the
 information terms and the graded (weak) identifiability (:func:`sloppy_direction`).
 
-The graded (weak) identifiability is the sloppiest direction of the information matrix.  With the
-Gauss-Newton information F = J^T Omega J and the parameter magnitudes D = diag(max(|p_i|, se_i)) (se_i the standard error of p_i when given, so that a parameter at 0, e.g.
-on its bound, is measured by its uncertainty and not by 1 in its unit; 1 where both are 0), the
-relative information F_r = D F D has eigenpairs
-(lambda_i, v_i), lambda_1 <= ... <= lambda_n.  The combination v_1^T (dp / p) of relative
+The graded (weak) identifiability is the sloppiest direction of the information matrix. With the
+Gauss-Newton information F = J^T Omega J and the parameter magnitudes D = diag(max(|p_i|, se_i)) (se_i
+the standard error of p_i when given, so that a parameter at 0, e.g. on its bound, is measured by its
+uncertainty and not by 1 in its unit; 1 where both are 0), the relative information F_r = D F D has
+eigenpairs (lambda_i, v_i), lambda_1 <= ... <= lambda_n. The combination v_1^T (dp / p) of relative
 parameter changes has standard error 1 / sqrt(lambda_1), the best determined one v_n^T (dp / p)
 1 / sqrt(lambda_n): v_1 is determined sqrt(lambda_n / lambda_1) times worse than v_n.
 """

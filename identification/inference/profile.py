@@ -33,9 +33,9 @@ D_ij(theta_i, theta_j) on a grid for a pair of parameters; the constrained solve
 
 Profile intervals and the summary of an estimate the data do not bound
 (:func:`profile_intervals_unbounded`, :func:`unbounded_summary`; :mod:`identification.fit.unbounded`
-certifies the run-off): D_i(theta) = 2 (Phi_min,i(theta) - Phi_inf), the likelihood-ratio statistic with the supremum of
-the likelihood; the side towards which the fit runs off is +-inf (or 0 for a parameter whose
-magnitude goes to 0), the other side is found by decade steps of theta from the representative
+certifies the run-off): D_i(theta) = 2 (Phi_min,i(theta) - Phi_inf), the likelihood-ratio statistic with
+the supremum of the likelihood; the side towards which the fit runs off is +-inf (or 0 for a parameter
+whose magnitude goes to 0), the other side is found by decade steps of theta from the representative
 point and brentq on sqrt(D) - sqrt(c) inside the decade that crosses c.
 """
 from __future__ import annotations

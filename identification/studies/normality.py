@@ -2,12 +2,12 @@
 
 tilde z_k = (z_{2,j,k} - z_{1,j,k}, z_{4,j,k} - z_{3,j,k}, ...)_{j = 1..n_q} (unit of z) is tested per
 sensor k; the gate passes when every gated sensor has an adjusted p-value >= the level (multiplicity
-correction over the gated sensors, below); the repeatability
-standard deviation of a sensor is std(tilde z_k) / sqrt(2) (same unit as z).
+correction over the gated sensors, below); the repeatability standard deviation of a sensor is
+std(tilde z_k) / sqrt(2) (same unit as z).
 
-The multiplicity correction of the gate: the gate tests every gated sensor with Shapiro-Wilk; m uncorrected tests at level a reject
-Gaussian data with probability 1 - (1 - a)^m (15 % at m = 3, 64 % at m = 20, 95 % at m = 60).
-The gate therefore controls its family-wise level a over the m gated sensors:
+The multiplicity correction of the gate: the gate tests every gated sensor with Shapiro-Wilk; m
+uncorrected tests at level a reject Gaussian data with probability 1 - (1 - a)^m (15 % at m = 3, 64 % at
+m = 20, 95 % at m = 60). The gate therefore controls its family-wise level a over the m gated sensors:
 
 - ``"holm"`` (default): Holm's step-down adjusted p-values
   p~_(i) = max_{k <= i} min(1, (m - k + 1) p_(k)) (p_(1) <= ... <= p_(m));
