@@ -54,7 +54,7 @@ from scipy.integrate import solve_ivp
 from identification import DynamicMeasurements, Measurements, identify
 from identification.fit.dynamic_fit import collocated_problem, identify_dynamic
 from identification.errors import IdentificationError
-from identification.studies.normality_gate import gate_fails
+from identification.studies.normality import gate_fails
 from identification.studies.montecarlo import MonteCarloSettings, clopper_pearson, linearized_size, run_monte_carlo
 from identification.inference.profile import ProfileError, profile_intervals
 from identification.inference.regions import mahalanobis2

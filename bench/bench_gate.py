@@ -8,7 +8,7 @@ multiplicity correction; it fails when some sensor's adjusted p-value is below 5
 the failure rate with its binomial standard error sqrt(r (1 - r) / N) and Clopper-Pearson 95 %
 interval, against 1 - (1 - 0.05 / m)^m (Holm/Bonferroni with uniform p-values) and 1 - 0.95^m
 (no correction).  Every data set's gate is also recomputed from the Monte Carlo's batched
-p-values (:func:`identification.studies.montecarlo.shapiro_pvalues` + :func:`identification.studies.normality_gate.gate_fails`)
+p-values (:func:`identification.studies.montecarlo.shapiro_pvalues` + :func:`identification.studies.normality.gate_fails`)
 and must give the same decision.
 
 Run ``python -m bench gate`` (``--sets=N --sensors=3,20,60 --seed=S``).
@@ -23,7 +23,7 @@ import numpy as np
 from identification import Measurements
 from identification.studies.detect import normality_check
 from identification.studies.montecarlo import clopper_pearson, shapiro_pvalues
-from identification.studies.normality_gate import GATE_CORRECTIONS, gate_fails
+from identification.studies.normality import GATE_CORRECTIONS, gate_fails
 
 LEVEL = 0.05
 

@@ -6,7 +6,7 @@ from identification.fit.dynamic_data import DynamicMeasurements
 from identification.fit.dynamic_fit import DiscretisationSettings
 from identification.fit.problem import Problem, information_contributions
 from identification.fit.estimator import IdentifySettings, covariance_from_terms
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.fit.ipopt_solver import IpoptSettings
 from identification.inference.regions import Ellipsoid, alpha_min, alpha_min_two_sample, in_region, mahalanobis2, CovarianceError
 from identification.inference.results import Estimate

@@ -63,9 +63,8 @@ is fitted by the full-space Ipopt estimator :func:`identification.identify` inst
 fallback is recorded (which member, why, and identify's error when it failed too): a member
 is never dropped.
 The parts: the inputs, settings and results :mod:`identification.fit.batch_data`, the mapped point
-functions :mod:`identification.fit.batch_points`, the data terms and sweeps
-:mod:`identification.fit.batch_sweep`, the iteration :mod:`identification.fit.batch_iteration` (the
-rules of :mod:`identification.fit.newton`); the checks of a converged member are identify's
+functions, the data terms, sweeps and iteration :mod:`identification.fit.batch_iteration` (the rules
+of :mod:`identification.fit.newton`); the checks of a converged member are identify's
 (:mod:`identification.fit.checks`).
 """
 from __future__ import annotations
@@ -83,9 +82,7 @@ from identification.errors import DataError, IdentificationError, StateSolveErro
 from identification.fit.assembly import sigma_rescaling
 from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, BatchMember, BatchSettings,
                                            FallbackRecord)
-from identification.fit.batch_iteration import iterate
-from identification.fit.batch_points import Points
-from identification.fit.batch_sweep import Iteration, Prepared, prepare
+from identification.fit.batch_iteration import Iteration, Points, Prepared, iterate, prepare
 from identification.fit.checks import CheckFailure, failed_check, rank_ok
 from identification.fit.unbounded import not_bounded_reason
 from identification.fit.estimator import IdentifySettings, as_start_vector, fit_static, param_scale

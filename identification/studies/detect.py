@@ -42,7 +42,7 @@ that disagree by more than a factor 100 across the decision line get a numbered 
 
 Line 05 (normality gate): Shapiro-Wilk test, per sensor, of the differences of pairs of
 series z_2 - z_1, z_4 - z_3, ... over all inputs, at the family-wise level over the gated
-sensors (Holm by default; :mod:`identification.studies.normality_gate`); the repeatability standard deviation
+sensors (Holm by default; :mod:`identification.studies.normality`); the repeatability standard deviation
 of a sensor is std(differences) / sqrt(2) (same unit as z).  A campaign of time series is gated
 pooled per instrument over every (experiment, time) reading (one gate, :class:`_NormalityGate`).
 
@@ -82,7 +82,7 @@ from identification.errors import DataError, IdentificationError
 from identification.vocabulary import renamed_arguments
 from identification.fit.measurements import Measurements
 from identification.fit.problem import strategy_for
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.progress import Progress
 from identification.studies.decisions import ModelDecision, decide, model_decisions
 from identification.studies.detect_settings import (CORRECTIONS, DEFAULT_STATISTIC, STATISTICS, DetectSettings,

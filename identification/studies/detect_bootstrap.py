@@ -51,7 +51,7 @@ from identification.inference.bootstrap import simulated_campaign
 from identification.studies.detect import STATISTICS, DetectSettings, run_split_tests
 from identification.errors import DataError, IdentificationError, NotBoundedError
 from identification.fit.unbounded import not_bounded_reason
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.fit.measurements import Measurements
 from identification.studies.split_fits import BATCHED, SplitFits
 from identification.progress import Progress

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.fit.estimator import IdentifySettings
-from identification.studies.normality_gate import GATE_CORRECTIONS, check_correction
+from identification.studies.normality import GATE_CORRECTIONS, check_correction
 
 __all__ = ["DetectSettings", "STATISTICS", "CORRECTIONS", "DEFAULT_STATISTIC", "alpha_field"]
 

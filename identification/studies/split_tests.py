@@ -22,7 +22,7 @@ from scipy import special, stats
 
 from models.contract import Model
 from identification.errors import DataError, IdentificationError
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.fit.measurements import Measurements
 from identification.inference.regions import CovarianceError, mahalanobis2
 from identification.studies.detect_settings import DetectSettings, alpha_field
@@ -302,7 +302,7 @@ def pooled_newton(model, data_u, split, est_c, est_v, w: np.ndarray, max_steps: 
     fits, and takes the estimator's own exact Newton steps (J^T W J + S, see
     :func:`identification.fit.refinement.refine`).  The result is used only when the Newton decrement
     g^T H^{-1} g < 1e-12 (chi^2 units: within 1e-6 standard errors of the optimum); otherwise
-    (None) the caller runs the full-space :func:`~identification.inference.identify.identify` on the pooled data.  ``w`` (n_S,) are the
+    (None) the caller runs the full-space :func:`~identification.inference.results.identify` on the pooled data.  ``w`` (n_S,) are the
     validated sensor weights of the fits.
     """
     from identification.errors import StateSolveError
@@ -337,7 +337,7 @@ def pooled_newton(model, data_u, split, est_c, est_v, w: np.ndarray, max_steps: 
 
 def _pooled_fit(run: _Run, split: Split, est_c, est_v):
     """The fit of the calibration and validation data together (:func:`pooled_newton` from the two
-    estimates, else :func:`~identification.inference.identify.identify`), or a FitFailure (the fit raised, or the data do not bound p)."""
+    estimates, else :func:`~identification.inference.results.identify`), or a FitFailure (the fit raised, or the data do not bound p)."""
     qs = sorted({j for j, _ in split.pooled_points(run.data.n_M)})
     data_u = split.pooled(run.data)
     est_u = pooled_newton(run.model, data_u, split, est_c, est_v, w=run.w)

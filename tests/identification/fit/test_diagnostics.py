@@ -1,10 +1,10 @@
-"""The typed diagnostics of a fit (``est.diagnostics``, identification.fit.diagnostics) and their ``extra`` source."""
+"""The typed diagnostics of a fit (``est.diagnostics``, identification.fit.record) and their ``extra`` source."""
 import pickle
 
 import numpy as np
 
 from identification import Measurements, identify
-from identification.fit.diagnostics import EXTRA_KEYS, FitDiagnostics
+from identification.fit.record import EXTRA_KEYS, FitDiagnostics
 from models import Model
 
 

@@ -125,7 +125,7 @@ def test_bad_input_names_the_argument():
 
 
 def test_sloppy_direction_names_the_confounded_combination():
-    from identification.fit.identifiability import sloppy_direction
+    from identification.fit.checks import sloppy_direction
     # information of y = a (k1 + k2) measured precisely plus k1 - k2 measured poorly: relative scale 1
     u, v = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
     F = 1e6 * np.outer(u, u) + 1.0 * np.outer(v, v)
@@ -144,7 +144,7 @@ def test_sloppy_direction_names_the_confounded_combination():
 def test_sloppy_direction_of_a_parameter_at_zero_uses_its_standard_error():
     # issue 30: Tc = 0 on its bound (se 1e-5 N m) next to R = 1 ohm (se 1e-2): dividing by 1 (its unit) made
     # Tc "determined 1e3x better"/"worse" by the unit chosen; scaled by its standard error it is one se
-    from identification.fit.identifiability import sloppy_direction
+    from identification.fit.checks import sloppy_direction
     se = np.array([1e-2, 1e-5])
     F = np.diag(1.0 / se ** 2)
     old = sloppy_direction(F, [1.0, 0.0], ["R", "Tc"])

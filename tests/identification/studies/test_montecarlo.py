@@ -16,7 +16,7 @@ from scipy import stats
 from identification.studies.detect import DetectSettings
 from identification.studies.montecarlo import (MonteCarloSettings, ModelCampaign, clopper_pearson, linearized_size,
                                        run_monte_carlo, size_study, validate)
-from identification.studies.normality_gate import gate_fails
+from identification.studies.normality import gate_fails
 from identification.studies.splits import splits_from_scenarios
 from models.library import linear_model
 from models.press import PRESS_SCENARIOS

@@ -14,7 +14,7 @@ import pytest
 from identification import Measurements
 from identification.studies.detect import DetectSettings, NormalityError, detect, normality_check
 from identification.studies.montecarlo import shapiro_pvalues   # the batched gate p-values of the Monte Carlo
-from identification.studies.normality_gate import GATE_CORRECTIONS, adjusted_pvalues, correction_text, gate_fails
+from identification.studies.normality import GATE_CORRECTIONS, adjusted_pvalues, correction_text, gate_fails
 
 P = np.array([0.01, 0.04, 0.03, 0.5])
 
