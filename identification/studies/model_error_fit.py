@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, stats
 
-from identification.inference.identify import identify
+from identification.inference.results import identify
 from identification.inference.results import Estimate
 from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observations, WhiteTest, fit_discrepancy,
                                                    white_lr_test)

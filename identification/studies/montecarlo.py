@@ -52,8 +52,8 @@ from identification.studies.detect import DEFAULT_STATISTIC, DetectSettings, alp
 from identification.errors import DataError, IdentificationError
 from identification.fit.measurements import Measurements
 from identification.fit.problem import COLLOCATED, strategy_for
-from identification.inference.identify import identify
-from identification.studies.normality_gate import correction_text, gate_fails
+from identification.inference.results import identify
+from identification.studies.normality import correction_text, gate_fails
 from identification.progress import Progress
 from identification.vocabulary import renamed_arguments
 from identification.results_protocol import ResultProtocol, jsonable
@@ -434,7 +434,7 @@ class MonteCarloResult(ResultProtocol):
 
     def gate_failure_rate(self) -> Rate:
         """Fraction of the campaigns failing the normality gate (its correction over the gated sensors;
-        :func:`identification.studies.normality_gate.gate_fails`, as :func:`identification.studies.detect.normality_check`)."""
+        :func:`identification.studies.normality.gate_fails`, as :func:`identification.studies.detect.normality_check`)."""
         fail = gate_fails(self.shapiro, self.normality_level, self.normality_correction, self.gated or None)
         return clopper_pearson(int(np.sum(fail)), int(fail.size), alpha=1.0 - self.ci_level)
 
