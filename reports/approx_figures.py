@@ -50,8 +50,9 @@ def efficiency_curve(efficiencies, weights, ax=None):
     ax.axhline(1.0, color="tab:green", ls="--", lw=1.0, label="robust design (reference)")
     ax.axhline(float(w @ e), color="0.4", ls=":", lw=1.0, label=f"prior mean {float(w @ e):.4f}")
     lo, hi = min(float(e.min()), 1.0), max(float(e.max()), 1.0)
-    pad = max(0.1 * (hi - lo), 5e-4)
+    pad = max(0.1 * (hi - lo), 0.01)        # at least +-1 %: equal designs read as a flat line at 1
     ax.set_ylim(lo - pad, hi + pad)
+    ax.ticklabel_format(axis="y", useOffset=False)
     ax.set_xlim(0.0, 1.0)
     ax.set_xlabel("cumulative prior weight (parameter vectors sorted by efficiency)")
     ax.set_ylabel("efficiency against the robust design (-)")
