@@ -35,7 +35,8 @@ class ErrorTest:
 @dataclass(frozen=True)
 class SensorDiscrepancy:
     """The discrepancy of one sensor: smooth amplitude s and length scale (in each input's unit:
-    l times the input's range), rough part tau; s, tau in the unit of the sensor and in sigma units."""
+    l times the input's range; a dynamic model: then in the time unit, l times the sampling span), rough part
+    tau; s, tau in the unit of the sensor and in sigma units."""
 
     sensor: str
     amplitude: float
