@@ -1,4 +1,4 @@
-"""How large is the model error of every variant, computed by the study (issue 29, static models).
+"""How large is the model error of every variant, computed by the study (issue 29, static and dynamic models).
 
 :func:`run_model_error` runs :func:`identification.model_error` (kind "auto": the 'no model error' test,
 then the error model of the best held-out log score) for every variant on the study's data and splits,
@@ -13,19 +13,15 @@ import dataclasses
 
 import numpy as np
 
-from identification import model_error
+from identification import model_error, rank_models
 from identification.errors import IdentificationError
 
 from .config import ConfigError
 from .study_base import Progress, design_sensors, start_values
 from .units import convert
 
-__all__ = ["STATIC_ONLY", "run_model_error", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
+__all__ = ["run_model_error", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
            "quantify_dict", "model_error_view", "run_model_error_views"]
-
-#: why a dynamic study is refused
-STATIC_ONLY = "model error is implemented for static models only (identification.model_error); this study is dynamic"
-
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -34,7 +30,7 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05):
     Raises
     ------
     ConfigError
-        The study's kind has no model error (a time-series study: :data:`STATIC_ONLY`).
+        The study's kind has no model error (``study.kind.model_error_refusal``; every kind has one today).
     """
     if study.kind.model_error_refusal:
         raise ConfigError(f"{study.cfg.path}: {study.kind.model_error_refusal}")
@@ -131,12 +127,22 @@ def _variant_lines(v: str, r, units: dict, results) -> list:
     return lines
 
 
+def ranking(results):
+    """The :class:`identification.ModelRanking` of the variants whose model error has a held-out table (None
+    when none has)."""
+    with_table = {v: r for v, r in results.model_error.items() if r.heldout}
+    return rank_models(with_table) if with_table else None
+
+
 def quantify_text(study, results) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model."""
+    pooled held-out coverage with and without the error model; then which variant to predict with."""
     units = sensor_units(study)
     blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
+    rank = ranking(results)
+    if rank is not None:
+        blocks.append("Ranking: " + rank.sentence())
     sens = ", ".join(results.design_sensors) if results.design_sensors else "all"
     head = f"Model error (sensors {sens}; {results.design_how or 'as configured'})"
     return head + "\n\n" + "\n\n".join(blocks)
@@ -150,7 +156,8 @@ def quantify_text_full(study, results) -> str:
 
 def quantify_dict(study, results) -> dict:
     """JSON-safe: {"sensors", "design_how", "variants": {variant: ModelErrorResult.to_dict() plus the sizes in
-    file units and the pooled coverages}, "errors": {variant: reason}}."""
+    file units and the pooled coverages}, "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or
+    None}."""
     units = sensor_units(study)
     variants = {}
     for v, r in results.model_error.items():
@@ -159,8 +166,9 @@ def quantify_dict(study, results) -> dict:
         d["pooled_coverage"] = {"plain": pooled_coverage(r, "none"), "with_error": pooled_coverage(r, r.kind)}
         d["embedded_parameters"] = [e.to_dict() for e in embedded_parameters(results, v)]
         variants[v] = d
+    rank = ranking(results)
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
-            "errors": dict(results.model_error_errors)}
+            "errors": dict(results.model_error_errors), "ranking": None if rank is None else rank.to_dict()}
 
 
 # ---------------------------------------------------------------------------- what the report's pages draw

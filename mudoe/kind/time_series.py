@@ -56,7 +56,6 @@ from ..config import ConfigError, StudyConfig, config_error
 from ..config_errors import entry_error, table_line
 from ..data_io import DataFileError
 from ..dynamic_io import read_long_csv, write_long_csv
-from ..model_error_runs import STATIC_ONLY
 from ..parameter_units import model_parameters
 from ..study_base import Study, oed_variant, require_fit
 from ..units import UnitError, convert
@@ -561,7 +560,7 @@ class TimeSeriesKind(StudyKind):
 
     name = "time series"
     report_pages = "trajectories"
-    model_error_refusal = STATIC_ONLY
+    model_error_refusal = ""           # model_error takes a dynamic model through its Problem (issue 29)
     input_rows = "experiments"
     normality_over = "every (experiment, time) reading, pooled per instrument"
 
