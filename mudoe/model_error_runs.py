@@ -193,13 +193,23 @@ def model_error_view(study, results, variant: str):
     """The :class:`identification.studies.records.ModelErrorView` of ``variant``: its discrepancy (all data) at the
     study's input rows, and the new-reading bands with and without the error model, each fitted on the
     calibration part of the split of the lowest plain held-out coverage, at its validation readings (file
-    units, relative to the plain prediction)."""
+    units, relative to the plain prediction).  A dynamic model: its discrepancy at every experiment against the
+    sampling times, without the held-out bands (the coverage table of every split only)."""
     from identification.studies.records import HeldOutBands, ModelErrorView
     r = results.model_error[variant]
     data, m = study.data[variant], study.models[variant]
     cols = [study.sensors.index(s) for s in r.sensors]
     units = tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors)
     d = r.discrepancy(data.inputs, r.alpha)
+    if d.grid:                     # over sampling times (a dynamic model): every experiment against time
+        flat = {a: getattr(d, a).reshape(-1, d.mean.shape[-1]) for a in ("mean", "lower", "upper")}
+        disc = tuple(_to_file_z(study, flat[a][:, cols], cols) for a in ("mean", "lower", "upper"))
+        unit = getattr(m, "time_unit", "") or ""
+        return ModelErrorView(variant=variant, result=r, sensors=r.sensors,
+                              units=tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors),
+                              input_label="t" + (f" [{unit}]" if unit else ""),
+                              q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
+                              embedded=embedded_parameters(results, variant))
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:
