@@ -1,4 +1,15 @@
-r"""How large is the model error, where does it sit, and what prediction error to expect (issue 29, static models).
+r"""How large is the model error, where does it sit, and what prediction error to expect (issue 29).
+
+One path for static and dynamic models: :class:`identification.Problem` gives the static problem of the model
+(a dynamic model dx/dt = f(x, z, p, u) collocated on a mesh controlled at p0, its readings flattened to
+(instrument, time) columns), and every step below runs on it.  What differs between the kinds is asked of the
+problem's strategy, never of the model: :meth:`identification.Problem.columns` says which instrument every
+column holds and at which coordinates (a dynamic model: its sampling time t).  The discrepancy is then one
+Gaussian process per instrument over the inputs *and* those coordinates (a dynamic model: over the experiment
+inputs and time), the pure error is pooled per instrument, a split by time window becomes a split of the
+columns (:func:`identification.studies.splits.flat_split`), and ``predict`` returns experiments x sampling
+times x instruments for a dynamic model (``band.grid[0]`` the times); ``exact_at`` may name the coordinate
+(``{"t": 0.0}``).
 
 For a static model h(y(p, q), p, q) and the means zbar_jk of the readings of sensor k at input row j,
 
@@ -254,7 +265,8 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
 def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, kind: str = "auto",
                 exact_at: Mapping | None = None, alpha: float = 0.05, weights=None, groups=None) -> ModelErrorResult:
     r"""zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk, or h_k(q_j, p + b_j) + eps_jk: detect, size and
-    locate the model error of a static model, and predict with it.
+    locate the model error of a static or dynamic model, and predict with it (a dynamic model: q_j an experiment
+    and the discrepancy delta_k(q_j, t) a process over its inputs and time, per instrument k).
 
     The 'no model error' test (REML likelihood ratio, reference 0.5 chi2_0 + 0.5 chi2_1), the output
     discrepancy per sensor (Gaussian process over the scaled inputs) or the embedded error (b_j ~ N(0,
@@ -263,14 +275,18 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
 
     Parameters
     ----------
-    model : models.Model (static)
-    data : Measurements           with sigma (unit of z), or sigma None and repeated series (pure error)
+    model : models.Model          static, or dynamic (an ODE/DAE, :meth:`models.Model.ode`)
+    data : Measurements or DynamicMeasurements   with sigma (unit of z), or sigma None and repeated series (pure
+                                  error, pooled per instrument)
     p0 : array_like (n_p,)        start values of the fits
-    splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice)
+    splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice); for time
+                                  series also splits by time window (:func:`identification.studies.splits.
+                                  time_window_splits`) and by experiments
     kind : "auto", "none", "discrepancy" or "embedded"
-    exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
+    exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero (a dynamic
+                                  model also {"t": time})
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
-    weights : array_like (n_S,), optional   sensor selection (0/1), as in identify (a positive weight selects the
+    weights : array_like (n_S,), optional   sensor (instrument) selection (0/1), as in identify (a positive weight selects the
                                   sensor; its size weights the plain fit only, not the error model)
     groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
                                   with one label share their parameter deviation b); None: every row its own
