@@ -1,9 +1,9 @@
-"""The pages "Model error of ...": what the study computed of a variant's model error (issue 29, static models).
+"""The pages "Model error of ...": what the study computed of a variant's model error (issue 29).
 
 For one variant (``results.model_error_views[variant]``, an
 :class:`identification.studies.records.ModelErrorView` the study computed, :mod:`mudoe.model_error_runs`):
 the verdict of the 'no model error' test and the chosen error model, the discrepancy per sensor against the
-first input with its band, the new-reading bands with and without the error model against the held-out
+first input (a dynamic model: against time, every experiment) with its band, the new-reading bands with and without the error model against the held-out
 readings of one split, and the held-out coverage table.  Draws only.  (The records ``ModelErrorView`` and
 ``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
 """
