@@ -73,17 +73,20 @@ def pooled_coverage(result, kind: str) -> float | None:
 
 
 def sensor_units(study) -> dict:
-    """{sensor: (unit of its files, unit in the model)}; ("", "") when the study declares no units."""
+    """{sensor: (unit of its files, unit in the model)}; without the study's units (a time-series study reads its
+    files into the model's units) the model's own sensor units for both, else ("", "")."""
     u = study.units
     if u is None or len(u.output_file) != len(study.sensors):
-        return {s: ("", "") for s in study.sensors}
+        model = next(iter(study.models.values()), None)
+        own = dict(zip(getattr(model, "sensors", ()), getattr(model, "sensor_units", ()) or ()))
+        return {s: (own.get(s, "") or "", own.get(s, "") or "") for s in study.sensors}
     return {s: (u.output_file[k], u.output_model[k]) for k, s in enumerate(study.sensors)}
 
 
 def _in_file_unit(value: float, units: tuple) -> tuple:
     """(value, unit) of a standard deviation in the sensor's file unit (the model unit if it cannot convert)."""
     file_unit, model_unit = units
-    if not file_unit or not model_unit:
+    if not file_unit or not model_unit or file_unit == model_unit:
         return float(value), model_unit or "(model unit)"
     return float(convert(value, model_unit, file_unit, difference=True)), file_unit
 
@@ -179,7 +182,7 @@ def _to_file_z(study, z: np.ndarray, columns) -> np.ndarray:
     out = np.array(z, float)
     for i, k in enumerate(columns):
         file_unit, model_unit = units[study.sensors[k]]
-        if file_unit and model_unit:
+        if file_unit and model_unit and file_unit != model_unit:
             out[..., i] = convert(out[..., i], model_unit, file_unit, difference=True)
     return out
 
