@@ -212,7 +212,10 @@ def model_error_view(study, results, variant: str):
                               units=tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors),
                               input_label="t" + (f" [{unit}]" if unit else ""),
                               q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
-                              embedded=embedded_parameters(results, variant))
+                              embedded=embedded_parameters(results, variant),
+                              curves=tuple(", ".join(f"{n} = {v:g}" for n, v in zip(m.inputs, row))
+                                           or f"experiment {j + 1}"
+                                           for j, row in enumerate(np.asarray(data.inputs, float))))
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:
