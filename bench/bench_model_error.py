@@ -16,7 +16,17 @@ sigma_man^2)):
 3. **adequate-model coverage** (``--n-coverage`` campaigns of the same kind): the held-out coverage and the
    widening of the model-error bands when there is no model error.
 
-Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10).
+4. **oscillator** (issue 29's dynamic target, ``mudoe/example_oscillator.py`` with the design of
+   ``configs/oscillator.toml``: steps F = 2, 4, 6, 8 N, x (sigma 0.02 mm) and a (sigma 0.05 m/s^2) every 40 ms
+   over 1 s, 2 series): ``--oscillator-n`` campaigns simulated from the cubic spring at its true parameters,
+   the rate at which the cubic model's error is *not* found (alpha 5 %) with its Clopper-Pearson interval; and
+   ``--oscillator-n-coverage`` campaigns on which the linear spring (the wrong model) is given to
+   ``model_error`` with the time-window splits t < e vs t >= e (e = :data:`OSC_EDGES`): the held-out
+   coverage of the 95 % new-reading bands with the chosen model error (kind auto) and without, pooled over
+   campaigns and splits, with the standard error over campaigns.
+
+Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10); the oscillator alone:
+``python -m bench model_error --skip=coverage,size,adequate --oscillator-n=1000 --oscillator-n-coverage=20``.
 """
 from __future__ import annotations
 
@@ -28,6 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from identification import model_error
+from identification.fit.dynamic_fit import simulate_campaign
+from identification.studies.splits import time_window_splits
 from identification.studies.montecarlo import clopper_pearson
 from mudoe.config import load_config
 from mudoe.study import prepare
@@ -109,6 +121,59 @@ def adequate_coverage(study, variant: str, n: int, seed: int) -> None:
           f"discrepancy {np.median(a[:, 3]):.2f}, embedded {np.median(a[:, 4]):.2f}; kind auto chose {kinds}")
 
 
+#: the time-window edges of the oscillator's held-out splits (s): t < e calibrates, t >= e validates
+OSC_EDGES = (0.36, 0.52, 0.68)
+OSC_TIMES = np.round(np.arange(1, 26) * 0.04, 10)       # s, as configs/oscillator.toml
+OSC_STEPS = np.array([[2.0], [4.0], [6.0], [8.0]])      # N
+OSC_SIGMA = np.array([0.02, 0.05])                      # mm, m/s^2
+
+
+def _oscillator_campaign(rng):
+    from mudoe.example_oscillator import P_TRUE, build
+    return simulate_campaign(build("cubic"), P_TRUE, OSC_STEPS, OSC_TIMES, OSC_SIGMA, n_series=2,
+                             seed=int(rng.integers(2 ** 32)))
+
+
+def oscillator_adequate(n: int, seed: int) -> None:
+    """The rate at which model_error finds no error of the cubic spring on its own campaigns (alpha 5 %)."""
+    from mudoe.example_oscillator import P_TRUE, build
+    model, rng, t0 = build("cubic"), np.random.default_rng(seed), time.perf_counter()
+    found = 0
+    for i in range(n):
+        found += model_error(model, _oscillator_campaign(rng), P_TRUE, kind="none").detected
+        if (i + 1) % 100 == 0:
+            print(f"  {i + 1} campaigns, {found} with model error found", file=sys.stderr, flush=True)
+    ci = clopper_pearson(n - found, n)
+    print(f"oscillator cubic (adequate), {n} campaigns, seed {seed}: no model error found in {100 * (n - found) / n:.2f} % "
+          f"[Clopper-Pearson 95 % {100 * ci.lo:.2f}, {100 * ci.hi:.2f}] (target >= 95 %); {time.perf_counter() - t0:.0f} s")
+
+
+def oscillator_wrong(n: int, seed: int) -> None:
+    """Held-out coverage of the linear spring's 95 % new-reading bands on cubic-spring campaigns, time windows."""
+    from mudoe.example_oscillator import build
+    model, rng, t0 = build("linear"), np.random.default_rng(seed), time.perf_counter()
+    splits = time_window_splits(OSC_EDGES)
+    rows, kinds = [], {}
+    for i in range(n):
+        r = model_error(model, _oscillator_campaign(rng), [350.0, 3.0], splits=splits)
+        kinds[r.kind] = kinds.get(r.kind, 0) + 1
+        rows.append([[h.coverage(r.kind), h.coverage_plain, h.coverage_discrepancy, h.coverage_embedded,
+                      h.widening(r.kind), h.n_values] for h in r.heldout])
+        print(f"  campaign {i + 1}: " + ", ".join(f"{h.split}: {100 * h.coverage(r.kind):.1f} %" for h in r.heldout)
+              + f" ({r.kind}, {time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+    a = np.array(rows)                                     # (campaign, split, 6)
+    w = a[:, :, 5]
+    per = (a[:, :, :4] * w[:, :, None]).sum(axis=1) / w.sum(axis=1)[:, None]   # pooled per campaign
+    se = per.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.full(4, np.nan)
+    print(f"oscillator linear on cubic data, {n} campaigns x {len(splits)} time-window splits (edges {OSC_EDGES} s), "
+          f"seed {seed}: held-out coverage of the 95 % new-reading bands with the chosen model error "
+          f"{100 * per[:, 0].mean():.1f} (+- {100 * se[0]:.1f}) % (target [90, 99]); plain {100 * per[:, 1].mean():.1f} "
+          f"(+- {100 * se[1]:.1f}) %, discrepancy {100 * per[:, 2].mean():.1f} (+- {100 * se[2]:.1f}) %, embedded "
+          f"{100 * per[:, 3].mean():.1f} (+- {100 * se[3]:.1f}) %; per split (chosen) "
+          + ", ".join(f"{sp.name}: {100 * np.average(a[:, j, 0], weights=w[:, j]):.1f} %" for j, sp in enumerate(splits))
+          + f"; median widening {np.median(a[:, :, 4]):.1f}; kind auto chose {kinds}; {time.perf_counter() - t0:.0f} s")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench model_error")
     ap.add_argument("--n", type=int, default=1000, help="campaigns of the size study")
@@ -116,12 +181,15 @@ def main(argv=None):
     ap.add_argument("--size-variant", default="M1")
     ap.add_argument("--seed", type=int, default=29)
     ap.add_argument("--quick", action="store_true", help="--n=100 --n-coverage=10")
+    ap.add_argument("--oscillator-n", type=int, default=0, help="campaigns of the cubic oscillator (adequate)")
+    ap.add_argument("--oscillator-n-coverage", type=int, default=0,
+                    help="campaigns of the linear oscillator on cubic data (held-out coverage)")
     ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate")
     args = ap.parse_args(argv or [])
     if args.quick:
         args.n, args.n_coverage = 100, 10
     skip = set(filter(None, args.skip.split(",")))
-    study = prepare(load_config(CONFIG))
+    study = prepare(load_config(CONFIG)) if not {"coverage", "size", "adequate"} <= skip else None
     if "coverage" not in skip:
         coverage_table(study)
         coverage_table(study, {"q_P": 0.0})          # the linkage is exact at zero press force
@@ -129,6 +197,10 @@ def main(argv=None):
         size_study(study, args.size_variant, args.n, args.seed)
     if "adequate" not in skip and args.n_coverage:
         adequate_coverage(study, args.size_variant, args.n_coverage, args.seed + 1)
+    if args.oscillator_n:
+        oscillator_adequate(args.oscillator_n, args.seed + 2)
+    if args.oscillator_n_coverage:
+        oscillator_wrong(args.oscillator_n_coverage, args.seed + 3)
 
 
 if __name__ == "__main__":

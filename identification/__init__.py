@@ -14,6 +14,7 @@ from models.state import simulate, solve_state, solve_states
 from identification.studies.splits import Split, SplitError, input_range_split, random_splits, series_split, splits_from_scenarios
 from identification.studies.detect import DetectionResult, DetectSettings, NormalityError, detect, normality_check
 from identification.studies.model_error import ModelErrorResult, model_error
+from identification.studies.model_ranking import ModelRanking, rank_models
 from identification.studies.montecarlo import (MonteCarloResult, MonteCarloSettings, clopper_pearson, linearized_size, power_study,
                          size_study, validate)
 
@@ -27,6 +28,6 @@ __all__ = [
     "DetectionResult", "DetectSettings", "NormalityError", "detect", "normality_check",
     "MonteCarloResult", "MonteCarloSettings", "clopper_pearson", "linearized_size", "power_study", "size_study",
     "validate",
-    "ModelErrorResult", "model_error",
+    "ModelErrorResult", "model_error", "ModelRanking", "rank_models",
     "DynamicMeasurements", "DiscretisationSettings", "Problem",
 ]

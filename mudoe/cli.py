@@ -26,7 +26,7 @@ _COMMANDS = {
     "identify": "identify the parameters of every model variant on the study's data",
     "oed": "optimal sensor selection: criteria of every sensor combination and the chosen design",
     "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
-    "quantify": "size of the model error of every variant (static models): test, error model, held-out coverage",
+    "quantify": "size of the model error of every variant (static and dynamic models): test, error model, held-out coverage",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
     "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
     "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",

@@ -1,4 +1,4 @@
-"""How large is the model error of every variant, computed by the study (issue 29, static models).
+"""How large is the model error of every variant, computed by the study (issue 29, static and dynamic models).
 
 :func:`run_model_error` runs :func:`identification.model_error` (kind "auto": the 'no model error' test,
 then the error model of the best held-out log score) for every variant on the study's data and splits,
@@ -13,19 +13,15 @@ import dataclasses
 
 import numpy as np
 
-from identification import model_error
+from identification import model_error, rank_models
 from identification.errors import IdentificationError
 
 from .config import ConfigError
 from .study_base import Progress, design_sensors, start_values
 from .units import convert
 
-__all__ = ["STATIC_ONLY", "run_model_error", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
+__all__ = ["run_model_error", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
            "quantify_dict", "model_error_view", "run_model_error_views"]
-
-#: why a dynamic study is refused
-STATIC_ONLY = "model error is implemented for static models only (identification.model_error); this study is dynamic"
-
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -34,7 +30,7 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05):
     Raises
     ------
     ConfigError
-        The study's kind has no model error (a time-series study: :data:`STATIC_ONLY`).
+        The study's kind has no model error (``study.kind.model_error_refusal``; every kind has one today).
     """
     if study.kind.model_error_refusal:
         raise ConfigError(f"{study.cfg.path}: {study.kind.model_error_refusal}")
@@ -77,17 +73,20 @@ def pooled_coverage(result, kind: str) -> float | None:
 
 
 def sensor_units(study) -> dict:
-    """{sensor: (unit of its files, unit in the model)}; ("", "") when the study declares no units."""
+    """{sensor: (unit of its files, unit in the model)}; without the study's units (a time-series study reads its
+    files into the model's units) the model's own sensor units for both, else ("", "")."""
     u = study.units
     if u is None or len(u.output_file) != len(study.sensors):
-        return {s: ("", "") for s in study.sensors}
+        model = next(iter(study.models.values()), None)
+        own = dict(zip(getattr(model, "sensors", ()), getattr(model, "sensor_units", ()) or ()))
+        return {s: (own.get(s, "") or "", own.get(s, "") or "") for s in study.sensors}
     return {s: (u.output_file[k], u.output_model[k]) for k, s in enumerate(study.sensors)}
 
 
 def _in_file_unit(value: float, units: tuple) -> tuple:
     """(value, unit) of a standard deviation in the sensor's file unit (the model unit if it cannot convert)."""
     file_unit, model_unit = units
-    if not file_unit or not model_unit:
+    if not file_unit or not model_unit or file_unit == model_unit:
         return float(value), model_unit or "(model unit)"
     return float(convert(value, model_unit, file_unit, difference=True)), file_unit
 
@@ -131,12 +130,22 @@ def _variant_lines(v: str, r, units: dict, results) -> list:
     return lines
 
 
+def ranking(results):
+    """The :class:`identification.ModelRanking` of the variants whose model error has a held-out table (None
+    when none has)."""
+    with_table = {v: r for v, r in results.model_error.items() if r.heldout}
+    return rank_models(with_table) if with_table else None
+
+
 def quantify_text(study, results) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model."""
+    pooled held-out coverage with and without the error model; then which variant to predict with."""
     units = sensor_units(study)
     blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
+    rank = ranking(results)
+    if rank is not None:
+        blocks.append("Ranking: " + rank.sentence())
     sens = ", ".join(results.design_sensors) if results.design_sensors else "all"
     head = f"Model error (sensors {sens}; {results.design_how or 'as configured'})"
     return head + "\n\n" + "\n\n".join(blocks)
@@ -150,7 +159,8 @@ def quantify_text_full(study, results) -> str:
 
 def quantify_dict(study, results) -> dict:
     """JSON-safe: {"sensors", "design_how", "variants": {variant: ModelErrorResult.to_dict() plus the sizes in
-    file units and the pooled coverages}, "errors": {variant: reason}}."""
+    file units and the pooled coverages}, "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or
+    None}."""
     units = sensor_units(study)
     variants = {}
     for v, r in results.model_error.items():
@@ -159,8 +169,9 @@ def quantify_dict(study, results) -> dict:
         d["pooled_coverage"] = {"plain": pooled_coverage(r, "none"), "with_error": pooled_coverage(r, r.kind)}
         d["embedded_parameters"] = [e.to_dict() for e in embedded_parameters(results, v)]
         variants[v] = d
+    rank = ranking(results)
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
-            "errors": dict(results.model_error_errors)}
+            "errors": dict(results.model_error_errors), "ranking": None if rank is None else rank.to_dict()}
 
 
 # ---------------------------------------------------------------------------- what the report's pages draw
@@ -171,7 +182,7 @@ def _to_file_z(study, z: np.ndarray, columns) -> np.ndarray:
     out = np.array(z, float)
     for i, k in enumerate(columns):
         file_unit, model_unit = units[study.sensors[k]]
-        if file_unit and model_unit:
+        if file_unit and model_unit and file_unit != model_unit:
             out[..., i] = convert(out[..., i], model_unit, file_unit, difference=True)
     return out
 
@@ -185,13 +196,26 @@ def model_error_view(study, results, variant: str):
     """The :class:`identification.studies.records.ModelErrorView` of ``variant``: its discrepancy (all data) at the
     study's input rows, and the new-reading bands with and without the error model, each fitted on the
     calibration part of the split of the lowest plain held-out coverage, at its validation readings (file
-    units, relative to the plain prediction)."""
+    units, relative to the plain prediction).  A dynamic model: its discrepancy at every experiment against the
+    sampling times, without the held-out bands (the coverage table of every split only)."""
     from identification.studies.records import HeldOutBands, ModelErrorView
     r = results.model_error[variant]
     data, m = study.data[variant], study.models[variant]
     cols = [study.sensors.index(s) for s in r.sensors]
     units = tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors)
     d = r.discrepancy(data.inputs, r.alpha)
+    if d.grid:                     # over sampling times (a dynamic model): every experiment against time
+        flat = {a: getattr(d, a).reshape(-1, d.mean.shape[-1]) for a in ("mean", "lower", "upper")}
+        disc = tuple(_to_file_z(study, flat[a][:, cols], cols) for a in ("mean", "lower", "upper"))
+        unit = getattr(m, "time_unit", "") or ""
+        return ModelErrorView(variant=variant, result=r, sensors=r.sensors,
+                              units=tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors),
+                              input_label="t" + (f" [{unit}]" if unit else ""),
+                              q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
+                              embedded=embedded_parameters(results, variant),
+                              curves=tuple(", ".join(f"{n} = {v:g}" for n, v in zip(m.inputs, row))
+                                           or f"experiment {j + 1}"
+                                           for j, row in enumerate(np.asarray(data.inputs, float))))
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:

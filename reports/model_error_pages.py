@@ -1,9 +1,9 @@
-"""The pages "Model error of ...": what the study computed of a variant's model error (issue 29, static models).
+"""The pages "Model error of ...": what the study computed of a variant's model error (issue 29).
 
 For one variant (``results.model_error_views[variant]``, an
 :class:`identification.studies.records.ModelErrorView` the study computed, :mod:`mudoe.model_error_runs`):
 the verdict of the 'no model error' test and the chosen error model, the discrepancy per sensor against the
-first input with its band, the new-reading bands with and without the error model against the held-out
+first input (a dynamic model: against time, every experiment) with its band, the new-reading bands with and without the error model against the held-out
 readings of one split, and the held-out coverage table.  Draws only.  (The records ``ModelErrorView`` and
 ``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
 """
@@ -56,11 +56,26 @@ def _step(q) -> float:
 
 def discrepancy_plot(view: ModelErrorView, k: int, ax=None):
     """The discrepancy of sensor ``k`` at every input row with its band (vertical bars), against the first
-    input; returns the figure."""
+    input (a dynamic model, ``view.curves``: one curve with its band per experiment, against time); returns the
+    figure."""
     ax = _ax(ax)
     mean, lo, hi = (np.asarray(a, float)[:, k] for a in view.discrepancy)
     unit = view.units[k]
     pct = f"{100 * (1 - view.result.alpha):g} %"
+    if view.curves:                                    # a dynamic model: one curve per experiment against time
+        n_t = len(view.q) // len(view.curves)
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        for j, label in enumerate(view.curves):
+            sl = slice(j * n_t, (j + 1) * n_t)
+            line, = ax.plot(view.q[sl], mean[sl], lw=1.4, label=label)
+            ax.fill_between(view.q[sl], lo[sl], hi[sl], color=line.get_color(), alpha=0.18, lw=0)
+        ax.set_xlabel(view.input_label)
+        ax.set_ylabel(f"discrepancy of {view.sensors[k]} [{unit}]")
+        ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=min(len(view.curves), 6),
+                  frameon=False, borderaxespad=0.2, title=f"{pct} bands", title_fontsize=7,
+                  alignment="left")
+        ax.grid(alpha=0.3)
+        return ax.figure
     x = spread(view.q, 2 * _step(view.q))
     ax.axhline(0.0, color="0.6", lw=0.8)
     ax.vlines(x, lo, hi, color="#1f77b4", alpha=0.45, lw=3, label=f"{pct} band")
@@ -138,9 +153,9 @@ def model_error_pages(results, variant: str):
                  "ones.", fontsize=10, weight="bold")
         row2 = top - 0.035
     else:
-        fig.text(0.04, top + 0.045, "The model error per sensor (all data): the discrepancy at every input row",
-                 fontsize=10, weight="bold")
-        if np.unique(view.q).size < view.q.size:
+        fig.text(0.04, top + 0.045, "The model error per sensor (all data): the discrepancy at every "
+                 + ("experiment against time" if view.curves else "input row"), fontsize=10, weight="bold")
+        if np.unique(view.q).size < view.q.size and not view.curves:
             fig.text(0.96, top + 0.045, f"rows that share a value of {view.input_label} are drawn side by side, "
                      "in the data's order", fontsize=8, style="italic", ha="right")
         row2 = top - h - 0.135

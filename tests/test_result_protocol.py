@@ -126,6 +126,14 @@ def _model_error():
     return mudoe.model_error(model, data, [1.0, 1.0], splits=(mudoe.Split("low/high", range(0, 6), range(6, 12)),))
 
 
+def _ranking():
+    import mudoe
+    model, data = _two_sensors()
+    sp = (mudoe.Split("low/high", range(0, 6), range(6, 12)),)
+    return mudoe.rank_models({"a": mudoe.model_error(model, data, [1.0, 1.0], splits=sp),
+                              "a plain": mudoe.model_error(model, data, [1.0, 1.0], splits=sp, kind="none")})
+
+
 def _inputs(refine=False):
     import mudoe
     model, _ = _two_sensors()
@@ -213,6 +221,7 @@ FACTORIES = {
     "BootstrapDetection": _bootstrap,
     "MonteCarloResult": _monte_carlo,
     "ModelErrorResult": _model_error,
+    "ModelRanking": _ranking,
     "DesignResult": _design,
     "DesignTable": lambda: importlib.import_module("mudoe").design_table(_rank_one(7, 4, 2), sensor_names=list("ABCD")),
     "InputDesignResult": _inputs,

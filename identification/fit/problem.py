@@ -19,6 +19,8 @@ user) adds a strategy and its entry in :func:`strategy_for`.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from models.contract import Model
@@ -31,8 +33,52 @@ from identification.fit.measurements import Measurements
 from identification.fit.multistart import check_starts, fit_starts
 from identification.fit.record import FitRecord
 
-__all__ = ["Problem", "ProblemStrategy", "StaticStrategy", "CollocatedStrategy", "strategy_for", "fit_model",
+__all__ = ["Problem", "ColumnLayout", "ProblemStrategy", "StaticStrategy", "CollocatedStrategy", "strategy_for", "fit_model",
            "information_contributions"]
+
+
+@dataclass(frozen=True, eq=False)
+class ColumnLayout:
+    """What the columns of the static problem's data are: column c holds instrument ``names[instrument[c]]`` at
+    the coordinates ``coords[c]`` (e.g. its sampling time, in the model's time unit).
+
+    A static model: one column per sensor, no coordinates.  A dynamic model: one column per (instrument,
+    sampling time) pair, the coordinate the time ``t``.  The verbs that treat an instrument's readings
+    together (a model error over time, an instrument's pure error) ask for it instead of the kind of model.
+
+    Attributes
+    ----------
+    instrument : ndarray (n_cols,) of int   the instrument of every column
+    names : tuple of str                    the instruments (n_inst)
+    coords : ndarray (n_cols, d_c)          the coordinates of every column (d_c = 0 for a static model)
+    coord_names : tuple of str              their names (d_c)
+    """
+
+    instrument: np.ndarray
+    names: tuple
+    coords: np.ndarray
+    coord_names: tuple = ()
+
+    def column_weights(self, w) -> np.ndarray:
+        """The weight of every column (n_cols,) from one per instrument ``w`` (n_inst,)."""
+        return np.asarray(w, float)[self.instrument]
+
+    @property
+    def grid(self) -> tuple:
+        """The sorted distinct values of every coordinate (d_c arrays): the axes of :meth:`arrange`."""
+        return tuple(np.unique(self.coords[:, c]) for c in range(self.coords.shape[1]))
+
+    def arrange(self, a) -> np.ndarray:
+        """Values a (n, n_cols) per column as (n, len(grid[0]), ..., n_inst): NaN where no column holds the
+        instrument at those coordinates.  A static model (no coordinates, one column per instrument in
+        order): ``a`` itself."""
+        a = np.asarray(a)
+        if not self.coord_names and np.array_equal(self.instrument, np.arange(len(self.names))):
+            return a
+        pos = tuple(np.searchsorted(g, self.coords[:, c]) for c, g in enumerate(self.grid))
+        out = np.full((a.shape[0],) + tuple(len(g) for g in self.grid) + (len(self.names),), np.nan)
+        out[(slice(None),) + pos + (self.instrument,)] = a
+        return out
 
 
 class ProblemStrategy:
@@ -63,8 +109,6 @@ class ProblemStrategy:
         The candidate axis of an approximate design (:mod:`oed.approximate`): "inputs" (input rows, a
         static model) or "times" (sampling times, a dynamic model); the information axes "times" and
         "pairs" (:func:`oed.information`) exist only where it is "times".
-    quantifies_model_error : bool
-        Whether :func:`identification.studies.model_error.model_error` covers the kind.
     """
 
     kind = ""
@@ -73,7 +117,6 @@ class ProblemStrategy:
     data_need = ""
     takes_time_series = False
     design_axis = ""
-    quantifies_model_error = False
 
     def check(self, problem: "Problem") -> None:
         """Raise TypeError for an argument this kind does not take (e.g. a discretisation of a static model)."""
@@ -111,6 +154,10 @@ class ProblemStrategy:
         """(F, S) per sensor (static) or per (sensor, time) pair (collocated) at p."""
         raise NotImplementedError
 
+    def columns(self, problem: "Problem") -> ColumnLayout:
+        """The :class:`ColumnLayout` of the static problem's data (which instrument, at which coordinates)."""
+        raise NotImplementedError
+
 
 class StaticStrategy(ProblemStrategy):
     """A static model E(y, p, q) = 0: its own static problem (the identity); fitted by
@@ -122,7 +169,6 @@ class StaticStrategy(ProblemStrategy):
     data_type = Measurements
     data_need = "expected an identification.Measurements"
     design_axis = "inputs"
-    quantifies_model_error = True
 
     def check(self, problem: "Problem") -> None:
         if problem.discretisation is not None:
@@ -144,6 +190,11 @@ class StaticStrategy(ProblemStrategy):
             raise TypeError("times: only for a dynamic model")
         return static_information(problem.model, problem.data, p, states, inputs=inputs, sigma=sigma,
                                   n_series=n_series)
+
+    def columns(self, problem: "Problem") -> ColumnLayout:
+        """One column per sensor, no coordinates."""
+        n = len(problem.data.sensors)
+        return ColumnLayout(np.arange(n), tuple(problem.data.sensors), np.zeros((n, 0)))
 
 
 class CollocatedStrategy(ProblemStrategy):
@@ -191,6 +242,14 @@ class CollocatedStrategy(ProblemStrategy):
             raise TypeError("states: not used for a dynamic model")
         return dynamic_information(problem.model, problem.data, p, inputs=inputs, times=times, sigma=sigma,
                                    n_series=n_series, discretisation=problem.discretisation)
+
+    def columns(self, problem: "Problem") -> ColumnLayout:
+        """One column per (instrument, sampling time) pair of the data (:attr:`DynamicMeasurements.pairs`),
+        the coordinate the time ``t``."""
+        names = tuple(problem.data.sensors)
+        pairs = problem.data.pairs
+        return ColumnLayout(np.array([names.index(k) for k, _ in pairs], int), names,
+                            np.array([[float(t)] for _, t in pairs]).reshape(len(pairs), 1), ("t",))
 
 
 #: the strategies, one per kind of model
@@ -261,6 +320,11 @@ class Problem:
         collocated on a mesh whose output error at p is within the tolerance (without p: the first mesh
         of the discretisation settings) and its data as (sensor, time) pairs (Measurements)."""
         return self.strategy.static(self, None if p is None else np.asarray(p, float))
+
+    def columns(self) -> ColumnLayout:
+        """The :class:`ColumnLayout` of :meth:`static`'s data: which instrument every column holds and at which
+        coordinates (a dynamic model: its sampling time)."""
+        return self.strategy.columns(self)
 
     def fit(self, p0, weights=None, settings: IdentifySettings | None = None, Y0=None, *, starts: int = 1, seed=0,
             workers: int | None = 1, scheduler=None) -> FitRecord:

@@ -53,62 +53,99 @@ _STARTS = ((0.0, float(np.log(0.3)), -2.0), (-2.0, 0.0, 0.0), (1.0, float(np.log
 
 @dataclass(frozen=True)
 class InputScaling:
-    """x = (q - offset) / scale per input column (dimensionless); a column without range keeps scale 1.
+    """x = (q - offset) / scale per input column, then per column coordinate (a dynamic model's time t), each
+    dimensionless; a column without range keeps scale 1.
 
     ``pins`` : tuple of (column, scaled value) where the discrepancy and its slope are zero.
+    ``d_q`` : the number of input columns (the first d_q of offset and scale; the rest are the coordinates).
     """
 
     offset: np.ndarray
     scale: np.ndarray
     pins: tuple = ()
+    d_q: int | None = None
 
     @classmethod
-    def of(cls, inputs: np.ndarray, exact_at: dict, names: tuple) -> "InputScaling":
-        """The scaling of the data's inputs (n_q, d_q) with the pins ``exact_at`` {input name: value}."""
-        lo, hi = inputs.min(axis=0), inputs.max(axis=0)
+    def of(cls, inputs: np.ndarray, exact_at: dict, names: tuple, coords: np.ndarray | None = None) -> "InputScaling":
+        """The scaling of the data's inputs (n_q, d_q) and of the columns' coordinates (n_cols, d_c) (``names``:
+        the inputs', then the coordinates') with the pins ``exact_at`` {input or coordinate name: value}."""
+        parts = [np.asarray(inputs, float)] + ([] if coords is None else [np.asarray(coords, float)])
+        lo = np.concatenate([a.min(axis=0) if a.shape[0] else np.zeros(a.shape[1]) for a in parts])
+        hi = np.concatenate([a.max(axis=0) if a.shape[0] else np.zeros(a.shape[1]) for a in parts])
         scale = np.where(hi > lo, hi - lo, 1.0)
         pins = tuple((names.index(n), (float(v) - lo[names.index(n)]) / scale[names.index(n)])
                      for n, v in exact_at.items())
-        return cls(lo, scale, pins)
+        return cls(lo, scale, pins, None if coords is None else np.asarray(inputs).shape[1])
 
     def __call__(self, inputs: np.ndarray) -> np.ndarray:
-        return (np.atleast_2d(np.asarray(inputs, float)) - self.offset) / self.scale
+        d = len(self.offset) if self.d_q is None else self.d_q
+        return (np.atleast_2d(np.asarray(inputs, float)) - self.offset[:d]) / self.scale[:d]
+
+    def coordinates(self, coords: np.ndarray) -> np.ndarray:
+        """The scaled column coordinates (n_cols, d_c)."""
+        d = len(self.offset) if self.d_q is None else self.d_q
+        return (np.asarray(coords, float) - self.offset[d:]) / self.scale[d:]
 
 
 @dataclass(frozen=True)
 class Observations:
-    """The stacked residual means of the selected sensors.
+    """The stacked residual means of the selected sensor columns, in blocks: one block (one Gaussian process)
+    per instrument, holding its columns (a static model: one column; a dynamic one: one per sampling time).
 
     Attributes
     ----------
-    sensors : tuple of int       the selected sensor columns k
-    rows : tuple of ndarray      per sensor, the input rows j with a value
-    noise : tuple of ndarray     per sensor, sigma_k^2 / n_jk (unit of z squared)
-    sigma : ndarray (n_sel,)     sigma_k of the selected sensors
-    x : ndarray (n_q, d_q)       the scaled inputs of all rows
+    sensors : tuple of int       the selected columns k
+    rows : tuple of ndarray      per block, the input row j of each observation
+    noise : tuple of ndarray     per block, sigma_k^2 / n_jk of each observation (unit of z squared)
+    sigma : ndarray (n_blocks,)  sigma of every block's instrument
+    x : tuple of ndarray         per block, the scaled coordinates (inputs, then column coordinates) of each
+                                 observation (n_i, d)
+    cols : tuple of ndarray      per block, the column k of each observation
+    blocks : tuple of ndarray    per block, its selected columns
     """
 
     sensors: tuple
     rows: tuple
     noise: tuple
     sigma: np.ndarray
-    x: np.ndarray
+    x: tuple
+    cols: tuple
+    blocks: tuple
 
     @classmethod
-    def of(cls, counts: np.ndarray, sigma: np.ndarray, w: np.ndarray, x: np.ndarray) -> "Observations":
-        """From the counts (n_q, n_S) of a campaign, sigma (n_S,), the weights (n_S,) and the scaled inputs."""
+    def of(cls, counts: np.ndarray, sigma: np.ndarray, w: np.ndarray, x: np.ndarray, instrument=None,
+           coords: np.ndarray | None = None) -> "Observations":
+        """From the counts (n_q, n_S) of a campaign, sigma (n_S,), the weights (n_S,), the scaled inputs (n_q,
+        d_q) and, for columns grouped into instruments, the instrument of every column (n_S,) and the columns'
+        scaled coordinates (n_S, d_c) (None: every column its own block, no coordinates)."""
+        n_S = counts.shape[1]
+        instrument = np.arange(n_S) if instrument is None else np.asarray(instrument)
+        coords = np.zeros((n_S, 0)) if coords is None else np.asarray(coords, float)
         sens = tuple(int(k) for k in np.flatnonzero(w > 0))
-        rows = tuple(np.flatnonzero(counts[:, k] > 0) for k in sens)
-        noise = tuple(sigma[k] ** 2 / counts[r, k] for k, r in zip(sens, rows))
-        return cls(sens, rows, noise, np.asarray(sigma, float)[list(sens)], x)
+        blocks = tuple(np.array([k for k in sens if instrument[k] == g], int)
+                       for g in dict.fromkeys(int(instrument[k]) for k in sorted(sens, key=lambda k: instrument[k])))
+        rows, cols, noise, xs, sig = [], [], [], [], []
+        for b in blocks:
+            r = [np.flatnonzero(counts[:, k] > 0) for k in b]
+            rows.append(np.concatenate(r))
+            cols.append(np.concatenate([np.full(len(rk), k) for k, rk in zip(b, r)]).astype(int))
+            noise.append(np.concatenate([sigma[k] ** 2 / counts[rk, k] for k, rk in zip(b, r)]))
+            xs.append(np.concatenate([np.hstack([x[rk], np.repeat(coords[k][None], len(rk), 0)])
+                                      for k, rk in zip(b, r)], axis=0))
+            sig.append(float(sigma[b[0]]))
+        return cls(sens, tuple(rows), tuple(noise), np.array(sig), tuple(xs), tuple(cols), blocks)
 
     @property
     def sizes(self) -> list:
         return [len(r) for r in self.rows]
 
+    def block_of(self, k: int) -> int:
+        """The block of selected column k."""
+        return next(i for i, b in enumerate(self.blocks) if k in b)
+
     def stack(self, a: np.ndarray) -> np.ndarray:
-        """Values a (n_q, n_S, ...) of the observations, stacked sensor by sensor (N, ...)."""
-        return np.concatenate([a[r, k] for k, r in zip(self.sensors, self.rows)], axis=0)
+        """Values a (n_q, n_S, ...) of the observations, stacked block by block (N, ...)."""
+        return np.concatenate([a[r, c] for r, c in zip(self.rows, self.cols)], axis=0)
 
 
 def _factors(xa: np.ndarray, xb: np.ndarray, ell: float, pins: tuple) -> tuple:
@@ -159,7 +196,7 @@ def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple) -> tuple:
     """(V_k, [dV_k/d theta]) of sensor block i with its hyperparameters th (3,)."""
     sig = obs.sigma[i]
     s2, ell, t2 = (sig * np.exp(th[0])) ** 2, float(np.exp(th[1])), (sig * np.exp(th[2])) ** 2
-    x = obs.x[obs.rows[i]]
+    x = obs.x[i]
     C, dC = kernel_blocks(x, x, ell, pins)
     W, dW = rough_weight(x, ell, pins)
     V = s2 * C + np.diag(t2 * W + obs.noise[i])
@@ -169,7 +206,7 @@ def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple) -> tuple:
 def _reml_parts(obs: Observations, theta: np.ndarray, G: np.ndarray, pins: tuple):
     """(f, Vinv blocks, A = G^T V^-1 G factor, block derivatives) or None when a Cholesky fails."""
     blocks, derivs, Vi, logdet = [], [], [], 0.0
-    for i in range(len(obs.sensors)):
+    for i in range(len(obs.blocks)):
         V, dV = _block(obs, i, theta[3 * i:3 * i + 3], pins)
         try:
             L = linalg.cholesky(V, lower=True)
@@ -244,15 +281,16 @@ class GPFit:
     def covariance(self) -> np.ndarray:
         """V (N, N): the stacked residual covariance (block diagonal over sensors)."""
         return linalg.block_diag(*[_block(self.obs, i, self.theta[3 * i:3 * i + 3], self.pins)[0]
-                                   for i in range(len(self.obs.sensors))])
+                                   for i in range(len(self.obs.blocks))])
 
     def cross(self, i: int, xs: np.ndarray) -> tuple:
-        """(k (n*, N): cov(delta_k(x*), stacked residuals), prior variance (n*,)) for sensor i at scaled x*."""
+        """(k (n*, N): cov(delta(x*), stacked residuals), prior variance (n*,)) for block i at scaled x* (inputs,
+        then column coordinates)."""
         ell = self.length_scale(i)
         s2, t2 = self.amplitude(i) ** 2, self.rough(i) ** 2
         k = np.zeros((xs.shape[0], sum(self.obs.sizes)))
         start = sum(self.obs.sizes[:i])
-        C, _ = kernel_blocks(xs, self.obs.x[self.obs.rows[i]], ell, self.pins)
+        C, _ = kernel_blocks(xs, self.obs.x[i], ell, self.pins)
         k[:, start:start + self.obs.sizes[i]] = s2 * C
         prior = s2 * np.diag(kernel_blocks(xs, xs, ell, self.pins)[0]) + t2 * rough_weight(xs, ell, self.pins)[0]
         return k, prior
@@ -265,7 +303,7 @@ def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple
     None: each of ``_STARTS`` for every sensor); the best finite optimum is kept.  Raises numpy.linalg.LinAlgError when no start gives a positive definite V
     and G^T V^{-1} G.
     """
-    n_sel = len(obs.sensors)
+    n_sel = len(obs.blocks)
     best = None
     for x0 in (np.tile(st, n_sel) for st in _STARTS) if starts is None else starts:
         if not np.isfinite(reml_objective(x0, obs, G, r, pins)[0]):

@@ -1,4 +1,15 @@
-r"""How large is the model error, where does it sit, and what prediction error to expect (issue 29, static models).
+r"""How large is the model error, where does it sit, and what prediction error to expect (issue 29).
+
+One path for static and dynamic models: :class:`identification.Problem` gives the static problem of the model
+(a dynamic model dx/dt = f(x, z, p, u) collocated on a mesh controlled at p0, its readings flattened to
+(instrument, time) columns), and every step below runs on it.  What differs between the kinds is asked of the
+problem's strategy, never of the model: :meth:`identification.Problem.columns` says which instrument every
+column holds and at which coordinates (a dynamic model: its sampling time t).  The discrepancy is then one
+Gaussian process per instrument over the inputs *and* those coordinates (a dynamic model: over the experiment
+inputs and time), the pure error is pooled per instrument, a split by time window becomes a split of the
+columns (:func:`identification.studies.splits.flat_split`), and ``predict`` returns experiments x sampling
+times x instruments for a dynamic model (``band.grid[0]`` the times); ``exact_at`` may name the coordinate
+(``{"t": 0.0}``).
 
 For a static model h(y(p, q), p, q) and the means zbar_jk of the readings of sensor k at input row j,
 
@@ -47,14 +58,14 @@ from scipy import stats
 
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
-from identification.fit.problem import strategy_for
+from identification.fit.problem import Problem, strategy_for
 from identification.inference.intervals import validate_alpha
 from identification.studies.discrepancy_gp import InputScaling
 from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
 from identification.studies.model_error_result import (EmbeddedParameter, ErrorTest, HeldOut, ModelErrorResult,
                                                        SensorDiscrepancy)
-from identification.studies.splits import Split, SplitError
-from models.contract import Model
+from identification.studies.splits import Split, SplitError, flat_split
+from models.labels import LabelledModel
 
 __all__ = ["model_error", "ModelErrorResult", "KINDS"]
 
@@ -65,24 +76,28 @@ _ERROR_KINDS = ("none", "discrepancy", "embedded")
 
 # ---------------------------------------------------------------------------- validation
 def _checked_model_data(model, data) -> None:
-    if not isinstance(model, Model) or not strategy_for(model).quantifies_model_error:
-        raise TypeError(f"model: expected a static models.Model, got {type(model).__name__} (model_error covers "
-                        "static models only)")
+    if not isinstance(model, LabelledModel):
+        raise TypeError(f"model: expected a models.Model (static or dynamic), got {type(model).__name__}")
     strategy_for(model).check_data(data)
+
+
+def _checked_inputs(model, data: Measurements) -> None:
+    """The static problem's data has as many input columns as its model (DataError)."""
     if data.d_q != model.n_q_dim:
         raise DataError(f"data: the inputs have {data.d_q} columns but the model has {model.n_q_dim} "
                         f"({', '.join(model.inputs)})")
 
 
-def _checked_exact_at(exact_at, model: Model) -> dict:
+def _checked_exact_at(exact_at, names: tuple) -> dict:
     if exact_at is None:
         return {}
     if not isinstance(exact_at, Mapping):
         raise ValueError(f"exact_at: expected a mapping {{input name: value}}, got {type(exact_at).__name__}")
     out = {}
     for name, value in exact_at.items():
-        if name not in model.inputs:
-            raise ValueError(f"exact_at: unknown input {name!r}; the model's inputs are {list(model.inputs)}")
+        if name not in names:
+            raise ValueError(f"exact_at: unknown input {name!r}; the model's inputs (and coordinates) are "
+                             f"{list(names)}")
         try:
             v = float(value)
         except (TypeError, ValueError):
@@ -93,23 +108,43 @@ def _checked_exact_at(exact_at, model: Model) -> dict:
     return out
 
 
-def _checked_splits(splits, data: Measurements, w: np.ndarray, n_p: int) -> tuple:
-    """The splits as a tuple; every calibration set holds at least n_p + 2 input x sensor means of the
+def _checked_splits(splits, data: Measurements, w: np.ndarray, n_p: int, pairs=None) -> tuple:
+    """The splits as a tuple, a split by time window as a split of the columns ``pairs`` (instrument, time) of
+    the static problem's data (:func:`identification.studies.splits.flat_split`); every calibration set holds at least n_p + 2 input x sensor means of the
     selected sensors and every validation set at least one reading (SplitError naming the split)."""
     if splits is None:
         return ()
     splits = (splits,) if isinstance(splits, Split) else tuple(splits)
     sel = w > 0
+    out = []
     for sp in splits:
         if not isinstance(sp, Split):
             raise TypeError(f"splits: expected identification.Split objects, got {type(sp).__name__}")
+        if sp.timed:
+            if pairs is None:
+                raise SplitError(f"splits: split {sp.name!r} selects readings by time window; the data hold no "
+                                 "time series")
+            sp = flat_split(sp, pairs, data.n_q)
         sp.check(data.n_q, data.n_M)
         n_cal = int((sp.calibration(data).counts()[:, sel] > 0).sum())
         n_val = int(sp.validation(data).counts()[:, sel].sum())
         if n_cal < n_p + 2 or n_val < 1:
             raise SplitError(f"splits: split {sp.name!r} has {n_cal} calibration means (input x sensor) and "
                              f"{n_val} validation readings; model_error needs at least n_p + 2 = {n_p + 2} and 1")
-    return splits
+        out.append(sp)
+    return tuple(out)
+
+
+def _instrument_weights(weights, names: tuple) -> np.ndarray:
+    """Validated instrument (sensor) weights (n_inst,), dimensionless: ones for None, else finite and >= 0."""
+    if weights is None:
+        return np.ones(len(names))
+    w = np.asarray(weights, dtype=float)
+    if w.shape != (len(names),):
+        raise DataError(f"weights: expected {len(names)} sensor weights ({', '.join(names)}), got shape {w.shape}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise DataError(f"weights: must be finite and non-negative, got {w.tolist()}")
+    return w
 
 
 def _checked_groups(groups, n_q: int) -> np.ndarray | None:
@@ -128,11 +163,13 @@ def _checked_groups(groups, n_q: int) -> np.ndarray | None:
     return np.array([codes[lab] for lab in labels])
 
 
-def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
-    """(data with sigma, source): sigma as given, or the pure error of repeated series (ValueError without)."""
+def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
+    """(data with sigma, source): sigma as given, or the pure error of repeated series per instrument (pooled over
+    its columns ``layout.instrument`` of the static data ``flat``; ``w`` the instrument weights; ValueError
+    without)."""
     if data.sigma is not None:
         return data, "given"
-    s, dof = pure_error_sigma(data.z)
+    s, dof = pure_error_sigma(flat.z, layout.instrument)
     sel = w > 0
     if data.n_M < 2 or not np.all(dof[sel] > 0) or not np.all(s[sel] > 0):
         raise ValueError("data: sigma is None and the data hold no repeated series to estimate the noise from "
@@ -141,13 +178,13 @@ def _sigma_of(data: Measurements, w: np.ndarray) -> tuple:
 
 
 # ---------------------------------------------------------------------------- held-out table
-def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups) -> HeldOut:
+def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, layout) -> HeldOut:
     """Every error model fitted on the calibration part of ``split`` predicts its validation readings (as new
     conditions)."""
     cal, val = split.calibration(data), split.validation(data)
-    plain = fit_model_error(model, cal, p0, w, scaling, "none")
+    plain = fit_model_error(model, cal, p0, w, scaling, "none", layout=layout)
     g = None if groups is None else groups[list(split.cal_inputs)]
-    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g)
+    fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g, layout=layout)
                       for k in _ERROR_KINDS[1:]]
     sel = w > 0
     z = val.z[:, :, sel]
@@ -184,14 +221,16 @@ def _embedded(fit: ErrorFit, names: tuple) -> tuple:
                  for n, o, p in zip(names, fit.embedded.omega, fit.p))
 
 
-def _discrepancies(fit: ErrorFit, data: Measurements, scaling: InputScaling) -> tuple:
+def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
+    """One SensorDiscrepancy per instrument (length scales in the units of the inputs, then of the coordinates)."""
     if fit.gp is None:
         return ()
     out = []
-    for i, k in enumerate(fit.gp.obs.sensors):
+    for i, b in enumerate(fit.gp.obs.blocks):
         ell = fit.gp.length_scale(i)
-        out.append(SensorDiscrepancy(data.sensors[k], fit.gp.amplitude(i), ell, tuple(float(v) for v in ell * scaling.scale),
-                                     fit.gp.rough(i), float(fit.sigma[k])))
+        out.append(SensorDiscrepancy(layout.names[layout.instrument[b[0]]], fit.gp.amplitude(i), ell,
+                                     tuple(float(v) for v in ell * scaling.scale), fit.gp.rough(i),
+                                     float(fit.sigma[b[0]])))
     return tuple(out)
 
 
@@ -223,7 +262,8 @@ def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tu
 def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, kind: str = "auto",
                 exact_at: Mapping | None = None, alpha: float = 0.05, weights=None, groups=None) -> ModelErrorResult:
     r"""zbar_jk = h_k(q_j, p) + delta_k(q_j) + rho_jk + eps_jk, or h_k(q_j, p + b_j) + eps_jk: detect, size and
-    locate the model error of a static model, and predict with it.
+    locate the model error of a static or dynamic model, and predict with it (a dynamic model: q_j an experiment
+    and the discrepancy delta_k(q_j, t) a process over its inputs and time, per instrument k).
 
     The 'no model error' test (REML likelihood ratio, reference 0.5 chi2_0 + 0.5 chi2_1), the output
     discrepancy per sensor (Gaussian process over the scaled inputs) or the embedded error (b_j ~ N(0,
@@ -232,14 +272,18 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
 
     Parameters
     ----------
-    model : models.Model (static)
-    data : Measurements           with sigma (unit of z), or sigma None and repeated series (pure error)
+    model : models.Model          static, or dynamic (an ODE/DAE, :meth:`models.Model.ode`)
+    data : Measurements or DynamicMeasurements   with sigma (unit of z), or sigma None and repeated series (pure
+                                  error, pooled per instrument)
     p0 : array_like (n_p,)        start values of the fits
-    splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice)
+    splits : Split or sequence of Split, optional   the held-out table (and ``kind="auto"``'s choice); for time
+                                  series also splits by time window (:func:`identification.studies.splits.
+                                  time_window_splits`) and by experiments
     kind : "auto", "none", "discrepancy" or "embedded"
-    exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero
+    exact_at : mapping {input name: value}, optional   where the discrepancy and its slope are zero (a dynamic
+                                  model also {"t": time})
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
-    weights : array_like (n_S,), optional   sensor selection (0/1), as in identify (a positive weight selects the
+    weights : array_like (n_S,), optional   sensor (instrument) selection (0/1), as in identify (a positive weight selects the
                                   sensor; its size weights the plain fit only, not the error model)
     groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
                                   with one label share their parameter deviation b); None: every row its own
@@ -257,36 +301,45 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     if kind not in KINDS:
         raise ValueError(f"kind: unknown kind {kind!r}; choose one of {', '.join(repr(k) for k in KINDS)}")
     alpha = validate_alpha(alpha)
-    exact = _checked_exact_at(exact_at, model)
+    problem = Problem(model, data)
+    layout = problem.columns()
+    exact = _checked_exact_at(exact_at, tuple(model.inputs) + tuple(layout.coord_names))
     p0 = np.asarray(p0, float).ravel()
     if p0.shape != (model.n_p,) or not np.all(np.isfinite(p0)):
         raise DataError(f"p0: expected {model.n_p} finite start values ({', '.join(model.param_names)}), got "
                         f"{p0.tolist()}")
-    w = data.sensor_weights(weights)
-    if not np.any(w > 0):
+    w_inst = _instrument_weights(weights, layout.names)
+    if not np.any(w_inst > 0):
         raise DataError("weights: select at least one sensor (a positive weight)")
+    w = layout.column_weights(w_inst)
+    flat = problem.static()[1] if data.sigma is None else None
+    data, sigma_source = _sigma_of(data, w_inst, flat, layout)
+    problem = Problem(model, data)
+    model, data = problem.static(p0)      # a dynamic model: collocated on a mesh controlled at p0
+    _checked_inputs(model, data)
     n_means = int((data.counts()[:, w > 0] > 0).sum())
     if n_means < model.n_p + 2:
         raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
                         f"n_p + 2 = {model.n_p + 2}")
-    data, sigma_source = _sigma_of(data, w)
-    splits = _checked_splits(splits, data, w, model.n_p)
+    splits = _checked_splits(splits, data, w, model.n_p, getattr(problem.data, "pairs", None))
     codes = _checked_groups(groups, data.n_q)
-    scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs))
-    plain = fit_model_error(model, data, p0, w, scaling, "none")
+    scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs) + tuple(layout.coord_names),
+                              layout.coords if layout.coord_names else None)
+    plain = fit_model_error(model, data, p0, w, scaling, "none", layout=layout)
     t = plain.test
     detected = t.p_value < alpha
-    heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha, codes) for sp in splits)
+    heldout = tuple(_held_out(model, data, p0, w, scaling, sp, alpha, codes, layout) for sp in splits)
     chosen, how = _choose(kind, detected, heldout)
     fit = plain if chosen == "none" else fit_model_error(model, data, p0, w, scaling, chosen, plain=plain.plain,
-                                                         groups=codes)
+                                                         groups=codes, layout=layout)
     est = plain.plain
     return ModelErrorResult(
         model_name=est.model_name or model.name, kind=chosen, detected=bool(detected),
         test=ErrorTest(t.statistic, t.p_value, t.lam, t.dof), alpha=alpha,
-        sensors=tuple(s for s, wk in zip(data.sensors, w) if wk > 0), param_names=tuple(model.param_names),
+        sensors=tuple(n for g, n in enumerate(layout.names) if np.any(w[layout.instrument == g] > 0)),
+        param_names=tuple(model.param_names),
         p=fit.p.copy(), cov=fit.cov.copy(), p_plain=est.p.copy(), cov_plain=np.asarray(est.cov, float).copy(),
-        discrepancies=_discrepancies(fit, data, scaling), embedded=_embedded(fit, tuple(model.param_names)),
+        discrepancies=_discrepancies(fit, layout, scaling), embedded=_embedded(fit, tuple(model.param_names)),
         identifiable=fit.identifiable,
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,

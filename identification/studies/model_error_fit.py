@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, stats
 
+from identification.fit.problem import ColumnLayout
 from identification.inference.results import identify
 from identification.inference.results import Estimate
 from identification.studies.discrepancy_gp import (GPFit, InputScaling, Observations, WhiteTest, fit_discrepancy,
@@ -65,7 +66,8 @@ CONFOUNDED_CORRELATION = 0.5
 class Band:
     """Mean and (1 - alpha) band, each ndarray (n*, n_S) in the unit of z (NaN for unselected sensors).
 
-    ``what``: "prediction" (of the output's mean, or of a new reading) or "discrepancy".
+    ``what``: "prediction" (of the output's mean, or of a new reading) or "discrepancy".  ``grid``: the axes
+    between the rows and the sensors of a dynamic model's band (its sampling times), else empty.
     """
 
     mean: np.ndarray
@@ -75,6 +77,7 @@ class Band:
     sensors: tuple
     what: str
     new_reading: bool = False
+    grid: tuple = ()
 
 
 def outputs_at(model, p: np.ndarray, inputs: np.ndarray, Y0=None) -> tuple:
@@ -107,6 +110,7 @@ class ErrorFit:
     correlation_kept : float          min generalised eigenvalue of (G^T V^-1 G, G^T diag(V)^-1 G): the share
                                       uncorrelated errors of the same size would leave
     notes : tuple of str
+    layout : ColumnLayout or None     the columns' instruments and coordinates (None: one column per sensor)
     """
 
     model: object
@@ -125,6 +129,7 @@ class ErrorFit:
     correlation_kept: float = 1.0
     notes: tuple = ()
     embedded: EmbeddedFit | None = None
+    layout: ColumnLayout | None = None
 
     @property
     def kind(self) -> str:
@@ -166,10 +171,12 @@ class ErrorFit:
 
     def _kriging(self, inputs, h, G, include_g: bool) -> tuple:
         xs = self.scaling(inputs)
+        coords = None if self.layout is None else self.scaling.coordinates(self.layout.coords)
         mean = np.full(h.shape, np.nan)
         var = np.full(h.shape, np.nan)
-        for i, k in enumerate(self.gp.obs.sensors):
-            kx, prior = self.gp.cross(i, xs)
+        for k in self.gp.obs.sensors:
+            x = xs if coords is None else np.hstack([xs, np.repeat(coords[k][None], xs.shape[0], 0)])
+            kx, prior = self.gp.cross(self.gp.obs.block_of(k), x)
             mean[:, k] = h[:, k] + kx @ self.alpha_r
             u = (G[:, k, :] if include_g else 0.0) - kx @ self.Vinv_G
             var[:, k] = prior - np.einsum("an,nm,am->a", kx, self.Vinv, kx) + np.einsum("ap,pq,aq->a", u, self.cov, u)
@@ -182,14 +189,18 @@ class ErrorFit:
         return Band(mean, mean - half, mean + half, alpha, tuple(self.plain.sensors), what, new_reading)
 
 
-def pure_error_sigma(z: np.ndarray) -> tuple:
-    """(s (n_S,), dof (n_S,)): the pooled standard deviation of the series about their mean at each input
-    (pure error), s_k^2 = sum_ij (z_ijk - zbar_jk)^2 / sum_j (n_jk - 1) (unit of z; NaN where dof = 0)."""
+def pure_error_sigma(z: np.ndarray, instrument=None) -> tuple:
+    """(s (n_inst,), dof (n_inst,)): the pooled standard deviation of the series about their mean at each input
+    (pure error), s_g^2 = sum_ijk (z_ijk - zbar_jk)^2 / sum_jk (n_jk - 1) over the columns k of instrument g
+    (``instrument`` (n_S,); None: every column its own) (unit of z; NaN where dof = 0)."""
     mask = np.isfinite(z)
     n = mask.sum(axis=0)
     zbar = np.where(n > 0, np.nansum(z, axis=0) / np.maximum(n, 1), 0.0)
     ss = np.sum(np.where(mask, (z - zbar[None]) ** 2, 0.0), axis=(0, 1))
     dof = np.clip(n - 1, 0, None).sum(axis=0)
+    if instrument is not None:
+        g = np.asarray(instrument, int)
+        ss, dof = np.bincount(g, ss), np.bincount(g, dof).astype(int)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(dof > 0, np.sqrt(ss / dof), np.nan), dof
 
@@ -240,20 +251,25 @@ def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np
 
 
 def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
-                    plain: Estimate | None = None, groups: np.ndarray | None = None) -> ErrorFit:
+                    plain: Estimate | None = None, groups: np.ndarray | None = None,
+                    layout: ColumnLayout | None = None) -> ErrorFit:
     """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
     plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
     the plain fit when already done; ``groups`` (n_q,) integer condition of every input row of the embedded error
-    (None: each row its own).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    (None: each row its own); ``layout`` the columns' instruments and coordinates (one discrepancy per instrument
+    over inputs and coordinates; None: one per column over inputs).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
-    obs = Observations.of(data.counts(), sigma, weights, scaling(data.inputs))
+    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs)) if layout is None else
+           Observations.of(data.counts(), sigma, weights, scaling(data.inputs), layout.instrument,
+                           scaling.coordinates(layout.coords)))
     zbar_s = obs.stack(np.nan_to_num(data.means()))
     Gs = obs.stack(np.asarray(est.G, float))
     r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))
     test = white_lr_test(obs, Gs, r0)
     if kind == "none":
-        return ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float))
+        return ErrorFit(model, weights, sigma, scaling, est, test, est.p.copy(), np.asarray(est.cov, float),
+                        layout=layout)
     noise = np.concatenate(obs.noise)
     cond = (np.arange(data.n_q) if groups is None else np.asarray(groups))[np.concatenate(obs.rows)]
     se = np.asarray(est.stderr_gn, float)
@@ -288,4 +304,4 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
     r = zbar_s - obs.stack(h)
     kept, corr = _information_kept(Gs, V, Vinv, noise)
     return ErrorFit(model, weights, sigma, scaling, est, test, p, cov, gp, Vinv @ r, Vinv @ Gs, Vinv, kept, corr,
-                    notes, emb)
+                    notes, emb, layout)

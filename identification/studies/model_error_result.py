@@ -1,6 +1,8 @@
 """The result of :func:`identification.studies.model_error.model_error` and its tables."""
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 from html import escape
 
@@ -33,7 +35,8 @@ class ErrorTest:
 @dataclass(frozen=True)
 class SensorDiscrepancy:
     """The discrepancy of one sensor: smooth amplitude s and length scale (in each input's unit:
-    l times the input's range), rough part tau; s, tau in the unit of the sensor and in sigma units."""
+    l times the input's range; a dynamic model: then in the time unit, l times the sampling span), rough part
+    tau; s, tau in the unit of the sensor and in sigma units."""
 
     sensor: str
     amplitude: float
@@ -179,13 +182,25 @@ class ModelErrorResult(ResultProtocol):
     def predict(self, inputs, alpha: float = 0.05, new_reading: bool = False) -> Band:
         """The outputs at input rows (n*, d_q) (model's input units) with their (1 - alpha) band: parameter
         uncertainty and model error, and with ``new_reading`` the sensor noise of one reading; ``mean``,
-        ``lower``, ``upper`` (n*, n_S) in the unit of z, NaN for the sensors not selected."""
-        return self.fit.predict(self._inputs(inputs), validate_alpha(alpha), bool(new_reading))
+        ``lower``, ``upper`` (n*, n_S) in the unit of z, NaN for the sensors not selected.
+
+        A dynamic model: the input rows are experiments and the arrays are (n*, n_t, n_S), experiments x the
+        campaign's sampling times (``band.grid[0]``, the model's time unit) x instruments (``band.sensors``),
+        NaN at a time where the campaign holds no reading of that instrument."""
+        return self._arranged(self.fit.predict(self._inputs(inputs), validate_alpha(alpha), bool(new_reading)))
 
     def discrepancy(self, inputs, alpha: float = 0.05) -> Band:
         """The discrepancy delta(q*) at input rows (n*, d_q) with its (1 - alpha) band (unit of z; zero for
-        kind "none", NaN for the sensors not selected)."""
-        return self.fit.discrepancy(self._inputs(inputs), validate_alpha(alpha))
+        kind "none", NaN for the sensors not selected); a dynamic model: (n*, n_t, n_S) as :meth:`predict`."""
+        return self._arranged(self.fit.discrepancy(self._inputs(inputs), validate_alpha(alpha)))
+
+    def _arranged(self, band: Band) -> Band:
+        """The band per instrument and coordinate (:meth:`identification.fit.problem.ColumnLayout.arrange`)."""
+        lay = self.fit.layout
+        if lay is None or not lay.coord_names:
+            return band
+        return dataclasses.replace(band, mean=lay.arrange(band.mean), lower=lay.arrange(band.lower),
+                                   upper=lay.arrange(band.upper), sensors=tuple(lay.names), grid=lay.grid)
 
     def _inputs(self, inputs) -> np.ndarray:
         try:

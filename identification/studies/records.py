@@ -452,6 +452,9 @@ class ModelErrorView:
     discrepancy : (mean, lower, upper)          each (n_q, n_S): the discrepancy and its band (file units)
     heldout : HeldOutBands or None              the split of the lowest plain held-out coverage
     embedded : tuple of EmbeddedParameter       the embedded error (chosen or fitted beside the chosen one)
+    curves : tuple of str                       a dynamic model: the label of every experiment; q (n_e n_t,)
+                                                then holds each experiment's sampling times one after the other
+                                                and the page draws one curve per experiment against time
     """
 
     variant: str
@@ -463,6 +466,7 @@ class ModelErrorView:
     discrepancy: tuple
     heldout: HeldOutBands | None
     embedded: tuple = ()
+    curves: tuple = ()
 
 
 # ---------------------------------------------------------------------------- a dynamic study

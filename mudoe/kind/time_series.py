@@ -56,9 +56,9 @@ from ..config import ConfigError, StudyConfig, config_error
 from ..config_errors import entry_error, table_line
 from ..data_io import DataFileError
 from ..dynamic_io import read_long_csv, write_long_csv
-from ..model_error_runs import STATIC_ONLY
 from ..parameter_units import model_parameters
-from ..study_base import Study, oed_variant, require_fit
+from ..model_error_runs import run_model_error, run_model_error_views
+from ..study_base import FitFailedError, MissingPieceError, Study, oed_variant, require_fit
 from ..units import UnitError, convert
 from .base import Simulation, StudyKind
 
@@ -605,7 +605,7 @@ class TimeSeriesKind(StudyKind):
 
     name = "time series"
     report_pages = "trajectories"
-    model_error_refusal = STATIC_ONLY
+    model_error_refusal = ""           # model_error takes a dynamic model through its Problem (issue 29)
     input_rows = "experiments"
     normality_over = "every (experiment, time) reading, pooled per instrument"
 
@@ -635,8 +635,16 @@ class TimeSeriesKind(StudyKind):
         return results
 
     def report_runs(self, study, results, progress):
-        """The trajectories of every fit with their bands, and the mesh of each fit."""
-        return run_trajectories(study, run_discretisation(study, results), progress)
+        """The trajectories of every fit with their bands, the mesh of each fit, and the pages "Model error of
+        ..." (the discrepancy against time; :mod:`mudoe.model_error_runs`; a failure becomes a note)."""
+        results = run_trajectories(study, run_discretisation(study, results), progress)
+        try:
+            results = run_model_error_views(study, run_model_error(study, results, progress))
+        except (MissingPieceError, FitFailedError) as exc:
+            results = results.with_note(f"model error not available: {exc}")
+        return results.with_note("; ".join(f"model error of {v} not computed: {e}"
+                                           for v, e in results.model_error_errors.items())) \
+            if results.model_error_errors else results
 
     def validation_problem(self, study, results, variant, est, used) -> tuple:
         return validation_problem(study, results, est, used)

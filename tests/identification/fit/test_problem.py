@@ -71,14 +71,13 @@ def test_the_strategy_answers_what_differs_between_the_kinds():
     static, dyn = strategy_for(model), strategy_for(build())
     assert (static.design_axis, dyn.design_axis) == ("inputs", "times")
     assert (static.takes_time_series, dyn.takes_time_series) == (False, True)
-    assert (static.quantifies_model_error, dyn.quantifies_model_error) == (True, False)
     assert isinstance(model, static.model_type) and isinstance(build(), dyn.model_type)
     static.check_data(data)
     with pytest.raises(TypeError, match=r"^data: expected an identification.Measurements, got list$"):
         static.check_data([1.0])
-    with pytest.raises(TypeError, match=r"^measurements\['m'\]: a dynamic model needs identification."
+    with pytest.raises(TypeError, match=r"^data\['m'\]: a dynamic model needs identification."
                                         r"DynamicMeasurements \(values over sampling times\), got Measurements$"):
-        dyn.check_data(data, "measurements['m']")
+        dyn.check_data(data, "data['m']")
     with pytest.raises(DataError, match=r"^data: validate needs a campaign, got NoneType$"):
         dyn.check_data(None, need="validate needs a campaign", error=DataError)
     with pytest.raises(TypeError, match="data: a dynamic model needs identification.DynamicMeasurements"):
