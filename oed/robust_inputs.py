@@ -68,8 +68,13 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
                                  f"{'pairs' if joint else 'rows'}), got {n_points!r}")
         return info.F
 
-    r = exact_over_prior(information_at, pr, p, int(n_points), criterion=criterion, robust=robust, names=None,
-                         time_limit=time_limit, method=method)
+    try:
+        r = exact_over_prior(information_at, pr, p, int(n_points), criterion=criterion, robust=robust, names=None,
+                             time_limit=time_limit, method=method)
+    except ValueError as exc:
+        if str(exc).startswith("n: "):      # the engine's number of runs is this verb's n_points
+            raise ValueError("n_points: " + str(exc)[3:]) from None
+        raise
     names = tuple(labels[i] for i in r.design.indices)
     return replace(r.design, names=names, local_indices=tuple(r.local.indices),
                    local_efficiencies=tuple(float(e) for e in r.local_efficiencies))
