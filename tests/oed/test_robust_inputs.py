@@ -62,6 +62,19 @@ def test_maximin_exact_inputs_against_brute_force(expo):
     assert r.efficiency == pytest.approx(worst[best], rel=1e-10) and r.efficiency <= 1.0 + 1e-12
 
 
+def test_joint_input_sensor_pairs_against_brute_force():
+    m = Model.explicit(["a", "b"], ["t"], ["y", "z"],
+                       h=lambda p, q: ca.vertcat(p[0] * ca.exp(-p[1] * q[0]), p[0] * q[0] / (1 + p[1] * q[0])))
+    pr = make_prior(PRIOR, m, P0)
+    sig = [0.1, 0.2]
+    r = select_inputs(m, P0, candidates=T[:6, None], sigma=sig, n_points=3, prior=pr, sensors="joint")
+    Fs = [information(m, ps, axis="input_pairs", candidates=T[:6, None], sigma=sig).F for ps in pr.points]
+    bayes = {c: sum(w * _u(F, c) for w, F in zip(pr.weights, Fs)) for c in itertools.combinations(range(12), 3)}
+    best = max(bayes, key=bayes.get)
+    assert r.proven_optimal and r.indices == best
+    assert r.names == tuple(f"q{c // 2}:{'yz'[c % 2]}" for c in best)
+
+
 def test_dynamic_reactor_experiments_against_brute_force():
     from mudoe.example_reactor import P_TRUE, TIMES, build
     m = build()
