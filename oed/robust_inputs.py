@@ -32,6 +32,22 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
     r"""The exact robust design :math:`\max_{|S|=n}` of the module docstring, with ``unused`` the arguments of
     :func:`oed.inputs.select_inputs` that this route does not take (any given is refused, named).
 
+    Parameters
+    ----------
+    model, p, candidates, sigma, sensors, n_series, times, discretisation
+        As in :func:`oed.inputs.select_inputs` (``sensors="joint"``: the candidates are (row, sensor) pairs).
+    n_points : int
+        Candidates chosen (distinct).
+    criterion : {"A", "D", "E"}
+    prior : (P, w), dict or oed.prior.Prior
+        :func:`oed.prior.make_prior` around ``p``.
+    robust : {"bayes", "maximin"}
+    method : {"auto", "enumerate", "bnb"}
+    time_limit : float
+        Seconds per :func:`oed.robust_exact.select_robust_exact` solve (the information is not counted).
+    unused : dict
+        ``refine``, ``kind``, ``costs``, ``budget``, ``bounds``, ``include``, ``exclude`` as given.
+
     Returns
     -------
     oed.robust_exact.RobustExactDesign
