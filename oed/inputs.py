@@ -45,6 +45,7 @@ from .design import DesignResult, DesignSettings, select_sensors_from_informatio
 from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
                           input_problem, measured_sensors, row_information)
 from .input_nlp import information_nlp
+from .robust_inputs import robust_exact_inputs
 from . import refine_child
 
 __all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "select_inputs", "refine_inputs",
@@ -273,22 +274,35 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
         equivalence-theorem certificate) on ``bounds`` (default the candidates' range), not an exact
         n-run design; ``n_points``, costs, budget, include/exclude, refine and method are then not used.
     prior : None, (P, w), dict or oed.prior.Prior
-        Parameter uncertainty (:func:`oed.prior.make_prior`); only with ``approximate=True`` (exact
-        robust designs are not implemented).
+        Parameter uncertainty (:func:`oed.prior.make_prior`): with ``approximate=True`` the robust approximate
+        design; else the exact robust design of ``n_points`` candidates (:mod:`oed.robust_inputs`: the
+        information of every candidate at every parameter vector, then
+        :func:`oed.robust_exact.select_robust_exact` by enumeration or branch-and-bound with a proven gap,
+        ``method`` "auto", "enumerate" or "bnb", ``time_limit`` per solve), with the local exact design at ``p``
+        and its efficiency across the prior.  ``refine``, ``costs``, ``budget``, ``include``, ``exclude``,
+        ``bounds`` and ``kind="second_order"`` are then refused (the refinement under a prior is not implemented).
     robust : {"bayes", "maximin"}
-        With a prior: pseudo-Bayesian or standardized maximin criterion.
+        With a prior: pseudo-Bayesian or standardized maximin criterion (exact designs: the worst-case
+        efficiency against each parameter vector's own exact n-run optimum).
     approx_settings : oed.approximate.ApproximateSettings
 
     Returns
     -------
-    InputDesignResult, or oed.approximate.ApproximateDesign with ``approximate=True``
+    InputDesignResult, oed.approximate.ApproximateDesign with ``approximate=True``, or
+    oed.robust_exact.RobustExactDesign with a prior and ``approximate=False``
 
     Raises
     ------
     ValueError
         Bad input (the message names the argument).
     """
-    if approximate or prior is not None:
+    if prior is not None and not approximate:
+        return robust_exact_inputs(model, p, candidates=candidates, sigma=sigma, n_points=n_points, sensors=sensors,
+                                   criterion=criterion, prior=prior, robust=robust, n_series=n_series, times=times,
+                                   discretisation=discretisation, method=method, time_limit=time_limit,
+                                   unused=dict(refine=refine, kind=kind, costs=costs, budget=budget, bounds=bounds,
+                                               include=include, exclude=exclude))
+    if approximate:
         exact_args = dict(n_points=n_points, costs=costs, budget=budget, include=include, exclude=exclude,
                           refine=refine, times=times)
         return _approximate_inputs(model, p, candidates, sigma, sensors, n_series, bounds, approximate, prior, robust,

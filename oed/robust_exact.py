@@ -73,6 +73,11 @@ class RobustExactDesign(ResultProtocol):
         upper_bound - value (0 when proven).
     nodes : int
         Branch-and-bound nodes (0 for enumeration).
+    local_indices : tuple of int
+        The local exact design at the nominal parameters (``select_inputs`` with a prior; empty otherwise).
+    local_efficiencies : tuple of float
+        That local design's efficiency against this design at every parameter vector of the prior
+        (:func:`set_efficiencies`; empty when ``local_indices`` is).
     """
 
     indices: tuple
@@ -90,6 +95,8 @@ class RobustExactDesign(ResultProtocol):
     upper_bound: float = float("nan")
     gap: float = 0.0
     nodes: int = 0
+    local_indices: tuple = ()
+    local_efficiencies: tuple = ()
 
     def summary(self) -> str:
         """One-paragraph summary."""
@@ -98,8 +105,13 @@ class RobustExactDesign(ResultProtocol):
         via = f"branch-and-bound, {self.nodes} nodes" if self.method == "bnb" else "enumeration"
         eff = "" if not np.isfinite(self.efficiency) else (
             f", {'worst-case ' if self.robust == 'maximin' else ''}efficiency {self.efficiency:.6f}")
-        return (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
+        text = (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
                 f"{self.value:.9g} ({proof}; {via}, {self.n_designs} sets evaluated){eff}, {self.wall_time:.2f} s")
+        if not self.local_efficiencies:
+            return text
+        e = np.asarray(self.local_efficiencies, float)
+        return (text + f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
+                f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
 
     def to_frame(self):
         """The chosen candidates (``index``, ``name``), one row each; ``.attrs``: value, efficiency, criterion,
@@ -111,8 +123,12 @@ class RobustExactDesign(ResultProtocol):
         return df
 
     def to_dict(self) -> dict:
-        """JSON-safe: every field (per_sample a list; NaN efficiency as null)."""
-        return jsonable(self)
+        """JSON-safe: every field (per_sample a list; NaN efficiency as null); ``local_indices`` and
+        ``local_efficiencies`` only when the local design was compared."""
+        d = jsonable(self)
+        if not self.local_efficiencies:
+            del d["local_indices"], d["local_efficiencies"]
+        return d
 
 
 def _check(F, prior_w, n, robust, u_star, names):
@@ -281,14 +297,15 @@ class ExactOverPrior:
 
 
 def exact_over_prior(information_at, prior, p, n, *, criterion=DEFAULT_CRITERION, robust="bayes", names=None,
-                     time_limit: float = 60.0) -> ExactOverPrior:
+                     time_limit: float = 60.0, method: str = "auto") -> ExactOverPrior:
     r""":math:`\max_{|S|=n}` of the robust criterion over ``prior`` (:func:`select_robust_exact`, enumeration or
     branch-and-bound) and the local n-run design at ``p``, with ``information_at(p_row) -> F (n_candidates, n_p,
     n_p)`` the information of one run of every candidate.  Maximin standardizes by each parameter vector's own
-    exact n-run optimum (so the worst-case efficiency is against the best n-run design at that vector)."""
+    exact n-run optimum (so the worst-case efficiency is against the best n-run design at that vector).  ``method``
+    and ``time_limit`` (s) apply to each :func:`select_robust_exact` call (local, per-vector optima, robust)."""
     F = np.stack([np.asarray(information_at(ps), float) for ps in prior.points], axis=1)
     F0 = np.asarray(information_at(np.asarray(p, float)), float)[:, None]
-    kw = dict(criterion=criterion, names=names, time_limit=time_limit)
+    kw = dict(criterion=criterion, names=names, time_limit=time_limit, method=method)
     local = select_robust_exact(F0, [1.0], n, **kw)
     u_star = None
     if robust == "maximin":

@@ -193,8 +193,11 @@ def test_design_verbs_route_approximate_designs(model):
     assert np.array_equal(r.points, ref.points) and np.array_equal(r.weights, ref.weights)
     with pytest.raises(ValueError, match="candidates: approximate designs need a continuous range"):
         select_inputs(model, P0, candidates=[[3.0]], sigma=1.0, approximate=True)
-    with pytest.raises(ValueError, match="prior: exact robust designs .* not implemented"):
+    # a prior without approximate=True: the exact robust design of n_points rows (tests/oed/test_robust_inputs.py)
+    with pytest.raises(ValueError, match="n_points: no set of 3 candidates gives a non-singular information"):
         select_inputs(model, P0, candidates=np.linspace(0.0, 24.0, 5), sigma=1.0, n_points=3, prior=NARROW)
+    ex = select_inputs(model, P0, candidates=np.linspace(0.25, 24.0, 6), sigma=1.0, n_points=3, prior=NARROW)
+    assert ex.proven_optimal and len(ex.indices) == 3 and all(n.startswith("q") for n in ex.names)
     with pytest.raises(ValueError, match="n_points: not used by an approximate design"):
         select_inputs(model, P0, candidates=np.linspace(0.0, 24.0, 5), sigma=1.0, n_points=3, approximate=True)
     from mudoe.example_reactor import P_TRUE, TIMES, build
