@@ -90,7 +90,7 @@ def waterfall_plot(ms, ax=None, label: str = ""):
     ax.set_ylabel("final objective Phi (dimensionless)")
     ax.set_title(label or f"{ms.reached_best} of {ms.n_starts} starts reached the best minimum", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7.5, loc="upper left", frameon=True, framealpha=0.85)
+    ax.legend(fontsize=7.5, loc="best", frameon=True, framealpha=0.85)
     return ax.figure
 
 
@@ -164,8 +164,8 @@ def multistart_pages(results, variant: str):
     for k, pp in enumerate(parts):
         title = f"Multi-start fit of {variant}" + (f" ({k + 1}/{len(parts)})" if len(parts) > 1 else "")
         fig = _page(title)
-        n_lines = _text(fig, 0.04, 0.925, _summary(ms), width=185, size=9)
-        top = 0.925 - 0.019 * n_lines - 0.04
+        n_lines = _text(fig, 0.04, 0.925, _summary(ms), width=170, size=9)
+        top = 0.925 - 0.019 * n_lines - 0.055
         waterfall_plot(ms, fig.add_axes([0.07, top - 0.45, 0.55, 0.45]))
         head, rows = minima_rows(ms, est.param_units, pp)
         more = (f" (the first {MINIMA_ROWS} of {len(ms.minima)}; all in results.json)"
@@ -179,7 +179,7 @@ def multistart_pages(results, variant: str):
         _text(fig, 0.66, top - 0.04, "Each point is one start's final objective, the starts sorted from the lowest. "
               "A flat step (a plateau) is a local minimum that several starts reached; the lowest, green, is the "
               "estimate (black star). One long lowest plateau: the starts agree on the minimum. Steps above it: "
-              "other local minima, worse fits of the same data. Points not on a plateau reached a minimum no other "
-              "start found.", width=60, size=8.5)
+              "other local minima, worse fits of the same data; a plateau of one point: a minimum only one start "
+              "found. Open grey triangles: fits the data do not bound, at the objective's limit.", width=60, size=8.5)
         figs.append(fig)
     return figs
