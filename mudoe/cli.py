@@ -223,9 +223,12 @@ def _write(out: Path, files: dict) -> list:
 
 
 def _identify_diagnostics(est) -> dict:
-    """Curvature (Bates-Watts) and weakest direction of an estimate for identify's JSON output."""
+    """Curvature (Bates-Watts), weakest direction and (``[identify] starts`` > 1) every start of an estimate for
+    identify's JSON output."""
     import numpy as np
     out = {}
+    if est.diagnostics.starts is not None:
+        out["multistart"] = est.diagnostics.starts.to_dict()
     sd = est.sloppy_direction
     if sd is not None:
         out["weakest_direction"] = dict(text=str(sd), sloppy=sd.sloppy.tolist(), stiff=sd.stiff.tolist(),

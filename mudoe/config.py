@@ -73,14 +73,15 @@ from .config_prior import check_robust_keys, check_robust_prior, read_prior
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
-from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, DynamicConfig, ModelConfig, OEDConfig,
-                              ParameterConfig, RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig, SplitsConfig,
-                              StudyConfig, ValidateConfig)
+from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, DynamicConfig, IdentifyConfig, ModelConfig,
+                              OEDConfig, ParameterConfig, RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig,
+                              SplitsConfig, StudyConfig, ValidateConfig)
 from .registry import known_scenarios, known_variants, virtual_prototype
 from .units import known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
-           "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
+           "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig",
+           "ValidateConfig", "ReportConfig",
            "DynamicConfig", "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
            "settings_values", "config_error"]
@@ -266,6 +267,10 @@ def _parse_simulate(ctx, t):
     return cfg
 
 
+def _parse_identify(ctx, t):
+    return IdentifyConfig(**read_table(ctx, "identify", IdentifyConfig, t))
+
+
 def _parse_validate(ctx, t):
     return validated(ctx, "validate", ValidateConfig(**read_table(ctx, "validate", ValidateConfig, t)))
 
@@ -340,7 +345,8 @@ def _parse_dynamic(ctx, t) -> DynamicConfig:
 
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,
              "parameters": _parse_parameters, "splits": _parse_splits, "detect": _parse_detect,
-             "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate, "report": _parse_report,
+             "identify": _parse_identify, "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate,
+             "report": _parse_report,
              "dynamic": _parse_dynamic}
 
 

@@ -1,7 +1,7 @@
 """The sections of a study config as frozen dataclasses: the schema of the TOML file.
 
 One dataclass per section ([model], [data], [[sensors]], [[parameters]], [splits], [simulate],
-[detect], [oed], [validate], [report], [dynamic]) and :class:`StudyConfig`, the whole study.  A section's fields
+[detect], [identify], [oed], [validate], [report], [dynamic]) and :class:`StudyConfig`, the whole study.  A section's fields
 are its allowed keys and their defaults (:mod:`mudoe.config_schema`); the defaults that belong to a
 built-in model (the default model, its variants, its data folder, its virtual prototype's seed and
 series) are read from :mod:`mudoe.registry`.  The file is read into them by :mod:`mudoe.config`.
@@ -24,7 +24,7 @@ from .registry import DEFAULT_MODEL, default_model, known_variants, virtual_prot
 from .units import convert
 
 __all__ = ["ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig", "RandomSplitConfig",
-           "SplitsConfig", "SimulateConfig", "DetectConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
+           "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
            "DynamicConfig", "StudyConfig"]
 
 
@@ -251,6 +251,22 @@ class DetectConfig:
 
 
 @dataclass(frozen=True)
+class IdentifyConfig:
+    """The fits of every variant: min_p Phi(p) (paper eq. 3, objective units) from ``starts`` start values.
+
+    Attributes
+    ----------
+    starts : int >= 1     fits from the [[parameters]] starts and ``starts - 1`` Latin-hypercube points drawn
+                          in the bounds (:mod:`identification.fit.multistart`); the best local minimum is the
+                          estimate and the report gets a "multi-start" page per variant (1: the single fit)
+    seed : int >= 0       draws the further starts
+    """
+
+    starts: int = config_key(1, bounds=Bounds(1))
+    seed: int = config_key(0, bounds=NON_NEGATIVE)
+
+
+@dataclass(frozen=True)
 class OEDConfig:
     """Sensor selection (paper section 4).
 
@@ -412,6 +428,7 @@ class StudyConfig:
     splits: SplitsConfig = field(default_factory=SplitsConfig)
     simulate: SimulateConfig = field(default_factory=SimulateConfig)
     detect: DetectConfig = field(default_factory=DetectConfig)
+    identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     oed: OEDConfig = field(default_factory=OEDConfig)
     validate: ValidateConfig = field(default_factory=ValidateConfig)
     report: ReportConfig = field(default_factory=ReportConfig)

@@ -251,15 +251,17 @@ def start_values(study: Study, variant: str) -> np.ndarray:
 def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
     """Identify every variant on the study's data (all sensors) and assess each fit (goodness of fit, trust of
     its linearisation); failures are recorded, not raised (an estimate the data do not bound is recorded as a
-    failure with its reason, "not bounded: ...")."""
+    failure with its reason, "not bounded: ...").  ``[identify] starts`` and ``seed`` are passed to every fit (a
+    multi-start fit keeps its starts in ``est.diagnostics.starts``)."""
     from identification.errors import IdentificationError
     from .fit_assessment import assess
     progress = progress or Progress(False)
     estimates, errors, assessments = dict(results.estimates), dict(results.estimate_errors), dict(results.assessments)
+    ident = study.cfg.identify
     for v, m in study.models.items():
         with progress.step(f"identify {v}"):
             try:
-                est = identify(m, study.data[v], start_values(study, v))
+                est = identify(m, study.data[v], start_values(study, v), starts=ident.starts, seed=ident.seed)
             except IdentificationError as exc:
                 errors[v] = f"{type(exc).__name__}: {exc}"
                 continue

@@ -582,7 +582,11 @@ def report_pages(results: StudyRecord, diagnosis=None, with_diagnosis: bool = Tr
     _require_record(results)
     pages = [("title", partial(_title_page, results)), ("loops", partial(_loops_page, results)),
              ("normality", partial(_normality_page, results)), ("oed", partial(_oed_page, results)),
-             ("estimates", partial(_estimate_pages, results)), ("ellipses", partial(_ellipse_pages, results))]
+             ("estimates", partial(_estimate_pages, results))]
+    from .multistart_pages import multistart_pages, multistart_variants
+    pages += [(f"multistart{k}", partial(multistart_pages, results, v))      # [identify] starts > 1
+              for k, v in enumerate(multistart_variants(results), 1)]
+    pages.append(("ellipses", partial(_ellipse_pages, results)))
     for k, v in enumerate(uncertainty_models(results, uncertainty), 1):
         pages.append((f"uncertainty{k}", partial(uncertainty_pages, results, v)))
     pages += [("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),

@@ -110,6 +110,9 @@ def results_dict(results) -> dict:
     if results.model_error or results.model_error_errors:     # a static study's model error (issue 29)
         out["model_error"] = {v: r.to_dict() for v, r in results.model_error.items()}
         out["model_error_errors"] = dict(results.model_error_errors)
+    starts = {v: e.diagnostics.starts for v, e in results.estimates.items() if e.diagnostics.starts is not None}
+    if starts:                                                  # [identify] starts > 1: every start of each fit
+        out["multistart"] = {v: ms.to_dict() for v, ms in starts.items()}
     out["notes"] = list(results.notes)
     return jsonable(out)
 

@@ -58,6 +58,7 @@ from identification.errors import DataError, IdentificationError
 from identification.fit.record import FitRecord
 from identification.fit.start import checked_start, param_scale
 from identification.replicate import ReplicationTask, replicate
+from identification.results_protocol import jsonable
 
 __all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
            "check_starts", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES"]
@@ -379,6 +380,21 @@ class MultiStartRecord:
         parts.append(f"starts: p0 and {n - 1} Latin-hypercube points ({'; '.join(self.rules)}; seed {self.seed}), "
                      f"{self.backend}; the tables: est.diagnostics.starts.to_frame() and .minima_frame()")
         return "; ".join(parts)
+
+    def to_dict(self) -> dict:
+        """The record as JSON-safe values (a report's results.json): per start (lists in start order, start 1 =
+        p0 first) its values, estimate, objective, outcome, status, error and time; the distinct minima (best
+        first: objective, parameters, the 1-based starts that reached each); best (1-based), reached_best, the
+        tolerances, rules, seed, backend and wall time (NaN as null)."""
+        return jsonable(dict(param_names=list(self.param_names), n_starts=self.n_starts, starts=self.starts,
+                             p=self.p, objective=self.objective, outcome=list(self.outcome),
+                             status=list(self.status), errors=list(self.errors), fit_time=self.fit_time,
+                             best=self.best + 1, reached_best=self.reached_best,
+                             minima=[dict(objective=m.objective, p=m.p, starts=[i + 1 for i in m.starts])
+                                     for m in self.minima],
+                             objective_tol=self.objective_tol, parameter_tol_se=self.parameter_tol_se,
+                             rules=list(self.rules), seed=self.seed, backend=self.backend,
+                             wall_time=self.wall_time))
 
     def minima_frame(self):
         """The distinct local minima, best first (``minimum`` 1, 2, ...): objective, how many starts reached each,
