@@ -42,7 +42,7 @@ from scipy import stats
 
 from identification.fit.dynamic_data import DynamicMeasurements, instrument_sigma
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
-from identification.studies.detect import normality_check
+from identification.studies.detect import POOLED_NOTE, normality_check
 from identification.studies.records import MeshSummary, SimulationTruth, Trajectories
 from identification.studies.splits import Split, random_splits
 from models.cache import Cache
@@ -261,7 +261,7 @@ def prepare_dynamic(cfg: StudyConfig, built: dict, progress=None) -> Study:
     data_all, camp = _load(cfg, first, Q, given)
     det = cfg.detect.settings()
     norm = normality_check(data_all.by_instrument(), det.normality_level, correction=det.normality_correction)
-    norm = type(norm)(**{**norm.__dict__, "note": "pooled per instrument over every (experiment, time) reading"})
+    norm = dataclasses.replace(norm, note=POOLED_NOTE)
     rows = tuple(dict(sensor=s, how="given" if given is not None else "estimated from the residuals",
                       sigma_rep=float(norm.sigma_rep[k]), sigma_man=math.nan,
                       sigma=float(sig[k])) for k, s in enumerate(first.sensors))
