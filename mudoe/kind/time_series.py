@@ -465,7 +465,7 @@ def run_trajectories(study, results, progress):
 
 def mesh_summary(est) -> MeshSummary | None:
     """The :class:`MeshSummary` of a dynamic estimate (None for an estimate without a discretisation record)."""
-    rec = getattr(est, "extra", {}).get("discretisation")
+    rec = est.diagnostics.discretisation if hasattr(est, "diagnostics") else None
     if rec is None:
         return None
     shift = np.abs(np.asarray(rec.shift_se, float))
