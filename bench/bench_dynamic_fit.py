@@ -81,8 +81,8 @@ def reactor(rep: int = 5, n_exp: int = 20, n_times: int = 30, seed: int = 0):
     est, w, c = _timed(lambda: identify(reactor_model(), data, ex.p_start))
     out = {"n_exp": n_exp, "n_times": n_times, "seed": seed, "reference_p": ref.p.tolist(), "reference_se": ref.se.tolist(),
            "mudoe_first": {"wall_s": w, "cpu_s": c, "dev_se": ((est.p - ref.p) / ref.se).tolist(),
-                           "solver": est.extra.get("solver"),
-                           "mesh": est.extra["discretisation"].history}}
+                           "solver": est.diagnostics.solver,
+                           "mesh": est.diagnostics.discretisation.history}}
     model = reactor_model()
     identify(model, data, ex.p_start)
     variants = {"2-point": {"jac": "2-point"}, "sens": {"jac": "sens"}, "sens_stacked": {"jac": "sens", "stacked": True}}
@@ -111,11 +111,11 @@ def scale(n_exp: int = 200, n_times: int = 100, seed: int = 1):
     ex = dr.batch_reactor()
     d = dr.simulate_data(ex, n_exp, n_times, seed=seed)
     est, w, c = _timed(lambda: identify(reactor_model(extent=True), _measurements(d), ex.p_start))
-    rec = est.extra["discretisation"]
+    rec = est.diagnostics.discretisation
     return {"n_exp": n_exp, "n_times": n_times, "n_states": 4, "wall_s": w, "cpu_s": c,
-            "n_y_per_experiment": est.model.n_y, "solver": est.extra.get("solver"), "mesh_history": rec.history,
+            "n_y_per_experiment": est.model.n_y, "solver": est.diagnostics.solver, "mesh_history": rec.history,
             "bounded": rec.bounded, "truth_minus_p_in_se": ((d.p_true - est.p) / est.stderr).tolist(),
-            "timing": {k: v[0] for k, v in est.extra.get("timing", {}).items()}}
+            "timing": {k: v[0] for k, v in (est.diagnostics.timing or {}).items()}}
 
 
 def montecarlo(n_rep: int = 1000, workers: int = 2, seed: int = 0):

@@ -126,7 +126,7 @@ def problem(study: str):
                f"the sampling times only, no error control; largest output error at p* {err:.3g} sigma")
     else:
         est = identify_dynamic(model, nominal, er.P_TRUE)
-        rec = est.extra["discretisation"]
+        rec = est.diagnostics.discretisation
         cm = est.model
         how = (f"controlled mesh of identify_dynamic at the default settings: degree {rec.degree}, "
                f"{rec.n_elements} elements, error {100 * rec.error_sigma:.2g} % sigma")

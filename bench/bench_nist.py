@@ -73,7 +73,7 @@ def fit(name: str, start: str, scales=None) -> dict:
                 "time": time.perf_counter() - t}
     return {"name": name, "start": start, "time": time.perf_counter() - t,
             "p": float(lre(est.p, d.certified).min()), "se": float(lre(est.stderr_gn, d.certified_stdev).min()),
-            "rss": float(lre(est.rss, d.certified_rss)[0]), "solver": est.extra.get("solver"),
+            "rss": float(lre(est.rss, d.certified_rss)[0]), "solver": est.diagnostics.solver,
             "attainable": nist.attainable_digits(d) if hasattr(nist, "attainable_digits") else None}
 
 

@@ -113,13 +113,13 @@ def _run_mudoe(kind, n):
     wall, cpu = time.perf_counter() - t, _cpu() - c
     return {"time": wall, "cpu": cpu, "rss_base": base, "rss_peak": _rss_mb(), "p": est.p.tolist(),
             "se": est.stderr.tolist(), "status": est.status, "iterations": est.iterations,
-            "timing": est.extra.get("timing", {}), "ipopt_timing": est.extra.get("ipopt_timing"),
-            "ipopt_passes": est.extra.get("ipopt_passes"), "solver": est.extra.get("solver")}
+            "timing": (est.diagnostics.timing or {}), "ipopt_timing": est.diagnostics.ipopt_timing,
+            "ipopt_passes": est.diagnostics.ipopt_passes, "solver": est.diagnostics.solver}
 
 
 def phases(n: int = 100_000, kind: str = "implicit"):
     """Where the time of one cold fit of ``n`` points goes: the phases of ``identify`` (wall and
-    CPU seconds, from ``Estimate.extra["timing"]``) and, for the Ipopt solve, the NLP build,
+    CPU seconds, from ``Estimate.diagnostics.timing``) and, for the Ipopt solve, the NLP build,
     the solver set-up, the time in the derivative callbacks and Ipopt's own work (the linear
     solves of the KKT system, mostly), in a fresh subprocess (as one row of the scale table)."""
     m = _subprocess("mudoe", kind, n)
@@ -284,7 +284,7 @@ def _small_one(index: int, rep: int) -> dict:
         t_s.append(time.perf_counter() - t)
         c_s.append(time.process_time() - c)
     out.update(mudoe=float(np.median(t_m)), mudoe_cpu=float(np.median(c_m)), scipy=float(np.median(t_s)),
-               scipy_cpu=float(np.median(c_s)), solver=est.extra.get("solver"),
+               scipy_cpu=float(np.median(c_s)), solver=est.diagnostics.solver,
                diff=float(np.max(np.abs(est.p - r.x) / np.abs(r.x))), p=est.p.tolist())
     return out
 

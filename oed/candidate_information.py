@@ -28,6 +28,7 @@ import numpy as np
 
 from identification import information_contributions
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
+from identification.fit.dynamic_data import instrument_sigma
 from identification.fit.problem import strategy_for
 from models.collocation import collocate, pair_name
 from models.trajectory import mapped_outputs
@@ -107,16 +108,14 @@ def check_p(model, p) -> np.ndarray:
     return p
 
 
-def check_sigma(model, sigma, what: str = "sensor") -> np.ndarray:
-    """Standard deviation per sensor (``what="instrument"``: per instrument of a dynamic model), shape (n_S,)."""
+def check_sigma(model, sigma) -> np.ndarray:
+    """Standard deviation per sensor of a static model, shape (n_S,) (a dynamic model's, one per instrument:
+    :func:`identification.fit.dynamic_data.instrument_sigma`)."""
     sig = np.asarray(sigma, dtype=float).ravel()
     if sig.size == 1:
         sig = np.full(model.n_S, float(sig[0]))
     if sig.shape != (model.n_S,) or not np.all(np.isfinite(sig) & (sig > 0)):
-        if what == "sensor":
-            raise ValueError(f"sigma: expected {model.n_S} positive finite values (one per sensor), got {sigma!r}")
-        raise ValueError(f"sigma: expected {model.n_S} positive finite values (one per instrument: "
-                         f"{', '.join(model.sensors)}), got {sigma!r}")
+        raise ValueError(f"sigma: expected {model.n_S} positive finite values (one per sensor), got {sigma!r}")
     return sig
 
 
@@ -217,7 +216,7 @@ def input_problem(model, p, candidates, sigma, sensors=None, *, times=None,
         return InputProblem(model=model, sigma=sigma, sensors=sensors, source=model)
     if times is None:
         raise ValueError("times: a dynamic model needs the sampling times of its experiments")
-    sig = check_sigma(model, sigma, "instrument")
+    sig = instrument_sigma(model.sensors, sigma)
     try:
         t = model.check_times(times)
     except ModelError as exc:

@@ -51,7 +51,8 @@ def normality_dict(chk, units=None, data_name: str = "series") -> dict:
 def split_dict(s) -> dict:
     """A :class:`identification.studies.splits.Split` as a dict of its fields (``Split(**d)`` rebuilds it;
     :meth:`identification.studies.splits.Split.to_dict`); ``cal_sensors`` / ``val_sensors`` are the 0-based
-    sensor columns of each set (None: all), e.g. the (sensor, time) columns of a split by sampling time."""
+    sensor columns of each set (None: all), e.g. the (sensor, time) columns of a split by sampling time; a split
+    by time window of a time series also has ``cal_window`` / ``val_window`` ([t_lo, t_hi), "inf" / "-inf")."""
     return s.to_dict()
 
 

@@ -49,7 +49,7 @@ class FullSpaceSolution:
 
 class PhaseClock:
     """Wall and CPU seconds (``time.perf_counter``, ``time.process_time``) of the phases of one
-    :func:`identify`, recorded in ``Estimate.extra["timing"]`` as {phase: (wall s, CPU s)}."""
+    :func:`identify`, recorded in ``Estimate.diagnostics.timing`` as {phase: (wall s, CPU s)}."""
 
     def __init__(self):
         self._wall, self._cpu = time.perf_counter(), time.process_time()

@@ -414,7 +414,7 @@ def fit_members(model, members, p0, weights, settings, starts=None) -> tuple:
 
 def decrements(results) -> np.ndarray:
     """The Newton decrement of every member's estimate (NaN for a failed fit)."""
-    return np.array([np.nan if isinstance(r, Exception) else float(r.extra.get("newton_decrement", np.nan))
+    return np.array([np.nan if isinstance(r, Exception) else r.diagnostics.newton_decrement
                      for r in results])
 
 

@@ -18,7 +18,7 @@ from models.dynamic import TIME_RTOL, merge_times, time_tolerance
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
 
-__all__ = ["DynamicMeasurements"]
+__all__ = ["DynamicMeasurements", "instrument_sigma"]
 
 
 def _readonly(a) -> np.ndarray:
@@ -263,3 +263,56 @@ class DynamicMeasurements:
         sig = "unknown" if self.sigma is None else np.array2string(self.sigma, precision=4)
         return (f"DynamicMeasurements(n_M={self.n_M}, n_q={self.n_q}, times={self.union_times.size}, "
                 f"sensors={list(self.sensors)}, sigma={sig}, missing={int((~np.isfinite(self._z)).sum())})")
+
+
+def instrument_sigma(instruments: Sequence[str], sigma, *, readings: Sequence[str] | None = None,
+                     missing: bool = False) -> np.ndarray:
+    r"""sigma_s, s = 1..n_S: one standard deviation per instrument (in the unit of its readings).
+
+    eps_ijtk ~ N(0, sigma_k^2) with one sigma per instrument k, not per time: the one place that turns
+    a scalar, a list per instrument, or the sigma of the flat ``sensor@time`` readings of a collocated
+    fit into that (n_S,) array.
+
+    Parameters
+    ----------
+    instruments : sequence of str
+        The instruments' names, in order (``model.sensors`` of a dynamic model).
+    sigma : float or array_like
+        One value for all instruments, n_S values (one per instrument), or, with ``readings``, one value
+        per reading.
+    readings : sequence of str, optional
+        Names ``instrument@time`` of the readings that ``sigma`` belongs to (an estimate's ``sensors``):
+        an instrument's sigma is that of its first reading.
+    missing : bool
+        Allow NaN (an instrument whose sigma is not given); every other value must be positive finite.
+
+    Returns
+    -------
+    numpy.ndarray (n_S,)
+
+    Raises
+    ------
+    ValueError
+        ``sigma`` not n_S positive finite values, or an instrument without reading.
+    """
+    names = list(instruments)
+    if readings is not None:
+        sig_r = np.asarray(sigma, dtype=float).ravel()
+        inst = [str(r).split("@")[0] for r in readings]
+        if sig_r.shape != (len(inst),):
+            raise ValueError(f"sigma: expected {len(inst)} values (one per reading), got {sigma!r}")
+        absent = [s for s in names if s not in inst]
+        if absent:
+            raise ValueError(f"readings: no reading of instrument(s) {', '.join(absent)}")
+        sig = np.array([sig_r[inst.index(s)] for s in names])
+    else:
+        sig = np.asarray(sigma, dtype=float).ravel()
+        if sig.size == 1:
+            sig = np.full(len(names), float(sig[0]))
+    ok = np.isfinite(sig) & (sig > 0)
+    if missing:
+        ok |= np.isnan(sig)
+    if sig.shape != (len(names),) or not np.all(ok):
+        raise ValueError(f"sigma: expected {len(names)} positive finite values (one per instrument: "
+                         f"{', '.join(names)}), got {sigma!r}")
+    return sig

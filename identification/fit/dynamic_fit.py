@@ -15,7 +15,7 @@ sigma, and the linearised shift of the estimate were exact outputs used,
 dp = (G^T W G)^{-1} G^T W \delta h with \delta h the error so estimated, in standard errors.
 While max e > ``tol_sigma`` or max |dp / se| > ``tol_se`` the mesh is refined (each element
 split into ceil(1.25 (error / tolerance)^{1/(2d-1)}) parts, 2..``max_factor``) and the fit
-repeated from p̂.  The estimate records the mesh and the achieved error (``extra["discretisation"]``, a
+repeated from p̂.  The estimate records the mesh and the achieved error (``est.diagnostics.discretisation``, a
 :class:`DiscretisationRecord`) and its summary says so, or says that the error could not be
 bounded.
 """
@@ -226,7 +226,7 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     -------
     identification.fit.record.FitRecord
         Of the collocated model (``rec.model``) on the flat data (``rec.data``), with
-        ``rec.extra["discretisation"]`` a :class:`DiscretisationRecord` and a note
+        ``rec.diagnostics.discretisation`` a :class:`DiscretisationRecord` and a note
         (:func:`identification.identify` returns it as an Estimate).
     """
     ds = discretisation or DiscretisationSettings()

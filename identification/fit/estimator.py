@@ -253,7 +253,7 @@ def fit_static(model: Model, data: Measurements, p0, weights=None,
         The solver stopped at a stationary point that is not a minimum (the reduced Hessian
         J^T Omega J + S is not positive definite) and no lower point was found along its negative
         curvature (names the point and the eigenvalue); from such a point with descent the problem
-        is solved again (:mod:`identification.fit.secondorder`; ``extra["saddle_escapes"]`` and a note).
+        is solved again (:mod:`identification.fit.secondorder`; ``diagnostics.saddle_escapes`` and a note).
     """
     settings = settings or IdentifySettings()
     t_start = time.perf_counter()

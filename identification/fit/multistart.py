@@ -454,7 +454,7 @@ def _failure(fits, n: int, X: np.ndarray) -> MultiStartError:
 def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None, seed=0, workers: int | None = 1,
                scheduler=None) -> FitRecord:
     """min over the local minima p_s of Phi (paper eq. 3, objective units) reached from p0 and ``starts - 1`` drawn
-    starts (see the module docstring): the record of the best with ``extra["starts"]`` a
+    starts (see the module docstring): the record of the best with ``diagnostics.starts`` a
     :class:`MultiStartRecord` and its note.
 
     Parameters

@@ -333,14 +333,14 @@ class Problem:
 
         ``weights`` (n_S,) are the sensor (instrument) weights, ``Y0`` (n_q, n_y) a guess of the states
         (static models only; used for the start p0 only).  A dynamic model's mesh is refined until its error at
-        the estimate is within the tolerances (``record.extra["discretisation"]``).  Returns the plain
+        the estimate is within the tolerances (``record.diagnostics.discretisation``).  Returns the plain
         :class:`identification.fit.record.FitRecord` (:func:`identification.identify` wraps it as an Estimate).
 
         ``starts`` > 1: a multi-start fit (:mod:`identification.fit.multistart`): besides p0, ``starts - 1``
         starts drawn from ``seed`` (an int >= 0, a numpy SeedSequence, or None for fresh entropy, recorded) in
         the bounds, each fitted with the same settings on ``workers`` local processes (1: serially here; None:
         every core) or a Dask ``scheduler``; the record of the best local minimum is returned with every start in
-        ``record.extra["starts"]`` (``est.diagnostics.starts``, a MultiStartRecord) and a note.  ``starts=1``
+        ``record.diagnostics.starts`` (a MultiStartRecord) and a note.  ``starts=1``
         (default) is the single fit from p0 (``seed``, ``workers`` and ``scheduler`` unused).
         """
         if check_starts(starts) == 1:

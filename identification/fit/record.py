@@ -16,13 +16,19 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
+import inspect
+import warnings
 
 import numpy as np
 
 from identification.errors import NotBoundedError
 from identification.fit.checks import SloppyDirection, sloppy_direction
 
-__all__ = ["FitRecord", "FitDiagnostics", "EXTRA_KEYS"]
+__all__ = ["FitRecord", "FitDiagnostics", "EXTRA_KEYS", "EXTRA_READERS"]
+
+#: the modules that read ``FitRecord.extra`` without a warning: the package that writes it (identification)
+#: and the standard library's copying of a dataclass (``dataclasses.replace``, ``copy``, ``pickle``)
+EXTRA_READERS = ("identification.", "dataclasses", "copy", "copyreg", "pickle")
 
 #: the keys of ``FitRecord.extra`` that :class:`FitDiagnostics` turns into attributes of the same name
 EXTRA_KEYS = ("solver", "newton_decrement", "ipopt_iterations", "ipopt_passes", "singular_values",
@@ -174,6 +180,16 @@ class FitRecord:
     model: object = field(default=None, repr=False)
     data: object = field(default=None, repr=False)
     unbounded: object = None
+
+    def __getattribute__(self, name):
+        """Attribute access; reading :attr:`extra` from outside :mod:`identification` warns (DeprecationWarning,
+        one release: read the typed :attr:`diagnostics`)."""
+        if name == "extra" and not inspect.currentframe().f_back.f_globals.get("__name__", "").startswith(
+                EXTRA_READERS):
+            warnings.warn("Estimate.extra / FitRecord.extra is deprecated and goes in the next release: read the "
+                          "typed est.diagnostics (identification.fit.record.FitDiagnostics) instead",
+                          DeprecationWarning, stacklevel=2)
+        return object.__getattribute__(self, name)
 
     def __post_init__(self):
         for name in ("p", "states", "fitted", "residuals", "weights", "sigma", "information", "S", "H",

@@ -391,7 +391,7 @@ class _TimeSeries:
                   for sp in run.splits}
         res = [dataclasses.replace(t, cal_label=labels[t.split][0], val_label=labels[t.split][1]) for t in res]
         tests = tuple(_undecided(t, unbounded[t.split]) if t.split in unbounded else t for t in res)
-        rec = whole.extra["discretisation"]
+        rec = whole.diagnostics.discretisation
         run.notes.append(f"{name}: every split's fits by Radau IIA collocation with discretisation error control "
                          f"(whole campaign: {rec.n_elements} elements, {100 * rec.error_sigma:.2g} % of sigma); the "
                          "normality gate is pooled per instrument")
@@ -435,7 +435,7 @@ def _series_fit(model, data, p0, weights, run: _Run, failed: str = ""):
 
 def _unbounded(est) -> str:
     """Why the discretisation error of the fit ``est`` is not bounded ("" when it is, or the fit failed)."""
-    rec = est.extra.get("discretisation") if not isinstance(est, FitFailure) else None
+    rec = est.diagnostics.discretisation if not isinstance(est, FitFailure) else None
     return "" if rec is None or rec.bounded else rec.reason or "not bounded"
 
 

@@ -362,12 +362,18 @@ class Split:
     def to_dict(self) -> dict:
         """The split as a dict of its fields (``Split(**d)`` rebuilds it; JSON-safe: tuples as lists);
         ``cal_sensors`` / ``val_sensors`` are the 0-based sensor columns of each set (None: all), e.g. the
-        (sensor, time) columns of a split by sampling time."""
+        (sensor, time) columns of a split by sampling time; a split by time window (:attr:`timed`) also has
+        ``cal_window`` / ``val_window``, the half-open windows [t_lo, t_hi) (None: every time; +-inf edges
+        become "inf" / "-inf" in JSON, which ``float`` reads back)."""
         def lst(v):
             return None if v is None else [int(x) for x in v]
-        return dict(name=self.name, cal_inputs=lst(self.cal_inputs), val_inputs=lst(self.val_inputs),
-                    cal_series=lst(self.cal_series), val_series=lst(self.val_series), description=self.description,
-                    cal_sensors=lst(self.cal_sensors), val_sensors=lst(self.val_sensors))
+        out = dict(name=self.name, cal_inputs=lst(self.cal_inputs), val_inputs=lst(self.val_inputs),
+                   cal_series=lst(self.cal_series), val_series=lst(self.val_series), description=self.description,
+                   cal_sensors=lst(self.cal_sensors), val_sensors=lst(self.val_sensors))
+        if self.timed:
+            out.update(cal_window=None if self.cal_window is None else [float(v) for v in self.cal_window],
+                       val_window=None if self.val_window is None else [float(v) for v in self.val_window])
+        return out
 
 
 # ---------------------------------------------------------------------------- constructors

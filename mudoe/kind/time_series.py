@@ -40,9 +40,9 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from identification.fit.dynamic_data import DynamicMeasurements
+from identification.fit.dynamic_data import DynamicMeasurements, instrument_sigma
 from identification.fit.dynamic_fit import DiscretisationSettings, controlled_mesh
-from identification.studies.detect import normality_check
+from identification.studies.detect import POOLED_NOTE, normality_check
 from identification.studies.records import MeshSummary, SimulationTruth, Trajectories
 from identification.studies.splits import Split, random_splits
 from models.cache import Cache
@@ -62,7 +62,7 @@ from ..study_base import FitFailedError, MissingPieceError, Study, oed_variant, 
 from ..units import UnitError, convert
 from .base import Simulation, StudyKind
 
-__all__ = ["TimeSeriesKind", "TIME_SERIES", "DynamicCampaign", "experiment_rows", "instrument_sigma", "build_dynamic",
+__all__ = ["TimeSeriesKind", "TIME_SERIES", "DynamicCampaign", "experiment_rows", "config_sigma", "build_dynamic",
            "prepare_dynamic", "simulation_truth", "dynamic_splits", "SimulatedDynamic", "simulate_dynamic",
            "time_design", "run_oed_dynamic", "plan_dynamic", "trajectories", "run_trajectories", "mesh_summary",
            "run_discretisation", "validation_problem", "dynamic_template_text"]
@@ -146,8 +146,9 @@ def _bounded(cfg: StudyConfig, m):
     return new, np.array([pcs[n].start for n in m.param_names], float)
 
 
-def instrument_sigma(cfg: StudyConfig, model) -> tuple:
-    """(sigma per instrument in the model's units or None, rows of the sigma table); sigma_man needs
+def config_sigma(cfg: StudyConfig, model) -> np.ndarray:
+    """sigma_s per instrument in the model's units ([[sensors]] sigma converted from the files' unit; NaN
+    where not given), through :func:`identification.fit.dynamic_data.instrument_sigma`; sigma_man needs
     the data's repeatability and is composed in :func:`prepare_dynamic`."""
     names = cfg.sensor_names()
     unknown = [n for n in names if n not in model.sensors]
@@ -170,7 +171,7 @@ def instrument_sigma(cfg: StudyConfig, model) -> tuple:
                 raise entry_error(cfg.path, cfg.text, "sensors", names.index(s), "unit",
                                   f"instrument {s}: unit {sc.unit!r}: {exc}") from None
         sig.append(math.nan if v is None else v)
-    return np.array(sig)
+    return instrument_sigma(model.sensors, sig, missing=True)
 
 
 # ---------------------------------------------------------------------------- the study
@@ -253,14 +254,14 @@ def prepare_dynamic(cfg: StudyConfig, built: dict, progress=None) -> Study:
     sigma per instrument, the splits, the experiments' inputs and the start values of every variant."""
     models, p0s, Q = build_dynamic(cfg, built)
     first = next(iter(models.values()))
-    sig = instrument_sigma(cfg, first)
+    sig = config_sigma(cfg, first)
     given = None if np.all(np.isnan(sig)) else sig
     if given is not None and np.any(np.isnan(sig)):
         raise ConfigError(f"{cfg.path}: [[sensors]] give every instrument a sigma, or none (estimated)")
     data_all, camp = _load(cfg, first, Q, given)
     det = cfg.detect.settings()
     norm = normality_check(data_all.by_instrument(), det.normality_level, correction=det.normality_correction)
-    norm = type(norm)(**{**norm.__dict__, "note": "pooled per instrument over every (experiment, time) reading"})
+    norm = dataclasses.replace(norm, note=POOLED_NOTE)
     rows = tuple(dict(sensor=s, how="given" if given is not None else "estimated from the residuals",
                       sigma_rep=float(norm.sigma_rep[k]), sigma_man=math.nan,
                       sigma=float(sig[k])) for k, s in enumerate(first.sensors))
@@ -350,7 +351,7 @@ def simulate_dynamic(cfg: StudyConfig, built: dict, seed: int | None = None) -> 
         raise config_error(cfg, "simulate", "truth", f"unknown parameter(s) {', '.join(unknown)}; the model has "
                            f"{', '.join(m.param_names)}")
     truth.update(sc.truth)
-    sig = instrument_sigma(cfg, m)
+    sig = config_sigma(cfg, m)
     if np.any(np.isnan(sig)):
         raise ConfigError(f"{cfg.path}: [[sensors]] `mudoe simulate` needs every instrument's sigma (the noise)")
     seed = sc.seed if seed is None else int(seed)
@@ -393,7 +394,8 @@ def run_oed_dynamic(study, results, progress):
     v = oed_variant(study)
     results = require_fit(study, results, v, progress, "oed", "; no information matrix to design with")
     est = results.estimates[v]
-    sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
+    sigma = (study.sigma if study.sigma is not None
+             else instrument_sigma(study.sensors, est.sigma, readings=est.sensors))
     with progress.step(f"sampling-time design ({study.cfg.oed.criterion}, {v})"):
         d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False)
     robust = isinstance(d, RobustExactPlan)          # (no DesignResult nor ranked table of the local engine)
@@ -404,16 +406,11 @@ def run_oed_dynamic(study, results, progress):
                    "campaign)")
 
 
-def _instrument_sigma(est, sensors) -> np.ndarray:
-    """sigma per instrument of an estimate of the flat (sensor@time) data."""
-    return np.array([est.sigma[[k for k, n in enumerate(est.sensors) if n.split("@")[0] == s][0]] for s in sensors])
-
-
 def plan_dynamic(cfg, built: dict, progress) -> DynamicDesign:
     """``[oed] planned = true`` for a dynamic model: the time design at the [[parameters]] starts, no data."""
     models, p0s, Q = build_dynamic(cfg, built)
     v = cfg.oed.variant or list(models)[-1]
-    sig = instrument_sigma(cfg, models[v])
+    sig = config_sigma(cfg, models[v])
     if np.any(np.isnan(sig)):
         s = models[v].sensors[int(np.flatnonzero(np.isnan(sig))[0])]
         names = cfg.sensor_names()
@@ -432,7 +429,8 @@ def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 40
     fine, d = np.linspace(0.0, horizon, n_fine), np.asarray(data.union_times, float)
     near = np.min(np.abs(fine[:, None] - d[None, :]), axis=1) <= 1e-9 * max(horizon, 1.0)   # 1.4000000000000001
     t = np.unique(np.r_[fine[~near], d])
-    sigma = study.sigma if study.sigma is not None else _instrument_sigma(est, study.sensors)
+    sigma = (study.sigma if study.sigma is not None
+             else instrument_sigma(study.sensors, est.sigma, readings=est.sensors))
     cm, err = controlled_mesh(model, est.p, study.inputs, t, sigma)
     Y = solve_states(cm, est.p, study.inputs)
     sens = sensitivities(cm, est.p, study.inputs, Y)
@@ -467,7 +465,7 @@ def run_trajectories(study, results, progress):
 
 def mesh_summary(est) -> MeshSummary | None:
     """The :class:`MeshSummary` of a dynamic estimate (None for an estimate without a discretisation record)."""
-    rec = getattr(est, "extra", {}).get("discretisation")
+    rec = est.diagnostics.discretisation if hasattr(est, "diagnostics") else None
     if rec is None:
         return None
     shift = np.abs(np.asarray(rec.shift_se, float))

@@ -100,9 +100,9 @@ def _campaign(seed):
 def test_identify_by_reduced_newton_equals_the_ipopt_fit():
     data = _campaign(0)
     est = identify(build(), data, P)
-    assert est.extra["solver"] == "reduced Newton"
+    assert est.diagnostics.solver == "reduced Newton"
     ipopt = identify(build(), data, P, settings=IdentifySettings(reduced_start_inputs=None))
-    assert ipopt.extra["solver"] == "ipopt"
+    assert ipopt.diagnostics.solver == "ipopt"
     assert np.all(np.abs(est.p - ipopt.p) <= 1e-8 * ipopt.stderr)
     assert np.allclose(est.cov, ipopt.cov, rtol=1e-7)
 
@@ -115,7 +115,7 @@ def test_a_bound_at_the_optimum_falls_back_to_ipopt():
                    rhs=lambda x, p, u: m.rhs_fun(x, ca.SX(0, 1), p, u), x0=lambda p, u: m.x0_fun(p, u),
                    h=lambda x, p, u: m.h_fun(x, ca.SX(0, 1), p, u), horizon=m.horizon)
     est = identify(m2, _campaign(1), [1.5, 50.0, 1.0, 70.0])
-    assert est.extra["solver"] != "reduced Newton" and abs(est.p[3] - 75.0) <= 1e-6
+    assert est.diagnostics.solver != "reduced Newton" and abs(est.p[3] - 75.0) <= 1e-6
 
 
 def test_second_derivatives_equal_the_generic_adjoint():

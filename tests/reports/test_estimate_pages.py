@@ -91,9 +91,9 @@ def test_a_fit_whose_error_is_not_bounded_says_so_in_red(reactor):
     from mudoe.report_record import study_record
     from reports.builder import _estimate_pages, _title_page
     est = reactor.estimates["isothermal"]
-    rec = dataclasses.replace(est.extra["discretisation"], bounded=False, error_sigma=0.034,
+    rec = dataclasses.replace(est.diagnostics.discretisation, bounded=False, error_sigma=0.034,
                               reason="no mesh within 4000 elements")
-    m = mesh_summary(dataclasses.replace(est, extra={**est.extra, "discretisation": rec}))
+    m = mesh_summary(dataclasses.replace(est, extra={"discretisation": rec}))
     assert not m.bounded and "3.4 % of sigma" in m.text() and "NOT bounded" in m.text()
     bad = study_record(dataclasses.replace(reactor, discretisation={"isothermal": m}))
     for fig in (_estimate_pages(bad)[0], _title_page(bad)):

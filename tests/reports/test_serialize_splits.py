@@ -20,3 +20,13 @@ def test_a_time_split_round_trips_through_results_json_with_its_sensor_columns()
     # every field is written: the split rebuilt from results.json equals the original
     assert [Split(**d) for d in back] == [sp, by_exp]
     assert split_dict(sp)["description"] == sp.description
+
+
+def test_a_time_window_split_writes_its_windows_and_a_split_without_window_does_not():
+    from identification.studies.splits import time_window_splits
+    sp, = time_window_splits([1.5])
+    d = json.loads(dumps(split_dict(sp)))
+    assert d["cal_window"] == ["-inf", 1.5] and d["val_window"] == [1.5, "inf"]
+    assert Split(**d) == sp                       # rebuilt from results.json with its windows
+    plain = split_dict(Split("exp", [0], [1, 2]))
+    assert "cal_window" not in plain and "val_window" not in plain

@@ -64,5 +64,5 @@ def assert_agree_in_sd(est, p_peer, agree_sd: float = AGREE_SD, step_sd: float =
     distance to the optimum in standard errors, exact AD) is below ``step_sd``."""
     gap = np.abs(np.asarray(est.p) - np.asarray(p_peer, float)) / est.stderr_gn
     assert np.all(gap < agree_sd), f"estimates differ by {gap.max():.3g} sd (allowed {agree_sd:g})"
-    dec = est.extra["newton_decrement"]
+    dec = est.diagnostics.newton_decrement
     assert dec < step_sd, f"mudoe's Newton decrement is {dec:.3g} sd (allowed {step_sd:g})"

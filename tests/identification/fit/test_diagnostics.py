@@ -1,7 +1,10 @@
 """The typed diagnostics of a fit (``est.diagnostics``, identification.fit.record) and their ``extra`` source."""
+import dataclasses
 import pickle
+import warnings
 
 import numpy as np
+import pytest
 
 from identification import Measurements, identify
 from identification.fit.record import EXTRA_KEYS, FitDiagnostics
@@ -18,11 +21,13 @@ def _fit():
 def test_the_typed_attributes_read_what_extra_holds():
     est = _fit()
     d = est.diagnostics
-    assert d.solver == est.extra["solver"] and d.refinement_stop == est.extra["refinement_stop"]
-    assert d.newton_decrement == est.extra["newton_decrement"] and d.ipopt_passes == est.extra["ipopt_passes"]
-    np.testing.assert_array_equal(d.singular_values, est.extra["singular_values"])
-    np.testing.assert_array_equal(d.hessian_eigenvalues, est.extra["hessian_eigenvalues"])
-    sv = np.asarray(est.extra["singular_values"])
+    with pytest.warns(DeprecationWarning, match="diagnostics"):
+        extra = est.extra
+    assert d.solver == extra["solver"] and d.refinement_stop == extra["refinement_stop"]
+    assert d.newton_decrement == extra["newton_decrement"] and d.ipopt_passes == extra["ipopt_passes"]
+    np.testing.assert_array_equal(d.singular_values, extra["singular_values"])
+    np.testing.assert_array_equal(d.hessian_eigenvalues, extra["hessian_eigenvalues"])
+    sv = np.asarray(extra["singular_values"])
     assert d.condition == sv.max() / sv.min() and d.discretisation is None and d.other == {}
     assert pickle.loads(pickle.dumps(d)).solver == d.solver
 
@@ -34,3 +39,13 @@ def test_unknown_keys_are_kept_and_missing_ones_have_defaults():
     empty = FitDiagnostics.from_extra(None)
     assert empty.solver == "" and empty.saddle_escapes == () and empty.timing is None and empty.other == {}
     assert set(EXTRA_KEYS) <= set(FitDiagnostics.__dataclass_fields__)
+
+
+def test_reading_extra_from_outside_warns_and_the_package_reads_it_silently():
+    est = _fit()
+    with pytest.warns(DeprecationWarning, match="est.diagnostics"):
+        assert est.extra["solver"] == est.diagnostics.solver
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        moved = dataclasses.replace(est, notes=("moved",))      # the standard library's copy reads extra
+        assert moved.diagnostics.solver == est.diagnostics.solver and pickle.loads(pickle.dumps(est)).n_p == 2

@@ -53,7 +53,7 @@ def test_reactor_agrees_with_reference_fit_within_five_hundredths_of_a_standard_
     est = identify(build(), DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"]), P0)
     ref = reference_fit(z, [TIMES] * len(Q))
     assert np.all(np.abs(est.p - ref) / est.stderr < 0.05), (est.p - ref) / est.stderr
-    rec = est.extra["discretisation"]
+    rec = est.diagnostics.discretisation
     assert isinstance(rec, DiscretisationRecord) and rec.bounded
     assert rec.error_sigma <= 0.01 and np.abs(rec.shift_se).max() <= 0.01
     assert any(n.startswith("discretisation: Radau IIA") for n in est.notes) and "discretisation" in est.summary()
@@ -72,7 +72,7 @@ def test_error_control_refines_a_coarse_mesh():
     data = DynamicMeasurements(Q, TIMES, z, SIGMA, sensors=["cA", "cB"])
     coarse = DiscretisationSettings(degree=2, elements=1)       # order 3 on the sampling grid (10 elements)
     est = identify_dynamic(build(), data, P0, discretisation=coarse)
-    rec = est.extra["discretisation"]
+    rec = est.diagnostics.discretisation
     assert len(rec.history) >= 2 and rec.history[0][1] > 0.01 and rec.bounded
     assert rec.n_elements > rec.history[0][0] and rec.error_sigma <= 0.01
     ref = reference_fit(z, [TIMES] * len(Q))
@@ -80,7 +80,7 @@ def test_error_control_refines_a_coarse_mesh():
     # no refinement allowed: the fit says that its discretisation error is not bounded
     est = identify_dynamic(build(), data, P0, discretisation=DiscretisationSettings(degree=2, elements=1,
                                                                                     max_refinements=0))
-    rec = est.extra["discretisation"]
+    rec = est.diagnostics.discretisation
     assert not rec.bounded and rec.error_sigma > 0.01
     assert "discretisation error NOT bounded" in Estimate.from_record(est).summary()
 
@@ -108,7 +108,7 @@ def test_collocated_problem_is_a_static_model():
     assert isinstance(flat, Measurements) and flat.sensors[:2] == ("cA@0.2", "cB@0.2")
     assert cm.sensors == flat.sensors and cm.mesh.boundaries[-1] == HORIZON
     est = identify(cm, flat, P0)                # no error control: the caller's mesh
-    assert "discretisation" not in est.extra and np.all(np.abs(est.p - P_TRUE) / est.stderr < 4)
+    assert est.diagnostics.discretisation is None and np.all(np.abs(est.p - P_TRUE) / est.stderr < 4)
 
 
 @pytest.mark.parametrize("make, exc, match", [
@@ -173,7 +173,7 @@ def test_spring_damper_with_cubic_spring_agrees_with_reference_fit():
     z = np.array([ivp_osc(P_OSC, f[0]) for f in F])[None]
     z = z + sig * np.random.default_rng(6).standard_normal(z.shape)
     est = identify(oscillator(), DynamicMeasurements(F, T_OSC, z, sig, sensors=["x", "a"]), [300.0, 3.0, 2e6])
-    assert est.extra["discretisation"].bounded
+    assert est.diagnostics.discretisation.bounded
     # the reference optimum: scipy least_squares over solve_ivp (rtol 1e-10) to tight tolerances, started at
     # the estimate to keep the test fast (it converges to its own optimum, not to the start)
     ref = least_squares(lambda p: ((z[0] - np.array([ivp_osc(p, f[0]) for f in F])) / sig).ravel(), est.p * 1.01,
@@ -233,7 +233,7 @@ def test_collocated_problem_with_a_mesh_controlled_at_p():
     est = identify(build(), data, P0)
     h = np.array([ivp(P_TRUE, q, TIMES).ravel() for q in Q])
     assert np.max(np.abs(cm.simulate(P_TRUE, Q) - h) / np.tile(SIGMA, TIMES.size)) < 0.01
-    assert cm.mesh.n_elements <= est.extra["discretisation"].n_elements * 2
+    assert cm.mesh.n_elements <= est.diagnostics.discretisation.n_elements * 2
 
 
 def test_index1_dae_identify():
@@ -249,7 +249,7 @@ def test_index1_dae_identify():
     est = identify(m, DynamicMeasurements(q, t, z, [0.01, 0.01]), [0.5])
     ref = least_squares(lambda k: ((z[0] - np.stack([q / (1 + k * q * t), (q / (1 + k * q * t)) ** 2], -1)) / 0.01)
                         .ravel(), [0.5], xtol=1e-14, ftol=1e-14, gtol=1e-14).x
-    assert abs(est.p[0] - ref[0]) / est.stderr[0] < 0.05 and est.extra["discretisation"].bounded
+    assert abs(est.p[0] - ref[0]) / est.stderr[0] < 0.05 and est.diagnostics.discretisation.bounded
 
 
 def test_blow_up_at_p0_names_the_experiment_and_time():
@@ -274,7 +274,7 @@ def test_detect_rejects_a_linear_spring_on_hardening_spring_data():
     split = [Split("small vs large steps", (0, 1), (2, 3))]
     wrong = identify(oscillator("linear"), data, [300.0, 3.0])
     right = identify(oscillator(), data, [300.0, 3.0, 2e6])
-    assert wrong.extra["discretisation"].bounded and right.extra["discretisation"].bounded
+    assert wrong.diagnostics.discretisation.bounded and right.diagnostics.discretisation.bounded
     assert detect(wrong.model, wrong.data, split, wrong.p, normality="override").tests[0].alpha_lr < 1e-6
     assert detect(right.model, right.data, split, right.p, normality="override").tests[0].alpha_lr > 0.05
 

@@ -252,7 +252,7 @@ def test_lazy_bounds_interior_solution_equals_bounded_solve():
     bounded = model.with_bounds({"k": (0.5, 10.0), "c": (0.01, 5.0)})
     lazy = identify(bounded, data, p0=[1.0, 0.1])
     strict = identify(bounded, data, p0=[1.0, 0.1], settings=IdentifySettings(lazy_bounds=False))
-    assert lazy.extra["ipopt_passes"] == 1 and strict.extra["ipopt_passes"] == 1
+    assert lazy.diagnostics.ipopt_passes == 1 and strict.diagnostics.ipopt_passes == 1
     np.testing.assert_allclose(lazy.p, strict.p, rtol=1e-9)
     np.testing.assert_allclose(lazy.cov, strict.cov, rtol=1e-7)
 
@@ -261,7 +261,7 @@ def test_lazy_bounds_falls_back_to_the_bounded_problem_when_a_bound_is_active():
     model, data = _line_with_bounded_slope()
     lazy = identify(model, data, p0=[0.5, 0.0])
     strict = identify(model, data, p0=[0.5, 0.0], settings=IdentifySettings(lazy_bounds=False))
-    assert lazy.extra["ipopt_passes"] == 2
+    assert lazy.diagnostics.ipopt_passes == 2
     np.testing.assert_allclose(lazy.p, strict.p, rtol=1e-9, atol=1e-9)
     assert lazy.p[0] <= 1.0
 
@@ -531,13 +531,13 @@ def test_explicit_model_solved_by_reduced_newton_equals_the_ipopt_path():
     data = Measurements(x, y.reshape(1, -1, 1), sigma=None)
     newton = identify(model, data, p0=[15.0, 0.5])
     ipopt = identify(model, data, p0=[15.0, 0.5], settings=IdentifySettings(explicit_newton=False))
-    assert newton.extra["solver"] == "reduced Newton" and ipopt.extra["solver"] == "ipopt"
-    assert newton.success and newton.extra["newton_decrement"] < 1e-18
+    assert newton.diagnostics.solver == "reduced Newton" and ipopt.diagnostics.solver == "ipopt"
+    assert newton.success and newton.diagnostics.newton_decrement < 1e-18
     np.testing.assert_allclose(newton.p, ipopt.p, rtol=1e-10)
     np.testing.assert_allclose(newton.cov, ipopt.cov, rtol=1e-8)
     bounded, bdata = _line_with_bounded_slope()
     est = identify(bounded, bdata, p0=[0.5, 0.0])
-    assert est.extra["solver"] == "ipopt" and est.extra["ipopt_passes"] == 2 and est.p[0] <= 1.0
+    assert est.diagnostics.solver == "ipopt" and est.diagnostics.ipopt_passes == 2 and est.p[0] <= 1.0
 
 
 def test_one_state_model_fits_like_its_explicit_twin():
@@ -577,8 +577,8 @@ def test_far_start_stays_on_the_reduced_newton_path_and_equals_the_ipopt_fit():
     data = Measurements(d.x, d.y.reshape(1, -1, 1), sigma=None)
     est = identify(model, data, p0=d.start1)
     ref = identify(model, data, p0=d.start1, settings=IdentifySettings(explicit_newton=False))
-    assert est.extra["solver"] == "reduced Newton"
-    assert ref.extra["solver"] == "ipopt"
+    assert est.diagnostics.solver == "reduced Newton"
+    assert ref.diagnostics.solver == "ipopt"
     np.testing.assert_allclose(est.p, d.certified, rtol=1e-9)
     np.testing.assert_allclose(est.p, ref.p, rtol=1e-10)
     np.testing.assert_allclose(est.cov, ref.cov, rtol=1e-8)

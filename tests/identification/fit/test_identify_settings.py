@@ -72,7 +72,7 @@ def test_unbounded_first_pass_is_capped_when_the_optimum_lies_at_infinity(monkey
     e = identify(model, data, [200.0, 4e-4], settings=IdentifySettings(explicit_newton=False))
     assert calls[0][:2] == (est_mod.LAZY_PASS_MAX_ITER, False)     # pass 1: unbounded, capped
     assert calls[-1][:2] == (IpoptSettings().max_iter, True)        # pass 2: bounded, full budget
-    assert e.extra["ipopt_passes"] == 2 and e.p[0] == pytest.approx(300.0)
+    assert e.diagnostics.ipopt_passes == 2 and e.p[0] == pytest.approx(300.0)
     monkeypatch.setattr(est_mod, "solve_nlp", real)
     ref = identify(model, data, [200.0, 4e-4], settings=IdentifySettings(explicit_newton=False, lazy_bounds=False))
     np.testing.assert_allclose(e.p, ref.p, rtol=1e-10)

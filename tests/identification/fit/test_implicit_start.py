@@ -65,7 +65,7 @@ def test_reduced_start_gives_the_estimate_and_covariance_of_the_plain_ipopt_path
     warm = identify(model, data, p0=[1.5, 1.0, 0.5])
     plain = identify(model, data, p0=[1.5, 1.0, 0.5], settings=IdentifySettings(reduced_start_inputs=None))
     assert warm.success and plain.success
-    assert warm.extra["ipopt_iterations"] <= 1 < plain.extra["ipopt_iterations"]
+    assert warm.diagnostics.ipopt_iterations <= 1 < plain.diagnostics.ipopt_iterations
     np.testing.assert_allclose(warm.p, plain.p, rtol=1e-10)
     np.testing.assert_allclose(warm.cov, plain.cov, rtol=1e-8)
     np.testing.assert_allclose(warm.cov_gn, plain.cov_gn, rtol=1e-8)
@@ -74,7 +74,7 @@ def test_reduced_start_gives_the_estimate_and_covariance_of_the_plain_ipopt_path
     assert_same_optimum(warm.p, p_ref, fun, jac)      # in standard errors: holds on any CPU
     np.testing.assert_allclose(warm.cov_gn, cov_ref, rtol=1e-6)
     assert not np.allclose(warm.cov, warm.cov_gn, rtol=1e-6, atol=0)     # the second-order term S is in cov
-    timing = warm.extra["timing"]
+    timing = warm.diagnostics.timing
     assert "start point of Ipopt" in timing and all(w >= 0 and c >= 0 for w, c in timing.values())
 
 
@@ -82,7 +82,7 @@ def test_few_inputs_keep_the_plain_ipopt_path():
     n = 50
     F, z = _data(n, seed=4)
     est = identify(_springs(), Measurements(F, z.reshape(1, n, 2), SIG), p0=[1.5, 1.0, 0.5])
-    assert est.extra["ipopt_iterations"] > 1
+    assert est.diagnostics.ipopt_iterations > 1
 
 
 def test_batched_state_solve_from_a_guess_equals_solve_states_and_fails_clearly():

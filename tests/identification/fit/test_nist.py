@@ -153,8 +153,8 @@ def test_identify_reproduces_certified_values(name, start):
     assert lre_rss >= min(MIN_LRE_RSS, attainable), msg
     assert lre_p.min() >= MIN_LRE_PARAMS, msg
     assert lre_se.min() >= min(MIN_LRE_STDERR, attainable), msg
-    assert np.isfinite(est.extra["newton_decrement"]), msg
-    assert est.extra["refinement_stop"] in ("converged", "round-off of the gradient", "round-off of p",
+    assert np.isfinite(est.diagnostics.newton_decrement), msg
+    assert est.diagnostics.refinement_stop in ("converged", "round-off of the gradient", "round-off of p",
                                             "no progress at round-off", ""), msg
 
 
@@ -173,10 +173,10 @@ def test_mgh10_with_declared_scales_leaves_the_saddle_and_reaches_the_certified_
     assert lre(est.p, d.certified).min() >= MIN_LRE_PARAMS, est.p
     assert lre(est.stderr_gn, d.certified_stdev).min() >= MIN_LRE_STDERR
     assert lre(est.rss, d.certified_rss)[0] >= MIN_LRE_RSS
-    (saddle,) = est.extra["saddle_escapes"]
+    (saddle,) = est.diagnostics.saddle_escapes
     assert saddle["eigenvalue"] < -1 and saddle["rss"] > 1e5
     assert any("saddle point" in n for n in est.notes)
-    assert np.all(est.extra["hessian_eigenvalues"] > 0) and np.isfinite(est.extra["newton_decrement"])
+    assert np.all(est.diagnostics.hessian_eigenvalues > 0) and np.isfinite(est.diagnostics.newton_decrement)
 
 
 def test_a_saddle_without_descent_raises_convergence_error(monkeypatch):

@@ -28,7 +28,7 @@ def fitted():
 
 def test_identify_gives_bard_and_gauss_newton_covariances_and_a_bounded_discretisation(fitted):
     model, data, est = fitted
-    assert est.extra["discretisation"].bounded
+    assert est.diagnostics.discretisation.bounded
     assert np.all(np.abs(est.p - P_TRUE) / est.stderr < 4.0)
     # Bard (second-order) and Gauss-Newton covariances: symmetric positive definite, close for this
     # nearly linear, well-fitting problem (residual terms are O(sigma))
