@@ -17,10 +17,10 @@ from identification import model_error, rank_models
 from identification.errors import IdentificationError
 
 from .config import ConfigError
-from .study_base import Progress, design_sensors, start_values
+from .study_base import FitFailedError, MissingPieceError, Progress, design_sensors, start_values
 from .units import convert
 
-__all__ = ["run_model_error", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
+__all__ = ["run_model_error", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
            "quantify_dict", "model_error_view", "run_model_error_views"]
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05):
@@ -244,3 +244,16 @@ def run_model_error_views(study, results):
     computed (the report's pages "Model error of ...")."""
     views = {v: model_error_view(study, results, v) for v in results.model_error}
     return dataclasses.replace(results, model_error_views={**results.model_error_views, **views})
+
+
+def run_model_error_pages(study, results, progress=None):
+    """``results`` with the model error of every variant and what its report pages draw
+    (:func:`run_model_error`, :func:`run_model_error_views`); a study-wide failure and each variant's failure
+    become notes of the results, never an error of the report."""
+    try:
+        results = run_model_error_views(study, run_model_error(study, results, progress))
+    except (MissingPieceError, FitFailedError) as exc:
+        results = results.with_note(f"model error not available: {exc}")
+    return results.with_note("; ".join(f"model error of {v} not computed: {e}"
+                                       for v, e in results.model_error_errors.items())) \
+        if results.model_error_errors else results

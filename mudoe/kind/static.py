@@ -35,11 +35,11 @@ from ..checks import check_data, check_model, study_splits
 from ..config import ConfigError, StudyConfig, config_error
 from ..data_io import (DataFileError, DataUnits, atomic_write_text, load_campaign, study_units, write_paper_layout,
                        write_tidy_layout)
-from ..model_error_runs import run_model_error, run_model_error_views
+from ..model_error_runs import run_model_error_pages
 from ..parameter_units import model_parameters
 from ..plans import plan_at_estimate, plan_without_data
 from ..registry import builtin_model, scenario_splits, simulate_refusal
-from ..study_base import (FitFailedError, MissingPieceError, Progress, Study, StudyResults, oed_variant, require_fit,
+from ..study_base import (Progress, Study, StudyResults, oed_variant, require_fit,
                           run_oed)
 from ..study_models import build_models, config_start_values, declare_units
 from ..units import UNITS
@@ -421,13 +421,7 @@ class StaticKind(StudyKind):
 
     def report_runs(self, study, results, progress):
         """The pages "Model error of ..." (:mod:`mudoe.model_error_runs`); a failure becomes a note."""
-        try:
-            results = run_model_error_views(study, run_model_error(study, results, progress))
-        except (MissingPieceError, FitFailedError) as exc:
-            results = results.with_note(f"model error not available: {exc}")
-        return results.with_note("; ".join(f"model error of {v} not computed: {e}"
-                                           for v, e in results.model_error_errors.items())) \
-            if results.model_error_errors else results
+        return run_model_error_pages(study, results, progress)
 
     def validation_problem(self, study, results, variant, est, used) -> tuple:
         """The model of ``variant`` itself, the study's splits, the sensors ``used``."""

@@ -57,8 +57,8 @@ from ..config_errors import entry_error, table_line
 from ..data_io import DataFileError
 from ..dynamic_io import read_long_csv, write_long_csv
 from ..parameter_units import model_parameters
-from ..model_error_runs import run_model_error, run_model_error_views
-from ..study_base import FitFailedError, MissingPieceError, Study, oed_variant, require_fit
+from ..model_error_runs import run_model_error_pages
+from ..study_base import Study, oed_variant, require_fit
 from ..units import UnitError, convert
 from .base import Simulation, StudyKind
 
@@ -636,13 +636,7 @@ class TimeSeriesKind(StudyKind):
         """The trajectories of every fit with their bands, the mesh of each fit, and the pages "Model error of
         ..." (the discrepancy against time; :mod:`mudoe.model_error_runs`; a failure becomes a note)."""
         results = run_trajectories(study, run_discretisation(study, results), progress)
-        try:
-            results = run_model_error_views(study, run_model_error(study, results, progress))
-        except (MissingPieceError, FitFailedError) as exc:
-            results = results.with_note(f"model error not available: {exc}")
-        return results.with_note("; ".join(f"model error of {v} not computed: {e}"
-                                           for v, e in results.model_error_errors.items())) \
-            if results.model_error_errors else results
+        return run_model_error_pages(study, results, progress)
 
     def validation_problem(self, study, results, variant, est, used) -> tuple:
         return validation_problem(study, results, est, used)
