@@ -40,6 +40,7 @@ def _types_from(obj, package: str) -> set:
     return found
 
 
+@pytest.mark.filterwarnings("ignore:Estimate.extra:DeprecationWarning")   # the walker reads every field
 def test_the_record_holds_no_object_of_the_study_layer(truss):
     from mudoe.report_record import study_record
     from oed.study_record import StudyRecord
