@@ -1,7 +1,9 @@
 """The robust-design keys of ``[oed]`` (issue 31): ``prior``, ``robust`` and ``approximate``.
 
 With ``mode = "sensors"`` (and ``approximate = false``) a prior gives the exact robust n-run design: a static
-study's sensors (``planned = true``) or a dynamic study's sampling times (:mod:`mudoe.robust_plans`).
+study's sensors (``planned = true``) or a dynamic study's sampling times (:mod:`mudoe.robust_plans`); with
+``mode = "inputs"`` and ``n_points`` the exact robust choice of ``n_points`` candidate input rows (without
+``n_points``, or with ``approximate = true``: the robust approximate design).
 
 ``prior`` is a table, one key per uncertain parameter, its value ``[distribution, arguments...]``::
 

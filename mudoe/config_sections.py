@@ -305,7 +305,8 @@ class OEDConfig:
     robust : {"", "bayes", "maximin"}  with a prior: the pseudo-Bayesian (default) or maximin criterion
     approximate : bool             mode "inputs": the approximate design (support points, weights and the
                                    equivalence certificate) on the candidates' range instead of n_points
-                                   exact points (implied by a prior)
+                                   exact points (implied by a prior without n_points; a prior with n_points
+                                   and approximate = false: the exact robust choice of n_points rows)
     """
 
     criterion: str = config_key(DEFAULT_CRITERION, choices=("A", "D", "E"))

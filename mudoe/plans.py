@@ -54,6 +54,12 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                            "prior)"):
             return plan_robust_exact(cfg, variant, model, lambda ps: select_information(model, ps, Q, sigma, o),
                                      tuple(model.sensors), n, p, planned, "sensors")
+    if o.prior and not o.approximate and o.mode == "inputs" and o.n_points is not None:
+        from .robust_plans import plan_robust_exact
+        with progress.step(f"exact robust input design ({o.criterion}, {variant}, {o.robust or 'bayes'} over the "
+                           "prior)"):
+            return plan_robust_exact(cfg, variant, model, lambda ps: input_information(model, ps, Q, sigma, o),
+                                     tuple(f"{q:g}" for q in q_set), o.n_points, p, planned, "inputs")
     if o.prior or o.approximate:
         from .robust_plans import plan_robust
         with progress.step(f"approximate input design ({o.criterion}, {variant}"
@@ -84,6 +90,13 @@ def select_information(model: Model, p, Q, sigma, o):
     """Planned Gauss-Newton information of every sensor at ``p`` (inputs ``Q``, ``[oed] n_series``), (n_S, n_p, n_p)."""
     from oed import information
     return information(model, p, inputs=Q, sigma=sigma, n_series=o.n_series).F
+
+
+def input_information(model: Model, p, Q, sigma, o):
+    """Planned Gauss-Newton information of one run at every candidate input row of ``Q`` (every sensor read,
+    ``[oed] n_series``) at ``p``, (n_Q, n_p, n_p)."""
+    from oed.candidate_information import information
+    return information(model, p, axis="inputs", candidates=Q, sigma=sigma, n_series=o.n_series).F
 
 
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None, built: dict | None = None) -> PlannedDesign:

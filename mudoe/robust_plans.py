@@ -7,7 +7,8 @@ local design's efficiency at every parameter vector of the prior against the rob
 (:func:`oed.design_efficiencies`).  :func:`plan_robust_exact` is ``mode = "sensors"`` with a prior (approximate =
 false): the exact robust n-run design of the sensors, or of a dynamic study's sampling times
 (:func:`oed.robust_exact.exact_over_prior`: enumeration or branch-and-bound, proven optimal or with its proven
-gap).  :func:`config_prior` checks the prior against the model (the
+gap); with ``mode = "inputs"``, a prior, ``approximate = false`` and ``n_points``, the exact robust choice of
+``n_points`` of the candidate input rows (the information of :func:`oed.inputs.select_inputs`'s exact route).  :func:`config_prior` checks the prior against the model (the
 messages name ``[oed] prior.<parameter>`` and its line).
 """
 from __future__ import annotations
@@ -86,12 +87,15 @@ def plan_robust_exact(cfg: StudyConfig, variant: str, model, information_at, lab
                       mode: str) -> RobustExactPlan:
     """The exact robust design of ``n`` of the candidates ``labels`` over ``[oed] prior``, with
     ``information_at(p_row) -> F (n_candidates, n_p, n_p)`` (Gauss-Newton information of one run of every
-    candidate), and the local exact design at ``p`` across the prior; ``mode`` "sensors" or "times"."""
+    candidate), and the local exact design at ``p`` across the prior; ``mode`` "sensors", "times" or "inputs"
+    (the candidate input rows, labelled by their set point)."""
     from oed.robust_exact import exact_over_prior
     o = cfg.oed
     prior = config_prior(cfg, model, p)
+    notes = (("the exact robust design uses the Gauss-Newton information (kind = \"second_order\" not used)",)
+             if o.kind == "second_order" and not planned else ())
     if not 1 <= n <= len(labels):
-        what = "[dynamic] n_times" if mode == "times" else "[oed] n_sensors"
+        what = {"times": "[dynamic] n_times", "inputs": "[oed] n_points"}.get(mode, "[oed] n_sensors")
         raise ConfigError(f"{cfg.path}: {what}: the exact robust design chooses 1..{len(labels)} candidates, got {n}")
     try:
         r = exact_over_prior(information_at, prior, p, n, criterion=o.criterion, robust=o.robust or "bayes",
@@ -101,4 +105,4 @@ def plan_robust_exact(cfg: StudyConfig, variant: str, model, information_at, lab
     return RobustExactPlan(variant, mode, planned, tuple(float(x) for x in p), tuple(labels), r.design, r.local,
                            tuple(float(e) for e in r.local_efficiencies),
                            tuple(tuple(float(v) for v in row) for row in prior.points),
-                           tuple(float(w) for w in prior.weights), tuple(model.param_names))
+                           tuple(float(w) for w in prior.weights), tuple(model.param_names), notes)

@@ -127,7 +127,8 @@ class RobustPlan(ResultProtocol):
 @dataclass(frozen=True)
 class RobustExactPlan(ResultProtocol):
     """An exact n-run design over a prior (``[oed] prior`` with ``approximate = false``, issue 31): sensors of a
-    static study (``mode = "sensors"``) or a dynamic study's sampling times (``mode = "times"``).
+    static study (``mode = "sensors"``), a dynamic study's sampling times (``mode = "times"``) or a static study's
+    input rows (``mode = "inputs"``, labelled by their set point in the model's unit).
 
     ``design`` is the :class:`oed.robust_exact.RobustExactDesign` (pseudo-Bayesian or maximin, by enumeration or
     branch-and-bound, proven optimal or with its proven gap), ``local`` the local exact design at ``p``,
@@ -159,7 +160,7 @@ class RobustExactPlan(ResultProtocol):
 
     def summary(self) -> str:
         """Text of the robust design, its proof, the local design and its efficiency across the prior."""
-        what = "sampling-time" if self.mode == "times" else "sensor"
+        what = {"times": "sampling-time", "inputs": "input"}.get(self.mode, "sensor")
         head = (f"exact robust {what} design of variant {self.variant} over a prior of {len(self.prior_weights)} "
                 f"parameter vectors, nominal p = {list(self.p)} "
                 + ("(planned before data: Gauss-Newton)" if self.planned else "(at the estimate)"))

@@ -66,7 +66,8 @@ def design_pages(results) -> list:
     if isinstance(plan, RobustPlan):
         return _approximate_pages(plan, q_unit)
     if isinstance(plan, RobustExactPlan):
-        return [robust_exact_page(plan)]
+        return [robust_exact_page(plan, f"set point{f' ({q_unit})' if q_unit else ''}" if plan.mode == "inputs"
+                                  else "")]
     return _input_pages(plan, q_unit, list(model.sensors))
 
 
@@ -203,7 +204,7 @@ def robust_exact_page(plan, axis_label: str = "") -> object:
     from .approx_figures import efficiency_curve
     d, local = plan.design, plan.local
     kind = {"bayes": "pseudo-Bayesian", "maximin": "maximin"}.get(d.robust, d.robust)
-    what = "sampling-time" if plan.mode == "times" else "sensor"
+    what = {"times": "sampling-time", "inputs": "input"}.get(plan.mode, "sensor")
     fig = _page(f"Exact robust {what} design ({d.criterion}, {kind}, {plan.variant})")
     ax = fig.add_axes([0.07, 0.50, 0.40, 0.38])
     labels = list(plan.candidates)

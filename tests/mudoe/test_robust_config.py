@@ -103,7 +103,7 @@ def test_approximate_without_a_prior_is_the_local_design(tmp_path, capsys):
 
 
 def test_an_unused_n_points_is_noted(tmp_path, capsys):
-    code, obj, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\n' + PRIOR)
+    code, obj, err = _run(tmp_path, capsys, 'mode = "inputs"\nn_points = 2\napproximate = true\n' + PRIOR)
     assert code == 0, err
     assert any("n_points = 2 not used" in n for n in obj["notes"])
 

@@ -105,3 +105,54 @@ def test_the_design_page_of_an_exact_robust_plan(tmp_path):
     assert any("efficiency" in ax.get_ylabel() for ax in figs[0].axes)
     assert any("proven optimal by complete enumeration" in t.get_text() for t in figs[0].texts)
     plt.close(figs[0])
+
+
+# ---------------------------------------------------------------- mode = "inputs": the exact robust input rows
+@pytest.mark.parametrize("robust", ["bayes", "maximin"])
+def test_planned_press_input_rows_over_a_prior_match_the_library(tmp_path, capsys, robust):
+    from models.press import press_model
+    from oed.inputs import select_inputs
+    cfg = tmp_path / "plan.toml"
+    cfg.write_text(PLANNED_PRESS + f'mode = "inputs"\nn_points = 3\nrobust = "{robust}"\n' + PRIOR)
+    obj = _oed(tmp_path, capsys, cfg)
+    q = np.linspace(0.0, 1600.0, 9)
+    ref = select_inputs(press_model(), [530.0, 470.0], candidates=q[:, None], sigma=SIGMA_MM, n_points=3,
+                        criterion="D", prior={"k5": ("uniform", 400.0, 700.0), "k7": ("lognormal", 470.0, 0.2)},
+                        robust=robust)
+    assert obj["mode"] == "inputs" and obj["approximate"] is False and obj["robust"] == robust
+    assert obj["candidates"] == [f"{v:g}" for v in q] and obj["indices"] == list(ref.indices)
+    assert obj["chosen"] == [f"{q[i]:g}" for i in ref.indices] and obj["proven_optimal"]
+    assert obj["value"] == pytest.approx(ref.value, rel=1e-12, abs=1e-12)
+    assert obj["local"]["indices"] == list(ref.local_indices)
+    assert np.allclose(obj["local_efficiencies"], ref.local_efficiencies, rtol=1e-12)
+    text = (tmp_path / "res" / "oed.txt").read_text()
+    assert "exact robust input design" in text and "efficiency of the local design" in text
+    assert json.loads((tmp_path / "res" / "oed.json").read_text())["chosen"] == obj["chosen"]
+
+
+def test_more_exact_robust_input_rows_than_candidates_is_refused_naming_the_key(tmp_path, capsys):
+    from cli_texts import one_line_error
+    cfg = tmp_path / "plan.toml"
+    cfg.write_text(PLANNED_PRESS + 'mode = "inputs"\nn_points = 12\n' + PRIOR)
+    one_line_error(capsys, ["oed", str(cfg), "--out", str(tmp_path / "res"), "--quiet"], "plan.toml:", "[oed] n_points", "n_points <= 9")
+
+
+def test_the_design_page_of_an_exact_robust_input_plan(tmp_path):
+    import matplotlib.pyplot as plt
+    from mudoe.plans import plan_without_data
+    from mudoe.study_models import build_models
+    from oed.study_record import ConfigRecord, DataSource, StudyRecord, StudySetup
+    from reports.design_pages import design_pages
+    cfg = parse_config(PLANNED_PRESS + 'mode = "inputs"\nn_points = 3\n' + PRIOR, str(tmp_path / "plan.toml"))
+    plan = plan_without_data(cfg)
+    models = {k: b.model for k, b in build_models(cfg).items()}
+    setup = StudySetup(config=ConfigRecord("", "", {}, "plan", 40, "none"), source=DataSource("none", (), "", 0, 0),
+                       campaign=None, sensors=(), sigma=None, sigma_table=(), normality=None, models=models, data={},
+                       p0=None, splits=())
+    figs = design_pages(StudyRecord(study=setup, plan=plan))
+    assert len(figs) == 1 and "Exact robust input design" in figs[0].texts[0].get_text()
+    assert any(ax.get_xlabel().startswith("set point") for ax in figs[0].axes)
+    assert any("efficiency" in ax.get_ylabel() for ax in figs[0].axes)
+    assert any("proven optimal" in t.get_text() for t in figs[0].texts)
+    figs[0].savefig(tmp_path / "page.pdf")
+    plt.close(figs[0])
