@@ -26,7 +26,7 @@ _EXPORTS = {
     "load_toml": "models", "press_model": "models",
     # data
     "Measurements": "identification", "DynamicMeasurements": "identification",
-    "read_long_csv": "mudoe.kind.time_series", "write_long_csv": "mudoe.kind.time_series",
+    "read_long_csv": "mudoe.kind.long_csv", "write_long_csv": "mudoe.kind.long_csv",
     "write_paper_layout": "mudoe.data_io", "read_paper_layout": "mudoe.data_io",
     # identification
     "identify": "identification", "Problem": "identification", "IdentifySettings": "identification",

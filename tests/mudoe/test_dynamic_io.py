@@ -1,10 +1,10 @@
-"""mudoe.kind.time_series: the long-format CSV of time-series campaigns."""
+"""mudoe.kind.long_csv: the long-format CSV of time-series campaigns."""
 import numpy as np
 import pytest
 
 from identification import DynamicMeasurements
 from mudoe.data_io import DataFileError
-from mudoe.kind.time_series import read_long_csv, write_long_csv
+from mudoe.kind.long_csv import read_long_csv, write_long_csv
 
 Q = np.array([[1.0, 330.0], [2.0, 350.0]])
 
@@ -41,5 +41,5 @@ def test_unit_conversion_and_errors(tmp_path):
 
 def test_the_old_module_path_still_answers_with_a_warning():
     import mudoe.dynamic_io as old
-    with pytest.warns(DeprecationWarning, match="use mudoe.kind.time_series.read_long_csv"):
+    with pytest.warns(DeprecationWarning, match="use mudoe.kind.long_csv.read_long_csv"):
         assert old.read_long_csv is read_long_csv

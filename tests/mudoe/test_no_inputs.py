@@ -12,7 +12,7 @@ from identification import DataError, DynamicMeasurements, identify
 from identification.fit.dynamic_fit import simulate_campaign
 from models import Model
 from mudoe.cli import main
-from mudoe.kind.time_series import read_long_csv, write_long_csv
+from mudoe.kind.long_csv import read_long_csv, write_long_csv
 
 P_TRUE = [2.0, 0.5]
 FACTORY = textwrap.dedent('''\
