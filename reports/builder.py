@@ -262,7 +262,7 @@ def _estimate_pages(results):
             truth = results.study.truth
             if truth is not None:
                 units = {p.name: p.unit for m in results.study.models.values() for p in m.params}
-                _text(fig, 0.04, 0.075, f"Truth of the simulated data ({truth.source}): " + ", ".join(
+                _text(fig, 0.04, 0.11, f"Truth of the simulated data ({truth.source}): " + ", ".join(
                       f"{n} = {v:.6g}{(' ' + units.get(n, '')) if units.get(n) else ''}"
                       for n, v in truth.values.items()) + ".", width=150, size=8.5, weight="bold")
             fig.text(0.04, 0.03, "Digits follow the standard error (two significant digits; the value to the same "
