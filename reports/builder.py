@@ -133,13 +133,13 @@ def _title_page(results):
         for k, (nt, bad) in enumerate(notes, 1):
             y -= 0.02 * _text(fig, 0.04, y, f"[{k}] {nt}", width=175, size=7.5,
                               **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
+    errors = "the model error of each variant, " if results.model_error_views else ""
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
-          "sampling-time design, estimates, confidence regions, alpha_min tables, residuals against time and against the "
-          "outputs." if s.pages == "trajectories" else
+          "sampling-time design, estimates, confidence regions, alpha_min tables, " + errors + "residuals against time "
+          "and against the outputs." if s.pages == "trajectories" else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
-          + ("the model error of each variant, " if results.model_error_views else "") + "what the model misses."),
-          width=165, size=8, color="0.4")
+          + errors + "what the model misses."), width=165, size=8, color="0.4")
     return fig
 
 
