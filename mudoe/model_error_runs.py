@@ -20,7 +20,7 @@ from .config import ConfigError
 from .study_base import FitFailedError, MissingPieceError, Progress, design_sensors, start_values
 from .units import convert
 
-__all__ = ["run_model_error", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
+__all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
            "quantify_dict", "model_error_view", "run_model_error_views"]
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05):
@@ -213,9 +213,7 @@ def model_error_view(study, results, variant: str):
                               input_label="t" + (f" [{unit}]" if unit else ""),
                               q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
                               embedded=embedded_parameters(results, variant),
-                              curves=tuple(", ".join(f"{n} = {v:g}" for n, v in zip(m.inputs, row))
-                                           or f"experiment {j + 1}"
-                                           for j, row in enumerate(np.asarray(data.inputs, float))))
+                              curves=curve_labels(m, data.inputs))
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:
@@ -257,3 +255,12 @@ def run_model_error_pages(study, results, progress=None):
     return results.with_note("; ".join(f"model error of {v} not computed: {e}"
                                        for v, e in results.model_error_errors.items())) \
         if results.model_error_errors else results
+
+
+def curve_labels(model, inputs) -> tuple:
+    """A legend label per experiment: its input values when they are few (e.g. "F = 2"), else "experiment k"
+    (a control profile has one value per grid step; the report's Experiments page lists them)."""
+    rows = np.asarray(inputs, float)
+    if getattr(model, "controls", ()) or rows.ndim != 2 or rows.shape[1] > 2 or rows.shape[1] == 0:
+        return tuple(f"experiment {j + 1}" for j in range(rows.shape[0]))
+    return tuple(", ".join(f"{n} = {v:g}" for n, v in zip(model.inputs, row)) for row in rows)

@@ -54,10 +54,10 @@ def _step(q) -> float:
     return 0.006 * (float(np.ptp(q)) if q.size > 1 and np.ptp(q) > 0 else 1.0)
 
 
-def discrepancy_plot(view: ModelErrorView, k: int, ax=None):
+def discrepancy_plot(view: ModelErrorView, k: int, ax=None, legend: bool = True):
     """The discrepancy of sensor ``k`` at every input row with its band (vertical bars), against the first
-    input (a dynamic model, ``view.curves``: one curve with its band per experiment, against time); returns the
-    figure."""
+    input (a dynamic model, ``view.curves``: one curve with its band per experiment, against time; ``legend``
+    False leaves their legend to the page, which draws one for all sensors); returns the figure."""
     ax = _ax(ax)
     mean, lo, hi = (np.asarray(a, float)[:, k] for a in view.discrepancy)
     unit = view.units[k]
@@ -71,9 +71,9 @@ def discrepancy_plot(view: ModelErrorView, k: int, ax=None):
             ax.fill_between(view.q[sl], lo[sl], hi[sl], color=line.get_color(), alpha=0.18, lw=0)
         ax.set_xlabel(view.input_label)
         ax.set_ylabel(f"discrepancy of {view.sensors[k]} [{unit}]")
-        ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=min(len(view.curves), 6),
-                  frameon=False, borderaxespad=0.2, title=f"{pct} bands", title_fontsize=7,
-                  alignment="left")
+        if legend:
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=min(len(view.curves), 6),
+                      frameon=False, borderaxespad=0.2, title=f"{pct} bands", title_fontsize=7, alignment="left")
         ax.grid(alpha=0.3)
         return ax.figure
     x = spread(view.q, 2 * _step(view.q))
@@ -165,7 +165,12 @@ def model_error_pages(results, variant: str):
     for k in range(n):
         x = 0.085 + k * (w + gap)
         if r.kind != "none":
-            discrepancy_plot(view, k, fig.add_axes([x, top - h, w, h]))
+            ax = fig.add_axes([x, top - h, w, h])
+            discrepancy_plot(view, k, ax, legend=not view.curves)
+            if view.curves and k == 0:                 # one legend of the experiments for every sensor, below
+                fig.legend(*ax.get_legend_handles_labels(), loc="upper center", bbox_to_anchor=(0.5, top - h - 0.075),
+                           ncol=min(len(view.curves), 8), fontsize=8, frameon=False,
+                           title=f"{100 * (1 - r.alpha):g} % bands", title_fontsize=8)
         if view.heldout is not None:
             heldout_band_plot(view, k, fig.add_axes([x, row2 - h, w, h]))
     head, rows = coverage_rows(r)

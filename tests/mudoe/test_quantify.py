@@ -130,3 +130,12 @@ def test_spread_moves_rows_of_one_value_apart_around_it():
     from reports.model_error_pages import spread
     x = spread([0.0, 100.0, 100.0, 200.0], 4.0)
     assert x.tolist() == [0.0, 98.0, 102.0, 200.0]
+
+
+def test_curve_labels_name_few_inputs_and_number_control_profiles():
+    from types import SimpleNamespace
+    from mudoe.model_error_runs import curve_labels
+    plain = SimpleNamespace(inputs=("F",), controls=())
+    assert curve_labels(plain, [[2.0], [4.0]]) == ("F = 2", "F = 4")
+    driven = SimpleNamespace(inputs=("TL",) + tuple(f"u{k}" for k in range(10)), controls=("u",))
+    assert curve_labels(driven, [[0.0] * 11, [0.02] * 11]) == ("experiment 1", "experiment 2")
