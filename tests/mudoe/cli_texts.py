@@ -55,3 +55,16 @@ def one_line_error(capsys, argv, *words):
     for w in words:
         assert w in lines[0], lines[0]
     return lines[0]
+
+
+def planned_design_pages(text: str, path) -> tuple:
+    """(plan, figures): the design that ``mudoe oed`` plans before data for the config ``text`` (read as if from
+    ``path``) and its design pages (reports.design_pages), drawn from a study record without data."""
+    from mudoe.config import parse_config
+    from mudoe.plans import plan_without_data
+    from mudoe.study_models import build_models
+    from reports.design_pages import design_pages
+    from tests.reports.record_stub import stub_record
+    cfg = parse_config(text, str(path))
+    plan = plan_without_data(cfg)
+    return plan, design_pages(stub_record({k: b.model for k, b in build_models(cfg).items()}, plan=plan))

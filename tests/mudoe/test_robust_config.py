@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from cli_texts import PLANNED_PRESS
+from cli_texts import PLANNED_PRESS, planned_design_pages
 from mudoe.cli import main
 from mudoe.config import parse_config
 from mudoe.config_prior import DISTRIBUTION_ARGS
@@ -121,18 +121,7 @@ def test_without_a_prior_the_output_is_the_local_route(tmp_path, capsys):
 
 def test_the_design_page_draws_the_certificate_and_the_efficiencies(tmp_path):
     import matplotlib.pyplot as plt
-    from oed.study_record import ConfigRecord, DataSource, StudyRecord, StudySetup
-
-    from mudoe.plans import plan_without_data
-    from mudoe.study_models import build_models
-    from reports.design_pages import design_pages
-    cfg = parse_config(PLAN + 'mode = "inputs"\n' + PRIOR, str(tmp_path / "plan.toml"))
-    plan = plan_without_data(cfg)
-    models = {k: b.model for k, b in build_models(cfg).items()}
-    setup = StudySetup(config=ConfigRecord("", "", {}, "plan", 40, "none"), source=DataSource("none", (), "", 0, 0),
-                       campaign=None, sensors=(), sigma=None, sigma_table=(), normality=None, models=models, data={},
-                       p0=None, splits=())
-    figs = design_pages(StudyRecord(study=setup, plan=plan))
+    plan, figs = planned_design_pages(PLAN + 'mode = "inputs"\n' + PRIOR, tmp_path / "plan.toml")
     assert len(figs) == 1
     axes = [ax for ax in figs[0].axes if ax.get_xlabel()]
     assert [ax.get_xlabel() for ax in axes][0] == "set point (N)"

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_texts import PLANNED_PRESS
+from cli_texts import PLANNED_PRESS, planned_design_pages
 from mudoe.cli import main
 from mudoe.config import ConfigError, parse_config
 
@@ -88,17 +88,7 @@ def test_planned_reactor_sampling_times_over_a_prior(tmp_path, capsys):
 
 def test_the_design_page_of_an_exact_robust_plan(tmp_path):
     import matplotlib.pyplot as plt
-    from mudoe.plans import plan_without_data
-    from reports.design_pages import design_pages
-    from oed.study_record import ConfigRecord, DataSource, StudyRecord, StudySetup
-    from mudoe.study_models import build_models
-    cfg = parse_config(PLANNED_PRESS + "n_sensors = 2\n" + PRIOR, str(tmp_path / "plan.toml"))
-    plan = plan_without_data(cfg)
-    models = {k: b.model for k, b in build_models(cfg).items()}
-    setup = StudySetup(config=ConfigRecord("", "", {}, "plan", 40, "none"), source=DataSource("none", (), "", 0, 0),
-                       campaign=None, sensors=(), sigma=None, sigma_table=(), normality=None, models=models, data={},
-                       p0=None, splits=())
-    figs = design_pages(StudyRecord(study=setup, plan=plan))
+    _, figs = planned_design_pages(PLANNED_PRESS + "n_sensors = 2\n" + PRIOR, tmp_path / "plan.toml")
     assert len(figs) == 1
     labels = [t.get_text() for ax in figs[0].axes for t in ax.get_xticklabels()]
     assert {"D_y", "F_x", "B0_y"} <= set(labels)
@@ -139,17 +129,7 @@ def test_more_exact_robust_input_rows_than_candidates_is_refused_naming_the_key(
 
 def test_the_design_page_of_an_exact_robust_input_plan(tmp_path):
     import matplotlib.pyplot as plt
-    from mudoe.plans import plan_without_data
-    from mudoe.study_models import build_models
-    from oed.study_record import ConfigRecord, DataSource, StudyRecord, StudySetup
-    from reports.design_pages import design_pages
-    cfg = parse_config(PLANNED_PRESS + 'mode = "inputs"\nn_points = 3\n' + PRIOR, str(tmp_path / "plan.toml"))
-    plan = plan_without_data(cfg)
-    models = {k: b.model for k, b in build_models(cfg).items()}
-    setup = StudySetup(config=ConfigRecord("", "", {}, "plan", 40, "none"), source=DataSource("none", (), "", 0, 0),
-                       campaign=None, sensors=(), sigma=None, sigma_table=(), normality=None, models=models, data={},
-                       p0=None, splits=())
-    figs = design_pages(StudyRecord(study=setup, plan=plan))
+    _, figs = planned_design_pages(PLANNED_PRESS + 'mode = "inputs"\nn_points = 3\n' + PRIOR, tmp_path / "plan.toml")
     assert len(figs) == 1 and "Exact robust input design" in figs[0].texts[0].get_text()
     assert any(ax.get_xlabel().startswith("set point") for ax in figs[0].axes)
     assert any("efficiency" in ax.get_ylabel() for ax in figs[0].axes)
