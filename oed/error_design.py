@@ -223,6 +223,9 @@ class ErrorDesignProblem:
     criterion : str
     repeats : int
     input_names : tuple of str
+    irreducible : ndarray (n_T,)          the targets' variance no run removes (rough part or embedded deviation,
+                                          sigma^2 units, region-major like ``core.d``)
+    target_sensors : tuple of str         the sensor of every target column
     """
 
     core: VarianceProblem
@@ -236,6 +239,13 @@ class ErrorDesignProblem:
     criterion: str
     repeats: int
     input_names: tuple
+    irreducible: np.ndarray
+    target_sensors: tuple
+
+    @property
+    def floor(self) -> float:
+        """J of the irreducible variances alone: no set of runs goes below it (sigma^2 units)."""
+        return float(self.core.criterion(self.irreducible))
 
     @property
     def n_candidates(self) -> int:
@@ -344,10 +354,11 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
         N = _noise(result, fit, sub, nu[nT + gr], repeats)
         Linv[np.ix_(gr, gr)] = linalg.solve_triangular(linalg.cholesky(N, lower=True), np.eye(len(gr)), lower=True)
     sig_t = fit.sigma[T.col]
-    d = np.diag(S)[:nT] + nu[:nT]
+    floor = nu[:nT].copy()
     if result.kind == "embedded":
         Om = np.diag(np.array([e.omega for e in result.embedded], float) ** 2)
-        d = d + np.einsum("tp,pq,tq->t", T.g, Om, T.g)
+        floor = floor + np.einsum("tp,pq,tq->t", T.g, Om, T.g)
+    d = np.diag(S)[:nT] + floor
     A = (S[:nT, nT:] @ Linv.T) / sig_t[:, None]
     B = Linv @ S[nT:, nT:] @ Linv.T
     w = np.repeat(w_r, len(tcols)) / len(tcols)
@@ -355,7 +366,7 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
                            criterion == "worst")
     return ErrorDesignProblem(core, pts_r, w_r, cand, np.array(rows, int), tuple(sens),
                               tuple(_label(lay, int(k)) for k in tcols), fit.sigma[tcols].copy(), criterion, repeats,
-                              names)
+                              names, floor / sig_t ** 2, tuple(lay.names[lay.instrument[k]] for k in tcols))
 
 
 # ---------------------------------------------------------------------------- the result
@@ -373,7 +384,10 @@ class ErrorDesignResult(ResultProtocol):
     chosen_sensors : tuple of tuple      the sensors each chosen run reads
     input_names : tuple of str
     target_labels : tuple of str         the target columns (sensor, or sensor at a time)
+    target_sensors : tuple of str        the sensor of every target column
     value_before, value_after : float    J now and after the runs (each sensor's sigma^2 units)
+    irreducible : float                  J of the part no run removes (the targets' rough part or embedded
+                                         deviation): below every design's value
     lower_bound : float                  proven: no n candidates give J below it
     gap : float                          value_after - lower_bound (0 when proven by enumeration)
     proven : bool                        optimal over the candidates within the branch-and-bound's tolerance
@@ -398,8 +412,10 @@ class ErrorDesignResult(ResultProtocol):
     chosen_sensors: tuple
     input_names: tuple
     target_labels: tuple
+    target_sensors: tuple
     value_before: float
     value_after: float
+    irreducible: float
     lower_bound: float
     gap: float
     proven: bool
@@ -434,13 +450,18 @@ class ErrorDesignResult(ResultProtocol):
                  f"{len(self.chosen)} run(s), {self.repeats} series each",
                  f"  runs: {self._runs()}",
                  f"  {what} posterior prediction variance over the region ({len(self.region)} points, sigma^2 units): "
-                 f"{self.value_before:.6g} -> {self.value_after:.6g} ({proof}; {via}, {self.n_evaluated} sets "
-                 f"evaluated, {self.wall_time:.2f} s)", "",
-                 f"{'target':<24} {'mean half before':>16} {'after':>10} {'max before':>11} {'after':>10}"]
+                 f"{self.value_before:.6g} -> {self.value_after:.6g}, of which no run removes {self.irreducible:.6g} "
+                 f"({proof}; {via}, {self.n_evaluated} sets evaluated, {self.wall_time:.2f} s)", "",
+                 "band half-width (unit of the sensor; over the region" + (" and the sampling times" if
+                 len(self.target_labels) > len(set(self.target_sensors)) else "") + ")",
+                 f"{'sensor':<16} {'mean before':>12} {'after':>10} {'max before':>11} {'after':>10}"]
         w = np.asarray(self.region_weights)
-        for j, lab in enumerate(self.target_labels):
-            hb, ha = self.half_before[:, j], self.half_after[:, j]
-            lines.append(f"{lab:<24.24} {w @ hb:>16.4g} {w @ ha:>10.4g} {hb.max():>11.4g} {ha.max():>10.4g}")
+        sens = np.asarray(self.target_sensors)
+        for name in dict.fromkeys(self.target_sensors):
+            m = sens == name
+            hb, ha = self.half_before[:, m], self.half_after[:, m]
+            lines.append(f"{name:<16.16} {w @ hb.mean(axis=1):>12.4g} {w @ ha.mean(axis=1):>10.4g} {hb.max():>11.4g} "
+                         f"{ha.max():>10.4g}")
         return "\n".join(lines + notes_lines(self.notes))
 
     def to_frame(self):
@@ -529,7 +550,8 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
         model_name=str(result.model_name), kind=str(result.kind), criterion=criterion, chosen=chosen,
         chosen_inputs=prob.candidates[prob.candidate_rows[list(chosen)]].copy(),
         chosen_sensors=tuple(prob.candidate_sensors[c] for c in chosen), input_names=prob.input_names,
-        target_labels=prob.target_labels, value_before=prob.value(()), value_after=float(out.value),
+        target_labels=prob.target_labels, target_sensors=prob.target_sensors, value_before=prob.value(()),
+        value_after=float(out.value), irreducible=prob.floor,
         lower_bound=float(out.lower_bound), gap=float(out.gap), proven=out.proven, status=out.status,
         method=out.method, nodes=out.nodes, n_evaluated=out.n_evaluated, region=prob.region.copy(),
         region_weights=prob.region_weights.copy(), half_before=prob.half_widths((), alpha),
