@@ -12,7 +12,9 @@ then for new runs of ``--repeats`` series at the candidate press forces 0, 100, 
    and n evenly spread candidates: the criterion (mean or largest posterior variance, sigma^2 units), the share
    of the reducible variance removed ((J_before - J) / (J_before - J_irreducible)) and the mean band half-width
    (um) before and after;
-2. **search**: enumeration against branch-and-bound on the same problems (same set and value, time);
+2. **search**: enumeration against branch-and-bound on the same problems (same set and value, time); then 33
+   candidates (every 50 N) and 8 runs, beyond a quick enumeration: branch-and-bound with its proven gap at the time
+   limit against greedy + exchange with its gap to the root bound;
 3. **Monte Carlo** (``--n-mc`` replications): the linearised model with the fitted discrepancy simulated jointly at
    the measured rows, the chosen new runs and the region (Gaussian process per sensor with M1's hyperparameters,
    rough part, noise sigma^2 / series), predicted by generalised least squares plus kriging from all readings,
@@ -29,6 +31,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")      # small dense algebra: threads only contend
 
 import argparse                                                   # noqa: E402
+import math                                                       # noqa: E402
 import time                                                       # noqa: E402
 from pathlib import Path                                          # noqa: E402
 
@@ -123,6 +126,23 @@ def search_agreement(r, sizes, repeats: int) -> None:
                   f"{te:>7.2f} {tb:>7.2f} {b.nodes:>6}{'' if b.proven else ' NOT PROVEN gap %.3g' % b.gap}")
 
 
+def beyond_enumeration(r, repeats: int, n: int, time_limit: float) -> None:
+    """Part 2b: 33 candidates (every 50 N), n runs: too many sets for a quick enumeration; branch-and-bound with its
+    proven gap at the time limit, against greedy + exchange and its gap to the root bound."""
+    cands = np.arange(0.0, 1601.0, 50.0)
+    print(f"\n33 candidates (every 50 N), n = {n} ({math.comb(33, n)} sets); branch-and-bound time limit "
+          f"{time_limit:g} s (load {_load():.1f})")
+    print(f"  {'region':<38} {'greedy J':>10} {'gap':>8} {'bnb J':>10} {'status':>10} {'gap':>8} {'nodes':>6} {'s':>6}")
+    for label, box, crit in REGIONS:
+        prob = error_design_problem(r, cands, region=box, criterion=crit, repeats=repeats, region_size=21)
+        g = search(prob.core, n, "greedy")
+        t0 = time.perf_counter()
+        b = search(prob.core, n, "bnb", time_limit=time_limit)
+        dt = time.perf_counter() - t0
+        print(f"  {label:<38.38} {g.value:>10.6f} {g.gap:>8.2g} {b.value:>10.6f} {b.status:>10} {b.gap:>8.2g} "
+              f"{b.nodes:>6} {dt:>6.1f}   runs {', '.join(f'{cands[i]:g}' for i in b.indices)}")
+
+
 # ---------------------------------------------------------------------------- Monte Carlo (independent of oed)
 def _sqrt_psd(K: np.ndarray) -> np.ndarray:
     w, U = np.linalg.eigh(K)
@@ -198,6 +218,7 @@ def main(argv=None):
         designs(study, r, sizes, args.repeats)
     if "search" not in skip:
         search_agreement(r, sizes, args.repeats)
+        beyond_enumeration(r, args.repeats, 8, 20.0 if args.quick else 60.0)
     if "mc" not in skip:
         region = np.linspace(0.0, 1600.0, 21)[:, None]
         e = select_error_design(r, CANDIDATES, 4, region=region, repeats=args.repeats)

@@ -95,7 +95,7 @@ class VarianceProblem:
             owner = np.empty(n_O, int)
             for c, x in enumerate(self.groups):
                 owner[x] = c
-            cache = (idx, A, B, owner)
+            cache = (idx, A, B, owner, np.eye(len(self.groups))[owner])        # one-hot (n_O, n_c)
             object.__setattr__(self, "_pad", cache)
         return cache
 
@@ -104,7 +104,7 @@ class VarianceProblem:
         sets = np.asarray(sets, int).reshape(len(sets), -1)
         if sets.shape[1] == 0:
             return np.repeat(self.d[None], sets.shape[0], axis=0)
-        idx, A, B, _ = self._padded()
+        idx, A, B = self._padded()[:3]
         obs = idx[sets].reshape(sets.shape[0], -1)                       # (B, m)
         M = B[obs[:, :, None], obs[:, None, :]] + np.eye(obs.shape[1])[None]
         L = np.linalg.cholesky(M)
@@ -121,15 +121,13 @@ class VarianceProblem:
 
     def relaxed(self, x: np.ndarray) -> tuple:
         """(v (n_T,), dv/dx (n_T, n_c)) at candidate weights x (n_c,) in [0, 1]."""
-        idx, _, _, owner = self._padded()
+        owner, onehot = self._padded()[3:]
         dh = np.sqrt(np.clip(x, 0.0, None))[owner]
         M = np.eye(len(dh)) + dh[:, None] * self.B * dh[None, :]
         W = dh[:, None] * np.linalg.solve(M, dh[:, None] * self.A.T)            # (n_O, n_T); M SPD, >= I
         v = self.d - np.sum(self.A.T * W, axis=0)
         post = self.A - W.T @ self.B
-        g = np.zeros((len(self.d), len(self.groups)))
-        np.add.at(g.T, owner, -(post ** 2).T)
-        return v, g
+        return v, -(post ** 2) @ onehot
 
 
 @dataclass(frozen=True)
@@ -274,7 +272,7 @@ def _relax(problem: VarianceProblem, x: np.ndarray, fixed_in, free, r: int, iter
             step /= 2
         else:
             break
-        if np.allclose(y, x, atol=1e-12):
+        if np.max(np.abs(y - x)) <= 1e-12:
             break
         x, f, grad = y, fy, gy
         best = max(best, _bound(problem, vy, ggy, x, fixed_in, free, r))
