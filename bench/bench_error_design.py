@@ -203,7 +203,7 @@ def monte_carlo(study, r, chosen: tuple, region: np.ndarray, repeats: int, n_mc:
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench error_design")
     ap.add_argument("--repeats", type=int, default=2, help="series per new run (the study measured 2)")
-    ap.add_argument("--n-mc", type=int, default=4000, help="Monte Carlo replications")
+    ap.add_argument("--n-mc", type=int, default=20000, help="Monte Carlo replications")
     ap.add_argument("--seed", type=int, default=293)
     ap.add_argument("--quick", action="store_true", help="n <= 4 and 1000 replications")
     ap.add_argument("--skip", default="", help="comma list of parts to skip: designs,search,mc")

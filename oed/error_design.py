@@ -370,7 +370,7 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
 
 
 # ---------------------------------------------------------------------------- the result
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ErrorDesignResult(ResultProtocol):
     """The n runs that most shrink the prediction band over the region (:func:`select_error_design`; the result
     protocol: :meth:`summary`, :meth:`to_frame`, :meth:`to_dict`, ``_repr_html_``).

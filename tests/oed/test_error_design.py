@@ -214,6 +214,29 @@ def test_other_error_models_give_the_band_of_predict(case, kind):
     assert d.value_after < d.value_before and d.proven
 
 
+def test_a_dynamic_model_falls_out_experiments_by_times():
+    """dx/dt = u - k x observed as x and 2 x, the truth with a missing - q x^2: new experiments (step levels u) read
+    every sampling time; the band before is the one of predict (experiments x times x sensors)."""
+    from identification.fit.dynamic_fit import simulate_campaign
+    from models.contract import Parameter
+
+    def model(missing):
+        params = [Parameter("k", 0.01, 100.0, scale=1.0)] + ([] if missing else [Parameter("q", -10.0, 10.0, scale=1.0)])
+        return Model.ode(params, states=["x"], inputs=["u"], sensors=["y", "w"],
+                         rhs=lambda x, p, u: ca.vertcat(u[0] - p[0] * x[0] - (0.0 if missing else p[1] * x[0] ** 2)),
+                         x0=lambda p, u: ca.vertcat(0.0), h=lambda x, p, u: ca.vertcat(x[0], 2 * x[0]), time_unit="s")
+    times = np.linspace(0.2, 3.0, 8)
+    data = simulate_campaign(model(False), [1.0, 0.3], np.array([[1.0], [2.0], [3.0]]), times, np.array([0.01, 0.02]),
+                             n_series=2, seed=4)
+    res = model_error(model(True), data, [1.0], kind="discrepancy")
+    region = np.array([[1.5], [2.5]])
+    d = select_error_design(res, np.linspace(0.5, 4.0, 6), 2, region=region, sensors=["y"])
+    assert d.proven and d.half_before.shape == (2, times.size) and d.target_labels[0] == "y at t=0.2"
+    b = res.predict(region, alpha=res.alpha)
+    np.testing.assert_allclose(d.half_before, (b.upper - b.mean)[:, :, 0], rtol=1e-9)
+    assert d.value_after < d.value_before and np.all(d.half_after <= d.half_before * (1 + 1e-12))
+
+
 @pytest.mark.parametrize("kwargs, match", [
     (dict(candidates=[[0.1, 2.0]]), "candidates"),
     (dict(candidates=[np.nan]), "candidates"),
