@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -507,7 +508,8 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
     method : "auto", "enumerate", "bnb" or "greedy"
         "auto": enumeration up to ``enumeration_limit`` sets, else branch-and-bound; "greedy": greedy + exchange
         with its gap to the root relaxation's bound (a heuristic, proven only when that gap closes).
-    time_limit : float      seconds; at the limit the best set found, ``proven`` False and the proven gap
+    time_limit : float      seconds; at the limit the best set found, ``proven`` False, the proven gap and a
+                            RuntimeWarning
     enumeration_limit : int
     gap_tol : float         the branch-and-bound's relative tolerance
 
@@ -525,9 +527,10 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
                                 criterion=criterion, sensors=sensors, measure=measure, pairs=pairs, repeats=repeats,
                                 region_size=region_size)
     n = _int_in(n, 1, prob.n_candidates, "n")
-    alpha = float(result.alpha if alpha is None else alpha)
-    if not 0 < alpha < 1:
+    alpha = result.alpha if alpha is None else alpha
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha < 1:
         raise ValueError(f"alpha: expected a number in (0, 1), got {alpha!r}")
+    alpha = float(alpha)
     if method not in SEARCH_METHODS:
         raise ValueError(f"method: expected one of {SEARCH_METHODS}, got {method!r}")
     if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) or not time_limit > 0:
@@ -543,6 +546,9 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
              "the target's own rough part stays in the band (no run removes it)"]
     if not out.proven:
         notes.append(f"the design is NOT proven optimal ({out.status}); proven gap {out.gap:.3g} in sigma^2 units")
+        if out.status in ("time_limit", "node_limit"):
+            warnings.warn(f"select_error_design stopped at its {out.status} (time_limit={time_limit:g} s): the design "
+                          f"is not proven optimal; proven gap {out.gap:.3g}", RuntimeWarning, stacklevel=2)
     if not result.identifiable:
         notes.append("the model error and the parameters cannot be told apart (result.identifiable False): the "
                      "band is that of the prediction, not of the parameters")

@@ -263,3 +263,12 @@ def test_bad_input_names_the_argument(case, kwargs, match):
         select_error_design(res, args.pop("candidates"), args.pop("n"), **args)
     with pytest.raises(ValueError, match="result"):
         select_error_design(object(), CAND, 1, region=REGION)
+
+
+def test_time_limit_of_the_front_door_warns_and_says_not_proven(case):
+    res, _ = case
+    many = np.linspace(0.0, 3.0, 14)
+    with pytest.warns(RuntimeWarning, match="not proven optimal"):
+        d = select_error_design(res, many, 5, region=REGION, method="bnb", time_limit=1e-9)
+    assert not d.proven and d.status == "time_limit" and "NOT proven" in d.summary()
+    assert d.lower_bound <= d.value_after and d.gap == pytest.approx(d.value_after - d.lower_bound)
