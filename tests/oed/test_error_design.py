@@ -272,3 +272,25 @@ def test_time_limit_of_the_front_door_warns_and_says_not_proven(case):
         d = select_error_design(res, many, 5, region=REGION, method="bnb", time_limit=1e-9)
     assert not d.proven and d.status == "time_limit" and "NOT proven" in d.summary()
     assert d.lower_bound <= d.value_after and d.gap == pytest.approx(d.value_after - d.lower_bound)
+
+
+def test_embedded_error_after_runs_equals_brute_force(case):
+    """Kind "embedded": every condition (old row, new run, target) has its own b ~ N(0, Omega), shared by its sensors;
+    generalised least squares on the stacked old and new readings with that covariance, written here."""
+    _, data = case
+    model = Model.explicit(["a", "b"], ["x"], ["y1", "y2"], h=lambda p, q: ca.vertcat(p[0] + p[1] * q[0],
+                                                                                     p[0] - p[1] * q[0] ** 2))
+    res = model_error(model, data, [1.0, 0.5], kind="embedded")
+    Om = np.diag([e.omega ** 2 for e in res.embedded])
+    new = (1, 4)
+    rows = [(x, SIGMA ** 2 / data.counts()[j]) for j, x in enumerate(X)] + [(CAND[c], SIGMA ** 2) for c in new]
+    G = np.concatenate([_g([x])[0] for x, _ in rows])                      # (2 rows, 2 p) per condition
+    V = np.zeros((len(G), len(G)))
+    for i, (x, noise) in enumerate(rows):
+        g = _g([x])[0]
+        V[2 * i:2 * i + 2, 2 * i:2 * i + 2] = g @ Om @ g.T + np.diag(noise)
+    C = np.linalg.inv(G.T @ np.linalg.solve(V, G))
+    gt = _g(REGION)                                                        # (n_r, 2, 2)
+    want = np.einsum("rkp,pq,rkq->rk", gt, C + Om, gt)
+    prob = error_design_problem(res, CAND, region=REGION)
+    np.testing.assert_allclose(prob.variances(new), want, rtol=1e-9)
