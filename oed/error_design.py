@@ -353,7 +353,12 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
     for gr in groups:
         sub = _Points(O.q[gr], O.col[gr], O.g[gr])
         N = _noise(result, fit, sub, nu[nT + gr], repeats)
-        Linv[np.ix_(gr, gr)] = linalg.solve_triangular(linalg.cholesky(N, lower=True), np.eye(len(gr)), lower=True)
+        try:
+            L = linalg.cholesky(N, lower=True)
+        except linalg.LinAlgError:
+            raise ValueError("result: the noise covariance of a new run is not positive definite (a sensor's sigma "
+                             "is zero?)") from None
+        Linv[np.ix_(gr, gr)] = linalg.solve_triangular(L, np.eye(len(gr)), lower=True)
     sig_t = fit.sigma[T.col]
     floor = nu[:nT].copy()
     if result.kind == "embedded":
