@@ -290,7 +290,7 @@ class _Node:
 
 
 def branch_and_bound(problem: VarianceProblem, n: int, time_limit: float, gap_tol: float = 1e-9,
-                     node_limit: int | None = None, root_iters: int = 200, node_iters: int = 30) -> SearchOutcome:
+                     node_limit: int | None = None, root_iters: int = 200, node_iters: int = 5) -> SearchOutcome:
     """min_{|S| = n} J(S) by best-bound branch-and-bound (module docstring); at the time or node limit the best
     set found with the smallest bound of the open nodes."""
     t0 = time.perf_counter()
