@@ -47,7 +47,18 @@ def case():
     return model_error(model, data, [1.0, 0.5], kind="discrepancy"), data
 
 
-def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditioning=False):
+def _pinned(xa, xb, ell, pin):
+    """The squared-exponential correlation conditioned on f(pin) = f'(pin) = 0 (identification.studies.discrepancy_gp's
+    docstring), and the rough part's factor at xa (None: no pin)."""
+    e = np.exp(-(xa[:, None] - xb[None]) ** 2 / (2 * ell ** 2))
+    if pin is None:
+        return e, np.ones(len(xa))
+    a, b = (xa[:, None] - pin) / ell, (xb[None] - pin) / ell
+    a2 = ((xa - pin) / ell) ** 2
+    return e - np.exp(-(a ** 2 + b ** 2) / 2) * (1 + a * b), 1 - np.exp(-a2) * (1 + a2)
+
+
+def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditioning=False, pin=None):
     """Posterior variances (n_targets, 2) of f_k(x*) plus its rough part after the old data and new runs at ``new``
     reading the sensors ``measured``: by one universal-kriging solve on the stacked data with p flat (``prior``
     None) or p ~ N(0, prior I), or (``conditioning``) by plain Gaussian conditioning of the joint normal vector
@@ -55,8 +66,11 @@ def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditionin
     hyp = {d.sensor: (d.amplitude, d.length_scales[0], d.rough) for d in res.discrepancies}
     names = ("y1", "y2")
     counts = data.counts()
-    obs = [(x, k, hyp[names[k]][2] ** 2 + SIGMA[k] ** 2 / counts[j, k]) for k in range(2) for j, x in enumerate(X)]
-    obs += [(x, k, hyp[names[k]][2] ** 2 + SIGMA[k] ** 2 / repeats) for x in new for k in measured]
+
+    def rough(x, k):
+        return hyp[names[k]][2] ** 2 * _pinned(np.array([x]), np.array([x]), hyp[names[k]][1], pin)[1][0]
+    obs = [(x, k, rough(x, k) + SIGMA[k] ** 2 / counts[j, k]) for k in range(2) for j, x in enumerate(X)]
+    obs += [(x, k, rough(x, k) + SIGMA[k] ** 2 / repeats) for x in new for k in measured]
     xo, ko, no = (np.array(v) for v in zip(*obs))
     lat = [(x, k) for x in targets for k in range(2)]
     xt, kt = (np.array(v) for v in zip(*lat))
@@ -66,14 +80,14 @@ def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditionin
         for k in range(2):
             s, ell, _ = hyp[names[k]]
             m = np.outer(ka == k, kb == k)
-            out += m * s ** 2 * np.exp(-(xa[:, None] - xb[None]) ** 2 / (2 * ell ** 2))
+            out += m * s ** 2 * _pinned(xa, xb, ell, pin)[0]
         return out
 
     Go = _g(xo)[np.arange(len(xo)), ko.astype(int)]
     Gt = _g(xt)[np.arange(len(xt)), kt.astype(int)]
     V = K(xo, ko, xo, ko) + np.diag(no)              # rough part and noise of every reading (a condition each)
     kt_o = K(xt, kt, xo, ko)
-    rough_t = np.array([hyp[names[int(k)]][2] ** 2 for k in kt])
+    rough_t = np.array([rough(x, int(k)) for x, k in zip(xt, kt)])
     prior_t = np.diag(K(xt, kt, xt, kt)) + rough_t
     if not conditioning:
         Vi = np.linalg.inv(V)
@@ -100,6 +114,21 @@ def test_variance_after_runs_equals_brute_force_conditioning(case):
                                        rtol=1e-8)
     crit = np.mean(uk / SIGMA ** 2, axis=1) @ (RW / RW.sum())
     assert prob.value((1, 3, 5)) == pytest.approx(crit, rel=1e-9)
+
+
+def test_exact_at_pins_the_discrepancy_and_its_rough_part(case):
+    """exact_at={"x": 0}: the discrepancy and its slope vanish at x = 0 (and the rough part with them): the
+    variance after runs against the brute force with the pinned kernel written here."""
+    _, data = case
+    model = Model.explicit(["a", "b"], ["x"], ["y1", "y2"], h=lambda p, q: ca.vertcat(p[0] + p[1] * q[0],
+                                                                                     p[0] - p[1] * q[0] ** 2))
+    res = model_error(model, data, [1.0, 0.5], kind="discrepancy", exact_at={"x": 0.0})
+    prob = error_design_problem(res, CAND, region=REGION)
+    for new in ((), (0, 3)):
+        np.testing.assert_allclose(prob.variances(new), _brute(res, data, REGION, CAND[list(new)], (0, 1), pin=0.0),
+                                   rtol=1e-9)
+    b = res.predict(REGION[:, None], alpha=res.alpha)        # the same float sums in another order: 1e-9 as above
+    np.testing.assert_allclose(prob.half_widths((), res.alpha), b.upper - b.mean, rtol=1e-9)
 
 
 def test_before_band_is_the_band_of_predict(case):
