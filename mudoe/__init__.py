@@ -49,6 +49,7 @@ _EXPORTS = {
     "select_times": "oed", "select_inputs": "oed", "select_discriminating": "oed",
     "approximate_design": "oed", "design_efficiencies": "oed", "make_prior": "oed",
     "sequential_design": "oed.sequential", "select_robust_exact": "oed.robust_exact",
+    "select_error_design": "oed",
     "DesignSettings": "oed", "CriteriaSettings": "oed", "ApproximateSettings": "oed", "RefineSettings": "oed",
     "Prior": "oed",
     # results (the result protocol: summary, to_frame, to_dict, _repr_html_)
@@ -60,7 +61,7 @@ _EXPORTS = {
     "ModelRanking": "identification",
     "DesignResult": "oed", "DesignTable": "oed", "InputDesignResult": "oed", "RefinedInputs": "oed",
     "DiscriminationResult": "oed", "ApproximateDesign": "oed", "SequentialResult": "oed.sequential",
-    "RobustExactDesign": "oed.robust_exact",
+    "RobustExactDesign": "oed.robust_exact", "ErrorDesignResult": "oed",
     "PlannedDesign": "oed.plan_records", "RobustPlan": "oed.plan_records", "RobustExactPlan": "oed.plan_records",
     "DiscriminationPlan": "oed.plan_records", "DynamicDesign": "oed.plan_records",
     # errors

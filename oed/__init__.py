@@ -15,8 +15,13 @@ maximin over a prior, with the equivalence-theorem certificate): :func:`approxim
 (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
 :func:`select_inputs` and :func:`select_times`.  Exact n-run designs under a prior (expected or worst-case
 criterion of the chosen set): :func:`oed.robust_exact.select_robust_exact`, by enumeration or the branch-and-bound
-with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``.
+with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``.  Designs that
+learn the model error (the n runs that most shrink the posterior prediction band of model plus model error over a
+region of use, after :func:`identification.model_error`): :func:`select_error_design` (:mod:`oed.error_design`,
+imported on first use).
 """
+import importlib
+
 from .criteria import DEFAULT_CRITERION, Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .candidate_information import AXES, CandidateInformation, information
 from .design import (DesignResult, DesignRow, DesignSettings, DesignTable, design_table, select_sensors,
@@ -28,6 +33,10 @@ from .times import select_times, time_information
 from .prior import Prior, make_prior
 from .approximate import ApproximateDesign, ApproximateSettings, approximate_design, design_efficiencies
 
+#: public names imported on first use (PEP 562): name -> module
+_LAZY = {"ErrorDesignResult": "oed.error_design", "select_error_design": "oed.error_design",
+         "error_design_problem": "oed.error_design"}
+
 __all__ = ["DEFAULT_CRITERION", "Criterion", "CriteriaSettings", "batch_criteria", "criterion_value", "validate_information",
            "AXES", "CandidateInformation", "information",
            "DesignResult", "DesignRow", "DesignSettings", "DesignTable", "design_table", "select_sensors",
@@ -35,4 +44,14 @@ __all__ = ["DEFAULT_CRITERION", "Criterion", "CriteriaSettings", "batch_criteria
            "input_information", "refine_inputs", "select_inputs", "DiscriminationResult", "select_discriminating",
            "select_times", "time_information", "dynamic_input_information", "select_dynamic_inputs", "Prior",
            "make_prior", "ApproximateDesign", "ApproximateSettings", "approximate_design",
-           "design_efficiencies"]
+           "design_efficiencies", *_LAZY]
+
+
+def __getattr__(name: str):
+    """``oed.<name>`` of :data:`_LAZY`: import its module on first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'oed' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value

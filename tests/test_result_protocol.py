@@ -126,6 +126,11 @@ def _model_error():
     return mudoe.model_error(model, data, [1.0, 1.0], splits=(mudoe.Split("low/high", range(0, 6), range(6, 12)),))
 
 
+def _error_design():
+    import mudoe
+    return mudoe.select_error_design(_model_error(), np.linspace(0.2, 2.0, 5), 2, region={"x": (0.1, 2.5)})
+
+
 def _ranking():
     import mudoe
     model, data = _two_sensors()
@@ -222,6 +227,7 @@ FACTORIES = {
     "MonteCarloResult": _monte_carlo,
     "ModelErrorResult": _model_error,
     "ModelRanking": _ranking,
+    "ErrorDesignResult": _error_design,
     "DesignResult": _design,
     "DesignTable": lambda: importlib.import_module("mudoe").design_table(_rank_one(7, 4, 2), sensor_names=list("ABCD")),
     "InputDesignResult": _inputs,
