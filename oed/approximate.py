@@ -40,6 +40,7 @@ from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import DEFAULT_CRITERION, Criterion
 from .prior import Prior, make_prior, readonly
+from .prior_sparse import check_non_negative
 from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
@@ -516,6 +517,7 @@ def _resolve_prior(model, p, prior, robust, settings) -> tuple:
         return make_prior((np.asarray(p, float)[None, :], [1.0]), model, p), "local"
     rule = settings.prior_rule or ("grid" if robust == "maximin" else "gauss")
     pr = make_prior(prior, model, p, rule=rule, order=settings.prior_order, seed=settings.seed)
+    check_non_negative(pr, "an approximate design")
     _check_prior_points(model, pr)
     return pr, robust
 

@@ -32,6 +32,7 @@ import numpy as np
 from identification.results_protocol import ResultProtocol, jsonable
 from .approx_weights import standardized
 from .criteria import DEFAULT_CRITERION, Criterion
+from .prior_sparse import check_non_negative
 from .robust_bnb import RobustBnBSettings, robust_branch_and_bound, robust_set_values
 
 __all__ = ["RobustExactDesign", "select_robust_exact", "set_efficiencies", "ExactOverPrior", "exact_over_prior"]
@@ -303,6 +304,7 @@ def exact_over_prior(information_at, prior, p, n, *, criterion=DEFAULT_CRITERION
     n_p)`` the information of one run of every candidate.  Maximin standardizes by each parameter vector's own
     exact n-run optimum (so the worst-case efficiency is against the best n-run design at that vector).  ``method``
     and ``time_limit`` (s) apply to each :func:`select_robust_exact` call (local, per-vector optima, robust)."""
+    check_non_negative(prior, "an exact robust design")
     F = np.stack([np.asarray(information_at(ps), float) for ps in prior.points], axis=1)
     F0 = np.asarray(information_at(np.asarray(p, float)), float)[:, None]
     kw = dict(criterion=criterion, names=names, time_limit=time_limit, method=method)
