@@ -47,7 +47,8 @@ from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_
 from identification.fit.problem import strategy_for
 from identification.results_protocol import ResultProtocol
 
-__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
+__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies",
+           "information_source"]
 
 ROBUST = ("bayes", "maximin")
 
@@ -440,6 +441,13 @@ def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None, polish
 
 
 # ---------------------------------------------------------------------------- the front door
+def information_source(model, sigma, inputs=None, sensors=None, n_series: int = 1):
+    """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run at
+    every point X (a static model's input rows, a dynamic model's sampling times of the experiments ``inputs``) at
+    every parameter vector P, as :func:`approximate_design` evaluates it; arguments checked."""
+    return _information_source(model, sigma, inputs, sensors, n_series, _axis(model))
+
+
 def _information_source(model, sigma, inputs, sensors, n_series, axis):
     """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run
     at every point X (axis ``inputs``: input rows; ``times``: sampling times of the experiments ``inputs``, every

@@ -79,6 +79,8 @@ class RobustExactDesign(ResultProtocol):
     local_efficiencies : tuple of float
         That local design's efficiency against this design at every parameter vector of the prior
         (:func:`set_efficiencies`; empty when ``local_indices`` is).
+    refined : oed.robust_refine.RobustRefined or None
+        The continuous refinement of the chosen points (``refine=True`` of the design verbs), else None.
     """
 
     indices: tuple
@@ -98,6 +100,7 @@ class RobustExactDesign(ResultProtocol):
     nodes: int = 0
     local_indices: tuple = ()
     local_efficiencies: tuple = ()
+    refined: object = None
 
     def summary(self) -> str:
         """One-paragraph summary."""
@@ -108,11 +111,11 @@ class RobustExactDesign(ResultProtocol):
             f", {'worst-case ' if self.robust == 'maximin' else ''}efficiency {self.efficiency:.6f}")
         text = (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
                 f"{self.value:.9g} ({proof}; {via}, {self.n_designs} sets evaluated){eff}, {self.wall_time:.2f} s")
-        if not self.local_efficiencies:
-            return text
-        e = np.asarray(self.local_efficiencies, float)
-        return (text + f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
-                f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
+        if self.local_efficiencies:
+            e = np.asarray(self.local_efficiencies, float)
+            text += (f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
+                     f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
+        return text if self.refined is None else text + "\n" + self.refined.summary()
 
     def to_frame(self):
         """The chosen candidates (``index``, ``name``), one row each; ``.attrs``: value, efficiency, criterion,
@@ -125,10 +128,12 @@ class RobustExactDesign(ResultProtocol):
 
     def to_dict(self) -> dict:
         """JSON-safe: every field (per_sample a list; NaN efficiency as null); ``local_indices`` and
-        ``local_efficiencies`` only when the local design was compared."""
+        ``local_efficiencies`` only when the local design was compared, ``refined`` only when refined."""
         d = jsonable(self)
         if not self.local_efficiencies:
             del d["local_indices"], d["local_efficiencies"]
+        if self.refined is None:
+            del d["refined"]
         return d
 
 

@@ -92,7 +92,8 @@ def test_dynamic_reactor_experiments_against_brute_force():
 
 @pytest.mark.parametrize("kwargs, match", [
     (dict(prior={"zz": ("uniform", 0.3, 2.5)}), r"prior: 'zz' is not a parameter of the model"),
-    (dict(prior=PRIOR, refine=True), r"refine: the continuous refinement of an exact robust design .* not implemented"),
+    (dict(prior=PRIOR, refine=True, sensors="joint"), r"refine: the continuous refinement is for input designs"),
+    (dict(prior=PRIOR, bounds=(0.1, 4.5)), r"bounds: used only by the refinement of the exact robust design"),
     (dict(prior=PRIOR, costs=np.ones(8), budget=3.0), r"costs: not used by the exact robust design"),
     (dict(prior=PRIOR, kind="second_order"), r"kind: the exact robust design uses the Gauss-Newton"),
     (dict(prior=PRIOR, method="scip"), r"method: the exact robust design takes"),
