@@ -81,6 +81,8 @@ class RobustExactDesign(ResultProtocol):
         (:func:`set_efficiencies`; empty when ``local_indices`` is).
     refined : oed.robust_refine.RobustRefined or None
         The continuous refinement of the chosen points (``refine=True`` of the design verbs), else None.
+    notes : tuple of str
+        Modelling notes (e.g. a second-order criterion planned without data is the Gauss-Newton one).
     """
 
     indices: tuple
@@ -101,6 +103,7 @@ class RobustExactDesign(ResultProtocol):
     local_indices: tuple = ()
     local_efficiencies: tuple = ()
     refined: object = None
+    notes: tuple = ()
 
     def summary(self) -> str:
         """One-paragraph summary."""
@@ -115,6 +118,7 @@ class RobustExactDesign(ResultProtocol):
             e = np.asarray(self.local_efficiencies, float)
             text += (f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
                      f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
+        text += "".join(f"\n  note: {n}" for n in self.notes)
         return text if self.refined is None else text + "\n" + self.refined.summary()
 
     def to_frame(self):
@@ -128,12 +132,15 @@ class RobustExactDesign(ResultProtocol):
 
     def to_dict(self) -> dict:
         """JSON-safe: every field (per_sample a list; NaN efficiency as null); ``local_indices`` and
-        ``local_efficiencies`` only when the local design was compared, ``refined`` only when refined."""
+        ``local_efficiencies`` only when the local design was compared, ``refined`` only when refined, ``notes`` only
+        when there are notes."""
         d = jsonable(self)
         if not self.local_efficiencies:
             del d["local_indices"], d["local_efficiencies"]
         if self.refined is None:
             del d["refined"]
+        if not self.notes:
+            del d["notes"]
         return d
 
 

@@ -63,9 +63,12 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
     ------
     ValueError
         Bad input (the message names the argument), e.g. ``refine=True`` of a joint (row, sensor) design.
+        ``kind="second_order"`` is taken: planned without data S = 0 at every vector, so it is the Gauss-Newton
+        design (noted in ``notes``).
     """
     from .prior import make_prior
     from .robust_exact import METHODS, ROBUST, exact_over_prior
+    Kind.parse(unused.get("kind", "gauss_newton"))          # a bad kind names the argument
     _refuse(unused)
     if method not in METHODS:
         raise ValueError(f"method: the exact robust design takes 'auto', 'enumerate' or 'bnb', got {method!r}")
@@ -105,8 +108,12 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
         refined = refine_robust_inputs(model, p, candidates, r.design.indices, pr, r.u_star, sigma=sigma,
                                        sensors=sensors, n_series=n_series, times=times, discretisation=discretisation,
                                        criterion=criterion, robust=robust, bounds=unused.get("bounds"))
+    notes = ()
+    if Kind.parse(unused.get("kind", "gauss_newton")) is Kind.SECOND_ORDER:
+        notes = ("kind='second_order' planned without data: expected residual 0, S = 0 at every parameter vector, "
+                 "so the design is the Gauss-Newton one",)
     return replace(r.design, names=names, local_indices=tuple(r.local.indices),
-                   local_efficiencies=tuple(float(e) for e in r.local_efficiencies), refined=refined)
+                   local_efficiencies=tuple(float(e) for e in r.local_efficiencies), refined=refined, notes=notes)
 
 
 def refine_robust_inputs(model, p, candidates, indices, prior, u_star, *, sigma, sensors, n_series, times,
@@ -152,9 +159,6 @@ def refine_robust_inputs(model, p, candidates, indices, prior, u_star, *, sigma,
 
 def _refuse(unused: dict) -> None:
     """A clear error naming the first argument of the exact route given that the robust one does not take."""
-    if Kind.parse(unused.get("kind", "gauss_newton")) is not Kind.GAUSS_NEWTON:
-        raise ValueError("kind: the exact robust design uses the Gauss-Newton information at every parameter "
-                         f"vector; give kind='gauss_newton' (got {unused['kind']!r})")
     if unused.get("bounds") is not None and not unused.get("refine"):
         raise ValueError("bounds: used only by the refinement of the exact robust design (refine=True); leave it out")
     for k in ("costs", "budget"):

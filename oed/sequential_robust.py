@@ -33,7 +33,7 @@ from .approx_weights import standardized
 from .criteria import Criterion, Kind, batch_criteria
 from .prior import Prior, readonly
 
-__all__ = ["RobustStep", "recentred", "robust_sensor_step", "ENUMERATION_MAX"]
+__all__ = ["RobustStep", "recentred", "robust_sensor_step", "robust_sensor_design", "ENUMERATION_MAX"]
 
 #: largest number of sets the second-order robust step enumerates
 ENUMERATION_MAX = 200_000
@@ -130,3 +130,24 @@ def _gauss_newton(F, prior, n, crit, robust, method, time_limit) -> RobustStep:
     eff = float(np.min(_efficiency(crit, np.asarray(r.per_sample), u_star, F.shape[-1])))
     return RobustStep(indices=r.indices, value=r.value, per_sample=r.per_sample, worst_case_efficiency=eff,
                       proven_optimal=r.proven_optimal, method=r.method, gap=r.gap, prior=prior)
+
+
+def robust_sensor_design(infos, prior: Prior, n: int, *, criterion, kind, robust, method, time_limit, names=None):
+    r"""The robust choice of ``n`` sensors of :func:`robust_sensor_step` as an
+    :class:`oed.robust_exact.RobustExactDesign` (``select_sensors(..., prior=, kind="second_order")`` with data:
+    the second-order covariance at every vector, by enumeration); ``efficiency`` the worst-case efficiency for
+    maximin (nan for bayes)."""
+    import time
+    from .robust_exact import RobustExactDesign
+    t0 = time.perf_counter()
+    step = robust_sensor_step(infos, prior, n, criterion=criterion, kind=kind, robust=robust, method=method,
+                              time_limit=time_limit)
+    labels = tuple(infos[0].labels) if names is None else tuple(names)
+    n_sets = math.comb(np.asarray(infos[0].F).shape[0], n) if step.method == "enumerate" else 0
+    return RobustExactDesign(indices=step.indices, names=tuple(labels[i] for i in step.indices), value=step.value,
+                             per_sample=step.per_sample, proven_optimal=step.proven_optimal, n_designs=n_sets,
+                             efficiency=step.worst_case_efficiency if robust == "maximin" else float("nan"),
+                             criterion=Criterion.parse(criterion).value, robust=robust,
+                             wall_time=time.perf_counter() - t0, method=step.method, upper_bound=step.value,
+                             gap=step.gap, notes=(f"{Kind.parse(kind).value} covariance at every parameter vector "
+                                                  "(u = -Psi(C)), every set enumerated",))

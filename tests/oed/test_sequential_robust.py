@@ -118,3 +118,28 @@ def test_bad_input_names_the_argument(case):
     bounded = m.with_bounds({"b": (0.0, 10.0)})
     with pytest.raises(ValueError, match=r"prior: moved to the estimate before experiment 1, b = -0\.0967978 lies outside"):
         sequential_design(bounded, exps, P0, prior={"b": ("uniform", -0.2, 2.0)})
+
+
+def test_select_sensors_with_data_a_prior_and_the_second_order_criterion(case):
+    """select_sensors(data, prior=, kind="second_order"): the second-order covariance at every vector (residuals of
+    the data there), the enumerated optimum; Gauss-Newton for comparison."""
+    from oed import select_sensors
+    from oed.criteria import batch_criteria
+    from oed.prior import make_prior
+    m, exps = case
+    pr = make_prior(SPREAD, m, P_TRUE, order=3)
+    so = select_sensors(m, exps[0], P_TRUE, n_sensors=3, criterion="D", kind="second_order", prior=pr)
+    sets = list(itertools.combinations(range(len(T)), 3))
+    W = np.zeros((len(sets), len(T)))
+    for k, c in enumerate(sets):
+        W[k, list(c)] = 1.0
+    infos = [information(m, ps, data=exps[0]) for ps in pr.points]
+    U = np.stack([-batch_criteria(i.F, i.S, W, "second_order").logdet for i in infos], axis=1)
+    assert so.indices == sets[int(np.argmax(U @ pr.weights))] and so.proven_optimal and so.method == "enumerate"
+    assert so.value == pytest.approx(float(np.max(U @ pr.weights)), rel=1e-12)
+    assert "second_order covariance at every parameter vector" in so.notes[0]
+    mm = select_sensors(m, exps[0], P_TRUE, n_sensors=3, criterion="D", kind="second_order", prior=pr,
+                        robust="maximin")
+    c = (U - U.max(axis=0)) / 2
+    assert mm.indices == sets[int(np.argmax(c.min(axis=1)))]
+    assert mm.efficiency == pytest.approx(float(np.exp(c.min(axis=1).max())), rel=1e-12)
