@@ -22,7 +22,8 @@ those of the marginals' own weights, so the exactness is against the prior itsel
   nodes, which are not a Gauss rule of that density.
 
 The combination coefficients alternate in sign, so **a sparse rule has negative weights** in general
-(they still sum to 1).  Its sum is an estimate of the integral like any rule's; the design verbs that
+(they still sum to 1; the sum of their absolute values grows with the level, 2l - 1 for two uniform parameters,
+and multiplies any noise in the integrand, e.g. a dynamic model's discretisation error of the information).  Its sum is an estimate of the integral like any rule's; the design verbs that
 rest on a non-negative measure (concavity of the expected criterion, the equivalence theorem, the
 branch-and-bound bounds) refuse such a rule with a clear error (see :func:`check_non_negative`).
 """
