@@ -15,7 +15,9 @@ maximin over a prior, with the equivalence-theorem certificate): :func:`approxim
 (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
 :func:`select_inputs` and :func:`select_times`.  Exact n-run designs under a prior (expected or worst-case
 criterion of the chosen set): :func:`oed.robust_exact.select_robust_exact`, by enumeration or the branch-and-bound
-with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``.
+with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``, refined
+continuously with ``refine=True`` (:mod:`oed.robust_refine`).  Sparse-grid priors: :mod:`oed.prior_sparse`;
+sequential designs under a prior: :mod:`oed.sequential_robust`.
 """
 from .criteria import DEFAULT_CRITERION, Criterion, CriteriaSettings, batch_criteria, criterion_value, validate_information
 from .candidate_information import AXES, CandidateInformation, information
