@@ -22,7 +22,10 @@ theta = (0.05884, 4.298, 21.80) (Atkinson, Donev & Tobias 2007, ch. 17-18), with
 
 Times are wall seconds, median of ``--rep`` runs (default 3), on the machine and date printed.
 
-Run: ``python -m bench robust [--rep=3] [--no-brute] [--exact-only]``
+Session 12 (bench/robust_library.py): sparse grids against tensor rules, sequential designs under a prior, refined
+exact robust designs (``--library`` runs just these; ``--library=sparse,sequential,refined`` some of them).
+
+Run: ``python -m bench robust [--rep=3] [--no-brute] [--exact-only] [--library[=parts]]``
 """
 from __future__ import annotations
 
@@ -262,10 +265,29 @@ def _exact_reactor(rep):
             _exact_line("reactor", F, pr.weights, n, names, "D", "maximin", us, rep)
 
 
+def _library(argv) -> None:
+    """Session 12's parts (bench/robust_library.py): sparse grids, sequential designs under a prior, refined exact
+    robust designs; ``--library=sparse,sequential,refined`` picks some."""
+    from bench import robust_library as lib
+    picked = next((a.split("=", 1)[1].split(",") for a in argv if a.startswith("--library=")),
+                  ["sparse", "sequential", "refined"])
+    if "sparse" in picked:
+        lib.sparse_grids(compartmental())
+    if "sequential" in picked:
+        lib.sequential()
+    if "refined" in picked:
+        lib.refined()
+
+
 def main(argv=None) -> None:
     argv = list(argv or [])
     rep = next((int(a.split("=")[1]) for a in argv if a.startswith("--rep=")), 3)
     brute = "--no-brute" not in argv
+    if any(a.startswith("--library") for a in argv):
+        print(f"machine: {platform.node()} {platform.machine()}, python {platform.python_version()}; "
+              f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
+        _library(argv)
+        return
     if "--exact-only" in argv:
         print(f"machine: {platform.node()} {platform.machine()}, python {platform.python_version()}; "
               f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
@@ -279,6 +301,7 @@ def main(argv=None) -> None:
     _maximin(model, 1, 21 if brute else 5)
     _reactor(1)
     _exact(rep)
+    _library(argv)
 
 
 if __name__ == "__main__":

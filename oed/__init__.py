@@ -15,7 +15,9 @@ maximin over a prior, with the equivalence-theorem certificate): :func:`approxim
 (:mod:`oed.approximate`, :mod:`oed.prior`, :mod:`oed.robust`), also as ``approximate=True`` of
 :func:`select_inputs` and :func:`select_times`.  Exact n-run designs under a prior (expected or worst-case
 criterion of the chosen set): :func:`oed.robust_exact.select_robust_exact`, by enumeration or the branch-and-bound
-with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``.  Designs that
+with proven gaps of :mod:`oed.robust_bnb`, also as ``select_times(..., prior=, approximate=False)``, refined
+continuously with ``refine=True`` (:mod:`oed.robust_refine`).  Sparse-grid priors: :mod:`oed.prior_sparse`;
+sequential designs under a prior: :mod:`oed.sequential_robust`.  Designs that
 learn the model error (the n runs that most shrink the posterior prediction band of model plus model error over a
 region of use, after :func:`identification.model_error`): :func:`select_error_design` (:mod:`oed.error_design`,
 imported on first use).

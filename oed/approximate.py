@@ -40,13 +40,15 @@ from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import DEFAULT_CRITERION, Criterion
 from .prior import Prior, make_prior, readonly
+from .prior_sparse import check_non_negative
 from .candidate_information import information
 from .robust import (bayes_efficiency_bound, bayes_gap, directional, efficiency_from_c, maximin_bound,
                      utilities)
 from identification.fit.problem import strategy_for
 from identification.results_protocol import ResultProtocol
 
-__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies"]
+__all__ = ["ApproximateSettings", "ApproximateDesign", "approximate_design", "check_approximate_route", "design_efficiencies",
+           "information_source"]
 
 ROBUST = ("bayes", "maximin")
 
@@ -439,6 +441,13 @@ def _solve(store, box, crit, mode, prior_w, u_star, settings, start=None, polish
 
 
 # ---------------------------------------------------------------------------- the front door
+def information_source(model, sigma, inputs=None, sensors=None, n_series: int = 1):
+    """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run at
+    every point X (a static model's input rows, a dynamic model's sampling times of the experiments ``inputs``) at
+    every parameter vector P, as :func:`approximate_design` evaluates it; arguments checked."""
+    return _information_source(model, sigma, inputs, sensors, n_series, _axis(model))
+
+
 def _information_source(model, sigma, inputs, sensors, n_series, axis):
     """(info(X, P) -> F of shape (n_x, n_s, n_p, n_p), names of the design columns): the information of one run
     at every point X (axis ``inputs``: input rows; ``times``: sampling times of the experiments ``inputs``, every
@@ -516,6 +525,7 @@ def _resolve_prior(model, p, prior, robust, settings) -> tuple:
         return make_prior((np.asarray(p, float)[None, :], [1.0]), model, p), "local"
     rule = settings.prior_rule or ("grid" if robust == "maximin" else "gauss")
     pr = make_prior(prior, model, p, rule=rule, order=settings.prior_order, seed=settings.seed)
+    check_non_negative(pr, "an approximate design")
     _check_prior_points(model, pr)
     return pr, robust
 

@@ -574,9 +574,7 @@ def _robust_sensors(model, p, info_at, prior, robust, kw):
     if bad:
         raise ValueError(f"{bad[0]}: not used by the exact robust design (prior is given: it chooses exactly "
                          "n_sensors sensors); leave it out")
-    if kw.get("kind", "gauss_newton") != "gauss_newton":
-        raise ValueError(f"kind: the exact robust design uses the Gauss-Newton information at every parameter vector; "
-                         f"give kind='gauss_newton' (got {kw['kind']!r})")
+    second = Kind.parse(kw.get("kind", "gauss_newton")) is Kind.SECOND_ORDER
     method = kw.get("method", "auto")
     if method not in METHODS:
         raise ValueError(f"method: the exact robust design takes 'auto', 'enumerate' or 'bnb', got {method!r}")
@@ -587,10 +585,16 @@ def _robust_sensors(model, p, info_at, prior, robust, kw):
     names = kw.get("sensor_names") or list(infos[0].labels)
     opts = dict(criterion=kw.get("criterion", DEFAULT_CRITERION), method=method,
                 time_limit=kw.get("time_limit", 60.0), names=list(names))
+    if second and any(i.S is not None and np.any(i.S) for i in infos):     # data: S at every vector (oed.sequential_robust)
+        from .sequential_robust import robust_sensor_design
+        return robust_sensor_design(infos, pr, n, kind="second_order", robust=robust, **opts)
     u_star = None
     if robust == "maximin":
         u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, **opts).value for s in range(F.shape[1])])
-    return select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **opts)
+    out = select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **opts)
+    return out if not second else replace(out, notes=out.notes + (
+        "kind='second_order' without residuals (planned): S = 0 at every parameter vector, so the second-order "
+        "criterion is the Gauss-Newton one",))
 
 
 def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times=None, prior=None, robust="bayes",
@@ -621,9 +625,12 @@ def select_sensors(model, data, p, *, inputs=None, sigma=None, n_series=1, times
     prior : None, (P, w), dict or oed.prior.Prior
         Parameter uncertainty (:func:`oed.prior.make_prior` around ``p``): the exact robust design of ``n_sensors``
         sensors (:func:`oed.robust_exact.select_robust_exact`, Gauss-Newton information at every parameter
-        vector; ``criterion``, ``method`` ("auto", "enumerate", "bnb"), ``time_limit`` and ``sensor_names`` are
-        read from the keyword arguments, the others refused), returned as a
-        :class:`oed.robust_exact.RobustExactDesign`.
+        vector; ``criterion``, ``method`` ("auto", "enumerate", "bnb"), ``time_limit``, ``sensor_names`` and
+        ``kind`` are read from the keyword arguments, the others refused), returned as a
+        :class:`oed.robust_exact.RobustExactDesign`.  ``kind="second_order"`` with data: the second-order
+        covariance at every vector (residuals of the data there), by enumeration
+        (:func:`oed.sequential_robust.robust_sensor_design`); without data S = 0, so it is the Gauss-Newton
+        design (noted).
     robust : {"bayes", "maximin"}
         With a prior: the expected criterion or the worst-case efficiency against each vector's own exact optimum.
 

@@ -279,8 +279,9 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
         information of every candidate at every parameter vector, then
         :func:`oed.robust_exact.select_robust_exact` by enumeration or branch-and-bound with a proven gap,
         ``method`` "auto", "enumerate" or "bnb", ``time_limit`` per solve), with the local exact design at ``p``
-        and its efficiency across the prior.  ``refine``, ``costs``, ``budget``, ``include``, ``exclude``,
-        ``bounds`` and ``kind="second_order"`` are then refused (the refinement under a prior is not implemented).
+        and its efficiency across the prior; ``refine=True`` then refines the chosen rows continuously within
+        ``bounds`` (:func:`oed.robust_inputs.refine_robust_inputs`, the result's ``refined``); ``costs``,
+        ``budget``, ``include`` and ``exclude`` are refused.
     robust : {"bayes", "maximin"}
         With a prior: pseudo-Bayesian or standardized maximin criterion (exact designs: the worst-case
         efficiency against each parameter vector's own exact n-run optimum).

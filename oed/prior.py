@@ -21,8 +21,11 @@ The rule is the tensor product of ``order`` nodes per uncertain parameter (``rul
 ``order`` equispaced values from the lower to the upper bound (``rule="grid"``, bounded distributions
 only, equal weights).  The quadrature error of a quantity f is estimated by
 :meth:`Prior.error` as :math:`|Q_{m+1} f - Q_m f|` (the tensor rule of the next order; for QMC an
-independent scrambled set of the same size): an estimate, not a bound.  Sparse grids are not
-implemented.
+independent scrambled set of the same size; for a sparse rule the level l + 1): an estimate, not a bound.
+``rule="sparse"``: the level-``order`` Smolyak sparse grid of the marginals' own Gauss rules
+(:mod:`oed.prior_sparse`), exact for polynomials of total degree 2 order - 1; its weights sum to 1 but some
+are negative, so it serves to evaluate expectations (:meth:`Prior.mean`, :meth:`Prior.error`); the design
+verbs refuse it (their certificates need a non-negative measure).
 """
 from __future__ import annotations
 
@@ -36,7 +39,7 @@ __all__ = ["Prior", "make_prior", "readonly", "DISTRIBUTIONS"]
 
 #: distribution name -> number of arguments after the name
 DISTRIBUTIONS = {"uniform": 2, "normal": 2, "lognormal": 2, "truncnormal": 4}
-RULES = ("gauss", "qmc", "grid")
+RULES = ("gauss", "qmc", "grid", "sparse")
 
 
 def readonly(a) -> np.ndarray:
@@ -55,13 +58,14 @@ class Prior:
     points : ndarray, shape (n, n_p)
         Parameter vectors (read-only); parameters without a distribution at their nominal value.
     weights : ndarray, shape (n,)
-        Non-negative weights summing to 1 (read-only).
+        Weights summing to 1 (read-only); non-negative except for a sparse rule (:mod:`oed.prior_sparse`).
     names : tuple of str
         Parameter names (the model's order).
     rule : str
-        ``"points"`` (given), ``"gauss"`` (tensor Gauss), ``"qmc"`` (scrambled Sobol) or ``"grid"``.
+        ``"points"`` (given), ``"gauss"`` (tensor Gauss), ``"qmc"`` (scrambled Sobol), ``"grid"`` or ``"sparse"``
+        (Smolyak).
     order : int
-        Nodes per uncertain parameter (gauss) or number of points (qmc); 0 for given points.
+        Nodes per uncertain parameter (gauss, grid), number of points (qmc) or level (sparse); 0 for given points.
     marginals : tuple
         ``(name, distribution, args)`` of every uncertain parameter (empty for given points).
     nominal : ndarray, shape (n_p,)
@@ -87,12 +91,12 @@ class Prior:
         return float(np.dot(self.weights, np.asarray(values, float)))
 
     def next_rule(self) -> "Prior | None":
-        """The rule of the next order (gauss: order + 1 nodes per parameter; qmc: an independent scrambled
-        set of the same size, seed + 1); None for given points (no error estimate)."""
+        """The rule of the next order (gauss, grid: order + 1 nodes per parameter; sparse: level + 1; qmc: an
+        independent scrambled set of the same size, seed + 1); None for given points (no error estimate)."""
         if self.rule == "points":
             return None
         spec = {name: (dist,) + tuple(args) for name, dist, args in self.marginals}
-        if self.rule in ("gauss", "grid"):
+        if self.rule in ("gauss", "grid", "sparse"):
             return _build(self.names, self.nominal, spec, self.rule, self.order + 1, self.seed)
         return _build(self.names, self.nominal, spec, "qmc", self.order, self.seed + 1)
 
@@ -127,9 +131,9 @@ def make_prior(prior, model_or_names, p, *, rule: str = "gauss", order: int = 5,
     p : array_like, shape (n_p,)
         Nominal parameters: the value of parameters without a distribution; it must lie within the
         support of every bounded distribution.
-    rule : {"gauss", "qmc", "grid"}
+    rule : {"gauss", "qmc", "grid", "sparse"}
     order : int
-        Gauss nodes per uncertain parameter, or QMC points (a power of 2 is best).
+        Gauss nodes per uncertain parameter, QMC points (a power of 2 is best), or the sparse grid's level.
     seed : int
         Seed of the scrambled Sobol points.
 
@@ -261,6 +265,11 @@ def _build(names, p, spec: dict, rule: str, order: int, seed: int) -> Prior:
         P = np.tile(p, (grids[0].size, 1))
         P[:, cols] = np.stack([g.ravel() for g in grids], axis=1)
         w = np.prod(np.stack([v.ravel() for v in wts], axis=1), axis=1)
+    elif rule == "sparse":
+        from .prior_sparse import sparse_rule
+        X, w = sparse_rule([(spec[k][0], np.asarray(spec[k][1:])) for k in keys], order)
+        P = np.tile(p, (X.shape[0], 1))
+        P[:, cols] = X
     else:
         sobol = qmc.Sobol(d=len(keys), scramble=True, seed=seed)
         m = int(np.log2(order))

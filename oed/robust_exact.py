@@ -32,6 +32,7 @@ import numpy as np
 from identification.results_protocol import ResultProtocol, jsonable
 from .approx_weights import standardized
 from .criteria import DEFAULT_CRITERION, Criterion
+from .prior_sparse import check_non_negative
 from .robust_bnb import RobustBnBSettings, robust_branch_and_bound, robust_set_values
 
 __all__ = ["RobustExactDesign", "select_robust_exact", "set_efficiencies", "ExactOverPrior", "exact_over_prior"]
@@ -78,6 +79,10 @@ class RobustExactDesign(ResultProtocol):
     local_efficiencies : tuple of float
         That local design's efficiency against this design at every parameter vector of the prior
         (:func:`set_efficiencies`; empty when ``local_indices`` is).
+    refined : oed.robust_refine.RobustRefined or None
+        The continuous refinement of the chosen points (``refine=True`` of the design verbs), else None.
+    notes : tuple of str
+        Modelling notes (e.g. a second-order criterion planned without data is the Gauss-Newton one).
     """
 
     indices: tuple
@@ -97,6 +102,8 @@ class RobustExactDesign(ResultProtocol):
     nodes: int = 0
     local_indices: tuple = ()
     local_efficiencies: tuple = ()
+    refined: object = None
+    notes: tuple = ()
 
     def summary(self) -> str:
         """One-paragraph summary."""
@@ -107,11 +114,12 @@ class RobustExactDesign(ResultProtocol):
             f", {'worst-case ' if self.robust == 'maximin' else ''}efficiency {self.efficiency:.6f}")
         text = (f"exact {self.robust} {self.criterion} design of {len(self.indices)} runs: {list(self.names)}, value "
                 f"{self.value:.9g} ({proof}; {via}, {self.n_designs} sets evaluated){eff}, {self.wall_time:.2f} s")
-        if not self.local_efficiencies:
-            return text
-        e = np.asarray(self.local_efficiencies, float)
-        return (text + f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
-                f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
+        if self.local_efficiencies:
+            e = np.asarray(self.local_efficiencies, float)
+            text += (f"; the local design at the nominal parameters {list(self.local_indices)} has efficiency min "
+                     f"{e.min():.6f}, max {e.max():.6f} against it across the prior's {e.size} parameter vectors")
+        text += "".join(f"\n  note: {n}" for n in self.notes)
+        return text if self.refined is None else text + "\n" + self.refined.summary()
 
     def to_frame(self):
         """The chosen candidates (``index``, ``name``), one row each; ``.attrs``: value, efficiency, criterion,
@@ -124,10 +132,15 @@ class RobustExactDesign(ResultProtocol):
 
     def to_dict(self) -> dict:
         """JSON-safe: every field (per_sample a list; NaN efficiency as null); ``local_indices`` and
-        ``local_efficiencies`` only when the local design was compared."""
+        ``local_efficiencies`` only when the local design was compared, ``refined`` only when refined, ``notes`` only
+        when there are notes."""
         d = jsonable(self)
         if not self.local_efficiencies:
             del d["local_indices"], d["local_efficiencies"]
+        if self.refined is None:
+            del d["refined"]
+        if not self.notes:
+            del d["notes"]
         return d
 
 
@@ -303,6 +316,7 @@ def exact_over_prior(information_at, prior, p, n, *, criterion=DEFAULT_CRITERION
     n_p)`` the information of one run of every candidate.  Maximin standardizes by each parameter vector's own
     exact n-run optimum (so the worst-case efficiency is against the best n-run design at that vector).  ``method``
     and ``time_limit`` (s) apply to each :func:`select_robust_exact` call (local, per-vector optima, robust)."""
+    check_non_negative(prior, "an exact robust design")
     F = np.stack([np.asarray(information_at(ps), float) for ps in prior.points], axis=1)
     F0 = np.asarray(information_at(np.asarray(p, float)), float)[:, None]
     kw = dict(criterion=criterion, names=names, time_limit=time_limit, method=method)

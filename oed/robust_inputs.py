@@ -13,7 +13,9 @@ parameter vector :math:`P_s` of the prior (:func:`oed.candidate_information.info
 
 by :func:`oed.robust_exact.exact_over_prior` (enumeration when small, else branch-and-bound with a proven gap;
 maximin standardized by each vector's own exact n-run optimum), which also gives the local exact design at the
-nominal ``p`` and its efficiency against the robust one at every parameter vector.
+nominal ``p`` and its efficiency against the robust one at every parameter vector.  With ``refine=True`` the
+chosen rows then move continuously within ``bounds`` (default the candidates' range) to raise the same criterion
+(:mod:`oed.robust_refine`), and a static model's refined design is compared with the approximate robust design.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ import numpy as np
 from .candidate_information import information
 from .criteria import Kind
 
-__all__ = ["robust_exact_inputs"]
+__all__ = ["robust_exact_inputs", "refine_robust_inputs"]
 
 
 def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, criterion, prior, robust, n_series, times,
@@ -46,21 +48,27 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
     time_limit : float
         Seconds per :func:`oed.robust_exact.select_robust_exact` solve (the information is not counted).
     unused : dict
-        ``refine``, ``kind``, ``costs``, ``budget``, ``bounds``, ``include``, ``exclude`` as given.
+        ``refine``, ``kind``, ``costs``, ``budget``, ``bounds``, ``include``, ``exclude`` as given (``refine`` and
+        ``bounds`` are used: the continuous refinement of the chosen rows within ``bounds``,
+        :func:`refine_robust_inputs`).
 
     Returns
     -------
     oed.robust_exact.RobustExactDesign
         ``names`` the candidates' labels (``q<j>`` or ``q<j>:<sensor>``), ``local_indices`` the local exact
-        design at ``p``, ``local_efficiencies`` its efficiency against the robust design at every prior vector.
+        design at ``p``, ``local_efficiencies`` its efficiency against the robust design at every prior vector,
+        ``refined`` the continuous refinement (``refine=True``).
 
     Raises
     ------
     ValueError
-        Bad input (the message names the argument), e.g. ``refine=True`` (not implemented with a prior).
+        Bad input (the message names the argument), e.g. ``refine=True`` of a joint (row, sensor) design.
+        ``kind="second_order"`` is taken: planned without data S = 0 at every vector, so it is the Gauss-Newton
+        design (noted in ``notes``).
     """
     from .prior import make_prior
     from .robust_exact import METHODS, ROBUST, exact_over_prior
+    Kind.parse(unused.get("kind", "gauss_newton"))          # a bad kind names the argument
     _refuse(unused)
     if method not in METHODS:
         raise ValueError(f"method: the exact robust design takes 'auto', 'enumerate' or 'bnb', got {method!r}")
@@ -71,6 +79,9 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
                          f"got {n_points!r}")
     pr = make_prior(prior, model, p)
     joint = isinstance(sensors, str) and sensors == "joint"
+    if joint and unused.get("refine"):
+        raise ValueError("refine: the continuous refinement is for input designs (sensors=None or names), not for "
+                         "joint input-sensor designs")
     axis = "input_pairs" if joint else "inputs"
     labels = []
 
@@ -92,19 +103,65 @@ def robust_exact_inputs(model, p, *, candidates, sigma, n_points, sensors, crite
             raise ValueError("n_points: " + str(exc)[3:]) from None
         raise
     names = tuple(labels[i] for i in r.design.indices)
+    refined = None
+    if unused.get("refine"):
+        refined = refine_robust_inputs(model, p, candidates, r.design.indices, pr, r.u_star, sigma=sigma,
+                                       sensors=sensors, n_series=n_series, times=times, discretisation=discretisation,
+                                       criterion=criterion, robust=robust, bounds=unused.get("bounds"))
+    notes = ()
+    if Kind.parse(unused.get("kind", "gauss_newton")) is Kind.SECOND_ORDER:
+        notes = ("kind='second_order' planned without data: expected residual 0, S = 0 at every parameter vector, "
+                 "so the design is the Gauss-Newton one",)
     return replace(r.design, names=names, local_indices=tuple(r.local.indices),
-                   local_efficiencies=tuple(float(e) for e in r.local_efficiencies))
+                   local_efficiencies=tuple(float(e) for e in r.local_efficiencies), refined=refined, notes=notes)
+
+
+def refine_robust_inputs(model, p, candidates, indices, prior, u_star, *, sigma, sensors, n_series, times,
+                         discretisation, criterion, robust, bounds=None, settings=None):
+    r"""The continuous refinement (:func:`oed.robust_refine.refine_robust`) of the exact robust design's rows
+    ``candidates[indices]`` within ``bounds`` (default the candidates' range; first spacing per input the smallest
+    gap between the candidates' distinct values), and for a static model its efficiency against the approximate
+    robust design on the same range (:func:`oed.approximate.approximate_design`, same prior points).
+
+    Returns
+    -------
+    oed.robust_refine.RobustRefined
+    """
+    from .approx_polish import explicit_polisher
+    from .approximate import approximate_design
+    from .robust_refine import RobustRefineSettings, refine_robust
+    if isinstance(sensors, str) and sensors == "joint":
+        raise ValueError("refine: the continuous refinement is for input designs (sensors=None or names), not for "
+                         "joint input-sensor designs")
+    Q = np.asarray(candidates, float)
+    Q = Q[:, None] if Q.ndim == 1 else Q
+    lo, hi = (Q.min(axis=0), Q.max(axis=0)) if bounds is None else (
+        np.broadcast_to(np.asarray(b, float).ravel(), (Q.shape[1],)).copy() for b in bounds)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not np.any(hi > lo):
+        raise ValueError(f"bounds: the refinement needs finite lower <= upper with a range in at least one input, "
+                         f"got {lo}, {hi}")
+    spacing = np.array([np.min(np.diff(np.unique(c))) if np.unique(c).size > 1 else (b - a) / 4.0
+                        for c, a, b in zip(Q.T, lo, hi)])
+
+    def info(X, P):
+        return np.stack([information(model, ps, axis="inputs", candidates=X, sigma=sigma, sensors=sensors,
+                                     n_series=n_series, times=times, discretisation=discretisation).F for ps in P],
+                        axis=1)
+    static = times is None
+    sens = None if sensors is None else list(np.atleast_1d(sensors))
+    polisher = explicit_polisher(model, prior.points, sigma, sens, n_series) if static else None
+    approx = approximate_design(model, p, sigma=sigma, bounds=(lo, hi), criterion=criterion, prior=prior,
+                                robust=robust, sensors=sensors, n_series=n_series) if static else None
+    return refine_robust(info, Q[list(indices)], prior, (lo, hi), criterion=criterion, robust=robust, u_star=u_star,
+                         spacing=spacing, names=tuple(f"q{j}" for j in range(Q.shape[1])), polisher=polisher,
+                         approximate=approx, settings=settings or RobustRefineSettings())
 
 
 def _refuse(unused: dict) -> None:
     """A clear error naming the first argument of the exact route given that the robust one does not take."""
-    if unused.get("refine"):
-        raise ValueError("refine: the continuous refinement of an exact robust design (prior given) is not "
-                         "implemented; leave refine=False (or drop the prior to refine the local design)")
-    if Kind.parse(unused.get("kind", "gauss_newton")) is not Kind.GAUSS_NEWTON:
-        raise ValueError("kind: the exact robust design uses the Gauss-Newton information at every parameter "
-                         f"vector; give kind='gauss_newton' (got {unused['kind']!r})")
-    for k in ("costs", "budget", "bounds"):
+    if unused.get("bounds") is not None and not unused.get("refine"):
+        raise ValueError("bounds: used only by the refinement of the exact robust design (refine=True); leave it out")
+    for k in ("costs", "budget"):
         if unused.get(k) is not None:
             raise ValueError(f"{k}: not used by the exact robust design (prior is given: it chooses exactly n_points "
                              "candidates); leave it out")

@@ -11,6 +11,10 @@ with :math:`p_0` the nominal parameters and the information of design k taken fr
 data available before experiment k (the initial data for k = 1, experiment k - 1 after).
 The result shows how the chosen sensors and the confidence ellipsoid change once the
 design is computed at identified instead of nominal parameters.
+
+Under a prior (``prior=``), each :math:`w_k` is instead the exact robust choice (pseudo-Bayesian or
+standardized maximin) over the prior moved to :math:`p_{k-1}` (:mod:`oed.sequential_robust`); at a point
+prior it is the local choice.
 """
 from __future__ import annotations
 
@@ -21,16 +25,20 @@ import numpy as np
 
 from identification.results_protocol import ResultProtocol, jsonable
 from identification.vocabulary import renamed_arguments
-from .criteria import DEFAULT_CRITERION
+from .criteria import DEFAULT_CRITERION, Criterion, Kind
 from .design import DesignResult, select_sensors_from_information
 from .candidate_information import information
+from .sequential_robust import RobustStep, recentred, robust_sensor_step
 
 __all__ = ["SequentialStep", "SequentialResult", "sequential_design"]
 
 
 @dataclass(frozen=True)
 class SequentialStep:
-    """One experiment: the design computed at ``p_design`` and the estimate it produced."""
+    """One experiment: the design computed at ``p_design`` and the estimate it produced.  Under a prior ``robust``
+    holds the robust choice (:class:`oed.sequential_robust.RobustStep`, with the prior moved to ``p_design``) and
+    ``design`` that choice as a :class:`DesignResult` (its ``value``: the robust criterion, maximised; see its
+    notes); None for a local design."""
 
     p_design: np.ndarray
     design: DesignResult
@@ -38,6 +46,7 @@ class SequentialStep:
     stderr: np.ndarray
     cov: np.ndarray
     ellipsoid_volume: float
+    robust: RobustStep | None = None
 
 
 @dataclass(frozen=True)
@@ -96,15 +105,28 @@ class SequentialResult(ResultProtocol):
 
     def to_dict(self) -> dict:
         """JSON-safe: param_names, sensor_names and per step p_design, the design (:meth:`DesignResult.to_dict`),
-        p, stderr, cov and ellipsoid_volume."""
+        p, stderr, cov and ellipsoid_volume (under a prior also ``robust``: the robust choice's value, per-vector
+        utilities, worst-case efficiency, proof and the prior's points and weights at that step)."""
         return jsonable(dict(param_names=self.param_names, sensor_names=self.sensor_names,
-                             steps=[dict(p_design=s.p_design, design=s.design.to_dict(), p=s.p, stderr=s.stderr,
-                                         cov=s.cov, ellipsoid_volume=s.ellipsoid_volume) for s in self.steps]))
+                             steps=[_step_dict(s) for s in self.steps]))
+
+
+def _step_dict(s: SequentialStep) -> dict:
+    """One step of :meth:`SequentialResult.to_dict` (``robust`` only under a prior)."""
+    d = dict(p_design=s.p_design, design=s.design.to_dict(), p=s.p, stderr=s.stderr, cov=s.cov,
+             ellipsoid_volume=s.ellipsoid_volume)
+    if s.robust is not None:
+        r = s.robust
+        d["robust"] = dict(value=r.value, per_sample=r.per_sample, worst_case_efficiency=r.worst_case_efficiency,
+                           proven_optimal=r.proven_optimal, method=r.method, gap=r.gap, prior_points=r.prior.points,
+                           prior_weights=r.prior.weights)
+    return d
 
 
 @renamed_arguments(experiments="data", p_nominal="p0")
 def sequential_design(model, data: Sequence, p0, initial=None, criterion=DEFAULT_CRITERION,
-                      kind="gauss_newton", n_sensors=None, alpha: float = 0.05, **design_kw) -> SequentialResult:
+                      kind="gauss_newton", n_sensors=None, alpha: float = 0.05, prior=None, robust: str = "bayes",
+                      **design_kw) -> SequentialResult:
     """Re-solve the sensor selection with the parameters identified from each experiment.
 
     Parameters
@@ -127,6 +149,13 @@ def sequential_design(model, data: Sequence, p0, initial=None, criterion=DEFAULT
         3.6e6 Gauss-Newton, see tests/oed/test_sequential_and_press.py).
     alpha : float
         Level of the reported confidence ellipsoid.
+    prior : None, (P, w), dict or oed.prior.Prior
+        Parameter uncertainty around ``p0`` (:func:`oed.prior.make_prior`, non-negative weights): each experiment's
+        sensors are then the exact robust choice of ``n_sensors`` (default min(n_p, n_S)) over the prior moved to
+        the current estimate (:mod:`oed.sequential_robust`; Gauss-Newton or ``kind="second_order"``);
+        ``design_kw`` then takes only ``method`` ("auto", "enumerate", "bnb") and ``time_limit`` (s per solve).
+    robust : {"bayes", "maximin"}
+        With a prior: the expected criterion, or the worst-case efficiency against each vector's own best set.
 
     Raises
     ------
@@ -143,16 +172,68 @@ def sequential_design(model, data: Sequence, p0, initial=None, criterion=DEFAULT
     p0 = np.asarray(p0, float).ravel()
     p_design = p0
     info_data = experiments[0] if initial is None else initial
+    pr = None if prior is None else _robust_prior(model, p0, prior, robust, design_kw)
     steps = []
     for experiment in experiments:
-        info = information(model, p_design, data=info_data)      # per sensor (a dynamic model's: per instrument)
-        design = select_sensors_from_information(info, criterion=criterion, kind=kind, n_sensors=n_sensors,
-                                                 **design_kw)
+        step = None
+        if pr is None:
+            info = information(model, p_design, data=info_data)      # per sensor (a dynamic model's: per instrument)
+            design = select_sensors_from_information(info, criterion=criterion, kind=kind, n_sensors=n_sensors,
+                                                     **design_kw)
+        else:
+            step, design = _robust_choice(model, recentred(pr, p0, p_design), info_data, criterion, kind, n_sensors,
+                                          robust, design_kw, len(steps) + 1)
         est = identify(model, experiment, p0, weights=np.asarray(design.weights, float))
         est.require_bounded(f"sequential design, experiment {len(steps) + 1} (the next design is computed at its "
                             "estimate)")
         steps.append(SequentialStep(p_design=p_design.copy(), design=design, p=est.p.copy(),
                                     stderr=est.stderr.copy(), cov=est.cov.copy(),
-                                    ellipsoid_volume=est.ellipsoid(alpha).volume()))
+                                    ellipsoid_volume=est.ellipsoid(alpha).volume(), robust=step))
         p_design, info_data = est.p.copy(), experiment
     return SequentialResult(tuple(steps), model.param_names, model.sensors)
+
+
+def _robust_prior(model, p0, prior, robust, design_kw):
+    """The prior of a robust sequential design around ``p0`` (checked: weights, robust, design_kw)."""
+    from .prior import make_prior
+    from .prior_sparse import check_non_negative
+    if robust not in ("bayes", "maximin"):
+        raise ValueError(f"robust: expected 'bayes' or 'maximin', got {robust!r}")
+    bad = [k for k, v in design_kw.items() if k not in ("method", "time_limit") and v is not None
+           and not (isinstance(v, (tuple, list)) and len(v) == 0)]
+    if bad:
+        raise ValueError(f"{bad[0]}: not used by the robust sequential design (prior is given: each experiment "
+                         "chooses exactly n_sensors sensors); leave it out")
+    pr = make_prior(prior, model, p0)
+    check_non_negative(pr, "a robust sequential design")
+    return pr
+
+
+def _robust_choice(model, pr, info_data, criterion, kind, n_sensors, robust, design_kw, k):
+    """(RobustStep, DesignResult) of experiment ``k``: the robust choice over ``pr`` (already at the estimate)."""
+    lower = np.array([q.lower for q in model.params], float)
+    upper = np.array([q.upper for q in model.params], float)
+    out = (pr.points < lower) | (pr.points > upper)
+    if np.any(out):
+        s, j = np.argwhere(out)[0]
+        raise ValueError(f"prior: moved to the estimate before experiment {k}, {model.param_names[j]} = "
+                         f"{pr.points[s, j]:g} lies outside the model's bounds [{lower[j]:g}, {upper[j]:g}]; "
+                         "narrow the prior")
+    infos = [information(model, ps, data=info_data) for ps in pr.points]
+    n_S = infos[0].F.shape[0]
+    n = min(model.n_p, n_S) if n_sensors is None else n_sensors
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= n_S:
+        raise ValueError(f"n_sensors: expected an integer in 1..{n_S}, got {n_sensors!r}")
+    step = robust_sensor_step(infos, pr, int(n), criterion=criterion, kind=kind, robust=robust,
+                              method=design_kw.get("method", "auto"), time_limit=design_kw.get("time_limit", 60.0))
+    labels = tuple(infos[0].labels)
+    mask = tuple(i in step.indices for i in range(n_S))
+    what = "expected utility" if robust == "bayes" else "smallest standardized utility"
+    design = DesignResult(chosen=tuple(labels[i] for i in step.indices), indices=step.indices, weights=mask,
+                          criterion=Criterion.parse(criterion).value, kind=Kind.parse(kind).value, value=step.value,
+                          det=None, lower_bound=float("nan"), gap=step.gap, proven_optimal=step.proven_optimal,
+                          method=f"{robust} {step.method}", status="optimal" if step.proven_optimal else "not proven",
+                          message="", wall_time=0.0, candidates=labels,
+                          notes=(f"robust {robust} design over {pr.n} parameter vectors: value is the {what} "
+                                 f"(u = -Psi(C), maximised), worst-case efficiency {step.worst_case_efficiency:.6g}",))
+    return step, design

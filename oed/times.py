@@ -41,7 +41,7 @@ def time_information(model, p, times, inputs, sigma, sensors=None, pairs: bool =
 def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None, pairs: bool = False,
                  sensors=None, criterion: str = DEFAULT_CRITERION, costs=None, budget=None, include=(), exclude=(),
                  method: str = "auto", time_limit: float = 60.0, n_series: int = 1, approximate: bool = False,
-                 prior=None, robust: str = "bayes", approx_settings=None):
+                 prior=None, robust: str = "bayes", approx_settings=None, refine: bool = False):
     """The sampling times (or time x sensor pairs) minimising the A, D or E criterion of the planned
     Gauss-Newton covariance of a dynamic model at p (see the module docstring); or, with
     ``approximate=True``, the approximate design (times and weights) on the range of ``times``
@@ -70,12 +70,18 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
                                    maximin standardized by each parameter vector's own exact n_times optimum)
     robust : {"bayes", "maximin"}
     approx_settings : oed.approximate.ApproximateSettings or None
+    refine : bool                  with a prior (exact robust design of times, not pairs): also move the chosen
+                                   times continuously within [min(times), max(times)]
+                                   (:func:`oed.robust_refine.refine_robust_times`; the result's ``refined``)
 
     Returns
     -------
     DesignResult (``axis`` "times" or "pairs", ``chosen`` the labels), oed.approximate.ApproximateDesign
     with ``approximate=True``, or oed.robust_exact.RobustExactDesign with a prior and ``approximate=False``
     """
+    if refine and (prior is None or approximate or pairs):
+        raise ValueError("refine: the refinement of sampling times is for exact robust designs of times (a prior, "
+                         "approximate=False, pairs=False)")
     if prior is not None and not approximate:
         for k, v in dict(max_times=max_times, costs=costs, budget=budget).items():
             if v is not None:
@@ -85,7 +91,7 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
             raise ValueError(f"{'include' if len(include) else 'exclude'}: not used by the exact robust design "
                              "(prior is given); leave it out")
         return _robust_exact_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
-                                   n_times, pairs, method, time_limit)
+                                   n_times, pairs, method, time_limit, (refine, approx_settings))
     if approximate or prior is not None:
         return _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust,
                                   approximate, approx_settings,
@@ -99,7 +105,7 @@ def select_times(model, p, times, inputs, sigma, n_times=None, *, max_times=None
 
 
 def _robust_exact_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, n_times, pairs,
-                        method, time_limit):
+                        method, time_limit, refining=(False, None)):
     """The exact robust route of :func:`select_times` (a prior, ``approximate=False``)."""
     from .prior import make_prior
     from .robust_exact import METHODS, select_robust_exact
@@ -116,7 +122,14 @@ def _robust_exact_times(model, p, times, inputs, sigma, sensors, n_series, crite
     u_star = None
     if robust == "maximin":
         u_star = np.array([select_robust_exact(F[:, [s]], [1.0], n, **kw).value for s in range(F.shape[1])])
-    return select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **kw)
+    design = select_robust_exact(F, pr.weights, n, robust=robust, u_star=u_star, **kw)
+    if not refining[0]:
+        return design
+    from dataclasses import replace
+    from .robust_refine import refine_robust_times
+    return replace(design, refined=refine_robust_times(model, p, design, times, inputs, sigma, pr, u_star,
+                                                       criterion=criterion, robust=robust, sensors=sensors,
+                                                       n_series=n_series, approx_settings=refining[1]))
 
 
 def _approximate_times(model, p, times, inputs, sigma, sensors, n_series, criterion, prior, robust, approximate,

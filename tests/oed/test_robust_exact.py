@@ -168,5 +168,8 @@ def test_select_sensors_with_a_prior_is_the_exact_robust_design():
     with pytest.raises(ValueError, match="exclude: not used by the exact robust design"):
         select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, prior=pr, exclude=["D_y"],
                        kind="gauss_newton")
-    with pytest.raises(ValueError, match="kind: the exact robust design uses the Gauss-Newton"):
-        select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, prior=pr, kind="second_order")
+    # second order planned without data: S = 0 at every vector, so the Gauss-Newton design, noted
+    so = select_sensors(m, None, p, inputs=Q, sigma=np.full(m.n_S, 0.01), n_sensors=4, criterion="E", prior=pr,
+                        kind="second_order", method="bnb")
+    assert so.names == r.names and so.value == r.value and "S = 0 at every parameter vector" in so.notes[0]
+    assert "notes" in so.to_dict() and "notes" not in r.to_dict()

@@ -92,9 +92,10 @@ def test_dynamic_reactor_experiments_against_brute_force():
 
 @pytest.mark.parametrize("kwargs, match", [
     (dict(prior={"zz": ("uniform", 0.3, 2.5)}), r"prior: 'zz' is not a parameter of the model"),
-    (dict(prior=PRIOR, refine=True), r"refine: the continuous refinement of an exact robust design .* not implemented"),
+    (dict(prior=PRIOR, refine=True, sensors="joint"), r"refine: the continuous refinement is for input designs"),
+    (dict(prior=PRIOR, bounds=(0.1, 4.5)), r"bounds: used only by the refinement of the exact robust design"),
     (dict(prior=PRIOR, costs=np.ones(8), budget=3.0), r"costs: not used by the exact robust design"),
-    (dict(prior=PRIOR, kind="second_order"), r"kind: the exact robust design uses the Gauss-Newton"),
+    (dict(prior=PRIOR, kind="third_order"), r"kind: unknown covariance kind 'third_order'"),
     (dict(prior=PRIOR, method="scip"), r"method: the exact robust design takes"),
     (dict(prior=PRIOR, n_points=9), r"n_points: expected an integer in 1..8"),
     (dict(prior=PRIOR, n_points=None), r"n_points: the exact robust design needs"),
@@ -103,3 +104,10 @@ def test_bad_input_names_the_argument(expo, kwargs, match):
     args = dict(candidates=T[:, None], sigma=0.1, n_points=3) | kwargs
     with pytest.raises(ValueError, match=match):
         select_inputs(expo, P0, **args)
+
+
+def test_second_order_planned_is_the_gauss_newton_design_noted(expo):
+    gn = select_inputs(expo, P0, candidates=T[:, None], sigma=0.1, n_points=3, prior=PRIOR)
+    so = select_inputs(expo, P0, candidates=T[:, None], sigma=0.1, n_points=3, prior=PRIOR, kind="second_order")
+    assert so.indices == gn.indices and so.value == gn.value and not gn.notes
+    assert "S = 0 at every parameter vector" in so.notes[0] and "note: kind='second_order'" in so.summary()

@@ -71,7 +71,7 @@ def test_bad_priors_name_the_key(prior, match):
 
 def test_bad_rule_and_order():
     with pytest.raises(ValueError, match="rule: expected one of"):
-        make_prior({"theta1": ("uniform", 0.05, 0.07)}, NAMES, P0, rule="sparse")
+        make_prior({"theta1": ("uniform", 0.05, 0.07)}, NAMES, P0, rule="smolyak")
     with pytest.raises(ValueError, match="order: expected an integer >= 1"):
         make_prior({"theta1": ("uniform", 0.05, 0.07)}, NAMES, P0, order=0)
     with pytest.raises(ValueError, match=r"prior\['theta2'\]: rule='grid' needs bounded"):

@@ -34,3 +34,18 @@ def test_sequential_design_takes_the_dynamic_model_and_weights_instruments(probl
     per = [sum(F[k] for k, (s, _) in enumerate(pairs) if s == name) for name in model.sensors]
     logdet = [np.linalg.slogdet(M)[1] if np.linalg.slogdet(M)[0] > 0 else -np.inf for M in per]
     assert res.steps[1].design.sensors == (model.sensors[int(np.argmax(logdet))],)
+
+
+def test_sequential_design_of_the_dynamic_model_under_a_prior(problem):
+    """A point prior gives the local sequential design bit for bit; a spread prior on E1 designs per instrument over
+    the prior moved to each estimate (the reactor's instrument choice does not depend on E1 here)."""
+    model, experiments = problem
+    p0 = P_TRUE * 1.1
+    local = sequential_design(model, experiments, p0, criterion="D", n_sensors=1)
+    point = sequential_design(model, experiments, p0, criterion="D", n_sensors=1, prior=(p0[None, :], [1.0]))
+    for a, b in zip(local.steps, point.steps):
+        assert a.design.chosen == b.design.chosen and np.array_equal(a.p, b.p) and np.array_equal(a.cov, b.cov)
+    rob = sequential_design(model, experiments, p0, criterion="D", n_sensors=1, prior={"E1": ("uniform", 60.0, 72.0)},
+                            robust="maximin")
+    assert rob.steps[1].robust.prior.n == 5 and np.allclose(rob.steps[1].robust.prior.nominal, rob.steps[0].p)
+    assert all(0 < s.robust.worst_case_efficiency <= 1 + 1e-12 for s in rob.steps)
