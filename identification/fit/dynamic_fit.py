@@ -35,7 +35,8 @@ from models.trajectory import interpolate_states, mapped_outputs, outputs_and_se
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.estimator import fit_static, static_information
-from identification.fit.start import as_start_vector, param_scale
+from identification.fit.implicit_start import start_sensitivities
+from identification.fit.start import as_start_vector, initial_states, param_scale
 
 __all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem",
            "controlled_mesh", "dynamic_information", "predict", "simulate_campaign", "DegenerateStartWarning",
@@ -305,8 +306,8 @@ def _degenerate_start(cm, flat, p0, w) -> str:
     not checked); a start whose trajectory fails is left to the fit, which names it."""
     if cm.dynamic.n_z:
         return ""
-    try:
-        _, G = outputs_and_sensitivities(cm, p0, flat.inputs)
+    try:       # the fit's own start states and sensitivities (cached: the fit and refits reuse them)
+        G = start_sensitivities(cm, p0, flat.inputs, initial_states(cm, p0, flat.inputs)).G
     except StateSolveError:
         return ""
     used = (flat.counts() > 0) & ((np.ones(G.shape[1]) if w is None else np.asarray(w)) > 0)[None, :]

@@ -38,6 +38,7 @@ from identification.fit import secondorder
 from identification.errors import DataError, IdentifiabilityError, IdentificationError, StateSolveError
 from identification.fit.assembly import FullSpaceSolution, PhaseClock, assemble_estimate
 from identification.fit.checks import check_identifiability, covariance_from_terms
+from identification.fit.data_start import data_trajectories
 from identification.fit.explicit_newton import reduced_start, solve_explicit_newton
 from identification.fit.implicit_start import nlp_multipliers
 from identification.fit.ipopt_solver import solve_nlp, warm_start
@@ -107,8 +108,12 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
                     clock.lap("reduced-space Newton (collocated trajectories)")
                 return FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
                                           got[2])
+    Y_nlp = st.Y_init                           # the NLP's start trajectories: through the data (settings.init)
+    if settings.init == "data" and model.state_numerics.reduced_space and st.Y_init is not None:
+        Y_data = data_trajectories(model, data, st.p0, st.Y_init)
+        Y_nlp = st.Y_init if Y_data is None else Y_data
     if s_y is None:                             # scalings left for the NLP (see make_start)
-        s_y, e_scale = scalings(model, st.p0, data.inputs, st.Y_init, False)
+        s_y, e_scale = scalings(model, st.p0, data.inputs, Y_nlp, False)
         st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     if warm is not None:
@@ -116,6 +121,8 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
     else:
         p_start, Y_start = predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
                                       settings.predictor_step)
+        if Y_nlp is not st.Y_init:
+            Y_start = Y_nlp
     if clock is not None:
         clock.lap("start point of Ipopt")
     x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
@@ -145,7 +152,7 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
                 res = r1
         passes = 1 if res is not None else 2
     if res is None:
-        res = solve(x0 if passes == 1 else np.concatenate([st.p0 / s_p, (st.Y_init / s_y[None, :]).ravel()]),
+        res = solve(x0 if passes == 1 else np.concatenate([st.p0 / s_p, (Y_nlp / s_y[None, :]).ravel()]),
                     np.concatenate([model.lower / s_p, -free_y]), np.concatenate([model.upper / s_p, free_y]))
     if clock is not None:
         clock.lap("NLP build, Ipopt set-up and solve")

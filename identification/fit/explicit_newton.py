@@ -12,6 +12,7 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.state import numerics
+from models.trajectory import merging
 from identification.fit import dense
 from identification.fit import newton as newton_core
 from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms
@@ -285,7 +286,9 @@ def reduced_start(st: Start, settings: IdentifySettings):
             not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None
     x0 = st.p0 / st.s_p
-    objective = ImplicitObjective(st.problem, x0, st.Y_init)
+    # the marched states at p0 of a reduced-space model (initial_states) are reused at the first point
+    # (not inside merged fits, whose evaluations depend on the batch: identification.fit.batch.fit_members)
+    objective = ImplicitObjective(st.problem, x0, st.Y_init, st.p0 if trajectory and not merging() else None)
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
     return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,
