@@ -113,7 +113,9 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
         Y_data = data_trajectories(model, data, st.p0, st.Y_init)
         Y_nlp = st.Y_init if Y_data is None else Y_data
     if s_y is None:                             # scalings left for the NLP (see make_start)
-        s_y, e_scale = scalings(model, st.p0, data.inputs, st.Y_init, False)
+        # cached per (p0, inputs) when Y_init are the start states initial_states keeps (data-independent)
+        cached = model.cache.get("identify.initial_states", (st.p0.tobytes(), data.inputs.tobytes()))
+        s_y, e_scale = scalings(model, st.p0, data.inputs, st.Y_init, cached is st.Y_init)
         st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
     key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
     if warm is not None:
