@@ -86,7 +86,8 @@ def _mudoe(b, p0, init: str, rep: int) -> dict:
             est, c, w = _cpu(lambda: identify(model, data, p0, settings=settings))
             cpu.append(c)
             wall.append(w)
-    return {"solver": est.diagnostics.solver, "iterations": est.iterations, "cpu": statistics.median(cpu),
+    return {"solver": est.diagnostics.solver, "iterations": est.iterations,
+            "meshes": len(est.diagnostics.discretisation.history), "cpu": statistics.median(cpu),
             "wall": statistics.median(wall), "first_cpu": c_first, "p": est.p.tolist(), "sse": _sse(b, est.p),
             "stderr": est.stderr.tolist()}
 
@@ -128,7 +129,7 @@ def _line(r) -> str:
     if "failed" in m:
         mud = f"FAILED {m['failed']}"
     else:
-        mud = f"{m['solver']} {m['iterations']} it, {1e3 * m['cpu']:.1f} ms"
+        mud = f"{m['solver']} {m['iterations']} it ({m['meshes']} mesh{'es' if m['meshes'] > 1 else ''}), {1e3 * m['cpu']:.1f} ms"
     sim = f"{s['iterations']} it, {1e3 * s['cpu']:.1f} ms" if "cpu" in s else s.get("failed", "")
     b = r["scipy_best"]
     sc = r["scipy"][b]

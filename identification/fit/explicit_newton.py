@@ -244,8 +244,8 @@ def _step(objective, x: np.ndarray, d: np.ndarray, cur: ExplicitTerms, dec: floa
         budget[0] += 1
         if budget[0] > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
             return newton_core.ABORT
-        try:
-            return objective(x + t * d, newton)
+        try:     # an objective whose S is cheap to add later takes it only at the accepted point (the loop's next turn)
+            return objective(x + t * d, newton and not getattr(objective, "deferred_second_order", False))
         except StateSolveError:
             return None
 

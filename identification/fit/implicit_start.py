@@ -166,6 +166,9 @@ class ImplicitObjective:
     """
 
     _KEEP = 2
+    #: S of a point is added by a second call with ``second_order`` at no other cost (the point is kept): the
+    #: line search asks for it only at the point it accepts (:func:`identification.fit.explicit_newton`)
+    deferred_second_order = True
 
     def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None):
         self._problem, self._sp = problem, problem.p_scale
