@@ -9,7 +9,8 @@
   and from every rate 1e-6 (just inside the bound): mudoe's warm refit with the default start
   trajectories (``IdentifySettings(init="data")``) and with ``init="simulate"`` (iterations and CPU), and
   scipy ``least_squares`` over ``solve_ivp`` with RK45, LSODA and BDF (:func:`bench.ode_benchmarks.scipy_fit`);
-  the ratio is the fastest scipy method's CPU over mudoe's.  Both optima are checked: the sum of squares of
+  the ratio is the fastest scipy method's CPU over mudoe's.  Iterations: the final fit's (reduced-space
+  Newton or Ipopt) and every Ipopt pass of every mesh together ("in all").  Both optima are checked: the sum of squares of
   mudoe's estimate (recomputed by solve_ivp, rtol 1e-10) and scipy's.
 
 CPU seconds of this process (the machine is shared: wall times are printed beside them).  Run:
@@ -72,6 +73,31 @@ def _sse(b, p) -> float:
     return float(np.sum((sol.y.T - b.z) ** 2))
 
 
+class _IpoptCount:
+    """Counts the Ipopt iterations of every pass of every fit (identify reports the last pass's only): wraps
+    the estimator's ``solve_nlp`` for the duration of a ``with`` block."""
+
+    def __enter__(self):
+        from identification.fit import estimator
+        self.module, self.original, self.iterations = estimator, estimator.solve_nlp, 0
+
+        def counted(*args, **kw):
+            try:
+                res = self.original(*args, **kw)
+            except Exception as exc:          # a failed pass: its iterations are in the message
+                text = str(exc).split("after ")[-1].split(" ")[0]
+                self.iterations += int(text) if text.isdigit() else 0
+                raise
+            self.iterations += res.iterations
+            return res
+        estimator.solve_nlp = counted
+        return self
+
+    def __exit__(self, *exc):
+        self.module.solve_nlp = self.original
+        return False
+
+
 def _mudoe(b, p0, init: str, rep: int) -> dict:
     from identification import IdentifySettings, identify
     model, data, settings = b.model(), b.data(), IdentifySettings(init=init)
@@ -86,7 +112,9 @@ def _mudoe(b, p0, init: str, rep: int) -> dict:
             est, c, w = _cpu(lambda: identify(model, data, p0, settings=settings))
             cpu.append(c)
             wall.append(w)
-    return {"solver": est.diagnostics.solver, "iterations": est.iterations,
+        with _IpoptCount() as count:
+            identify(model, data, p0, settings=settings)
+    return {"solver": est.diagnostics.solver, "iterations": est.iterations, "ipopt_total": count.iterations,
             "meshes": len(est.diagnostics.discretisation.history), "cpu": statistics.median(cpu),
             "wall": statistics.median(wall), "first_cpu": c_first, "p": est.p.tolist(), "sse": _sse(b, est.p),
             "stderr": est.stderr.tolist()}
@@ -129,8 +157,10 @@ def _line(r) -> str:
     if "failed" in m:
         mud = f"FAILED {m['failed']}"
     else:
-        mud = f"{m['solver']} {m['iterations']} it ({m['meshes']} mesh{'es' if m['meshes'] > 1 else ''}), {1e3 * m['cpu']:.1f} ms"
-    sim = f"{s['iterations']} it, {1e3 * s['cpu']:.1f} ms" if "cpu" in s else s.get("failed", "")
+        mud = (f"{m['solver']} {m['iterations']} it ({m['meshes']} mesh{'es' if m['meshes'] > 1 else ''}; Ipopt "
+               f"{m['ipopt_total']} in all), {1e3 * m['cpu']:.1f} ms")
+    sim = (f"{s['solver']} {s['iterations']} it (Ipopt {s['ipopt_total']}), {1e3 * s['cpu']:.1f} ms" if "cpu" in s
+           else s.get("failed", ""))
     b = r["scipy_best"]
     sc = r["scipy"][b]
     return (f"| {r['problem']} | {r['start']} | {mud} | {sim} | {b} {1e3 * sc['cpu']:.0f} ms (nfev {sc['nfev']}) | "

@@ -246,8 +246,8 @@ def _step(objective, x: np.ndarray, d: np.ndarray, cur: ExplicitTerms, dec: floa
             return newton_core.ABORT
         try:     # an objective whose S is cheap to add later takes it only at the accepted point (the loop's next turn)
             return objective(x + t * d, newton and not getattr(objective, "deferred_second_order", False))
-        except StateSolveError:
-            return None
+        except StateSolveError:      # no states there: halve, or give up (the full-space NLP's turn)
+            return newton_core.ABORT if getattr(objective, "abort_on_failure", False) else None
 
     new, t = newton_core.backtrack(trial, lambda c, t: newton_core.sufficient_decrease(c.f, cur.f, t, dec))
     return new, (x + t * d if new is not None and new is not newton_core.ABORT else None)
@@ -288,7 +288,10 @@ def reduced_start(st: Start, settings: IdentifySettings):
     x0 = st.p0 / st.s_p
     # the marched states at p0 of a reduced-space model (initial_states) are reused at the first point
     # (not inside merged fits, whose evaluations depend on the batch: identification.fit.batch.fit_members)
-    objective = ImplicitObjective(st.problem, x0, st.Y_init, st.p0 if trajectory and not merging() else None)
+    # a collocated ODE gives up at the first trial point where its trajectories cannot be solved (a step into a
+    # blow-up): the full-space NLP, whose trajectories need not be consistent on the way, takes over from p0
+    objective = ImplicitObjective(st.problem, x0, st.Y_init, st.p0 if trajectory and not merging() else None,
+                                  abort_on_failure=trajectory)
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
     return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,

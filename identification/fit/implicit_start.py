@@ -163,6 +163,9 @@ class ImplicitObjective:
         space (:func:`identification.fit.start.initial_states`): the point at p0 then reuses them and the
         start's cached sensitivities (:func:`identification.fit.start.start_sensitivities`) instead of
         marching again.
+    abort_on_failure : bool
+        A trial point of the line search whose states cannot be solved ends the iteration (the caller solves
+        the full-space NLP instead) rather than halving the step.
     """
 
     _KEEP = 2
@@ -170,8 +173,10 @@ class ImplicitObjective:
     #: line search asks for it only at the point it accepts (:func:`identification.fit.explicit_newton`)
     deferred_second_order = True
 
-    def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None):
+    def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None,
+                 abort_on_failure: bool = False):
         self._problem, self._sp = problem, problem.p_scale
+        self.abort_on_failure = abort_on_failure
         self._outer = np.outer(self._sp, self._sp)
         self._seen = [(np.array(x0, float), np.asarray(Y0, float), None)]      # (x, states, point or None)
         # (p0,) when Y0 are the marched states at exactly p0 (initial_states of a reduced-space model)

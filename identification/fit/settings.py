@@ -48,7 +48,10 @@ class IdentifySettings:
                               in the states, the rest from the simulation at p0
                               (:mod:`identification.fit.data_start`); "simulate": the simulation at p0.
                               Only Ipopt's start: the reduced-space iteration (which solves the
-                              trajectories at every p) and the optimum are the same either way
+                              trajectories at every p) and the optimum are the same either way.  With
+                              "data", a start with a value on its bound (moved into the interior) is
+                              solved on the first mesh by the full-space NLP directly, its unbounded
+                              first pass capped at DATA_LAZY_PASS_MAX_ITER iterations
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)

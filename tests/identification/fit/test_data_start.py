@@ -97,3 +97,19 @@ def test_data_start_needs_fewer_ipopt_iterations_and_reaches_the_same_optimum():
 def test_init_is_checked():
     with pytest.raises(ValueError, match="init: expected one of 'data', 'simulate'"):
         IdentifySettings(init="guess")
+
+
+def test_a_start_on_the_bounds_is_solved_from_the_data_in_few_iterations():
+    # alpha-pinene from every rate 0 (COPS's start; moved 1e-3 into the interior): the first mesh goes straight
+    # to the full-space NLP through the data (6 Ipopt iterations here); the optimum is the one found from a
+    # start near it by the reduced-space iteration
+    b = ob.benchmark("pinene")
+    model, data = b.model(), b.data()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        on_bound = identify(model, data, (0.0,) * 5)
+        near = identify(model, data, (6e-5, 3e-5, 2e-5, 2.7e-4, 4e-5))
+    assert on_bound.diagnostics.solver == "ipopt" and on_bound.iterations <= 15
+    assert near.diagnostics.solver == "reduced Newton"
+    assert np.max(np.abs(on_bound.p - near.p) / near.stderr) < 1e-6
+    np.testing.assert_allclose(on_bound.objective, near.objective, rtol=1e-10)
