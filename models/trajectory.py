@@ -38,7 +38,7 @@ from .state import numerics, solve_states_generic
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states", "march", "march_functions",
            "march_failure", "element_failures", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
-           "outputs_and_sensitivities"]
+           "outputs_and_sensitivities", "merging"]
 
 #: the broker of this thread's member fit in :func:`run_merged` (None outside one)
 _LOCAL = threading.local()
@@ -49,6 +49,12 @@ _MAX_ITER = 60
 #: up to this many experiments the elements are solved inside one CasADi call (its rootfinder,
 #: mapped); more experiments are solved element by element with batched NumPy (fewer calls per point)
 MARCH_IN_CASADI_MAX = 8
+
+
+def merging() -> bool:
+    """True inside one fit of :func:`run_merged` (this thread's trajectory evaluations are merged with other
+    fits': their numbers depend on the merged batch, so a value computed outside it is not reused inside)."""
+    return getattr(_LOCAL, "broker", None) is not None
 
 
 def _params(p, n: int) -> np.ndarray:

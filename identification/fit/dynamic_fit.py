@@ -18,6 +18,13 @@ split into ceil(1.25 (error / tolerance)^{1/(2d-1)}) parts, 2..``max_factor``) a
 repeated from p̂.  The estimate records the mesh and the achieved error (``est.diagnostics.discretisation``, a
 :class:`DiscretisationRecord`) and its summary says so, or says that the error could not be
 bounded.
+
+The fit on each mesh is the reduced-space iteration on the trajectories (a shooting method: the
+trajectories are solved at every p), with Ipopt on the full-space NLP as its fallback, whose trajectories
+start through the data (``IdentifySettings.init``, :mod:`identification.fit.data_start`).  A start with a
+value on its bound (a rate of 0, moved into the interior) goes to the full-space NLP directly on the first
+mesh, and the reduced-space iteration of a collocated ODE gives up at the first trial point where the
+trajectories cannot be solved (the full-space NLP needs them consistent only at its solution).
 """
 from __future__ import annotations
 
@@ -34,8 +41,10 @@ from models.dynamic import DynamicModel
 from models.trajectory import interpolate_states, mapped_outputs, outputs_and_sensitivities
 from identification.fit.dynamic_data import DynamicMeasurements
 from identification.errors import DataError, IdentificationError, StateSolveError
-from identification.fit.estimator import fit_static, static_information
-from identification.fit.start import as_start_vector, param_scale
+from identification.fit.data_start import linear_outputs
+from identification.fit.estimator import IdentifySettings, fit_static, static_information
+from identification.fit.implicit_start import start_sensitivities
+from identification.fit.start import as_start_vector, initial_states, param_scale
 
 __all__ = ["DiscretisationSettings", "DiscretisationRecord", "identify_dynamic", "collocated_problem",
            "controlled_mesh", "dynamic_information", "predict", "simulate_campaign", "DegenerateStartWarning",
@@ -241,10 +250,11 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
         warnings.warn(degenerate, DegenerateStartWarning, stacklevel=3)
         start_notes += (degenerate,)
     mesh, p_start, history, order = cm.mesh, p0, [], 2 * ds.degree - 1
+    first = _first_settings(model, settings, bool(start_notes))
     while True:
         cm = collocate(model, data.union_times, mesh=mesh, outputs=data.pairs)
         try:
-            est = fit_static(cm, flat, p_start, weights=w, settings=settings)
+            est = fit_static(cm, flat, p_start, weights=w, settings=settings if history else first)
         except IdentificationError as exc:
             if not degenerate:
                 raise
@@ -277,6 +287,18 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
                                extra={**est.extra, "discretisation": rec})
 
 
+def _first_settings(model: DynamicModel, settings, moved: bool):
+    """The settings of the fit on the first mesh: with a start value moved off its bound (a rate of 0: nearly
+    constant trajectories, from which the reduced-space iteration, a shooting method, crawls) and start
+    trajectories through the data (``init="data"``, outputs linear in the states), the full-space NLP is solved
+    from those directly (no reduced-space attempt first); otherwise ``settings``.  Later meshes start from the
+    previous estimate with ``settings``."""
+    settings = settings or IdentifySettings()
+    if not moved or settings.init != "data" or linear_outputs(model) is None:
+        return settings
+    return dataclasses.replace(settings, reduced_start_inputs=None)
+
+
 def _interior_start(model: DynamicModel, p0) -> tuple:
     """(p0 with every start value on a finite bound moved ``START_MARGIN`` of its scale into the interior (at
     most half the bound range), the note saying so or ())."""
@@ -305,8 +327,8 @@ def _degenerate_start(cm, flat, p0, w) -> str:
     not checked); a start whose trajectory fails is left to the fit, which names it."""
     if cm.dynamic.n_z:
         return ""
-    try:
-        _, G = outputs_and_sensitivities(cm, p0, flat.inputs)
+    try:       # the fit's own start states and sensitivities (cached: the fit and refits reuse them)
+        G = start_sensitivities(cm, p0, flat.inputs, initial_states(cm, p0, flat.inputs)).G
     except StateSolveError:
         return ""
     used = (flat.counts() > 0) & ((np.ones(G.shape[1]) if w is None else np.asarray(w)) > 0)[None, :]

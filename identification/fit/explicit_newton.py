@@ -12,6 +12,7 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.state import numerics
+from models.trajectory import merging
 from identification.fit import dense
 from identification.fit import newton as newton_core
 from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms
@@ -243,10 +244,10 @@ def _step(objective, x: np.ndarray, d: np.ndarray, cur: ExplicitTerms, dec: floa
         budget[0] += 1
         if budget[0] > _NEWTON_MAX_EVALS or (not newton and k > max_halvings):
             return newton_core.ABORT
-        try:
-            return objective(x + t * d, newton)
-        except StateSolveError:
-            return None
+        try:     # an objective whose S is cheap to add later takes it only at the accepted point (the loop's next turn)
+            return objective(x + t * d, newton and not getattr(objective, "deferred_second_order", False))
+        except StateSolveError:      # no states there: halve, or give up (the full-space NLP's turn)
+            return newton_core.ABORT if getattr(objective, "abort_on_failure", False) else None
 
     new, t = newton_core.backtrack(trial, lambda c, t: newton_core.sufficient_decrease(c.f, cur.f, t, dec))
     return new, (x + t * d if new is not None and new is not newton_core.ABORT else None)
@@ -285,7 +286,12 @@ def reduced_start(st: Start, settings: IdentifySettings):
             not (trajectory or (st.data.n_q >= min_inputs and numerics(model).dense))):
         return None
     x0 = st.p0 / st.s_p
-    objective = ImplicitObjective(st.problem, x0, st.Y_init)
+    # the marched states at p0 of a reduced-space model (initial_states) are reused at the first point
+    # (not inside merged fits, whose evaluations depend on the batch: identification.fit.batch.fit_members)
+    # a collocated ODE gives up at the first trial point where its trajectories cannot be solved (a step into a
+    # blow-up): the full-space NLP, whose trajectories need not be consistent on the way, takes over from p0
+    objective = ImplicitObjective(st.problem, x0, st.Y_init, st.p0 if trajectory and not merging() else None,
+                                  abort_on_failure=trajectory)
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
     return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,

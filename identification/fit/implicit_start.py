@@ -31,7 +31,10 @@ from models.state import numerics
 from identification.fit.explicit_kernel import ExplicitTerms
 from identification.fit.refinement import ReducedPoint, ReducedProblem
 
-__all__ = ["ImplicitObjective", "solve_states_from", "nlp_multipliers"]
+__all__ = ["ImplicitObjective", "solve_states_from", "nlp_multipliers", "start_sensitivities", "START_CACHE_SIZE"]
+
+#: entries kept per model of each start-point cache in ``model.cache`` (repeated fits of new data)
+START_CACHE_SIZE = 32
 
 #: damped Newton iterations and step halvings per iteration of :func:`solve_states_from`
 _STATE_MAX_ITER = 40
@@ -132,6 +135,17 @@ def solve_states_from(model, p: np.ndarray, inputs: np.ndarray, Y0: np.ndarray,
                           f"{_STATE_MAX_ITER} Newton iterations")
 
 
+def start_sensitivities(model, p0, inputs, Y0):
+    """Outputs h, sensitivities G = dh/dp and state derivatives y'(p0) at the start states ``Y0``
+    (:func:`models.sensitivity.sensitivities`), kept in ``model.cache`` per (p0, inputs, Y0): they do not depend
+    on the data, so the degenerate-start check and the first point of every refit from the same start share
+    one evaluation."""
+    key = (p0.tobytes(), inputs.tobytes(), np.asarray(Y0).tobytes())
+    return model.cache.get_or_make("identify.start_point", key, lambda: sensitivities(model, p0, inputs, Y0),
+                                   maxsize=START_CACHE_SIZE)
+
+
+
 class ImplicitObjective:
     """Phi(s_p ⊙ x) of an implicit model with dense states and its terms w.r.t. the scaled
     parameters x, as an :class:`identification.fit.explicit_kernel.ExplicitTerms` (the call of the
@@ -144,14 +158,29 @@ class ImplicitObjective:
     problem : ReducedProblem
     x0 : ndarray (n_p,)      scaled start parameters
     Y0 : ndarray (n_q, n_y)  states at s_p ⊙ x0
+    p0 : ndarray (n_p,), optional
+        The start values when ``Y0`` are the marched states at exactly p0 of a model solved in the reduced
+        space (:func:`identification.fit.start.initial_states`): the point at p0 then reuses them and the
+        start's cached sensitivities (:func:`identification.fit.start.start_sensitivities`) instead of
+        marching again.
+    abort_on_failure : bool
+        A trial point of the line search whose states cannot be solved ends the iteration (the caller solves
+        the full-space NLP instead) rather than halving the step.
     """
 
     _KEEP = 2
+    #: S of a point is added by a second call with ``second_order`` at no other cost (the point is kept): the
+    #: line search asks for it only at the point it accepts (:func:`identification.fit.explicit_newton`)
+    deferred_second_order = True
 
-    def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray):
+    def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None,
+                 abort_on_failure: bool = False):
         self._problem, self._sp = problem, problem.p_scale
+        self.abort_on_failure = abort_on_failure
         self._outer = np.outer(self._sp, self._sp)
         self._seen = [(np.array(x0, float), np.asarray(Y0, float), None)]      # (x, states, point or None)
+        # (p0,) when Y0 are the marched states at exactly p0 (initial_states of a reduced-space model)
+        self._start = (np.asarray(p0, float),) if p0 is not None else None
 
     def _nearest(self, x: np.ndarray):
         return min(self._seen, key=lambda e: float(np.max(np.abs(e[0] - x))))
@@ -165,6 +194,12 @@ class ImplicitObjective:
             return near[2]
         problem = self._problem
         p = x * self._sp
+        if near[2] is None and self._start is not None and np.array_equal(p, self._start[0]):
+            # the start of a model solved in the reduced space: its states at p0 are the marched ones the
+            # solve below would give, bit for bit, and its sensitivities there are shared by refits
+            pt = problem.point_at(p, near[1], start_sensitivities(problem.model, p, problem.data.inputs, near[1]))
+            self._seen = ([e for e in self._seen if not np.array_equal(e[0], x)] + [(x.copy(), near[1], pt)])[-self._KEEP:]
+            return pt
         # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
         guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
         # the model's own solve from it (a collocated ODE: Newton on all trajectories, else marched), if it has one

@@ -7,7 +7,10 @@ import numpy as np
 
 from identification.fit.ipopt_solver import IpoptSettings
 
-__all__ = ["IdentifySettings"]
+__all__ = ["IdentifySettings", "INIT_CHOICES"]
+
+#: the start trajectories of a collocated ODE's full-space NLP (:attr:`IdentifySettings.init`)
+INIT_CHOICES = ("data", "simulate")
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,15 @@ class IdentifySettings:
                               inputs start Ipopt at the reduced-space optimum with its
                               multipliers (:func:`reduced_start`; Ipopt verifies it, usually at
                               iteration 0, instead of iterating on the n_q n_y states); None never
+    init : str                where the full-space NLP of a collocated ODE starts its trajectories:
+                              "data" (default): through the series means where the outputs are linear
+                              in the states, the rest from the simulation at p0
+                              (:mod:`identification.fit.data_start`); "simulate": the simulation at p0.
+                              Only Ipopt's start: the reduced-space iteration (which solves the
+                              trajectories at every p) and the optimum are the same either way.  With
+                              "data", a start with a value on its bound (moved into the interior) is
+                              solved on the first mesh by the full-space NLP directly, its unbounded
+                              first pass capped at DATA_LAZY_PASS_MAX_ITER iterations
     """
 
     ipopt: IpoptSettings = field(default_factory=IpoptSettings)
@@ -53,6 +65,7 @@ class IdentifySettings:
     refine_decrement: float = 1e-18
     explicit_newton: bool = True
     reduced_start_inputs: int | None = 200
+    init: str = "data"
 
     def __post_init__(self):
         if not isinstance(self.ipopt, IpoptSettings):
@@ -69,6 +82,8 @@ class IdentifySettings:
                 isinstance(self.reduced_start_inputs, (int, np.integer)) and self.reduced_start_inputs >= 1):
             raise ValueError(f"reduced_start_inputs: expected None or an integer >= 1, "
                              f"got {self.reduced_start_inputs!r}")
+        if self.init not in INIT_CHOICES:
+            raise ValueError(f"init: expected one of {', '.join(map(repr, INIT_CHOICES))}, got {self.init!r}")
         if not (isinstance(self.predictor_step, (int, float, np.floating)) and 0 <= self.predictor_step < np.inf):
             raise ValueError(f"predictor_step: expected a finite number >= 0 (0 disables the predictor), "
                              f"got {self.predictor_step!r}")

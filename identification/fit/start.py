@@ -19,12 +19,12 @@ from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit import newton as newton_core
-from identification.fit.implicit_start import solve_states_from
+from identification.fit.implicit_start import START_CACHE_SIZE, solve_states_from
 from identification.fit.measurements import Measurements, common_spread
 from identification.fit.refinement import ReducedProblem
 
 __all__ = ["Start", "make_start", "scalings", "predictor", "as_start_vector", "checked_start", "param_scale",
-           "decrement_unit"]
+           "decrement_unit", "initial_states"]
 
 
 # ---------------------------------------------------------------------------- validation
@@ -71,18 +71,22 @@ def _validate(model, data, p0, weights):
 
 
 #: entries kept per model of each start-point cache in ``model.cache`` (repeated fits of new data)
-_START_CACHE_SIZE = 32
+_START_CACHE_SIZE = START_CACHE_SIZE
 
 
-def _initial_states(model, p0, inputs, Y0):
-    """States at the start values (kept in ``model.cache`` per p0 and inputs: repeated fits of new data)."""
+def initial_states(model, p0, inputs, Y0=None) -> np.ndarray:
+    """States y_j solving E(y_j, p0, q_j) = 0 at the start values, shape (n_q, n_y) (kept in ``model.cache`` per
+    p0 and inputs: repeated fits of new data).  A model solved in the reduced space (a collocated ODE) marches
+    its trajectories (:meth:`models.trajectory.TrajectoryNumerics.states`): the same states, bit for bit, as
+    the reduced-space iteration's own solve at p0, which then reuses them.  ``Y0``: a guess (not cached)."""
     if Y0 is not None:
         return solve_states(model, p0, inputs, Y0=Y0)
     key = (p0.tobytes(), inputs.tobytes())
     Y = model.cache.get("identify.initial_states", key)
     if Y is not None:
         return Y
-    if numerics(model).dense and inputs.shape[0] >= BATCH_START_MIN:
+    if (numerics(model).dense and inputs.shape[0] >= BATCH_START_MIN
+            and not model.state_numerics.reduced_space):
         # all inputs at once from the model's guesses (faster than solve_states' batched start;
         # the same damped Newton); solve_states is the fallback
         guess = (np.array([model.y_guess(p0, q) for q in inputs]) if model.has_y_guess
@@ -237,7 +241,7 @@ def make_start(model, data, p0, weights, Y0) -> Start:
         Y_init, s_y, e_scale = np.zeros((data.n_q, 0)), np.ones(0), np.ones(0)
     else:
         try:
-            Y_init = _initial_states(model, p0, data.inputs, Y0)
+            Y_init = initial_states(model, p0, data.inputs, Y0)
         except StateSolveError as exc:
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
