@@ -67,7 +67,7 @@ from identification.studies.model_error_result import (EmbeddedParameter, ErrorT
 from identification.studies.splits import Split, SplitError, flat_split
 from models.labels import LabelledModel
 
-__all__ = ["model_error", "ModelErrorResult", "KINDS"]
+__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
 KINDS = ("auto", "none", "discrepancy", "embedded")
@@ -178,27 +178,55 @@ def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
 
 
 # ---------------------------------------------------------------------------- held-out table
+#: two input rows whose scaled inputs differ by at most this (per column, of the range) hold the same inputs
+SAME_INPUTS = 1e-9
+
+
+def unseen_rows(split: Split, data: Measurements, groups: np.ndarray | None = None) -> np.ndarray:
+    """Which validation input rows of ``split`` lie in a condition its calibration part has not seen, bool
+    (n_val,) in the order of ``split.val_inputs``.
+
+    With ``groups`` (the condition code of every input row of ``data``): the rows of a condition without
+    calibration rows.  Without: the validation rows that are not calibration rows but repeat a calibration
+    row's inputs (within :data:`SAME_INPUTS` of the inputs' range): the data hold them apart though the
+    model's inputs do not tell them apart (the direction of motion at one force, another day at one set
+    point), so the calibration part says nothing about their condition.  A split by time window or by series
+    (the same rows on both sides) has none.
+    """
+    cal, val = list(split.cal_inputs), list(split.val_inputs)
+    if groups is not None:
+        return ~np.isin(np.asarray(groups)[val], np.asarray(groups)[cal])
+    q = np.asarray(data.inputs, float)
+    span = np.where(np.ptp(q, axis=0) > 0, np.ptp(q, axis=0), 1.0) if len(q) else np.ones(q.shape[1])
+    xc, xv = q[cal] / span, q[val] / span
+    same = np.all(np.abs(xv[:, None, :] - xc[None, :, :]) <= SAME_INPUTS, axis=2).any(axis=1)
+    return same & ~np.isin(val, cal)
+
+
 def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, layout) -> HeldOut:
     """Every error model fitted on the calibration part of ``split`` predicts its validation readings (as new
-    conditions)."""
+    conditions: the embedded error always, the discrepancy on the rows :func:`unseen_rows` names)."""
     cal, val = split.calibration(data), split.validation(data)
     plain = fit_model_error(model, cal, p0, w, scaling, "none", layout=layout)
     g = None if groups is None else groups[list(split.cal_inputs)]
     fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g, layout=layout)
                       for k in _ERROR_KINDS[1:]]
+    new = unseen_rows(split, data, groups)
+    conditions = np.where(new, -1, 0) if groups is None else np.where(new, -1, groups[list(split.val_inputs)])
     sel = w > 0
     z = val.z[:, :, sel]
     ok = np.isfinite(z)
     cover, score, width = [], [], []
     for f in fits:
-        b = f.predict(val.inputs, alpha, new_reading=True)
+        b = f.predict(val.inputs, alpha, new_reading=True, conditions=conditions)
         lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
         sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
         cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
         score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
+    n_new = int(np.broadcast_to(new[None, :, None], z.shape)[ok].sum())
     return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
-                   float(np.median(width[2] / width[0])), score[0], score[1], score[2])
+                   float(np.median(width[2] / width[0])), score[0], score[1], score[2], n_new)
 
 
 def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:

@@ -71,7 +71,9 @@ class HeldOut:
     ``coverage_*`` the fraction of validation readings (selected sensors) inside the (1 - alpha)
     new-reading band without model error (``plain``), with the output discrepancy and with the embedded
     error; ``widening_*`` the median ratio of the band widths (with / without); ``log_score_*`` the mean
-    log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted.
+    log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted; ``n_unseen``
+    those of them at rows in a condition the calibration part has not seen
+    (:func:`identification.studies.model_error.unseen_rows`: the discrepancy predicts them as a new draw).
     """
 
     split: str
@@ -84,6 +86,7 @@ class HeldOut:
     log_score_plain: float
     log_score_discrepancy: float
     log_score_embedded: float
+    n_unseen: int = 0
 
     def coverage(self, kind: str) -> float:
         """The coverage of the ``kind`` ("none", "discrepancy", "embedded") bands."""
