@@ -37,12 +37,16 @@ from pathlib import Path
 
 import numpy as np
 
-from identification import model_error
+from identification import Split, model_error
 from identification.fit.dynamic_fit import simulate_campaign
 from identification.studies.splits import time_window_splits
+from identification.studies.discrepancy_gp import InputScaling
+from identification.studies.model_error import unseen_rows
+from identification.studies.model_error_fit import fit_model_error
 from identification.studies.montecarlo import clopper_pearson
 from mudoe.config import load_config
 from mudoe.study import prepare
+from models.press import PRESS_LOADING_ROWS
 from models.state import simulate
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
@@ -50,24 +54,53 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 WEIGHTS = np.array([0.0, 1.0, 1.0])
 
 
-def coverage_table(study, exact_at=None) -> dict:
+def _needed(study, variant: str, split, exact_at, alpha: float = 0.05) -> float:
+    """The factor by which the discrepancy's held-out new-reading bands of ``split`` could shrink and still hold
+    (1 - alpha) of its validation readings: the (1 - alpha) quantile of |z - mean| / half-width (< 1: wider than
+    the error requires, > 1: too narrow)."""
+    m, d = study.models[variant], study.data[variant]
+    scaling = InputScaling.of(d.inputs, exact_at or {}, tuple(m.inputs))
+    cal, val = split.calibration(d), split.validation(d)
+    f = fit_model_error(m, cal, study.p0, WEIGHTS, scaling, "discrepancy")
+    b = f.predict(val.inputs, alpha, True, conditions=np.where(unseen_rows(split, d), -1, 0))
+    sel = WEIGHTS > 0
+    z = val.z[:, :, sel]
+    ok = np.isfinite(z)
+    e = np.abs(z - b.mean[None][:, :, sel]) / (b.upper - b.mean)[None][:, :, sel]
+    return float(np.quantile(e[ok], 1 - alpha))
+
+
+def _cp(cover: float, n: int) -> str:
+    ci = clopper_pearson(int(round(cover * n)), n)
+    return f"[{100 * ci.lo:.1f}, {100 * ci.hi:.1f}]"
+
+
+def coverage_table(study, exact_at=None, groups=None) -> dict:
     """{variant: ModelErrorResult (kind auto)} on the study's data and splits; prints the held-out table: coverage
-    of the plain, discrepancy and embedded 95 % new-reading bands (%) and their median widening."""
+    of the plain, discrepancy and embedded 95 % new-reading bands (%) with the Clopper-Pearson 95 % interval of the
+    discrepancy's (the validation readings taken as independent), their median widening, the readings in a
+    condition the calibration part has not seen (unseen) and the factor the discrepancy bands could shrink by
+    (need, :func:`_needed`)."""
     out = {}
-    print(f"exact_at = {exact_at}")
-    print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}")
+    print(f"exact_at = {exact_at}, groups = {None if groups is None else sorted(set(groups))}")
+    print(f"{'variant':<8} {'split':<32} {'n':>4} {'unseen':>6} {'plain':>6} {'discr.':>6} {'CP 95 %':>13} "
+          f"{'widen':>6} {'need':>5} {'embed.':>6} {'widen':>6}")
     for v, m in study.models.items():
         t0 = time.perf_counter()
-        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at)
+        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at,
+                        groups=groups)
         dt = time.perf_counter() - t0
-        for h in r.heldout:
-            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
-                  f"{100 * h.coverage_discrepancy:>6.1f} {h.widening_discrepancy:>6.2f} "
+        for h, sp in zip(r.heldout, study.splits):
+            need = _needed(study, v, sp, exact_at) if groups is None else float("nan")
+            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {h.n_unseen:>6} {100 * h.coverage_plain:>6.1f} "
+                  f"{100 * h.coverage_discrepancy:>6.1f} {_cp(h.coverage_discrepancy, h.n_values):>13} "
+                  f"{h.widening_discrepancy:>6.2f} {need:>5.2f} "
                   f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}")
         n = sum(h.n_values for h in r.heldout)
         pooled = {k: sum(h.coverage(k) * h.n_values for h in r.heldout) / n for k in ("none", "discrepancy", "embedded")}
-        print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {100 * pooled['none']:>6.1f} "
-              f"{100 * pooled['discrepancy']:>6.1f} {np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} "
+        print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {sum(h.n_unseen for h in r.heldout):>6} "
+              f"{100 * pooled['none']:>6.1f} {100 * pooled['discrepancy']:>6.1f} {_cp(pooled['discrepancy'], n):>13} "
+              f"{np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} {'':>5} "
               f"{100 * pooled['embedded']:>6.1f} {np.median([h.widening_embedded for h in r.heldout]):>6.2f}")
         print(f"         model_error {dt:.2f} s; test LR {r.test.statistic:.4g}, p = {r.test.p_value:.3g}; "
               f"{r.how} -> {r.kind}; identifiable {r.identifiable} (information kept {r.information_kept:.3f})")
@@ -77,48 +110,88 @@ def coverage_table(study, exact_at=None) -> dict:
     return out
 
 
-def _campaigns(study, variant: str, n: int, seed: int):
-    """Campaigns simulated from ``variant`` at its plain fit on the shipped data (2 series, sigma given)."""
-    m, d = study.models[variant], study.data[variant]
-    fit = model_error(m, d, study.p0, kind="none", weights=WEIGHTS)
-    h = simulate(m, fit.p_plain, d.inputs)
-    rng = np.random.default_rng(seed)
+def press_branches(study) -> list:
+    """The press study's condition of every input row: "loading" (0 .. 1600 N, the peak included) or
+    "unloading" (the direction of motion, which M1's input q_P does not hold)."""
+    n_q = next(iter(study.data.values())).n_q
+    return ["loading" if j in PRESS_LOADING_ROWS else "unloading" for j in range(n_q)]
+
+
+# ---------------------------------------------------------------------------- a known condition offset
+#: the synthetic case of a condition offset the model lacks: set points, noise, offset spread (sd), conditions
+OFFSET_Q = np.linspace(0.2, 2.0, 10)
+OFFSET_SIGMA = 0.05
+OFFSET_KAPPA = 0.15
+OFFSET_CONDITIONS = 5
+
+
+def _offset_model():
+    import casadi as ca
+    from models.contract import Model
+    return Model.explicit(["a", "b"], ["x"], ["y1", "y2"],
+                          h=lambda p, q: ca.vertcat(p[0] * (1 - ca.exp(-p[1] * q[0])), p[0] * q[0] / (1 + p[1] * q[0])))
+
+
+def _offset_campaign(rng, n_cond: int):
+    """Measurements of ``n_cond`` conditions at the set points OFFSET_Q (2 series): the model at a = 2, b = 1.5
+    plus an offset b_gk ~ N(0, OFFSET_KAPPA^2) per condition g and sensor k plus noise; the rows' conditions."""
+    from identification import Measurements
+    q = np.tile(OFFSET_Q, n_cond)
+    cond = np.repeat(np.arange(n_cond), OFFSET_Q.size)
+    truth = np.stack([2.0 * (1 - np.exp(-1.5 * q)), 2.0 * q / (1 + 1.5 * q)], axis=1)
+    mean = truth + OFFSET_KAPPA * rng.standard_normal((n_cond, 2))[cond]
+    z = mean[None] + OFFSET_SIGMA * rng.standard_normal((2, q.size, 2))
+    return Measurements(q[:, None], z, OFFSET_SIGMA, sensors=["y1", "y2"], input_names=["x"]), cond
+
+
+def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None) -> tuple:
+    """(coverage, median widening against the plain bands) of the discrepancy's 95 % new-reading bands fitted on
+    rows ``cal`` of ``d`` at rows ``val`` (``groups`` the rows' condition codes, None: one; ``unseen`` bool per
+    validation row: predicted as a condition not seen), as the held-out table of ``model_error`` computes them."""
+    scaling = InputScaling.of(d.inputs, {}, ("x",))
+    dc, dv = d.subset(inputs=cal), d.subset(inputs=val)
+    w = np.ones(2)
+    plain = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "none")
+    f = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "discrepancy", plain=plain.plain,
+                        groups=None if groups is None else np.asarray(groups)[cal])
+    codes = np.zeros(len(val), int) if groups is None else np.asarray(groups)[val]
+    b = f.predict(dv.inputs, 0.05, True, conditions=np.where(unseen, -1, codes) if unseen is not None else codes)
+    b0 = plain.predict(dv.inputs, 0.05, True)
+    cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
+    return cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower)))
+
+
+def condition_offset_study(n: int, seed: int) -> None:
+    """Held-out coverage of the discrepancy's 95 % new-reading bands at a condition the calibration part has not
+    seen, on campaigns with a condition offset the model lacks (truth known): calibrated on one condition (as
+    the press's loading vs unloading) and on four (conditions named as groups, or not); before (the validation
+    rows kriged as the calibration's condition) and after (a new draw of the error process); mean over campaigns
+    with its standard error."""
+    rng, t0 = np.random.default_rng(seed), time.perf_counter()
+    m, nq = _offset_model(), OFFSET_Q.size
+    rows = {k: [] for k in ("one condition: before", "one condition: after", "four: no groups (rough part)",
+                            "four: groups named")}
     for _ in range(n):
-        yield m, d.with_z(h[None] + d.sigma * rng.standard_normal(d.z.shape)), fit.p_plain
-
-
-def size_study(study, variant: str, n: int, seed: int) -> None:
-    """The rejection rate of the 'no model error' test at alpha 5 % on campaigns of an adequate model."""
-    t0 = time.perf_counter()
-    rej, pv = 0, []
-    for i, (m, d, p) in enumerate(_campaigns(study, variant, n, seed)):
-        r = model_error(m, d, p, kind="none", weights=WEIGHTS)
-        rej += r.detected
-        pv.append(r.test.p_value)
-        if (i + 1) % 100 == 0:
-            print(f"  {i + 1} campaigns, {rej} rejections", file=sys.stderr, flush=True)
-    rate = clopper_pearson(rej, n)
-    pv = np.array(pv)
-    print(f"size ({variant} adequate, {n} campaigns, seed {seed}): {100 * rej / n:.2f} % "
-          f"[95 % CI {100 * rate.lo:.2f}, {100 * rate.hi:.2f}] at alpha 5 %; P(LR = 0) = {np.mean(pv == 1):.3f}; "
-          f"rate at 1 % {100 * np.mean(pv < 0.01):.2f} %, at 10 % {100 * np.mean(pv < 0.1):.2f} %; "
-          f"{time.perf_counter() - t0:.0f} s")
-
-
-def adequate_coverage(study, variant: str, n: int, seed: int) -> None:
-    """Held-out coverage and widening of the model-error bands on campaigns without model error."""
-    rows, kinds = [], {}
-    for m, d, p in _campaigns(study, variant, n, seed):
-        r = model_error(m, d, p, splits=study.splits, weights=WEIGHTS)
-        rows += [(h.coverage_plain, h.coverage_discrepancy, h.coverage_embedded, h.widening_discrepancy,
-                  h.widening_embedded) for h in r.heldout]
-        kinds[r.kind] = kinds.get(r.kind, 0) + 1
-    a = np.array(rows)
-    se = a[:, :3].std(axis=0) / np.sqrt(len(a))
-    print(f"adequate {variant}, {n} campaigns x {len(study.splits)} splits: held-out coverage plain "
-          f"{100 * a[:, 0].mean():.1f} (+- {100 * se[0]:.1f}) %, discrepancy {100 * a[:, 1].mean():.1f} "
-          f"(+- {100 * se[1]:.1f}) %, embedded {100 * a[:, 2].mean():.1f} (+- {100 * se[2]:.1f}) %; median widening "
-          f"discrepancy {np.median(a[:, 3]):.2f}, embedded {np.median(a[:, 4]):.2f}; kind auto chose {kinds}")
+        d, cond = _offset_campaign(rng, 2)
+        cal, val = list(range(nq)), list(range(nq, 2 * nq))
+        unseen = unseen_rows(Split("one vs one", cal, val), d)
+        assert unseen.all()
+        rows["one condition: before"].append(_offset_heldout(m, d, cal, val))
+        rows["one condition: after"].append(_offset_heldout(m, d, cal, val, unseen=unseen))
+        d, cond = _offset_campaign(rng, OFFSET_CONDITIONS)
+        cal, val = list(range(4 * nq)), list(range(4 * nq, 5 * nq))
+        rows["four: no groups (rough part)"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(
+            Split("four vs one", cal, val), d)))
+        rows["four: groups named"].append(_offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(
+            Split("four vs one", cal, val), d, cond)))
+    print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
+          f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
+          f"new-reading bands (40 readings per campaign; mean over campaigns +- standard error; median widening):")
+    for k, a in rows.items():
+        a = np.array(a)
+        print(f"  {k:<30} {100 * a[:, 0].mean():6.1f} +- {100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  "
+              f"widening {np.median(a[:, 1]):.2f}")
+    print(f"  {time.perf_counter() - t0:.0f} s")
 
 
 #: the time-window edges of the oscillator's held-out splits (s): t < e calibrates, t >= e validates
@@ -184,7 +257,9 @@ def main(argv=None):
     ap.add_argument("--oscillator-n", type=int, default=0, help="campaigns of the cubic oscillator (adequate)")
     ap.add_argument("--oscillator-n-coverage", type=int, default=0,
                     help="campaigns of the linear oscillator on cubic data (held-out coverage)")
-    ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate")
+    ap.add_argument("--n-offset", type=int, default=0,
+                    help="campaigns of the synthetic condition offset (held-out coverage at a condition not seen)")
+    ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate,offset")
     args = ap.parse_args(argv or [])
     if args.quick:
         args.n, args.n_coverage = 100, 10
@@ -193,6 +268,9 @@ def main(argv=None):
     if "coverage" not in skip:
         coverage_table(study)
         coverage_table(study, {"q_P": 0.0})          # the linkage is exact at zero press force
+        coverage_table(study, groups=press_branches(study))     # the direction of motion named
+    if "offset" not in skip and args.n_offset:
+        condition_offset_study(args.n_offset, args.seed + 4)
     if "size" not in skip and args.n:
         size_study(study, args.size_variant, args.n, args.seed)
     if "adequate" not in skip and args.n_coverage:

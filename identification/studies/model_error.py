@@ -147,10 +147,11 @@ def _instrument_weights(weights, names: tuple) -> np.ndarray:
     return w
 
 
-def _checked_groups(groups, n_q: int) -> np.ndarray | None:
-    """The condition of every input row as integer codes (n_q,), or None (ValueError naming the argument)."""
+def _checked_groups(groups, n_q: int) -> tuple:
+    """(codes, labels): the condition of every input row as integer codes (n_q,) and the distinct labels in code
+    order, or (None, ()) (ValueError naming the argument)."""
     if groups is None:
-        return None
+        return None, ()
     if isinstance(groups, (str, bytes)) or not hasattr(groups, "__len__"):
         raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {groups!r}")
     labels = list(groups)
@@ -160,7 +161,7 @@ def _checked_groups(groups, n_q: int) -> np.ndarray | None:
         codes = {lab: i for i, lab in enumerate(dict.fromkeys(labels))}
     except TypeError:
         raise ValueError("groups: the condition labels must be hashable (numbers or strings)") from None
-    return np.array([codes[lab] for lab in labels])
+    return np.array([codes[lab] for lab in labels]), tuple(codes)
 
 
 def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
@@ -187,20 +188,23 @@ def unseen_rows(split: Split, data: Measurements, groups: np.ndarray | None = No
     (n_val,) in the order of ``split.val_inputs``.
 
     With ``groups`` (the condition code of every input row of ``data``): the rows of a condition without
-    calibration rows.  Without: the validation rows that are not calibration rows but repeat a calibration
-    row's inputs (within :data:`SAME_INPUTS` of the inputs' range): the data hold them apart though the
-    model's inputs do not tell them apart (the direction of motion at one force, another day at one set
-    point), so the calibration part says nothing about their condition.  A split by time window or by series
-    (the same rows on both sides) has none.
+    calibration rows.  Without: when no two calibration rows hold the same inputs, the validation rows that
+    are not calibration rows but repeat a calibration row's inputs (within :data:`SAME_INPUTS` of the inputs'
+    range): the data hold them apart though the model's inputs do not tell them apart (the direction of
+    motion at one force, another day at one set point), and the calibration part, one reading of each input,
+    says nothing about how much two rows at one input differ.  When calibration rows repeat inputs, the
+    discrepancy's rough part (independent between rows) has measured that and no row is unseen; a split by
+    time window or by series (the same rows on both sides) has none.
     """
     cal, val = list(split.cal_inputs), list(split.val_inputs)
     if groups is not None:
         return ~np.isin(np.asarray(groups)[val], np.asarray(groups)[cal])
     q = np.asarray(data.inputs, float)
-    span = np.where(np.ptp(q, axis=0) > 0, np.ptp(q, axis=0), 1.0) if len(q) else np.ones(q.shape[1])
+    span = np.where(np.ptp(q, axis=0) > 0, np.ptp(q, axis=0), 1.0)
     xc, xv = q[cal] / span, q[val] / span
+    repeats = np.all(np.abs(xc[:, None, :] - xc[None, :, :]) <= SAME_INPUTS, axis=2).sum() > len(cal)
     same = np.all(np.abs(xv[:, None, :] - xc[None, :, :]) <= SAME_INPUTS, axis=2).any(axis=1)
-    return same & ~np.isin(val, cal)
+    return same & ~np.isin(val, cal) & ~repeats
 
 
 def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, layout) -> HeldOut:
@@ -265,8 +269,13 @@ def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
 def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
            grouped: bool) -> tuple:
     notes = list(fit.notes)
-    if grouped and kind != "embedded":
-        notes.append(f"groups name the conditions of the embedded error only; the {kind} error model does not use them")
+    if grouped and kind == "none":
+        notes.append("groups name the conditions of the error models; the 'none' error model does not use them")
+    unseen = [f"{h.split} ({h.n_unseen} of {h.n_values})" for h in heldout if h.n_unseen]
+    if unseen and kind == "discrepancy":
+        notes.append("held-out readings in a condition the calibration part has not seen, predicted as a new draw of "
+                     "the discrepancy (no share common to the conditions is assumed; with one condition in the "
+                     "calibration part it is not identifiable): " + ", ".join(unseen))
     if sigma_source != "given":
         notes.append("sigma is the pure error of the repeated series, taken as known: the test's reference "
                      "distribution is then approximate")
@@ -313,8 +322,12 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
     weights : array_like (n_S,), optional   sensor (instrument) selection (0/1), as in identify (a positive weight selects the
                                   sensor; its size weights the plain fit only, not the error model)
-    groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
-                                  with one label share their parameter deviation b); None: every row its own
+    groups : sequence of n_q labels, optional   the condition of every input row (a direction of motion, a day):
+                                  rows with one label share their embedded parameter deviation b, and the
+                                  discrepancy of every condition is its own draw of the process (independent
+                                  between conditions); None: the embedded error's conditions are the rows, the
+                                  discrepancy's one condition, and a split's validation rows that repeat the
+                                  inputs of its calibration rows are a condition not seen (:func:`unseen_rows`)
 
     Returns
     -------
@@ -350,7 +363,7 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
                         f"n_p + 2 = {model.n_p + 2}")
     splits = _checked_splits(splits, data, w, model.n_p, getattr(problem.data, "pairs", None))
-    codes = _checked_groups(groups, data.n_q)
+    codes, labels = _checked_groups(groups, data.n_q)
     scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs) + tuple(layout.coord_names),
                               layout.coords if layout.coord_names else None)
     plain = fit_model_error(model, data, p0, w, scaling, "none", layout=layout)
@@ -372,4 +385,4 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,
                                                                  codes is not None),
-        fit=fit)
+        fit=fit, groups=labels)

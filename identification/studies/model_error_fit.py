@@ -158,8 +158,9 @@ class ErrorFit:
         var = np.clip(var, 0.0, None) + (self.sigma ** 2 if new_reading else 0.0)
         return self._band(mean, var, sel, alpha, "prediction", new_reading)
 
-    def discrepancy(self, inputs: np.ndarray, alpha: float) -> Band:
-        """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error)."""
+    def discrepancy(self, inputs: np.ndarray, alpha: float, conditions: np.ndarray | None = None) -> Band:
+        """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error) in the conditions
+        ``conditions`` (as :meth:`predict`)."""
         n = np.atleast_2d(inputs).shape[0]
         sel = self.weights > 0
         if self.embedded is not None:
@@ -169,7 +170,8 @@ class ErrorFit:
         if self.gp is None:
             z = np.zeros((n, len(self.sigma)))
             return self._band(z, z, sel, alpha, "discrepancy", False)
-        mean, var = self._kriging(inputs, np.zeros((n, len(self.sigma))), None, include_g=False)
+        mean, var = self._kriging(inputs, np.zeros((n, len(self.sigma))), None, include_g=False,
+                                  conditions=conditions)
         return self._band(mean, np.clip(var, 0.0, None), sel, alpha, "discrepancy", False)
 
     def _kriging(self, inputs, h, G, include_g: bool, conditions=None) -> tuple:
