@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 from identification import Split, model_error
 from identification.fit.dynamic_fit import simulate_campaign
@@ -161,36 +162,43 @@ def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None) -> tup
     return cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower)))
 
 
+#: the numbers of conditions in the calibration part of the condition-offset study
+OFFSET_CALIBRATION = (1, 4, 9)
+
+
 def condition_offset_study(n: int, seed: int) -> None:
     """Held-out coverage of the discrepancy's 95 % new-reading bands at a condition the calibration part has not
-    seen, on campaigns with a condition offset the model lacks (truth known): calibrated on one condition (as
-    the press's loading vs unloading) and on four (conditions named as groups, or not); before (the validation
-    rows kriged as the calibration's condition) and after (a new draw of the error process); mean over campaigns
-    with its standard error."""
+    seen, on campaigns with a condition offset the model lacks (truth known): calibrated on c conditions
+    (:data:`OFFSET_CALIBRATION`; c = 1 as the press's loading vs unloading), validated on one more at the same set
+    points; before (the validation rows kriged as the calibration's condition(s): one condition named, or none and
+    the rough part) and after (a new draw of the error process: rows found by :func:`unseen_rows`, for c > 1 with
+    the conditions named); mean over campaigns with its standard error, against the coverage P(|t_c| < 1.96) of a
+    band whose variance is estimated from c draws of the offset (noise and fixed effects neglected)."""
     rng, t0 = np.random.default_rng(seed), time.perf_counter()
     m, nq = _offset_model(), OFFSET_Q.size
-    rows = {k: [] for k in ("one condition: before", "one condition: after", "four: no groups (rough part)",
-                            "four: groups named")}
+    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after")}
     for _ in range(n):
-        d, cond = _offset_campaign(rng, 2)
-        cal, val = list(range(nq)), list(range(nq, 2 * nq))
-        unseen = unseen_rows(Split("one vs one", cal, val), d)
-        assert unseen.all()
-        rows["one condition: before"].append(_offset_heldout(m, d, cal, val))
-        rows["one condition: after"].append(_offset_heldout(m, d, cal, val, unseen=unseen))
-        d, cond = _offset_campaign(rng, OFFSET_CONDITIONS)
-        cal, val = list(range(4 * nq)), list(range(4 * nq, 5 * nq))
-        rows["four: no groups (rough part)"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(
-            Split("four vs one", cal, val), d)))
-        rows["four: groups named"].append(_offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(
-            Split("four vs one", cal, val), d, cond)))
+        for c in OFFSET_CALIBRATION:
+            d, cond = _offset_campaign(rng, c + 1)
+            cal, val = list(range(c * nq)), list(range(c * nq, (c + 1) * nq))
+            sp = Split(f"{c} vs 1", cal, val)
+            if c == 1:
+                rows[c, "before"].append(_offset_heldout(m, d, cal, val))
+                rows[c, "after"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
+            else:
+                rows[c, "before"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
+                rows[c, "after"].append(_offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(sp, d, cond)))
     print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
           f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
-          f"new-reading bands (40 readings per campaign; mean over campaigns +- standard error; median widening):")
-    for k, a in rows.items():
+          f"new-reading bands at a condition not seen ({2 * 2 * nq} readings per campaign; mean over campaigns "
+          f"+- standard error; median widening against the plain bands)")
+    for (c, k), a in rows.items():
         a = np.array(a)
-        print(f"  {k:<30} {100 * a[:, 0].mean():6.1f} +- {100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  "
-              f"widening {np.median(a[:, 1]):.2f}")
+        how = ("one condition named, kriged" if c == 1 else "no groups, kriged + rough part") if k == "before" else \
+            ("unseen rows, new draw" if c == 1 else "groups named, new draw")
+        print(f"  {c} calibration condition(s), {k:<6} ({how:<30}) {100 * a[:, 0].mean():6.1f} +- "
+              f"{100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  widening {np.median(a[:, 1]):.2f}"
+              + (f"   [P(|t_{c}| < 1.96) = {100 * (1 - 2 * stats.t.sf(1.96, c)):.1f} %]" if k == "after" else ""))
     print(f"  {time.perf_counter() - t0:.0f} s")
 
 
