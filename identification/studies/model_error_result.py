@@ -194,8 +194,10 @@ class ModelErrorResult(ResultProtocol):
 
         ``condition`` (the discrepancy only): one label or one per row (n*,); a label of ``groups`` predicts in
         that condition, :data:`NEW_CONDITION` (or, with groups, any other label) in a condition the data do not
-        hold (the discrepancy a new draw of its process: mean 0, its prior band); None: the data's condition
-        (with ``groups`` named: a condition not seen).
+        hold (the discrepancy a new draw of its process: mean 0, its prior band); None (also per row): the data's
+        condition (with ``groups`` named: a condition not seen).  The held-out bands of a split:
+        ``condition=[NEW_CONDITION if u else None for u in unseen_rows(split, data)]``
+        (:func:`identification.studies.model_error.unseen_rows`) on the fit to its calibration part.
 
         A dynamic model: the input rows are experiments and the arrays are (n*, n_t, n_S), experiments x the
         campaign's sampling times (``band.grid[0]``, the model's time unit) x instruments (``band.sensors``),
@@ -221,8 +223,8 @@ class ModelErrorResult(ResultProtocol):
             raise ValueError(f"condition: expected one label or one per input row ({n}), got {len(labels)}")
         codes = {lab: i for i, lab in enumerate(self.groups)}
         try:
-            return np.array([-1 if lab == NEW_CONDITION else codes.get(lab, -1 if self.groups else 0)
-                             for lab in labels])
+            return np.array([-1 if lab is None and self.groups else 0 if lab is None else
+                             -1 if lab == NEW_CONDITION else codes.get(lab, -1 if self.groups else 0) for lab in labels])
         except TypeError:
             raise ValueError("condition: the labels must be hashable (numbers or strings)") from None
 

@@ -74,6 +74,9 @@ def test_a_condition_not_seen_is_predicted_by_the_model_with_the_discrepancy_pri
     prior = np.array([d.amplitude ** 2 + d.rough ** 2 for d in r.discrepancies])
     var = prior[None, :] + np.einsum("jkp,pq,jkq->jk", G, r.cov, G)
     np.testing.assert_allclose((new.upper - new.mean) / c, np.sqrt(var), rtol=1e-10)
+    mixed = r.predict(q, condition=[None, NEW_CONDITION, None])             # per row: the data's, not seen
+    np.testing.assert_array_equal(mixed.mean[[0, 2]], seen.mean[[0, 2]])
+    np.testing.assert_array_equal(mixed.mean[1], new.mean[1])
     disc = r.discrepancy(q, condition=NEW_CONDITION)
     np.testing.assert_allclose(disc.mean, 0.0, atol=1e-12)
     np.testing.assert_allclose((disc.upper - disc.mean) / c, np.sqrt(np.broadcast_to(prior, disc.mean.shape)),
