@@ -31,7 +31,12 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    conditions (input rows or named groups), p + b_g with b_g ~ N(0, diag(omega^2)), omega by REML with exact
    gradients: which parameters carry the error and by how much.
 4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
-   validation readings (95 % new-reading bands by default): coverage, median widening, log score.
+   validation readings (95 % new-reading bands by default): coverage, median widening, log score.  Readings in
+   a condition the calibration part has not seen (:func:`unseen_rows`: a named group without calibration rows,
+   or rows that repeat a calibration row's inputs when the calibration rows repeat none, e.g. the press's
+   unloading at the loading forces for a model whose one input is the force) are predicted with the
+   discrepancy as a new draw of its process (no cross-covariance with the calibration readings: mean h(q*, p),
+   its prior band); the embedded error predicts every validation row as a new condition anyway.
    ``kind="auto"``: "none" when the test does not detect model error (so an adequate model gets an error
    model no more often than the test's size), else the error model of the highest total held-out log score
    (without splits: the discrepancy).

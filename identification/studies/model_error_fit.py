@@ -27,6 +27,8 @@ for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
     \operatorname{var} = s_k^2 c(q^*, q^*) + \tau_k^2 w(q^*) - k_*^\top V^{-1} k_* + u^\top C^{ME} u
     \;[+\,\sigma_k^2 \text{ for a new reading}];
 
+at a condition the data do not hold (``conditions`` of :meth:`ErrorFit.predict`, the discrepancy of every
+condition its own draw) k* = 0: mean h_k(q*, p^ME), variance s_k^2 c(q*, q*) + tau_k^2 w(q*) + g*^T C^ME g*;
 with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
 condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
 without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
