@@ -25,6 +25,17 @@ sigma_man^2)):
    coverage of the 95 % new-reading bands with the chosen model error (kind auto) and without, pooled over
    campaigns and splits, with the standard error over campaigns.
 
+5. **condition offset** (``--n-offset`` campaigns, issue 29's press coverage target): a small static model whose
+   readings carry an offset per condition (a direction, a day) that the model lacks, calibrated on 1, 4 or 9
+   conditions and validated on one more at the same set points: the held-out coverage of the discrepancy's 95 %
+   new-reading bands with the validation condition kriged as a seen one (before) and predicted as a condition
+   not seen (after, :func:`identification.studies.model_error.unseen_rows`).
+
+The coverage part prints three tables: as shipped, pinned at zero force, and with the press's direction of
+motion named as the conditions (``groups``: loading, unloading); per split also the Clopper-Pearson interval of
+the discrepancy's coverage, the readings in a condition the calibration part has not seen, and the factor its
+bands could shrink by and still hold 95 % (need).
+
 Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10); the oscillator alone:
 ``python -m bench model_error --skip=coverage,size,adequate --oscillator-n=1000 --oscillator-n-coverage=20``.
 """
@@ -36,13 +47,18 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
-from identification import model_error
+from identification import Split, model_error
 from identification.fit.dynamic_fit import simulate_campaign
 from identification.studies.splits import time_window_splits
+from identification.studies.discrepancy_gp import InputScaling
+from identification.studies.model_error import unseen_rows
+from identification.studies.model_error_fit import fit_model_error
 from identification.studies.montecarlo import clopper_pearson
 from mudoe.config import load_config
 from mudoe.study import prepare
+from models.press import PRESS_LOADING_ROWS
 from models.state import simulate
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
@@ -50,24 +66,53 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 WEIGHTS = np.array([0.0, 1.0, 1.0])
 
 
-def coverage_table(study, exact_at=None) -> dict:
+def _needed(study, variant: str, split, exact_at, alpha: float = 0.05) -> float:
+    """The factor by which the discrepancy's held-out new-reading bands of ``split`` could shrink and still hold
+    (1 - alpha) of its validation readings: the (1 - alpha) quantile of |z - mean| / half-width (< 1: wider than
+    the error requires, > 1: too narrow)."""
+    m, d = study.models[variant], study.data[variant]
+    scaling = InputScaling.of(d.inputs, exact_at or {}, tuple(m.inputs))
+    cal, val = split.calibration(d), split.validation(d)
+    f = fit_model_error(m, cal, study.p0, WEIGHTS, scaling, "discrepancy")
+    b = f.predict(val.inputs, alpha, True, conditions=np.where(unseen_rows(split, d), -1, 0))
+    sel = WEIGHTS > 0
+    z = val.z[:, :, sel]
+    ok = np.isfinite(z)
+    e = np.abs(z - b.mean[None][:, :, sel]) / (b.upper - b.mean)[None][:, :, sel]
+    return float(np.quantile(e[ok], 1 - alpha))
+
+
+def _cp(cover: float, n: int) -> str:
+    ci = clopper_pearson(int(round(cover * n)), n)
+    return f"[{100 * ci.lo:.1f}, {100 * ci.hi:.1f}]"
+
+
+def coverage_table(study, exact_at=None, groups=None) -> dict:
     """{variant: ModelErrorResult (kind auto)} on the study's data and splits; prints the held-out table: coverage
-    of the plain, discrepancy and embedded 95 % new-reading bands (%) and their median widening."""
+    of the plain, discrepancy and embedded 95 % new-reading bands (%) with the Clopper-Pearson 95 % interval of the
+    discrepancy's (the validation readings taken as independent), their median widening, the readings in a
+    condition the calibration part has not seen (unseen) and the factor the discrepancy bands could shrink by
+    (need, :func:`_needed`)."""
     out = {}
-    print(f"exact_at = {exact_at}")
-    print(f"{'variant':<8} {'split':<32} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}")
+    print(f"exact_at = {exact_at}, groups = {None if groups is None else sorted(set(groups))}")
+    print(f"{'variant':<8} {'split':<32} {'n':>4} {'unseen':>6} {'plain':>6} {'discr.':>6} {'CP 95 %':>13} "
+          f"{'widen':>6} {'need':>5} {'embed.':>6} {'widen':>6}")
     for v, m in study.models.items():
         t0 = time.perf_counter()
-        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at)
+        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at,
+                        groups=groups)
         dt = time.perf_counter() - t0
-        for h in r.heldout:
-            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
-                  f"{100 * h.coverage_discrepancy:>6.1f} {h.widening_discrepancy:>6.2f} "
+        for h, sp in zip(r.heldout, study.splits):
+            need = _needed(study, v, sp, exact_at) if groups is None else float("nan")
+            print(f"{v:<8} {h.split:<32} {h.n_values:>4} {h.n_unseen:>6} {100 * h.coverage_plain:>6.1f} "
+                  f"{100 * h.coverage_discrepancy:>6.1f} {_cp(h.coverage_discrepancy, h.n_values):>13} "
+                  f"{h.widening_discrepancy:>6.2f} {need:>5.2f} "
                   f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}")
         n = sum(h.n_values for h in r.heldout)
         pooled = {k: sum(h.coverage(k) * h.n_values for h in r.heldout) / n for k in ("none", "discrepancy", "embedded")}
-        print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {100 * pooled['none']:>6.1f} "
-              f"{100 * pooled['discrepancy']:>6.1f} {np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} "
+        print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {sum(h.n_unseen for h in r.heldout):>6} "
+              f"{100 * pooled['none']:>6.1f} {100 * pooled['discrepancy']:>6.1f} {_cp(pooled['discrepancy'], n):>13} "
+              f"{np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} {'':>5} "
               f"{100 * pooled['embedded']:>6.1f} {np.median([h.widening_embedded for h in r.heldout]):>6.2f}")
         print(f"         model_error {dt:.2f} s; test LR {r.test.statistic:.4g}, p = {r.test.p_value:.3g}; "
               f"{r.how} -> {r.kind}; identifiable {r.identifiable} (information kept {r.information_kept:.3f})")
@@ -75,6 +120,96 @@ def coverage_table(study, exact_at=None) -> dict:
             print("         " + block.replace("\n", "\n         "))
         out[v] = r
     return out
+
+
+def press_branches(study) -> list:
+    """The press study's condition of every input row: "loading" (0 .. 1600 N, the peak included) or
+    "unloading" (the direction of motion, which M1's input q_P does not hold)."""
+    n_q = next(iter(study.data.values())).n_q
+    return ["loading" if j in PRESS_LOADING_ROWS else "unloading" for j in range(n_q)]
+
+
+# ---------------------------------------------------------------------------- a known condition offset
+#: the synthetic case of a condition offset the model lacks: set points, noise, offset spread (sd)
+OFFSET_Q = np.linspace(0.2, 2.0, 10)
+OFFSET_SIGMA = 0.05
+OFFSET_KAPPA = 0.15
+
+
+def _offset_model():
+    import casadi as ca
+    from models.contract import Model
+    return Model.explicit(["a", "b"], ["x"], ["y1", "y2"],
+                          h=lambda p, q: ca.vertcat(p[0] * (1 - ca.exp(-p[1] * q[0])), p[0] * q[0] / (1 + p[1] * q[0])))
+
+
+def _offset_campaign(rng, n_cond: int):
+    """Measurements of ``n_cond`` conditions at the set points OFFSET_Q (2 series): the model at a = 2, b = 1.5
+    plus an offset b_gk ~ N(0, OFFSET_KAPPA^2) per condition g and sensor k plus noise; the rows' conditions."""
+    from identification import Measurements
+    q = np.tile(OFFSET_Q, n_cond)
+    cond = np.repeat(np.arange(n_cond), OFFSET_Q.size)
+    truth = np.stack([2.0 * (1 - np.exp(-1.5 * q)), 2.0 * q / (1 + 1.5 * q)], axis=1)
+    mean = truth + OFFSET_KAPPA * rng.standard_normal((n_cond, 2))[cond]
+    z = mean[None] + OFFSET_SIGMA * rng.standard_normal((2, q.size, 2))
+    return Measurements(q[:, None], z, OFFSET_SIGMA, sensors=["y1", "y2"], input_names=["x"]), cond
+
+
+def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None) -> tuple:
+    """(coverage, median widening against the plain bands) of the discrepancy's 95 % new-reading bands fitted on
+    rows ``cal`` of ``d`` at rows ``val`` (``groups`` the rows' condition codes, None: one; ``unseen`` bool per
+    validation row: predicted as a condition not seen), as the held-out table of ``model_error`` computes them."""
+    scaling = InputScaling.of(d.inputs, {}, ("x",))
+    dc, dv = d.subset(inputs=cal), d.subset(inputs=val)
+    w = np.ones(2)
+    plain = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "none")
+    f = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "discrepancy", plain=plain.plain,
+                        groups=None if groups is None else np.asarray(groups)[cal])
+    codes = np.zeros(len(val), int) if groups is None else np.asarray(groups)[val]
+    b = f.predict(dv.inputs, 0.05, True, conditions=np.where(unseen, -1, codes) if unseen is not None else codes)
+    b0 = plain.predict(dv.inputs, 0.05, True)
+    cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
+    return cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower)))
+
+
+#: the numbers of conditions in the calibration part of the condition-offset study
+OFFSET_CALIBRATION = (1, 4, 9)
+
+
+def condition_offset_study(n: int, seed: int) -> None:
+    """Held-out coverage of the discrepancy's 95 % new-reading bands at a condition the calibration part has not
+    seen, on campaigns with a condition offset the model lacks (truth known): calibrated on c conditions
+    (:data:`OFFSET_CALIBRATION`; c = 1 as the press's loading vs unloading), validated on one more at the same set
+    points; before (the validation rows kriged as the calibration's condition(s): one condition named, or none and
+    the rough part) and after (a new draw of the error process: rows found by :func:`unseen_rows`, for c > 1 with
+    the conditions named); mean over campaigns with its standard error, against the coverage P(|t_c| < 1.96) of a
+    band whose variance is estimated from c draws of the offset (noise and fixed effects neglected)."""
+    rng, t0 = np.random.default_rng(seed), time.perf_counter()
+    m, nq = _offset_model(), OFFSET_Q.size
+    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after")}
+    for _ in range(n):
+        for c in OFFSET_CALIBRATION:
+            d, cond = _offset_campaign(rng, c + 1)
+            cal, val = list(range(c * nq)), list(range(c * nq, (c + 1) * nq))
+            sp = Split(f"{c} vs 1", cal, val)
+            if c == 1:
+                rows[c, "before"].append(_offset_heldout(m, d, cal, val))
+                rows[c, "after"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
+            else:
+                rows[c, "before"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
+                rows[c, "after"].append(_offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(sp, d, cond)))
+    print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
+          f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
+          f"new-reading bands at a condition not seen ({2 * 2 * nq} readings per campaign; mean over campaigns "
+          f"+- standard error; median widening against the plain bands)")
+    for (c, k), a in rows.items():
+        a = np.array(a)
+        how = ("one condition named, kriged" if c == 1 else "no groups, kriged + rough part") if k == "before" else \
+            ("unseen rows, new draw" if c == 1 else "groups named, new draw")
+        print(f"  {c} calibration condition(s), {k:<6} ({how:<30}) {100 * a[:, 0].mean():6.1f} +- "
+              f"{100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  widening {np.median(a[:, 1]):.2f}"
+              + (f"   [P(|t_{c}| < 1.96) = {100 * (1 - 2 * stats.t.sf(1.96, c)):.1f} %]" if k == "after" else ""))
+    print(f"  {time.perf_counter() - t0:.0f} s")
 
 
 def _campaigns(study, variant: str, n: int, seed: int):
@@ -184,7 +319,9 @@ def main(argv=None):
     ap.add_argument("--oscillator-n", type=int, default=0, help="campaigns of the cubic oscillator (adequate)")
     ap.add_argument("--oscillator-n-coverage", type=int, default=0,
                     help="campaigns of the linear oscillator on cubic data (held-out coverage)")
-    ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate")
+    ap.add_argument("--n-offset", type=int, default=0,
+                    help="campaigns of the synthetic condition offset (held-out coverage at a condition not seen)")
+    ap.add_argument("--skip", default="", help="comma list of parts to skip: coverage,size,adequate,offset")
     args = ap.parse_args(argv or [])
     if args.quick:
         args.n, args.n_coverage = 100, 10
@@ -193,6 +330,9 @@ def main(argv=None):
     if "coverage" not in skip:
         coverage_table(study)
         coverage_table(study, {"q_P": 0.0})          # the linkage is exact at zero press force
+        coverage_table(study, groups=press_branches(study))     # the direction of motion named
+    if "offset" not in skip and args.n_offset:
+        condition_offset_study(args.n_offset, args.seed + 4)
     if "size" not in skip and args.n:
         size_study(study, args.size_variant, args.n, args.seed)
     if "adequate" not in skip and args.n_coverage:

@@ -12,7 +12,16 @@ s_k^2 exp(-|x - x'|^2 / (2 l_k^2)) on the inputs scaled to [0, 1] (x = (q - q_mi
 per input column, l_k dimensionless) and a rough part rho_jk ~ N(0, tau_k^2), independent between input
 rows (conditions the model's inputs do not tell apart, e.g. loading and unloading at one force).
 s_k, tau_k are in the unit of sensor k.  Stacked over the selected sensors, r = zbar - h(p) has the
-covariance V(theta) = blockdiag_k(s_k^2 C_k + tau_k^2 W_k + D_k), D_k = diag(sigma_k^2 / n_jk).
+covariance V(theta) = blockdiag_k(s_k^2 C_k o S + tau_k^2 W_k + D_k), D_k = diag(sigma_k^2 / n_jk).
+
+**Conditions** (``conditions`` of :meth:`Observations.of`, one code per input row; None: one condition):
+the smooth discrepancy of each condition g is its own draw of the process, delta_k(q, g), independent
+between conditions with common hyperparameters, S_oo' = [g(o) = g(o')] (a condition the model's inputs
+do not name: a direction of motion, a day, a phase).  A prediction at a condition the data do not hold
+has no cross-covariance with the data (``cross`` with its code): the error of a condition not seen is a
+new draw of the process fitted on the conditions seen (its prior s_k^2 c(x, x) + tau_k^2 w(x), mean 0).
+With one condition in the data the share of the error common to all conditions is not identifiable, and
+this (none of it common) is the cautious choice.
 
 ``exact_at`` pins delta and its slope to zero at input value v of a named input (for every value
 of the other inputs): the factor of that input column is the squared-exponential process conditioned
@@ -102,6 +111,8 @@ class Observations:
                                  observation (n_i, d)
     cols : tuple of ndarray      per block, the column k of each observation
     blocks : tuple of ndarray    per block, its selected columns
+    conditions : tuple of ndarray or None   per block, the condition code of each observation (None: one
+                                 condition, code 0)
     """
 
     sensors: tuple
@@ -111,13 +122,15 @@ class Observations:
     x: tuple
     cols: tuple
     blocks: tuple
+    conditions: tuple | None = None
 
     @classmethod
     def of(cls, counts: np.ndarray, sigma: np.ndarray, w: np.ndarray, x: np.ndarray, instrument=None,
-           coords: np.ndarray | None = None) -> "Observations":
+           coords: np.ndarray | None = None, conditions: np.ndarray | None = None) -> "Observations":
         """From the counts (n_q, n_S) of a campaign, sigma (n_S,), the weights (n_S,), the scaled inputs (n_q,
         d_q) and, for columns grouped into instruments, the instrument of every column (n_S,) and the columns'
-        scaled coordinates (n_S, d_c) (None: every column its own block, no coordinates)."""
+        scaled coordinates (n_S, d_c) (None: every column its own block, no coordinates); ``conditions`` the
+        integer condition code of every input row (n_q,) (None: one condition)."""
         n_S = counts.shape[1]
         instrument = np.arange(n_S) if instrument is None else np.asarray(instrument)
         coords = np.zeros((n_S, 0)) if coords is None else np.asarray(coords, float)
@@ -133,7 +146,21 @@ class Observations:
             xs.append(np.concatenate([np.hstack([x[rk], np.repeat(coords[k][None], len(rk), 0)])
                                       for k, rk in zip(b, r)], axis=0))
             sig.append(float(sigma[b[0]]))
-        return cls(sens, tuple(rows), tuple(noise), np.array(sig), tuple(xs), tuple(cols), blocks)
+        conds = None if conditions is None else tuple(np.asarray(conditions, int)[r] for r in rows)
+        return cls(sens, tuple(rows), tuple(noise), np.array(sig), tuple(xs), tuple(cols), blocks, conds)
+
+    def condition_codes(self, i: int) -> np.ndarray:
+        """The condition code of every observation of block i (n_i,) (zeros for one condition)."""
+        return np.zeros(len(self.rows[i]), int) if self.conditions is None else self.conditions[i]
+
+    def same_condition(self, i: int, codes: np.ndarray | None = None) -> np.ndarray | float:
+        """S (n*, n_i) = [code* = code of observation o] of block i against ``codes`` (n*,) (None: the block's own
+        observations); 1.0 when the data hold one condition and ``codes`` is None."""
+        if self.conditions is None and codes is None:
+            return 1.0
+        own = self.condition_codes(i)
+        other = own if codes is None else np.asarray(codes, int)
+        return (other[:, None] == own[None, :]).astype(float)
 
     @property
     def sizes(self) -> list:
@@ -198,6 +225,8 @@ def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple) -> tuple:
     s2, ell, t2 = (sig * np.exp(th[0])) ** 2, float(np.exp(th[1])), (sig * np.exp(th[2])) ** 2
     x = obs.x[i]
     C, dC = kernel_blocks(x, x, ell, pins)
+    S = obs.same_condition(i)
+    C, dC = C * S, dC * S
     W, dW = rough_weight(x, ell, pins)
     V = s2 * C + np.diag(t2 * W + obs.noise[i])
     return V, (2 * s2 * C, s2 * dC + np.diag(t2 * dW), np.diag(2 * t2 * W))
@@ -283,15 +312,18 @@ class GPFit:
         return linalg.block_diag(*[_block(self.obs, i, self.theta[3 * i:3 * i + 3], self.pins)[0]
                                    for i in range(len(self.obs.blocks))])
 
-    def cross(self, i: int, xs: np.ndarray) -> tuple:
+    def cross(self, i: int, xs: np.ndarray, conditions: np.ndarray | None = None) -> tuple:
         """(k (n*, N): cov(delta(x*), stacked residuals), prior variance (n*,)) for block i at scaled x* (inputs,
-        then column coordinates)."""
+        then column coordinates) in the conditions ``conditions`` (n*,) codes (None: code 0, the one condition
+        of data without conditions; a code the data do not hold: a condition not seen, k = 0)."""
         ell = self.length_scale(i)
         s2, t2 = self.amplitude(i) ** 2, self.rough(i) ** 2
         k = np.zeros((xs.shape[0], sum(self.obs.sizes)))
         start = sum(self.obs.sizes[:i])
         C, _ = kernel_blocks(xs, self.obs.x[i], ell, self.pins)
-        k[:, start:start + self.obs.sizes[i]] = s2 * C
+        codes = None if conditions is None and self.obs.conditions is None else (
+            np.zeros(xs.shape[0], int) if conditions is None else conditions)
+        k[:, start:start + self.obs.sizes[i]] = s2 * C * self.obs.same_condition(i, codes)
         prior = s2 * np.diag(kernel_blocks(xs, xs, ell, self.pins)[0]) + t2 * rough_weight(xs, ell, self.pins)[0]
         return k, prior
 

@@ -31,7 +31,12 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    conditions (input rows or named groups), p + b_g with b_g ~ N(0, diag(omega^2)), omega by REML with exact
    gradients: which parameters carry the error and by how much.
 4. **Held-out table**: for every split, each error model fitted on its calibration part predicts its
-   validation readings (95 % new-reading bands by default): coverage, median widening, log score.
+   validation readings (95 % new-reading bands by default): coverage, median widening, log score.  Readings in
+   a condition the calibration part has not seen (:func:`unseen_rows`: a named group without calibration rows,
+   or rows that repeat a calibration row's inputs when the calibration rows repeat none, e.g. the press's
+   unloading at the loading forces for a model whose one input is the force) are predicted with the
+   discrepancy as a new draw of its process (no cross-covariance with the calibration readings: mean h(q*, p),
+   its prior band); the embedded error predicts every validation row as a new condition anyway.
    ``kind="auto"``: "none" when the test does not detect model error (so an adequate model gets an error
    model no more often than the test's size), else the error model of the highest total held-out log score
    (without splits: the discrepancy).
@@ -67,7 +72,7 @@ from identification.studies.model_error_result import (EmbeddedParameter, ErrorT
 from identification.studies.splits import Split, SplitError, flat_split
 from models.labels import LabelledModel
 
-__all__ = ["model_error", "ModelErrorResult", "KINDS"]
+__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
 KINDS = ("auto", "none", "discrepancy", "embedded")
@@ -147,10 +152,11 @@ def _instrument_weights(weights, names: tuple) -> np.ndarray:
     return w
 
 
-def _checked_groups(groups, n_q: int) -> np.ndarray | None:
-    """The condition of every input row as integer codes (n_q,), or None (ValueError naming the argument)."""
+def _checked_groups(groups, n_q: int) -> tuple:
+    """(codes, labels): the condition of every input row as integer codes (n_q,) and the distinct labels in code
+    order, or (None, ()) (ValueError naming the argument)."""
     if groups is None:
-        return None
+        return None, ()
     if isinstance(groups, (str, bytes)) or not hasattr(groups, "__len__"):
         raise ValueError(f"groups: expected one condition label per input row ({n_q}), got {groups!r}")
     labels = list(groups)
@@ -160,7 +166,7 @@ def _checked_groups(groups, n_q: int) -> np.ndarray | None:
         codes = {lab: i for i, lab in enumerate(dict.fromkeys(labels))}
     except TypeError:
         raise ValueError("groups: the condition labels must be hashable (numbers or strings)") from None
-    return np.array([codes[lab] for lab in labels])
+    return np.array([codes[lab] for lab in labels]), tuple(codes)
 
 
 def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
@@ -178,27 +184,58 @@ def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
 
 
 # ---------------------------------------------------------------------------- held-out table
+#: two input rows whose scaled inputs differ by at most this (per column, of the range) hold the same inputs
+SAME_INPUTS = 1e-9
+
+
+def unseen_rows(split: Split, data: Measurements, groups: np.ndarray | None = None) -> np.ndarray:
+    """Which validation input rows of ``split`` lie in a condition its calibration part has not seen, bool
+    (n_val,) in the order of ``split.val_inputs``.
+
+    With ``groups`` (the condition code of every input row of ``data``): the rows of a condition without
+    calibration rows.  Without: when no two calibration rows hold the same inputs, the validation rows that
+    are not calibration rows but repeat a calibration row's inputs (within :data:`SAME_INPUTS` of the inputs'
+    range): the data hold them apart though the model's inputs do not tell them apart (the direction of
+    motion at one force, another day at one set point), and the calibration part, one reading of each input,
+    says nothing about how much two rows at one input differ.  When calibration rows repeat inputs, the
+    discrepancy's rough part (independent between rows) has measured that and no row is unseen; a split by
+    time window or by series (the same rows on both sides) has none.
+    """
+    cal, val = list(split.cal_inputs), list(split.val_inputs)
+    if groups is not None:
+        return ~np.isin(np.asarray(groups)[val], np.asarray(groups)[cal])
+    q = np.asarray(data.inputs, float)
+    span = np.where(np.ptp(q, axis=0) > 0, np.ptp(q, axis=0), 1.0)
+    xc, xv = q[cal] / span, q[val] / span
+    repeats = np.all(np.abs(xc[:, None, :] - xc[None, :, :]) <= SAME_INPUTS, axis=2).sum() > len(cal)
+    same = np.all(np.abs(xv[:, None, :] - xc[None, :, :]) <= SAME_INPUTS, axis=2).any(axis=1)
+    return same & ~np.isin(val, cal) & ~repeats
+
+
 def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, layout) -> HeldOut:
     """Every error model fitted on the calibration part of ``split`` predicts its validation readings (as new
-    conditions)."""
+    conditions: the embedded error always, the discrepancy on the rows :func:`unseen_rows` names)."""
     cal, val = split.calibration(data), split.validation(data)
     plain = fit_model_error(model, cal, p0, w, scaling, "none", layout=layout)
     g = None if groups is None else groups[list(split.cal_inputs)]
     fits = [plain] + [fit_model_error(model, cal, p0, w, scaling, k, plain=plain.plain, groups=g, layout=layout)
                       for k in _ERROR_KINDS[1:]]
+    new = unseen_rows(split, data, groups)
+    conditions = np.where(new, -1, 0) if groups is None else np.where(new, -1, groups[list(split.val_inputs)])
     sel = w > 0
     z = val.z[:, :, sel]
     ok = np.isfinite(z)
     cover, score, width = [], [], []
     for f in fits:
-        b = f.predict(val.inputs, alpha, new_reading=True)
+        b = f.predict(val.inputs, alpha, new_reading=True, conditions=conditions)
         lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
         sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
         cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
         score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
+    n_new = int(np.broadcast_to(new[None, :, None], z.shape)[ok].sum())
     return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
-                   float(np.median(width[2] / width[0])), score[0], score[1], score[2])
+                   float(np.median(width[2] / width[0])), score[0], score[1], score[2], n_new)
 
 
 def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
@@ -237,8 +274,13 @@ def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
 def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
            grouped: bool) -> tuple:
     notes = list(fit.notes)
-    if grouped and kind != "embedded":
-        notes.append(f"groups name the conditions of the embedded error only; the {kind} error model does not use them")
+    if grouped and kind == "none":
+        notes.append("groups name the conditions of the error models; the 'none' error model does not use them")
+    unseen = [f"{h.split} ({h.n_unseen} of {h.n_values})" for h in heldout if h.n_unseen]
+    if unseen and kind == "discrepancy":
+        notes.append("held-out readings in a condition the calibration part has not seen, predicted as a new draw of "
+                     "the discrepancy (no share common to the conditions is assumed; with one condition in the "
+                     "calibration part it is not identifiable): " + ", ".join(unseen))
     if sigma_source != "given":
         notes.append("sigma is the pure error of the repeated series, taken as known: the test's reference "
                      "distribution is then approximate")
@@ -285,8 +327,12 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     alpha : float in (0, 0.5)     the test's level and the bands' miss probability
     weights : array_like (n_S,), optional   sensor (instrument) selection (0/1), as in identify (a positive weight selects the
                                   sensor; its size weights the plain fit only, not the error model)
-    groups : sequence of n_q labels, optional   the condition of every input row for the embedded error (rows
-                                  with one label share their parameter deviation b); None: every row its own
+    groups : sequence of n_q labels, optional   the condition of every input row (a direction of motion, a day):
+                                  rows with one label share their embedded parameter deviation b, and the
+                                  discrepancy of every condition is its own draw of the process (independent
+                                  between conditions); None: the embedded error's conditions are the rows, the
+                                  discrepancy's one condition, and a split's validation rows that repeat the
+                                  inputs of its calibration rows are a condition not seen (:func:`unseen_rows`)
 
     Returns
     -------
@@ -322,7 +368,7 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
                         f"n_p + 2 = {model.n_p + 2}")
     splits = _checked_splits(splits, data, w, model.n_p, getattr(problem.data, "pairs", None))
-    codes = _checked_groups(groups, data.n_q)
+    codes, labels = _checked_groups(groups, data.n_q)
     scaling = InputScaling.of(data.inputs, exact, tuple(model.inputs) + tuple(layout.coord_names),
                               layout.coords if layout.coord_names else None)
     plain = fit_model_error(model, data, p0, w, scaling, "none", layout=layout)
@@ -344,4 +390,4 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,
                                                                  codes is not None),
-        fit=fit)
+        fit=fit, groups=labels)

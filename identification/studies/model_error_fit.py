@@ -27,6 +27,8 @@ for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
     \operatorname{var} = s_k^2 c(q^*, q^*) + \tau_k^2 w(q^*) - k_*^\top V^{-1} k_* + u^\top C^{ME} u
     \;[+\,\sigma_k^2 \text{ for a new reading}];
 
+at a condition the data do not hold (``conditions`` of :meth:`ErrorFit.predict`, the discrepancy of every
+condition its own draw) k* = 0: mean h_k(q*, p^ME), variance s_k^2 c(q*, q*) + tau_k^2 w(q*) + g*^T C^ME g*;
 with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
 condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
 without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
@@ -142,8 +144,11 @@ class ErrorFit:
             return True
         return self.information_kept >= CONFOUNDED_INFORMATION or self.correlation_kept >= CONFOUNDED_CORRELATION
 
-    def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool) -> Band:
-        """The (1 - alpha) band of the outputs (``new_reading``: of one new reading) at input rows (n*, d_q)."""
+    def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool, conditions: np.ndarray | None = None
+                ) -> Band:
+        """The (1 - alpha) band of the outputs (``new_reading``: of one new reading) at input rows (n*, d_q) in the
+        conditions ``conditions`` (n*,) integer codes (None: the data's one condition; a code the fit's data do not
+        hold: a condition not seen, whose discrepancy is a new draw of the process; the discrepancy only)."""
         h, G = outputs_at(self.model, self.p, inputs)
         sel = self.weights > 0
         if self.gp is None:
@@ -151,12 +156,13 @@ class ErrorFit:
             var = np.einsum("jkp,pq,jkq->jk", G, C, G)
             mean = h
         else:
-            mean, var = self._kriging(inputs, h, G, include_g=True)
+            mean, var = self._kriging(inputs, h, G, include_g=True, conditions=conditions)
         var = np.clip(var, 0.0, None) + (self.sigma ** 2 if new_reading else 0.0)
         return self._band(mean, var, sel, alpha, "prediction", new_reading)
 
-    def discrepancy(self, inputs: np.ndarray, alpha: float) -> Band:
-        """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error)."""
+    def discrepancy(self, inputs: np.ndarray, alpha: float, conditions: np.ndarray | None = None) -> Band:
+        """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error) in the conditions
+        ``conditions`` (as :meth:`predict`)."""
         n = np.atleast_2d(inputs).shape[0]
         sel = self.weights > 0
         if self.embedded is not None:
@@ -166,17 +172,18 @@ class ErrorFit:
         if self.gp is None:
             z = np.zeros((n, len(self.sigma)))
             return self._band(z, z, sel, alpha, "discrepancy", False)
-        mean, var = self._kriging(inputs, np.zeros((n, len(self.sigma))), None, include_g=False)
+        mean, var = self._kriging(inputs, np.zeros((n, len(self.sigma))), None, include_g=False,
+                                  conditions=conditions)
         return self._band(mean, np.clip(var, 0.0, None), sel, alpha, "discrepancy", False)
 
-    def _kriging(self, inputs, h, G, include_g: bool) -> tuple:
+    def _kriging(self, inputs, h, G, include_g: bool, conditions=None) -> tuple:
         xs = self.scaling(inputs)
         coords = None if self.layout is None else self.scaling.coordinates(self.layout.coords)
         mean = np.full(h.shape, np.nan)
         var = np.full(h.shape, np.nan)
         for k in self.gp.obs.sensors:
             x = xs if coords is None else np.hstack([xs, np.repeat(coords[k][None], xs.shape[0], 0)])
-            kx, prior = self.gp.cross(self.gp.obs.block_of(k), x)
+            kx, prior = self.gp.cross(self.gp.obs.block_of(k), x, conditions)
             mean[:, k] = h[:, k] + kx @ self.alpha_r
             u = (G[:, k, :] if include_g else 0.0) - kx @ self.Vinv_G
             var[:, k] = prior - np.einsum("an,nm,am->a", kx, self.Vinv, kx) + np.einsum("ap,pq,aq->a", u, self.cov, u)
@@ -255,14 +262,14 @@ def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling,
                     layout: ColumnLayout | None = None) -> ErrorFit:
     """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
     plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
-    the plain fit when already done; ``groups`` (n_q,) integer condition of every input row of the embedded error
-    (None: each row its own); ``layout`` the columns' instruments and coordinates (one discrepancy per instrument
+    the plain fit when already done; ``groups`` (n_q,) integer condition of every input row: of the embedded error
+    (None: each row its own) and of the discrepancy (independent between conditions; None: one condition); ``layout`` the columns' instruments and coordinates (one discrepancy per instrument
     over inputs and coordinates; None: one per column over inputs).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
-    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs)) if layout is None else
-           Observations.of(data.counts(), sigma, weights, scaling(data.inputs), layout.instrument,
-                           scaling.coordinates(layout.coords)))
+    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs), conditions=groups) if layout is None
+           else Observations.of(data.counts(), sigma, weights, scaling(data.inputs), layout.instrument,
+                                scaling.coordinates(layout.coords), conditions=groups))
     zbar_s = obs.stack(np.nan_to_num(data.means()))
     Gs = obs.stack(np.asarray(est.G, float))
     r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))

@@ -13,7 +13,10 @@ from identification.inference.intervals import ConfidenceIntervals, validate_alp
 from identification.studies.model_error_fit import Band, ErrorFit
 from identification.results_protocol import ResultProtocol
 
-__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest"]
+__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest", "NEW_CONDITION"]
+
+#: the ``condition`` of :meth:`ModelErrorResult.predict` for a condition the data do not hold
+NEW_CONDITION = "new"
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,9 @@ class HeldOut:
     ``coverage_*`` the fraction of validation readings (selected sensors) inside the (1 - alpha)
     new-reading band without model error (``plain``), with the output discrepancy and with the embedded
     error; ``widening_*`` the median ratio of the band widths (with / without); ``log_score_*`` the mean
-    log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted.
+    log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted; ``n_unseen``
+    those of them at rows in a condition the calibration part has not seen
+    (:func:`identification.studies.model_error.unseen_rows`: the discrepancy predicts them as a new draw).
     """
 
     split: str
@@ -84,6 +89,7 @@ class HeldOut:
     log_score_plain: float
     log_score_discrepancy: float
     log_score_embedded: float
+    n_unseen: int = 0
 
     def coverage(self, kind: str) -> float:
         """The coverage of the ``kind`` ("none", "discrepancy", "embedded") bands."""
@@ -142,6 +148,7 @@ class ModelErrorResult(ResultProtocol):
     sigma_source : str           "given" or "pure error (repeated series)"
     how : str                    how ``kind`` was chosen
     notes : tuple of str
+    groups : tuple               the distinct condition labels of ``groups`` (empty: none named)
     """
 
     model_name: str
@@ -167,6 +174,7 @@ class ModelErrorResult(ResultProtocol):
     how: str
     notes: tuple = ()
     fit: ErrorFit | None = field(default=None, repr=False)
+    groups: tuple = ()
 
     # ------------------------------------------------------------------ numbers
     def conf_int(self, alpha: float | None = None) -> ConfidenceIntervals:
@@ -179,20 +187,46 @@ class ModelErrorResult(ResultProtocol):
         return ConfidenceIntervals(param_names=self.param_names, estimate=self.p.copy(), lower=self.p - c * se,
                                    upper=self.p + c * se, method="wald", alpha=a, notes=notes)
 
-    def predict(self, inputs, alpha: float = 0.05, new_reading: bool = False) -> Band:
+    def predict(self, inputs, alpha: float = 0.05, new_reading: bool = False, condition=None) -> Band:
         """The outputs at input rows (n*, d_q) (model's input units) with their (1 - alpha) band: parameter
         uncertainty and model error, and with ``new_reading`` the sensor noise of one reading; ``mean``,
         ``lower``, ``upper`` (n*, n_S) in the unit of z, NaN for the sensors not selected.
 
+        ``condition`` (the discrepancy only): one label or one per row (n*,); a label of ``groups`` predicts in
+        that condition, :data:`NEW_CONDITION` (or, with groups, any other label) in a condition the data do not
+        hold (the discrepancy a new draw of its process: mean 0, its prior band); None (also per row): the data's
+        condition (with ``groups`` named: a condition not seen).  The held-out bands of a split:
+        ``condition=[NEW_CONDITION if u else None for u in unseen_rows(split, data)]``
+        (:func:`identification.studies.model_error.unseen_rows`) on the fit to its calibration part.
+
         A dynamic model: the input rows are experiments and the arrays are (n*, n_t, n_S), experiments x the
         campaign's sampling times (``band.grid[0]``, the model's time unit) x instruments (``band.sensors``),
         NaN at a time where the campaign holds no reading of that instrument."""
-        return self._arranged(self.fit.predict(self._inputs(inputs), validate_alpha(alpha), bool(new_reading)))
+        q = self._inputs(inputs)
+        return self._arranged(self.fit.predict(q, validate_alpha(alpha), bool(new_reading),
+                                               self._conditions(condition, len(q))))
 
-    def discrepancy(self, inputs, alpha: float = 0.05) -> Band:
+    def discrepancy(self, inputs, alpha: float = 0.05, condition=None) -> Band:
         """The discrepancy delta(q*) at input rows (n*, d_q) with its (1 - alpha) band (unit of z; zero for
-        kind "none", NaN for the sensors not selected); a dynamic model: (n*, n_t, n_S) as :meth:`predict`."""
-        return self._arranged(self.fit.discrepancy(self._inputs(inputs), validate_alpha(alpha)))
+        kind "none", NaN for the sensors not selected) in ``condition`` (as :meth:`predict`); a dynamic model:
+        (n*, n_t, n_S) as :meth:`predict`."""
+        q = self._inputs(inputs)
+        return self._arranged(self.fit.discrepancy(q, validate_alpha(alpha), self._conditions(condition, len(q))))
+
+    def _conditions(self, condition, n: int) -> np.ndarray | None:
+        """The integer condition codes (n,) of ``condition`` (-1: a condition not seen), None for the data's one."""
+        if condition is None:
+            return None if not self.groups else np.full(n, -1)
+        labels = [condition] * n if isinstance(condition, (str, bytes)) or not hasattr(condition, "__len__") \
+            else list(condition)
+        if len(labels) != n:
+            raise ValueError(f"condition: expected one label or one per input row ({n}), got {len(labels)}")
+        codes = {lab: i for i, lab in enumerate(self.groups)}
+        try:
+            return np.array([-1 if lab is None and self.groups else 0 if lab is None else
+                             -1 if lab == NEW_CONDITION else codes.get(lab, -1 if self.groups else 0) for lab in labels])
+        except TypeError:
+            raise ValueError("condition: the labels must be hashable (numbers or strings)") from None
 
     def _arranged(self, band: Band) -> Band:
         """The band per instrument and coordinate (:meth:`identification.fit.problem.ColumnLayout.arrange`)."""
@@ -238,7 +272,7 @@ class ModelErrorResult(ResultProtocol):
             "information_kept": self.information_kept,
             "correlation_kept": self.correlation_kept, "heldout": [h.to_dict() for h in self.heldout],
             "exact_at": dict(self.exact_at), "sigma": self.sigma, "sigma_source": self.sigma_source,
-            "notes": list(self.notes)})
+            "notes": list(self.notes), "groups": [str(g) for g in self.groups]})
 
     def summary(self) -> str:
         """The verdict, the test, the parameters with and without model error, the discrepancy per sensor,

@@ -97,7 +97,10 @@ def test_embedded_groups_share_their_deviation():
     assert by_group.embedded[0].omega > 2 * by_group.embedded[1].omega
     assert by_group.embedded[0].omega != pytest.approx(by_row.embedded[0].omega, rel=1e-3)
     assert np.sqrt(by_group.cov[0, 0]) > np.sqrt(by_row.cov[0, 0])       # five draws of b, not 25
-    assert any("groups" in n for n in model_error(_model(), d, P0, kind="discrepancy", groups=groups).notes)
+    assert any("groups" in n for n in model_error(_model(), d, P0, kind="none", groups=groups).notes)
+    grouped = model_error(_model(), d, P0, kind="discrepancy", groups=groups)     # the discrepancy uses them too
+    assert grouped.groups == ("g1", "g2", "g3", "g4", "g5")
+    assert not any("groups" in n for n in grouped.notes)
 
 
 def test_adequate_model_mechanics():
