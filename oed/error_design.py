@@ -322,6 +322,9 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
     region_size : int                 nodes per input of a box region
     """
     fit = _checked_result(result)
+    if result.groups and result.kind == "discrepancy":
+        raise ValueError(f"result: its discrepancy has named conditions ({', '.join(map(str, result.groups))}); a design "
+                         "for runs in one of them is not implemented: compute the model error without groups")
     if criterion not in CRITERIA:
         raise ValueError(f"criterion: expected one of {CRITERIA}, got {criterion!r}")
     names = tuple(fit.model.inputs)

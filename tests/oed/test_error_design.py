@@ -323,3 +323,11 @@ def test_embedded_error_after_runs_equals_brute_force(case):
     want = np.einsum("rkp,pq,rkq->rk", gt, C + Om, gt)
     prob = error_design_problem(res, CAND, region=REGION)
     np.testing.assert_allclose(prob.variances(new), want, rtol=1e-9)
+
+
+def test_a_discrepancy_with_named_conditions_is_refused_naming_the_result(case):
+    res, data = case
+    groups = np.repeat(["day 1", "day 2"], (X.size + 1) // 2)[:X.size]
+    named = model_error(res.fit.model, data, [1.0, 0.5], kind="discrepancy", groups=groups)
+    with pytest.raises(ValueError, match="result: its discrepancy has named conditions"):
+        select_error_design(named, CAND, 1, region=REGION)
