@@ -139,13 +139,15 @@ def ranking(results):
 
 def quantify_text(study, results) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model; then which variant to predict with."""
+    pooled held-out coverage with and without the error model; then which variant to predict with and the
+    verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
+    :mod:`identification.studies.model_ranking`)."""
     units = sensor_units(study)
     blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
     rank = ranking(results)
     if rank is not None:
-        blocks.append("Ranking: " + rank.sentence())
+        blocks.append("Ranking: " + rank.sentence() + "\nVerdict: " + rank.verdict())
     sens = ", ".join(results.design_sensors) if results.design_sensors else "all"
     head = f"Model error (sensors {sens}; {results.design_how or 'as configured'})"
     return head + "\n\n" + "\n\n".join(blocks)

@@ -34,6 +34,10 @@ def test_writes_both_files_with_the_keys(press_quantify):
     assert set(d) == {"sensors", "design_how", "variants", "errors", "ranking"}
     assert d["ranking"]["use"] in {"M1", "M2", "M3"} and len(d["ranking"]["rows"]) == 3 and d["ranking"]["comparable"]
     assert set(d["variants"]) == {"M1", "M2", "M3"} and d["errors"] == {}
+    rank = d["ranking"]                                # issue 29 item 2: the margin's standard error, the verdict
+    assert rank["margin_se"] > 0 and len(rank["split_margins"]) == 4
+    assert rank["verdict"].startswith("choose " if rank["decided"] else "a tie within 2 SE")
+    assert rank["decided"] == (rank["margin"] > 2 * rank["margin_se"])
     assert d["sensors"] == ["F_x", "B0_y"]             # the study's E-optimal design, as in the tests
     for v, r in d["variants"].items():
         assert {"detected", "kind", "test", "heldout", "discrepancies", "embedded_parameters", "pooled_coverage",
@@ -58,6 +62,9 @@ def test_text_file_has_the_summary_per_variant(press_quantify):
         assert f"{v}: model error DETECTED" in text
         assert f"---- {v} in full ----\nModel error of " in text     # the full ModelErrorResult.summary()
     assert "without the model error" in text and " um " in text
+    rank = json.loads((out / "quantify.json").read_text())["ranking"]
+    assert f"Ranking: {rank['sentence']}\nVerdict: {rank['verdict']}" in text
+    assert "standard error over 4 splits" in rank["verdict"]
 
 
 def test_a_time_series_study_is_no_longer_refused():
