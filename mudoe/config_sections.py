@@ -378,6 +378,8 @@ class ReportConfig:
     #: which fitted models get the pages "Uncertainty of ..." (profile intervals, likelihood regions):
     #: "untrusted" those whose linearisation is not trustworthy, "all", or "none"
     uncertainty: str = config_key("untrusted", choices=("untrusted", "all", "none"))
+    #: the pages "Model error of ..." of every variant (issue 29; each costs a model_error with its held-out table)
+    model_error: bool = True
 
 
 @dataclass(frozen=True)

@@ -249,7 +249,10 @@ def run_model_error_views(study, results):
 def run_model_error_pages(study, results, progress=None):
     """``results`` with the model error of every variant and what its report pages draw
     (:func:`run_model_error`, :func:`run_model_error_views`); a study-wide failure and each variant's failure
-    become notes of the results, never an error of the report."""
+    become notes of the results, never an error of the report.  ``[report] model_error = false``: nothing
+    computed, a note says the pages were skipped."""
+    if not study.cfg.report.model_error:
+        return results.with_note("model-error pages skipped ([report] model_error = false)")
     try:
         results = run_model_error_views(study, run_model_error(study, results, progress))
     except (MissingPieceError, FitFailedError) as exc:

@@ -146,3 +146,28 @@ def test_curve_labels_name_few_inputs_and_number_control_profiles():
     assert curve_labels(plain, [[2.0], [4.0]]) == ("F = 2", "F = 4")
     driven = SimpleNamespace(inputs=("TL",) + tuple(f"u{k}" for k in range(10)), controls=("u",))
     assert curve_labels(driven, [[0.0] * 11, [0.02] * 11]) == ("experiment 1", "experiment 2")
+
+
+def test_report_model_error_switch_reads_true_or_false_and_names_file_line_and_key():
+    from mudoe.config import ConfigError, parse_config
+    assert parse_config("", "s.toml").report.model_error is True           # default: the pages are drawn
+    assert parse_config("[report]\nmodel_error = false\n", "s.toml").report.model_error is False
+    for bad in ('"no"', "0", "[true]"):
+        with pytest.raises(ConfigError) as ei:
+            parse_config(f'[report]\ntitle = "x"\nmodel_error = {bad}\n', "study.toml")
+        msg = str(ei.value)
+        assert "study.toml:3:" in msg and "model_error:" in msg and "expected true or false" in msg
+
+
+def test_report_model_error_false_skips_the_computation_with_a_note():
+    """``[report] model_error = false``: run_model_error_pages computes nothing and says so."""
+    import dataclasses
+    from mudoe.config import load_config
+    from mudoe.model_error_runs import run_model_error_pages
+    from mudoe.study import StudyResults, prepare
+    cfg = load_config(REPO / "configs" / "cstr.toml")
+    cfg = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, model_error=False))
+    study = prepare(cfg)
+    out = run_model_error_pages(study, StudyResults(study))
+    assert not out.model_error and not out.model_error_views and not out.model_error_errors
+    assert "model-error pages skipped ([report] model_error = false)" in out.notes
