@@ -194,6 +194,8 @@ def rank_models(results: Mapping) -> ModelRanking:
     Returns
     -------
     ModelRanking
+        With the margin's standard error over the splits (``margin_se``, ``split_margins``) and its verdict
+        (module docstring).
 
     Raises
     ------
@@ -227,5 +229,6 @@ def rank_models(results: Mapping) -> ModelRanking:
         paired = _split_margins(results[first.variant], kind[first.variant], results[second.variant],
                                 kind[second.variant])
         se = _margin_se(paired)
-    return ModelRanking(tuple(rows), first.variant, first.with_error, margin, margin * first.n_values,
-                        "" if second is None else second.variant, comparable, tuple(notes), se, paired)
+    return ModelRanking(rows=tuple(rows), use=first.variant, use_error=first.with_error, margin=margin,
+                        margin_total=margin * first.n_values, runner_up="" if second is None else second.variant,
+                        comparable=comparable, notes=tuple(notes), margin_se=se, split_margins=paired)

@@ -76,8 +76,9 @@ def test_the_margin_has_a_standard_error_over_the_splits(ranking):
 
 def _ranking(margin: float, se: float, splits: int = 4, comparable: bool = True, runner_up: str = "B"):
     from identification.studies.model_ranking import ModelRanking
-    return ModelRanking((), "A", False, margin, 100 * margin, runner_up, comparable, (), se,
-                        tuple((f"s{k}", 25, margin) for k in range(splits)))
+    return ModelRanking(rows=(), use="A", use_error=False, margin=margin, margin_total=100 * margin,
+                        runner_up=runner_up, comparable=comparable, margin_se=se,
+                        split_margins=tuple((f"s{k}", 25, margin) for k in range(splits)))
 
 
 def test_the_verdict_chooses_above_two_standard_errors_and_calls_a_tie_below():
