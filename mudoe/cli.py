@@ -28,7 +28,8 @@ _COMMANDS = {
     "detect": "Algorithm 1: calibration/validation tests, alpha_min for the three statistics, verdict per model",
     "quantify": "size of the model error of every variant (static and dynamic models): test, error model, held-out coverage",
     "report": "run identify, oed and detect and build report.pdf, PNGs and results.json",
-    "validate": "Monte Carlo size study of the test (data simulated from the fitted model)",
+    "validate": "Monte Carlo size study of the test (data simulated from the fitted model), then the held-out "
+                "coverage of the variant's bands with and without its model error",
     "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",
 }
 _INIT_HELP = "write a commented study config template for your own model factory (never overwrites)"
@@ -68,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                             help="run the replications on a Dask cluster: the scheduler address printed "
                                  "by `dask scheduler`, e.g. tcp://10.0.0.5:8786 (default: [validate] "
                                  "scheduler of the config, absent: local processes)")
+            sp.add_argument("--no-model-error", action="store_true",
+                            help="skip the held-out coverage of the variant's bands with its model error "
+                                 "(default: [validate] model_error of the config, true)")
         if name == "simulate":
             sp.add_argument("--seed", type=int, default=None,
                             help="random seed (default: [simulate] seed, the press: [data] seed)")
@@ -343,6 +347,11 @@ def _validate(study, results, args, progress, out) -> int:
     results = run_validate(study, results, progress, workers=args.workers, scheduler=args.scheduler)
     obj = validation_dict(results.validation)
     text = results.validation.summary()
+    if study.cfg.validate.model_error and not args.no_model_error:
+        from .model_error_runs import validate_model_error
+        variant = study.cfg.validate.variant or next(iter(study.models))       # the one run_validate simulated
+        lines, obj["model_error"] = validate_model_error(study, results, variant, progress)
+        text += "\n\n" + lines
     _write(out, {"validate.json": dumps(obj), "validate.txt": text + "\n"})
     _emit(args, text, obj)
     return EXIT_OK

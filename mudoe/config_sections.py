@@ -349,13 +349,15 @@ class ValidateConfig:
     ``.scheduler`` (defaults: :data:`STUDY_DEFAULTS`; ``scheduler`` absent: local processes,
     else a Dask scheduler address "tcp://HOST:8786", README "Running on several machines").
     ``variant`` (study only): the model variant simulated and tested
-    ("" = the first listed).
+    ("" = the first listed).  ``model_error`` (study only): ``mudoe validate`` also reports the held-out
+    coverage of the variant's bands with and without its model error (:mod:`mudoe.model_error_runs`).
     """
 
     n_runs: int = setting(MonteCarloSettings, "n_rep")
     seed: int = setting(MonteCarloSettings, "seed", bounds=NON_NEGATIVE)
     scheduler: str | None = setting(MonteCarloSettings, "scheduler")
     variant: str = ""
+    model_error: bool = True
 
     def settings(self, tol: float, workers: int | None = None, progress: bool = True,
                  normality_correction: str = "holm") -> MonteCarloSettings:
@@ -378,6 +380,8 @@ class ReportConfig:
     #: which fitted models get the pages "Uncertainty of ..." (profile intervals, likelihood regions):
     #: "untrusted" those whose linearisation is not trustworthy, "all", or "none"
     uncertainty: str = config_key("untrusted", choices=("untrusted", "all", "none"))
+    #: the pages "Model error of ..." of every variant (issue 29; each costs a model_error with its held-out table)
+    model_error: bool = True
 
 
 @dataclass(frozen=True)

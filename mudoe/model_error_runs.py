@@ -21,11 +21,13 @@ from .study_base import FitFailedError, MissingPieceError, Progress, design_sens
 from .units import convert
 
 __all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
-           "quantify_dict", "model_error_view", "run_model_error_views"]
+           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error"]
 
-def run_model_error(study, results, progress=None, alpha: float = 0.05):
+def run_model_error(study, results, progress=None, alpha: float = 0.05, variants=None, embedded: bool = True):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
-    sensors of the tests, and ``model_error_errors``: {variant: reason} of the failed ones.
+    sensors of the tests, and ``model_error_errors``: {variant: reason} of the failed ones; ``variants`` those
+    computed (None: every variant), ``embedded`` False skips the embedded error fitted beside another chosen
+    error model (which parameters would carry it).
 
     Raises
     ------
@@ -41,11 +43,13 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05):
     done, failed = dict(results.model_error), dict(results.model_error_errors)
     embedded = dict(results.model_error_embedded)
     for v, m in study.models.items():
+        if variants is not None and v not in variants:
+            continue
         with progress.step(f"model error of {v}"):
             try:
                 r = model_error(m, study.data[v], start_values(study, v), splits=study.splits, weights=w,
                                 alpha=alpha)
-                if r.kind != "embedded":          # which parameters would carry it (all data, no splits)
+                if embedded and r.kind != "embedded":          # which parameters would carry it (all data, no splits)
                     embedded[v] = model_error(m, study.data[v], start_values(study, v), kind="embedded", weights=w,
                                               alpha=alpha)
                 done[v] = r
@@ -139,13 +143,15 @@ def ranking(results):
 
 def quantify_text(study, results) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model; then which variant to predict with."""
+    pooled held-out coverage with and without the error model; then which variant to predict with and the
+    verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
+    :mod:`identification.studies.model_ranking`)."""
     units = sensor_units(study)
     blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
     rank = ranking(results)
     if rank is not None:
-        blocks.append("Ranking: " + rank.sentence())
+        blocks.append("Ranking: " + rank.sentence() + "\nVerdict: " + rank.verdict())
     sens = ", ".join(results.design_sensors) if results.design_sensors else "all"
     head = f"Model error (sensors {sens}; {results.design_how or 'as configured'})"
     return head + "\n\n" + "\n\n".join(blocks)
@@ -172,6 +178,41 @@ def quantify_dict(study, results) -> dict:
     rank = ranking(results)
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
             "errors": dict(results.model_error_errors), "ranking": None if rank is None else rank.to_dict()}
+
+
+# ---------------------------------------------------------------------------- mudoe validate
+def validate_model_error(study, results, variant: str, progress=None) -> tuple:
+    """(text, dict) of ``mudoe validate``'s lines on the model error of the validated ``variant`` on the study's
+    data: the held-out coverage of its (1 - alpha) new-reading bands without and with its model error, pooled and
+    per split, as :func:`run_model_error` computes it (kind auto, the study's splits and test sensors; the embedded
+    error beside another chosen error model is not fitted); a failure is a line of the text and the dict's
+    ``error``, never an error of the command."""
+    out = {"variant": variant, "error": None}
+    if study.kind.model_error_refusal:
+        out["error"] = study.kind.model_error_refusal
+    else:
+        results = run_model_error(study, results, progress, variants=(variant,), embedded=False)
+        out["error"] = results.model_error_errors.get(variant)
+    if out["error"] is not None:
+        return f"Held-out coverage with the model error of {variant}: not computed: {out['error']}", out
+    r = results.model_error[variant]
+    n = sum(h.n_values for h in r.heldout)
+    out.update(detected=r.detected, p_value=r.test.p_value, kind=r.kind, alpha=r.alpha, sensors=list(r.sensors),
+               n_values=n, coverage_plain=pooled_coverage(r, "none"), coverage_with_error=pooled_coverage(r, r.kind),
+               splits=[dict(split=h.split, n_values=h.n_values, coverage_plain=h.coverage_plain,
+                            coverage_with_error=h.coverage(r.kind), widening=h.widening(r.kind)) for h in r.heldout])
+    level = f"{100 * (1 - r.alpha):g} %"
+    head = (f"Held-out coverage of {variant}'s {level} new-reading bands on the study's data (model_error, kind auto; "
+            f"sensors {', '.join(r.sensors)}): model error {'DETECTED' if r.detected else 'not detected'} "
+            f"(p = {r.test.p_value:.3g}), error model: {r.kind}")
+    if not r.heldout:
+        return head + "\n  no splits: no held-out coverage", out
+    lines = [head, f"  pooled: {100 * out['coverage_plain']:.1f} % without the model error, "
+                   f"{100 * out['coverage_with_error']:.1f} % with it ({r.kind}), {n} readings in {len(r.heldout)} "
+                   "split(s)"]
+    lines += [f"  {h.split}: {100 * h.coverage_plain:.1f} % -> {100 * h.coverage(r.kind):.1f} % ({h.n_values} readings, "
+              f"band x {h.widening(r.kind):.2f})" for h in r.heldout]
+    return "\n".join(lines), out
 
 
 # ---------------------------------------------------------------------------- what the report's pages draw
@@ -247,7 +288,10 @@ def run_model_error_views(study, results):
 def run_model_error_pages(study, results, progress=None):
     """``results`` with the model error of every variant and what its report pages draw
     (:func:`run_model_error`, :func:`run_model_error_views`); a study-wide failure and each variant's failure
-    become notes of the results, never an error of the report."""
+    become notes of the results, never an error of the report.  ``[report] model_error = false``: nothing
+    computed, a note says the pages were skipped."""
+    if not study.cfg.report.model_error:
+        return results.with_note("model-error pages skipped ([report] model_error = false)")
     try:
         results = run_model_error_views(study, run_model_error(study, results, progress))
     except (MissingPieceError, FitFailedError) as exc:

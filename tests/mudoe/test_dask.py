@@ -62,7 +62,8 @@ def test_same_numbers_serial_and_dask_from_the_study(campaign_dirs, cluster):
 def test_cli_flag_and_config_key_reach_the_cluster(campaign_dirs, cluster, capsys, tmp_path):
     out = tmp_path / "out"
     addr = cluster.scheduler_address
-    rc = main(["validate", str(campaign_dirs["paper_cfg"]), "--runs", "1", "--scheduler", addr, "--out", str(out)])
+    rc = main(["validate", str(campaign_dirs["paper_cfg"]), "--runs", "1", "--scheduler", addr, "--out", str(out),
+               "--no-model-error"])
     text, err = _lines(capsys)
     assert rc == 0, err
     assert f"dask ({addr}, 2 workers)" in (out / "validate.txt").read_text()
@@ -70,7 +71,7 @@ def test_cli_flag_and_config_key_reach_the_cluster(campaign_dirs, cluster, capsy
     cfg = tmp_path / "key.toml"
     cfg.write_text(campaign_dirs["paper_cfg"].read_text() + f'\n[validate]\nn_runs = 1\nscheduler = "{addr}"\n')
     out2 = tmp_path / "out2"
-    rc = main(["validate", str(cfg), "--out", str(out2), "--quiet"])
+    rc = main(["validate", str(cfg), "--out", str(out2), "--quiet", "--no-model-error"])
     _lines(capsys)
     assert rc == 0 and f"dask ({addr}, 2 workers)" in (out2 / "validate.txt").read_text()
 

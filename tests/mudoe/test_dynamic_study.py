@@ -73,6 +73,7 @@ def test_reactor_study_end_to_end(tmp_path, capsys):
     assert det["verdicts"]["isothermal"] in ("not rejected", "rejected", "undecided")
     rc, text, _ = _run(capsys, "validate", str(cfg), "--out", str(out), "--runs", "3", "--json")
     assert rc == 0 and json.loads(text)["n_rep"] == 3          # every split, on the collocation
+    assert json.loads(text)["model_error"]["variant"] == "isothermal"     # the held-out coverage, issue 29
     # the time-window split's replications are decided (its coverage is a number); the "cool vs hot"
     # split of this three-experiment config validates on one temperature, where E1, E2 are not identifiable
     cov = json.loads(text)["coverage"]["isothermal/t < 0.7 vs t >= 0.7"]

@@ -34,6 +34,10 @@ def test_writes_both_files_with_the_keys(press_quantify):
     assert set(d) == {"sensors", "design_how", "variants", "errors", "ranking"}
     assert d["ranking"]["use"] in {"M1", "M2", "M3"} and len(d["ranking"]["rows"]) == 3 and d["ranking"]["comparable"]
     assert set(d["variants"]) == {"M1", "M2", "M3"} and d["errors"] == {}
+    rank = d["ranking"]                                # issue 29 item 2: the margin's standard error, the verdict
+    assert rank["margin_se"] > 0 and len(rank["split_margins"]) == 4
+    assert rank["verdict"].startswith("choose " if rank["decided"] else "a tie within 2 SE")
+    assert rank["decided"] == (rank["margin"] > 2 * rank["margin_se"])
     assert d["sensors"] == ["F_x", "B0_y"]             # the study's E-optimal design, as in the tests
     for v, r in d["variants"].items():
         assert {"detected", "kind", "test", "heldout", "discrepancies", "embedded_parameters", "pooled_coverage",
@@ -59,6 +63,9 @@ def test_text_file_has_the_summary_per_variant(press_quantify):
         assert f"{v}: model error DETECTED" in text
         assert f"---- {v} in full ----\nModel error of " in text     # the full ModelErrorResult.summary()
     assert "without the model error" in text and " um " in text
+    rank = json.loads((out / "quantify.json").read_text())["ranking"]
+    assert f"Ranking: {rank['sentence']}\nVerdict: {rank['verdict']}" in text
+    assert "standard error over 4 splits" in rank["verdict"]
 
 
 def test_a_time_series_study_is_no_longer_refused():
@@ -140,3 +147,28 @@ def test_curve_labels_name_few_inputs_and_number_control_profiles():
     assert curve_labels(plain, [[2.0], [4.0]]) == ("F = 2", "F = 4")
     driven = SimpleNamespace(inputs=("TL",) + tuple(f"u{k}" for k in range(10)), controls=("u",))
     assert curve_labels(driven, [[0.0] * 11, [0.02] * 11]) == ("experiment 1", "experiment 2")
+
+
+def test_report_model_error_switch_reads_true_or_false_and_names_file_line_and_key():
+    from mudoe.config import ConfigError, parse_config
+    assert parse_config("", "s.toml").report.model_error is True           # default: the pages are drawn
+    assert parse_config("[report]\nmodel_error = false\n", "s.toml").report.model_error is False
+    for bad in ('"no"', "0", "[true]"):
+        with pytest.raises(ConfigError) as ei:
+            parse_config(f'[report]\ntitle = "x"\nmodel_error = {bad}\n', "study.toml")
+        msg = str(ei.value)
+        assert "study.toml:3:" in msg and "model_error:" in msg and "expected true or false" in msg
+
+
+def test_report_model_error_false_skips_the_computation_with_a_note():
+    """``[report] model_error = false``: run_model_error_pages computes nothing and says so."""
+    import dataclasses
+    from mudoe.config import load_config
+    from mudoe.model_error_runs import run_model_error_pages
+    from mudoe.study import StudyResults, prepare
+    cfg = load_config(REPO / "configs" / "cstr.toml")
+    cfg = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, model_error=False))
+    study = prepare(cfg)
+    out = run_model_error_pages(study, StudyResults(study))
+    assert not out.model_error and not out.model_error_views and not out.model_error_errors
+    assert "model-error pages skipped ([report] model_error = false)" in out.notes
