@@ -15,6 +15,8 @@ import numpy as np
 
 from identification import model_error, rank_models
 from identification.errors import IdentificationError
+from identification.studies.model_error import unseen_rows
+from identification.studies.model_error_result import NEW_CONDITION
 
 from .config import ConfigError
 from .study_base import FitFailedError, MissingPieceError, Progress, design_sensors, start_values
@@ -263,8 +265,11 @@ def model_error_view(study, results, variant: str):
         cal, val = split.calibration(data), split.validation(data)
         w = np.array([1.0 if s in r.sensors else 0.0 for s in study.sensors])
         kinds = ("none",) if r.kind == "none" else ("none", r.kind)
+        unseen = unseen_rows(split, data)            # as the held-out table predicts them: a new draw of the error
+        condition = [NEW_CONDITION if u else None for u in unseen]
         bands = [model_error(m, cal, start_values(study, variant), kind=k, weights=w, alpha=r.alpha)
-                 .predict(val.inputs, r.alpha, new_reading=True) for k in kinds]
+                 .predict(val.inputs, r.alpha, new_reading=True,
+                          condition=condition if k == "discrepancy" else None) for k in kinds]
         mean = bands[0].mean[:, cols]
         rel = [tuple(_to_file_z(study, getattr(b, a)[:, cols] - mean, cols) for a in ("lower", "upper"))
                for b in bands]
