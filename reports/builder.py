@@ -234,7 +234,9 @@ def _oed_page(results):
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
            f"{len(r.chosen)} sensors): {', '.join(r.chosen)} (green), {value}, "
            f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "
-           "The detection tests use these sensors.")
+           + ("The detection tests use these sensors." if tuple(results.design_sensors) in ((), tuple(r.chosen))
+              else f"The detection tests use {results.design_how} ({', '.join(results.design_sensors)}; next "
+                   "page)."))
     for nt in r.notes:
         txt += f"\nNote: {nt}"
     _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 1), 0.72) - 0.05, 0.12), txt, width=170, size=9)
