@@ -13,7 +13,7 @@ by :func:`oed.inputs.select_inputs` (``times=``: the collocated model on a mesh 
 with ``[oed] refine`` the chosen rows then moved continuously within the bounds, everything within ``[oed]
 time_limit`` seconds; with ``[oed] prior`` the exact robust choice over the prior
 (:func:`mudoe.robust_plans.plan_robust_exact`).  The designed experiments are valued against the current ones
-(:class:`oed.dynamic_plans.DynamicInputPlan`): the design is of new experiments, planned on its own (the
+(:class:`oed.dynamic_plans.ExperimentPlan`): the design is of new experiments, planned on its own (the
 refinement has no information of the current experiments to add to), and its value is given beside the current
 experiments', each current experiment's alone, and the two together.
 
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from oed.dynamic_plans import ApproximateTimePlan, DynamicInputPlan, ExperimentInput
+from oed.dynamic_plans import ApproximateTimePlan, ExperimentPlan, ExperimentInput
 
 from .config import ConfigError, StudyConfig, config_error
 
@@ -97,7 +97,7 @@ def design_values(model, p, rows, sigma, times, n_series: int, criterion: str) -
 
 
 def _efficiency(criterion: str, v_design: float, n_design: int, v_current: float, n_current: int, n_p: int) -> float:
-    """Efficiency per experiment of the design against the current experiments (:class:`DynamicInputPlan`)."""
+    """Efficiency per experiment of the design against the current experiments (:class:`ExperimentPlan`)."""
     if not np.isfinite(v_design):
         return 0.0
     if not np.isfinite(v_current):
@@ -123,7 +123,7 @@ def _hit(result) -> bool:
     return any("time limit" in t for t in texts)
 
 
-def input_design(cfg: StudyConfig, variant: str, model, p, Q, sigma, planned: bool, progress) -> DynamicInputPlan:
+def input_design(cfg: StudyConfig, variant: str, model, p, Q, sigma, planned: bool, progress) -> ExperimentPlan:
     """``[oed] mode = "inputs"`` of a time-series study (module docstring): the next ``n_points`` experiments at
     ``p`` (``Q`` the study's experiments, ``sigma`` per instrument, model units).
 
@@ -168,7 +168,7 @@ def input_design(cfg: StudyConfig, variant: str, model, p, Q, sigma, planned: bo
             "current + design": design_values(model, p, np.vstack([Q, designed]), sigma, times, o.n_series, crit)}
     each = _each(model, p, Q, sigma, times, o.n_series, crit)
     eff = _efficiency(crit, vals["design"], len(designed), vals["current"], len(Q), model.n_p)
-    return DynamicInputPlan(variant, planned, tuple(float(x) for x in p), tuple(model.param_names),
+    return ExperimentPlan(variant, planned, tuple(float(x) for x in p), tuple(model.param_names),
                             experiment_inputs(model), tuple(lo.tolist()), tuple(hi.tolist()),
                             tuple(tuple(r) for r in np.asarray(Q, float).tolist()),
                             tuple(tuple(r) for r in C.tolist()), labels, crit, res,

@@ -14,7 +14,7 @@ import numpy as np
 from identification.results_protocol import ResultProtocol, jsonable
 from .plan_records import RobustPlan
 
-__all__ = ["ExperimentInput", "DynamicInputPlan", "ApproximateTimePlan", "row_groups"]
+__all__ = ["ExperimentInput", "ExperimentPlan", "ApproximateTimePlan", "row_groups"]
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ def _row_text(inputs, row) -> str:
 
 
 @dataclass(frozen=True)
-class DynamicInputPlan(ResultProtocol):
+class ExperimentPlan(ResultProtocol):
     r"""The design of a time-series study's next ``n`` experiments (``[oed] mode = "inputs"``): their constants and
     control profiles within ``lower`` / ``upper``.
 

@@ -1,6 +1,6 @@
 """Report page of a time-series study's design of its next experiments (``[oed] mode = "inputs"``, issue 30 item 8).
 
-It draws what :class:`oed.dynamic_plans.DynamicInputPlan` holds: each control's profile u(t) of the designed
+It draws what :class:`oed.dynamic_plans.ExperimentPlan` holds: each control's profile u(t) of the designed
 experiments (bold) over the study's current experiments (thin, grey) within the bounds (dotted), each constant
 within its bounds (the designed value against the current ones), the table of the designed and current
 experiments' constants with each one's criterion value alone, and the text with the values of the design, of the
@@ -146,7 +146,7 @@ def _text(plan) -> str:
 
 
 def input_design_pages(plan, model) -> list:
-    """The page of ``plan`` (an :class:`oed.dynamic_plans.DynamicInputPlan`) for the dynamic ``model`` (its horizon
+    """The page of ``plan`` (an :class:`oed.dynamic_plans.ExperimentPlan`) for the dynamic ``model`` (its horizon
     and time unit), with a prior followed by the exact robust choice's page.
 
     Returns

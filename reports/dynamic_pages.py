@@ -18,7 +18,7 @@ from functools import partial
 
 import numpy as np
 
-from oed.dynamic_plans import ApproximateTimePlan, DynamicInputPlan
+from oed.dynamic_plans import ApproximateTimePlan, ExperimentPlan
 from oed.plan_records import RobustExactPlan
 
 __all__ = ["trajectory_plot", "residual_time_plot", "residual_output_plot", "control_plot", "time_design_plot",
@@ -397,7 +397,7 @@ def _design_page(results):
     from .tables import criteria_units, draw_table
     fig = _page("Sampling-time design")
     plan = results.plan
-    if isinstance(plan, (DynamicInputPlan, ApproximateTimePlan)):      # the next experiments, approximate times
+    if isinstance(plan, (ExperimentPlan, ApproximateTimePlan)):      # the next experiments, approximate times
         import matplotlib.pyplot as plt
         plt.close(fig)
         model = results.study.models[plan.variant]

@@ -367,7 +367,7 @@ def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool, progr
     :class:`oed.plan_records.DynamicDesign`, or with ``[oed] prior`` the exact robust design over the prior
     (:class:`oed.plan_records.RobustExactPlan`); with ``approximate = true`` the approximate sampling times
     (:class:`oed.dynamic_plans.ApproximateTimePlan`, :func:`mudoe.dynamic_plans.approximate_times`); with ``mode =
-    "inputs"`` the next experiments (:class:`oed.dynamic_plans.DynamicInputPlan`,
+    "inputs"`` the next experiments (:class:`oed.dynamic_plans.ExperimentPlan`,
     :func:`mudoe.dynamic_plans.input_design`)."""
     from oed.best_designs import best_designs
     from oed import information, select_sensors_from_information
@@ -411,7 +411,7 @@ def run_oed_dynamic(study, results, progress):
     with (progress.step(f"{what} design ({study.cfg.oed.criterion}, {v})") if what != "input"
           else contextlib.nullcontext()):            # the input design reports its own step
         d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False, progress=progress)
-    ranked = isinstance(d, DynamicDesign)       # the local engine's DesignResult and ranked table (else none)
+    ranked = getattr(d, "table", None) is not None   # the local engine's DesignResult and ranked table (else none)
     return dataclasses.replace(
         results, plan=d, oed=d.result if ranked else None, oed_table=d.table if ranked else None, oed_variant=v,
         design_sensors=tuple(study.sensors),
