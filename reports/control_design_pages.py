@@ -69,11 +69,17 @@ def constants_plot(plan, ax=None):
         span = hi - lo if hi > lo else 1.0
         ax.plot([0, 1], [r, r], color="0.3", lw=1.0)
         ax.text(-0.02, r, f"{inp.name}{_unit(inp.unit)}\n[{lo:.4g}, {hi:.4g}]", ha="right", va="center", fontsize=8)
+        others = [row[col] for row in plan.candidates[sum(c.startswith("experiment") for c in plan.labels):]]
+        ax.plot((np.asarray(others) - lo) / span, np.full(len(others), r), "x", color="0.75", ms=6,
+                label="random candidates" if r == 0 and others else None)
+        at = {}                                          # the current experiments, numbered, one label per value
         for j, row in enumerate(plan.current):
-            x = (row[col] - lo) / span
-            ax.plot(x, r, "o", color="0.6", ms=7, label="current experiments" if j == 0 and r == 0 else None)
-            ax.annotate(str(j + 1), (x, r), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=7,
-                        color="0.4")
+            at.setdefault(round(float(row[col]), 12), []).append(str(j + 1))
+        for value, which in at.items():
+            x = (value - lo) / span
+            ax.plot(x, r, "o", color="0.5", ms=7, label="current experiments" if r == 0 and which[0] == "1" else None)
+            ax.annotate(", ".join(which), (x, r), xytext=(0, 7), textcoords="offset points", ha="center",
+                        fontsize=7, color="0.3")
         for j, row in enumerate(plan.designed):
             ax.plot((row[col] - lo) / span, r, "D", color=_DESIGNED[j % len(_DESIGNED)], ms=9,
                     label=f"designed {j + 1}" if r == 0 else None)
@@ -82,7 +88,7 @@ def constants_plot(plan, ax=None):
     ax.set_xticks([0, 0.5, 1], ["lower", "middle", "upper"], fontsize=8)
     ax.set_yticks([])
     ax.set_title("constants within their bounds (numbers: the current experiments)", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right", bbox_to_anchor=(1.0, 1.08), ncol=2, frameon=False)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=4, frameon=False)
     for side in ("left", "right", "top"):
         ax.spines[side].set_visible(False)
     return ax.figure
@@ -130,7 +136,9 @@ def _text(plan) -> str:
            f"designed {v['current + design']:.6g} (lower is better). Efficiency per experiment of the design "
            f"against the current experiments: {plan.efficiency:.4g} (above 1: one designed experiment is worth "
            f"more than an average current one). The design is of new experiments on their own; the value "
-           f"'current + designed' is what the campaign would reach with them.")
+           f"'current + designed' is what the campaign would reach with them."
+           + (" 'inf' in the table: that experiment alone does not identify the parameters."
+              if not all(np.isfinite(plan.each)) else ""))
     for j, row in enumerate(plan.designed, 1):
         parts = [f"{i.name} = {v[0]:.5g}{' ' + i.unit if i.unit else ''}" if not i.grid else
                  f"{i.name} = [{', '.join(f'{x:.4g}' for x in v)}]{' ' + i.unit if i.unit else ''} at "
