@@ -135,7 +135,8 @@ def _title_page(results):
                               **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
     errors = "the model error of each variant, " if results.model_error_views else ""
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
-          "sampling-time design, estimates, confidence regions, alpha_min tables, " + errors + "residuals against time "
+          + ("design of the next experiments" if getattr(results.plan, "mode", "") == "inputs" else "sampling-time design")
+          + ", estimates, confidence regions, alpha_min tables, " + errors + "residuals against time "
           "and against the outputs." if s.pages == "trajectories" else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
