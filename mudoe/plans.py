@@ -89,7 +89,8 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                                   f"inputs ({', '.join(model.inputs)}); the continuous refinement moves the model's "
                                   "inputs themselves and needs a model whose one input is the set point")
             res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
-                                sensors="joint" if o.mode == "both" else None, refine=o.refine, **common)
+                                sensors="joint" if o.mode == "both" else None, refine=o.refine,
+                                time_limit=o.time_limit, **common)
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
 
 

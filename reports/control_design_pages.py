@@ -123,6 +123,8 @@ def _text(plan) -> str:
         r = plan.result
         how = (f"the exact choice ({'proven optimal' if r.proven_optimal else 'not proven optimal'}, {r.method})"
                + ("" if r.refined is None else
+                  ", the continuous refinement within the bounds (Ipopt) not finished: the exact levels are kept"
+                  if r.refined.n_failed == len(r.refined.start_values) else
                   f", then refined continuously within the bounds (Ipopt, exact CasADi derivatives, "
                   f"{len(r.refined.start_values)} starts, {r.refined.n_failed} not finished)"))
     txt = (f"{'Planned before data at the start values' if plan.planned else 'At the estimate'} of {plan.variant}, "
