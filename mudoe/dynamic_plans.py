@@ -168,12 +168,14 @@ def input_design(cfg: StudyConfig, variant: str, model, p, Q, sigma, planned: bo
             "current + design": design_values(model, p, np.vstack([Q, designed]), sigma, times, o.n_series, crit)}
     each = _each(model, p, Q, sigma, times, o.n_series, crit)
     eff = _efficiency(crit, vals["design"], len(designed), vals["current"], len(Q), model.n_p)
-    return ExperimentPlan(variant, planned, tuple(float(x) for x in p), tuple(model.param_names),
-                            experiment_inputs(model), tuple(lo.tolist()), tuple(hi.tolist()),
-                            tuple(tuple(r) for r in np.asarray(Q, float).tolist()),
-                            tuple(tuple(r) for r in C.tolist()), labels, crit, res,
-                            tuple(tuple(r) for r in designed.tolist()), vals, each, eff, float(o.time_limit),
-                            _hit(res) if res is not None else False, o.n_series, robust, notes)
+    return ExperimentPlan(variant=variant, planned=planned, p=tuple(float(x) for x in p),
+                          param_names=tuple(model.param_names), inputs=experiment_inputs(model),
+                          lower=tuple(lo.tolist()), upper=tuple(hi.tolist()),
+                          current=tuple(tuple(r) for r in np.asarray(Q, float).tolist()),
+                          candidates=tuple(tuple(r) for r in C.tolist()), labels=labels, criterion=crit, result=res,
+                          designed=tuple(tuple(r) for r in designed.tolist()), values=vals, each=each, efficiency=eff,
+                          time_limit=float(o.time_limit), time_limit_hit=_hit(res) if res is not None else False,
+                          n_series=o.n_series, robust=robust, notes=notes)
 
 
 def approximate_times(cfg: StudyConfig, variant: str, model, p, Q, sigma, planned: bool) -> ApproximateTimePlan:
