@@ -385,15 +385,15 @@ def _report(study, results, args, progress, out) -> int:
 
 def _report_results(study, results, progress):
     """Everything the report shows, computed by the study (the report only draws it)."""
-    from .study import (FitFailedError, MissingPieceError, plan_at_estimate, run_bands, run_detect, run_diagnosis,
-                        run_identify, run_oed, run_report_pages, run_uncertainty)
+    from .study import (FitFailedError, MissingPieceError, run_bands, run_detect, run_diagnosis, run_identify,
+                        run_oed, run_report_pages, run_uncertainty)
     results = run_identify(study, results, progress)
     try:
         results = run_oed(study, results, progress)
     except (MissingPieceError, FitFailedError) as exc:
         results = results.with_note(f"optimal design not available: {exc}")
     if study.cfg.oed.mode != "sensors":
-        results = dataclasses.replace(results, plan=plan_at_estimate(study, results, progress))
+        results = dataclasses.replace(results, plan=study.kind.plan_at_estimate(study, results, progress))
     try:
         results = run_detect(study, results, progress)
     except (MissingPieceError, FitFailedError) as exc:

@@ -69,6 +69,7 @@ from pathlib import Path
 
 from .checks import check_config
 from .config_errors import ConfigContext, ConfigError, EntryContext, config_error
+from .config_design import check_design_keys, read_bounds
 from .config_prior import check_robust_keys, check_robust_prior, read_prior
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
@@ -198,9 +199,11 @@ def _parse_detect(ctx, t):
 
 
 def _parse_oed(ctx, t):
-    kw = read_table(ctx, "oed", OEDConfig, t, skip=("prior",))
+    kw = read_table(ctx, "oed", OEDConfig, t, skip=("prior", "bounds"))
     if "prior" in t:
         kw["prior"] = read_prior(ctx, t["prior"])
+    if "bounds" in t:
+        kw["bounds"] = read_bounds(ctx, t["bounds"])
     o = OEDConfig(**kw)
     check_robust_prior(ctx, o)
     if o.candidates and o.candidates_range:
@@ -212,11 +215,6 @@ def _parse_oed(ctx, t):
                             f"integer count >= 1, got {list(r)}")
     if (not o.costs) != (o.budget is None):
         raise ctx.error("oed", "budget" if o.costs else "costs", "give both costs and budget, or neither")
-    if o.mode in ("inputs", "both"):
-        if o.n_points is None and not (o.prior or o.approximate):
-            raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs n_points (how many to choose)")
-        if not (o.candidates or o.candidates_range):
-            raise ctx.error("oed", "mode", f"mode = {o.mode!r} needs candidates or candidates_range")
     if o.refine and o.mode != "inputs":
         raise ctx.error("oed", "refine", f"the continuous refinement is for mode = \"inputs\" (mode is {o.mode!r})")
     _check_discrimination_keys(ctx, o)
@@ -379,10 +377,11 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     if base_dir is None:
         base_dir = Path(path).resolve().parent if path != "<string>" else Path.cwd()
     cfg = StudyConfig(**kw, path=str(path), base_dir=str(base_dir), text=text)
+    o = cfg.oed
+    check_design_keys(ctx, o, cfg.dynamic is not None, raw.get("oed", {}))
     _check_data(ctx, cfg)
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
-    o = cfg.oed
     check_robust_keys(ctx, o, cfg.dynamic is not None)
     if o.planned and not (o.candidates or o.candidates_range) and cfg.dynamic is None:   # dynamic: its experiments
         raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")

@@ -1,9 +1,12 @@
 """The robust-design keys of ``[oed]`` (issue 31): ``prior``, ``robust`` and ``approximate``.
 
 With ``mode = "sensors"`` (and ``approximate = false``) a prior gives the exact robust n-run design: a static
-study's sensors (``planned = true``) or a dynamic study's sampling times (:mod:`mudoe.robust_plans`); with
-``mode = "inputs"`` and ``n_points`` the exact robust choice of ``n_points`` candidate input rows (without
-``n_points``, or with ``approximate = true``: the robust approximate design).
+study's sensors (planned before data, or at the estimate with data) or a dynamic study's sampling times
+(:mod:`mudoe.robust_plans`); with ``mode = "inputs"`` and ``n_points`` the exact robust choice of ``n_points``
+candidate input rows (a dynamic study: experiments; a static study without ``n_points``, or with ``approximate =
+true``: the robust approximate design); with ``mode = "both"`` and ``n_points`` the exact robust choice of
+(set point, sensor) pairs.  ``approximate = true`` on a dynamic study (mode "sensors") gives the approximate
+sampling times, robust with a prior (:func:`check_robust_keys`).
 
 ``prior`` is a table, one key per uncertain parameter, its value ``[distribution, arguments...]``::
 
@@ -68,13 +71,35 @@ def check_robust_prior(ctx: ConfigContext, o) -> None:
 
 
 def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
-    """prior / approximate: the approximate design is for a static study's ``mode = "inputs"`` (without refine,
-    include, exclude, costs); a prior with ``mode = "sensors"`` (and approximate = false) asks for the exact
-    robust n-run design of a static study's sensors (planned = true) or of a dynamic study's sampling times
-    (:func:`check_exact_robust_keys`)."""
+    """prior / approximate against ``mode`` and the kind of study:
+
+    * mode "sensors", a prior, approximate = false: the exact robust n-run design of a static study's sensors
+      (planned, or at the estimate with data) or of a dynamic study's sampling times
+      (:func:`check_exact_robust_keys`);
+    * a dynamic study's mode "sensors" with approximate = true: the approximate sampling times (with a prior:
+      robust);
+    * mode "inputs": a static study's approximate design (without refine, include, exclude, costs), or with a prior
+      and n_points its exact robust choice of n_points set points; a dynamic study's exact robust choice of
+      n_points experiments (approximate designs of control profiles and the refinement under a prior are refused);
+    * mode "both" with a prior and n_points: the exact robust choice of (set point, sensor) pairs; an approximate
+      joint design is refused with what to use instead.
+    """
     if not (o.prior or o.approximate):
         return
     key = "prior" if o.prior else "approximate"
+    if o.mode == "both" and not dynamic:
+        if o.approximate:
+            raise ctx.error("oed", "approximate", "an approximate joint design of set points and sensors is not "
+                            "available: use mode = \"inputs\" with approximate = true (every sensor read at each "
+                            "support point), or approximate = false with a prior and n_points (the exact robust "
+                            "choice of (set point, sensor) pairs)")
+        if o.n_points is None:
+            raise ctx.error("oed", "prior", "with mode = \"both\" a prior gives the exact robust choice of n_points "
+                            "(set point, sensor) pairs: give n_points")
+        check_exact_robust_keys(ctx, o, dynamic)
+        return
+    if o.mode == "sensors" and dynamic and o.approximate:
+        return                              # the approximate sampling times (robust with a prior)
     if o.prior and not o.approximate and o.mode == "sensors":
         check_exact_robust_keys(ctx, o, dynamic)
         return
@@ -84,9 +109,15 @@ def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
         raise ctx.error("oed", key, f"robust and approximate designs are for mode = \"inputs\" (mode is {o.mode!r})"
                         + extra)
     if dynamic:
-        raise ctx.error("oed", key, "approximate designs of a dynamic study's sampling times are not available in "
-                        "mudoe oed (use oed.select_times(..., approximate=True, prior=...)); a prior with "
-                        "approximate = false and mode = \"sensors\" gives the exact robust sampling times")
+        if o.approximate:
+            raise ctx.error("oed", "approximate", "approximate designs of a dynamic study's experiments (control "
+                            "profiles and constants) are not available (oed.select_inputs refuses them): approximate "
+                            "= true with mode = \"sensors\" gives the approximate sampling times; a prior with "
+                            "approximate = false the exact robust choice of n_points experiments")
+        if o.refine:
+            raise ctx.error("oed", "refine", "the continuous refinement under a prior is not implemented "
+                            "(oed.select_inputs); leave refine out, or drop the prior to refine the local design")
+        return
     if o.refine:
         raise ctx.error("oed", "refine", "an approximate design already places its points on the continuous range; "
                         "leave refine out")
@@ -97,12 +128,10 @@ def check_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
 
 
 def check_exact_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
-    """The exact robust design (``prior`` with mode = "sensors", approximate = false) chooses exactly ``n`` candidates:
-    no include, exclude, costs, budget or max_sensors; a static study's is planned before data."""
-    if not dynamic and not o.planned:
-        raise ctx.error("oed", "prior", "the exact robust sensor design of a static study is planned before data "
-                        "(set planned = true with candidates): with data, the sensor design is the estimate's")
+    """The exact robust design (a prior, approximate = false) chooses exactly ``n`` candidates: no include,
+    exclude, costs, budget or max_sensors."""
     for k in ("include", "exclude", "costs", "budget", "max_sensors"):
         if getattr(o, k) not in ((), None):
             raise ctx.error("oed", k, "not used by the exact robust design (prior is given: it chooses exactly "
-                            "n_sensors candidates, or [dynamic] n_times sampling times); leave it out")
+                            "n_sensors candidates, n_points (set point, sensor) pairs, or [dynamic] n_times "
+                            "sampling times); leave it out")

@@ -306,7 +306,18 @@ class OEDConfig:
     approximate : bool             mode "inputs": the approximate design (support points, weights and the
                                    equivalence certificate) on the candidates' range instead of n_points
                                    exact points (implied by a prior without n_points; a prior with n_points
-                                   and approximate = false: the exact robust choice of n_points rows)
+                                   and approximate = false: the exact robust choice of n_points rows); a
+                                   dynamic study's mode "sensors": the approximate sampling times (weights on
+                                   the range of the candidate times, with the certificate)
+    bounds : dict                  a dynamic study's mode "inputs": {input: (lower, upper)} of its constants
+                                   and controls (model units; a control's every grid value); an input not
+                                   named: the range of the study's experiments (mudoe.config_design)
+    n_candidates : int             a dynamic study's mode "inputs": random experiments drawn within the bounds
+                                   (seeded by ``seed``) as candidates beside the study's own experiments
+    seed : int                     draws the candidate experiments
+    time_limit : float             seconds for an input design (the exact choice and the continuous
+                                   refinement, a dynamic model's mesh control included); the output says when
+                                   it was reached
     """
 
     criterion: str = config_key(DEFAULT_CRITERION, choices=("A", "D", "E"))
@@ -332,6 +343,10 @@ class OEDConfig:
     prior: dict = field(default_factory=dict)
     robust: str = config_key("", choices=("bayes", "maximin"))
     approximate: bool = False
+    bounds: dict = field(default_factory=dict)
+    n_candidates: int = config_key(8, bounds=POSITIVE)
+    seed: int = config_key(0, bounds=NON_NEGATIVE)
+    time_limit: float = config_key(60.0, bounds=POSITIVE)
 
     def candidate_points(self) -> np.ndarray:
         """The candidate set points: ``candidates``, or ``candidates_range`` = [start, stop, count]."""

@@ -60,6 +60,13 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                            "prior)"):
             return plan_robust_exact(cfg, variant, model, lambda ps: input_information(model, ps, Q, sigma, o),
                                      tuple(f"{q:g}" for q in q_set), o.n_points, p, planned, "inputs")
+    if o.prior and not o.approximate and o.mode == "both":
+        from .robust_plans import plan_robust_exact
+        labels = tuple(f"{q:g}:{s}" for q in q_set for s in model.sensors)    # model unit, as mode "inputs"
+        with progress.step(f"exact robust joint design ({o.criterion}, {variant}, {o.robust or 'bayes'} over the "
+                           "prior)"):
+            return plan_robust_exact(cfg, variant, model, lambda ps: pair_information(model, ps, Q, sigma, o),
+                                     labels, o.n_points, p, planned, "both")
     if o.prior or o.approximate:
         from .robust_plans import plan_robust
         with progress.step(f"approximate input design ({o.criterion}, {variant}"
@@ -82,7 +89,8 @@ def plan_design(cfg: StudyConfig, variant: str, model: Model, inputs_fn, p, sigm
                                   f"inputs ({', '.join(model.inputs)}); the continuous refinement moves the model's "
                                   "inputs themselves and needs a model whose one input is the set point")
             res = select_inputs(model, p, candidates=Q, sigma=sigma, n_points=o.n_points, n_series=o.n_series,
-                                sensors="joint" if o.mode == "both" else None, refine=o.refine, **common)
+                                sensors="joint" if o.mode == "both" else None, refine=o.refine,
+                                time_limit=o.time_limit, **common)
     return PlannedDesign(variant, o.mode, planned, tuple(float(x) for x in p), tuple(float(x) for x in q_set), res)
 
 
@@ -97,6 +105,13 @@ def input_information(model: Model, p, Q, sigma, o):
     ``[oed] n_series``) at ``p``, (n_Q, n_p, n_p)."""
     from oed.candidate_information import information
     return information(model, p, axis="inputs", candidates=Q, sigma=sigma, n_series=o.n_series).F
+
+
+def pair_information(model: Model, p, Q, sigma, o):
+    """Planned Gauss-Newton information of every (candidate input row, sensor) pair at ``p`` (row-major: row j's
+    sensors in the model's order, ``[oed] n_series``), (n_Q n_S, n_p, n_p)."""
+    from oed.candidate_information import information
+    return information(model, p, axis="input_pairs", candidates=Q, sigma=sigma, n_series=o.n_series).F
 
 
 def plan_without_data(cfg: StudyConfig, progress: Progress | None = None, built: dict | None = None) -> PlannedDesign:

@@ -13,6 +13,8 @@ messages name ``[oed] prior.<parameter>`` and its line).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from oed.plan_records import RobustExactPlan, RobustPlan
@@ -20,7 +22,7 @@ from .config import ConfigError, StudyConfig
 from .config_errors import ConfigContext
 from .config_prior import prior_error
 
-__all__ = ["config_prior", "plan_robust", "plan_robust_exact"]
+__all__ = ["config_prior", "plan_robust", "plan_robust_exact", "robust_sensors_at_estimate"]
 
 
 def config_prior(cfg: StudyConfig, model, p):
@@ -95,14 +97,33 @@ def plan_robust_exact(cfg: StudyConfig, variant: str, model, information_at, lab
     notes = (("the exact robust design uses the Gauss-Newton information (kind = \"second_order\" not used)",)
              if o.kind == "second_order" and not planned else ())
     if not 1 <= n <= len(labels):
-        what = {"times": "[dynamic] n_times", "inputs": "[oed] n_points"}.get(mode, "[oed] n_sensors")
+        what = {"times": "[dynamic] n_times", "inputs": "[oed] n_points", "both": "[oed] n_points"}.get(
+            mode, "[oed] n_sensors")
         raise ConfigError(f"{cfg.path}: {what}: the exact robust design chooses 1..{len(labels)} candidates, got {n}")
     try:
         r = exact_over_prior(information_at, prior, p, n, criterion=o.criterion, robust=o.robust or "bayes",
-                             names=[str(x) for x in labels])
+                             names=[str(x) for x in labels], time_limit=o.time_limit)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path}: [oed] {exc}") from None
     return RobustExactPlan(variant, mode, planned, tuple(float(x) for x in p), tuple(labels), r.design, r.local,
                            tuple(float(e) for e in r.local_efficiencies),
                            tuple(tuple(float(v) for v in row) for row in prior.points),
                            tuple(float(w) for w in prior.weights), tuple(model.param_names), notes)
+
+
+def robust_sensors_at_estimate(cfg: StudyConfig, variant: str, model, data, p, sigma) -> RobustExactPlan:
+    """``[oed] prior`` with data (mode "sensors", approximate = false): the exact robust choice of ``n_sensors``
+    (default min(n_p, number of sensors)) sensors over the prior around the estimate ``p``, each sensor's
+    Gauss-Newton information planned at the data's input rows and number of series (``data``: the study's
+    Measurements of ``variant``; ``sigma`` per sensor, model units) at every parameter vector of the prior
+    (:func:`plan_robust_exact`)."""
+    from oed import information
+    o = cfg.oed
+    Q, n_series = np.asarray(data.inputs, float), int(data.n_M)
+    n = o.n_sensors if o.n_sensors is not None else min(model.n_p, len(model.sensors))
+    plan = plan_robust_exact(cfg, variant, model, lambda ps: information(model, ps, inputs=Q, sigma=sigma,
+                                                                         n_series=n_series).F,
+                             tuple(model.sensors), n, p, False, "sensors")
+    note = (f"with data: each sensor's information at the data's {Q.shape[0]} input rows x {n_series} series "
+            "(Gauss-Newton, at every parameter vector of the prior)")
+    return dataclasses.replace(plan, notes=plan.notes + (note,))

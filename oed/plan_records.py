@@ -160,7 +160,7 @@ class RobustExactPlan(ResultProtocol):
 
     def summary(self) -> str:
         """Text of the robust design, its proof, the local design and its efficiency across the prior."""
-        what = {"times": "sampling-time", "inputs": "input"}.get(self.mode, "sensor")
+        what = {"times": "sampling-time", "inputs": "input", "both": "joint set point x sensor"}.get(self.mode, "sensor")
         head = (f"exact robust {what} design of variant {self.variant} over a prior of {len(self.prior_weights)} "
                 f"parameter vectors, nominal p = {list(self.p)} "
                 + ("(planned before data: Gauss-Newton)" if self.planned else "(at the estimate)"))

@@ -135,7 +135,8 @@ def _title_page(results):
                               **(dict(color="tab:red", weight="bold") if bad else {})) + 0.004
     errors = "the model error of each variant, " if results.model_error_views else ""
     _text(fig, 0.04, 0.045, "Contents: " + ("trajectories against time with prediction bands, normality and sigma, "
-          "sampling-time design, estimates, confidence regions, alpha_min tables, " + errors + "residuals against time "
+          + ("design of the next experiments" if getattr(results.plan, "mode", "") == "inputs" else "sampling-time design")
+          + ", estimates, confidence regions, alpha_min tables, " + errors + "residuals against time "
           "and against the outputs." if s.pages == "trajectories" else
           "measurement data and model outputs, normality and sigma, optimal sensor design, "
           "estimates, confidence regions, alpha_min tables, prediction bands, residual diagnostics, "
@@ -234,7 +235,9 @@ def _oed_page(results):
            f"at the {results.oed_variant} estimate on all study data. Chosen ({r.criterion}-criterion, exactly "
            f"{len(r.chosen)} sensors): {', '.join(r.chosen)} (green), {value}, "
            f"{'proven optimal' if r.proven_optimal else 'not proven optimal'} ({r.method}). "
-           "The detection tests use these sensors.")
+           + ("The detection tests use these sensors." if tuple(results.design_sensors) in ((), tuple(r.chosen))
+              else f"The detection tests use {results.design_how} ({', '.join(results.design_sensors)}; next "
+                   "page)."))
     for nt in r.notes:
         txt += f"\nNote: {nt}"
     _text(figs[-1], 0.04, max(0.88 - min(0.03 * (len(part) + 1), 0.72) - 0.05, 0.12), txt, width=170, size=9)

@@ -27,7 +27,7 @@ import numpy as np
 
 from oed.plan_records import RobustExactPlan, RobustPlan
 
-__all__ = ["design_pages", "robust_exact_page"]
+__all__ = ["design_pages", "robust_exact_page", "approximate_pages"]
 
 PAGE_SIZE = (11.69, 8.27)
 ROWS_PER_TABLE = 22
@@ -64,10 +64,11 @@ def design_pages(results) -> list:
     if plan.mode == "discrimination":
         return _discrimination_pages(plan, q_unit, dict(zip(model.sensors, model.sensor_units)))
     if isinstance(plan, RobustPlan):
-        return _approximate_pages(plan, q_unit)
+        return approximate_pages(plan, f"set point{f' ({q_unit})' if q_unit else ''}")
     if isinstance(plan, RobustExactPlan):
-        return [robust_exact_page(plan, f"set point{f' ({q_unit})' if q_unit else ''}" if plan.mode == "inputs"
-                                  else "")]
+        label = {"inputs": f"set point{f' ({q_unit})' if q_unit else ''}",
+                 "both": f"(set point{f' ({q_unit})' if q_unit else ''}, sensor) pair"}.get(plan.mode, "")
+        return [robust_exact_page(plan, label)]
     return _input_pages(plan, q_unit, list(model.sensors))
 
 
@@ -148,15 +149,15 @@ def _pair_grid(ax, cand, r, q_unit: str, names: list) -> None:
 
 
 # ---------------------------------------------------------------------------- approximate (issue 31)
-def _approximate_pages(plan, q_unit: str) -> list:
-    """The approximate design: its sensitivity function (the certificate), the design, and with a prior the local
-    design's efficiency across the prior against the robust one."""
+def approximate_pages(plan, x_label: str, what: str = "input") -> list:
+    """The approximate design (of input set points, or of a dynamic study's sampling times: ``what``
+    "sampling-time"; ``x_label`` the axis with its unit): its sensitivity function (the certificate), the design,
+    and with a prior the local design's efficiency across the prior against the robust one."""
     from .approx_figures import efficiency_curve, sensitivity_plot
     from .tables import draw_table
     d, local = plan.design, plan.local
     kind = {"local": "local", "bayes": "pseudo-Bayesian", "maximin": "maximin"}.get(d.robust, d.robust)
-    fig = _page(f"Approximate input design ({d.criterion}, {kind}, {plan.variant})")
-    x_label = f"set point{f' ({q_unit})' if q_unit else ''}"
+    fig = _page(f"Approximate {what} design ({d.criterion}, {kind}, {plan.variant})")
     wide = local is None
     sensitivity_plot(np.asarray(d.checked)[:, 0], d.sensitivity, d.reference, np.asarray(d.points)[:, 0], x_label,
                      ax=fig.add_axes([0.07, 0.50, 0.86 if wide else 0.40, 0.38]))
@@ -169,15 +170,17 @@ def _approximate_pages(plan, q_unit: str) -> list:
     shown = rows[:ROWS_PER_TABLE // 2]
     h = min(0.03 * (len(shown) + 1), 0.30)
     draw_table(fig.add_axes([0.04, 0.38 - h, 0.34, h]), head, shown, fontsize=8)
-    _text(fig, 0.42, 0.38, _approximate_text(plan, kind), width=90)
+    _text(fig, 0.42, 0.38, _approximate_text(plan, kind, what), width=90)
     return [fig]
 
 
-def _approximate_text(plan, kind: str) -> str:
+def _approximate_text(plan, kind: str, what: str = "input") -> str:
     d = plan.design
+    over = ("the range of the candidate times, for the study's experiments (every instrument read at each time)"
+            if what == "sampling-time" else "the candidates' range")
     txt = (f"{'Planned before data at the start values' if plan.planned else 'At the estimate'} of {plan.variant}, "
            f"p = ({', '.join(f'{v:.6g}' for v in plan.p)}); {kind} {d.criterion}-optimal approximate design over "
-           f"the candidates' range, {d.prior.n} parameter vector{'s' if d.prior.n > 1 else ''}"
+           f"{over}, {d.prior.n} parameter vector{'s' if d.prior.n > 1 else ''}"
            f"{f' ({d.prior.rule} rule)' if d.prior.n > 1 else ''}.\n\n"
            f"Certificate (equivalence theorem): the sensitivity function's maximum over the {len(d.sensitivity)} "
            f"checked points is {d.sensitivity_max:.9g} against its optimum value {d.reference:.9g} (gap "
@@ -204,7 +207,7 @@ def robust_exact_page(plan, axis_label: str = "") -> object:
     from .approx_figures import efficiency_curve
     d, local = plan.design, plan.local
     kind = {"bayes": "pseudo-Bayesian", "maximin": "maximin"}.get(d.robust, d.robust)
-    what = {"times": "sampling-time", "inputs": "input"}.get(plan.mode, "sensor")
+    what = {"times": "sampling-time", "inputs": "input", "both": "joint set point x sensor"}.get(plan.mode, "sensor")
     fig = _page(f"Exact robust {what} design ({d.criterion}, {kind}, {plan.variant})")
     ax = fig.add_axes([0.07, 0.50, 0.40, 0.38])
     labels = list(plan.candidates)

@@ -18,6 +18,7 @@ from functools import partial
 
 import numpy as np
 
+from oed.dynamic_plans import ApproximateTimePlan, ExperimentPlan
 from oed.plan_records import RobustExactPlan
 
 __all__ = ["trajectory_plot", "residual_time_plot", "residual_output_plot", "control_plot", "time_design_plot",
@@ -396,6 +397,15 @@ def _design_page(results):
     from .tables import criteria_units, draw_table
     fig = _page("Sampling-time design")
     plan = results.plan
+    if isinstance(plan, (ExperimentPlan, ApproximateTimePlan)):      # the next experiments, approximate times
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        model = results.study.models[plan.variant]
+        if isinstance(plan, ApproximateTimePlan):
+            from .design_pages import approximate_pages
+            return approximate_pages(plan, f"time{_unit(model.time_unit)}", "sampling-time")
+        from .control_design_pages import input_design_pages
+        return input_design_pages(plan, model)
     if plan is None or plan.mode != "times":
         _text(fig, 0.04, 0.85, "Not available: " + "; ".join(n for n in results.notes if "design" in n), size=10)
         return fig

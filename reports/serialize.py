@@ -14,6 +14,7 @@ import json
 import platform
 
 from identification.results_protocol import jsonable
+from oed.dynamic_plans import ExperimentPlan
 
 from .tables import ALL_SERIES, normality_labels, sigma_display
 
@@ -100,6 +101,8 @@ def results_dict(results) -> dict:
         out["oed"] = oed_dict(results.oed, results.oed_table, results.oed_variant)
     if results.plan is not None and results.plan.mode == "times":    # a dynamic study's sampling times
         out["time_design"] = results.plan.to_dict()
+    if isinstance(results.plan, ExperimentPlan):                # a dynamic study's next experiments
+        out["input_design"] = results.plan.to_dict()
     if results.discretisation:                                  # a dynamic study: the mesh of each fit
         out["discretisation"] = {v: dataclasses.asdict(m) for v, m in results.discretisation.items()}
     if results.detection is not None:

@@ -78,6 +78,11 @@ class StudyKind:
         """``mudoe oed``: (text of oed.txt, the object of oed.json)."""
         raise NotImplementedError
 
+    def plan_at_estimate(self, study, results, progress):
+        """The design of ``[oed] mode`` inputs / both / discrimination at the estimate for the report (a record of
+        :mod:`oed.plan_records`), after :meth:`run_oed`; None when there is none."""
+        raise NotImplementedError
+
     def diagnose(self, study, results, progress):
         """``results`` with the diagnostic split family (unchanged where the kind has none)."""
         raise NotImplementedError

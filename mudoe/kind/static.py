@@ -177,8 +177,18 @@ def sensor_design(study: Study, results: StudyResults, progress: Progress) -> St
         table = design_rows(F, S if o.kind == "second_order" else None, study.sensors, o.min_sensors or n_default,
                             res, o.criterion, kind=o.kind)
     how = f"{o.criterion}-optimal ({o.kind} covariance) design of {len(res.sensors)} sensors at the {v} estimate"
-    return dataclasses.replace(results, oed=res, oed_table=table, oed_variant=v, design_sensors=tuple(res.sensors),
-                               design_how=how)
+    results = dataclasses.replace(results, oed=res, oed_table=table, oed_variant=v, design_sensors=tuple(res.sensors),
+                                  design_how=how)
+    if not o.prior:
+        return results
+    from ..robust_plans import robust_sensors_at_estimate      # [oed] prior with data: the exact robust design
+    sigma = study.sigma if study.sigma is not None else est.sigma
+    with progress.step(f"exact robust sensor design ({o.criterion}, {v}, {o.robust or 'bayes'} over the prior)"):
+        plan = robust_sensors_at_estimate(study.cfg, v, study.models[v], study.data[v], est.p, sigma)
+    kind = "pseudo-Bayesian" if plan.design.robust == "bayes" else "maximin"
+    return dataclasses.replace(results, plan=plan, design_sensors=tuple(plan.design.names),
+                               design_how=f"the exact {kind} {o.criterion}-optimal design of {len(plan.design.names)} "
+                                          f"sensors over the [oed] prior around the {v} estimate")
 
 
 # ---------------------------------------------------------------------------- simulate
@@ -407,7 +417,16 @@ class StaticKind(StudyKind):
             plan = plan_at_estimate(study, results, progress)
             return plan.summary(), plan.to_dict()
         results = run_oed(study, results, progress)
-        return oed_table_text(results), oed_dict(results.oed, results.oed_table, results.oed_variant)
+        local = oed_dict(results.oed, results.oed_table, results.oed_variant)
+        if results.plan is None:
+            return oed_table_text(results), local
+        text = (results.plan.summary() + "\n\nThe local sensor design at the estimate (the information of the data, "
+                f"{study.cfg.oed.kind} covariance):\n" + oed_table_text(results))
+        return text, dict(results.plan.to_dict(), sensor_design=local)
+
+    def plan_at_estimate(self, study, results, progress):
+        """:func:`mudoe.plans.plan_at_estimate` (the design of mode inputs / both / discrimination)."""
+        return plan_at_estimate(study, results, progress)
 
     def diagnose(self, study, results, progress):
         from ..diagnosis_runs import diagnose

@@ -28,6 +28,7 @@ quantile), and the mesh of each fit.  :class:`TimeSeriesKind` is this kind's
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import hashlib
@@ -50,14 +51,14 @@ from models.contract import ModelError, Parameter
 from models.fileio import atomic_write_texts
 from models.sensitivity import sensitivities
 from models.state import solve_states
-from oed.plan_records import DynamicDesign, RobustExactPlan
+from oed.plan_records import DynamicDesign
 
 from ..config import ConfigError, StudyConfig, config_error
 from ..config_errors import entry_error, table_line
 from ..data_io import DataFileError
 from ..parameter_units import model_parameters
 from ..model_error_runs import run_model_error_pages
-from ..study_base import Study, oed_variant, require_fit
+from ..study_base import Progress, Study, oed_variant, require_fit
 from ..units import UnitError, convert
 from .base import Simulation, StudyKind
 from .long_csv import read_long_csv, write_long_csv
@@ -361,18 +362,28 @@ def simulate_dynamic(cfg: StudyConfig, built: dict, seed: int | None = None) -> 
 
 
 # ---------------------------------------------------------------------------- the sampling-time design, the pages
-def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool):
+def time_design(cfg, variant: str, model, p, inputs, sigma, planned: bool, progress=None):
     """The [oed] criterion's design of [dynamic] n_times candidate times (or pairs) at p: a
     :class:`oed.plan_records.DynamicDesign`, or with ``[oed] prior`` the exact robust design over the prior
-    (:class:`oed.plan_records.RobustExactPlan`)."""
+    (:class:`oed.plan_records.RobustExactPlan`); with ``approximate = true`` the approximate sampling times
+    (:class:`oed.dynamic_plans.ApproximateTimePlan`, :func:`mudoe.dynamic_plans.approximate_times`); with ``mode =
+    "inputs"`` the next experiments (:class:`oed.dynamic_plans.ExperimentPlan`,
+    :func:`mudoe.dynamic_plans.input_design`)."""
     from oed.best_designs import best_designs
     from oed import information, select_sensors_from_information
     dyn, o = cfg.dynamic, cfg.oed
-    if o.mode != "sensors":
+    if o.mode not in ("sensors", "inputs"):
         raise ConfigError(f"{cfg.path}: [oed] mode = {o.mode!r}: a dynamic study designs sampling times "
-                          "([dynamic] n_times, candidate_times, pairs); leave mode at \"sensors\"")
+                          "([dynamic] n_times, candidate_times, pairs; mode = \"sensors\") or its next experiments "
+                          "(mode = \"inputs\")")
     if sigma is None:
         raise ConfigError(f"{cfg.path}: [[sensors]] a sampling-time design needs every instrument's sigma")
+    if o.mode == "inputs":
+        from ..dynamic_plans import input_design
+        return input_design(cfg, variant, model, p, inputs, sigma, planned, progress or Progress(False))
+    if o.approximate:
+        from ..dynamic_plans import approximate_times
+        return approximate_times(cfg, variant, model, p, inputs, sigma, planned)
     cand = np.asarray(dyn.candidates(), float)
     axis = "pairs" if dyn.pairs else "times"
     info = information(model, p, axis=axis, times=cand, inputs=inputs, sigma=sigma)
@@ -396,14 +407,16 @@ def run_oed_dynamic(study, results, progress):
     est = results.estimates[v]
     sigma = (study.sigma if study.sigma is not None
              else instrument_sigma(study.sensors, est.sigma, readings=est.sensors))
-    with progress.step(f"sampling-time design ({study.cfg.oed.criterion}, {v})"):
-        d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False)
-    robust = isinstance(d, RobustExactPlan)          # (no DesignResult nor ranked table of the local engine)
+    what = "input" if study.cfg.oed.mode == "inputs" else "sampling-time"
+    with (progress.step(f"{what} design ({study.cfg.oed.criterion}, {v})") if what != "input"
+          else contextlib.nullcontext()):            # the input design reports its own step
+        d = time_design(study.cfg, v, study.models[v], est.p, study.inputs, sigma, planned=False, progress=progress)
+    ranked = getattr(d, "table", None) is not None   # the local engine's DesignResult and ranked table (else none)
     return dataclasses.replace(
-        results, plan=d, oed=None if robust else d.result, oed_table=None if robust else d.table, oed_variant=v,
+        results, plan=d, oed=d.result if ranked else None, oed_table=d.table if ranked else None, oed_variant=v,
         design_sensors=tuple(study.sensors),
-        design_how="all instruments at every sampling time of the data (the sampling-time design is for the next "
-                   "campaign)")
+        design_how=f"all instruments at every sampling time of the data (the {what} design is for the next "
+                   f"{'experiments' if what == 'input' else 'campaign'})")
 
 
 def plan_dynamic(cfg, built: dict, progress) -> DynamicDesign:
@@ -417,8 +430,10 @@ def plan_dynamic(cfg, built: dict, progress) -> DynamicDesign:
         line = table_line(cfg.text, "sensors", names.index(s), "") if s in names else None
         raise ConfigError(f"{cfg.path}{f':{line}' if line else ''}: [[sensors]] a design without data needs every "
                           f"instrument's sigma; {s!r} has none")
-    with progress.step(f"sampling-time design ({cfg.oed.criterion}, {v}, planned)"):
-        return time_design(cfg, v, models[v], p0s[v], Q, sig, planned=True)
+    what = "input" if cfg.oed.mode == "inputs" else "sampling-time"
+    with (progress.step(f"{what} design ({cfg.oed.criterion}, {v}, planned)") if what != "input"
+          else contextlib.nullcontext()):
+        return time_design(cfg, v, models[v], p0s[v], Q, sig, planned=True, progress=progress)
 
 
 def trajectories(study, est, variant: str, level: float = 0.95, n_fine: int = 401) -> Trajectories:
@@ -620,9 +635,14 @@ class TimeSeriesKind(StudyKind):
         return run_oed_dynamic(study, results, progress)
 
     def oed_files(self, study, results, progress) -> tuple:
-        """The sampling-time design at the estimate (its plan record)."""
+        """The design at the estimate (its plan record): sampling times, or with mode "inputs" the next
+        experiments."""
         plan = self.run_oed(study, results, progress).plan
         return plan.summary(), plan.to_dict()
+
+    def plan_at_estimate(self, study, results, progress):
+        """The design :meth:`run_oed` made (its sampling times or next experiments; None if it failed)."""
+        return results.plan
 
     def diagnose(self, study, results, progress):
         """No diagnostic split family (its splits are of set points and series)."""

@@ -52,7 +52,10 @@ def test_without_the_keys_the_defaults_are_local():
     ('mode = "inputs"\nprior = { k7 = ["normal", 470.0] }\n', "prior.k7", "takes 2 numbers"),
     ('mode = "inputs"\nn_points = 2\nrobust = "bayes"\n', "robust", "needs a prior"),
     ('mode = "inputs"\nrobust = "minimax"\n' + PRIOR, "robust", "unknown value 'minimax'"),
-    ('mode = "both"\n' + PRIOR, "prior", 'for mode = "inputs"'),
+    ('mode = "both"\n' + PRIOR, "prior", 'a prior gives the exact robust choice of n_points (set point, sensor) '
+                                          'pairs: give n_points'),
+    ('mode = "both"\nn_points = 2\napproximate = true\n' + PRIOR, "approximate",
+     'an approximate joint design of set points and sensors is not available: use mode = "inputs" with approximate'),
     ('mode = "sensors"\napproximate = true\n' + PRIOR, "prior", 'for mode = "inputs"'),
     ('mode = "sensors"\nexclude = ["F_x"]\n' + PRIOR, "exclude", "not used by the exact robust design"),
     ('mode = "inputs"\nexclude = ["F_x"]\n' + PRIOR, "exclude", "not used by an approximate design"),

@@ -1,5 +1,6 @@
 """`mudoe oed` with [oed] prior and mode = "sensors" (approximate = false): the exact robust n-run design of a static
-study's sensors (planned) and of a dynamic study's sampling times, its records and design page (issue 31 item 4)."""
+study's sensors (planned) and of a dynamic study's sampling times, its records and design page (issue 31 item 4).
+With data (no longer refused): tests/mudoe/test_oed_product.py."""
 import json
 import re
 from pathlib import Path
@@ -49,13 +50,6 @@ def test_planned_press_sensors_over_a_prior_match_the_library(tmp_path, capsys, 
     text = (tmp_path / "res" / "oed.txt").read_text()
     assert "exact robust sensor design" in text and "efficiency of the local design" in text
     assert json.loads((tmp_path / "res" / "oed.json").read_text())["chosen"] == obj["chosen"]
-
-
-def test_a_static_robust_sensor_design_with_data_is_refused_naming_the_key():
-    text = PLANNED_PRESS.replace("planned = true", "planned = false") + "n_sensors = 2\n" + PRIOR
-    with pytest.raises(ConfigError, match=r"plan.toml:\d+: \[oed\] prior: the exact robust sensor design of a "
-                                          "static study is planned before data"):
-        parse_config(text, "plan.toml")
 
 
 def _reactor(tmp_path, extra):
