@@ -23,14 +23,17 @@ forward substitution through the same blocks,
     x_{00}' = x_0'(p), \quad z_{00}' = -g_z^{-1} (g_x x_{00}' + g_p), \quad
     V_k' = -R_V^{-1} (R_{x_0} x_{k0}' + R_p).
 
-For an index-1 DAE g_z is nonsingular, so R_V is; a DAE whose dg/dz is structurally singular (not of
-index 1) keeps the generic solves (:class:`GenericDAESolve`, the reason kept in ``reason``), and a state
-solve or sensitivity whose blocks fail falls back to the generic solves of :mod:`models.state` with the
-reason kept in :attr:`DAETrajectoryNumerics.fallbacks` and a :class:`RuntimeWarning` (never silent).
+For an index-1 DAE g_z is nonsingular, so R_V is (a DAE whose dg/dz is structurally singular is refused when
+it is built, :class:`models.dynamic.DynamicModel`).  A state solve or sensitivity whose blocks fail (an element's
+Newton, or g_z singular at a point of the trajectory: not of index 1 there) falls back to the generic solves of
+:mod:`models.state` with the reason kept in :attr:`DAETrajectoryNumerics.fallbacks` and a
+:class:`RuntimeWarning` (never silent).
 """
 from __future__ import annotations
 
 import warnings
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 import casadi as ca
 import numpy as np
@@ -41,29 +44,31 @@ from .sensitivity import Sensitivities, StateSolve, generic_sensitivities
 from .state import solve_states_generic
 from .trajectory import RESIDUAL_TOL, TrajectoryNumerics, march
 
-__all__ = ["DAETrajectoryNumerics", "GenericDAESolve", "dae_numerics", "index_one_reason", "MAX_FALLBACKS_KEPT"]
+__all__ = ["DAETrajectoryNumerics", "GenericDAESolve", "dae_numerics", "dae_march_scope", "MAX_FALLBACKS_KEPT"]
 
 #: Newton iterations on z(0) (as the element solves of :meth:`models.collocation.CollocatedModel.element_functions`)
 _MAX_ITER = 60
 #: fallback reasons kept per numerics (the latest ones)
 MAX_FALLBACKS_KEPT = 20
+#: whether collocated index-1 DAEs march here (:func:`dae_march_scope`)
+_MARCH_SCOPE: ContextVar = ContextVar("mudoe_dae_march", default=True)
 
 
-def index_one_reason(dynamic) -> str:
-    """"" when dg/dz of the DAE is structurally nonsingular (index 1 possible), else the reason it is not of
-    index 1 (structural rank of dg/dz below the number of algebraic states)."""
-    x, z = ca.SX.sym("x", dynamic.n_x), ca.SX.sym("z", dynamic.n_z)
-    p, u = ca.SX.sym("p", dynamic.n_p), ca.SX.sym("u", dynamic.n_u)
-    rank = ca.sprank(ca.jacobian(dynamic.alg_fun(x, z, p, u), z).sparsity())
-    if rank < dynamic.n_z:
-        return (f"{dynamic.name!r} is not of index 1: dg/dz of its algebraic equations has structural rank {rank} "
-                f"< {dynamic.n_z} algebraic states; the generic solves of the whole trajectory are used")
-    return ""
+@contextmanager
+def dae_march_scope(enabled: bool):
+    """The element marcher of index-1 DAEs on (the default) or off for the code run inside the block, in this
+    thread (or task) only: off, a collocated DAE's :attr:`models.Model.state_numerics` is the generic solves
+    (:class:`GenericDAESolve`, reason "switched off by dae_march_scope"); for comparisons and benchmarks."""
+    token = _MARCH_SCOPE.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _MARCH_SCOPE.reset(token)
 
 
 class GenericDAESolve(StateSolve):
     """The generic solves (:class:`models.sensitivity.StateSolve`) of a collocated DAE the marcher does not take;
-    ``reason`` says why (e.g. not of index 1, :func:`index_one_reason`)."""
+    ``reason`` says why (:func:`dae_march_scope` switched the marcher off)."""
 
     def __init__(self, model, reason: str):
         super().__init__(model)
@@ -80,7 +85,7 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
     fallbacks : list of str   why a solve fell back to the generic path (the latest :data:`MAX_FALLBACKS_KEPT`)
     """
 
-    def __init__(self, cm):   # noqa: PLR0915 - the CasADi functions of the blocks, built once
+    def __init__(self, cm):
         dyn, d, N = cm.dynamic, cm.mesh.degree, cm.mesh.n_elements
         self.model, self.d, self.N = cm, d, N
         n_x, n_z, n_p = dyn.n_x, dyn.n_z, dyn.n_p
@@ -185,7 +190,13 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
             g = g[:, :, 0]
             if not np.all(np.isfinite(g)) or np.max(np.abs(g)) <= 1e-13:
                 break
-            step = np.linalg.solve(gz, g[:, :, None])[:, :, 0]
+            try:
+                step = np.linalg.solve(gz, g[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                j = int(np.argmin(np.abs(np.linalg.det(gz))))
+                raise StateSolveError(f"initial algebraic states of {self.model.dynamic.name!r}: dg/dz is singular "
+                                      f"at t = 0 for experiment {j + 1} (inputs {inputs[j].tolist()}): the DAE is "
+                                      "not of index 1 there") from None
             z = z - step
             if np.max(np.abs(step)) <= 1e-12 * (1 + np.max(np.abs(z))):
                 g = self._call(self.alg0, n, [x0, z, p, inputs])[0][:, :, 0]
@@ -319,16 +330,13 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
 
 
 def dae_numerics(cm):
-    """The numerics of a collocated DAE (kept in its cache): :class:`DAETrajectoryNumerics` when dg/dz is
-    structurally nonsingular (:func:`index_one_reason`), else :class:`GenericDAESolve` with the reason (and a
-    :class:`RuntimeWarning` once, when it is made)."""
+    """The numerics of a collocated DAE: :class:`DAETrajectoryNumerics` (kept in its cache); the generic solves
+    (:class:`GenericDAESolve`) inside ``dae_march_scope(False)``.  A DAE whose dg/dz is structurally singular is
+    refused when it is built (:class:`models.dynamic.DynamicModel`); one singular on the trajectory falls back
+    in the solves (module docstring)."""
+    if not _MARCH_SCOPE.get():
+        return GenericDAESolve(cm, "the DAE element marcher is switched off by dae_march_scope(False)")
     num = cm.cache.get("dae_trajectory", None)
     if num is None:
-        reason = index_one_reason(cm.dynamic)
-        if reason:
-            warnings.warn(reason, RuntimeWarning, stacklevel=2)
-            num = GenericDAESolve(cm, reason)
-        else:
-            num = DAETrajectoryNumerics(cm)
-        num = cm.cache.put("dae_trajectory", None, num)
+        num = cm.cache.put("dae_trajectory", None, DAETrajectoryNumerics(cm))
     return num
