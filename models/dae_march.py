@@ -201,7 +201,8 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
             if np.max(np.abs(step)) <= 1e-12 * (1 + np.max(np.abs(z))):
                 g = self._call(self.alg0, n, [x0, z, p, inputs])[0][:, :, 0]
                 break
-        bad = ~(np.all(np.isfinite(z), axis=1) & (np.max(np.abs(g), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(z), axis=1))))
+        small = np.max(np.abs(g), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(z), axis=1))
+        bad = ~(np.all(np.isfinite(z), axis=1) & small)
         if np.any(bad):
             j = int(np.flatnonzero(bad)[0])
             raise StateSolveError(f"initial algebraic states of {self.model.dynamic.name!r}: no z(0) with "

@@ -122,3 +122,22 @@ def test_an_element_that_fails_falls_back_to_the_generic_path_with_the_reason():
     # a good start needs no fallback
     assert np.all(np.isfinite(num.solve_states(np.array([0.1]), np.array([[1.0]]))))
     assert len(num.fallbacks) == 1
+
+
+def test_batch_fits_of_a_dae_merge_their_marches_and_equal_the_generic_fits():
+    from identification import Measurements
+    from identification.fit.batch import fit_batch
+    make, p, Q = CASES["equilibrium"]
+    data = simulate_campaign(make(), p, Q, TIMES, [0.01] * 3, seed=5)
+    est = identify(make(), data, p)
+    rng = np.random.default_rng(4)
+    sets = [Measurements(est.data.inputs, est.data.z + 0.01 * rng.standard_normal(est.data.z.shape), est.data.sigma,
+                         sensors=est.data.sensors) for _ in range(3)]
+    fit = fit_batch(est.model, sets, est.p)
+    assert est.model.state_numerics.merges_fits and fit.ok.all() and not fit.fallbacks
+    with dae_march_scope(False):
+        ref_est = identify(make(), data, p)
+        ref = fit_batch(ref_est.model, sets, ref_est.p)
+    assert ref.ok.all()
+    for r in range(3):
+        assert np.all(np.abs(fit.p[r] - ref.p[r]) <= 1e-6 * np.sqrt(np.diag(ref.cov[r])))
