@@ -139,10 +139,13 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
             fm = self._maps[(f.name(), n)] = batched_function(f, n)
         return fm(*args)
 
-    def _fell_back(self, what: str, exc: Exception) -> None:
+    def _fell_back(self, what: str, exc: Exception, warn: bool = True) -> str:
+        """Keep (and by default warn) why ``what`` fell back to the generic solves; returns the reason."""
         reason = f"{what} of {self.model.dynamic.name!r} fell back to the generic solves: {exc}"
         self.fallbacks = (self.fallbacks + [reason])[-MAX_FALLBACKS_KEPT:]
-        warnings.warn(reason, RuntimeWarning, stacklevel=3)
+        if warn:
+            warnings.warn(reason, RuntimeWarning, stacklevel=3)
+        return reason
 
     def _w_elements(self, Y: np.ndarray) -> tuple:
         """(W (n, N, n_w d), XS (n, N, n_x)): every element's unknowns and its start (the x part of the previous
@@ -157,12 +160,19 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
     # ------------------------------------------------------------------ the strategy's operations
     def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
         """The collocation solution (n_q, n_y) at p (:meth:`states`); when the marcher fails, the generic solves
-        (:func:`models.state.solve_states_generic`, from ``Y0`` or the model's own guess), the reason kept."""
+        (:func:`models.state.solve_states_generic`, from ``Y0`` or the model's own guess), the reason kept in
+        :attr:`fallbacks`: with a warning when they succeed, else in their StateSolveError (raised)."""
         try:
             return self.states(p, inputs, Y0)
         except (StateSolveError, np.linalg.LinAlgError) as exc:
-            self._fell_back("the state solve", exc)
-        return solve_states_generic(self.model, p, inputs, Y0)
+            first = exc
+        reason = self._fell_back("the state solve", first, warn=False)
+        try:
+            Y = solve_states_generic(self.model, p, inputs, Y0)
+        except StateSolveError as exc:
+            raise StateSolveError(f"{exc} ({reason}, which failed too)") from first
+        warnings.warn(reason, RuntimeWarning, stacklevel=2)
+        return Y
 
     def sensitivities(self, p: np.ndarray, inputs: np.ndarray, Y) -> Sensitivities:
         """h, G = dh/dp and y'(p) by forward substitution through the elements; the generic sensitivities
