@@ -32,6 +32,7 @@ import numpy as np
 
 from .contract import Model, ModelError
 from .dynamic import DynamicModel, merge_times, register_collocation, time_label, time_tolerance
+from .dae_march import dae_numerics
 from .trajectory import march, march_functions, trajectory_numerics
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
@@ -221,9 +222,9 @@ class CollocatedModel(Model):
     @property
     def state_numerics(self):
         """The element marcher of an ODE (:class:`models.trajectory.TrajectoryNumerics`: all experiments at once,
-        element by element); a DAE keeps the generic solves (:attr:`models.Model.state_numerics`), its state
-        guess marched (:meth:`_integrate`)."""
-        return super().state_numerics if self.dynamic.n_z else trajectory_numerics(self)
+        element by element) or of an index-1 DAE (:func:`models.dae_march.dae_numerics`: the generic solves,
+        with the reason, for a DAE whose dg/dz is structurally singular)."""
+        return dae_numerics(self) if self.dynamic.n_z else trajectory_numerics(self)
 
     # ------------------------------------------------------------------ state guess
     def element_symbols(self) -> tuple:

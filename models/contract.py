@@ -196,7 +196,8 @@ class Model(LabelledModel):
     def state_numerics(self):
         """How this model's states and sensitivities are computed (one strategy per model, cached): the generic
         solves of E(y, p, q) = 0 (:class:`models.sensitivity.StateSolve`) here; a collocated ODE marches its
-        elements (:class:`models.trajectory.TrajectoryNumerics`).  Operations: ``solve_states``,
+        elements (:class:`models.trajectory.TrajectoryNumerics`), a collocated index-1 DAE too
+        (:class:`models.dae_march.DAETrajectoryNumerics`).  Operations: ``solve_states``,
         ``sensitivities``, ``marched_states``, ``integrated_outputs``; capabilities ``reduced_space`` and
         ``merges_fits``."""
         return self.cache.get_or_make("state_numerics", None, lambda: StateSolve(self))

@@ -213,8 +213,9 @@ class StateSolve:
     r"""The generic numerics of a model E(y, p, q) = 0 (:attr:`models.Model.state_numerics`): the states by
     Newton input by input (sparse LU of dE/dy; small dense states all inputs at once,
     :func:`models.state.solve_states_generic`), the sensitivities y'(p) = -(dE/dy)^{-1} dE/dp likewise
-    (:func:`generic_sensitivities`).  The other strategy is the element marcher of a collocated ODE
-    (:class:`models.trajectory.TrajectoryNumerics`); both have the same operations and capabilities.
+    (:func:`generic_sensitivities`).  The other strategy is the element marcher of a collocated ODE or index-1 DAE
+    (:class:`models.trajectory.TrajectoryNumerics`, :class:`models.dae_march.DAETrajectoryNumerics`); they have the
+    same operations and capabilities.
 
     Attributes
     ----------

@@ -21,7 +21,7 @@ mapped CasADi evaluation and one batched LAPACK solve of the (n_q, n_x d, n_x d)
 iteration, instead of one sparse LU of the whole trajectory (n_y = n_x (1 + N d)) per experiment.
 The numbers are those of the whole-trajectory solve to round-off (the same equations, solved
 exactly).  Outputs and G = dh/dy y' + dh/dp come from one mapped evaluation.  ODEs only (no
-algebraic states): DAE models keep the generic solves of :mod:`models.state`.
+algebraic states): index-1 DAEs march in :mod:`models.dae_march` (the same scheme with z in every element).
 """
 from __future__ import annotations
 

@@ -62,11 +62,14 @@ def test_blow_up_names_the_experiment_and_element(monkeypatch):
             trajectory_numerics(cm).states([1.0], [[0.1], [1.0]])
 
 
-def test_dae_models_keep_the_generic_solves():
+def test_dae_models_march_in_their_own_numerics():
+    from models.dae_march import DAETrajectoryNumerics
     m = Model.ode(["k"], ["x"], ["x0"], ["w"], rhs=lambda x, z, p, u: -p[0] * z[0],
                   alg=lambda x, z, p, u: z[0] - x[0] ** 2, algebraic=["w"], x0=lambda p, u: u[0],
                   h=lambda x, z, p, u: z, horizon=1.0)
-    assert trajectory_numerics(collocate(m, [0.5, 1.0])) is None
+    cdae = collocate(m, [0.5, 1.0])
+    assert trajectory_numerics(cdae) is None             # the ODE marcher's numerics: ODEs only
+    assert isinstance(cdae.state_numerics, DAETrajectoryNumerics)     # models.dae_march (tests/models/test_dae_march.py)
     assert trajectory_numerics(build()) is None          # not collocated
 
 
@@ -78,16 +81,19 @@ def test_every_model_carries_one_numerics_strategy_with_the_same_operations():
                     h=lambda x, z, p, u: z, horizon=1.0)
     cm, cdae = collocate(build(), TIMES), collocate(dae, [0.5, 1.0])
     assert isinstance(cm.state_numerics, trajectory.TrajectoryNumerics) and cm.state_numerics is trajectory_numerics(cm)
-    assert isinstance(cdae.state_numerics, StateSolve) and not cdae.state_numerics.reduced_space
+    static = Model(["k"], ["q"], ["y"], 1, E=lambda y, p, q: y - p[0] * q[0], h=lambda y, p, q: y)
+    assert isinstance(static.state_numerics, StateSolve) and not static.state_numerics.reduced_space
     assert cm.state_numerics.reduced_space and cm.state_numerics.merges_fits
-    for num in (cm.state_numerics, cdae.state_numerics):
+    assert cdae.state_numerics.reduced_space and cdae.state_numerics.merges_fits     # an index-1 DAE marches too
+    for num in (cm.state_numerics, cdae.state_numerics, static.state_numerics):
         assert all(callable(getattr(num, op)) for op in ("solve_states", "sensitivities", "marched_states",
                                                           "integrated_outputs"))
-    # the DAE's integrated outputs are its marched state guess; its states the generic solve from there
+    # the DAE's integrated outputs are its marched states; from a guess, the same states
     h = cdae.integrated_outputs([0.8], [[2.0]])
     Y = solve_states(cdae, [0.8], [[2.0]])
     assert np.abs(h - np.asarray(cdae.h_fun(Y[0], [0.8], [2.0])).T).max() <= 1e-10
-    assert cdae.state_numerics.marched_states([0.8], np.array([[2.0]]), Y) is None
+    Ym = cdae.state_numerics.marched_states([0.8], np.array([[2.0]]), Y * (1 + 1e-6))
+    assert np.abs(Ym - Y).max() <= 1e-12 * np.abs(Y).max()
     # the ODE's marched states from a guess are its states
     Yo = solve_states(cm, P_TRUE, Q[:2])
     assert np.abs(cm.state_numerics.marched_states(P_TRUE, Q[:2], Yo * (1 + 1e-6)) - Yo).max() <= 1e-12 * np.abs(Yo).max()
