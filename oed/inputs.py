@@ -517,8 +517,8 @@ def refine_inputs(model, p, start, sigma, *, criterion=DEFAULT_CRITERION, sensor
                                                                                  crit, deadline), maxsize=4)
     except BuildTimeout as exc:
         return _kept(model, p, X0, sig, (crit, k_idx, n_series), (lo, hi), settings,
-                     f"time limit ({time_limit:.3g} s) reached while building the refinement's NLP (during "
-                     f"{exc.phase})", t0)
+                     f"time limit ({time_limit:.3g} s) reached while building the refinement's NLP (after "
+                     f"{exc.phase}; no Ipopt run started)", t0)
     rng = np.random.default_rng(settings.seed)
     starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
     M0 = nlp.matrix(nlp.start(model, p, X0, lo, span))
