@@ -126,9 +126,10 @@ def scale_part(step=0.02):
 
     * ~1000 states: the ``profile`` batch reactor of mudoe/example_reactor.py collocated with ``max_step``
       (0.02 h: 939 states per experiment), two experiments refined together, 2 Ipopt starts, ``time_limit=600``
-      (above ``RefineSettings.child_above`` variables: in its child process);
+      (9 400 variables: in this process, below ``RefineSettings.child_above``);
     * the DC motor of mudoe/example_motor.py (configs/motor.toml): its 4 experiments as candidates, n_points=4,
-      n_series=2, refined within TL in [0, 0.03] N m and u in [-12, 12] V, ``time_limit=60`` (4 starts).
+      n_series=2, refined within TL in [0, 0.03] N m and u in [-12, 12] V, ``time_limit=60`` (4 starts; 22 808
+      variables: in the child process).
     """
     from mudoe import example_motor as em
     from mudoe import example_reactor as er

@@ -65,14 +65,18 @@ class RefineSettings:
     ipopt : IpoptSettings
     child_above : int or None
         Under a time limit, an NLP with more variables than this (rows x (inputs + states x (1 + n_p))) is
-        built and solved in a child process that is killed at the limit (:mod:`oed.refine_child`): its
-        construction cannot be interrupted otherwise.  None: always in this process.
+        built and solved in a child process that is killed at the limit (:mod:`oed.refine_child`).  In this
+        process the limit is checked between the build's steps and bounds every Ipopt run, so it is exceeded
+        by at most one step that cannot be interrupted (a row's Hessian, CasADi's ``nlpsol`` set-up, one
+        Ipopt iteration: about 1.5 s at 10 000 variables on the reference machine); the child costs a
+        fresh interpreter and a build that is not cached (about 1.6 s CPU at 10 000 variables).  None: always
+        in this process.  (20000 since session 12, was 5000.)
     """
 
     n_starts: int = 4
     seed: int = 0
     ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
-    child_above: int | None = 5000
+    child_above: int | None = 20000
 
     def __post_init__(self):
         if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
