@@ -19,7 +19,8 @@ The peer runs through :func:`bench.bench_pyomo_doe.run_peer` (its own venv, in a
 ``MUDOE_PEER_PYTHON`` / ``MUDOE_PEER_IPOPT`` / ``MUDOE_PEER_DATA``).  Ratios are peer / mudoe
 of the median CPU and wall seconds, measured in this one run.
 
-Run: ``python -m bench dynamic_doe [--rep=10] [--doe-rep=3] [--factorial-rep=2]``
+Run: ``python -m bench dynamic_doe [--rep=10] [--doe-rep=3] [--factorial-rep=2]`` (``--factorial-rep=0``: no
+factorial); ``python -m bench dynamic_doe --scale [--step=0.02]``: the large designs of :func:`scale_part` alone.
 """
 from __future__ import annotations
 
@@ -93,6 +94,8 @@ def mudoe_part(rep=10, doe_rep=3, factorial_rep=2):
                      "log10_det": -res.refined.value / np.log(10) + 2 * float(np.sum(np.log10(P))),
                      "ode_log10_det": dr.log10_det(dr.pyomo_doe_reactor_fim(x[0], x[1:])),
                      "start_values": list(res.refined.start_values), "notes": list(res.notes)}
+    if factorial_rep < 1:
+        return out
     C, T0 = (g.ravel() for g in np.meshgrid(np.linspace(1, 5, 9), np.linspace(300, 700, 9), indexing="ij"))
     Q = np.column_stack([C, T0, np.tile(NOMINAL[2:], (C.size, 1))])
     first, warm, Fq = _timed(lambda: information(model, P, axis="inputs", candidates=Q, times=GRID,
@@ -108,6 +111,47 @@ def mudoe_part(rep=10, doe_rep=3, factorial_rep=2):
     return out
 
 
+def _design_record(first, res, what):
+    """(wall, CPU incl. children) seconds and the refinement's outcome."""
+    r = res.refined if hasattr(res, "refined") else res
+    out = {"wall_s": first[0], "cpu_s": first[1], "value": r.value, "start_values": list(r.start_values),
+           "messages": list(r.messages), "inputs": np.asarray(r.inputs).tolist(), "what": what}
+    if hasattr(res, "refined"):
+        out.update(exact_value=res.value, notes=list(res.notes))
+    return out
+
+
+def scale_part(step=0.02):
+    """Issue 30 item 6 (design speed), each the first call in this process for its model:
+
+    * ~1000 states: the ``profile`` batch reactor of mudoe/example_reactor.py collocated with ``max_step``
+      (0.02 h: 939 states per experiment), two experiments refined together, 2 Ipopt starts, ``time_limit=600``
+      (9 400 variables: in this process, below ``RefineSettings.child_above``);
+    * the DC motor of mudoe/example_motor.py (configs/motor.toml): its 4 experiments as candidates, n_points=4,
+      n_series=2, refined within TL in [0, 0.03] N m and u in [-12, 12] V, ``time_limit=60`` (4 starts; 22 808
+      variables: in the child process).
+    """
+    from mudoe import example_motor as em
+    from mudoe import example_reactor as er
+    from oed import RefineSettings, refine_inputs, select_inputs
+
+    cm = er.build("profile").collocate(er.TIMES, max_step=step)
+    X0 = np.array([np.r_[2.0, [370.0] * 4, [330.0] * 4], np.r_[1.0, [340.0] * 8]])
+    lo, hi = np.r_[0.5, [320.0] * 8], np.r_[2.5, [380.0] * 8]
+    t0 = _clock()
+    r = refine_inputs(cm, er.P_TRUE, X0, np.full(cm.n_S, 0.01), bounds=(lo, hi), settings=RefineSettings(n_starts=2),
+                      time_limit=600)
+    out = {"reactor_states": _design_record(_since(t0), r, f"{cm.n_y} states per experiment, 2 experiments")}
+    Q = np.array([[0.0, 6, 6, 12, 12, 0, 0, -6, -6, 0, 0], [0.02, 12, 12, 12, 6, 6, 3, 3, 0, 0, 0],
+                  [0.01, 3, 6, 3, 0, -3, -6, -3, 0, 3, 0], [0.03, 9, -9, 9, -9, 12, 12, -12, -12, 6, 0]], float)
+    t0 = _clock()
+    res = select_inputs(em.build("coulomb"), em.P_TRUE, times=em.TIMES, candidates=Q, sigma=[0.02, 0.5, 0.01],
+                        n_points=4, n_series=2, refine=True, bounds=(np.r_[0.0, [-12.0] * 10], np.r_[0.03, [12.0] * 10]),
+                        time_limit=60.0)
+    out["motor"] = _design_record(_since(t0), res, "DC motor, 4 experiments x 11 inputs")
+    return out
+
+
 def _ratio(peer, mine, key):
     return peer[key] / mine[key] if mine[key] > 0 else None
 
@@ -117,9 +161,9 @@ def ratios(peer, mine):
     out = {}
     pairs = {"fim": (peer["compute_FIM"]["warm"], mine["fim"]),
              "design": (peer.get("run_doe", {}).get("warm"), mine["design"]),
-             "factorial": (peer.get("factorial", {}).get("timing"), mine["factorial"])}
+             "factorial": (peer.get("factorial", {}).get("timing"), mine.get("factorial"))}
     for name, (pw, m) in pairs.items():
-        if pw is None or m["warm"] is None:
+        if pw is None or m is None or m["warm"] is None:
             continue
         out[name] = {"cpu_warm": pw["cpu_median_s"] / m["warm"]["cpu_median_s"],
                      "wall_warm": pw["median_s"] / m["warm"]["median_s"],
@@ -132,6 +176,11 @@ def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     opts = dict(a[2:].split("=", 1) for a in argv if a.startswith("--") and "=" in a)
     rep, doe_rep, fact_rep = int(opts.get("rep", 10)), int(opts.get("doe-rep", 3)), int(opts.get("factorial-rep", 2))
+    if "--scale" in argv:                 # issue 30 item 6: the large designs, alone (no peer)
+        out = {"machine_before": _machine(), "scale": scale_part(float(opts.get("step", 0.02))),
+               "machine_after": _machine()}
+        print(json.dumps(out, indent=1, default=float))
+        return
     out = {"machine_before": _machine(), "mudoe": mudoe_part(rep, doe_rep, fact_rep)}
     try:
         out["peer"] = run_peer(rep, doe_rep, fact_rep)
@@ -147,7 +196,8 @@ def main(argv=None):
         out["ratios"] = ratios(peer, out["mudoe"])
     out["machine_after"] = _machine()
     for part in ("fim", "design", "factorial"):
-        out["mudoe"][part]["first_s"] = list(out["mudoe"][part]["first_s"])
+        if part in out["mudoe"]:
+            out["mudoe"][part]["first_s"] = list(out["mudoe"][part]["first_s"])
     print(json.dumps(out, indent=1, default=float))
 
 

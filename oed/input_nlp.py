@@ -7,18 +7,37 @@ refinement solves
 .. math::
 
     \min_{u, y, S}\ \Psi\bigl(M^{-1}\bigr),\qquad
-    M = D^{-1}\Bigl[n_\text{series}\sum_i \tilde G_i^T W \tilde G_i\Bigr] D^{-1},\quad
+    M = D^{-1}\Bigl[\sum_i \tilde G_i^T W \tilde G_i\Bigr] D^{-1},\quad
     \tilde G_i = h_y S_i + h_p D,
 
     \text{s.t.}\quad E(y_i, p, q_i) = 0,\qquad E_y(y_i, p, q_i)\, S_i + E_p(y_i, p, q_i)\, D = 0,
 
-W = diag(1 / sigma_k^2) over the measured sensors.  Every term is sparse (E_y of a collocated
+W = diag(n_series / sigma_k^2) over the measured sensors.  The NLP's variables are u, y / s and S / s with
+s = max(1, sqrt(n_y) / 2) (:func:`variable_scale`): Ipopt's inertia correction adds delta I over every variable,
+which in the space of the inputs acts as delta (I + sum ||d(y, S)/du||^2), a sum over all states; far from the
+optimum, where the criterion is not convex and delta is large, the steps in u were then tiny (437 iterations
+for one start at 363 states per experiment, 14-42 with the scaling; the optimum is the same).  Every term is sparse (E_y of a collocated
 dynamic model is block-banded), so Ipopt's exact-Hessian steps cost one sparse factorisation of the
 KKT matrix: no dense inverse of E_y appears, and the NLP stays fast at hundreds of states per
 experiment.  An explicit model (no states) has G = h_p.
+
+The exact Hessian of the Lagrangian is assembled from small parts rather than differentiated as one
+graph (:func:`_hessian_of_lagrangian`): with :math:`\tilde M = \sum_i \tilde M_i(x_i)` and the criterion's
+Lagrangian :math:`\ell(\tilde M, z)` (z: the E criterion's extra variables),
+
+.. math::
+
+    \nabla^2 L = \mathrm{blockdiag}_i\,\nabla^2_{x_i}\bigl(\lambda_i^T c_i + \langle \nabla_{\tilde M}\ell,
+    \tilde M_i\rangle\bigr) + J^T\,\nabla^2_{(\tilde M, z)}\ell\,J,\qquad J = \partial(\tilde M, z)/\partial x,
+
+where c_i are row i's constraints.  The row block is differentiated once for one row and called per row,
+and :math:`\ell` once over the n_p^2 entries of the matrix, so the construction grows linearly with the
+rows (differentiating -log det of the whole graph took 20 s for one row of the DC motor, n_p = 6, and
+grew faster than the rows).  :func:`information_nlp` checks a deadline between these steps.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import casadi as ca
@@ -29,7 +48,15 @@ from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion
 
-__all__ = ["InformationNlp", "information_nlp"]
+__all__ = ["InformationNlp", "information_nlp", "BuildTimeout", "variable_scale", "LIFT_ABOVE"]
+
+
+class BuildTimeout(RuntimeError):
+    """The deadline passed while the refinement's NLP was being built (``phase``: the step it was in)."""
+
+    def __init__(self, phase: str):
+        super().__init__(f"time limit reached while building the refinement's NLP ({phase})")
+        self.phase = phase
 
 
 @dataclass(frozen=True)
@@ -40,7 +67,9 @@ class InformationNlp:
     ----------
     problem : NlpProblem       for :func:`identification.fit.ipopt_solver.solve_nlp` (with its Hessian)
     n_u, n_y, n_s, n_extra, n_g : int
-        sizes of the blocks of x = (u, y, S, criterion extras) and of g
+        sizes of the blocks of x = (u, y, S, m, criterion extras) and of g
+    n_m : int
+        entries of the lifted information m (0: not lifted)
     information : casadi.Function
         ``(u, y, S) -> M`` (n_p, n_p), model units
     scale : ndarray (n_p,)     the diagonal of D
@@ -54,6 +83,7 @@ class InformationNlp:
     n_g: int
     information: ca.Function
     scale: np.ndarray
+    n_m: int = 0
 
     def start(self, model, p, Q, lo, span) -> np.ndarray:
         """x0 at the input rows Q (n_pts, d_q): their states, sensitivities and criterion extras."""
@@ -62,10 +92,25 @@ class InformationNlp:
             Y = solve_states(model, p, Q)
             S = sensitivities(model, p, Q, Y).state_derivatives * self.scale[None, None, :]
             # S_i stored column-major (n_y, n_p) as CasADi's vec
-            ys, ss = Y.ravel(), np.concatenate([s.T.ravel() for s in S])
+            sv = variable_scale(model.n_y)
+            ys, ss = Y.ravel() / sv, np.concatenate([s.T.ravel() for s in S]) / sv
         else:
             ys, ss = np.zeros(0), np.zeros(0)
-        return np.concatenate([U, ys, ss, np.zeros(self.n_extra)])
+        return np.concatenate([U, ys, ss, np.zeros(self.n_m + self.n_extra)])
+
+    def parameter(self, M) -> np.ndarray:
+        """The NLP parameter b at the information M (model units): sqrt(diag(D M D)) when lifted, else empty."""
+        if not self.n_m:
+            return np.zeros(0)
+        d = self.scale ** 2 * np.diag(np.asarray(M, float))
+        return np.sqrt(np.where(d > 0, d, 1.0))
+
+    def lifted(self, M, b) -> np.ndarray:
+        """The lifted m at the information M (model units): tril(B^-1 D M D B^-1), column-major."""
+        if not self.n_m:
+            return np.zeros(0)
+        Ms = (self.scale / b)[:, None] * np.asarray(M, float) * (self.scale / b)[None, :]
+        return Ms.T.ravel()[_tril_index(Ms.shape[0])]
 
     def matrix(self, x) -> np.ndarray:
         """M at the NLP point x."""
@@ -74,12 +119,21 @@ class InformationNlp:
         return np.array(self.information(x[:self.n_u], x[self.n_u:self.n_u + self.n_y], x[self.n_u + self.n_y:n]))
 
 
-def _criterion(X, crit: Criterion, M, n_p):
-    """(objective, extra variables, extra equality constraints) of Psi(M^-1) (D: log det C)."""
+def variable_scale(n_y: int) -> float:
+    """sigma = max(1, sqrt(n_y) / 2): the NLP's state and sensitivity variables are y / sigma and S / sigma
+    (module docstring)."""
+    return max(1.0, 0.5 * float(np.sqrt(n_y)))
+
+
+def _criterion(X, crit: Criterion, Mt, scale):
+    """(objective, extra variables, extra equality constraints) of Psi(M^-1), M = D^-1 Mt D^-1 (D: -log det M)."""
+    n_p = Mt.size1()
+    if crit is Criterion.D:      # log det M = log det Mt - 2 sum log d: the same optimum, better scaled
+        return -ca.log(ca.det(Mt)) + 2.0 * float(np.sum(np.log(scale))), [], []
+    Dinv = ca.DM(np.diag(1.0 / scale))
+    M = ca.mtimes([Dinv, Mt, Dinv])
     if crit is Criterion.A:
         return ca.trace(ca.solve(M, X.eye(n_p))), [], []
-    if crit is Criterion.D:
-        return -ca.log(ca.det(M)), [], []
     t = X.sym("t")
     L = X.sym("L", n_p * (n_p + 1) // 2)
     Lm = X(ca.Sparsity.lower(n_p), L)
@@ -87,24 +141,12 @@ def _criterion(X, crit: Criterion, M, n_p):
     return -t, [t, L], [R[i, j] for i in range(n_p) for j in range(i + 1)]
 
 
-def _hessian_of_lagrangian(X, x, f, g, par) -> ca.Function:
-    """``(x, par, lam_f, lam_g) -> triu(lam_f f_xx + sum lam_g g_xx)``, the objective's and the
-    constraints' Hessians taken apart (CasADi's Hessian of the whole Lagrangian colours the dense
-    block of the criterion together with the sparse constraints: 4x slower to build here)."""
-    lam_f, lam_g = X.sym("lam_f"), X.sym("lam_g", g.size1())
-    H = lam_f * ca.hessian(f, x)[0] + ca.hessian(ca.dot(lam_g, g), x)[0]
-    return ca.Function("hess_lag", [x, par, lam_f, lam_g], [ca.triu(H)])
-
-
-def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion) -> InformationNlp:
-    """The NLP of the module docstring for ``n_pts`` rows of ``model`` at the nominal ``p``.
-
-    ``weights`` (n_S,): n_series / sigma_k^2 for measured sensors, 0 otherwise; ``lo``, ``span``
-    (d_q,) map the scaled inputs u in [0, 1] to q."""
-    X = ca.SX if model.symbolic == "SX" else ca.MX
+def _row_functions(model, p, weights, lo, span, X) -> ca.Function:
+    """``row(u, y / sigma, S / sigma) -> (c, vec Mt_i)``: one row's constraints c = (E; vec(E_y S + E_p D)) and its
+    information Mt_i = G^T W G (D-scaled units), sigma = :func:`variable_scale`."""
     n_y, n_p, d = model.n_y, model.n_p, model.n_q_dim
     scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
-    Dm, pp = ca.DM(np.diag(scale)), ca.DM(p)
+    Dm = ca.DM(np.diag(scale))
     ys, qs, ps = X.sym("y", n_y), X.sym("q", d), X.sym("p", n_p)
     h = model.h_fun(ys, ps, qs)
     hy, hp = ca.jacobian(h, ys), ca.jacobian(h, ps)
@@ -114,29 +156,169 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion) ->
     else:
         E = Ey = Ep = X.zeros(0, 1)
     parts = ca.Function("parts", [ys, ps, qs], [E, Ey, Ep, hy, hp])
+    u, y_, S_ = X.sym("u", d), X.sym("y", n_y), X.sym("S", n_y, n_p)
+    y, S = variable_scale(n_y) * y_, variable_scale(n_y) * S_
+    Ei, Eyi, Epi, hyi, hpi = parts(y, ca.DM(p), ca.DM(lo) + ca.DM(span) * u)
+    G = ca.mtimes(hpi, Dm) + (ca.mtimes(hyi, S) if n_y else 0)
+    Mt = ca.mtimes([G.T, ca.DM(np.diag(weights)), G])
+    c = ca.vertcat(Ei, ca.vec(ca.mtimes(Eyi, S) + ca.mtimes(Epi, Dm))) if n_y else X.zeros(0, 1)
+    return ca.Function("row", [u, y_, S_], [c, ca.vec(Mt)])
+
+
+def _row_hessian(row: ca.Function, X) -> ca.Function:
+    """``(u, y, S, lam_c, Lam) -> (Hessian of lam_c^T c + Lam^T vec Mt_i over (u, y, vec S),
+    d vec Mt_i / d(u, y, vec S))`` of one row, built once and called per row."""
+    u, y, S = X.sym("u", row.size_in(0)), X.sym("y", row.size_in(1)), X.sym("S", row.size_in(2))
+    c, mt = row(u, y, S)
+    lam, Lam = X.sym("lam", c.size1()), X.sym("Lam", mt.size1())
+    xr = ca.vertcat(u, y, ca.vec(S))
+    H = ca.hessian(ca.dot(lam, c) + ca.dot(Lam, mt), xr)[0]
+    return ca.Function("row_hess", [u, y, S, lam, Lam], [H, ca.jacobian(mt, xr)])
+
+
+def _criterion_parts(X, crit: Criterion, n_p: int, scale, lift: bool):
+    """(criterion Function ``(vec Mt, z) -> (f, cons)``, extra variables, parts Function): not lifted,
+    ``parts(vec Mt, z, lam_f, lam_cons) -> (gradient over vec Mt, Hessian over (vec Mt, z))`` of
+    ell = lam_f f + lam_cons^T cons; lifted, ``parts(m, z, b, lam_f, lam_cons) -> Hessian over (m, z)`` of ell at
+    Mt = B sym(m) B."""
+    mv = X.sym("Mt", n_p * n_p)
+    f, extra, cons = _criterion(X, crit, ca.reshape(mv, n_p, n_p), scale)
+    z = ca.vertcat(*extra) if extra else X.zeros(0, 1)
+    fun = ca.Function("crit", [mv, z], [f, ca.vertcat(*cons) if cons else X.zeros(0, 1)])
+    lam_f, lam_c = X.sym("lam_f"), X.sym("lam_cons", len(cons))
+    if lift:
+        m, b = X.sym("m", n_p * (n_p + 1) // 2), X.sym("b", n_p)
+        fm, cm = fun(ca.vec(_unlift(X, m, b)), z)
+        w = ca.vertcat(m, z)
+        H = ca.hessian(lam_f * fm + (ca.dot(lam_c, cm) if cons else 0), w)[0]
+        return fun, extra, ca.Function("crit_parts", [m, z, b, lam_f, lam_c], [H])
+    ell = lam_f * f + (ca.dot(lam_c, ca.vertcat(*cons)) if cons else 0)
+    H, g = ca.hessian(ell, ca.vertcat(mv, z))
+    return fun, extra, ca.Function("crit_parts", [mv, z, lam_f, lam_c], [g[:n_p * n_p], H])
+
+
+def _unlift(X, m, b):
+    """Mt = B sym(m) B from the lower triangle m (column-major) and b."""
+    n_p = b.size1()
+    Ms = X(ca.Sparsity.lower(n_p), m)
+    return ca.mtimes([ca.diag(b), Ms + ca.tril(Ms, False).T, ca.diag(b)])
+
+
+def _tril_index(n_p: int) -> list:
+    """Positions in vec (column-major) of the lower triangle's entries, in CasADi's ``Sparsity.lower`` order."""
+    return [i + j * n_p for j in range(n_p) for i in range(j, n_p)]
+
+
+#: lift the information matrix into variables when more NLP variables than this enter it: its dense block
+#: in the unlifted Hessian (the squared count) would dominate the KKT factorisation
+LIFT_ABOVE = 400
+
+
+def _check(deadline: float, phase: str) -> None:
+    if time.perf_counter() > deadline:
+        raise BuildTimeout(phase)
+
+
+def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
+                    deadline: float = np.inf) -> InformationNlp:
+    """The NLP of the module docstring for ``n_pts`` rows of ``model`` at the nominal ``p``.
+
+    ``weights`` (n_S,): n_series / sigma_k^2 for measured sensors, 0 otherwise; ``lo``, ``span``
+    (d_q,) map the scaled inputs u in [0, 1] to q; ``deadline`` (a ``time.perf_counter()`` value) is checked
+    between the steps of the construction.
+
+    Raises
+    ------
+    BuildTimeout
+        When the deadline passed during the construction (its step named).
+    """
+    X = ca.SX if model.symbolic == "SX" else ca.MX
+    n_y, n_p, d = model.n_y, model.n_p, model.n_q_dim
+    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    row = _row_functions(model, p, weights, lo, span, X)
+    _check(deadline, "the rows' equations")
+    hess_row = _row_hessian(row, X)
+    _check(deadline, "one row's Hessian")
+    n_dense = n_pts * int(np.count_nonzero(np.asarray(hess_row.sparsity_out(1).colind()[1:])
+                                           - np.asarray(hess_row.sparsity_out(1).colind()[:-1])))
+    lift = n_dense > LIFT_ABOVE
+    crit_fun, extra, crit_parts = _criterion_parts(X, crit, n_p, scale, lift)
+    _check(deadline, "the criterion's derivatives")
     Us = [X.sym(f"u{i}", d) for i in range(n_pts)]
     Ys = [X.sym(f"y{i}", n_y) for i in range(n_pts)]
     Ss = [X.sym(f"S{i}", n_y, n_p) for i in range(n_pts)]
-    W = ca.DM(np.diag(weights))
-    Mt, g = X.zeros(n_p, n_p), []
+    g, mv = [], 0
     for u, y, S in zip(Us, Ys, Ss):
-        q = ca.DM(lo) + ca.DM(span) * u
-        Ei, Eyi, Epi, hyi, hpi = parts(y, pp, q)
-        G = ca.mtimes(hpi, Dm) + (ca.mtimes(hyi, S) if n_y else 0)
-        Mt = Mt + ca.mtimes([G.T, W, G])
+        c, mt = row(u, y, S)
+        mv = mv + mt
         if n_y:
-            g += [Ei, ca.vec(ca.mtimes(Eyi, S) + ca.mtimes(Epi, Dm))]
-    Dinv = ca.DM(np.diag(1.0 / scale))
-    M = ca.mtimes([Dinv, Mt, Dinv])
-    if crit is Criterion.D:      # log det M = log det Mt - 2 sum log d: the same optimum, better scaled
-        f, extra, cons = -ca.log(ca.det(Mt)) + 2.0 * float(np.sum(np.log(scale))), [], []
+            g.append(c)
+    z = ca.vertcat(*extra) if extra else X.zeros(0, 1)
+    n_m = n_p * (n_p + 1) // 2 if lift else 0
+    m, b = X.sym("m", n_m), X.sym("b", n_p if lift else 0)
+    if lift:
+        tri = _tril_index(n_p)
+        bb = ca.vec(ca.mtimes(b, b.T))[tri]
+        g.append(mv[tri] / bb - m)
+        f, cons = crit_fun(ca.vec(_unlift(X, m, b)), z)
     else:
-        f, extra, cons = _criterion(X, crit, M, n_p)
+        f, cons = crit_fun(mv, z)
     U, Y, S = ca.vertcat(*Us), ca.vertcat(*Ys), ca.vertcat(*[ca.vec(s) for s in Ss])
-    x = ca.vertcat(U, Y, S, *extra)
-    gg = ca.vertcat(*g, *cons) if (g or cons) else X.zeros(0, 1)
-    info = ca.Function("M", [U, Y, S], [M])
-    par = X.sym("par", 0)
-    return InformationNlp(NlpProblem(x, f, gg, par, hess_lag=_hessian_of_lagrangian(X, x, f, gg, par)),
-                          U.size1(), Y.size1(), S.size1(),
-                          x.size1() - U.size1() - Y.size1() - S.size1(), gg.size1(), info, scale)
+    x = ca.vertcat(U, Y, S, m, z)
+    gg = ca.vertcat(*g, cons)
+    Dinv = ca.DM(np.diag(1.0 / scale))
+    info = ca.Function("M", [U, Y, S], [ca.mtimes([Dinv, ca.reshape(mv, n_p, n_p), Dinv])])
+    _check(deadline, "the rows' constraints")
+    n_c = [c.size1() for c in g[:n_pts]] if n_y else [0] * n_pts
+    hess = _hessian_of_lagrangian((n_pts, d, n_y, n_p, n_m), x.size1(), (row, hess_row, crit_parts), n_c,
+                                  cons.size1())
+    _check(deadline, "the Hessian of the Lagrangian")
+    return InformationNlp(NlpProblem(x, f, gg, b, hess_lag=hess), U.size1(), Y.size1(), S.size1(),
+                          z.size1(), gg.size1(), info, scale, n_m)
+
+
+def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) -> ca.Function:
+    """``(x, b, lam_f, lam_g) -> triu(lam_f f_xx + sum lam_g g_xx)`` assembled (module docstring) in an MX graph
+    that calls the row's and the criterion's Functions: ``functions`` = (row, its Hessian, the criterion's
+    parts), ``n_c`` the rows' constraint counts, ``n_cons`` the criterion's; ``dims`` = (rows, inputs per row,
+    states, parameters, lifted entries)."""
+    n_pts, d, n_y, n_p, n_m = dims
+    row, hess_row, crit_parts = functions
+    x, lam_f = ca.MX.sym("x", n_x), ca.MX.sym("lam_f")
+    lam_g, b = ca.MX.sym("lam_g", sum(n_c) + n_m + n_cons), ca.MX.sym("b", n_p if n_m else 0)
+    n_u, n_s = n_pts * d, n_y * n_p
+    n_w = n_x - n_u - n_pts * (n_y + n_s)                  # (m, z): the criterion's own variables
+    mv, rows, idx = 0, [], []
+    for i in range(n_pts):
+        ix = (list(range(i * d, (i + 1) * d)) + list(range(n_u + i * n_y, n_u + (i + 1) * n_y))
+              + list(range(n_u + n_pts * n_y + i * n_s, n_u + n_pts * n_y + (i + 1) * n_s)))
+        xi = (x[ix[:d]], x[ix[d:d + n_y]], ca.reshape(x[ix[d + n_y:]], n_y, n_p))
+        if not n_m:
+            mv = mv + row(*xi)[1]
+        rows.append(xi)
+        idx += ix
+    idx += list(range(n_x - n_w, n_x))
+    w = x[n_x - n_w:]
+    lam_cons = lam_g[sum(n_c) + n_m:]
+    if n_m:
+        tri = _tril_index(n_p)
+        sel = ca.DM(ca.Sparsity.triplet(n_p * n_p, n_m, tri, list(range(n_m))), 1.0)
+        Lam = ca.mtimes(sel, lam_g[sum(n_c):sum(n_c) + n_m] / ca.vec(ca.mtimes(b, b.T))[tri])
+        Hw = crit_parts(w[:n_m], w[n_m:], b, lam_f, lam_cons)
+    else:
+        Lam, Hw = crit_parts(mv, w, lam_f, lam_cons)
+    off = np.cumsum([0] + list(n_c))
+    blocks, jacs = [], []
+    for i, xi in enumerate(rows):
+        Hi, Ji = hess_row(*xi, lam_g[int(off[i]):int(off[i + 1])], Lam)
+        blocks.append(Hi)
+        jacs.append(Ji)
+    inv = list(np.argsort(idx))
+    if n_m:
+        H = ca.diagcat(*blocks, Hw)[inv, inv]
+    else:
+        blocks.append(ca.MX(n_w, n_w))
+        # J: d(vec Mt, z)/dx, the rows' Jacobians side by side, then the identity on z; columns in x's order
+        J = ca.diagcat(ca.horzcat(*jacs), ca.MX.eye(n_w))[:, inv] if n_w else ca.horzcat(*jacs)[:, inv]
+        H = ca.diagcat(*blocks)[inv, inv] + ca.mtimes([J.T, Hw, J])
+    return ca.Function("hess_lag", [x, b, lam_f, lam_g], [ca.triu(H)])

@@ -44,7 +44,7 @@ from .criteria import DEFAULT_CRITERION, Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
 from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
                           input_problem, measured_sensors, row_information)
-from .input_nlp import information_nlp
+from .input_nlp import BuildTimeout, information_nlp
 from .robust_inputs import robust_exact_inputs
 from . import refine_child
 
@@ -65,14 +65,18 @@ class RefineSettings:
     ipopt : IpoptSettings
     child_above : int or None
         Under a time limit, an NLP with more variables than this (rows x (inputs + states x (1 + n_p))) is
-        built and solved in a child process that is killed at the limit (:mod:`oed.refine_child`): its
-        construction cannot be interrupted otherwise.  None: always in this process.
+        built and solved in a child process that is killed at the limit (:mod:`oed.refine_child`).  In this
+        process the limit is checked between the build's steps and bounds every Ipopt run, so it is exceeded
+        by at most one step that cannot be interrupted (a row's Hessian, CasADi's ``nlpsol`` set-up, one
+        Ipopt iteration: about 1.5 s at 10 000 variables on the reference machine); the child costs a
+        fresh interpreter and a build that is not cached (about 1.6 s CPU at 10 000 variables).  None: always
+        in this process.  (20000 since session 12, was 5000.)
     """
 
     n_starts: int = 4
     seed: int = 0
     ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
-    child_above: int | None = 5000
+    child_above: int | None = 20000
 
     def __post_init__(self):
         if isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer)) or self.n_starts < 1:
@@ -513,14 +517,22 @@ def refine_inputs(model, p, start, sigma, *, criterion=DEFAULT_CRITERION, sensor
     span = np.where(hi > lo, hi - lo, 1.0)
     weights = np.array([float(n_series) / sig[k] ** 2 if k in k_idx else 0.0 for k in range(model.n_S)])
     key = ("refine_nlp", np.asarray(p).tobytes(), weights.tobytes(), n_pts, lo.tobytes(), span.tobytes(), crit)
-    nlp = model.cache.get_or_make("refine_nlp", key, lambda: information_nlp(model, p, weights, n_pts, lo, span,
-                                                                             crit), maxsize=4)
+    try:
+        nlp = model.cache.get_or_make("refine_nlp", key, lambda: information_nlp(model, p, weights, n_pts, lo, span,
+                                                                                 crit, deadline), maxsize=4)
+    except BuildTimeout as exc:
+        return _kept(model, p, X0, sig, (crit, k_idx, n_series), (lo, hi), settings,
+                     f"time limit ({time_limit:.3g} s) reached while building the refinement's NLP (after "
+                     f"{exc.phase}; no Ipopt run started)", t0)
     rng = np.random.default_rng(settings.seed)
     starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
-    best, best_v = X0, _value(crit, nlp.matrix(nlp.start(model, p, X0, lo, span)))
+    M0 = nlp.matrix(nlp.start(model, p, X0, lo, span))
+    best, best_v = X0, _value(crit, M0)
+    b = nlp.parameter(M0)            # the lifted information's scale (if lifted), the same for every start
     values, messages = [], []
-    lbx = np.r_[np.zeros(nlp.n_u), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, -np.inf)]
-    ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(nlp.n_y + nlp.n_s + nlp.n_extra, np.inf)]
+    n_free = nlp.n_y + nlp.n_s + nlp.n_m + nlp.n_extra
+    lbx = np.r_[np.zeros(nlp.n_u), np.full(n_free, -np.inf)]
+    ubx = np.r_[np.tile(np.where(hi > lo, 1.0, 0.0), n_pts), np.full(n_free, np.inf)]
     # each start's share of the time left once the NLP is built (its construction is part of the limit)
     share = None if time_limit is None else _share(max(deadline - time.perf_counter(), 1e-3) / len(starts))
     ipopt = settings.ipopt if share is None else replace(
@@ -531,7 +543,7 @@ def refine_inputs(model, p, start, sigma, *, criterion=DEFAULT_CRITERION, sensor
             messages.append("not started: time limit reached")
             values.append(np.inf)
             continue
-        v, msg, Xr = _one_start(model, p, nlp, Xs, (lo, hi, span), crit, (lbx, ubx), ipopt, key)
+        v, msg, Xr = _one_start(model, p, nlp, Xs, (lo, hi, span), crit, (lbx, ubx, b), ipopt, key)
         values.append(v)
         messages.append(msg)
         if v < best_v:
@@ -556,15 +568,18 @@ def _kept(model, p, X0, sig, design, box, settings: RefineSettings, why: str, t0
 
 def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
     """(criterion value, message, refined rows) of one Ipopt run of the refinement from the rows Xs
-    (value inf for a failed run; a stalled run's point is still a design, re-evaluated exactly)."""
+    (value inf for a failed run; a stalled run's point is still a design, re-evaluated exactly); ``var_bounds`` =
+    (lbx, ubx, the NLP parameter b of :meth:`oed.input_nlp.InformationNlp.parameter`)."""
     lo, hi, span = box
     n_pts, d = Xs.shape
     zero = np.zeros(nlp.n_g)
     try:
         x0 = nlp.start(model, p, Xs, lo, span)
-        x0[nlp.n_u + nlp.n_y + nlp.n_s:] = _extras(crit, nlp.matrix(x0))
-        r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, [], settings=ipopt,
-                      what="input refinement", key=key, cache=model.cache)
+        M, n = nlp.matrix(x0), nlp.n_u + nlp.n_y + nlp.n_s
+        x0[n:n + nlp.n_m] = nlp.lifted(M, var_bounds[2])
+        x0[n + nlp.n_m:] = _extras(crit, M)
+        r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, var_bounds[2],
+                      settings=ipopt, what="input refinement", key=key, cache=model.cache)
     except (IdentificationError, StateSolveError) as exc:
         return np.inf, str(exc), Xs
     Xr = lo + span * np.clip(np.asarray(r.x[: n_pts * d]).reshape(n_pts, d), 0.0, 1.0) * (hi > lo)

@@ -1,10 +1,11 @@
 """A large input refinement in a child process that is ended at its time limit.
 
-Building the refinement's NLP (:mod:`oed.input_nlp`: the criterion's and the constraints' exact
-Hessians, symbolically) is one CasADi call that Python cannot interrupt; for a collocated dynamic
-model it grows faster than the number of rows (the DC motor of issue 30, 120 elements: 17 s for one
-row, 187 s for two, over 11 minutes for four).  :func:`oed.inputs.refine_inputs` therefore runs an
-NLP with more than :attr:`oed.inputs.RefineSettings.child_above` variables under a time limit here:
+Building the refinement's NLP (:mod:`oed.input_nlp`) checks the time limit between its steps, but one step (a
+row's Hessian, CasADi's ``nlpsol`` set-up) and one Ipopt iteration are single calls that Python cannot interrupt;
+before the Hessian was assembled from one row's (session 12) the construction grew faster than the number of rows
+(the DC motor of issue 30, 120 elements: 17 s for one row, 187 s for two, over 11 minutes for four).
+:func:`oed.inputs.refine_inputs` therefore runs an NLP with more than :attr:`oed.inputs.RefineSettings.child_above`
+variables under a time limit here:
 a fresh interpreter (``python -c``: it imports no ``__main__``, so a plain script needs no guard) reads the
 problem from its stdin (:func:`models.shipping.dumps`), builds and solves it, and writes the result to its
 own copy of stdout (Ipopt's output goes to stderr).  At the time limit the child is killed, whatever phase
