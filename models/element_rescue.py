@@ -1,4 +1,4 @@
-r"""A damped Newton solve of one collocation element: the rescue of an element whose plain Newton failed.
+r"""The rescue of a collocation element whose plain Newton solve failed: solved in halves, then damped Newton.
 
 Element k of a collocated model (:mod:`models.collocation`) has the unknowns V = (x_r, z_r), r = 1..d, that solve
 
@@ -7,18 +7,25 @@ Element k of a collocated model (:mod:`models.collocation`) has the unknowns V =
     R(V; x_{k0}, p, U_k, h_k) = 0 \qquad \text{(the collocation equations of the element)}.
 
 The element marcher (:func:`models.trajectory.march`) solves them by plain Newton from V = (x_k0, ..., x_k0).
-On a stiff model (Robertson's kinetics: rates 0.04, 1e4, 3e7 over 1e5 s) an element of the size the
-sampling asks for (1e4 s) holds a solution (Radau IIA is L-stable) that plain Newton from that guess does not
-reach: its full steps overshoot the fast quasi-steady state and stall with max |R| ~ 0.3.  Newton with a
-backtracking line search on the merit function phi(V) = |R(V)|^2 / 2,
+On a stiff model (Robertson's kinetics: rates 0.04, 1e4, 3e7 over 1e5 s, or a rough start's rates
+(0.12, 1e5, 3e6) on the element [4931, 14045] s) an element of the size the sampling asks for holds a
+solution (Radau IIA is L-stable) that plain Newton from that guess does not reach (it stalls at
+max |R| ~ 0.15); Newton damped by a line search from the same guess may stall too, or land on a spurious
+root of the collocation equations (they have several for a long element of a nonlinear model).  So the
+rescue continues in the element length: the element is solved in two halves, each by plain Newton or, where
+that fails, in halves again (at most :data:`SPLIT_DEPTH` times: 2^SPLIT_DEPTH pieces), and the halves'
+collocation polynomials at the element's Radau points start Newton on the element's own equations, damped by
+a backtracking line search on phi(V) = |R(V)|^2 / 2,
 
 .. math::
 
     V \leftarrow V - \lambda R_V^{-1} R, \qquad \lambda = 1, 1/2, 1/4, \ldots \text{ until }
-    |R(V - \lambda \Delta)| \le (1 - 10^{-4} \lambda) |R(V)|,
+    |R(V - \lambda \Delta)| \le (1 - 10^{-4} \lambda) |R(V)|
 
-(the Armijo condition for the Newton direction, which descends phi wherever R_V is regular) converges there
-(30-40 iterations for a 1e5 s element).  Only elements whose plain solve failed are redone, so every
+(Armijo).  The start lies within the halves' discretisation error of the element's solution, so Newton
+converges to the root that continues the solution of the short pieces, not to a spurious one.  The caps
+(iterations, line-search halvings, depth) keep a failure cheap: a trial point of a fit's line search at which
+the trajectory blows up fails in milliseconds.  Only elements whose plain solve failed are redone, so every
 trajectory that was solved before is unchanged to the bit.
 """
 from __future__ import annotations
@@ -28,14 +35,98 @@ import numpy as np
 
 from .batched import batched_function
 
-__all__ = ["damped_element_solve", "RESCUE_MAX_ITER"]
+__all__ = ["damped_element_solve", "rescue_elements", "element_failures", "RESIDUAL_TOL", "RESCUE_MAX_ITER",
+           "SPLIT_DEPTH"]
 
+#: an element's collocation solution is accepted when max |R| <= RESIDUAL_TOL (1 + max |V|)
+RESIDUAL_TOL = 1e-8
 #: damped Newton iterations per element before the rescue counts as failed
-RESCUE_MAX_ITER = 200
+RESCUE_MAX_ITER = 60
+#: how often an element is split in halves (recursively: at most 2^SPLIT_DEPTH pieces) for a start of its
+#: damped Newton
+SPLIT_DEPTH = 10
 #: Armijo's sufficient decrease of |R| per unit step length
 _ARMIJO = 1e-4
-#: smallest step length of the line search
-_MIN_STEP = 2.0 ** -30
+#: smallest step length of the line search (a row whose step falls below it has stalled)
+_MIN_STEP = 2.0 ** -12
+
+
+def element_failures(V: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Rows (one element of one experiment) whose unknowns V are not finite or whose collocation residual
+    R is above RESIDUAL_TOL (1 + max |V|): the element's Newton solve failed."""
+    return ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(V), axis=1))))
+
+
+def rescue_elements(cm, V0: np.ndarray, par: np.ndarray) -> tuple:
+    """(V, R) of m elements whose plain Newton failed, each solved from the guess of its halves
+    (:func:`split_guess`) by :func:`damped_element_solve` (module docstring).  ``V0`` (m, n_w d) the elements'
+    start points repeated, ``par`` (m, n_x + n_p + n_u d + 1) as in :func:`damped_element_solve`; the caller
+    judges the result with :func:`element_failures` (rows without a guess keep V0)."""
+    V, R = np.array(V0, float), np.full(V0.shape, np.nan)
+    n_w = V0.shape[1] // cm.mesh.degree
+    for j in range(V0.shape[0]):
+        guess = split_guess(cm, V0[j, :n_w], par[j], SPLIT_DEPTH)
+        if guess is not None:
+            Vj, Rj = damped_element_solve(cm, guess[None], par[j][None])
+            V[j], R[j] = Vj[0], Rj[0]
+    return V, R
+
+
+def _solve_one(cm, w: np.ndarray, par: np.ndarray, depth: int) -> np.ndarray | None:
+    """One element's solution (n_w d,) from its start w: CasADi's plain Newton, else (``depth`` > 0) the damped
+    Newton from :func:`split_guess`; None when neither solves it."""
+    V0 = np.tile(w, cm.mesh.degree)
+    V = np.asarray(cm.element_functions()[0](V0, par)).ravel()
+    R = _blocks(cm, 1)(V[None], par[None])[0][:, :, 0]
+    if not element_failures(V[None], R)[0]:
+        return V
+    guess = split_guess(cm, w, par, depth) if depth > 0 else None
+    if guess is None:
+        return None
+    V, R = damped_element_solve(cm, guess[None], par[None])
+    return None if element_failures(V, R)[0] else V[0]
+
+
+def split_guess(cm, w_start: np.ndarray, par: np.ndarray, depth: int) -> np.ndarray | None:
+    """A guess of one element's unknowns (n_w d,): the element solved in two halves (each by
+    :func:`_solve_one`, split again at most ``depth - 1`` times), the halves' collocation polynomials
+    (Lagrange on each half's d + 1 points) at the element's Radau points; None when a half does not solve.
+
+    ``w_start`` the element's start (x, z), ``par`` its (x_start, p, U, h); u(t) within the element is
+    linear in t (constants, and controls constant or linear between grid points, which are element
+    boundaries), so the inputs at the halves' points lie on the straight line through U."""
+    dyn, d = cm.dynamic, cm.mesh.degree
+    n_x, n_p, n_u = dyn.n_x, dyn.n_p, dyn.n_u
+    tau = np.asarray(cm.tau)
+    p, U, h = par[n_x:n_x + n_p], par[n_x + n_p:-1].reshape(d, n_u), float(par[-1])
+    if d > 1 and n_u:                                                   # (2, n_u): slope, value at 0
+        line = np.polyfit(tau[1:], U, 1)
+    else:
+        line = np.vstack([np.zeros((1, n_u)), U[:1]])
+    w, pts = np.asarray(w_start, float), []
+    for i in range(2):
+        s = (i + tau[1:]) / 2                                           # the half's points in [0, 1]
+        sub = np.r_[w[:n_x], p, (line[0][None, :] * s[:, None] + line[1][None, :]).ravel(), h / 2]
+        V = _solve_one(cm, w, sub, depth - 1)
+        if V is None:
+            return None
+        pts.append(np.vstack([w, V.reshape(d, -1)]))
+        w = V[-w.size:]
+    return _at_radau_points(np.stack(pts), tau)
+
+
+def _at_radau_points(pts: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """The piecewise collocation polynomial of ``parts`` equal sub-elements (pts (parts, d + 1, n_w): each
+    sub-element's start and Radau-point values) at the whole element's Radau points, stacked (n_w d,)."""
+    parts, d = pts.shape[0], tau.size - 1
+    out = []
+    for t in tau[1:]:
+        i = min(int(t * parts), parts - 1)
+        s = t * parts - i                                               # position within sub-element i
+        basis = np.array([np.prod([(s - tau[r]) / (tau[j] - tau[r]) for r in range(d + 1) if r != j])
+                          for j in range(d + 1)])
+        out.append(basis @ pts[i])
+    return np.concatenate(out)
 
 
 def _blocks(cm, m: int):

@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
-from .element_rescue import damped_element_solve
+from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
 from .sensitivity import Sensitivities
 from .state import numerics, solve_states_generic
 
@@ -73,9 +73,6 @@ def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
 
 
 # ---------------------------------------------------------------------------- the element marcher
-#: an element's collocation solution is accepted when max |R| <= RESIDUAL_TOL (1 + max |V|)
-RESIDUAL_TOL = 1e-8
-
 
 def march_functions(cm) -> tuple:
     """(march, residuals, Umap) of a collocated model: march(w_0, P) -> (W_end, V) solves the elements one
@@ -92,12 +89,6 @@ def march_functions(cm) -> tuple:
         march_f = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
         return march_f, R.map(N), cm.point_input_map()
     return cm.cache.get_or_make("march_functions", None, build)
-
-
-def element_failures(V: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Rows (one element of one experiment) whose unknowns V are not finite or whose collocation residual
-    R is above RESIDUAL_TOL (1 + max |V|): the element's Newton solve failed."""
-    return ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(V), axis=1))))
 
 
 def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
@@ -168,7 +159,7 @@ def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
 def rescue_march(cm, W0: np.ndarray, P: np.ndarray, V: np.ndarray, bad: np.ndarray, p, inputs) -> np.ndarray:
     """The march of :func:`march` again for the experiments with a failed element, from their first failed
     element on: each element by CasADi's plain Newton (the element's rootfinder, mapped) and, where that
-    fails, by Newton with a line search (:func:`models.element_rescue.damped_element_solve`).
+    fails, by Newton with a line search (:func:`models.element_rescue.rescue_elements`).
 
     ``P`` (n, N, n_par) every element's (p, U_k, h_k), ``V`` (n, N, n_w d) the marched unknowns, ``bad``
     (n, N) the failed elements.  Returns V with those experiments' elements replaced; raises
@@ -188,7 +179,7 @@ def rescue_march(cm, W0: np.ndarray, P: np.ndarray, V: np.ndarray, bad: np.ndarr
         Rk = _element_residuals(cm, Vk, par)
         failed = element_failures(Vk, Rk)
         if np.any(failed):
-            Vk[failed], Rk[failed] = damped_element_solve(cm, V0[failed], par[failed])
+            Vk[failed], Rk[failed] = rescue_elements(cm, V0[failed], par[failed])
             failed = element_failures(Vk, Rk)
             if np.any(failed):
                 raise march_failure(cm, p, inputs, int(js[np.flatnonzero(failed)[0]]), k)
@@ -465,7 +456,7 @@ class TrajectoryNumerics:
             pb = p if p.ndim == 1 else p[bad]
             par = np.concatenate([xs[bad], np.broadcast_to(pb, (int(bad.sum()), p.shape[-1])), U[bad],
                                   np.full((int(bad.sum()), 1), hk)], axis=1)
-            V[bad], R[bad] = damped_element_solve(self.model, np.tile(xs[bad], (1, self.d)), par)
+            V[bad], R[bad] = rescue_elements(self.model, np.tile(xs[bad], (1, self.d)), par)
             bad = element_failures(V, R)
         if np.any(bad):
             self._fail(inputs, int(np.flatnonzero(bad)[0]), k, p)
