@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from .contract import Model, ModelError
-from .dynamic import DynamicModel, merge_times, register_collocation, time_label, time_tolerance
+from .dynamic import DynamicModel, merge_times, register_collocation, same_instant_gaps, time_label, time_tolerance
 from .dae_march import dae_numerics
 from .trajectory import march, march_functions, trajectory_numerics
 
@@ -74,12 +74,12 @@ class Mesh:
         b = np.asarray(self.boundaries, float).ravel()
         if b.size < 2 or b[0] != 0.0 or np.any(np.diff(b) <= 0) or not np.all(np.isfinite(b)):
             raise ModelError("mesh: boundaries must start at 0 and increase strictly (at least one element)")
-        short = np.flatnonzero(np.diff(b) <= time_tolerance(b[-1]))
+        short = np.flatnonzero(same_instant_gaps(b, b[-1]))
         if short.size:
             i = int(short[0])
             raise ModelError(f"mesh: the boundaries {float(b[i])!r} and {float(b[i + 1])!r} differ by round-off only "
-                             f"(an element "
-                             f"shorter than {time_tolerance(b[-1]):.3g}); give that boundary once")
+                             f"(an element shorter than {time_tolerance(b[-1], b[i + 1]):.3g}); give that boundary "
+                             "once")
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or not 1 <= self.degree <= 9:
             raise ModelError(f"degree: expected an integer in 1..9, got {self.degree!r}")
         object.__setattr__(self, "boundaries", tuple(float(v) for v in b))
@@ -90,7 +90,7 @@ class Mesh:
         equal elements no longer than ``max_step``."""
         if not (math.isfinite(max_step) and max_step > 0):
             raise ModelError(f"max_step: expected a positive time, got {max_step!r}")
-        pts = merge_times([0.0, horizon], breakpoints, tol=time_tolerance(horizon))   # round-off makes no element
+        pts = merge_times([0.0, horizon], breakpoints, horizon=horizon)   # round-off makes no element
         pts = pts[(pts >= 0) & (pts <= horizon)]
         out = [0.0]
         for a, b in zip(pts[:-1], pts[1:]):
@@ -145,9 +145,8 @@ class CollocatedModel(Model):
                              f"{labels[i]}); merge them or give times that differ")
         self.tau, self.C = radau_coefficients(mesh.degree)
         b = np.asarray(mesh.boundaries)
-        tol = time_tolerance(b[-1])
         self._end_of = {float(t): int(np.argmin(np.abs(b - t))) - 1 for t in self.times}
-        off = [float(t) for t in self.times if np.min(np.abs(b - t)) > tol]
+        off = [float(t) for t in self.times if np.min(np.abs(b - t)) > time_tolerance(b[-1], t)]
         if off:
             raise ModelError(f"mesh: sampling time(s) {', '.join(f'{v:g}' for v in off)} are not element boundaries")
         n_w = dynamic.n_x + dynamic.n_z
@@ -333,11 +332,12 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
     tol = time_tolerance(horizon)
     grid = [g for c in dynamic.controls for g in c.grid if g <= horizon + tol]
     if mesh is None:       # the sampling times stay exact; a grid point within round-off of one merges into it
-        mesh = Mesh.covering(merge_times(t, grid, tol=tol), horizon, max_step or horizon / DEFAULT_ELEMENTS, degree)
+        mesh = Mesh.covering(merge_times(t, grid, horizon=horizon), horizon, max_step or horizon / DEFAULT_ELEMENTS,
+                             degree)
     elif not isinstance(mesh, Mesh):
         raise ModelError(f"mesh: expected a models.collocation.Mesh, got {type(mesh).__name__}")
     b = np.asarray(mesh.boundaries)
-    missing = [v for v in merge_times(t, grid, tol=tol) if np.min(np.abs(b - v)) > tol]
+    missing = [v for v in merge_times(t, grid, horizon=horizon) if np.min(np.abs(b - v)) > time_tolerance(horizon, v)]
     if missing or abs(b[-1] - horizon) > tol:
         raise ModelError(f"mesh: its boundaries must contain every sampling time and control grid point and end "
                          f"at the horizon {horizon:g}; missing {', '.join(f'{v:g}' for v in missing) or 'the end'}")

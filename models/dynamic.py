@@ -29,13 +29,18 @@ import numpy as np
 from .cache import Cache
 from .labels import LabelledModel, ModelError, as_column, as_parameters, check_names
 
-__all__ = ["Control", "DynamicModel", "time_label", "register_collocation", "TIME_RTOL", "time_tolerance",
-           "merge_times"]
+__all__ = ["Control", "DynamicModel", "time_label", "register_collocation", "TIME_RTOL", "TIME_FLOOR",
+           "time_tolerance", "same_instant_gaps", "merge_times"]
 
-#: two times closer than TIME_RTOL x the horizon are one instant (round-off: 0.35 and
-#: 0.35000000000000003 from ``np.arange(10) * 0.05``); sampling times, control grid points and mesh
-#: boundaries are compared and merged with :func:`time_tolerance`, so round-off never makes an element
+#: two times a, b of an experiment of length T closer than TIME_RTOL x max(|a|, |b|, TIME_FLOOR T) are one
+#: instant (round-off: 0.35 and 0.35000000000000003 from ``np.arange(10) * 0.05``); sampling times, control grid
+#: points and mesh boundaries are compared and merged with :func:`time_tolerance`, so round-off never makes an
+#: element.  The tolerance is relative to the size of the times compared (round-off is), so log-spaced times
+#: (1e-5, 4.9e-5, ... of a 1e5 s horizon: a stiff model's sampling) stay distinct instants.
 TIME_RTOL = 1e-9
+#: times below TIME_FLOOR x the horizon share the tolerance of TIME_FLOOR x the horizon (a time near 0 computed
+#: with numbers of the horizon's size carries their round-off, ~1e-16 x the horizon)
+TIME_FLOOR = 1e-6
 
 #: the collocation behind :meth:`DynamicModel.collocate` (:func:`models.collocation.collocate`, which
 #: registers itself here when :mod:`models.collocation` is imported; the ``models`` package imports it,
@@ -55,20 +60,39 @@ def time_label(t: float) -> str:
     return f"{float(t):.12g}"
 
 
-def time_tolerance(horizon) -> float:
-    """The distance under which two times of an experiment of length ``horizon`` are the same instant:
-    ``TIME_RTOL * horizon`` (``TIME_RTOL`` when the horizon is not positive)."""
+def time_tolerance(horizon, at=None):
+    """tol = TIME_RTOL max(|at|, TIME_FLOOR T): the distance (time unit of the model) under which two times of
+    size ``at`` of an experiment of length T = ``horizon`` are the same instant.
+
+    ``at`` None: the times at the horizon, TIME_RTOL T (the largest tolerance of the experiment); an array:
+    one tolerance per time.  T not positive or not finite: T = 1."""
     h = abs(float(horizon))
-    return TIME_RTOL * h if math.isfinite(h) and h > 0 else TIME_RTOL
+    h = h if math.isfinite(h) and h > 0 else 1.0
+    if at is None:
+        return TIME_RTOL * h
+    tol = TIME_RTOL * np.maximum(np.abs(np.asarray(at, float)), TIME_FLOOR * h)
+    return float(tol) if tol.ndim == 0 else tol
 
 
-def merge_times(*groups, tol: float) -> np.ndarray:
-    """The sorted distinct times of ``groups`` with times closer than ``tol`` merged into one instant.
+def same_instant_gaps(t, horizon) -> np.ndarray:
+    """Which gaps of the sorted times t (one per neighbouring pair, ``t.size - 1``) are round-off only:
+    t[i + 1] - t[i] <= :func:`time_tolerance` at the larger of the two."""
+    t = np.asarray(t, float).ravel()
+    if t.size < 2:
+        return np.zeros(0, bool)
+    return np.diff(t) <= time_tolerance(horizon, np.maximum(np.abs(t[:-1]), np.abs(t[1:])))
 
-    A group of times within ``tol`` of their neighbours becomes one value: the one of the earliest group
-    that holds one (pass the times that must stay exact first, e.g. 0 and the horizon, then the sampling
-    times, then control grid points), within that group the one that reads shortest (0.35 rather than
-    0.35000000000000003)."""
+
+def merge_times(*groups, tol: float | None = None, horizon: float | None = None) -> np.ndarray:
+    """The sorted distinct times of ``groups`` with times of one instant merged into one value.
+
+    One instant: neighbours within :func:`time_tolerance` of the experiment's ``horizon`` (relative to the
+    times' size), or, given ``tol`` instead, within that absolute distance.  A group of times within the
+    tolerance of their neighbours becomes one value: the one of the earliest group that holds one (pass the
+    times that must stay exact first, e.g. 0 and the horizon, then the sampling times, then control grid
+    points), within that group the one that reads shortest (0.35 rather than 0.35000000000000003)."""
+    if (tol is None) == (horizon is None):
+        raise TypeError("merge_times: give one of tol= (an absolute distance) and horizon= (the experiment's length)")
     vals, rank = [], []
     for g, times in enumerate(groups):
         v = np.asarray(times, float).ravel()
@@ -79,7 +103,8 @@ def merge_times(*groups, tol: float) -> np.ndarray:
         return v
     order = np.argsort(v, kind="stable")
     v, r = v[order], r[order]
-    starts = np.r_[0, np.flatnonzero(np.diff(v) > tol) + 1]
+    apart = np.diff(v) > tol if horizon is None else ~same_instant_gaps(v, horizon)
+    starts = np.r_[0, np.flatnonzero(apart) + 1]
     out = []
     for a, b in zip(starts, np.r_[starts[1:], v.size]):
         cand = v[a:b][r[a:b] == r[a:b].min()]
@@ -307,12 +332,13 @@ class DynamicModel(LabelledModel):
         if np.any(np.diff(t) <= 0):
             i = int(np.flatnonzero(np.diff(t) <= 0)[0])
             raise ModelError(f"{arg}: sampling times must be strictly increasing; {t[i + 1]:g} follows {t[i]:g}")
-        tol = time_tolerance(self.horizon if self.horizon is not None else t[-1])
-        if np.any(np.diff(t) <= tol):
-            i = int(np.flatnonzero(np.diff(t) <= tol)[0])
+        horizon = self.horizon if self.horizon is not None else t[-1]
+        tol = time_tolerance(horizon)
+        twins = same_instant_gaps(t, horizon)
+        if np.any(twins):
+            i = int(np.flatnonzero(twins)[0])
             raise ModelError(f"{arg}: sampling times {float(t[i])!r} and {float(t[i + 1])!r} differ by round-off only "
-                             f"(less than "
-                             f"{TIME_RTOL:g} of the horizon); give that time once")
+                             f"(less than {TIME_RTOL:g} of their size); give that time once")
         if self.horizon is not None and t[-1] > self.horizon + tol:
             raise ModelError(f"{arg}: sampling time {t[-1]:g} lies beyond the horizon {self.horizon:g}")
         return t

@@ -33,6 +33,7 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
+from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
 from .sensitivity import Sensitivities
 from .state import numerics, solve_states_generic
 
@@ -78,9 +79,6 @@ def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
 
 
 # ---------------------------------------------------------------------------- the element marcher
-#: an element's collocation solution is accepted when max |R| <= RESIDUAL_TOL (1 + max |V|)
-RESIDUAL_TOL = 1e-8
-
 
 def march_functions(cm) -> tuple:
     """(march, residuals, Umap) of a collocated model: march(w_0, P) -> (W_end, V) solves the elements one
@@ -97,12 +95,6 @@ def march_functions(cm) -> tuple:
         march_f = ca.Function("step", [ws, par], [V[-n_w:], V]).mapaccum("march", N)
         return march_f, R.map(N), cm.point_input_map()
     return cm.cache.get_or_make("march_functions", None, build)
-
-
-def element_failures(V: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Rows (one element of one experiment) whose unknowns V are not finite or whose collocation residual
-    R is above RESIDUAL_TOL (1 + max |V|): the element's Newton solve failed."""
-    return ~(np.all(np.isfinite(V), axis=1) & (np.max(np.abs(R), axis=1) <= RESIDUAL_TOL * (1 + np.max(np.abs(V), axis=1))))
 
 
 def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
@@ -124,7 +116,9 @@ def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
     ``mapaccum`` of CasADi's rootfinder, :func:`march_functions`, mapped over the experiments); more
     experiments of an ODE element by element with batched NumPy Newton steps
     (:meth:`TrajectoryNumerics.element_newton`, fewer calls per point).  Every element's residual is
-    checked (:func:`element_failures`).
+    checked (:func:`element_failures`); an experiment with a failed element is marched again from that
+    element with Newton damped by a line search where plain Newton fails (:func:`rescue_march`, a stiff
+    model on long elements), which leaves every element solved before unchanged.
 
     Parameters
     ----------
@@ -162,11 +156,48 @@ def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
     XS = np.concatenate([W0[:, None, :n_x], W_end[:, :-1, :n_x]], axis=1)
     residual = cm.cache.get_or_make("element_residual_map", m, lambda: cm.element_functions()[1].map(m), maxsize=8)
     R = np.asarray(residual(V.reshape(m, -1).T, np.concatenate([XS, P], axis=2).reshape(m, -1).T)).T
-    bad = element_failures(V.reshape(m, -1), R)
+    bad = element_failures(V.reshape(m, -1), R).reshape(n, N)
     if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise march_failure(cm, p, inputs, i // N, i % N)
+        return rescue_march(cm, W0, P, V, bad, p, inputs)
     return V
+
+
+def rescue_march(cm, W0: np.ndarray, P: np.ndarray, V: np.ndarray, bad: np.ndarray, p, inputs) -> np.ndarray:
+    """The march of :func:`march` again for the experiments with a failed element, from their first failed
+    element on: each element by CasADi's plain Newton (the element's rootfinder, mapped) and, where that
+    fails, by Newton with a line search (:func:`models.element_rescue.rescue_elements`).
+
+    ``P`` (n, N, n_par) every element's (p, U_k, h_k), ``V`` (n, N, n_w d) the marched unknowns, ``bad``
+    (n, N) the failed elements.  Returns V with those experiments' elements replaced; raises
+    :func:`march_failure` of the first element that neither solves."""
+    n_x, n_w = cm.dynamic.n_x, W0.shape[1]
+    V = np.array(V, float)
+    rows = np.flatnonzero(np.any(bad, axis=1))
+    first = np.argmax(bad[rows], axis=1)
+    rf = cm.element_functions()[0]
+    for k in range(int(first.min()), V.shape[1]):
+        js = rows[first <= k]
+        ws = W0[js] if k == 0 else V[js, k - 1, -n_w:]
+        par = np.concatenate([ws[:, :n_x], P[js, k]], axis=1)
+        V0 = np.tile(ws, (1, cm.mesh.degree))
+        rfm = cm.cache.get_or_make("element_rootfinder_map", js.size, lambda: rf.map(js.size), maxsize=8)
+        Vk = np.asarray(rfm(ca.DM(np.ascontiguousarray(V0.T)), ca.DM(np.ascontiguousarray(par.T)))).T
+        Rk = _element_residuals(cm, Vk, par)
+        failed = element_failures(Vk, Rk)
+        if np.any(failed):
+            Vk[failed], Rk[failed] = rescue_elements(cm, V0[failed], par[failed])
+            failed = element_failures(Vk, Rk)
+            if np.any(failed):
+                raise march_failure(cm, p, inputs, int(js[np.flatnonzero(failed)[0]]), k)
+        V[js, k] = Vk
+    return V
+
+
+def _element_residuals(cm, V: np.ndarray, par: np.ndarray) -> np.ndarray:
+    """The collocation residuals (m, n_w d) of m elements at their unknowns V (m, n_w d), par = (x_start, p, U, h)."""
+    R = cm.element_functions()[1]
+    Rm = cm.cache.get_or_make("element_residual_map", V.shape[0], lambda: R.map(V.shape[0]), maxsize=8)
+    return np.asarray(Rm(ca.DM(np.ascontiguousarray(V.T)), ca.DM(np.ascontiguousarray(par.T)))).T
 
 
 def _march_symbolic(cm, p, q):
@@ -427,6 +458,12 @@ class TrajectoryNumerics:
         if not fresh:
             R = _mapped_call(self._maps, self.newton, n, [V, xs, p, U, h])[0][:, :, 0]
         bad = element_failures(V, R)
+        if np.any(bad):                 # Newton with a line search where plain Newton failed (a stiff model)
+            pb = p if p.ndim == 1 else p[bad]
+            par = np.concatenate([xs[bad], np.broadcast_to(pb, (int(bad.sum()), p.shape[-1])), U[bad],
+                                  np.full((int(bad.sum()), 1), hk)], axis=1)
+            V[bad], R[bad] = rescue_elements(self.model, np.tile(xs[bad], (1, self.d)), par)
+            bad = element_failures(V, R)
         if np.any(bad):
             self._fail(inputs, int(np.flatnonzero(bad)[0]), k, p)
         return V
@@ -721,32 +758,42 @@ def _mapped(cm, derivatives, n):
 
 def mapped_outputs(cm, p, inputs, tol: float = RESIDUAL_TOL) -> np.ndarray:
     """Outputs (n_q, n_S) of a collocated ODE model at p for every input row (one mapped call; the
-    collocation solution of :meth:`models.collocation.CollocatedModel.integrated_outputs`)."""
+    collocation solution of :meth:`models.collocation.CollocatedModel.integrated_outputs`).  When an element's
+    plain Newton solve fails in that call, the trajectories are marched with the rescue of :func:`march`
+    (:meth:`TrajectoryNumerics.outputs`)."""
     Q = np.atleast_2d(np.asarray(inputs, float))
     p = np.asarray(p, float).ravel()
     h, bad = (np.asarray(a) for a in _mapped(cm, False, Q.shape[0])(p, Q.T))
-    _check(cm, p, Q, h, bad, tol)
+    if _failed(h, bad, Q.shape[0], tol):
+        return trajectory_numerics(cm).outputs(p, Q)
     return h.T
 
 
-def _check(cm, p, Q, h, bad, tol):
-    """:func:`march_failure` naming the experiment and element whose Newton solve failed."""
-    bad = bad.reshape(Q.shape[0], -1)
-    wrong = ~np.isfinite(bad) | (bad > tol)
-    if np.any(wrong) or not np.all(np.isfinite(h)):
-        j, k = np.argwhere(wrong)[0] if np.any(wrong) else (int(np.argwhere(~np.isfinite(h.T))[0][0]), 0)
-        raise march_failure(cm, p, Q, int(j), int(k))
+def _failed(h, bad, n: int, tol: float) -> bool:
+    """True when an element's relative residual (``bad``, n x N) is above ``tol`` or not finite, or an output
+    is not finite: the in-graph march failed somewhere."""
+    bad = bad.reshape(n, -1)
+    return bool(np.any(~np.isfinite(bad) | (bad > tol)) or not np.all(np.isfinite(h)))
 
 
 def outputs_and_sensitivities(cm, p, inputs, tol: float = RESIDUAL_TOL):
     """(h (n_q, n_S), G (n_q, n_S, n_p)) of a collocated ODE model at p for every input row, one
-    mapped call (:func:`output_sensitivity_function`); raises :class:`models.errors.StateSolveError`
-    naming the experiment and element when an element's Newton solve did not converge (relative
-    residual above ``tol``)."""
+    mapped call (:func:`output_sensitivity_function`).  When an element's Newton solve in that call does not
+    converge (relative residual above ``tol``), the trajectories are marched with the rescue of :func:`march`
+    and y' found by forward substitution (:meth:`TrajectoryNumerics.sensitivities`); raises
+    :class:`models.errors.StateSolveError` naming the experiment and element when even that fails."""
     Q = np.atleast_2d(np.asarray(inputs, float))
     p = np.asarray(p, float).ravel()
     h, G, bad = (np.asarray(a) for a in _mapped(cm, True, Q.shape[0])(p, Q.T))
-    _check(cm, p, Q, h, bad, tol)
+    if _failed(h, bad, Q.shape[0], tol):        # marched with the rescue of march, y' by forward substitution
+        num = trajectory_numerics(cm)
+        sens = num.sensitivities(p, Q, num.states(p, Q))
+        return _finite_sensitivities(cm, p, sens.h, sens.G)
+    return _finite_sensitivities(cm, p, h.T, G.reshape(cm.n_S, Q.shape[0], cm.n_p).transpose(1, 0, 2))
+
+
+def _finite_sensitivities(cm, p, h, G) -> tuple:
+    """(h, G) when G is finite, else StateSolveError."""
     if not np.all(np.isfinite(G)):
         raise StateSolveError(f"sensitivities of {cm.dynamic.name!r} at p = {p.tolist()} are not finite")
-    return h.T, G.reshape(cm.n_S, Q.shape[0], cm.n_p).transpose(1, 0, 2)
+    return h, G

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from models.dynamic import merge_times, time_tolerance
+from models.dynamic import merge_times
 from .approx_polish import explicit_polisher
 from .approx_weights import bayes_weights, information_of, maximin_weights, multiplicative_weights, standardized
 from .criteria import DEFAULT_CRITERION, Criterion
@@ -473,7 +473,7 @@ def _information_source(model, sigma, inputs, sensors, n_series, axis):
         t = X[:, 0]
         # times closer than the round-off tolerance are one instant (models.dynamic.merge_times): refined grids
         # around a support point can hold such twins, which the model's data checks refuse
-        u = merge_times(t, tol=time_tolerance(t.max()))
+        u = merge_times(t, horizon=t.max())
         at = np.abs(t[:, None] - u[None, :]).argmin(axis=1)
         out = np.empty((t.size, len(P), model.n_p, model.n_p))
         for s, ps in enumerate(P):

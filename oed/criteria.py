@@ -97,7 +97,8 @@ class CriteriaSettings:
     rank_rtol : float
         A design is singular when lambda_min / lambda_max of the diagonally scaled
         information ``D^{-1/2} M D^{-1/2}`` (``D = diag M``) is ``<= rank_rtol``, or a
-        diagonal entry of ``M`` is ``<= rank_rtol * max_k ||F_k||``.
+        diagonal entry ``M_ii`` is ``<= rank_rtol * max_k (F_k)_ii`` (per parameter: invariant to the
+        parameters' units, e.g. rates of 0.04 and 3e7 1/s).
     near_singular_cond : float
         Condition number of the scaled information above which a design is flagged.
     symmetry_rtol, psd_rtol : float
@@ -199,9 +200,10 @@ class BatchCriteria:
 
 
 def _scaled_eigs(M, F_scale, settings):
-    """Eigenvalues of diag-scaled M, singular flags, cond of scaled M."""
+    """Singular flags and cond of the diag-scaled M (n_designs, n_p, n_p); ``F_scale`` (n_p,) the largest
+    information of every parameter in one candidate, max_k (F_k)_ii."""
     d = np.einsum("bii->bi", M)
-    tiny = d <= settings.rank_rtol * F_scale
+    tiny = d <= settings.rank_rtol * F_scale[None, :]
     dsafe = np.where(tiny, 1.0, d)
     s = 1.0 / np.sqrt(dsafe)
     Ms = M * s[:, :, None] * s[:, None, :]
@@ -244,7 +246,7 @@ def batch_criteria(F, S, W, kind="gauss_newton", *, settings: CriteriaSettings =
     if not np.all(np.isfinite(W)):
         raise ValueError("w: contains NaN or inf")
     nb = W.shape[0]
-    F_scale = float(np.max(np.abs(F))) if F.size else 1.0
+    F_scale = np.max(np.einsum("kii->ki", F), axis=0) if n_S else np.ones(n_p)   # per parameter (units)
     Fflat = F.reshape(n_S, -1)
     G = ((W * W) @ Fflat).reshape(nb, n_p, n_p)
     singular, cond = _scaled_eigs(G, F_scale, settings)

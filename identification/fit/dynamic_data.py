@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from models.collocation import pair_name
-from models.dynamic import TIME_RTOL, merge_times, time_tolerance
+from models.dynamic import TIME_RTOL, merge_times, same_instant_gaps
 from identification.errors import DataError
 from identification.fit.measurements import Measurements
 
@@ -75,18 +75,19 @@ def _times_table(times, n_q: int) -> np.ndarray:
 
 
 def _merged(t: np.ndarray) -> np.ndarray:
-    """The times with every time within round-off of another (:func:`models.dynamic.time_tolerance` of the
-    last time) replaced by one value for all experiments, so that round-off never makes two instants."""
+    """The times with every time within round-off of another (:func:`models.dynamic.time_tolerance` with the
+    last time as the horizon) replaced by one value for all experiments, so that round-off never makes two
+    instants."""
     finite = t[np.isfinite(t)]
-    tol = time_tolerance(finite.max())
+    horizon = finite.max()
     for j, row in enumerate(t):
         r = row[np.isfinite(row)]
-        if np.any(np.diff(r) <= tol):
-            i = int(np.flatnonzero(np.diff(r) <= tol)[0])
+        twins = same_instant_gaps(r, horizon)
+        if np.any(twins):
+            i = int(np.flatnonzero(twins)[0])
             raise DataError(f"times: experiment {j + 1}: the sampling times {float(r[i])!r} and {float(r[i + 1])!r} "
-                            f"differ by "
-                            f"round-off only (less than {TIME_RTOL:g} of the last time); give that time once")
-    union = merge_times(finite, tol=tol)
+                            f"differ by round-off only (less than {TIME_RTOL:g} of their size); give that time once")
+    union = merge_times(finite, horizon=horizon)
     if union.size == np.unique(finite).size:
         return t
     out = t.copy()

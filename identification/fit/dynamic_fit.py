@@ -213,7 +213,12 @@ def _error(model, data, est, mesh, w):
     e = np.where(counts > 0, np.abs(dh) / est.sigma[None, :], 0.0)
     A = np.einsum("jkp,jk,jkq->pq", est.G, wt, est.G)
     b = np.einsum("jkp,jk,jk->p", est.G, wt, dh)
-    shift = np.linalg.solve(A, b) / est.stderr_gn      # Gauss-Newton: finite whenever p is identifiable
+    try:
+        shift = np.linalg.solve(A, b) / est.stderr_gn  # Gauss-Newton: finite whenever p is identifiable
+    except np.linalg.LinAlgError:       # a run-off point (not identifiable): the least-norm shift, in standard
+        dp = np.linalg.lstsq(A, b, rcond=None)[0]       # errors where they are finite (0 along the run-off)
+        shift = np.where(np.isfinite(est.stderr_gn), dp / np.where(np.isfinite(est.stderr_gn), est.stderr_gn, 1.0),
+                         0.0)
     return e.max(axis=0), float(e.max()), shift
 
 

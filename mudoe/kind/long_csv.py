@@ -92,7 +92,7 @@ def _time(path, line, cell, declared) -> float:
     if declared is None or not declared.size:
         return t
     k = int(np.argmin(np.abs(declared - t)))
-    if abs(declared[k] - t) > time_tolerance(declared[-1]):
+    if abs(declared[k] - t) > time_tolerance(declared[-1], declared[k]):
         raise DataFileError(f"{path}, line {line}: time {cell!r} is not one of the declared sampling times "
                             f"([dynamic] times; the nearest is {declared[k]:g}); correct the time or add it to "
                             "[dynamic] times")
