@@ -202,6 +202,13 @@ class ImplicitObjective:
             return pt
         # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
         guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+        # a collocated ODE: Newton on all trajectories from it with y'(p) from the last iteration's blocks
+        fused = getattr(problem.model.state_numerics, "states_and_sensitivities", None)
+        got = None if fused is None else fused(p, problem.data.inputs, guess)
+        if got is not None:
+            pt = problem.point_at(p, got[0], got[1])
+            self._seen = ([e for e in self._seen if not np.array_equal(e[0], x)] + [(x.copy(), got[0], pt)])[-self._KEEP:]
+            return pt
         # the model's own solve from it (a collocated ODE: Newton on all trajectories, else marched), if it has one
         Y = problem.model.state_numerics.marched_states(p, problem.data.inputs, guess)
         if Y is None and guess is not None:
