@@ -38,7 +38,7 @@ from .state import numerics, solve_states_generic
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states", "march", "march_functions",
            "march_failure", "element_failures", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
-           "outputs_and_sensitivities", "merging"]
+           "outputs_and_sensitivities", "merging", "REFINED_RESIDUAL_TOL"]
 
 #: the broker of this thread's member fit in :func:`run_merged` (None outside one)
 _LOCAL = threading.local()
@@ -80,6 +80,9 @@ def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
 # ---------------------------------------------------------------------------- the element marcher
 #: an element's collocation solution is accepted when max |R| <= RESIDUAL_TOL (1 + max |V|)
 RESIDUAL_TOL = 1e-8
+#: one Newton step from another mesh's trajectories is kept when max |R| <= REFINED_RESIDUAL_TOL (1 + max |V|)
+#: on every element (:meth:`TrajectoryNumerics.refined_outputs`)
+REFINED_RESIDUAL_TOL = 1e-10
 
 
 def march_functions(cm) -> tuple:
@@ -252,6 +255,7 @@ class TrajectoryNumerics:
         self.residual_blocks = ca.Function("traj_residual_blocks", [V, xs, p, U, hk], [R, RV, ca.jacobian(R, xs)])
         self.full_blocks = ca.Function("traj_full_blocks", [V, xs, p, U, hk],
                                        [R, RV, ca.jacobian(R, xs), ca.jacobian(R, p)])
+        self.residual = ca.Function("traj_residual", [V, xs, p, U, hk], [R])
         q = ca.SX.sym("q", dyn.n_q_dim)
         x0 = dyn.x0_fun(p, cm.initial_input(q))
         self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
@@ -307,6 +311,39 @@ class TrajectoryNumerics:
         if guess is None:
             return self.outputs(p, inputs)
         return self.outputs(p, inputs, self.states(p, inputs, guess))
+
+    def refined_outputs(self, p, inputs, guess) -> np.ndarray:
+        r"""h (n_q, n_S) of the collocation solution at p from a ``guess`` within the discretisation error of it
+        (another mesh's trajectories interpolated, :func:`interpolate_states`): one Newton step on all
+        trajectories, kept when every element's residual after it is at most
+        :data:`REFINED_RESIDUAL_TOL` (1 + max |V|) (Newton converges quadratically: from a start at a relative
+        distance delta the step leaves O(delta^2), and the residual test bounds what is left); else Newton to
+        convergence as :meth:`integrated_outputs`."""
+        inputs = np.atleast_2d(np.asarray(inputs, float))
+        if getattr(_LOCAL, "broker", None) is not None:
+            return self.integrated_outputs(p, inputs, guess)
+        n, N = inputs.shape[0], self.N
+        pv = _params(p, n)
+        x0 = _mapped_call(self._maps, self.init, n, [pv, inputs])[0][:, :, 0]
+        n_x = x0.shape[1]
+        Y = np.array(guess, float)
+        if Y.shape == (n, n_x * (1 + N * self.d)):
+            Y[:, :n_x] = x0
+            U, pe, steps = self._controls(inputs).reshape(n * N, -1), _per_element(pv, N), np.tile(self.steps, n)[:, None]
+            W, XS = self._elements(Y, n_x)
+            R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
+                                     [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
+            E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
+            Y -= self._stacked_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+            W, XS = self._elements(Y, n_x)
+            W = W.reshape(n * N, -1)
+            R = _mapped_call(self._maps, self.residual, n * N, [W, XS.reshape(n * N, -1), pe, U, steps])[0][:, :, 0]
+            with np.errstate(invalid="ignore"):
+                ok = np.all(np.isfinite(W)) and np.all(np.max(np.abs(R), axis=1) <= REFINED_RESIDUAL_TOL
+                                                        * (1 + np.max(np.abs(W), axis=1)))
+            if ok:
+                return self.outputs(pv, inputs, Y)
+        return self.integrated_outputs(p, inputs, guess)
 
     # ------------------------------------------------------------------ states
     def _elements(self, Y: np.ndarray, n_x: int) -> tuple:
@@ -727,7 +764,7 @@ def interpolate_states(coarse, fine, Y) -> np.ndarray:
     for j in range(d + 1):
         np.add.at(L, (np.arange(tf.size), k * d + j), basis[:, j])
     n, n_w = Y.shape[0], coarse.dynamic.n_x + coarse.dynamic.n_z
-    return np.einsum("fc,ncx->nfx", L, np.asarray(Y, float).reshape(n, -1, n_w)).reshape(n, -1)
+    return np.matmul(L, np.asarray(Y, float).reshape(n, -1, n_w)).reshape(n, -1)
 
 
 # ---------------------------------------------------------------------------- outputs and sensitivities, mapped

@@ -206,7 +206,11 @@ def _error(model, data, est, mesh, w):
     fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
     order = 2 * mesh.degree - 1
     guess = None if est.states is None else interpolate_states(est.model, fine, est.states)
-    h_fine = fine.state_numerics.integrated_outputs(est.p, data.inputs, guess)   # from the fit's trajectories
+    num = fine.state_numerics
+    if guess is not None and hasattr(num, "refined_outputs"):      # one Newton step from the fit's trajectories
+        h_fine = num.refined_outputs(est.p, data.inputs, guess)
+    else:
+        h_fine = num.integrated_outputs(est.p, data.inputs, guess)
     dh = (h_fine - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
