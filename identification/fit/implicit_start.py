@@ -172,6 +172,9 @@ class ImplicitObjective:
     #: S of a point is added by a second call with ``second_order`` at no other cost (the point is kept): the
     #: line search asks for it only at the point it accepts (:func:`identification.fit.explicit_newton`)
     deferred_second_order = True
+    #: Newton steps (with S) from the first point whose Gauss-Newton decrement is below 1e-4 (set by
+    #: :func:`identification.fit.explicit_newton.reduced_start` for a collocated ODE)
+    early_newton = False
 
     def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None,
                  abort_on_failure: bool = False):
