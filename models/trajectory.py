@@ -415,7 +415,7 @@ class TrajectoryNumerics:
         if Y.shape != (n, n_x * (1 + N * d)):
             return None
         Y[:, :n_x] = x0                                   # x(0) - x0(p, u(0)) = 0 exactly
-        prev = np.inf
+        prev, force = np.inf, False
         if sweep:
             x0p = _mapped_call(self._maps, self.init, n, [p, inputs])[1]
         for _ in range(8):
@@ -430,7 +430,10 @@ class TrajectoryNumerics:
                 return None
             prev = norm
             E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
-            if sweep:
+            yp = None
+            # y'(p) is solved along only where this step may be the last: |R| <= 1e-10 (1 + |y|) (a step of at
+            # most 1e-12 (1 + |y|) has |R| = |R_V dy| below it unless |R_V| > 100); else in a later iteration
+            if sweep and (force or norm <= 1e-10 * (1 + float(np.max(np.abs(Y))))):
                 n_p = Rp.shape[-1]
                 B = np.concatenate([E[:, :, None], np.concatenate([x0p, -Rp.reshape(n, -1, n_p)], axis=1)], axis=2)
                 out = self._stacked_solve(RV, Rx, B.reshape(-1, 1 + n_p)).reshape(n, -1, 1 + n_p)
@@ -441,9 +444,11 @@ class TrajectoryNumerics:
                 return None
             Y -= dY
             if np.all(np.max(np.abs(dY), axis=1) <= 1e-12 * (1 + np.max(np.abs(Y), axis=1))):
-                if sweep:
+                if not sweep:
+                    return Y
+                if yp is not None:
                     return Y, yp, RV.reshape((n, N) + RV.shape[1:]), Rx.reshape((n, N) + Rx.shape[1:])
-                return Y
+                prev, force = np.inf, True                # converged without y'(p): one more step, with it
         return None
 
     def states_and_sensitivities(self, p, inputs, guess):
