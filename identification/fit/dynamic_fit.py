@@ -202,7 +202,10 @@ def _weights(data: DynamicMeasurements, weights):
 def _error(model, data, est, mesh, w):
     """(error per flat sensor in sigmas, max, linearised estimate shift in standard errors) of the
     fit ``est`` on ``mesh``: Richardson's estimate 2^o / (2^o - 1) (h^{N/2} - h^N) with the mesh
-    halved, o = 2 d - 1 the order at the element boundaries."""
+    halved, o = 2 d - 1 the order at the element boundaries.  h^{N/2} by one Newton step from the fit's trajectories
+    interpolated onto the halved mesh (they are within the discretisation error of its solution, and Newton
+    converges quadratically), kept when every element's residual is at most 1e-10 (1 + |V|), else Newton to
+    convergence (:meth:`models.trajectory.TrajectoryNumerics.refined_outputs`)."""
     # the halved mesh's model, kept with the fit's (collocate validates the times and meshes before its cache)
     fine = est.model.cache.get_or_make("halved_mesh", tuple(data.pairs), lambda: collocate(
         model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs), maxsize=4)
