@@ -193,8 +193,12 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
         unit = newton_core.decrement_unit(cur.f, None if known else dof)
         if not newton and dec < 1e-4 * unit and getattr(objective, "early_newton", False):
-            newton = True                          # Newton steps from this point on (S here, the next turn)
-            continue
+            newton = True                          # Newton steps from this point on (with S here)
+            cur = objective(x, True)
+            L = newton_core.factor(cur.F + cur.S, cur.F)
+            if L is None:
+                return None
+            v, dec = newton_core.decrement(L, cur.g)
         if newton:
             roundoff = newton_core.gradient_roundoff(functools.partial(dense.tri_solve, L), cur.g_abs)
             if newton_core.converged(dec, refine_dec * unit, roundoff):
