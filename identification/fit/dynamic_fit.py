@@ -202,11 +202,20 @@ def _weights(data: DynamicMeasurements, weights):
 def _error(model, data, est, mesh, w):
     """(error per flat sensor in sigmas, max, linearised estimate shift in standard errors) of the
     fit ``est`` on ``mesh``: Richardson's estimate 2^o / (2^o - 1) (h^{N/2} - h^N) with the mesh
-    halved, o = 2 d - 1 the order at the element boundaries."""
-    fine = collocate(model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs)
+    halved, o = 2 d - 1 the order at the element boundaries.  h^{N/2} by one Newton step from the fit's trajectories
+    interpolated onto the halved mesh (they are within the discretisation error of its solution, and Newton
+    converges quadratically), kept when every element's residual is at most 1e-10 (1 + |V|), else Newton to
+    convergence (:meth:`models.trajectory.TrajectoryNumerics.refined_outputs`)."""
+    # the halved mesh's model, kept with the fit's (collocate validates the times and meshes before its cache)
+    fine = est.model.cache.get_or_make("halved_mesh", tuple(data.pairs), lambda: collocate(
+        model, data.union_times, mesh=mesh.refined(2), outputs=data.pairs), maxsize=4)
     order = 2 * mesh.degree - 1
     guess = None if est.states is None else interpolate_states(est.model, fine, est.states)
-    h_fine = fine.state_numerics.integrated_outputs(est.p, data.inputs, guess)   # from the fit's trajectories
+    num = fine.state_numerics
+    if guess is not None and hasattr(num, "refined_outputs"):      # one Newton step from the fit's trajectories
+        h_fine = num.refined_outputs(est.p, data.inputs, guess)
+    else:
+        h_fine = num.integrated_outputs(est.p, data.inputs, guess)
     dh = (h_fine - est.fitted) * 2 ** order / (2 ** order - 1)  # (n_q, n_pairs)
     counts = data.flat().counts()
     wt = counts * (np.ones(dh.shape[1]) if w is None else w)[None, :] / est.sigma[None, :] ** 2
@@ -257,7 +266,8 @@ def identify_dynamic(model: DynamicModel, data: DynamicMeasurements, p0, weights
     mesh, p_start, history, order = cm.mesh, p0, [], 2 * ds.degree - 1
     first = _first_settings(model, settings, bool(start_notes))
     while True:
-        cm = collocate(model, data.union_times, mesh=mesh, outputs=data.pairs)
+        if mesh is not cm.mesh:                     # the first mesh's model is collocated_problem's
+            cm = collocate(model, data.union_times, mesh=mesh, outputs=data.pairs)
         try:
             est = fit_static(cm, flat, p_start, weights=w, settings=settings if history else first)
         except IdentificationError as exc:

@@ -192,6 +192,13 @@ def _newton_from(st: Start, settings: IdentifySettings, objective: "_ExplicitObj
         # the decrement in units of the standard errors: with sigma unknown the objective's sigma is
         # a common spread and s^2 = RSS / (n - n_p) is what the standard errors use
         unit = newton_core.decrement_unit(cur.f, None if known else dof)
+        if not newton and dec < 1e-4 * unit and getattr(objective, "early_newton", False):
+            newton = True                          # Newton steps from this point on (with S here)
+            cur = objective(x, True)
+            L = newton_core.factor(cur.F + cur.S, cur.F)
+            if L is None:
+                return None
+            v, dec = newton_core.decrement(L, cur.g)
         if newton:
             roundoff = newton_core.gradient_roundoff(functools.partial(dense.tri_solve, L), cur.g_abs)
             if newton_core.converged(dec, refine_dec * unit, roundoff):
@@ -292,6 +299,9 @@ def reduced_start(st: Start, settings: IdentifySettings):
     # blow-up): the full-space NLP, whose trajectories need not be consistent on the way, takes over from p0
     objective = ImplicitObjective(st.problem, x0, st.Y_init, st.p0 if trajectory and not merging() else None,
                                   abort_on_failure=trajectory)
+    # a collocated ODE: Newton steps start at the first point whose Gauss-Newton decrement is below 1e-4 (one
+    # point fewer than switching after that point's Gauss-Newton step)
+    objective.early_newton = trajectory
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
     return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,

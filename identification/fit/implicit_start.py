@@ -172,6 +172,9 @@ class ImplicitObjective:
     #: S of a point is added by a second call with ``second_order`` at no other cost (the point is kept): the
     #: line search asks for it only at the point it accepts (:func:`identification.fit.explicit_newton`)
     deferred_second_order = True
+    #: Newton steps (with S) from the first point whose Gauss-Newton decrement is below 1e-4 (set by
+    #: :func:`identification.fit.explicit_newton.reduced_start` for a collocated ODE)
+    early_newton = False
 
     def __init__(self, problem: ReducedProblem, x0: np.ndarray, Y0: np.ndarray, p0: np.ndarray | None = None,
                  abort_on_failure: bool = False):
@@ -202,6 +205,13 @@ class ImplicitObjective:
             return pt
         # first-order prediction y(p) ~ y(p') + y'(p') (p - p')
         guess = None if near[2] is None else near[1] + near[2].sens.state_derivatives @ (p - near[2].p)
+        # a collocated ODE: Newton on all trajectories from it with y'(p) from the last iteration's blocks
+        fused = getattr(problem.model.state_numerics, "states_and_sensitivities", None)
+        got = None if fused is None else fused(p, problem.data.inputs, guess)
+        if got is not None:
+            pt = problem.point_at(p, got[0], got[1])
+            self._seen = ([e for e in self._seen if not np.array_equal(e[0], x)] + [(x.copy(), got[0], pt)])[-self._KEEP:]
+            return pt
         # the model's own solve from it (a collocated ODE: Newton on all trajectories, else marched), if it has one
         Y = problem.model.state_numerics.marched_states(p, problem.data.inputs, guess)
         if Y is None and guess is not None:

@@ -164,3 +164,64 @@ def test_interpolated_trajectories_start_newton_on_the_halved_mesh():
     # the guess is within the discretisation error, and Newton from it reaches the marched states
     assert np.abs(guess - exact).max() < 1e-2 and np.abs(guess[:, :3] - exact[:, :3]).max() == 0
     assert np.abs(traj._newton(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
+
+
+def test_fused_newton_sensitivities_equal_the_separate_sweep():
+    """y'(p) from the last Newton iteration's blocks (states_and_sensitivities) equals the sweep at the converged
+    states to 1e-10 relative, from a far guess (several iterations) and from the converged states (one); no guess,
+    a guess that Newton cannot start from, or a call inside run_merged: None (the caller solves as before)."""
+    cm = collocate(build(), TIMES, max_step=0.25)
+    traj = trajectory_numerics(cm)
+    Yg, Ypg, hg, Gg = generic(cm, P, Q)
+    for guess in (Yg * (1 + 1e-3), Yg):
+        Y, sens = traj.states_and_sensitivities(P, Q, guess)
+        assert np.abs(Y - Yg).max() <= 1e-12 * np.abs(Yg).max()
+        assert np.abs(sens.state_derivatives - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        assert np.abs(sens.h - hg).max() <= 1e-12 and np.abs(sens.G - Gg).max() <= 1e-10 * np.abs(Gg).max()
+    assert traj.states_and_sensitivities(P, Q, None) is None
+    assert traj.states_and_sensitivities(P, Q, np.full_like(Yg, np.nan)) is None
+    assert trajectory.run_merged([lambda: traj.states_and_sensitivities(P, Q, Yg)]) == [None]
+
+
+def test_halved_mesh_outputs_by_one_newton_step_equal_the_converged_ones():
+    """refined_outputs (one Newton step from the coarse trajectories interpolated, residual checked) gives the
+    halved mesh's outputs of the converged Newton solve to 1e-12; from a guess where the step fails (not finite) it
+    falls back to that solve."""
+    from models.trajectory import interpolate_states
+    coarse = collocate(build(), TIMES, max_step=0.25)
+    fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
+    guess = interpolate_states(coarse, fine, trajectory_numerics(coarse).states(P, Q))
+    traj = trajectory_numerics(fine)
+    exact = traj.outputs(P, Q, traj._states(P, Q))
+    calls = []
+    original = traj.integrated_outputs
+    traj.integrated_outputs = lambda *a: calls.append(1) or original(*a)
+    try:
+        assert np.abs(traj.refined_outputs(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
+        assert not calls                                                # one step was enough
+        bad = guess.copy()
+        bad[:, -1] = np.nan
+        assert np.abs(traj.refined_outputs(P, Q, bad) - exact).max() <= 1e-12 * np.abs(exact).max() and calls
+    finally:
+        del traj.integrated_outputs
+
+
+def test_halved_mesh_one_step_is_rejected_by_its_residual_on_a_nonlinear_model():
+    """Logistic growth on a coarse mesh: after one Newton step from the interpolated trajectories an element's
+    residual is above 1e-10 (1 + |V|), so refined_outputs solves to convergence: the same outputs."""
+    from models.trajectory import interpolate_states
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x * (1 - x), x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, horizon=4.0)
+    coarse = collocate(m, [1.0, 2.0, 3.0, 4.0], max_step=0.5)
+    fine = collocate(m, [1.0, 2.0, 3.0, 4.0], mesh=coarse.mesh.refined(2))
+    p, q = np.array([3.0]), np.array([[0.01], [0.02]])
+    guess = interpolate_states(coarse, fine, trajectory_numerics(coarse).states(p, q))
+    traj = trajectory_numerics(fine)
+    calls = []
+    original = traj.integrated_outputs
+    traj.integrated_outputs = lambda *a: calls.append(1) or original(*a)
+    try:
+        h = traj.refined_outputs(p, q, guess)
+    finally:
+        del traj.integrated_outputs
+    assert calls == [1] and np.abs(h - traj.outputs(p, q, traj._states(p, q))).max() <= 1e-11
