@@ -132,6 +132,16 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
         self.fallbacks = []
 
     # ------------------------------------------------------------------ helpers
+
+    def states_and_sensitivities(self, p, inputs, guess):
+        """None: the fused states and sensitivities of :class:`models.trajectory.TrajectoryNumerics` hold the
+        ODE's blocks only; the caller solves the states and sweeps the DAE's elements as usual."""
+        return None
+
+    def refined_outputs(self, p, inputs, guess) -> np.ndarray:
+        """h (n_q, n_S) of the collocation solution at p from ``guess`` by Newton to convergence
+        (:meth:`integrated_outputs`; the one-step shortcut of the ODE marcher is not implemented for DAEs)."""
+        return self.integrated_outputs(p, inputs, guess)
     def _call(self, f: ca.Function, n: int, args) -> list:
         """f at n points (rows of the (n, .) arguments; (.,) arguments shared), one dense (n, r, c) array per output."""
         fm = self._maps.get((f.name(), n))
