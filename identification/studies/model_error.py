@@ -66,7 +66,7 @@ from identification.fit.measurements import Measurements
 from identification.fit.problem import Problem, strategy_for
 from identification.inference.intervals import validate_alpha
 from identification.studies.discrepancy_gp import InputScaling
-from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
+from identification.studies.model_error_fit import ErrorFit, band_logpdf, fit_model_error, pure_error_sigma
 from identification.studies.model_error_result import (EmbeddedParameter, ErrorTest, HeldOut, ModelErrorResult,
                                                        PureErrorCheck, SensorDiscrepancy)
 from identification.studies.splits import Split, SplitError, flat_split
@@ -267,10 +267,9 @@ def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, l
     cover, score, width = [], [], []
     for f in fits:
         b = f.predict(val.inputs, alpha, new_reading=True, conditions=conditions)
-        lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
-        sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
+        lo, hi = b.lower[None, :, sel], b.upper[None, :, sel]
         cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
-        score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
+        score.append(float(np.mean(band_logpdf(b, val.z)[:, :, sel][ok])))
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
     n_new = int(np.broadcast_to(new[None, :, None], z.shape)[ok].sum())
     return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
