@@ -187,12 +187,18 @@ def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None, aware:
     codes = np.zeros(len(val), int) if groups is None else np.asarray(groups)[val]
     b0 = plain.predict(dv.inputs, 0.05, True)
     out = []
+    cc = np.where(unseen, -1, codes) if unseen is not None else codes
     for a in aware:
-        b = f.predict(dv.inputs, 0.05, True, conditions=np.where(unseen, -1, codes) if unseen is not None else codes,
-                      variance_aware=a)
+        b = f.predict(dv.inputs, 0.05, True, conditions=cc, variance_aware=a)
         cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
         out.append((cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower))),
                     float(np.median((b.upper - b.lower) / (2 * 1.96 * OFFSET_SIGMA)))))
+    if unseen is not None and len(aware) > 1:     # the oracle: the true offset variance for the estimated new draw
+        A = np.stack([f.gp.cross(i, scaling(dv.inputs), cc)[1] for i in range(2)], axis=1)
+        b = f.predict(dv.inputs, 0.05, True, conditions=cc, variance_aware=False)
+        T = ((b.upper - b.mean) / stats.norm.ppf(0.975)) ** 2 - A + OFFSET_KAPPA ** 2
+        cover = float(np.mean(np.abs(dv.z - b.mean[None]) <= stats.norm.ppf(0.975) * np.sqrt(T)[None]))
+        out.append((cover, float(np.median(np.sqrt(A[unseen]))) / OFFSET_KAPPA, np.nan))
     return out
 
 
@@ -209,11 +215,12 @@ def condition_offset_study(n: int, seed: int) -> None:
     the conditions named; the normal plug-in band) and t (the same with the Student-t band on the effective
     degrees of freedom of the estimated new-draw variance); mean over campaigns with its standard error, against
     the coverage P(|t_c| < 1.96) of a band whose variance is estimated from c draws of the offset (noise and fixed
-    effects neglected); widths: median widening against the plain bands (median over campaigns) and the mean of
+    effects neglected); oracle: the plug-in band with the true offset variance kappa^2 in place of the estimated
+    new-draw variance (is the band's shape right?), with the estimated new-draw sd over kappa; widths: median widening against the plain bands (median over campaigns) and the mean of
     the median full width in units of the plain noise band 2 x 1.96 sigma."""
     rng, t0 = np.random.default_rng(seed), time.perf_counter()
     m, nq = _offset_model(), OFFSET_Q.size
-    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after", "t")}
+    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after", "t", "oracle")}
     for _ in range(n):
         for c in OFFSET_CALIBRATION:
             d, cond = _offset_campaign(rng, c + 1)
@@ -228,6 +235,7 @@ def condition_offset_study(n: int, seed: int) -> None:
                                         aware=(False, True))
             rows[c, "after"].append(after[0])
             rows[c, "t"].append(after[1])
+            rows[c, "oracle"].append(after[2])
     print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
           f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
           f"new-reading bands at a condition not seen ({2 * 2 * nq} readings per campaign; mean over campaigns "
@@ -235,6 +243,11 @@ def condition_offset_study(n: int, seed: int) -> None:
           f"90 % quantile over campaigns)")
     for (c, k), a in rows.items():
         a = np.array(a)
+        if k == "oracle":
+            print(f"  {c} calibration condition(s), oracle (plug-in, the true kappa^2 for the new draw) "
+                  f"{100 * a[:, 0].mean():6.1f} +- {100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  estimated "
+                  f"new-draw sd / kappa: median {np.median(a[:, 1]):.2f}, mean {a[:, 1].mean():.2f}")
+            continue
         how = {"before": "one condition named, kriged" if c == 1 else "no groups, kriged + rough part",
                "after": "new draw, normal plug-in" if c == 1 else "groups named, new draw, plug-in",
                "t": "new draw, Student-t" if c == 1 else "groups named, new draw, Student-t"}[k]

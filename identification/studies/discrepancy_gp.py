@@ -42,7 +42,9 @@ The hyperparameters theta = (log(s_k / sigma_k), log l_k, log(tau_k / sigma_k)) 
     P = V^{-1} - V^{-1} G (G^\top V^{-1} G)^{-1} G^\top V^{-1},
 
 with the exact gradient d(-2 l_R)/d theta_i = tr(P V_i) - r^T P V_i P r (V_i = dV / d theta_i, analytic),
-by L-BFGS-B from a few starts.  Every factorisation is a Cholesky; one that fails is reported, never
+by L-BFGS-B from a few starts.  The expected information of the REML likelihood, I_ab = tr(P V_a P V_b) / 2
+(:func:`reml_information`), gives the sampling variance of the estimated new-draw variance at a condition not
+seen (:meth:`GPFit.prior_variance_spread`, delta method over the hyperparameters not on a bound).  Every factorisation is a Cholesky; one that fails is reported, never
 replaced by a pseudo-inverse.
 """
 from __future__ import annotations

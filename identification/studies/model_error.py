@@ -41,6 +41,12 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    model no more often than the test's size), else the error model of the highest total held-out log score
    (without splits: the discrepancy).
 5. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
+6. **Stated sigma against the repeats** (sigma given, repeated series; :func:`pure_error_checks`): per selected
+   sensor, nu s^2 / sigma^2 against chi2_nu with s the pooled pure error on nu degrees of freedom; a note names
+   the sensors where the repeats scatter clearly less (or more) than sigma (one-sided p < alpha).  A stated
+   sigma that holds a systematic error (the press's sigma_man, a gauge error that varies smoothly with the
+   reading) is held by the discrepancy too, and the new-reading bands, which add sigma^2, are then wider than
+   the error requires; ``sigma=None`` takes the pure error.
 
 ``identifiable`` is False when, along some direction of p, the model error leaves less than
 :data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` (1 %) of the information the noise alone

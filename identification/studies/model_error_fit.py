@@ -29,6 +29,12 @@ for sensor k with k* = cov(delta_k(q*), r), u = g* - G^T V^{-1} k*:
 
 at a condition the data do not hold (``conditions`` of :meth:`ErrorFit.predict`, the discrepancy of every
 condition its own draw) k* = 0: mean h_k(q*, p^ME), variance s_k^2 c(q*, q*) + tau_k^2 w(q*) + g*^T C^ME g*;
+optionally (``variance_aware``, not the default: :data:`VARIANCE_AWARE`) a Student-t band there on the
+Satterthwaite degrees of freedom nu = 2 var^2 / var(A^) of the estimated new-draw variance A = s_k^2 c + tau_k^2 w
+(var(A^) by the delta method over the REML expected information,
+:meth:`identification.studies.discrepancy_gp.GPFit.prior_variance_spread`); measured in
+bench/bench_model_error.py (``--n-offset``) and not adopted: it does not bring 4 calibration conditions to
+nominal coverage and makes the bands of one condition absurdly wide in some campaigns;
 with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
 condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
 without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
