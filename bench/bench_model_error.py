@@ -31,10 +31,14 @@ sigma_man^2)):
    new-reading bands with the validation condition kriged as a seen one (before) and predicted as a condition
    not seen (after, :func:`identification.studies.model_error.unseen_rows`).
 
-The coverage part prints three tables: as shipped, pinned at zero force, and with the press's direction of
-motion named as the conditions (``groups``: loading, unloading); per split also the Clopper-Pearson interval of
-the discrepancy's coverage, the readings in a condition the calibration part has not seen, and the factor its
-bands could shrink by and still hold 95 % (need).
+The coverage part prints five tables: as shipped, pinned at zero force, with the press's direction of motion
+named as the conditions (``groups``: loading, unloading), and with sigma None (the pure error of the repeated
+series instead of the study's sqrt(sigma_rep^2 + sigma_man^2)) unpinned and pinned; per split also the
+Clopper-Pearson interval of the discrepancy's coverage, the readings in a condition the calibration part has
+not seen, the factor its bands could shrink by and still hold 95 % (need) and their median width (um); per
+variant the stated sigma against the pure error (:attr:`ModelErrorResult.pure_error`).  The condition-offset
+part compares the plug-in band at a condition not seen with the Student-t band (``variance_aware``) and an
+oracle band with the true offset variance.
 
 Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10); the oscillator alone:
 ``python -m bench model_error --skip=coverage,size,adequate --oscillator-n=1000 --oscillator-n-coverage=20``.
