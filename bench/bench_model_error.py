@@ -31,10 +31,14 @@ sigma_man^2)):
    new-reading bands with the validation condition kriged as a seen one (before) and predicted as a condition
    not seen (after, :func:`identification.studies.model_error.unseen_rows`).
 
-The coverage part prints three tables: as shipped, pinned at zero force, and with the press's direction of
-motion named as the conditions (``groups``: loading, unloading); per split also the Clopper-Pearson interval of
-the discrepancy's coverage, the readings in a condition the calibration part has not seen, and the factor its
-bands could shrink by and still hold 95 % (need).
+The coverage part prints five tables: as shipped, pinned at zero force, with the press's direction of motion
+named as the conditions (``groups``: loading, unloading), and with sigma None (the pure error of the repeated
+series instead of the study's sqrt(sigma_rep^2 + sigma_man^2)) unpinned and pinned; per split also the
+Clopper-Pearson interval of the discrepancy's coverage, the readings in a condition the calibration part has
+not seen, the factor its bands could shrink by and still hold 95 % (need) and their median width (um); per
+variant the stated sigma against the pure error (:attr:`ModelErrorResult.pure_error`).  The condition-offset
+part compares the plug-in band at a condition not seen with the Student-t band (``variance_aware``) and an
+oracle band with the true offset variance.
 
 Run ``python -m bench model_error --n=1000 --n-coverage=50`` (``--quick``: 100 and 10); the oscillator alone:
 ``python -m bench model_error --skip=coverage,size,adequate --oscillator-n=1000 --oscillator-n-coverage=20``.
@@ -54,7 +58,7 @@ from identification.fit.dynamic_fit import simulate_campaign
 from identification.studies.splits import time_window_splits
 from identification.studies.discrepancy_gp import InputScaling
 from identification.studies.model_error import unseen_rows
-from identification.studies.model_error_fit import fit_model_error
+from identification.studies.model_error_fit import fit_model_error, pure_error_sigma
 from identification.studies.montecarlo import clopper_pearson
 from mudoe.config import load_config
 from mudoe.study import prepare
@@ -66,11 +70,20 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 WEIGHTS = np.array([0.0, 1.0, 1.0])
 
 
-def _needed(study, variant: str, split, exact_at, alpha: float = 0.05) -> float:
-    """The factor by which the discrepancy's held-out new-reading bands of ``split`` could shrink and still hold
-    (1 - alpha) of its validation readings: the (1 - alpha) quantile of |z - mean| / half-width (< 1: wider than
-    the error requires, > 1: too narrow)."""
+def _data(study, variant: str, pure: bool):
+    """The variant's data with the study's sigma, or (``pure``) with sigma None: model_error takes the pure error
+    of the repeated series."""
+    d = study.data[variant]
+    return d.with_sigma(None) if pure else d
+
+
+def _needed(study, variant: str, split, exact_at, alpha: float = 0.05, pure: bool = False) -> tuple:
+    """(need, width): the factor by which the discrepancy's held-out new-reading bands of ``split`` could shrink
+    and still hold (1 - alpha) of its validation readings, the (1 - alpha) quantile of |z - mean| / half-width
+    (< 1: wider than the error requires, > 1: too narrow); the median full width of those bands (um)."""
     m, d = study.models[variant], study.data[variant]
+    if pure:
+        d = d.with_sigma(pure_error_sigma(d.z)[0])
     scaling = InputScaling.of(d.inputs, exact_at or {}, tuple(m.inputs))
     cal, val = split.calibration(d), split.validation(d)
     f = fit_model_error(m, cal, study.p0, WEIGHTS, scaling, "discrepancy")
@@ -79,7 +92,8 @@ def _needed(study, variant: str, split, exact_at, alpha: float = 0.05) -> float:
     z = val.z[:, :, sel]
     ok = np.isfinite(z)
     e = np.abs(z - b.mean[None][:, :, sel]) / (b.upper - b.mean)[None][:, :, sel]
-    return float(np.quantile(e[ok], 1 - alpha))
+    width = np.broadcast_to((b.upper - b.lower)[None][:, :, sel], z.shape)[ok]
+    return float(np.quantile(e[ok], 1 - alpha)), 1e3 * float(np.median(width))
 
 
 def _cp(cover: float, n: int) -> str:
@@ -87,35 +101,42 @@ def _cp(cover: float, n: int) -> str:
     return f"[{100 * ci.lo:.1f}, {100 * ci.hi:.1f}]"
 
 
-def coverage_table(study, exact_at=None, groups=None) -> dict:
-    """{variant: ModelErrorResult (kind auto)} on the study's data and splits; prints the held-out table: coverage
-    of the plain, discrepancy and embedded 95 % new-reading bands (%) with the Clopper-Pearson 95 % interval of the
-    discrepancy's (the validation readings taken as independent), their median widening, the readings in a
-    condition the calibration part has not seen (unseen) and the factor the discrepancy bands could shrink by
-    (need, :func:`_needed`)."""
+def coverage_table(study, exact_at=None, groups=None, pure: bool = False) -> dict:
+    """{variant: ModelErrorResult (kind auto)} on the study's data and splits (``pure``: sigma None, the pure error
+    of the repeated series); prints the held-out table: coverage of the plain, discrepancy and embedded 95 %
+    new-reading bands (%) with the Clopper-Pearson 95 % interval of the discrepancy's (the validation readings
+    taken as independent), their median widening, the readings in a condition the calibration part has not seen
+    (unseen), the factor the discrepancy bands could shrink by (need) and their median full width in um
+    (:func:`_needed`); the CPU and wall time of model_error."""
     out = {}
-    print(f"exact_at = {exact_at}, groups = {None if groups is None else sorted(set(groups))}")
+    print(f"exact_at = {exact_at}, groups = {None if groups is None else sorted(set(groups))}, sigma = "
+          f"{'None (pure error of the repeated series)' if pure else 'the study' + chr(39) + 's'}")
     print(f"{'variant':<8} {'split':<32} {'n':>4} {'unseen':>6} {'plain':>6} {'discr.':>6} {'CP 95 %':>13} "
-          f"{'widen':>6} {'need':>5} {'embed.':>6} {'widen':>6}")
+          f"{'widen':>6} {'need':>5} {'width':>6} {'embed.':>6} {'widen':>6}")
     for v, m in study.models.items():
-        t0 = time.perf_counter()
-        r = model_error(m, study.data[v], study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at,
+        t0, c0 = time.perf_counter(), time.process_time()
+        r = model_error(m, _data(study, v, pure), study.p0, splits=study.splits, weights=WEIGHTS, exact_at=exact_at,
                         groups=groups)
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         for h, sp in zip(r.heldout, study.splits):
-            need = _needed(study, v, sp, exact_at) if groups is None else float("nan")
+            need, width = _needed(study, v, sp, exact_at, pure=pure) if groups is None else (np.nan, np.nan)
             print(f"{v:<8} {h.split:<32} {h.n_values:>4} {h.n_unseen:>6} {100 * h.coverage_plain:>6.1f} "
                   f"{100 * h.coverage_discrepancy:>6.1f} {_cp(h.coverage_discrepancy, h.n_values):>13} "
-                  f"{h.widening_discrepancy:>6.2f} {need:>5.2f} "
+                  f"{h.widening_discrepancy:>6.2f} {need:>5.2f} {width:>6.2f} "
                   f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}")
         n = sum(h.n_values for h in r.heldout)
         pooled = {k: sum(h.coverage(k) * h.n_values for h in r.heldout) / n for k in ("none", "discrepancy", "embedded")}
         print(f"{v:<8} {'pooled / median widening':<32} {n:>4} {sum(h.n_unseen for h in r.heldout):>6} "
               f"{100 * pooled['none']:>6.1f} {100 * pooled['discrepancy']:>6.1f} {_cp(pooled['discrepancy'], n):>13} "
-              f"{np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} {'':>5} "
+              f"{np.median([h.widening_discrepancy for h in r.heldout]):>6.2f} {'':>5} {'':>6} "
               f"{100 * pooled['embedded']:>6.1f} {np.median([h.widening_embedded for h in r.heldout]):>6.2f}")
-        print(f"         model_error {dt:.2f} s; test LR {r.test.statistic:.4g}, p = {r.test.p_value:.3g}; "
-              f"{r.how} -> {r.kind}; identifiable {r.identifiable} (information kept {r.information_kept:.3f})")
+        print(f"         model_error {dc:.2f} s CPU, {dt:.2f} s wall; test LR {r.test.statistic:.4g}, p = "
+              f"{r.test.p_value:.3g}; {r.how} -> {r.kind}; identifiable {r.identifiable} (information kept "
+              f"{r.information_kept:.3f}); sigma {r.sigma_source} "
+              + " ".join(f"{n} {1e3 * s:.2f} um" for n, s, w in zip(r.fit.plain.sensors, r.sigma, WEIGHTS) if w > 0))
+        for c in r.pure_error:
+            print(f"         {c.sensor}: pure error {1e3 * c.pure_error:.2f} um against sigma {1e3 * c.sigma:.2f} um "
+                  f"(ratio {c.ratio:.2f}, {c.dof} dof, chi-square p below {c.p_below:.2g})")
         for block in r.summary().split("\n\n")[1:3]:          # the parameters, the discrepancy / embedded error
             print("         " + block.replace("\n", "\n         "))
         out[v] = r
@@ -155,10 +176,12 @@ def _offset_campaign(rng, n_cond: int):
     return Measurements(q[:, None], z, OFFSET_SIGMA, sensors=["y1", "y2"], input_names=["x"]), cond
 
 
-def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None) -> tuple:
-    """(coverage, median widening against the plain bands) of the discrepancy's 95 % new-reading bands fitted on
-    rows ``cal`` of ``d`` at rows ``val`` (``groups`` the rows' condition codes, None: one; ``unseen`` bool per
-    validation row: predicted as a condition not seen), as the held-out table of ``model_error`` computes them."""
+def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None, aware: tuple = (False,)) -> list:
+    """[(coverage, median widening against the plain bands, median full width / (2 * 1.96 sigma))] of the
+    discrepancy's 95 % new-reading bands fitted on rows ``cal`` of ``d`` at rows ``val`` (``groups`` the rows'
+    condition codes, None: one; ``unseen`` bool per validation row: predicted as a condition not seen), as the
+    held-out table of ``model_error`` computes them, one per ``aware`` (ErrorFit.predict's variance_aware: the
+    Student-t band at a condition not seen, or the normal plug-in band)."""
     scaling = InputScaling.of(d.inputs, {}, ("x",))
     dc, dv = d.subset(inputs=cal), d.subset(inputs=val)
     w = np.ones(2)
@@ -166,10 +189,21 @@ def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None) -> tup
     f = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "discrepancy", plain=plain.plain,
                         groups=None if groups is None else np.asarray(groups)[cal])
     codes = np.zeros(len(val), int) if groups is None else np.asarray(groups)[val]
-    b = f.predict(dv.inputs, 0.05, True, conditions=np.where(unseen, -1, codes) if unseen is not None else codes)
     b0 = plain.predict(dv.inputs, 0.05, True)
-    cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
-    return cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower)))
+    out = []
+    cc = np.where(unseen, -1, codes) if unseen is not None else codes
+    for a in aware:
+        b = f.predict(dv.inputs, 0.05, True, conditions=cc, variance_aware=a)
+        cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
+        out.append((cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower))),
+                    float(np.median((b.upper - b.lower) / (2 * 1.96 * OFFSET_SIGMA)))))
+    if unseen is not None and len(aware) > 1:     # the oracle: the true offset variance for the estimated new draw
+        A = np.stack([f.gp.cross(i, scaling(dv.inputs), cc)[1] for i in range(2)], axis=1)
+        b = f.predict(dv.inputs, 0.05, True, conditions=cc, variance_aware=False)
+        T = ((b.upper - b.mean) / stats.norm.ppf(0.975)) ** 2 - A + OFFSET_KAPPA ** 2
+        cover = float(np.mean(np.abs(dv.z - b.mean[None]) <= stats.norm.ppf(0.975) * np.sqrt(T)[None]))
+        out.append((cover, float(np.median(np.sqrt(A[unseen]))) / OFFSET_KAPPA, np.nan))
+    return out
 
 
 #: the numbers of conditions in the calibration part of the condition-offset study
@@ -181,33 +215,49 @@ def condition_offset_study(n: int, seed: int) -> None:
     seen, on campaigns with a condition offset the model lacks (truth known): calibrated on c conditions
     (:data:`OFFSET_CALIBRATION`; c = 1 as the press's loading vs unloading), validated on one more at the same set
     points; before (the validation rows kriged as the calibration's condition(s): one condition named, or none and
-    the rough part) and after (a new draw of the error process: rows found by :func:`unseen_rows`, for c > 1 with
-    the conditions named); mean over campaigns with its standard error, against the coverage P(|t_c| < 1.96) of a
-    band whose variance is estimated from c draws of the offset (noise and fixed effects neglected)."""
+    the rough part), after (a new draw of the error process: rows found by :func:`unseen_rows`, for c > 1 with
+    the conditions named; the normal plug-in band) and t (the same with the Student-t band on the effective
+    degrees of freedom of the estimated new-draw variance); mean over campaigns with its standard error, against
+    the coverage P(|t_c| < 1.96) of a band whose variance is estimated from c draws of the offset (noise and fixed
+    effects neglected); oracle: the plug-in band with the true offset variance kappa^2 in place of the estimated
+    new-draw variance (is the band's shape right?), with the estimated new-draw sd over kappa; widths: median widening against the plain bands (median over campaigns) and the mean of
+    the median full width in units of the plain noise band 2 x 1.96 sigma."""
     rng, t0 = np.random.default_rng(seed), time.perf_counter()
     m, nq = _offset_model(), OFFSET_Q.size
-    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after")}
+    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after", "t", "oracle")}
     for _ in range(n):
         for c in OFFSET_CALIBRATION:
             d, cond = _offset_campaign(rng, c + 1)
             cal, val = list(range(c * nq)), list(range(c * nq, (c + 1) * nq))
             sp = Split(f"{c} vs 1", cal, val)
             if c == 1:
-                rows[c, "before"].append(_offset_heldout(m, d, cal, val))
-                rows[c, "after"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
+                rows[c, "before"] += _offset_heldout(m, d, cal, val)
+                after = _offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d), aware=(False, True))
             else:
-                rows[c, "before"].append(_offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d)))
-                rows[c, "after"].append(_offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(sp, d, cond)))
+                rows[c, "before"] += _offset_heldout(m, d, cal, val, unseen=unseen_rows(sp, d))
+                after = _offset_heldout(m, d, cal, val, groups=cond, unseen=unseen_rows(sp, d, cond),
+                                        aware=(False, True))
+            rows[c, "after"].append(after[0])
+            rows[c, "t"].append(after[1])
+            rows[c, "oracle"].append(after[2])
     print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
           f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
           f"new-reading bands at a condition not seen ({2 * 2 * nq} readings per campaign; mean over campaigns "
-          f"+- standard error; median widening against the plain bands)")
+          f"+- standard error; median widening against the plain bands; width in units of 2 x 1.96 sigma: mean, "
+          f"90 % quantile over campaigns)")
     for (c, k), a in rows.items():
         a = np.array(a)
-        how = ("one condition named, kriged" if c == 1 else "no groups, kriged + rough part") if k == "before" else \
-            ("unseen rows, new draw" if c == 1 else "groups named, new draw")
-        print(f"  {c} calibration condition(s), {k:<6} ({how:<30}) {100 * a[:, 0].mean():6.1f} +- "
-              f"{100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  widening {np.median(a[:, 1]):.2f}"
+        if k == "oracle":
+            print(f"  {c} calibration condition(s), oracle (plug-in, the true kappa^2 for the new draw) "
+                  f"{100 * a[:, 0].mean():6.1f} +- {100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  estimated "
+                  f"new-draw sd / kappa: median {np.median(a[:, 1]):.2f}, mean {a[:, 1].mean():.2f}")
+            continue
+        how = {"before": "one condition named, kriged" if c == 1 else "no groups, kriged + rough part",
+               "after": "new draw, normal plug-in" if c == 1 else "groups named, new draw, plug-in",
+               "t": "new draw, Student-t" if c == 1 else "groups named, new draw, Student-t"}[k]
+        print(f"  {c} calibration condition(s), {k:<6} ({how:<34}) {100 * a[:, 0].mean():6.1f} +- "
+              f"{100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  widening {np.median(a[:, 1]):.2f}  width "
+              f"{a[:, 2].mean():.2f} (90 % {np.quantile(a[:, 2], 0.9):.2f})"
               + (f"   [P(|t_{c}| < 1.96) = {100 * (1 - 2 * stats.t.sf(1.96, c)):.1f} %]" if k == "after" else ""))
     print(f"  {time.perf_counter() - t0:.0f} s")
 
@@ -331,6 +381,8 @@ def main(argv=None):
         coverage_table(study)
         coverage_table(study, {"q_P": 0.0})          # the linkage is exact at zero press force
         coverage_table(study, groups=press_branches(study))     # the direction of motion named
+        coverage_table(study, pure=True)             # sigma None: the pure error of the repeated series
+        coverage_table(study, {"q_P": 0.0}, pure=True)
     if "offset" not in skip and args.n_offset:
         condition_offset_study(args.n_offset, args.seed + 4)
     if "size" not in skip and args.n:

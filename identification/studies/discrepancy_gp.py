@@ -42,7 +42,9 @@ The hyperparameters theta = (log(s_k / sigma_k), log l_k, log(tau_k / sigma_k)) 
     P = V^{-1} - V^{-1} G (G^\top V^{-1} G)^{-1} G^\top V^{-1},
 
 with the exact gradient d(-2 l_R)/d theta_i = tr(P V_i) - r^T P V_i P r (V_i = dV / d theta_i, analytic),
-by L-BFGS-B from a few starts.  Every factorisation is a Cholesky; one that fails is reported, never
+by L-BFGS-B from a few starts.  The expected information of the REML likelihood, I_ab = tr(P V_a P V_b) / 2
+(:func:`reml_information`), gives the sampling variance of the estimated new-draw variance at a condition not
+seen (:meth:`GPFit.prior_variance_spread`, delta method over the hyperparameters not on a bound).  Every factorisation is a Cholesky; one that fails is reported, never
 replaced by a pseudo-inverse.
 """
 from __future__ import annotations
@@ -53,10 +55,12 @@ import numpy as np
 from scipy import linalg, optimize, stats
 
 __all__ = ["InputScaling", "Observations", "GPFit", "fit_discrepancy", "white_lr_test", "WhiteTest",
-           "kernel_blocks", "reml_objective", "BOUNDS"]
+           "kernel_blocks", "reml_objective", "reml_information", "BOUNDS", "AT_BOUND"]
 
 #: bounds of (log(s / sigma), log l, log(tau / sigma)): s, tau from ~3e-4 sigma (effectively zero) to 150 sigma
 BOUNDS = ((-8.0, 5.0), (float(np.log(0.03)), float(np.log(5.0))), (-8.0, 5.0))
+#: a log hyperparameter within this of a bound is held fixed there by the variance of the estimates
+AT_BOUND = 1e-2
 _STARTS = ((0.0, float(np.log(0.3)), -2.0), (-2.0, 0.0, 0.0), (1.0, float(np.log(1.0)), -4.0))
 
 
@@ -276,6 +280,36 @@ def reml_objective(theta, obs: Observations, G: np.ndarray, r: np.ndarray, pins:
     return f, grad
 
 
+def reml_information(theta, obs: Observations, G: np.ndarray, pins: tuple = ()) -> np.ndarray:
+    """The expected information of the REML likelihood about theta (3 n_sel, 3 n_sel), I_ab = tr(P V_a P V_b) / 2
+    (V_a = dV / d theta_a, analytic; P the REML projection of :func:`reml_objective`).  Raises
+    numpy.linalg.LinAlgError when V or G^T V^-1 G is not positive definite."""
+    theta = np.asarray(theta, float)
+    parts = _reml_parts(obs, theta, G, pins)
+    if parts is None:
+        raise np.linalg.LinAlgError("the discrepancy's covariance V or G^T V^-1 G is not positive definite")
+    _, Vinv, LA, derivs = parts
+    VG = Vinv @ G
+    P = Vinv - VG @ linalg.cho_solve((LA, True), VG.T)
+    full = []                                   # P V_a, each (N, N), V_a embedded in its block
+    start = 0
+    for i, n in enumerate(obs.sizes):
+        for dV in derivs[i]:
+            full.append(P[:, start:start + n] @ dV)
+        start += n
+    n_t = len(full)
+    info = np.empty((n_t, n_t))
+    starts = np.repeat(np.cumsum([0] + obs.sizes[:-1]), 3)
+    sizes = np.repeat(obs.sizes, 3)
+    for a in range(n_t):
+        for b in range(a, n_t):
+            # tr(P V_a P V_b) = sum over the rows of block b and of block a of (P V_a)(P V_b)
+            Ma = full[a][starts[b]:starts[b] + sizes[b], :]          # (n_b, n_a): rows of block b of P V_a
+            Mb = full[b][starts[a]:starts[a] + sizes[a], :]          # (n_a, n_b)
+            info[a, b] = info[b, a] = 0.5 * float(np.sum(Ma * Mb.T))
+    return info
+
+
 @dataclass(frozen=True)
 class GPFit:
     """The discrepancy's hyperparameters and the factors its predictions need.
@@ -287,6 +321,8 @@ class GPFit:
     pins : tuple                 (column, scaled value) of exact_at
     reml : float                 -2 l_R at theta (without constant)
     converged : bool             the optimiser reported success from the best start
+    information : ndarray (3 n_sel, 3 n_sel) or None   the REML expected information about theta
+                                 (:func:`reml_information`; None: not computed)
     """
 
     theta: np.ndarray
@@ -294,6 +330,7 @@ class GPFit:
     pins: tuple
     reml: float
     converged: bool
+    information: np.ndarray | None = None
 
     def amplitude(self, i: int) -> float:
         """s_k of selected sensor i (unit of z)."""
@@ -327,6 +364,29 @@ class GPFit:
         prior = s2 * np.diag(kernel_blocks(xs, xs, ell, self.pins)[0]) + t2 * rough_weight(xs, ell, self.pins)[0]
         return k, prior
 
+    def prior_variance_spread(self, i: int, xs: np.ndarray) -> np.ndarray:
+        r"""var(A^(x*)) (n*,): the sampling variance of the estimated new-draw variance A(x) = s_k^2 c(x, x) +
+        tau_k^2 w(x) of block i at scaled x* (unit of z to the fourth), by the delta method,
+        grad_theta A^T I_ff^{-1} grad_theta A over the free hyperparameters f of all blocks (those not within
+        :data:`AT_BOUND` of a bound, where the estimate sits on the bound and is held there; ``information`` the
+        REML expected information).  Raises numpy.linalg.LinAlgError when I_ff is not positive definite."""
+        if self.information is None:
+            raise ValueError("information: this GPFit was built without the REML information")
+        lo = np.tile([b[0] for b in BOUNDS], len(self.obs.blocks))
+        hi = np.tile([b[1] for b in BOUNDS], len(self.obs.blocks))
+        free = np.flatnonzero((self.theta > lo + AT_BOUND) & (self.theta < hi - AT_BOUND))
+        ell, s2, t2 = self.length_scale(i), self.amplitude(i) ** 2, self.rough(i) ** 2
+        C, dC = kernel_blocks(xs, xs, ell, self.pins)
+        W, dW = rough_weight(xs, ell, self.pins)
+        grad = np.zeros((xs.shape[0], len(self.theta)))
+        grad[:, 3 * i:3 * i + 3] = np.stack([2 * s2 * np.diag(C), s2 * np.diag(dC) + t2 * dW, 2 * t2 * W], axis=1)
+        g = grad[:, free]
+        if not free.size:
+            return np.zeros(xs.shape[0])
+        L = linalg.cholesky(self.information[np.ix_(free, free)], lower=True)
+        u = linalg.solve_triangular(L, g.T, lower=True)
+        return np.sum(u * u, axis=0)
+
 
 def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = (), starts=None) -> GPFit:
     """theta maximising the REML likelihood of the stacked residuals r (N,) with sensitivities G (N, n_p).
@@ -347,7 +407,8 @@ def fit_discrepancy(obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple
     if best is None:
         raise np.linalg.LinAlgError("the discrepancy's covariance V or G^T V^-1 G is not positive definite at "
                                     "any start (Cholesky failed)")
-    return GPFit(np.asarray(best.x, float), obs, pins, float(best.fun), bool(best.success))
+    theta = np.asarray(best.x, float)
+    return GPFit(theta, obs, pins, float(best.fun), bool(best.success), reml_information(theta, obs, G, pins))
 
 
 @dataclass(frozen=True)

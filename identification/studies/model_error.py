@@ -41,6 +41,12 @@ part independent between input rows (:mod:`identification.studies.discrepancy_gp
    model no more often than the test's size), else the error model of the highest total held-out log score
    (without splits: the discrepancy).
 5. The chosen error model fitted on all data: p, conf_int, predict, discrepancy.
+6. **Stated sigma against the repeats** (sigma given, repeated series; :func:`pure_error_checks`): per selected
+   sensor, nu s^2 / sigma^2 against chi2_nu with s the pooled pure error on nu degrees of freedom; a note names
+   the sensors where the repeats scatter clearly less (or more) than sigma (one-sided p < alpha).  A stated
+   sigma that holds a systematic error (the press's sigma_man, a gauge error that varies smoothly with the
+   reading) is held by the discrepancy too, and the new-reading bands, which add sigma^2, are then wider than
+   the error requires; ``sigma=None`` takes the pure error.
 
 ``identifiable`` is False when, along some direction of p, the model error leaves less than
 :data:`~identification.studies.model_error_fit.CONFOUNDED_INFORMATION` (1 %) of the information the noise alone
@@ -66,13 +72,13 @@ from identification.fit.measurements import Measurements
 from identification.fit.problem import Problem, strategy_for
 from identification.inference.intervals import validate_alpha
 from identification.studies.discrepancy_gp import InputScaling
-from identification.studies.model_error_fit import ErrorFit, fit_model_error, pure_error_sigma
+from identification.studies.model_error_fit import ErrorFit, band_logpdf, fit_model_error, pure_error_sigma
 from identification.studies.model_error_result import (EmbeddedParameter, ErrorTest, HeldOut, ModelErrorResult,
-                                                       SensorDiscrepancy)
+                                                       PureErrorCheck, SensorDiscrepancy)
 from identification.studies.splits import Split, SplitError, flat_split
 from models.labels import LabelledModel
 
-__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS"]
+__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS", "pure_error_checks"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
 KINDS = ("auto", "none", "discrepancy", "embedded")
@@ -183,6 +189,45 @@ def _sigma_of(data, w: np.ndarray, flat: Measurements, layout) -> tuple:
     return data.with_sigma(np.where(np.isfinite(s) & (s > 0), s, 1.0)), "pure error (repeated series)"
 
 
+def pure_error_checks(data: Measurements, w: np.ndarray, layout) -> tuple:
+    """One :class:`PureErrorCheck` per selected instrument of the static data ``data`` (sigma given, columns'
+    instruments ``layout.instrument``, ``w`` the instrument weights) holding repeated readings: dof s^2 / sigma^2
+    against chi2_dof (empty without repeats or without sigma)."""
+    if data.sigma is None or data.n_M < 2:
+        return ()
+    s, dof = pure_error_sigma(data.z, layout.instrument)
+    sig = np.broadcast_to(np.asarray(data.sigma, float), (data.n_S,))
+    out = []
+    for g, name in enumerate(layout.names):
+        cols = np.flatnonzero(np.asarray(layout.instrument) == g)
+        if w[g] <= 0 or dof[g] <= 0 or not cols.size or not sig[cols[0]] > 0:
+            continue
+        x = dof[g] * s[g] ** 2 / sig[cols[0]] ** 2
+        out.append(PureErrorCheck(name, float(sig[cols[0]]), float(s[g]), int(dof[g]),
+                                  float(stats.chi2.cdf(x, dof[g])), float(stats.chi2.sf(x, dof[g]))))
+    return tuple(out)
+
+
+def _pure_error_notes(checks: tuple, alpha: float) -> list:
+    """Notes on the sensors whose pure error is clearly (p < alpha, one-sided) below or above the stated sigma."""
+    notes = []
+    below = [c for c in checks if c.p_below < alpha]
+    above = [c for c in checks if c.p_above < alpha]
+    if below:
+        notes.append("the repeated series scatter clearly less than the stated sigma on " + ", ".join(
+            f"{c.sensor} (pure error {c.pure_error:.4g} against sigma {c.sigma:.4g}, ratio {c.ratio:.2f}, "
+            f"chi-square test on {c.dof} dof, p = {c.p_below:.2g})" for c in below)
+            + ": if the excess is a systematic error (a gauge error that varies with the reading) the discrepancy "
+              "holds it too and the new-reading bands, which add sigma^2, are wider than the error requires; "
+              "sigma=None takes the pure error")
+    if above:
+        notes.append("the repeated series scatter clearly more than the stated sigma on " + ", ".join(
+            f"{c.sensor} (pure error {c.pure_error:.4g} against sigma {c.sigma:.4g}, ratio {c.ratio:.2f}, "
+            f"chi-square test on {c.dof} dof, p = {c.p_above:.2g})" for c in above)
+            + ": the test and the bands take too little noise; sigma=None takes the pure error")
+    return notes
+
+
 # ---------------------------------------------------------------------------- held-out table
 #: two input rows whose scaled inputs differ by at most this (per column, of the range) hold the same inputs
 SAME_INPUTS = 1e-9
@@ -228,10 +273,9 @@ def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, l
     cover, score, width = [], [], []
     for f in fits:
         b = f.predict(val.inputs, alpha, new_reading=True, conditions=conditions)
-        lo, hi, m = b.lower[None, :, sel], b.upper[None, :, sel], b.mean[None, :, sel]
-        sd = (hi - m) / stats.norm.ppf(1 - alpha / 2)
+        lo, hi = b.lower[None, :, sel], b.upper[None, :, sel]
         cover.append(float(np.mean(((z >= lo) & (z <= hi))[ok])))
-        score.append(float(np.mean(stats.norm.logpdf(z, m, sd)[ok])))
+        score.append(float(np.mean(band_logpdf(b, val.z)[:, :, sel][ok])))
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
     n_new = int(np.broadcast_to(new[None, :, None], z.shape)[ok].sum())
     return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
@@ -272,8 +316,8 @@ def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
 
 
 def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
-           grouped: bool) -> tuple:
-    notes = list(fit.notes)
+           grouped: bool, checks: tuple = (), alpha: float = 0.05) -> tuple:
+    notes = list(fit.notes) + _pure_error_notes(checks, alpha)
     if grouped and kind == "none":
         notes.append("groups name the conditions of the error models; the 'none' error model does not use them")
     unseen = [f"{h.split} ({h.n_unseen} of {h.n_values})" for h in heldout if h.n_unseen]
@@ -363,6 +407,7 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
     problem = Problem(model, data)
     model, data = problem.static(p0)      # a dynamic model: collocated on a mesh controlled at p0
     _checked_inputs(model, data)
+    checks = pure_error_checks(data, w_inst, layout) if sigma_source == "given" else ()
     n_means = int((data.counts()[:, w > 0] > 0).sum())
     if n_means < model.n_p + 2:
         raise DataError(f"data: {n_means} input x sensor means on the selected sensors; model_error needs at least "
@@ -389,5 +434,5 @@ def model_error(model, data, p0, splits: Sequence[Split] | Split | None = None, 
         identifiable=fit.identifiable,
         information_kept=fit.information_kept, correlation_kept=fit.correlation_kept, heldout=heldout, exact_at=exact, sigma=fit.sigma.copy(),
         sigma_source=sigma_source, how=how, notes=_notes(fit, chosen, exact, detected, heldout, sigma_source,
-                                                                 codes is not None),
-        fit=fit, groups=labels)
+                                                                 codes is not None, checks, alpha),
+        fit=fit, groups=labels, pure_error=checks)

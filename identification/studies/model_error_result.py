@@ -13,7 +13,8 @@ from identification.inference.intervals import ConfidenceIntervals, validate_alp
 from identification.studies.model_error_fit import Band, ErrorFit
 from identification.results_protocol import ResultProtocol
 
-__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest", "NEW_CONDITION"]
+__all__ = ["ModelErrorResult", "HeldOut", "SensorDiscrepancy", "EmbeddedParameter", "ErrorTest", "PureErrorCheck",
+           "NEW_CONDITION"]
 
 #: the ``condition`` of :meth:`ModelErrorResult.predict` for a condition the data do not hold
 NEW_CONDITION = "new"
@@ -33,6 +34,35 @@ class ErrorTest:
     excess: float
     dof: int
     reference: str = "0.5 chi2_0 + 0.5 chi2_1"
+
+
+@dataclass(frozen=True)
+class PureErrorCheck:
+    r"""The stated sigma of one sensor against the pure error of the repeated series.
+
+    Under H0 (the readings' repeatable noise has standard deviation ``sigma``), dof s^2 / sigma^2 ~ chi2_dof with s
+    the pooled pure error (``pure_error``, unit of z) on ``dof`` degrees of freedom; ``p_below`` = P(chi2_dof <=
+    dof s^2 / sigma^2) (small: the repeats scatter clearly less than sigma says), ``p_above`` = 1 - p_below.
+    A stated sigma above the repeatability may hold a systematic error (a gauge error that varies with the
+    reading) which the discrepancy, fitted on the same readings, holds too: the new-reading bands then count it
+    twice.  Independence of the series is assumed.
+    """
+
+    sensor: str
+    sigma: float
+    pure_error: float
+    dof: int
+    p_below: float
+    p_above: float
+
+    @property
+    def ratio(self) -> float:
+        """pure_error / sigma (dimensionless)."""
+        return self.pure_error / self.sigma
+
+    def to_dict(self) -> dict:
+        return {"sensor": self.sensor, "sigma": self.sigma, "pure_error": self.pure_error, "ratio": self.ratio,
+                "dof": self.dof, "p_below": self.p_below, "p_above": self.p_above}
 
 
 @dataclass(frozen=True)
@@ -149,6 +179,8 @@ class ModelErrorResult(ResultProtocol):
     how : str                    how ``kind`` was chosen
     notes : tuple of str
     groups : tuple               the distinct condition labels of ``groups`` (empty: none named)
+    pure_error : tuple of PureErrorCheck   sigma given and repeated series: the stated sigma of every selected
+                                 sensor against its pure error (empty otherwise)
     """
 
     model_name: str
@@ -175,6 +207,7 @@ class ModelErrorResult(ResultProtocol):
     notes: tuple = ()
     fit: ErrorFit | None = field(default=None, repr=False)
     groups: tuple = ()
+    pure_error: tuple = ()
 
     # ------------------------------------------------------------------ numbers
     def conf_int(self, alpha: float | None = None) -> ConfidenceIntervals:
@@ -272,7 +305,8 @@ class ModelErrorResult(ResultProtocol):
             "information_kept": self.information_kept,
             "correlation_kept": self.correlation_kept, "heldout": [h.to_dict() for h in self.heldout],
             "exact_at": dict(self.exact_at), "sigma": self.sigma, "sigma_source": self.sigma_source,
-            "notes": list(self.notes), "groups": [str(g) for g in self.groups]})
+            "notes": list(self.notes), "groups": [str(g) for g in self.groups],
+            "pure_error": [c.to_dict() for c in self.pure_error]})
 
     def summary(self) -> str:
         """The verdict, the test, the parameters with and without model error, the discrepancy per sensor,
