@@ -43,7 +43,7 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05, variants
     used = set(results.design_sensors)
     w = np.array([1.0 if s in used else 0.0 for s in study.sensors]) if used else None
     done, failed = dict(results.model_error), dict(results.model_error_errors)
-    embedded = dict(results.model_error_embedded)
+    beside = dict(results.model_error_embedded)
     for v, m in study.models.items():
         if variants is not None and v not in variants:
             continue
@@ -52,12 +52,12 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05, variants
                 r = model_error(m, study.data[v], start_values(study, v), splits=study.splits, weights=w,
                                 alpha=alpha)
                 if embedded and r.kind != "embedded":          # which parameters would carry it (all data, no splits)
-                    embedded[v] = model_error(m, study.data[v], start_values(study, v), kind="embedded", weights=w,
-                                              alpha=alpha)
+                    beside[v] = model_error(m, study.data[v], start_values(study, v), kind="embedded", weights=w,
+                                            alpha=alpha)
                 done[v] = r
             except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
                 failed[v] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-    return dataclasses.replace(results, model_error=done, model_error_errors=failed, model_error_embedded=embedded)
+    return dataclasses.replace(results, model_error=done, model_error_errors=failed, model_error_embedded=beside)
 
 
 def embedded_parameters(results, variant: str) -> tuple:
