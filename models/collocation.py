@@ -281,7 +281,8 @@ class CollocatedModel(Model):
         """u(t_kr) from the input row q at every collocation point (element k, r = 1..d), element after
         element; a control's jump at an element boundary takes the element's own side."""
         dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
-        return [dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+        entries, symbolic = dyn.input_entries(q), isinstance(q, (ca.SX, ca.MX))      # split q once, not per point
+        return [dyn.u_from(entries, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]), symbolic)
                 for k in range(N) for r in range(1, d + 1)]
 
     def point_input_map(self) -> np.ndarray:
