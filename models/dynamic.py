@@ -298,6 +298,12 @@ class DynamicModel(LabelledModel):
     def u_from(self, entries, t: float, t_ref: float, symbolic: bool):
         """u(t) of :meth:`u_at` from the entries of the input row (:meth:`input_entries`); an
         expression when ``symbolic``, else an array."""
+        parts = self.u_parts(entries, t, t_ref)
+        return ca.vertcat(*parts) if symbolic else np.array(parts, float)
+
+    def u_parts(self, entries, t: float, t_ref: float) -> list:
+        """The n_u entries of u(t) (constants, then each control's value at t) from the entries of the
+        input row, as a list (:meth:`u_from` stacks them)."""
         n_c = len(self.constants)
         parts = [entries[i] for i in range(n_c)]
         k = n_c
@@ -305,7 +311,7 @@ class DynamicModel(LabelledModel):
             vals = [entries[k + i] for i in range(len(c.grid))]
             parts.append(c.value(vals, t, t_ref))
             k += len(c.grid)
-        return ca.vertcat(*parts) if symbolic else np.array(parts, float)
+        return parts
 
     def check_times(self, times, arg: str = "times") -> np.ndarray:
         """Validated sampling times: finite, >= 0, strictly increasing, within the horizon."""
