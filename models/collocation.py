@@ -284,7 +284,7 @@ class CollocatedModel(Model):
         entries, symbolic = dyn.input_entries(q), isinstance(q, (ca.SX, ca.MX))      # split q once, not per point
         at = [(b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
               for k in range(N) for r in range(1, d + 1)]
-        if isinstance(q, ca.SX) and dyn.n_u:     # one stack of every point's entries, split into the points' columns
+        if symbolic and dyn.n_u:     # one stack of every point's entries, split into the points' columns
             flat = [e for t, t_ref in at for e in dyn.u_parts(entries, t, t_ref)]
             return ca.horzsplit(ca.reshape(ca.vertcat(*flat), dyn.n_u, len(at)))
         return [dyn.u_from(entries, t, t_ref, symbolic) for t, t_ref in at]

@@ -289,9 +289,9 @@ class DynamicModel(LabelledModel):
         return self.u_from(self.input_entries(q), t, t_ref, isinstance(q, (ca.SX, ca.MX)))
 
     def input_entries(self, q) -> Sequence:
-        """The entries q_0, q_1, ... of the input row q: one split of a dense SX column (the same
-        elements as q[i], without one Python call per entry and time), else q itself."""
-        if isinstance(q, ca.SX) and q.is_dense() and q.is_column():
+        """The entries q_0, q_1, ... of the input row q: one split of a dense SX or MX column (the same
+        entries as q[i], without one Python call per entry and time), else q itself."""
+        if isinstance(q, (ca.SX, ca.MX)) and q.is_dense() and q.is_column():
             return ca.vertsplit(q)
         return q
 

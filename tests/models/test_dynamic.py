@@ -220,3 +220,20 @@ def test_point_inputs_split_q_once_give_the_same_expressions(kind):
     qn = np.r_[1.5, 1.0, 3.0, 2.0, 0.5]         # numeric rows take the same path as before
     assert np.array_equal(m.u_at(qn, 0.7, 0.75), np.asarray(ca.evalf(ca.substitute(
         _u_by_index(m, q, 0.7, 0.75), q, ca.DM(qn)))).ravel())
+
+
+@pytest.mark.parametrize("kind", ["constant", "linear"])
+def test_point_inputs_of_an_mx_row_evaluate_to_the_numeric_inputs(kind):
+    # the MX graph from one split of q gives, at a numeric row, exactly the inputs of the numeric path
+    grid = [0.0, 0.5, 1.0, 1.5]
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * u[1] * x, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, controls={"u": {"grid": grid, "kind": kind}}, horizon=2.0)
+    cm = m.collocate(np.array([0.25, 0.5, 1.2, 2.0]), max_step=0.1)
+    q = ca.MX.sym("q", m.n_q_dim)
+    f = ca.Function("U", [q], [ca.horzcat(*cm.point_inputs(q))])
+    qn = np.array([1.5, 1.0, 3.3, 2.0, 0.7])
+    U = np.asarray(f(qn))
+    assert U.shape == (m.n_u, cm.mesh.n_elements * cm.mesh.degree)
+    assert np.array_equal(U, np.column_stack(cm.point_inputs(qn)))
+    # the linear map Umap is another arithmetic (a matrix product: its sums round differently for linear controls)
+    np.testing.assert_allclose(U.T.ravel(), cm.point_input_map() @ qn, rtol=1e-15, atol=1e-15)
