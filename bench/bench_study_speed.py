@@ -1,7 +1,7 @@
 """Speed of a dynamic study's commands: `mudoe detect`, `report` and `validate` on the DC motor
 (configs/motor.toml) against the batch reactor (configs/reactor.toml), issue 30 item 7.
 
-Each command runs in a fresh process (``python -m mudoe COMMAND CONFIG --out TMP --quiet``, nice 10) and
+Each command runs in a fresh process (``python -m mudoe COMMAND CONFIG --out TMP --quiet``, at niceness 10) and
 is timed by wall clock and by CPU (user + system of the child, ``resource.getrusage(RUSAGE_CHILDREN)``,
 which counts the spawned validate workers once they have finished).  The machine may be shared: the load
 average (``os.getloadavg``) is printed beside every row and the motor is compared with the reactor of the
@@ -35,8 +35,8 @@ def run_command(tree: Path, command: str, config: str, runs: int, workers: int) 
     """Wall and CPU seconds (user + system of the child process and its workers) of one command on ``tree``,
     and the one-minute load average before it; raises RuntimeError naming the command when it fails."""
     with tempfile.TemporaryDirectory(prefix="bench_study_speed_") as out:
-        cmd = ["nice", "-n", "10", sys.executable, "-m", "mudoe", command, str(tree / "configs" / f"{config}.toml"),
-               "--out", out, "--quiet"]
+        cmd = ["nice", "-n", str(max(10 - os.nice(0), 0)), sys.executable, "-m", "mudoe", command,
+               str(tree / "configs" / f"{config}.toml"), "--out", out, "--quiet"]
         if command == "validate":
             cmd += ["--runs", str(runs), "--workers", str(workers)]
         env = dict(os.environ, PYTHONPATH=str(tree))
