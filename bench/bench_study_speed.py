@@ -31,10 +31,13 @@ CONFIGS = ("motor", "reactor")
 COMMANDS = ("detect", "report", "validate")
 
 
-def run_command(tree: Path, command: str, config: str, runs: int, workers: int) -> dict:
+def run_command(tree: Path, command: str, config: str, runs: int, workers: int, keep: Path | None = None) -> dict:
     """Wall and CPU seconds (user + system of the child process and its workers) of one command on ``tree``,
-    and the one-minute load average before it; raises RuntimeError naming the command when it fails."""
-    with tempfile.TemporaryDirectory(prefix="bench_study_speed_") as out:
+    and the one-minute load average before it; raises RuntimeError naming the command when it fails.  The
+    command's output folder is ``keep/<tree>/<command>_<config>`` when ``keep`` is given (to compare the
+    results of two trees), else a temporary folder."""
+    with tempfile.TemporaryDirectory(prefix="bench_study_speed_") as tmp:
+        out = tmp if keep is None else str(keep / tree.name / f"{command}_{config}")
         cmd = ["nice", "-n", str(max(10 - os.nice(0), 0)), sys.executable, "-m", "mudoe", command,
                str(tree / "configs" / f"{config}.toml"), "--out", out, "--quiet"]
         if command == "validate":
@@ -54,11 +57,13 @@ def run_command(tree: Path, command: str, config: str, runs: int, workers: int) 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="bench_study_speed", description=__doc__.splitlines()[0])
-    ap.add_argument("--commands", default=",".join(COMMANDS), help="comma-separated subset of detect,report,validate")
+    ap.add_argument("--commands", default=",".join(COMMANDS),
+                    help="comma-separated subset of detect,report,validate")
     ap.add_argument("--configs", default=",".join(CONFIGS), help="comma-separated configs of configs/ (motor,reactor)")
     ap.add_argument("--trees", default=".", help="comma-separated source trees (default this one)")
     ap.add_argument("--runs", type=int, default=20, help="validate: replications (default 20)")
     ap.add_argument("--workers", type=int, default=1, help="validate: local workers (default 1)")
+    ap.add_argument("--keep", default=None, help="keep every command's output under this folder")
     args = ap.parse_args(argv)
     commands = [c for c in args.commands.split(",") if c]
     bad = [c for c in commands if c not in COMMANDS]
@@ -67,12 +72,14 @@ def main(argv: list[str] | None = None) -> None:
     trees = [(HERE if t == "." else Path(t).resolve()) for t in args.trees.split(",") if t]
     configs = [c for c in args.configs.split(",") if c]
     when = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())
-    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {when}; validate --runs {args.runs} --workers {args.workers}")
+    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {when}; validate --runs {args.runs} "
+          f"--workers {args.workers}")
     print("| tree | command | config | wall s | CPU s | load | CPU / reactor's |")
     print("|---|---|---|---|---|---|---|")
     for command in commands:
         for tree in trees:
-            got = {c: run_command(tree, command, c, args.runs, args.workers) for c in configs}
+            keep = None if args.keep is None else Path(args.keep)
+            got = {c: run_command(tree, command, c, args.runs, args.workers, keep) for c in configs}
             ref = got.get("reactor")
             for c, g in got.items():
                 ratio = f"{g['cpu'] / ref['cpu']:.2f}" if ref and ref["cpu"] > 0 else "-"
