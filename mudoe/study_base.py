@@ -259,6 +259,9 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
     progress = progress or Progress(False)
     estimates, errors, assessments = dict(results.estimates), dict(results.estimate_errors), dict(results.assessments)
     ident = study.cfg.identify
+    unknown = [v for v in variants or () if v not in study.models]
+    if unknown:
+        raise ValueError(f"variants: unknown {unknown[0]!r}; the study's variants are {', '.join(study.models)}")
     for v, m in study.models.items():
         if variants is not None and v not in variants:
             continue

@@ -73,3 +73,5 @@ def test_validate_fits_only_its_variant_with_the_same_estimate():
     assert np.array_equal(alone.estimates["M2"].p, every.estimates["M2"].p)
     assert np.array_equal(alone.estimates["M2"].cov, every.estimates["M2"].cov)
     assert list(require_fit(study, empty, "M2", None, "oed").estimates) == list(study.models)   # default: all
+    with pytest.raises(ValueError, match="variants: unknown 'M9'"):
+        run_identify(study, empty, variants=("M9",))
