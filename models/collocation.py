@@ -281,8 +281,13 @@ class CollocatedModel(Model):
         """u(t_kr) from the input row q at every collocation point (element k, r = 1..d), element after
         element; a control's jump at an element boundary takes the element's own side."""
         dyn, d, N, b = self.dynamic, self.mesh.degree, self.mesh.n_elements, np.asarray(self.mesh.boundaries)
-        return [dyn.u_at(q, b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
-                for k in range(N) for r in range(1, d + 1)]
+        entries, symbolic = dyn.input_entries(q), isinstance(q, (ca.SX, ca.MX))      # split q once, not per point
+        at = [(b[k] + self.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+              for k in range(N) for r in range(1, d + 1)]
+        if symbolic and dyn.n_u:     # one stack of every point's entries, split into the points' columns
+            flat = [e for t, t_ref in at for e in dyn.u_parts(entries, t, t_ref)]
+            return ca.horzsplit(ca.reshape(ca.vertcat(*flat), dyn.n_u, len(at)))
+        return [dyn.u_from(entries, t, t_ref, symbolic) for t, t_ref in at]
 
     def point_input_map(self) -> np.ndarray:
         """Umap (N d n_u, d_q): the inputs at every point, stacked, are Umap q (linear in the input row)."""

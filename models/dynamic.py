@@ -311,14 +311,32 @@ class DynamicModel(LabelledModel):
     def u_at(self, q, t: float, t_ref: float):
         """u(t) = (constants, control values at t) from the input row q (an expression or array);
         t_ref selects the side of a control jump (see :meth:`Control.value`)."""
+        return self.u_from(self.input_entries(q), t, t_ref, isinstance(q, (ca.SX, ca.MX)))
+
+    def input_entries(self, q) -> Sequence:
+        """The entries q_0, q_1, ... of the input row q: one split of a dense SX or MX column (the same
+        entries as q[i], without one Python call per entry and time), else q itself."""
+        if isinstance(q, (ca.SX, ca.MX)) and q.is_dense() and q.is_column():
+            return ca.vertsplit(q)
+        return q
+
+    def u_from(self, entries, t: float, t_ref: float, symbolic: bool):
+        """u(t) of :meth:`u_at` from the entries of the input row (:meth:`input_entries`); an
+        expression when ``symbolic``, else an array."""
+        parts = self.u_parts(entries, t, t_ref)
+        return ca.vertcat(*parts) if symbolic else np.array(parts, float)
+
+    def u_parts(self, entries, t: float, t_ref: float) -> list:
+        """The n_u entries of u(t) (constants, then each control's value at t) from the entries of the
+        input row, as a list (:meth:`u_from` stacks them)."""
         n_c = len(self.constants)
-        parts = [q[i] for i in range(n_c)]
+        parts = [entries[i] for i in range(n_c)]
         k = n_c
         for c in self.controls:
-            vals = [q[k + i] for i in range(len(c.grid))]
+            vals = [entries[k + i] for i in range(len(c.grid))]
             parts.append(c.value(vals, t, t_ref))
             k += len(c.grid)
-        return ca.vertcat(*parts) if isinstance(q, (ca.SX, ca.MX)) else np.array(parts, float)
+        return parts
 
     def check_times(self, times, arg: str = "times") -> np.ndarray:
         """Validated sampling times: finite, >= 0, strictly increasing, within the horizon."""

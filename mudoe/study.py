@@ -141,7 +141,7 @@ def run_validate(study: Study, results: StudyResults, progress: Progress | None 
     with contextlib.nullcontext() if address is None else connect(address) as client:
         if client is not None:
             settings = dataclasses.replace(settings, scheduler=client)
-        results = require_fit(study, results, v, progress, "validate")
+        results = require_fit(study, results, v, progress, "validate", alone=True)     # no other fit is used
         est = results.estimates[v]
         data = study.data[v]
         results = design_sensors(study, results, progress)

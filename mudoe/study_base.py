@@ -15,7 +15,7 @@ import dataclasses
 import importlib
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -248,17 +248,23 @@ def start_values(study: Study, variant: str) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- the fits
-def run_identify(study: Study, results: StudyResults, progress: Progress | None = None) -> StudyResults:
-    """Identify every variant on the study's data (all sensors) and assess each fit (goodness of fit, trust of
-    its linearisation); failures are recorded, not raised (an estimate the data do not bound is recorded as a
-    failure with its reason, "not bounded: ...").  ``[identify] starts`` and ``seed`` are passed to every fit (a
-    multi-start fit keeps its starts in ``est.diagnostics.starts``)."""
+def run_identify(study: Study, results: StudyResults, progress: Progress | None = None,
+                 variants: Sequence[str] | None = None) -> StudyResults:
+    """Identify every variant (or those named in ``variants``) on the study's data (all sensors) and assess each
+    fit (goodness of fit, trust of its linearisation); failures are recorded, not raised (an estimate the data do
+    not bound is recorded as a failure with its reason, "not bounded: ...").  ``[identify] starts`` and ``seed``
+    are passed to every fit (a multi-start fit keeps its starts in ``est.diagnostics.starts``)."""
     from identification.errors import IdentificationError
     from .fit_assessment import assess
     progress = progress or Progress(False)
     estimates, errors, assessments = dict(results.estimates), dict(results.estimate_errors), dict(results.assessments)
     ident = study.cfg.identify
+    unknown = [v for v in variants or () if v not in study.models]
+    if unknown:
+        raise ValueError(f"variants: unknown {unknown[0]!r}; the study's variants are {', '.join(study.models)}")
     for v, m in study.models.items():
+        if variants is not None and v not in variants:
+            continue
         with progress.step(f"identify {v}"):
             try:
                 est = identify(m, study.data[v], start_values(study, v), starts=ident.starts, seed=ident.seed)
@@ -278,11 +284,11 @@ def oed_variant(study: Study) -> str:
 
 
 def require_fit(study: Study, results: StudyResults, v: str, progress: Progress, command: str,
-                why: str = "") -> StudyResults:
-    """``results`` with the fits of the study's variants if ``v`` has no estimate yet; FitFailedError if its
-    fit failed."""
+                why: str = "", alone: bool = False) -> StudyResults:
+    """``results`` with the fits of the study's variants (``alone``: of ``v`` only, for a command whose output
+    uses no other fit) if ``v`` has no estimate yet; FitFailedError if its fit failed."""
     if v not in results.estimates:
-        results = run_identify(study, results, progress)
+        results = run_identify(study, results, progress, variants=(v,) if alone else None)
     if v not in results.estimates:
         raise FitFailedError(f"{command}: the fit of variant {v} failed ({results.estimate_errors.get(v)}){why}")
     return results

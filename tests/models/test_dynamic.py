@@ -190,3 +190,50 @@ def test_round_off_in_grids_and_times_makes_no_element():
         Mesh((0.0, 0.35, 0.35000000000000003, 0.5))
     with pytest.raises(ModelError, match="differ by round-off only"):
         decay().collocate([0.3, 0.30000000000000004])
+
+
+def _u_by_index(dyn, q, t, t_ref):
+    """u(t) built entry by entry as q[i] (the construction before the one split of q)."""
+    n_c, parts, k = len(dyn.constants), [], len(dyn.constants)
+    parts = [q[i] for i in range(n_c)]
+    for c in dyn.controls:
+        parts.append(c.value([q[k + i] for i in range(len(c.grid))], t, t_ref))
+        k += len(c.grid)
+    return ca.vertcat(*parts)
+
+
+@pytest.mark.parametrize("kind", ["constant", "linear"])
+def test_point_inputs_split_q_once_give_the_same_expressions(kind):
+    # the inputs at the collocation points from one split of q are the expressions of q[i] entry by entry
+    grid = [0.0, 0.5, 1.0, 1.5]
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * u[1] * x, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, controls={"u": {"grid": grid, "kind": kind}}, horizon=2.0)
+    cm = m.collocate(np.array([0.25, 0.5, 1.2, 2.0]), max_step=0.1)
+    q = ca.SX.sym("q", m.n_q_dim)
+    b, d = np.asarray(cm.mesh.boundaries), cm.mesh.degree
+    old = [_u_by_index(m, q, b[k] + cm.tau[r] * (b[k + 1] - b[k]), 0.5 * (b[k] + b[k + 1]))
+           for k in range(cm.mesh.n_elements) for r in range(1, d + 1)]
+    new = cm.point_inputs(q)
+    assert len(new) == len(old) == cm.mesh.n_elements * d
+    assert [str(e) for e in new] == [str(e) for e in old]
+    assert str(m.u_at(q, 0.7, 0.75)) == str(_u_by_index(m, q, 0.7, 0.75))
+    qn = np.r_[1.5, 1.0, 3.0, 2.0, 0.5]         # numeric rows take the same path as before
+    assert np.array_equal(m.u_at(qn, 0.7, 0.75), np.asarray(ca.evalf(ca.substitute(
+        _u_by_index(m, q, 0.7, 0.75), q, ca.DM(qn)))).ravel())
+
+
+@pytest.mark.parametrize("kind", ["constant", "linear"])
+def test_point_inputs_of_an_mx_row_evaluate_to_the_numeric_inputs(kind):
+    # the MX graph from one split of q gives, at a numeric row, exactly the inputs of the numeric path
+    grid = [0.0, 0.5, 1.0, 1.5]
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * u[1] * x, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, controls={"u": {"grid": grid, "kind": kind}}, horizon=2.0)
+    cm = m.collocate(np.array([0.25, 0.5, 1.2, 2.0]), max_step=0.1)
+    q = ca.MX.sym("q", m.n_q_dim)
+    f = ca.Function("U", [q], [ca.horzcat(*cm.point_inputs(q))])
+    qn = np.array([1.5, 1.0, 3.3, 2.0, 0.7])
+    U = np.asarray(f(qn))
+    assert U.shape == (m.n_u, cm.mesh.n_elements * cm.mesh.degree)
+    assert np.array_equal(U, np.column_stack(cm.point_inputs(qn)))
+    # the linear map Umap is another arithmetic (a matrix product: its sums round differently for linear controls)
+    np.testing.assert_allclose(U.T.ravel(), cm.point_input_map() @ qn, rtol=1e-15, atol=1e-15)

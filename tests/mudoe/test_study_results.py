@@ -2,6 +2,7 @@
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -56,3 +57,21 @@ def test_variant_model_reads_the_set_points():
     np.testing.assert_array_equal(VariantModel(m).inputs(q), q[:, None])
     two = VariantModel(m, lambda s: np.column_stack([s, s ** 2]))
     np.testing.assert_array_equal(two.inputs(q), [[0, 0], [1, 1], [2, 4]])
+
+
+def test_validate_fits_only_its_variant_with_the_same_estimate():
+    # validate uses the fit of its own variant only (issue 30 item 7): the others are not fitted, and the fit
+    # is the one of all variants bit for bit
+    from mudoe.config import load_config
+    from mudoe.study import StudyResults, prepare, require_fit, run_identify
+    study = prepare(load_config(REPO / "configs" / "press.toml"))
+    empty = StudyResults(study)
+    alone = require_fit(study, empty, "M2", None, "validate", alone=True)
+    assert list(alone.estimates) == ["M2"]
+    every = run_identify(study, empty)
+    assert list(every.estimates) == list(study.models) and len(study.models) == 3
+    assert np.array_equal(alone.estimates["M2"].p, every.estimates["M2"].p)
+    assert np.array_equal(alone.estimates["M2"].cov, every.estimates["M2"].cov)
+    assert list(require_fit(study, empty, "M2", None, "oed").estimates) == list(study.models)   # default: all
+    with pytest.raises(ValueError, match="variants: unknown 'M9'"):
+        run_identify(study, empty, variants=("M9",))
