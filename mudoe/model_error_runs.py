@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy import stats
 
 from identification import model_error, rank_models
 from identification.errors import IdentificationError
@@ -313,3 +314,209 @@ def curve_labels(model, inputs) -> tuple:
     if getattr(model, "controls", ()) or rows.ndim != 2 or rows.shape[1] > 2 or rows.shape[1] == 0:
         return tuple(f"experiment {j + 1}" for j in range(rows.shape[0]))
     return tuple(", ".join(f"{n} = {v:g}" for n, v in zip(model.inputs, row)) for row in rows)
+
+
+# ---------------------------------------------------------------------------- the engineer's summary (issue 29 item 4)
+#: values of the grid over the data's input range where the sizes and bands are taken (a model of one input)
+SIZE_LEVELS = {1: 41}
+#: candidate runs of the next-runs design: a uniform grid over the data's input range (a model of one input)
+CANDIDATE_LEVELS = 17
+#: Gauss-Legendre nodes of the region (the data's input range) of the next-runs design (a model of one input)
+REGION_NODES = 21
+#: what the size s(q) of the error is for each error model
+SIZE_IS = {"discrepancy": "|mean discrepancy|", "embedded": "95 % half-width of the parameters' spread",
+           "none": "no error model: 0"}
+
+
+def plain_result(result):
+    """``result`` (a :class:`identification.ModelErrorResult`) as its plain fit: kind "none", the parameters and
+    covariance of the fit without model error, so that its ``predict`` gives the plain bands (h +- z sqrt(g^T C g
+    [+ sigma^2])) with no refit."""
+    f = result.fit
+    plain = dataclasses.replace(f, p=np.asarray(f.plain.p, float).copy(), cov=np.asarray(f.plain.cov, float).copy(),
+                                gp=None, embedded=None, alpha_r=None, Vinv_G=None, Vinv=None)
+    return dataclasses.replace(result, kind="none", fit=plain, p=plain.p, cov=plain.cov, discrepancies=(),
+                               embedded=())
+
+
+def _file_values(study, values: np.ndarray, sensors) -> np.ndarray:
+    """Differences ``values`` (..., len(sensors)) of the named sensors in their files' units."""
+    units = sensor_units(study)
+    out = np.array(values, float)
+    for i, s in enumerate(sensors):
+        file_unit, model_unit = units.get(s, ("", ""))
+        if file_unit and model_unit and file_unit != model_unit:
+            out[..., i] = convert(out[..., i], model_unit, file_unit, difference=True)
+    return out
+
+
+def _input_value(study, model, k: int, v: float) -> tuple:
+    """(value, unit) of input ``k`` as the engineer reads it (the first input in its file unit)."""
+    unit = (tuple(getattr(model, "input_units", ()) or ()) + ("",) * len(model.inputs))[k] or ""
+    if k == 0 and study.units is not None:
+        return float(study.units.q_to_file(float(v))), study.units.input_file
+    return float(v), unit
+
+
+def _input_label(study, model, row) -> str:
+    """"q_P = 1600 N": an input row (model units) as the engineer reads it."""
+    out = []
+    for k, (name, v) in enumerate(zip(model.inputs, np.atleast_1d(np.asarray(row, float)))):
+        v, unit = _input_value(study, model, k, v)
+        out.append(f"{name} = {v:.4g}" + (f" {unit}" if unit else ""))
+    return ", ".join(out)
+
+
+def _levels_grid(lo: np.ndarray, hi: np.ndarray, levels: int) -> np.ndarray:
+    """The product grid of ``levels`` equally spaced values per input over [lo, hi] (ends included)."""
+    axes = [np.linspace(a, b, levels) if b > a else np.array([a]) for a, b in zip(lo, hi)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def _range_words(study, model, lo, hi) -> str:
+    """"q_P 0-1600 N": the data's input range as the engineer reads it."""
+    out = []
+    for k, name in enumerate(model.inputs):
+        a, unit = _input_value(study, model, k, lo[k])
+        b, _ = _input_value(study, model, k, hi[k])
+        out.append(f"{name} {a:.4g}-{b:.4g}" + (f" {unit}" if unit else ""))
+    return ", ".join(out)
+
+
+def _flat(band, cols) -> tuple:
+    """(mean, half) of a band, (n_points, len(cols)): a dynamic model's experiments x times one after the other."""
+    mean = np.asarray(band.mean, float)
+    half = (np.asarray(band.upper, float) - np.asarray(band.lower, float)) / 2
+    n_s = mean.shape[-1]
+    return mean.reshape(-1, n_s)[:, cols], half.reshape(-1, n_s)[:, cols]
+
+
+def _distinct_rows(q: np.ndarray) -> np.ndarray:
+    """The distinct input rows of ``q`` in the data's order."""
+    _, first = np.unique(q, axis=0, return_index=True)
+    return q[np.sort(first)]
+
+
+def _points(study, variant: str, result) -> tuple:
+    """(input rows, a label per point, the words of where): one input, a grid of :data:`SIZE_LEVELS` values over the
+    data's range; several inputs (they may be tied, e.g. a direction or the previous set point), the data's distinct
+    input rows; a dynamic model, the data's experiments at their sampling times (a point is an experiment at a
+    time, experiments x times one after the other)."""
+    data, m = study.data[variant], study.models[variant]
+    q = np.asarray(data.inputs, float)
+    if study.cfg.dynamic is not None:
+        times = np.asarray(result.discrepancy(q[:1], result.alpha).grid[0], float)
+        unit = getattr(m, "time_unit", "") or ""
+        labels = [f"{c}, t = {t:.4g}" + (f" {unit}" if unit else "") for c in curve_labels(m, q) for t in times]
+        return q, labels, f"the data's {len(q)} experiments at their {len(times)} sampling times"
+    if q.shape[1] > 1:
+        rows = _distinct_rows(q)
+        return rows, [_input_label(study, m, row) for row in rows], f"the data's {len(rows)} distinct input rows"
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    grid = _levels_grid(lo, hi, SIZE_LEVELS[1])
+    return grid, [_input_label(study, m, row) for row in grid], \
+        f"{len(grid)} points over the data's range ({_range_words(study, m, lo, hi)})"
+
+
+def _sizes(study, variant: str, result, rows, labels) -> list:
+    """The :class:`SensorErrorSize` fields of every selected sensor (before the next runs) at ``rows``."""
+    cols = [study.sensors.index(s) for s in result.sensors]
+    a = result.alpha
+    d_mean, d_half = _flat(result.discrepancy(rows, a), cols)
+    size = (np.abs(d_mean) if result.kind == "discrepancy" else d_half if result.kind == "embedded"
+            else np.zeros_like(d_mean))
+    size = np.abs(_file_values(study, size, result.sensors))
+    half = _file_values(study, _flat(result.predict(rows, a, new_reading=True), cols)[1], result.sensors)
+    plain = _file_values(study, _flat(plain_result(result).predict(rows, a, new_reading=True), cols)[1],
+                         result.sensors)
+    units = sensor_units(study)
+    out = []
+    for i, s in enumerate(result.sensors):
+        ok = np.isfinite(size[:, i])
+        peak = int(np.flatnonzero(ok)[np.argmax(size[ok, i])]) if ok.any() else 0
+        out.append(dict(sensor=s, unit=units.get(s, ("", ""))[0] or units.get(s, ("", ""))[1] or "model unit",
+                        max_abs=float(np.max(size[ok, i])) if ok.any() else float("nan"),
+                        rms=float(np.sqrt(np.mean(size[ok, i] ** 2))) if ok.any() else float("nan"),
+                        at=labels[peak], half_median=float(np.nanmedian(half[:, i])),
+                        half_max=float(np.nanmax(half[:, i])), plain_median=float(np.nanmedian(plain[:, i])),
+                        plain_max=float(np.nanmax(plain[:, i]))))
+    return out
+
+
+def _design_inputs(study, model, q: np.ndarray) -> tuple:
+    """(candidates, region, region words, candidate words) of the next-runs design (model units): one input, a
+    uniform grid of :data:`CANDIDATE_LEVELS` values over the data's range and that range as the region; several
+    inputs, the data's distinct input rows for both (their inputs may be tied; equal weights)."""
+    if q.shape[1] == 1:
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        cand = _levels_grid(lo, hi, CANDIDATE_LEVELS)
+        words = _range_words(study, model, lo, hi)
+        return (cand, {model.inputs[0]: (float(lo[0]), float(hi[0]))},
+                f"the data's range ({words}), {REGION_NODES} Gauss-Legendre nodes",
+                f"a uniform grid of {len(cand)} values over {words}")
+    rows = _distinct_rows(q)
+    return rows, rows, f"the data's {len(rows)} distinct input rows", f"the data's {len(rows)} distinct input rows"
+
+
+def _mean_new_reading(study, result, des, sensor: str) -> tuple:
+    """(before, after): the region's weighted mean half-width of the new-reading band, z sqrt(v + sigma^2), of
+    ``sensor`` (file unit) from the design's posterior half-widths z sqrt(v) of model + error."""
+    z = float(stats.norm.ppf(1 - des.alpha / 2))
+    sig = float(np.asarray(result.sigma, float)[study.sensors.index(sensor)])
+    w = np.asarray(des.region_weights, float)
+    mk = np.asarray(des.target_sensors) == sensor
+    means = [w @ np.sqrt(np.asarray(h, float)[:, mk] ** 2 + (z * sig) ** 2).mean(axis=1)
+             for h in (des.half_before, des.half_after)]
+    return tuple(float(x) for x in _file_values(study, np.array(means)[:, None], [sensor]).ravel())
+
+
+def next_runs(study, variant: str, result, n: int) -> tuple:
+    """(labels of the chosen runs, how, {sensor: (before, after)}): the ``n`` input rows that most shrink the
+    prediction band (model + error) over where the data lie, :func:`oed.select_error_design` with the integrated
+    criterion (:func:`_design_inputs`: candidates and region), each run as many series as the data's; before and
+    after are the mean half-width of the new-reading band over the region (file units).  None proposed (empty
+    labels, ``how`` says why) for ``n`` = 0, an error model "none", control profiles, or what the design refuses."""
+    from oed import select_error_design
+    if n == 0 or result.kind not in ("discrepancy", "embedded"):
+        return (), ("" if n == 0 else "no error model: no runs to learn it"), {}
+    data, m = study.data[variant], study.models[variant]
+    if getattr(m, "controls", ()):
+        return (), "next runs not offered: the inputs are control profiles (no candidate runs to choose from)", {}
+    cand, region, region_words, cand_words = _design_inputs(study, m, np.asarray(data.inputs, float))
+    if n > len(cand):
+        return (), f"next runs not offered: {n} runs asked for, {len(cand)} candidates", {}
+    repeats = max(1, int(getattr(data, "n_M", 1) or 1))
+    try:
+        des = select_error_design(result, cand, n, region=region, criterion="integrated", region_size=REGION_NODES,
+                                  repeats=repeats, time_limit=20.0)
+    except ValueError as exc:
+        return (), f"next runs not offered: {str(exc).splitlines()[0]}", {}
+    shrink = {s: _mean_new_reading(study, result, des, s) for s in dict.fromkeys(des.target_sensors)}
+    how = (f"{n} new run(s) of {repeats} series each from {cand_words}, chosen to shrink the mean "
+           f"{100 * (1 - result.alpha):g} % band over {region_words} (oed.select_error_design, integrated criterion; "
+           + ("proven optimal" if des.proven else f"NOT proven optimal: {des.status}") + ")")
+    return tuple(_input_label(study, m, row) for row in des.chosen_inputs), how, shrink
+
+
+def error_summary(study, results, variant: str, n_next: int | None = None):
+    """The :class:`identification.studies.records.ErrorSummary` of ``variant``'s model error (computed in
+    ``results.model_error``): the size of the error per sensor in the files' units, its peak, the new-reading band
+    with and without it over the data's input range (:func:`_points`), the parameters that carry it and the next
+    runs (``n_next``, default ``[quantify] next_runs``; :func:`next_runs`)."""
+    from identification.studies.records import ErrorSummary, SensorErrorSize
+    r = results.model_error[variant]
+    n_next = study.cfg.quantify.next_runs if n_next is None else n_next
+    rows, labels, where = _points(study, variant, r)
+    runs, how, shrink = next_runs(study, variant, r, n_next)
+    sizes = tuple(SensorErrorSize(**d, next_before=shrink.get(d["sensor"], (np.nan, np.nan))[0],
+                                  next_after=shrink.get(d["sensor"], (np.nan, np.nan))[1])
+                  for d in _sizes(study, variant, r, rows, labels))
+    return ErrorSummary(variant=variant, kind=r.kind, detected=bool(r.detected), p_value=float(r.test.p_value),
+                        alpha=float(r.alpha), size_is=SIZE_IS.get(r.kind, r.kind), grid=where, sizes=sizes,
+                        embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how)
+
+
+def error_summaries(study, results, n_next: int | None = None) -> dict:
+    """{variant: ErrorSummary} of every variant whose model error was computed (:func:`error_summary`)."""
+    return {v: error_summary(study, results, v, n_next) for v in results.model_error}
