@@ -24,7 +24,8 @@ from .study_base import FitFailedError, MissingPieceError, Progress, design_sens
 from .units import convert
 
 __all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
-           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error"]
+           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error", "plain_result", "next_runs",
+           "error_summary", "error_summaries", "summary_lines"]
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05, variants=None, embedded: bool = True):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -144,13 +145,38 @@ def ranking(results):
     return rank_models(with_table) if with_table else None
 
 
-def quantify_text(study, results) -> str:
+def summary_lines(s) -> list:
+    """The terminal lines of an :class:`ErrorSummary`: per sensor the size (max, where, rms), the band to design
+    with against the plain one, then the next runs with the mean band before -> after."""
+    pct = f"{100 * (1 - s.alpha):g} %"
+    lines = [f"  over {s.grid} (size = {s.size_is}; {pct} band of a new reading, median and max):"]
+    for z in s.sizes:
+        size = ("no error model" if s.kind == "none" else
+                f"error max {z.max_abs:.3g} {z.unit} at {z.at}, rms {z.rms:.3g} {z.unit}")
+        lines.append(f"    {z.sensor}: {size}; band to design with +-{z.half_median:.3g} {z.unit} (max "
+                     f"{z.half_max:.3g}), plain +-{z.plain_median:.3g} (max {z.plain_max:.3g})")
+    if s.next_runs:
+        lines.append("  measure next: " + "; ".join(s.next_runs) + "; mean band " + ", ".join(
+            f"{z.sensor} {z.next_before:.3g} -> {z.next_after:.3g} {z.unit}" for z in s.sizes
+            if z.next_before == z.next_before))
+        lines.append(f"    ({s.next_how})")
+    elif s.next_how:
+        lines.append(f"  {s.next_how}")
+    return lines
+
+
+def quantify_text(study, results, summaries=None) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model; then which variant to predict with and the
-    verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
+    pooled held-out coverage with and without the error model, the engineer's summary (``summaries``
+    {variant: ErrorSummary}, None: :func:`error_summaries`; :func:`summary_lines`); then which variant to predict
+    with and the verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
     :mod:`identification.studies.model_ranking`)."""
     units = sensor_units(study)
-    blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
+    if summaries is None:
+        summaries = error_summaries(study, results)[0]
+    blocks = ["\n".join(_variant_lines(v, r, units, results)
+                        + (summary_lines(summaries[v]) if v in summaries else ["  engineer's summary not computed"]))
+              for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
     rank = ranking(results)
     if rank is not None:
@@ -160,23 +186,30 @@ def quantify_text(study, results) -> str:
     return head + "\n\n" + "\n\n".join(blocks)
 
 
-def quantify_text_full(study, results) -> str:
+def quantify_text_full(study, results, summaries=None) -> str:
     """The text file: the terminal summary, then every variant's full summary."""
     full = [f"---- {v} in full ----\n{r.summary()}" for v, r in results.model_error.items()]
-    return quantify_text(study, results) + "\n\n" + "\n\n".join(full)
+    return quantify_text(study, results, summaries) + "\n\n" + "\n\n".join(full)
 
 
-def quantify_dict(study, results) -> dict:
+def quantify_dict(study, results, summaries=None, summary_errors=None) -> dict:
     """JSON-safe: {"sensors", "design_how", "variants": {variant: ModelErrorResult.to_dict() plus the sizes in
-    file units and the pooled coverages}, "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or
-    None}."""
+    file units, the pooled coverages, "summary" (the :class:`ErrorSummary` as a dict, None if it failed) and
+    "summary_error" (why it failed, ``summary_errors``; None)},
+    "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or None}."""
+    from identification.results_protocol import jsonable
     units = sensor_units(study)
+    if summaries is None:
+        summaries, summary_errors = error_summaries(study, results)
+    summary_errors = summary_errors or {}
     variants = {}
     for v, r in results.model_error.items():
         d = r.to_dict()
         d["size_file_units"] = _sensor_sizes(r, units)
         d["pooled_coverage"] = {"plain": pooled_coverage(r, "none"), "with_error": pooled_coverage(r, r.kind)}
         d["embedded_parameters"] = [e.to_dict() for e in embedded_parameters(results, v)]
+        d["summary"] = jsonable(summaries[v]) if v in summaries else None
+        d["summary_error"] = summary_errors.get(v)
         variants[v] = d
     rank = ranking(results)
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
@@ -286,9 +319,15 @@ def model_error_view(study, results, variant: str):
 
 def run_model_error_views(study, results):
     """``results`` with ``model_error_views``: {variant: ModelErrorView} of every variant whose model error was
-    computed (the report's pages "Model error of ...")."""
-    views = {v: model_error_view(study, results, v) for v in results.model_error}
-    return dataclasses.replace(results, model_error_views={**results.model_error_views, **views})
+    computed (the report's pages "Model error of ..."), each with its :class:`ErrorSummary` (:func:`error_summary`;
+    a failure is a note, the summary None) and the ranking of the variants (the page "Model uncertainty")."""
+    rank = ranking(results)
+    summaries, failed = error_summaries(study, results)
+    views = {v: dataclasses.replace(model_error_view(study, results, v), summary=summaries.get(v), ranking=rank)
+             for v in results.model_error}
+    results = dataclasses.replace(results, model_error_views={**results.model_error_views, **views})
+    return results.with_note("; ".join(f"model-error summary of {v} not computed: {e}" for v, e in failed.items())) \
+        if failed else results
 
 
 def run_model_error_pages(study, results, progress=None):
@@ -517,6 +556,13 @@ def error_summary(study, results, variant: str, n_next: int | None = None):
                         embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how)
 
 
-def error_summaries(study, results, n_next: int | None = None) -> dict:
-    """{variant: ErrorSummary} of every variant whose model error was computed (:func:`error_summary`)."""
-    return {v: error_summary(study, results, v, n_next) for v in results.model_error}
+def error_summaries(study, results, n_next: int | None = None) -> tuple:
+    """({variant: ErrorSummary}, {variant: reason}) of every variant whose model error was computed
+    (:func:`error_summary`); a variant whose summary fails is in the second with its reason, never dropped."""
+    done, failed = {}, {}
+    for v in results.model_error:
+        try:
+            done[v] = error_summary(study, results, v, n_next)
+        except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
+            failed[v] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return done, failed
