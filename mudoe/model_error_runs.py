@@ -358,10 +358,11 @@ def curve_labels(model, inputs) -> tuple:
 # ---------------------------------------------------------------------------- the engineer's summary (issue 29 item 4)
 #: values of the grid over the data's input range where the sizes and bands are taken (a model of one input)
 SIZE_LEVELS = {1: 41}
-#: candidate runs of the next-runs design: a uniform grid over the data's input range (a model of one input)
-CANDIDATE_LEVELS = 17
-#: Gauss-Legendre nodes of the region (the data's input range) of the next-runs design (a model of one input)
-REGION_NODES = 21
+#: candidate runs of the next-runs design: a uniform grid over the data's input range (a model of one input;
+#: a time-series model, whose every candidate and node is a whole experiment at every sampling time: fewer)
+CANDIDATE_LEVELS = {"static": 17, "time series": 9}
+#: Gauss-Legendre nodes of the region (the data's input range) of the next-runs design (as CANDIDATE_LEVELS)
+REGION_NODES = {"static": 21, "time series": 9}
 #: what the size s(q) of the error is for each error model
 SIZE_IS = {"discrepancy": "|mean discrepancy|", "embedded": "95 % half-width of the parameters' spread",
            "none": "no error model: 0"}
@@ -484,18 +485,20 @@ def _sizes(study, variant: str, result, rows, labels) -> list:
 
 
 def _design_inputs(study, model, q: np.ndarray) -> tuple:
-    """(candidates, region, region words, candidate words) of the next-runs design (model units): one input, a
-    uniform grid of :data:`CANDIDATE_LEVELS` values over the data's range and that range as the region; several
-    inputs, the data's distinct input rows for both (their inputs may be tied; equal weights)."""
+    """(candidates, region, region nodes, region words, candidate words) of the next-runs design (model units): one
+    input, a uniform grid of :data:`CANDIDATE_LEVELS` values over the data's range and that range as the region
+    (:data:`REGION_NODES` Gauss-Legendre nodes); several inputs, the data's distinct input rows for both (their
+    inputs may be tied; equal weights)."""
+    size = "static" if study.cfg.dynamic is None else "time series"
     if q.shape[1] == 1:
         lo, hi = q.min(axis=0), q.max(axis=0)
-        cand = _levels_grid(lo, hi, CANDIDATE_LEVELS)
+        cand = _levels_grid(lo, hi, CANDIDATE_LEVELS[size])
         words = _range_words(study, model, lo, hi)
-        return (cand, {model.inputs[0]: (float(lo[0]), float(hi[0]))},
-                f"the data's range ({words}), {REGION_NODES} Gauss-Legendre nodes",
+        return (cand, {model.inputs[0]: (float(lo[0]), float(hi[0]))}, REGION_NODES[size],
+                f"the data's range ({words}), {REGION_NODES[size]} Gauss-Legendre nodes",
                 f"a uniform grid of {len(cand)} values over {words}")
     rows = _distinct_rows(q)
-    return rows, rows, f"the data's {len(rows)} distinct input rows", f"the data's {len(rows)} distinct input rows"
+    return rows, rows, 1, f"the data's {len(rows)} distinct input rows", f"the data's {len(rows)} distinct input rows"
 
 
 def _mean_new_reading(study, result, des, sensor: str) -> tuple:
@@ -522,12 +525,12 @@ def next_runs(study, variant: str, result, n: int) -> tuple:
     data, m = study.data[variant], study.models[variant]
     if getattr(m, "controls", ()):
         return (), "next runs not offered: the inputs are control profiles (no candidate runs to choose from)", {}
-    cand, region, region_words, cand_words = _design_inputs(study, m, np.asarray(data.inputs, float))
+    cand, region, nodes, region_words, cand_words = _design_inputs(study, m, np.asarray(data.inputs, float))
     if n > len(cand):
         return (), f"next runs not offered: {n} runs asked for, {len(cand)} candidates", {}
     repeats = max(1, int(getattr(data, "n_M", 1) or 1))
     try:
-        des = select_error_design(result, cand, n, region=region, criterion="integrated", region_size=REGION_NODES,
+        des = select_error_design(result, cand, n, region=region, criterion="integrated", region_size=nodes,
                                   repeats=repeats, time_limit=20.0)
     except ValueError as exc:
         return (), f"next runs not offered: {str(exc).splitlines()[0]}", {}

@@ -58,7 +58,7 @@ def test_summary_rows_shade_the_detected_variant_only():
     head, rows, flags = summary_rows([_view("A", True), _view("B", False)])
     assert len(rows) == 2 and len(head) == len(rows[0])
     assert any(flags[0]) and not any(flags[1])
-    assert rows[1][3] == "0" and rows[1][-1] == "-"        # no error model: size 0, no next runs
+    assert rows[1][4] == "0" and rows[1][-1] == "-"        # no error model: size 0, no next runs
 
 
 def test_the_page_is_listed_only_when_a_view_has_a_summary():
