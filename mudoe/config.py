@@ -75,8 +75,8 @@ from .config_readers import (check_keys, one_of, read_str, read_str_list, read_t
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
 from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, DynamicConfig, IdentifyConfig, ModelConfig,
-                              OEDConfig, ParameterConfig, QuantifyConfig, RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig,
-                              SplitsConfig, StudyConfig, ValidateConfig)
+                              OEDConfig, ParameterConfig, QuantifyConfig, RandomSplitConfig, ReportConfig, SensorConfig,
+                              SimulateConfig, SplitsConfig, StudyConfig, ValidateConfig)
 from .registry import known_scenarios, known_variants, virtual_prototype
 from .units import known_units
 

@@ -24,8 +24,8 @@ from .registry import DEFAULT_MODEL, default_model, known_variants, virtual_prot
 from .units import convert
 
 __all__ = ["ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig", "RandomSplitConfig",
-           "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig", "ValidateConfig", "QuantifyConfig", "ReportConfig",
-           "DynamicConfig", "StudyConfig"]
+           "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig", "ValidateConfig",
+           "QuantifyConfig", "ReportConfig", "DynamicConfig", "StudyConfig"]
 
 
 def _default_variants() -> tuple:

@@ -24,8 +24,8 @@ from .study_base import FitFailedError, MissingPieceError, Progress, design_sens
 from .units import convert
 
 __all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
-           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error", "plain_result", "next_runs",
-           "error_summary", "error_summaries", "summary_lines"]
+           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error", "plain_result",
+           "next_runs", "error_summary", "error_summaries", "summary_lines"]
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05, variants=None, embedded: bool = True):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -356,15 +356,16 @@ def curve_labels(model, inputs) -> tuple:
 
 
 # ---------------------------------------------------------------------------- the engineer's summary (issue 29 item 4)
-#: values of the grid over the data's input range where the sizes and bands are taken (a model of one input)
-SIZE_LEVELS = {1: 41}
+#: values of the grid over the data's input range where the sizes and bands are taken (a model of one input; a
+#: time-series model: experiments, each at every sampling time)
+SIZE_LEVELS = {"static": 41, "time series": 9}
 #: candidate runs of the next-runs design: a uniform grid over the data's input range (a model of one input;
 #: a time-series model, whose every candidate and node is a whole experiment at every sampling time: fewer)
 CANDIDATE_LEVELS = {"static": 17, "time series": 9}
 #: Gauss-Legendre nodes of the region (the data's input range) of the next-runs design (as CANDIDATE_LEVELS)
 REGION_NODES = {"static": 21, "time series": 9}
 #: what the size s(q) of the error is for each error model
-SIZE_IS = {"discrepancy": "|mean discrepancy|", "embedded": "95 % half-width of the parameters' spread",
+SIZE_IS = {"discrepancy": "|mean discrepancy|", "embedded": "{level} half-width of the parameters' spread",
            "none": "no error model: 0"}
 
 
@@ -439,24 +440,29 @@ def _distinct_rows(q: np.ndarray) -> np.ndarray:
 
 
 def _points(study, variant: str, result) -> tuple:
-    """(input rows, a label per point, the words of where): one input, a grid of :data:`SIZE_LEVELS` values over the
-    data's range; several inputs (they may be tied, e.g. a direction or the previous set point), the data's distinct
-    input rows; a dynamic model, the data's experiments at their sampling times (a point is an experiment at a
-    time, experiments x times one after the other)."""
+    """(input rows, a label per point, the words of where): a model of one input, a grid of :data:`SIZE_LEVELS`
+    values over the data's range; several inputs (they may be tied, e.g. a direction or the previous set point) or
+    control profiles, the data's distinct input rows.  A time-series model: each row an experiment at the data's
+    sampling times (a point is an experiment at a time, experiments x times one after the other)."""
     data, m = study.data[variant], study.models[variant]
     q = np.asarray(data.inputs, float)
-    if study.cfg.dynamic is not None:
-        times = np.asarray(result.discrepancy(q[:1], result.alpha).grid[0], float)
-        unit = getattr(m, "time_unit", "") or ""
-        labels = [f"{c}, t = {t:.4g}" + (f" {unit}" if unit else "") for c in curve_labels(m, q) for t in times]
-        return q, labels, f"the data's {len(q)} experiments at their {len(times)} sampling times"
-    if q.shape[1] > 1:
+    dynamic = study.cfg.dynamic is not None
+    if q.shape[1] == 1 and not getattr(m, "controls", ()):
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        rows = _levels_grid(lo, hi, SIZE_LEVELS["time series" if dynamic else "static"])
+        names, where = [_input_label(study, m, row) for row in rows], \
+            f"{len(rows)} points over the data's range ({_range_words(study, m, lo, hi)})"
+    else:
         rows = _distinct_rows(q)
-        return rows, [_input_label(study, m, row) for row in rows], f"the data's {len(rows)} distinct input rows"
-    lo, hi = q.min(axis=0), q.max(axis=0)
-    grid = _levels_grid(lo, hi, SIZE_LEVELS[1])
-    return grid, [_input_label(study, m, row) for row in grid], \
-        f"{len(grid)} points over the data's range ({_range_words(study, m, lo, hi)})"
+        names = list(curve_labels(m, rows)) if dynamic else [_input_label(study, m, row) for row in rows]
+        where = f"the data's {len(rows)} distinct input rows"
+    if not dynamic:
+        return rows, names, where
+    times = np.asarray(result.discrepancy(rows[:1], result.alpha).grid[0], float)
+    unit = getattr(m, "time_unit", "") or ""
+    labels = [f"{c}, t = {t:.4g}" + (f" {unit}" if unit else "") for c in names for t in times]
+    return rows, labels, where.replace("points", "experiments").replace("input rows", "experiments") \
+        + f" at the {len(times)} sampling times"
 
 
 def _sizes(study, variant: str, result, rows, labels) -> list:
@@ -555,7 +561,8 @@ def error_summary(study, results, variant: str, n_next: int | None = None):
                                   next_after=shrink.get(d["sensor"], (np.nan, np.nan))[1])
                   for d in _sizes(study, variant, r, rows, labels))
     return ErrorSummary(variant=variant, kind=r.kind, detected=bool(r.detected), p_value=float(r.test.p_value),
-                        alpha=float(r.alpha), size_is=SIZE_IS.get(r.kind, r.kind), grid=where, sizes=sizes,
+                        alpha=float(r.alpha), grid=where, sizes=sizes,
+                        size_is=SIZE_IS.get(r.kind, r.kind).format(level=f"{100 * (1 - r.alpha):g} %"),
                         embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how)
 
 

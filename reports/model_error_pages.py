@@ -215,7 +215,8 @@ def summary_rows(views) -> tuple:
         for i, z in enumerate(s.sizes):
             u = z.unit
             nxt = "-" if z.next_before != z.next_before else f"{z.next_before:.3g} -> {z.next_after:.3g} {u}"
-            test = f"{'DETECTED' if s.detected else 'not detected'}\np = {s.p_value:.2g}"
+            p = f"p = {s.p_value:.2g}" if s.p_value > 0 else "p < 1e-300"
+            test = f"{'DETECTED' if s.detected else 'not detected'}\n{p}"
             rows.append([s.variant if i == 0 else "", test if i == 0 else "", s.kind if i == 0 else "", z.sensor,
                          _num(z.max_abs, u) if s.kind != "none" else "0", _wrap(z.at) if s.kind != "none" else "-",
                          _num(z.rms, u) if s.kind != "none" else "0",
@@ -260,7 +261,8 @@ def model_uncertainty_page(results):
     heights = [max(str(c).count("\n") + 1 for c in r) for r in rows]
     height = 0.024 * (sum(heights) + 2)
     ax = fig.add_axes([0.04, top - height, 0.92, height])
-    widths = np.array([0.05, 0.08, 0.075, 0.05, 0.07, 0.2, 0.065, 0.13, 0.12, 0.12])
+    where = min(0.2, max(0.1, 0.0058 * max((len(line) for r in rows for line in str(r[5]).split("\n")), default=0)))
+    widths = np.array([0.05, 0.08, 0.075, 0.05, 0.075, where, 0.07, 0.14, 0.14, 0.13])
     draw_table(ax, head, rows, flags=flags, fontsize=7.5, highlight="#fbe3e1", col_widths=list(widths / widths.sum()),
                title="The model error per sensor over the data's range (the sensors' file units; shaded: detected)")
     for (r, _), cell in ax.tables[0].get_celld().items():       # rows of two lines (test, a long "where")

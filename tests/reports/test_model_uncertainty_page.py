@@ -19,10 +19,12 @@ def _view(variant: str, detected: bool, ranking=None, next_runs=("q = 1600 N",))
     sizes = (SensorErrorSize("y", "um", 10.7 if detected else 0.0, 5.6 if detected else 0.0, "q = 680 N", 12.7, 13.8,
                              9.71, 9.89, *((12.75, 12.70) if next_runs and detected else (float("nan"),) * 2)),)
     summary = ErrorSummary(variant=variant, kind=kind, detected=detected, p_value=1e-20 if detected else 0.4,
-                           alpha=0.05, size_is="|mean discrepancy|", grid="41 points over the data's range (q 0-1600 N)",
+                           alpha=0.05, size_is="|mean discrepancy|",
+                           grid="41 points over the data's range (q 0-1600 N)",
                            sizes=sizes, embedded=(EmbeddedParameter("k5", 2.0, 0.031),) if detected else (),
                            next_runs=next_runs if detected else (),
-                           next_how="2 new run(s) of 2 series each" if detected else "no error model: no runs to learn it")
+                           next_how=("2 new run(s) of 2 series each" if detected
+                                     else "no error model: no runs to learn it"))
     return ModelErrorView(variant=variant, result=None, sensors=("y",), units=("um",), input_label="q [N]",
                           q=None, discrepancy=(), heldout=None, summary=summary, ranking=ranking)
 
