@@ -258,3 +258,21 @@ def test_the_model_uncertainty_page_carries_the_summary(press_views):
     s = press_views.model_error_views["M1"].summary
     assert "Which model to use for prediction" in texts and "Verdict:" in texts
     assert f"{s.sizes[0].max_abs:.3g} um" in texts and s.sizes[0].at in texts and "Measure next:" in texts
+
+
+def test_quantify_writes_and_prints_the_summary_of_every_variant(press_quantify):
+    """quantify.json: each variant's ``summary`` (the ErrorSummary's fields, JSON-safe) and no failure; the text:
+    the size, the band to design with and the next runs."""
+    _, stdout, out = press_quantify
+    d = json.loads((out / "quantify.json").read_text())
+    for v, r in d["variants"].items():
+        s = r["summary"]
+        assert r["summary_error"] is None and s["variant"] == v
+        assert {"kind", "detected", "p_value", "alpha", "size_is", "grid", "sizes", "embedded", "next_runs",
+                "next_how"} <= set(s)
+        assert [z["sensor"] for z in s["sizes"]] == ["F_x", "B0_y"]
+        assert len(s["next_runs"]) == (2 if s["kind"] in ("discrepancy", "embedded") else 0)
+    m1 = d["variants"]["M1"]["summary"]["sizes"][0]
+    assert m1["unit"] == "um" and m1["half_median"] > m1["plain_median"] and m1["at"].startswith("q_P = ")
+    text = (out / "quantify.txt").read_text()
+    assert "band to design with +-" in text and "measure next: q_P = " in text and "error max " in text
