@@ -485,6 +485,7 @@ def _sizes(study, variant: str, result, rows, labels) -> list:
                         max_abs=float(np.max(size[ok, i])) if ok.any() else float("nan"),
                         rms=float(np.sqrt(np.mean(size[ok, i] ** 2))) if ok.any() else float("nan"),
                         at=labels[peak], half_median=float(np.nanmedian(half[:, i])),
+                        size=size[:, i].copy(), half=half[:, i].copy(), plain=plain[:, i].copy(),
                         half_max=float(np.nanmax(half[:, i])), plain_median=float(np.nanmedian(plain[:, i])),
                         plain_max=float(np.nanmax(plain[:, i]))))
     return out
@@ -501,10 +502,10 @@ def _design_inputs(study, model, q: np.ndarray) -> tuple:
         cand = _levels_grid(lo, hi, CANDIDATE_LEVELS[size])
         words = _range_words(study, model, lo, hi)
         return (cand, {model.inputs[0]: (float(lo[0]), float(hi[0]))}, REGION_NODES[size],
-                f"the data's range ({words}), {REGION_NODES[size]} Gauss-Legendre nodes",
+                f"the range ({REGION_NODES[size]} Gauss-Legendre nodes)",
                 f"a uniform grid of {len(cand)} values over {words}")
     rows = _distinct_rows(q)
-    return rows, rows, 1, f"the data's {len(rows)} distinct input rows", f"the data's {len(rows)} distinct input rows"
+    return rows, rows, 1, "them", f"the data's {len(rows)} distinct input rows"
 
 
 def _mean_new_reading(study, result, des, sensor: str) -> tuple:
@@ -541,9 +542,9 @@ def next_runs(study, variant: str, result, n: int) -> tuple:
     except ValueError as exc:
         return (), f"next runs not offered: {str(exc).splitlines()[0]}", {}
     shrink = {s: _mean_new_reading(study, result, des, s) for s in dict.fromkeys(des.target_sensors)}
-    how = (f"{n} new run(s) of {repeats} series each from {cand_words}, chosen to shrink the mean "
-           f"{100 * (1 - result.alpha):g} % band over {region_words} (oed.select_error_design, integrated criterion; "
-           + ("proven optimal" if des.proven else f"NOT proven optimal: {des.status}") + ")")
+    how = (f"{n} run(s) of {repeats} series from {cand_words} that most shrink the mean band over {region_words}; "
+           "oed.select_error_design, integrated criterion, "
+           + ("proven optimal" if des.proven else f"NOT proven optimal: {des.status}"))
     return tuple(_input_label(study, m, row) for row in des.chosen_inputs), how, shrink
 
 
@@ -557,13 +558,20 @@ def error_summary(study, results, variant: str, n_next: int | None = None):
     n_next = study.cfg.quantify.next_runs if n_next is None else n_next
     rows, labels, where = _points(study, variant, r)
     runs, how, shrink = next_runs(study, variant, r, n_next)
-    sizes = tuple(SensorErrorSize(**d, next_before=shrink.get(d["sensor"], (np.nan, np.nan))[0],
+    curves = study.cfg.dynamic is None and rows.shape[1] == 1           # a static model of one input: its grid
+    sizes = tuple(SensorErrorSize(**{k: x for k, x in d.items() if curves or k not in ("size", "half", "plain")},
+                                  next_before=shrink.get(d["sensor"], (np.nan, np.nan))[0],
                                   next_after=shrink.get(d["sensor"], (np.nan, np.nan))[1])
                   for d in _sizes(study, variant, r, rows, labels))
+    u = study.units
+    m = study.models[variant]
+    x_label = m.inputs[0] + (f" [{u.input_file}]" if u is not None and u.input_file else
+                             f" [{m.input_units[0]}]" if getattr(m, "input_units", ("",))[0] else "")
     return ErrorSummary(variant=variant, kind=r.kind, detected=bool(r.detected), p_value=float(r.test.p_value),
                         alpha=float(r.alpha), grid=where, sizes=sizes,
                         size_is=SIZE_IS.get(r.kind, r.kind).format(level=f"{100 * (1 - r.alpha):g} %"),
-                        embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how)
+                        embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how,
+                        x=_first_input(study, rows) if curves else np.zeros(0), x_label=x_label if curves else "")
 
 
 def error_summaries(study, results, n_next: int | None = None) -> tuple:

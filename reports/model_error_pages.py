@@ -237,7 +237,7 @@ def _ranking_text(views) -> str:
 
 def _variant_text(s) -> str:
     pct = f"{100 * (1 - s.alpha):g} %"
-    parts = [f"{s.variant}: size = {s.size_is}, over {s.grid}; bands of a new reading at {pct}."]
+    parts = [f"{s.variant}: size = {s.size_is}; over {s.grid}; bands of a new reading at {pct}."]
     if s.embedded:
         parts.append("Parameters that carry the error (embedded, varying between conditions): "
                      + "; ".join(f"{e.name} +-{100 * e.relative:.3g} %" for e in s.embedded) + ".")
@@ -271,5 +271,36 @@ def model_uncertainty_page(results):
     fig.canvas.draw()
     bottom = ax.tables[0].get_window_extent().transformed(fig.transFigure.inverted()).y0
     text = "\n\n".join(_variant_text(v.summary) for v in views)
-    _text(fig, 0.04, bottom - 0.03, text, width=185, size=8)
+    lines = _text(fig, 0.04, bottom - 0.03, text, width=185, size=8)
+    curves = [v.summary for v in views if v.summary.x.size and v.summary.kind != "none"]
+    room = bottom - 0.03 - 0.0165 * lines - 0.1           # top of the plots, below their title and legend
+    if curves and room > 0.15:
+        _band_curves(fig, curves, room)
     return fig
+
+
+def _band_curves(fig, summaries, top: float):
+    """Per sensor, against the input: the band to design with (solid), the plain band (dashed) and the size of
+    the error (dotted) of every summary with curves (a static model of one input), one colour per variant."""
+    sensors = list(dict.fromkeys(z.sensor for s in summaries for z in s.sizes))
+    n = len(sensors)
+    gap = 0.07
+    w = (0.88 - gap * (n - 1)) / n
+    fig.text(0.04, top + 0.07, "Over the data's range: the band to design with (solid), the plain band (dashed) and "
+             "the size of the error (dotted)", fontsize=10, weight="bold")
+    for k, sensor in enumerate(sensors):
+        ax = fig.add_axes([0.08 + k * (w + gap), 0.07, w, top - 0.07])
+        unit = ""
+        for j, s in enumerate(summaries):
+            z = next((z for z in s.sizes if z.sensor == sensor), None)
+            if z is None or not z.half.size:
+                continue
+            unit, c = z.unit, f"C{j}"
+            ax.plot(s.x, z.half, "-", color=c, lw=1.6, label=f"{s.variant}: band with {s.kind}")
+            ax.plot(s.x, z.plain, "--", color=c, lw=1.1, label=f"{s.variant}: plain band")
+            ax.plot(s.x, z.size, ":", color=c, lw=1.6, label=f"{s.variant}: {s.size_is}")
+        ax.set_xlabel(summaries[0].x_label)
+        ax.set_ylabel(f"{sensor}: half-width, size [{unit}]")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+        _legend_above(ax)

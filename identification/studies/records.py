@@ -26,7 +26,7 @@ under their old paths (``reports.view.FitAssessment`` etc., deprecated).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -455,8 +455,9 @@ class SensorErrorSize:
     at : str                        where s peaks, e.g. "q_P = 1600 N" (a dynamic model: "F = 2, t = 0.4 s")
     half_median, half_max : float   half-width of the (1 - alpha) new-reading band with the error model over the grid
     plain_median, plain_max : float the same of the plain band (parameters and sensor noise only)
-    next_before, next_after : float mean half-width of the prediction band (model + error, without the reading
-                                    noise) over the range before and after the next runs (NaN: none proposed)
+    next_before, next_after : float mean half-width of the new-reading band over the range before and after the
+                                    next runs (NaN: none proposed)
+    size, half, plain : ndarray (n_x,)   s(q), the two half-widths at the summary's ``x`` (empty without ``x``)
     """
 
     sensor: str
@@ -470,6 +471,9 @@ class SensorErrorSize:
     plain_max: float
     next_before: float = float("nan")
     next_after: float = float("nan")
+    size: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    half: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plain: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -488,6 +492,9 @@ class ErrorSummary:
     next_runs : tuple of str        the runs that most shrink the band over the range, e.g. ("q_P = 1600 N", ...)
                                     (empty: none proposed)
     next_how : str                  how they were chosen (candidates, criterion, series per run) or why none
+    x : ndarray (n_x,)              a static model of one input: the grid's input values (its file unit), where the
+                                    sizes' curves are taken (empty otherwise)
+    x_label : str                   the input with its unit, e.g. "q_P [N]"
     """
 
     variant: str
@@ -501,6 +508,8 @@ class ErrorSummary:
     embedded: tuple = ()
     next_runs: tuple = ()
     next_how: str = ""
+    x: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    x_label: str = ""
 
 
 @dataclass(frozen=True)
