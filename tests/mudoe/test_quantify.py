@@ -216,6 +216,9 @@ def test_the_summary_records_say_how_large_where_the_band_and_the_next_runs(pres
     assert rank is not None and all(v.ranking is rank for v in views.values())
     m3 = views["M3"].summary                           # four tied inputs: the data's distinct rows, not a box
     assert m3.grid == "the data's 29 distinct input rows" and "q_prev = " in m3.sizes[0].at
+    assert s.x_label == "q_P [N]" and s.x.shape == (41,) and s.x[0] == 0.0 and s.x[-1] == 1600.0   # the curves drawn
+    assert f_x.size.shape == f_x.half.shape == f_x.plain.shape == (41,) and f_x.size.max() == f_x.max_abs
+    assert np.median(f_x.half) == f_x.half_median and m3.x.size == 0 == m3.sizes[0].size.size
 
 
 def test_plain_result_predicts_the_plain_fit_s_band_without_a_refit(press_views):

@@ -1,6 +1,7 @@
 """The page "Model uncertainty" (issue 29 item 4) drawn from records alone: a stub study record whose views hold
 an :class:`identification.studies.records.ErrorSummary` (no study, no fit)."""
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -17,14 +18,17 @@ from record_stub import stub_record  # noqa: E402
 def _view(variant: str, detected: bool, ranking=None, next_runs=("q = 1600 N",)) -> ModelErrorView:
     kind = "discrepancy" if detected else "none"
     sizes = (SensorErrorSize("y", "um", 10.7 if detected else 0.0, 5.6 if detected else 0.0, "q = 680 N", 12.7, 13.8,
-                             9.71, 9.89, *((12.75, 12.70) if next_runs and detected else (float("nan"),) * 2)),)
+                             9.71, 9.89, *((12.75, 12.70) if next_runs and detected else (float("nan"),) * 2),
+                             size=np.array([4.0, 10.7, 2.0]), half=np.array([13.0, 12.7, 13.8]),
+                             plain=np.array([9.7, 9.71, 9.89])),)
     summary = ErrorSummary(variant=variant, kind=kind, detected=detected, p_value=1e-20 if detected else 0.4,
                            alpha=0.05, size_is="|mean discrepancy|",
                            grid="41 points over the data's range (q 0-1600 N)",
                            sizes=sizes, embedded=(EmbeddedParameter("k5", 2.0, 0.031),) if detected else (),
                            next_runs=next_runs if detected else (),
                            next_how=("2 new run(s) of 2 series each" if detected
-                                     else "no error model: no runs to learn it"))
+                                     else "no error model: no runs to learn it"),
+                           x=np.array([0.0, 680.0, 1600.0]), x_label="q [N]")
     return ModelErrorView(variant=variant, result=None, sensors=("y",), units=("um",), input_label="q [N]",
                           q=None, discrepancy=(), heldout=None, summary=summary, ranking=ranking)
 
@@ -46,6 +50,8 @@ def test_the_page_is_drawn_from_the_records_with_the_verdict_and_the_numbers():
     assert "12.8 -> 12.7 um" in texts
     assert "Measure next: q = 1600 N" in texts and "k5 +-3.1 %" in texts
     assert "No error model: no runs to learn it." in texts
+    assert "Over the data's range: the band to design with (solid)" in texts and "A: band with discrepancy" in texts
+    assert "B: band with none" not in texts               # no error model: no curves
 
 
 def test_a_tie_says_either_model_predicts_as_well():
