@@ -149,7 +149,7 @@ def summary_lines(s) -> list:
     """The terminal lines of an :class:`ErrorSummary`: per sensor the size (max, where, rms), the band to design
     with against the plain one, then the next runs with the mean band before -> after."""
     pct = f"{100 * (1 - s.alpha):g} %"
-    lines = [f"  over {s.grid} (size = {s.size_is}; {pct} band of a new reading, median and max):"]
+    lines = [f"  on {s.grid} (size = {s.size_is}; {pct} band of a new reading, median and max):"]
     for z in s.sizes:
         size = ("no error model" if s.kind == "none" else
                 f"error max {z.max_abs:.3g} {z.unit} at {z.at}, rms {z.rms:.3g} {z.unit}")

@@ -237,7 +237,7 @@ def _ranking_text(views) -> str:
 
 def _variant_text(s) -> str:
     pct = f"{100 * (1 - s.alpha):g} %"
-    parts = [f"{s.variant}: size = {s.size_is}; over {s.grid}; bands of a new reading at {pct}."]
+    parts = [f"{s.variant}: size = {s.size_is}; on {s.grid}; bands of a new reading at {pct}."]
     if s.embedded:
         parts.append("Parameters that carry the error (embedded, varying between conditions): "
                      + "; ".join(f"{e.name} +-{100 * e.relative:.3g} %" for e in s.embedded) + ".")
