@@ -222,7 +222,8 @@ def summary_rows(views) -> tuple:
                          _num(z.rms, u) if s.kind != "none" else "0",
                          f"+-{z.half_median:.3g} ({z.half_max:.3g}) {u}",
                          f"+-{z.plain_median:.3g} ({z.plain_max:.3g}) {u}", nxt])
-            flags.append([s.detected and k in (0, 1, 4, 7) for k in range(len(head))])
+            sized = s.detected and s.kind != "none"       # detected but no error model chosen: nothing to size
+            flags.append([(s.detected and k in (0, 1)) or (sized and k in (4, 7)) for k in range(len(head))])
     return head, rows, flags
 
 
