@@ -315,15 +315,17 @@ def _detect(study, results, args, progress, out) -> int:
 
 def _quantify(study, results, args, progress, out) -> int:
     from reports.serialize import dumps
-    from .model_error_runs import quantify_dict, quantify_text, quantify_text_full, run_model_error
+    from .model_error_runs import error_summaries, quantify_dict, quantify_text, quantify_text_full, run_model_error
     results = run_model_error(study, results, progress)
     if not results.model_error:
         from .study import FitFailedError
         raise FitFailedError("; ".join(f"model error of {v}: {e}" for v, e in results.model_error_errors.items())
                              or "no model variant")
-    obj = quantify_dict(study, results)
-    _write(out, {"quantify.json": dumps(obj), "quantify.txt": quantify_text_full(study, results) + "\n"})
-    _emit(args, quantify_text(study, results), obj)
+    with progress.step("model-error summaries and next runs"):
+        summaries, failed = error_summaries(study, results)
+    obj = quantify_dict(study, results, summaries, failed)
+    _write(out, {"quantify.json": dumps(obj), "quantify.txt": quantify_text_full(study, results, summaries) + "\n"})
+    _emit(args, quantify_text(study, results, summaries), obj)
     return EXIT_FAILED if results.model_error_errors else EXIT_OK
 
 

@@ -75,14 +75,14 @@ from .config_readers import (check_keys, one_of, read_str, read_str_list, read_t
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
 from .config_sections import (CustomSplitConfig, DataConfig, DetectConfig, DynamicConfig, IdentifyConfig, ModelConfig,
-                              OEDConfig, ParameterConfig, RandomSplitConfig, ReportConfig, SensorConfig, SimulateConfig,
-                              SplitsConfig, StudyConfig, ValidateConfig)
+                              OEDConfig, ParameterConfig, QuantifyConfig, RandomSplitConfig, ReportConfig, SensorConfig,
+                              SimulateConfig, SplitsConfig, StudyConfig, ValidateConfig)
 from .registry import known_scenarios, known_variants, virtual_prototype
 from .units import known_units
 
 __all__ = ["ConfigError", "ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig",
            "RandomSplitConfig", "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig",
-           "ValidateConfig", "ReportConfig",
+           "ValidateConfig", "QuantifyConfig", "ReportConfig",
            "DynamicConfig", "StudyConfig", "load_config", "parse_config", "LENGTH_UNITS", "FORCE_UNITS", "MODEL_VARIANTS",
            "DEFAULT_CONFIG", "STUDY_DEFAULTS", "known_variants", "known_scenarios", "setting", "settings_keys",
            "settings_values", "config_error"]
@@ -273,6 +273,10 @@ def _parse_validate(ctx, t):
     return validated(ctx, "validate", ValidateConfig(**read_table(ctx, "validate", ValidateConfig, t)))
 
 
+def _parse_quantify(ctx, t):
+    return QuantifyConfig(**read_table(ctx, "quantify", QuantifyConfig, t))
+
+
 def _parse_report(ctx, t):
     return ReportConfig(**read_table(ctx, "report", ReportConfig, t))
 
@@ -344,7 +348,7 @@ def _parse_dynamic(ctx, t) -> DynamicConfig:
 _SECTIONS = {"model": _parse_model, "data": _parse_data, "sensors": _parse_sensors,
              "parameters": _parse_parameters, "splits": _parse_splits, "detect": _parse_detect,
              "identify": _parse_identify, "simulate": _parse_simulate, "oed": _parse_oed, "validate": _parse_validate,
-             "report": _parse_report,
+             "quantify": _parse_quantify, "report": _parse_report,
              "dynamic": _parse_dynamic}
 
 

@@ -24,8 +24,8 @@ from .registry import DEFAULT_MODEL, default_model, known_variants, virtual_prot
 from .units import convert
 
 __all__ = ["ModelConfig", "DataConfig", "SensorConfig", "ParameterConfig", "CustomSplitConfig", "RandomSplitConfig",
-           "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig", "ValidateConfig", "ReportConfig",
-           "DynamicConfig", "StudyConfig"]
+           "SplitsConfig", "SimulateConfig", "DetectConfig", "IdentifyConfig", "OEDConfig", "ValidateConfig",
+           "QuantifyConfig", "ReportConfig", "DynamicConfig", "StudyConfig"]
 
 
 def _default_variants() -> tuple:
@@ -387,6 +387,18 @@ class ValidateConfig:
 
 
 @dataclass(frozen=True)
+class QuantifyConfig:
+    """``mudoe quantify`` and the report's "Model uncertainty" page (issue 29).
+
+    ``next_runs``: the number of new runs (input rows) proposed for every variant whose error model is a
+    discrepancy or an embedded error, the ones that most shrink its prediction band over the data's input range
+    (:func:`oed.select_error_design`, integrated criterion; :mod:`mudoe.model_error_runs`); 0 proposes none.
+    """
+
+    next_runs: int = config_key(2, bounds=NON_NEGATIVE)
+
+
+@dataclass(frozen=True)
 class ReportConfig:
     """Report options."""
 
@@ -451,6 +463,7 @@ class StudyConfig:
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     oed: OEDConfig = field(default_factory=OEDConfig)
     validate: ValidateConfig = field(default_factory=ValidateConfig)
+    quantify: QuantifyConfig = field(default_factory=QuantifyConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
     dynamic: DynamicConfig | None = None   # [dynamic]: a time-series study (mudoe.kind.time_series)
     path: str = "<string>"

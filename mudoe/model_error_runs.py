@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy import stats
 
 from identification import model_error, rank_models
 from identification.errors import IdentificationError
@@ -23,7 +24,8 @@ from .study_base import FitFailedError, MissingPieceError, Progress, design_sens
 from .units import convert
 
 __all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
-           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error"]
+           "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error", "plain_result",
+           "next_runs", "error_summary", "error_summaries", "summary_lines"]
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05, variants=None, embedded: bool = True):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -143,13 +145,38 @@ def ranking(results):
     return rank_models(with_table) if with_table else None
 
 
-def quantify_text(study, results) -> str:
+def summary_lines(s) -> list:
+    """The terminal lines of an :class:`ErrorSummary`: per sensor the size (max, where, rms), the band to design
+    with against the plain one, then the next runs with the mean band before -> after."""
+    pct = f"{100 * (1 - s.alpha):g} %"
+    lines = [f"  on {s.grid} (size = {s.size_is}; {pct} band of a new reading, median and max):"]
+    for z in s.sizes:
+        size = ("no error model" if s.kind == "none" else
+                f"error max {z.max_abs:.3g} {z.unit} at {z.at}, rms {z.rms:.3g} {z.unit}")
+        lines.append(f"    {z.sensor}: {size}; band to design with +-{z.half_median:.3g} {z.unit} (max "
+                     f"{z.half_max:.3g}), plain +-{z.plain_median:.3g} (max {z.plain_max:.3g})")
+    if s.next_runs:
+        lines.append("  measure next: " + "; ".join(s.next_runs) + "; mean band " + ", ".join(
+            f"{z.sensor} {z.next_before:.3g} -> {z.next_after:.3g} {z.unit}" for z in s.sizes
+            if z.next_before == z.next_before))
+        lines.append(f"    ({s.next_how})")
+    elif s.next_how:
+        lines.append(f"  {s.next_how}")
+    return lines
+
+
+def quantify_text(study, results, summaries=None) -> str:
     """The terminal summary: per variant detected?, kind, size per sensor (file units), embedded parameters,
-    pooled held-out coverage with and without the error model; then which variant to predict with and the
-    verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
+    pooled held-out coverage with and without the error model, the engineer's summary (``summaries``
+    {variant: ErrorSummary}, None: :func:`error_summaries`; :func:`summary_lines`); then which variant to predict
+    with and the verdict: "choose X" or "a tie within 2 SE" (the margin's standard error over the splits,
     :mod:`identification.studies.model_ranking`)."""
     units = sensor_units(study)
-    blocks = ["\n".join(_variant_lines(v, r, units, results)) for v, r in results.model_error.items()]
+    if summaries is None:
+        summaries = error_summaries(study, results)[0]
+    blocks = ["\n".join(_variant_lines(v, r, units, results)
+                        + (summary_lines(summaries[v]) if v in summaries else ["  engineer's summary not computed"]))
+              for v, r in results.model_error.items()]
     blocks += [f"{v}: model error not computed: {e}" for v, e in results.model_error_errors.items()]
     rank = ranking(results)
     if rank is not None:
@@ -159,23 +186,30 @@ def quantify_text(study, results) -> str:
     return head + "\n\n" + "\n\n".join(blocks)
 
 
-def quantify_text_full(study, results) -> str:
+def quantify_text_full(study, results, summaries=None) -> str:
     """The text file: the terminal summary, then every variant's full summary."""
     full = [f"---- {v} in full ----\n{r.summary()}" for v, r in results.model_error.items()]
-    return quantify_text(study, results) + "\n\n" + "\n\n".join(full)
+    return quantify_text(study, results, summaries) + "\n\n" + "\n\n".join(full)
 
 
-def quantify_dict(study, results) -> dict:
+def quantify_dict(study, results, summaries=None, summary_errors=None) -> dict:
     """JSON-safe: {"sensors", "design_how", "variants": {variant: ModelErrorResult.to_dict() plus the sizes in
-    file units and the pooled coverages}, "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or
-    None}."""
+    file units, the pooled coverages, "summary" (the :class:`ErrorSummary` as a dict, None if it failed) and
+    "summary_error" (why it failed, ``summary_errors``; None)},
+    "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or None}."""
+    from identification.results_protocol import jsonable
     units = sensor_units(study)
+    if summaries is None:
+        summaries, summary_errors = error_summaries(study, results)
+    summary_errors = summary_errors or {}
     variants = {}
     for v, r in results.model_error.items():
         d = r.to_dict()
         d["size_file_units"] = _sensor_sizes(r, units)
         d["pooled_coverage"] = {"plain": pooled_coverage(r, "none"), "with_error": pooled_coverage(r, r.kind)}
         d["embedded_parameters"] = [e.to_dict() for e in embedded_parameters(results, v)]
+        d["summary"] = jsonable(summaries[v]) if v in summaries else None
+        d["summary_error"] = summary_errors.get(v)
         variants[v] = d
     rank = ranking(results)
     return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
@@ -285,9 +319,15 @@ def model_error_view(study, results, variant: str):
 
 def run_model_error_views(study, results):
     """``results`` with ``model_error_views``: {variant: ModelErrorView} of every variant whose model error was
-    computed (the report's pages "Model error of ...")."""
-    views = {v: model_error_view(study, results, v) for v in results.model_error}
-    return dataclasses.replace(results, model_error_views={**results.model_error_views, **views})
+    computed (the report's pages "Model error of ..."), each with its :class:`ErrorSummary` (:func:`error_summary`;
+    a failure is a note, the summary None) and the ranking of the variants (the page "Model uncertainty")."""
+    rank = ranking(results)
+    summaries, failed = error_summaries(study, results)
+    views = {v: dataclasses.replace(model_error_view(study, results, v), summary=summaries.get(v), ranking=rank)
+             for v in results.model_error}
+    results = dataclasses.replace(results, model_error_views={**results.model_error_views, **views})
+    return results.with_note("; ".join(f"model-error summary of {v} not computed: {e}" for v, e in failed.items())) \
+        if failed else results
 
 
 def run_model_error_pages(study, results, progress=None):
@@ -313,3 +353,234 @@ def curve_labels(model, inputs) -> tuple:
     if getattr(model, "controls", ()) or rows.ndim != 2 or rows.shape[1] > 2 or rows.shape[1] == 0:
         return tuple(f"experiment {j + 1}" for j in range(rows.shape[0]))
     return tuple(", ".join(f"{n} = {v:g}" for n, v in zip(model.inputs, row)) for row in rows)
+
+
+# ---------------------------------------------------------------------------- the engineer's summary (issue 29 item 4)
+#: values of the grid over the data's input range where the sizes and bands are taken (a model of one input; a
+#: time-series model: experiments, each at every sampling time)
+SIZE_LEVELS = {"static": 41, "time series": 9}
+#: candidate runs of the next-runs design: a uniform grid over the data's input range (a model of one input;
+#: a time-series model, whose every candidate and node is a whole experiment at every sampling time: fewer)
+CANDIDATE_LEVELS = {"static": 17, "time series": 9}
+#: Gauss-Legendre nodes of the region (the data's input range) of the next-runs design (as CANDIDATE_LEVELS)
+REGION_NODES = {"static": 21, "time series": 9}
+#: what the size s(q) of the error is for each error model
+SIZE_IS = {"discrepancy": "|mean discrepancy|", "embedded": "{level} half-width of the parameters' spread",
+           "none": "no error model: 0"}
+
+
+def plain_result(result):
+    """``result`` (a :class:`identification.ModelErrorResult`) as its plain fit: kind "none", the parameters and
+    covariance of the fit without model error, so that its ``predict`` gives the plain bands (h +- z sqrt(g^T C g
+    [+ sigma^2])) with no refit."""
+    f = result.fit
+    plain = dataclasses.replace(f, p=np.asarray(f.plain.p, float).copy(), cov=np.asarray(f.plain.cov, float).copy(),
+                                gp=None, embedded=None, alpha_r=None, Vinv_G=None, Vinv=None)
+    return dataclasses.replace(result, kind="none", fit=plain, p=plain.p, cov=plain.cov, discrepancies=(),
+                               embedded=())
+
+
+def _file_values(study, values: np.ndarray, sensors) -> np.ndarray:
+    """Differences ``values`` (..., len(sensors)) of the named sensors in their files' units."""
+    units = sensor_units(study)
+    out = np.array(values, float)
+    for i, s in enumerate(sensors):
+        file_unit, model_unit = units.get(s, ("", ""))
+        if file_unit and model_unit and file_unit != model_unit:
+            out[..., i] = convert(out[..., i], model_unit, file_unit, difference=True)
+    return out
+
+
+def _input_value(study, model, k: int, v: float) -> tuple:
+    """(value, unit) of input ``k`` as the engineer reads it (the first input in its file unit)."""
+    unit = (tuple(getattr(model, "input_units", ()) or ()) + ("",) * len(model.inputs))[k] or ""
+    if k == 0 and study.units is not None:
+        return float(study.units.q_to_file(float(v))), study.units.input_file
+    return float(v), unit
+
+
+def _input_label(study, model, row) -> str:
+    """"q_P = 1600 N": an input row (model units) as the engineer reads it."""
+    out = []
+    for k, (name, v) in enumerate(zip(model.inputs, np.atleast_1d(np.asarray(row, float)))):
+        v, unit = _input_value(study, model, k, v)
+        out.append(f"{name} = {v:.4g}" + (f" {unit}" if unit else ""))
+    return ", ".join(out)
+
+
+def _levels_grid(lo: np.ndarray, hi: np.ndarray, levels: int) -> np.ndarray:
+    """The product grid of ``levels`` equally spaced values per input over [lo, hi] (ends included)."""
+    axes = [np.linspace(a, b, levels) if b > a else np.array([a]) for a, b in zip(lo, hi)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def _range_words(study, model, lo, hi) -> str:
+    """"q_P 0-1600 N": the data's input range as the engineer reads it."""
+    out = []
+    for k, name in enumerate(model.inputs):
+        a, unit = _input_value(study, model, k, lo[k])
+        b, _ = _input_value(study, model, k, hi[k])
+        out.append(f"{name} {a:.4g}-{b:.4g}" + (f" {unit}" if unit else ""))
+    return ", ".join(out)
+
+
+def _flat(band, cols) -> tuple:
+    """(mean, half) of a band, (n_points, len(cols)): a dynamic model's experiments x times one after the other."""
+    mean = np.asarray(band.mean, float)
+    half = (np.asarray(band.upper, float) - np.asarray(band.lower, float)) / 2
+    n_s = mean.shape[-1]
+    return mean.reshape(-1, n_s)[:, cols], half.reshape(-1, n_s)[:, cols]
+
+
+def _distinct_rows(q: np.ndarray) -> np.ndarray:
+    """The distinct input rows of ``q`` in the data's order."""
+    _, first = np.unique(q, axis=0, return_index=True)
+    return q[np.sort(first)]
+
+
+def _points(study, variant: str, result) -> tuple:
+    """(input rows, a label per point, the words of where): a model of one input, a grid of :data:`SIZE_LEVELS`
+    values over the data's range; several inputs (they may be tied, e.g. a direction or the previous set point) or
+    control profiles, the data's distinct input rows.  A time-series model: each row an experiment at the data's
+    sampling times (a point is an experiment at a time, experiments x times one after the other)."""
+    data, m = study.data[variant], study.models[variant]
+    q = np.asarray(data.inputs, float)
+    dynamic = study.cfg.dynamic is not None
+    if q.shape[1] == 1 and not getattr(m, "controls", ()):
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        rows = _levels_grid(lo, hi, SIZE_LEVELS["time series" if dynamic else "static"])
+        names, where = [_input_label(study, m, row) for row in rows], \
+            f"{len(rows)} points over the data's range ({_range_words(study, m, lo, hi)})"
+    else:
+        rows = _distinct_rows(q)
+        names = list(curve_labels(m, rows)) if dynamic else [_input_label(study, m, row) for row in rows]
+        where = f"the data's {len(rows)} distinct input rows"
+    if not dynamic:
+        return rows, names, where
+    times = np.asarray(result.discrepancy(rows[:1], result.alpha).grid[0], float)
+    unit = getattr(m, "time_unit", "") or ""
+    labels = [f"{c}, t = {t:.4g}" + (f" {unit}" if unit else "") for c in names for t in times]
+    return rows, labels, where.replace("points", "experiments").replace("input rows", "experiments") \
+        + f" at the {len(times)} sampling times"
+
+
+def _sizes(study, variant: str, result, rows, labels) -> list:
+    """The :class:`SensorErrorSize` fields of every selected sensor (before the next runs) at ``rows``."""
+    cols = [study.sensors.index(s) for s in result.sensors]
+    a = result.alpha
+    d_mean, d_half = _flat(result.discrepancy(rows, a), cols)
+    size = (np.abs(d_mean) if result.kind == "discrepancy" else d_half if result.kind == "embedded"
+            else np.zeros_like(d_mean))
+    size = np.abs(_file_values(study, size, result.sensors))
+    half = _file_values(study, _flat(result.predict(rows, a, new_reading=True), cols)[1], result.sensors)
+    plain = _file_values(study, _flat(plain_result(result).predict(rows, a, new_reading=True), cols)[1],
+                         result.sensors)
+    units = sensor_units(study)
+    out = []
+    for i, s in enumerate(result.sensors):
+        ok = np.isfinite(size[:, i])
+        peak = int(np.flatnonzero(ok)[np.argmax(size[ok, i])]) if ok.any() else 0
+        out.append(dict(sensor=s, unit=units.get(s, ("", ""))[0] or units.get(s, ("", ""))[1] or "model unit",
+                        max_abs=float(np.max(size[ok, i])) if ok.any() else float("nan"),
+                        rms=float(np.sqrt(np.mean(size[ok, i] ** 2))) if ok.any() else float("nan"),
+                        at=labels[peak], half_median=float(np.nanmedian(half[:, i])),
+                        size=size[:, i].copy(), half=half[:, i].copy(), plain=plain[:, i].copy(),
+                        half_max=float(np.nanmax(half[:, i])), plain_median=float(np.nanmedian(plain[:, i])),
+                        plain_max=float(np.nanmax(plain[:, i]))))
+    return out
+
+
+def _design_inputs(study, model, q: np.ndarray) -> tuple:
+    """(candidates, region, region nodes, region words, candidate words) of the next-runs design (model units): one
+    input, a uniform grid of :data:`CANDIDATE_LEVELS` values over the data's range and that range as the region
+    (:data:`REGION_NODES` Gauss-Legendre nodes); several inputs, the data's distinct input rows for both (their
+    inputs may be tied; equal weights)."""
+    size = "static" if study.cfg.dynamic is None else "time series"
+    if q.shape[1] == 1:
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        cand = _levels_grid(lo, hi, CANDIDATE_LEVELS[size])
+        words = _range_words(study, model, lo, hi)
+        return (cand, {model.inputs[0]: (float(lo[0]), float(hi[0]))}, REGION_NODES[size],
+                f"the range ({REGION_NODES[size]} Gauss-Legendre nodes)",
+                f"a uniform grid of {len(cand)} values over {words}")
+    rows = _distinct_rows(q)
+    return rows, rows, 1, "them", f"the data's {len(rows)} distinct input rows"
+
+
+def _mean_new_reading(study, result, des, sensor: str) -> tuple:
+    """(before, after): the region's weighted mean half-width of the new-reading band, z sqrt(v + sigma^2), of
+    ``sensor`` (file unit) from the design's posterior half-widths z sqrt(v) of model + error."""
+    z = float(stats.norm.ppf(1 - des.alpha / 2))
+    sig = float(np.asarray(result.sigma, float)[study.sensors.index(sensor)])
+    w = np.asarray(des.region_weights, float)
+    mk = np.asarray(des.target_sensors) == sensor
+    means = [w @ np.sqrt(np.asarray(h, float)[:, mk] ** 2 + (z * sig) ** 2).mean(axis=1)
+             for h in (des.half_before, des.half_after)]
+    return tuple(float(x) for x in _file_values(study, np.array(means)[:, None], [sensor]).ravel())
+
+
+def next_runs(study, variant: str, result, n: int) -> tuple:
+    """(labels of the chosen runs, how, {sensor: (before, after)}): the ``n`` input rows that most shrink the
+    prediction band (model + error) over where the data lie, :func:`oed.select_error_design` with the integrated
+    criterion (:func:`_design_inputs`: candidates and region), each run as many series as the data's; before and
+    after are the mean half-width of the new-reading band over the region (file units).  None proposed (empty
+    labels, ``how`` says why) for ``n`` = 0, an error model "none", control profiles, or what the design refuses."""
+    from oed import select_error_design
+    if n == 0 or result.kind not in ("discrepancy", "embedded"):
+        return (), ("" if n == 0 else "no error model: no runs to learn it"), {}
+    data, m = study.data[variant], study.models[variant]
+    if getattr(m, "controls", ()):
+        return (), "next runs not offered: the inputs are control profiles (no candidate runs to choose from)", {}
+    cand, region, nodes, region_words, cand_words = _design_inputs(study, m, np.asarray(data.inputs, float))
+    if n > len(cand):
+        return (), f"next runs not offered: {n} runs asked for, {len(cand)} candidates", {}
+    repeats = max(1, int(getattr(data, "n_M", 1) or 1))
+    try:
+        des = select_error_design(result, cand, n, region=region, criterion="integrated", region_size=nodes,
+                                  repeats=repeats, time_limit=20.0)
+    except ValueError as exc:
+        return (), f"next runs not offered: {str(exc).splitlines()[0]}", {}
+    shrink = {s: _mean_new_reading(study, result, des, s) for s in dict.fromkeys(des.target_sensors)}
+    how = (f"{n} run(s) of {repeats} series from {cand_words} that most shrink the mean band over {region_words}; "
+           "oed.select_error_design, integrated criterion, "
+           + ("proven optimal" if des.proven else f"NOT proven optimal: {des.status}"))
+    return tuple(_input_label(study, m, row) for row in des.chosen_inputs), how, shrink
+
+
+def error_summary(study, results, variant: str, n_next: int | None = None):
+    """The :class:`identification.studies.records.ErrorSummary` of ``variant``'s model error (computed in
+    ``results.model_error``): the size of the error per sensor in the files' units, its peak, the new-reading band
+    with and without it over the data's input range (:func:`_points`), the parameters that carry it and the next
+    runs (``n_next``, default ``[quantify] next_runs``; :func:`next_runs`)."""
+    from identification.studies.records import ErrorSummary, SensorErrorSize
+    r = results.model_error[variant]
+    n_next = study.cfg.quantify.next_runs if n_next is None else n_next
+    rows, labels, where = _points(study, variant, r)
+    runs, how, shrink = next_runs(study, variant, r, n_next)
+    curves = study.cfg.dynamic is None and rows.shape[1] == 1           # a static model of one input: its grid
+    sizes = tuple(SensorErrorSize(**{k: x for k, x in d.items() if curves or k not in ("size", "half", "plain")},
+                                  next_before=shrink.get(d["sensor"], (np.nan, np.nan))[0],
+                                  next_after=shrink.get(d["sensor"], (np.nan, np.nan))[1])
+                  for d in _sizes(study, variant, r, rows, labels))
+    u = study.units
+    m = study.models[variant]
+    x_label = m.inputs[0] + (f" [{u.input_file}]" if u is not None and u.input_file else
+                             f" [{m.input_units[0]}]" if getattr(m, "input_units", ("",))[0] else "")
+    return ErrorSummary(variant=variant, kind=r.kind, detected=bool(r.detected), p_value=float(r.test.p_value),
+                        alpha=float(r.alpha), grid=where, sizes=sizes,
+                        size_is=SIZE_IS.get(r.kind, r.kind).format(level=f"{100 * (1 - r.alpha):g} %"),
+                        embedded=tuple(embedded_parameters(results, variant)), next_runs=runs, next_how=how,
+                        x=_first_input(study, rows) if curves else np.zeros(0), x_label=x_label if curves else "")
+
+
+def error_summaries(study, results, n_next: int | None = None) -> tuple:
+    """({variant: ErrorSummary}, {variant: reason}) of every variant whose model error was computed
+    (:func:`error_summary`); a variant whose summary fails is in the second with its reason, never dropped."""
+    done, failed = {}, {}
+    for v in results.model_error:
+        try:
+            done[v] = error_summary(study, results, v, n_next)
+        except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
+            failed[v] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return done, failed

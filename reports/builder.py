@@ -595,7 +595,9 @@ def report_pages(results: StudyRecord, diagnosis=None, with_diagnosis: bool = Tr
     pages += [("alpha_min", partial(_alpha_pages, results)), ("bands", partial(_band_pages, results)),
               ("residuals", partial(_residual_pages, results))]
     if results.model_error_views:                        # issue 29: every variant whose model error was computed
-        from .model_error_pages import model_error_pages
+        from .model_error_pages import model_error_pages, model_uncertainty_page
+        if any(v.summary is not None for v in results.model_error_views.values()):
+            pages.append(("model_uncertainty", partial(model_uncertainty_page, results)))
         pages += [(f"model_error{k}", partial(model_error_pages, results, v))
                   for k, v in enumerate(results.model_error_views, 1)]
     if results.plan is not None:                         # [oed] mode inputs / both / discrimination

@@ -4,7 +4,10 @@ For one variant (``results.model_error_views[variant]``, an
 :class:`identification.studies.records.ModelErrorView` the study computed, :mod:`mudoe.model_error_runs`):
 the verdict of the 'no model error' test and the chosen error model, the discrepancy per sensor against the
 first input (a dynamic model: against time, every experiment) with its band, the new-reading bands with and without the error model against the held-out
-readings of one split, and the held-out coverage table.  Draws only.  (The records ``ModelErrorView`` and
+readings of one split, and the held-out coverage table.  Before them the page "Model uncertainty" of every variant
+(:func:`model_uncertainty_page`, the records' :class:`identification.studies.records.ErrorSummary`): how large
+the error is in the sensors' units and where, the band to design with, where to measure next and which model to
+use (the ranking's verdict).  Draws only.  (The records ``ModelErrorView`` and
 ``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
 """
 from __future__ import annotations
@@ -18,7 +21,8 @@ import identification.studies.records as _records
 from .moved import moved
 from .page_layout import draw_text as _text, new_page as _page
 
-__all__ = ["discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread", "model_error_pages"]
+__all__ = ["discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread", "model_error_pages", "summary_rows",
+           "model_uncertainty_page"]
 
 __getattr__ = moved(__name__, _records, ("HeldOutBands", "ModelErrorView"))
 
@@ -179,3 +183,125 @@ def model_error_pages(results, variant: str):
                title=f"Held-out coverage of the {100 * (1 - r.alpha):g} % new-reading bands (each split's "
                      "validation readings predicted from a fit on its calibration part)")
     return fig
+
+
+# ---------------------------------------------------------------------------- the engineer's summary
+def _num(x: float, unit: str = "") -> str:
+    return "-" if x != x else f"{x:.3g}" + (f" {unit}" if unit else "")
+
+
+def _wrap(label: str, width: int = 36) -> str:
+    """An input label "a = 1 N, b = 2 N, ..." on lines of at most ``width`` characters, broken after commas."""
+    lines = [""]
+    for part in label.split(", "):
+        if lines[-1] and len(lines[-1]) + 2 + len(part) > width:
+            lines.append(part)
+        else:
+            lines[-1] = f"{lines[-1]}, {part}" if lines[-1] else part
+    return "\n".join(lines)
+
+
+def summary_rows(views) -> tuple:
+    """(head, rows, detected flags) of the summary table: per variant and sensor the size of the error (max, where,
+    rms), the new-reading band with the error and the plain one (median and max over the grid) and the mean band
+    before -> after the next runs, all in the sensor's unit."""
+    head = ["variant", "test", "error\nmodel", "sensor", "max |error|", "where", "rms",
+            "band to design with\nmedian (max)", "plain band\nmedian (max)", "after next runs\n(mean band)"]
+    rows, flags = [], []
+    for v in views:
+        s = v.summary
+        if s is None:
+            continue
+        for i, z in enumerate(s.sizes):
+            u = z.unit
+            nxt = "-" if z.next_before != z.next_before else f"{z.next_before:.3g} -> {z.next_after:.3g} {u}"
+            p = f"p = {s.p_value:.2g}" if s.p_value > 0 else "p < 1e-300"
+            test = f"{'DETECTED' if s.detected else 'not detected'}\n{p}"
+            rows.append([s.variant if i == 0 else "", test if i == 0 else "", s.kind if i == 0 else "", z.sensor,
+                         _num(z.max_abs, u) if s.kind != "none" else "0", _wrap(z.at) if s.kind != "none" else "-",
+                         _num(z.rms, u) if s.kind != "none" else "0",
+                         f"+-{z.half_median:.3g} ({z.half_max:.3g}) {u}",
+                         f"+-{z.plain_median:.3g} ({z.plain_max:.3g}) {u}", nxt])
+            sized = s.detected and s.kind != "none"       # detected but no error model chosen: nothing to size
+            flags.append([(s.detected and k in (0, 1)) or (sized and k in (4, 7)) for k in range(len(head))])
+    return head, rows, flags
+
+
+def _ranking_text(views) -> str:
+    rank = next((v.ranking for v in views if v.ranking is not None), None)
+    if rank is None:
+        return "Which model to use: no ranking (no variant has a held-out table: the study has no splits)."
+    return ("Which model to use for prediction: " + rank.sentence() + ".\nVerdict: " + rank.verdict()
+            + (" (the held-out log scores differ by less than their noise: either model predicts as well)"
+               if not rank.decided and rank.runner_up and rank.comparable else "") + ".")
+
+
+def _variant_text(s) -> str:
+    pct = f"{100 * (1 - s.alpha):g} %"
+    parts = [f"{s.variant}: size = {s.size_is}; on {s.grid}; bands of a new reading at {pct}."]
+    if s.embedded:
+        parts.append("Parameters that carry the error (embedded, varying between conditions): "
+                     + "; ".join(f"{e.name} +-{100 * e.relative:.3g} %" for e in s.embedded) + ".")
+    if s.next_runs:
+        parts.append("Measure next: " + "; ".join(s.next_runs) + f" ({s.next_how}).")
+    elif s.next_how:
+        parts.append(s.next_how[0].upper() + s.next_how[1:] + ".")
+    return " ".join(parts)
+
+
+def model_uncertainty_page(results):
+    """One page for every variant whose model error the study computed: which model to use (the ranking's
+    verdict), the table of :func:`summary_rows` and per variant what the sizes are, the parameters that carry
+    the error and the next runs (``view.summary``, computed by the study)."""
+    from .tables import draw_table
+    views = [v for v in results.model_error_views.values() if v.summary is not None]
+    fig = _page("Model uncertainty: how large the model error is, the band to design with, which model to use")
+    n = _text(fig, 0.04, 0.925, _ranking_text(views), width=135, size=10, weight="bold")
+    head, rows, flags = summary_rows(views)
+    top = 0.925 - 0.024 * n - 0.035
+    heights = [max(str(c).count("\n") + 1 for c in r) for r in rows]
+    height = 0.024 * (sum(heights) + 2)
+    ax = fig.add_axes([0.04, top - height, 0.92, height])
+    where = min(0.2, max(0.1, 0.0058 * max((len(line) for r in rows for line in str(r[5]).split("\n")), default=0)))
+    widths = np.array([0.05, 0.08, 0.075, 0.05, 0.075, where, 0.07, 0.14, 0.14, 0.13])
+    draw_table(ax, head, rows, flags=flags, fontsize=7.5, highlight="#fbe3e1", col_widths=list(widths / widths.sum()),
+               title="The model error per sensor over the data's range (the sensors' file units; shaded: detected)")
+    for (r, _), cell in ax.tables[0].get_celld().items():       # rows of two lines (test, a long "where")
+        if r > 0 and heights[r - 1] > 1:
+            cell.set_height(cell.get_height() * heights[r - 1])
+    fig.canvas.draw()
+    bottom = ax.tables[0].get_window_extent().transformed(fig.transFigure.inverted()).y0
+    text = "\n\n".join(_variant_text(v.summary) for v in views)
+    lines = _text(fig, 0.04, bottom - 0.03, text, width=185, size=8)
+    curves = [v.summary for v in views if v.summary.x.size and v.summary.kind != "none"]
+    room = bottom - 0.03 - 0.0165 * lines - 0.1           # top of the plots, below their title and legend
+    if curves and room > 0.15:
+        _band_curves(fig, curves, room)
+    return fig
+
+
+def _band_curves(fig, summaries, top: float):
+    """Per sensor, against the input: the band to design with (solid), the plain band (dashed) and the size of
+    the error (dotted) of every summary with curves (a static model of one input), one colour per variant."""
+    sensors = list(dict.fromkeys(z.sensor for s in summaries for z in s.sizes))
+    n = len(sensors)
+    gap = 0.07
+    w = (0.88 - gap * (n - 1)) / n
+    fig.text(0.04, top + 0.07, "Over the data's range: the band to design with (solid), the plain band (dashed) and "
+             "the size of the error (dotted)", fontsize=10, weight="bold")
+    for k, sensor in enumerate(sensors):
+        ax = fig.add_axes([0.08 + k * (w + gap), 0.07, w, top - 0.07])
+        unit = ""
+        for j, s in enumerate(summaries):
+            z = next((z for z in s.sizes if z.sensor == sensor), None)
+            if z is None or not z.half.size:
+                continue
+            unit, c = z.unit, f"C{j}"
+            ax.plot(s.x, z.half, "-", color=c, lw=1.6, label=f"{s.variant}: band with {s.kind}")
+            ax.plot(s.x, z.plain, "--", color=c, lw=1.1, label=f"{s.variant}: plain band")
+            ax.plot(s.x, z.size, ":", color=c, lw=1.6, label=f"{s.variant}: {s.size_is}")
+        ax.set_xlabel(summaries[0].x_label)
+        ax.set_ylabel(f"{sensor}: half-width, size [{unit}]")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+        _legend_above(ax)

@@ -13,7 +13,9 @@ few methods only word what the record holds (e.g. :meth:`Diagnosis.misses`,
   :class:`Explanation` s (:data:`MISSES` says what a rejection of each kind means);
 * the bands of a fit: :class:`PredictionBands` (h +- q sqrt(g^T C g [+ sigma^2]));
 * a fit whose linearisation may not be trusted: :class:`ModelUncertainty` of :class:`PairRegion` s;
-* the model error of a variant: :class:`ModelErrorView` with its :class:`HeldOutBands`;
+* the model error of a variant: :class:`ModelErrorView` with its :class:`HeldOutBands` and the engineer's
+  :class:`ErrorSummary` (its :class:`SensorErrorSize` s: how large, where, the band to design with, where to
+  measure next);
 * a dynamic study: :class:`Trajectories` on a fine time grid and :class:`MeshSummary` of each fit;
 * a simulated study: :class:`SimulationTruth` (the true parameters, marked on the estimates);
 * the press's figures: :class:`ModelCurve`.
@@ -24,17 +26,19 @@ under their old paths (``reports.view.FitAssessment`` etc., deprecated).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from identification.inference.profile import ConfidenceIntervals, LikelihoodRegion
 from identification.inference.results import Estimate
 from identification.studies.model_error_result import ModelErrorResult
+from identification.studies.model_ranking import ModelRanking
 
 __all__ = ["unit_suffix", "fmt_value", "fmt_p", "fmt_pct", "Presentation", "OutputDisplay", "GoodnessOfFit",
            "FitAssessment", "MISSES", "Explanation", "DiagnosisRow", "Diagnosis", "PredictionBands",
-           "UNTRUSTED", "PairRegion", "ModelUncertainty", "HeldOutBands", "ModelErrorView", "Trajectories",
+           "UNTRUSTED", "PairRegion", "ModelUncertainty", "HeldOutBands", "SensorErrorSize", "ErrorSummary",
+           "ModelErrorView", "Trajectories",
            "SimulationTruth", "MeshSummary", "ModelCurve"]
 
 
@@ -439,6 +443,76 @@ class HeldOutBands:
 
 
 @dataclass(frozen=True)
+class SensorErrorSize:
+    """How large one sensor's model error is over the data's input range and the band to design with, all in the
+    sensor's file unit: the size s(q) = |mean discrepancy delta(q)| (kind "discrepancy"), or the (1 - alpha)
+    half-width of the parameters' spread g^T Omega g (kind "embedded", zero mean), or 0 (kind "none").
+
+    Attributes
+    ----------
+    sensor, unit : str
+    max_abs, rms : float            max and root mean square of s(q) over the grid
+    at : str                        where s peaks, e.g. "q_P = 1600 N" (a dynamic model: "F = 2, t = 0.4 s")
+    half_median, half_max : float   half-width of the (1 - alpha) new-reading band with the error model over the grid
+    plain_median, plain_max : float the same of the plain band (parameters and sensor noise only)
+    next_before, next_after : float mean half-width of the new-reading band over the range before and after the
+                                    next runs (NaN: none proposed)
+    size, half, plain : ndarray (n_x,)   s(q), the two half-widths at the summary's ``x`` (empty without ``x``)
+    """
+
+    sensor: str
+    unit: str
+    max_abs: float
+    rms: float
+    at: str
+    half_median: float
+    half_max: float
+    plain_median: float
+    plain_max: float
+    next_before: float = float("nan")
+    next_after: float = float("nan")
+    size: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    half: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plain: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class ErrorSummary:
+    """The engineer's summary of one variant's model error (computed by the study, :mod:`mudoe.model_error_runs`).
+
+    Attributes
+    ----------
+    variant, kind : str             the error model ("none", "discrepancy", "embedded")
+    detected : bool
+    p_value, alpha : float          of the 'no model error' test; the bands' level is 1 - alpha
+    size_is : str                   what the size s(q) of :class:`SensorErrorSize` is for this kind
+    grid : str                      where the numbers are taken, e.g. "21 points over q_P 0-1600 N"
+    sizes : tuple of SensorErrorSize   one per selected sensor
+    embedded : tuple of EmbeddedParameter   the parameters that carry the error (embedded, chosen or beside it)
+    next_runs : tuple of str        the runs that most shrink the band over the range, e.g. ("q_P = 1600 N", ...)
+                                    (empty: none proposed)
+    next_how : str                  how they were chosen (candidates, criterion, series per run) or why none
+    x : ndarray (n_x,)              a static model of one input: the grid's input values (its file unit), where the
+                                    sizes' curves are taken (empty otherwise)
+    x_label : str                   the input with its unit, e.g. "q_P [N]"
+    """
+
+    variant: str
+    kind: str
+    detected: bool
+    p_value: float
+    alpha: float
+    size_is: str
+    grid: str
+    sizes: tuple
+    embedded: tuple = ()
+    next_runs: tuple = ()
+    next_how: str = ""
+    x: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    x_label: str = ""
+
+
+@dataclass(frozen=True)
 class ModelErrorView:
     """What the page of one variant's model error draws (computed by the study).
 
@@ -455,6 +529,8 @@ class ModelErrorView:
     curves : tuple of str                       a dynamic model: the label of every experiment; q (n_e n_t,)
                                                 then holds each experiment's sampling times one after the other
                                                 and the page draws one curve per experiment against time
+    summary : ErrorSummary or None              the engineer's numbers (how large, where, band, next runs)
+    ranking : ModelRanking or None              the ranking of the study's variants (the same in every view)
     """
 
     variant: str
@@ -467,6 +543,8 @@ class ModelErrorView:
     heldout: HeldOutBands | None
     embedded: tuple = ()
     curves: tuple = ()
+    summary: ErrorSummary | None = None
+    ranking: ModelRanking | None = None
 
 
 # ---------------------------------------------------------------------------- a dynamic study

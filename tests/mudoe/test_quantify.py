@@ -172,3 +172,110 @@ def test_report_model_error_false_skips_the_computation_with_a_note():
     out = run_model_error_pages(study, StudyResults(study))
     assert not out.model_error and not out.model_error_views and not out.model_error_errors
     assert "model-error pages skipped ([report] model_error = false)" in out.notes
+
+
+# ---------------------------------------------------------------------------- the engineer's summary (issue 29 item 4)
+def test_quantify_next_runs_reads_a_count_and_names_file_line_and_key(tmp_path, capsys):
+    """``[quantify] next_runs``: default 2, 0 turns the next runs off; a bad value is one line naming file, line
+    and key, exit 2, nothing written."""
+    from mudoe.config import ConfigError, parse_config
+    assert parse_config("", "s.toml").quantify.next_runs == 2
+    assert parse_config("[quantify]\nnext_runs = 0\n", "s.toml").quantify.next_runs == 0
+    for bad, words in (("-1", "must be non-negative"), ("1.5", "expected an integer"), ('"2"', "expected a number"),
+                       ("true", "expected a number")):
+        with pytest.raises(ConfigError) as ei:
+            parse_config(f"[quantify]\n\nnext_runs = {bad}\n", "study.toml")
+        assert "study.toml:3:" in str(ei.value) and "[quantify] next_runs:" in str(ei.value) and words in str(ei.value)
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(PRESS.read_text().replace("[report]", "[quantify]\nnext_runs = -2\n\n[report]", 1))
+    out = tmp_path / "out"
+    _one_line_error(capsys, ["quantify", str(cfg), "--out", str(out)], "bad.toml:", "[quantify] next_runs:")
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_summary_records_say_how_large_where_the_band_and_the_next_runs(press_views):
+    """M1's summary as the study computed it: the error in um over 0-1600 N, its peak inside the range, the band
+    with the error wider than the plain one, two next runs that shrink the mean band, the ranking in every view."""
+    views = press_views.model_error_views
+    s = views["M1"].summary
+    assert s.variant == "M1" and s.detected and s.kind == "discrepancy" and s.size_is == "|mean discrepancy|"
+    assert s.grid == "41 points over the data's range (q_P 0-1600 N)"
+    assert [z.sensor for z in s.sizes] == ["F_x", "B0_y"] and {z.unit for z in s.sizes} == {"um"}
+    f_x = s.sizes[0]
+    # the page "Model error of M1" draws F_x's discrepancy down to about -11 um near 700 N (bench/RESULTS.md)
+    assert 5.0 < f_x.max_abs < 20.0 and 0.0 < f_x.rms < f_x.max_abs
+    peak = float(f_x.at.removeprefix("q_P = ").removesuffix(" N"))
+    assert 400.0 <= peak <= 1000.0
+    for z in s.sizes:
+        assert z.plain_median <= z.plain_max and z.half_median <= z.half_max
+        assert z.half_median > z.plain_median          # the error widens the band to design with
+        assert z.next_after <= z.next_before          # the next runs never widen it
+    assert len(s.next_runs) == 2 and all(r.startswith("q_P = ") for r in s.next_runs)
+    assert "integrated criterion" in s.next_how and "17" in s.next_how
+    rank = views["M1"].ranking
+    assert rank is not None and all(v.ranking is rank for v in views.values())
+    m3 = views["M3"].summary                           # four tied inputs: the data's distinct rows, not a box
+    assert m3.grid == "the data's 29 distinct input rows" and "q_prev = " in m3.sizes[0].at
+    assert s.x_label == "q_P [N]" and s.x.shape == (41,) and s.x[0] == 0.0 and s.x[-1] == 1600.0   # the curves drawn
+    assert f_x.size.shape == f_x.half.shape == f_x.plain.shape == (41,) and f_x.size.max() == f_x.max_abs
+    assert np.median(f_x.half) == f_x.half_median and m3.x.size == 0 == m3.sizes[0].size.size
+
+
+def test_plain_result_predicts_the_plain_fit_s_band_without_a_refit(press_views):
+    from mudoe.model_error_runs import plain_result
+    from mudoe.study_base import start_values
+    from identification import model_error
+    study = press_views.study
+    r = press_views.model_error["M1"]
+    w = np.array([1.0 if s in r.sensors else 0.0 for s in study.sensors])
+    plain = model_error(study.models["M1"], study.data["M1"], start_values(study, "M1"), kind="none", weights=w,
+                        alpha=r.alpha)
+    q = np.linspace(0.0, 1600.0, 7)[:, None]
+    a, b = plain_result(r).predict(q, r.alpha, new_reading=True), plain.predict(q, r.alpha, new_reading=True)
+    ok = np.isfinite(b.lower)
+    assert ok.sum() == 14 and np.array_equal(ok, np.isfinite(a.lower))
+    np.testing.assert_allclose(a.lower[ok], b.lower[ok], rtol=1e-10)
+    np.testing.assert_allclose(a.upper[ok], b.upper[ok], rtol=1e-10)
+
+
+def test_next_runs_zero_proposes_none(press_views):
+    from mudoe.model_error_runs import error_summary
+    s = error_summary(press_views.study, press_views, "M1", n_next=0)
+    assert s.next_runs == () and s.next_how == ""
+    assert all(np.isnan(z.next_before) and np.isnan(z.next_after) for z in s.sizes)
+
+
+def test_the_model_uncertainty_page_carries_the_summary(press_views):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mudoe.report_record import study_record
+    from reports.builder import page_texts, report_pages
+    from reports.model_error_pages import model_uncertainty_page
+    rec = study_record(press_views)
+    names = [n for n, _ in report_pages(rec, with_diagnosis=False, uncertainty="none")]
+    assert names.index("model_uncertainty") + 1 == names.index("model_error1")
+    fig = model_uncertainty_page(rec)
+    texts = " ".join(" ".join(page_texts(fig)).split())   # wrapped lines read as one
+    plt.close(fig)
+    s = press_views.model_error_views["M1"].summary
+    assert "Which model to use for prediction" in texts and "Verdict:" in texts
+    assert f"{s.sizes[0].max_abs:.3g} um" in texts and s.sizes[0].at in texts and "Measure next:" in texts
+
+
+def test_quantify_writes_and_prints_the_summary_of_every_variant(press_quantify):
+    """quantify.json: each variant's ``summary`` (the ErrorSummary's fields, JSON-safe) and no failure; the text:
+    the size, the band to design with and the next runs."""
+    _, stdout, out = press_quantify
+    d = json.loads((out / "quantify.json").read_text())
+    for v, r in d["variants"].items():
+        s = r["summary"]
+        assert r["summary_error"] is None and s["variant"] == v
+        assert {"kind", "detected", "p_value", "alpha", "size_is", "grid", "sizes", "embedded", "next_runs",
+                "next_how"} <= set(s)
+        assert [z["sensor"] for z in s["sizes"]] == ["F_x", "B0_y"]
+        assert len(s["next_runs"]) == (2 if s["kind"] in ("discrepancy", "embedded") else 0)
+    m1 = d["variants"]["M1"]["summary"]["sizes"][0]
+    assert m1["unit"] == "um" and m1["half_median"] > m1["plain_median"] and m1["at"].startswith("q_P = ")
+    text = (out / "quantify.txt").read_text()
+    assert "band to design with +-" in text and "measure next: q_P = " in text and "error max " in text
