@@ -282,7 +282,10 @@ def reduced_start(st: Start, settings: IdentifySettings):
     (:class:`identification.fit.implicit_start.ImplicitObjective`: states by batched damped Newton
     from the nearest point evaluated, sensitivities by the implicit function theorem, S by
     adjoints, all inputs at once).  Used for models with at least
-    ``settings.reduced_start_inputs`` inputs.  Returns (result, point, S) as
+    ``settings.reduced_start_inputs`` inputs.  A collocated ODE whose iteration gives up (a Gauss-Newton step
+    halved more than :data:`_GN_MAX_HALVINGS` times, or a trial point without trajectories) takes
+    Levenberg-Marquardt steps (:func:`_levenberg_marquardt`, trial points without trajectories raise the
+    damping) and restarts the iteration from their point.  Returns (result, point, S) as
     :func:`solve_explicit_newton`, or None (not used, or the iteration failed: Ipopt then
     starts from the predictor as before).
     """
@@ -304,5 +307,14 @@ def reduced_start(st: Start, settings: IdentifySettings):
     objective.early_newton = trajectory
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
-    return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,
-                        time.perf_counter(), _GN_MAX_HALVINGS)
+    settings = dataclasses.replace(settings, refine_decrement=0.0)
+    t0 = time.perf_counter()
+    got = _newton_from(st, settings, objective, x0, t0, _GN_MAX_HALVINGS)
+    if got is None and trajectory:
+        # a collocated ODE from a far start (e.g. stiff kinetics with rates off by 10x in opposite directions):
+        # Levenberg-Marquardt on the same exact Gauss-Newton model, as for explicit models, then the
+        # iteration from its point; a trial point without trajectories only raises the damping
+        x = _levenberg_marquardt(st, objective)
+        if x is not None:
+            got = _newton_from(st, settings, objective, x, t0)
+    return got
