@@ -134,9 +134,14 @@ def check_data(cfg, campaign, splits, n_p: int) -> None:
 
 def call_factory(factory, name: str, variant: str, error):
     """``factory(variant)``; a factory that calls ``sys.exit`` raises ``error(message)`` (a ConfigError naming
-    the file and key) instead of ending the process silently."""
+    the file and key) instead of ending the process silently, and a model the factory cannot build (a
+    :class:`models.contract.ModelError`, e.g. a right-hand side returning the wrong number of derivatives)
+    raises ``error`` naming the factory and the variant with the model's message."""
+    from models.contract import ModelError
     try:
         return factory(variant)
+    except ModelError as exc:
+        raise error(f"the model factory {name}({variant!r}) cannot build its model: {exc}") from None
     except SystemExit as exc:
         raise error(f"the model factory {name}({variant!r}) called sys.exit({exc.code!r}) instead of returning a "
                     "models.Model; raise an exception in the factory to report a problem") from None

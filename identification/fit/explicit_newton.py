@@ -68,9 +68,14 @@ class _ExplicitObjective:
 
 #: at most this many evaluations of :func:`_levenberg_marquardt`
 _LM_MAX_EVALS = 200
+#: a collocated ODE (:func:`reduced_start`): at most this many Levenberg-Marquardt evaluations, and no more than
+#: this many trial points in a row without trajectories (each costs a failed march); then Ipopt's turn
+_LM_TRAJECTORY_MAX_EVALS = 40
+_LM_TRAJECTORY_MAX_FAILS = 3
 
 
-def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
+def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective", max_evals: int = _LM_MAX_EVALS,
+                         max_fails: int | None = None):
     r"""Levenberg-Marquardt iterations on the exact Gauss-Newton model, for starts where the
     line-searched Gauss-Newton/Newton iteration of :func:`solve_explicit_newton` fails.
 
@@ -80,8 +85,9 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
     1 - (2 rho - 1)^3) on success, mu <- nu mu and nu <- 2 nu on failure; start mu = 1e-3
     max diag F).  Stops once an undamped-size step (mu < 1e-6) is accepted with the Gauss-Newton
     decrement g^T F^{-1} g below 1e-2 of the objective, or when the objective stalls (relative
-    decrease below 1e-10); at most :data:`_LM_MAX_EVALS` evaluations.  Returns the point reached
-    (the Newton iteration then finishes from it), or None.
+    decrease below 1e-10); at most ``max_evals`` evaluations and, when ``max_fails`` is given, at most that
+    many trial points in a row where the objective cannot be evaluated (StateSolveError).  Returns the point
+    reached (the Newton iteration then finishes from it), or None.
     """
     x = st.p0 / st.s_p
     try:
@@ -94,7 +100,8 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
     mu, nu = 1e-3 * float(D.max()), 2.0
     if not (math.isfinite(mu) and mu > 0):
         return None
-    for _ in range(_LM_MAX_EVALS):
+    fails = 0
+    for _ in range(max_evals):
         D = np.maximum(D, np.diag(cur.F))               # Marquardt's scaling, never shrinking
         L = newton_core.factor(cur.F + mu * np.diag(D))
         if L is None:
@@ -106,8 +113,11 @@ def _levenberg_marquardt(st: Start, objective: "_ExplicitObjective"):
         pred = -(cur.g @ d + 0.5 * d @ (cur.F @ d))     # decrease predicted by the Gauss-Newton model
         try:
             new = objective(x + d, False)
+            fails = 0
         except StateSolveError:
-            new = None
+            new, fails = None, fails + 1
+            if max_fails is not None and fails > max_fails:
+                return None
         rho = (cur.f - new.f) / pred if new is not None and math.isfinite(new.f) and pred > 0 else -1.0
         if rho > newton_core.ARMIJO:                  # the decrease is at least 1e-4 of the predicted one
             stalled = cur.f - new.f <= 1e-10 * abs(cur.f)
@@ -282,7 +292,10 @@ def reduced_start(st: Start, settings: IdentifySettings):
     (:class:`identification.fit.implicit_start.ImplicitObjective`: states by batched damped Newton
     from the nearest point evaluated, sensitivities by the implicit function theorem, S by
     adjoints, all inputs at once).  Used for models with at least
-    ``settings.reduced_start_inputs`` inputs.  Returns (result, point, S) as
+    ``settings.reduced_start_inputs`` inputs.  A collocated ODE whose iteration gives up (a Gauss-Newton step
+    halved more than :data:`_GN_MAX_HALVINGS` times, or a trial point without trajectories) takes
+    Levenberg-Marquardt steps (:func:`_levenberg_marquardt`, trial points without trajectories raise the
+    damping; at most 40 evaluations and 3 such points in a row) and restarts the iteration from their point.  Returns (result, point, S) as
     :func:`solve_explicit_newton`, or None (not used, or the iteration failed: Ipopt then
     starts from the predictor as before).
     """
@@ -304,5 +317,14 @@ def reduced_start(st: Start, settings: IdentifySettings):
     objective.early_newton = trajectory
     # to round-off (no decrement threshold): Ipopt's test is on the gradient, which a decrement of
     # 1e-24 can leave at 1e-8 when the information is large (many inputs)
-    return _newton_from(st, dataclasses.replace(settings, refine_decrement=0.0), objective, x0,
-                        time.perf_counter(), _GN_MAX_HALVINGS)
+    settings = dataclasses.replace(settings, refine_decrement=0.0)
+    t0 = time.perf_counter()
+    got = _newton_from(st, settings, objective, x0, t0, _GN_MAX_HALVINGS)
+    if got is None and trajectory:
+        # a collocated ODE from a far start (e.g. stiff kinetics with rates off by 10x in opposite directions):
+        # Levenberg-Marquardt on the same exact Gauss-Newton model, as for explicit models, then the
+        # iteration from its point; a trial point without trajectories only raises the damping
+        x = _levenberg_marquardt(st, objective, _LM_TRAJECTORY_MAX_EVALS, _LM_TRAJECTORY_MAX_FAILS)
+        if x is not None:
+            got = _newton_from(st, settings, objective, x, t0)
+    return got

@@ -270,3 +270,23 @@ def test_faults_of_factory_friction_file_and_disk_are_one_clear_line(capsys, tmp
     line = _one_line(capsys, ["init", str(out.with_suffix(".toml"))])
     assert "[Errno 28]" in line and "disk.toml" in line, line
     assert not out.with_suffix(".toml").exists()
+
+
+def test_a_factory_whose_rhs_has_the_wrong_length_is_one_line_naming_it(capsys, tmp_path, monkeypatch):
+    # issue 30 (bad input): the model's own error (rhs returns 1 derivative for 2 states) named with the config's
+    # file and line, the factory and its variant; exit 2 before any work, nothing written
+    (tmp_path / "shortrhs.py").write_text(
+        "import casadi as ca\nfrom models import Model\n\n\ndef build(variant='default'):\n"
+        "    return Model.ode(['k1', 'k2'], ['cA', 'cB'], [], ['cA', 'cB'], rhs=lambda x, p, u: -p[0] * x[0],\n"
+        "                     x0=lambda p, u: ca.vertcat(1.0, 0.0), h=lambda x, p, u: x)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    line = _one_line(capsys, ["init", "--model", "shortrhs:build", str(tmp_path / "s.toml")])
+    assert line.endswith("--model: the model factory shortrhs:build('default') cannot build its model: rhs returns 1 "
+                         "derivatives but 2 states are named (cA, cB)"), line
+    assert not (tmp_path / "s.toml").exists()
+    cfg = tmp_path / "f.toml"
+    cfg.write_text(CSTR.replace("mudoe.example_cstr:build", "shortrhs:build"))
+    line = _one_line(capsys, ["identify", str(cfg), "--out", str(tmp_path / "o")])
+    assert f"f.toml:{_line_of(CSTR, 'name = ')}: [model] name: the model factory shortrhs:build('arrhenius') " \
+           "cannot build its model: rhs returns 1 derivatives but 2 states are named (cA, cB)" in line, line
+    assert not (tmp_path / "o").exists()
