@@ -108,10 +108,18 @@ class Mesh:
         return float(np.max(np.diff(self.boundaries)))
 
     def refined(self, factor: int) -> "Mesh":
-        """Every element split into ``factor`` equal parts."""
+        """Every element split into ``factor`` equal parts; an element too short for that (parts of at most twice the
+        same-instant tolerance :func:`models.dynamic.time_tolerance` at its end, which the mesh would refuse as one
+        instant) into the most equal parts longer than that, itself if none (e.g. two sampling times 5e-10 h
+        apart)."""
         b = np.asarray(self.boundaries)
-        fine = (b[:-1, None] + np.diff(b)[:, None] * np.arange(factor)[None, :] / factor).ravel()
-        return Mesh(tuple(np.r_[fine, b[-1]]), self.degree)
+        L = np.diff(b)
+        fine = b[:-1, None] + L[:, None] * np.arange(factor)[None, :] / factor
+        n = np.clip(np.ceil(L / (2.0 * time_tolerance(b[-1], b[1:]))) - 1, 1, factor).astype(int)
+        if np.all(n == factor):
+            return Mesh(tuple(np.r_[fine.ravel(), b[-1]]), self.degree)
+        parts = [fine[i] if n[i] == factor else b[i] + L[i] * np.arange(n[i]) / n[i] for i in range(L.size)]
+        return Mesh(tuple(np.r_[np.concatenate(parts), b[-1]]), self.degree)
 
 
 class CollocatedModel(Model):

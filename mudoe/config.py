@@ -70,7 +70,7 @@ from pathlib import Path
 from .checks import check_config
 from .config_errors import ConfigContext, ConfigError, EntryContext, config_error
 from .config_design import check_design_keys, read_bounds
-from .config_prior import check_robust_keys, check_robust_prior, read_prior
+from .config_prior import check_approximate_range, check_robust_keys, check_robust_prior, read_prior
 from .config_readers import (check_keys, one_of, read_str, read_str_list, read_table, read_value, require, tables,
                              unique, validated)
 from .config_schema import STUDY_DEFAULTS, setting, settings_keys, settings_values
@@ -387,6 +387,7 @@ def parse_config(text: str, path: str = "<string>", base_dir: str | Path | None 
     _check_names(ctx, cfg)
     _check_rival(ctx, cfg)
     check_robust_keys(ctx, o, cfg.dynamic is not None)
+    check_approximate_range(ctx, o, cfg.dynamic)
     if o.planned and not (o.candidates or o.candidates_range) and cfg.dynamic is None:   # dynamic: its experiments
         raise ctx.error("oed", "planned", "a planned design needs candidates or candidates_range (the inputs)")
     check_config(cfg, ctx.error)

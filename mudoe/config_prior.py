@@ -28,7 +28,7 @@ import math
 from .config_errors import ConfigContext, ConfigError
 
 __all__ = ["DISTRIBUTION_ARGS", "prior_error", "read_prior", "check_robust_prior", "check_robust_keys",
-           "check_exact_robust_keys"]
+           "check_exact_robust_keys", "check_approximate_range"]
 
 #: number of arguments of each distribution (the same as :data:`oed.prior.DISTRIBUTIONS`; a test checks it)
 DISTRIBUTION_ARGS = {"uniform": 2, "normal": 2, "lognormal": 2, "truncnormal": 4}
@@ -135,3 +135,28 @@ def check_exact_robust_keys(ctx: ConfigContext, o, dynamic: bool) -> None:
             raise ctx.error("oed", k, "not used by the exact robust design (prior is given: it chooses exactly "
                             "n_sensors candidates, n_points (set point, sensor) pairs, or [dynamic] n_times "
                             "sampling times); leave it out")
+
+
+def check_approximate_range(ctx: ConfigContext, o, dyn) -> None:
+    """An approximate design places its support points on the range [min, max] of the candidates: they must span
+    one (at least two distinct values).  The approximate route is a static study's ``mode = "inputs"`` with
+    ``approximate = true`` or a prior without ``n_points`` (the candidate set points, ``[oed] candidates`` or
+    ``candidates_range``), and a dynamic study's ``mode = "sensors"`` with ``approximate = true`` (the candidate
+    sampling times, ``[dynamic] candidate_times`` or ``times``); ``dyn`` is the ``[dynamic]`` section or None."""
+    if dyn is not None:
+        if not (o.approximate and o.mode == "sensors"):
+            return
+        section, key = "dynamic", "candidate_times" if dyn.candidate_times else "times"
+        values, what = [float(t) for t in dyn.candidates()], "candidate sampling times"
+    else:
+        if o.mode != "inputs" or not (o.approximate or (o.prior and o.n_points is None)):
+            return
+        section, key = "oed", "candidates_range" if o.candidates_range else "candidates"
+        values, what = [float(q) for q in o.candidate_points()], "candidate set points"
+    if not values or max(values) > min(values):
+        return                              # no candidates at all: the design keys' own checks say so
+    route = "approximate = true" if o.approximate else "a prior without n_points"
+    raise ctx.error(section, key, f"the approximate design ({route}) places its support points on the range "
+                    f"[min, max] of the {what}, but they span no range (every one is {values[0]:g}); give at least "
+                    "two distinct values" + ("" if dyn is not None or o.approximate else
+                                             ", or n_points for the exact robust choice of n_points set points"))

@@ -118,6 +118,23 @@ def test_mesh_must_hold_the_sampling_times():
     assert cm.mesh.n_elements == 6 and cm.n_y == 1 + 6 * 2
 
 
+
+def test_refining_keeps_an_element_too_short_to_split():
+    """Two sampling times 5.4e-10 h apart (distinct: above the 4.76e-10 same-instant tolerance at 0.476 of a 2 h
+    horizon) and the halved mesh of the Richardson check: the short element stays whole (its halves would be one
+    instant), every other element is halved exactly as before (the reactor's approximate sampling times under a
+    prior stopped at `mesh: ... differ by round-off only` before)."""
+    b = (0.0, 0.4760351561, 0.4760937497, 0.47609375024000006, 0.47615234366, 2.0)
+    fine = Mesh(b).refined(2).boundaries
+    old = np.r_[(np.asarray(b)[:-1, None] + np.diff(b)[:, None] * np.arange(2) / 2).ravel(), 2.0]
+    assert fine == tuple(float(v) for v in np.delete(old, 5))           # the short element's midpoint dropped
+    assert Mesh((0.0, 0.5, 1.0)).refined(3).boundaries == tuple(
+        float(v) for v in np.r_[(np.array([0.0, 0.5])[:, None] + 0.5 * np.arange(3) / 3).ravel(), 1.0])
+    cm = decay(horizon=2.0).collocate([0.4760937497, 0.47609375024000006, 2.0])
+    half = decay(horizon=2.0).collocate(cm.times, mesh=cm.mesh.refined(2))
+    assert half.mesh.n_elements == 2 * cm.mesh.n_elements - 1
+    assert np.allclose(half.simulate([1.3], [[2.0]]), cm.simulate([1.3], [[2.0]]), rtol=1e-6)
+
 def test_blow_up_names_the_element():
     m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
                   h=lambda x, p, u: x, horizon=2.0)

@@ -133,3 +133,50 @@ def test_the_design_page_draws_the_certificate_and_the_efficiencies(tmp_path):
     assert any(abs(line.get_ydata()[0] - plan.design.reference) < 1e-12 for line in sens.get_lines()
                if len(set(np.atleast_1d(line.get_ydata()))) == 1)          # the line at the optimum value n_p
     plt.close(figs[0])
+
+
+@pytest.mark.parametrize("old, new, extra, key, match", [
+    ("candidates_range = [0.0, 1600.0, 9]", "candidates = [500.0]", 'mode = "inputs"\napproximate = true\n',
+     "candidates", "(approximate = true) places its support points on the range [min, max] of the candidate set "
+                   "points, but they span no range (every one is 500)"),
+    ("candidates_range = [0.0, 1600.0, 9]", "candidates_range = [500.0, 500.0, 3]",
+     'mode = "inputs"\napproximate = true\n', "candidates_range", "span no range (every one is 500)"),
+    ("candidates_range = [0.0, 1600.0, 9]", "candidates = [500.0, 500.0]", 'mode = "inputs"\n' + PRIOR,
+     "candidates", "(a prior without n_points) places its support points"),
+])
+def test_approximate_designs_without_a_range_exit_2_naming_key_and_line(tmp_path, capsys, old, new, extra, key,
+                                                                         match):
+    text = PLAN.replace(old, new) + extra
+    cfg = tmp_path / "plan.toml"
+    cfg.write_text(text)
+    code = main(["oed", str(cfg), "--out", str(tmp_path / "res"), "--json", "--quiet"])
+    err = capsys.readouterr().err
+    line = next(i + 1 for i, s in enumerate(text.splitlines()) if s.startswith(key + " ="))
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert f"plan.toml:{line}: [oed] {key}: the approximate design " in err and match in err
+    assert not (tmp_path / "res" / "oed.json").exists()
+
+
+def test_exact_robust_inputs_need_no_range():
+    o = parse_config(PLAN.replace("candidates_range = [0.0, 1600.0, 9]", "candidates = [500.0, 500.0]")
+                     + 'mode = "inputs"\nn_points = 1\n' + PRIOR, "plan.toml").oed
+    assert o.n_points == 1 and not o.approximate
+
+
+def test_approximate_sampling_times_without_a_range_exit_2_naming_key_and_line(tmp_path, capsys):
+    from pathlib import Path
+    repo = Path(__file__).resolve().parents[2]
+    text = (repo / "configs" / "reactor.toml").read_text()
+    text = re.sub(r"^times = .*$", "times = [1.0]", text, count=1, flags=re.M)
+    text = re.sub(r"^n_times = .*\n", "", text, count=1, flags=re.M)
+    text = text.replace("[oed]\n", '[oed]\nplanned = true\napproximate = true\nprior = { E1 = ["uniform", 45.0, '
+                                   '55.0] }\n')
+    cfg = tmp_path / "reactor.toml"
+    cfg.write_text(text)
+    code = main(["oed", str(cfg), "--out", str(tmp_path / "res"), "--json", "--quiet"])
+    err = capsys.readouterr().err
+    line = next(i + 1 for i, s in enumerate(text.splitlines()) if s.startswith("times ="))
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert (f"reactor.toml:{line}: [dynamic] times: the approximate design (approximate = true) places its support "
+            "points on the range [min, max] of the candidate sampling times, but they span no range (every one is 1)"
+            in err)
