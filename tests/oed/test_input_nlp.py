@@ -79,3 +79,28 @@ def test_time_limit_reached_while_building_keeps_the_start_and_says_so():
     assert any(n.startswith("refinement not finished: time limit") and "building the refinement's NLP" in n
                for n in res.notes), res.notes
     assert np.array_equal(res.refined.inputs, res.inputs)
+
+
+@pytest.mark.parametrize("crit", [Criterion.D, Criterion.A, Criterion.E])
+@pytest.mark.parametrize("lift_above", [input_nlp.LIFT_ABOVE, 0])
+def test_assembled_jacobian_equals_the_whole_constraints(crit, lift_above, monkeypatch):
+    # the constraint Jacobian assembled per row (and through the criterion's constraints) is CasADi's Jacobian of
+    # the whole constraint vector, at a point off the constraints; its g output is the NLP's g
+    monkeypatch.setattr(input_nlp, "LIFT_ABOVE", lift_above)
+    cm, w = _coarse()
+    nlp = information_nlp(cm, P, w, 2, LOWER, UPPER - LOWER, crit)
+    x0 = nlp.start(cm, P, ROWS, LOWER, UPPER - LOWER)
+    M = nlp.matrix(x0)
+    b = nlp.parameter(M)
+    n = nlp.n_u + nlp.n_y + nlp.n_s
+    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
+    rng = np.random.default_rng(5)
+    x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
+    x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
+    pr = nlp.problem
+    g_got, J_got = (np.array(v) for v in pr.jac_g(x, b))
+    ref = ca.Function("J", [pr.x, pr.par], [pr.g, ca.jacobian(pr.g, pr.x)])
+    g_ref, J_ref = (np.array(v) for v in ref(x, b))
+    assert J_got.shape == J_ref.shape == (nlp.n_g, x.size)
+    assert np.max(np.abs(J_got - J_ref)) <= 1e-9 * max(1.0, np.max(np.abs(J_ref)))
+    assert np.max(np.abs(g_got - g_ref)) <= 1e-9 * max(1.0, np.max(np.abs(g_ref)))
