@@ -104,3 +104,22 @@ def test_assembled_jacobian_equals_the_whole_constraints(crit, lift_above, monke
     assert J_got.shape == J_ref.shape == (nlp.n_g, x.size)
     assert np.max(np.abs(J_got - J_ref)) <= 1e-9 * max(1.0, np.max(np.abs(J_ref)))
     assert np.max(np.abs(g_got - g_ref)) <= 1e-9 * max(1.0, np.max(np.abs(g_ref)))
+
+
+def test_refinement_without_mumps_scaling_reaches_the_same_design(monkeypatch):
+    # above oed.inputs.UNSCALED_MUMPS_ABOVE variables MUMPS factorises without its own scaling: forced on the
+    # small reactor (below the threshold by default), the refinement reaches the default's value and levels
+    from oed import inputs
+
+    cm, _ = _coarse()
+    sig = np.full(cm.n_S, 0.01)
+    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    monkeypatch.setattr(inputs, "UNSCALED_MUMPS_ABOVE", 0)
+    seen, solve = [], inputs.solve_nlp
+    monkeypatch.setattr(inputs, "solve_nlp", lambda *a, **k: seen.append(k["settings"].extra) or solve(*a, **k))
+    cm2, _ = _coarse()
+    unscaled = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    assert seen and all(("mumps_scaling", 0) in extra for extra in seen)
+    assert plain.n_failed == 0 and unscaled.n_failed == 0
+    assert unscaled.value == pytest.approx(plain.value, abs=1e-7)
+    assert np.allclose(unscaled.inputs, plain.inputs, rtol=1e-4, atol=1e-3 * (UPPER - LOWER))
