@@ -37,7 +37,7 @@ def test_assembled_hessian_equals_the_whole_lagrangians(crit, lift_above, monkey
     M = nlp.matrix(x0)
     b = nlp.parameter(M)
     n = nlp.n_u + nlp.n_y + nlp.n_s
-    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
+    x0[n:n + nlp.n_m] = nlp.lifted(x0, b)
     rng = np.random.default_rng(3)
     x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
     x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
@@ -48,12 +48,13 @@ def test_assembled_hessian_equals_the_whole_lagrangians(crit, lift_above, monkey
 
 
 def test_lifted_refinement_reaches_the_same_design(monkeypatch):
+    # two rows: each row's information lifted into its own variables, the criterion at their sum
     cm, _ = _coarse()
     sig = np.full(cm.n_S, 0.01)
-    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    plain = refine_inputs(cm, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
     monkeypatch.setattr(input_nlp, "LIFT_ABOVE", 0)
     cm2, _ = _coarse()                          # a fresh model: no NLP cached
-    lifted = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    lifted = refine_inputs(cm2, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
     assert plain.n_failed == 0 and lifted.n_failed == 0
     assert lifted.value == pytest.approx(plain.value, abs=1e-7)
     assert np.allclose(lifted.inputs, plain.inputs, rtol=1e-4, atol=1e-3 * (UPPER - LOWER))
@@ -93,7 +94,7 @@ def test_assembled_jacobian_equals_the_whole_constraints(crit, lift_above, monke
     M = nlp.matrix(x0)
     b = nlp.parameter(M)
     n = nlp.n_u + nlp.n_y + nlp.n_s
-    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
+    x0[n:n + nlp.n_m] = nlp.lifted(x0, b)
     rng = np.random.default_rng(5)
     x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
     x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
