@@ -69,9 +69,7 @@ class InformationNlp:
     n_u, n_y, n_s, n_extra, n_g : int
         sizes of the blocks of x = (u, y, S, m, criterion extras) and of g
     n_m : int
-        entries of the lifted information m (0: not lifted): the lower triangle of each row's matrix
-    row_information : casadi.Function
-        ``(u, y, S) -> (vec Mt_1, ..., vec Mt_n)`` side by side (D-scaled units)
+        entries of the lifted information m (0: not lifted)
     information : casadi.Function
         ``(u, y, S) -> M`` (n_p, n_p), model units
     scale : ndarray (n_p,)     the diagonal of D
@@ -86,7 +84,6 @@ class InformationNlp:
     information: ca.Function
     scale: np.ndarray
     n_m: int = 0
-    row_information: ca.Function | None = None
 
     def start(self, model, p, Q, lo, span) -> np.ndarray:
         """x0 at the input rows Q (n_pts, d_q): their states, sensitivities and criterion extras."""
@@ -108,15 +105,12 @@ class InformationNlp:
         d = self.scale ** 2 * np.diag(np.asarray(M, float))
         return np.sqrt(np.where(d > 0, d, 1.0))
 
-    def lifted(self, x, b) -> np.ndarray:
-        """The lifted m at the NLP point x: per row tril(B^-1 Mt_i B^-1), column-major, the rows one after another."""
+    def lifted(self, M, b) -> np.ndarray:
+        """The lifted m at the information M (model units): tril(B^-1 D M D B^-1), column-major."""
         if not self.n_m:
             return np.zeros(0)
-        x = np.asarray(x, float).ravel()
-        n = self.n_u + self.n_y + self.n_s
-        Mt = np.array(self.row_information(x[:self.n_u], x[self.n_u:self.n_u + self.n_y], x[self.n_u + self.n_y:n]))
-        bb = np.outer(b, b).T.ravel()[_tril_index(b.size)]
-        return (Mt[_tril_index(b.size), :] / bb[:, None]).T.ravel()
+        Ms = (self.scale / b)[:, None] * np.asarray(M, float) * (self.scale / b)[None, :]
+        return Ms.T.ravel()[_tril_index(Ms.shape[0])]
 
     def matrix(self, x) -> np.ndarray:
         """M at the NLP point x."""
@@ -265,22 +259,20 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     Us = [X.sym(f"u{i}", d) for i in range(n_pts)]
     Ys = [X.sym(f"y{i}", n_y) for i in range(n_pts)]
     Ss = [X.sym(f"S{i}", n_y, n_p) for i in range(n_pts)]
-    g, mv, mts = [], 0, []
+    g, mv = [], 0
     for u, y, S in zip(Us, Ys, Ss):
         c, mt = row(u, y, S)
         mv = mv + mt
-        mts.append(mt)
         if n_y:
             g.append(c)
     z = ca.vertcat(*extra) if extra else X.zeros(0, 1)
-    n_t = n_p * (n_p + 1) // 2
-    n_m = n_pts * n_t if lift else 0
+    n_m = n_p * (n_p + 1) // 2 if lift else 0
     m, b = X.sym("m", n_m), X.sym("b", n_p if lift else 0)
-    if lift:                        # per row: m_i = tril(Mt_i) / bb, the criterion at sum_i m_i
+    if lift:
         tri = _tril_index(n_p)
         bb = ca.vec(ca.mtimes(b, b.T))[tri]
-        g += [mts[i][tri] / bb - m[i * n_t:(i + 1) * n_t] for i in range(n_pts)]
-        f, cons = crit_fun(ca.vec(_unlift(X, ca.sum2(ca.reshape(m, n_t, n_pts)), b)), z)
+        g.append(mv[tri] / bb - m)
+        f, cons = crit_fun(ca.vec(_unlift(X, m, b)), z)
     else:
         f, cons = crit_fun(mv, z)
     U, Y, S = ca.vertcat(*Us), ca.vertcat(*Ys), ca.vertcat(*[ca.vec(s) for s in Ss])
@@ -288,7 +280,6 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     gg = ca.vertcat(*g, cons)
     Dinv = ca.DM(np.diag(1.0 / scale))
     info = ca.Function("M", [U, Y, S], [ca.mtimes([Dinv, ca.reshape(mv, n_p, n_p), Dinv])])
-    row_info = ca.Function("Mt_rows", [U, Y, S], [ca.horzcat(*mts)])
     _check(deadline, "the rows' constraints")
     n_c = [c.size1() for c in g[:n_pts]] if n_y else [0] * n_pts
     hess = _hessian_of_lagrangian((n_pts, d, n_y, n_p, n_m), x.size1(), (row, hess_row, crit_parts), n_c,
@@ -297,7 +288,7 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     jac = _jacobian_of_constraints((n_pts, d, n_y, n_p, n_m), x.size1(), (_row_jacobian(row, X), crit_jac), n_c)
     _check(deadline, "the constraints' Jacobian")
     return InformationNlp(NlpProblem(x, f, gg, b, hess_lag=hess, jac_g=jac), U.size1(), Y.size1(), S.size1(),
-                          z.size1(), gg.size1(), info, scale, n_m, row_info)
+                          z.size1(), gg.size1(), info, scale, n_m)
 
 
 def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) -> ca.Function:
@@ -324,20 +315,16 @@ def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) ->
     w = x[n_x - n_w:]
     lam_cons = lam_g[sum(n_c) + n_m:]
     if n_m:
-        tri, n_t = _tril_index(n_p), n_m // n_pts
-        sel = ca.DM(ca.Sparsity.triplet(n_p * n_p, n_t, tri, list(range(n_t))), 1.0)
-        lam_m = ca.reshape(lam_g[sum(n_c):sum(n_c) + n_m], n_t, n_pts) / ca.repmat(ca.vec(ca.mtimes(b, b.T))[tri], 1, n_pts)
-        Lams = [ca.mtimes(sel, lam_m[:, i]) for i in range(n_pts)]
-        Hw = crit_parts(ca.sum2(ca.reshape(w[:n_m], n_t, n_pts)), w[n_m:], b, lam_f, lam_cons)
-        E = _summation(n_t, n_pts, n_w - n_m)
-        Hw = ca.mtimes([E.T, Hw, E])
+        tri = _tril_index(n_p)
+        sel = ca.DM(ca.Sparsity.triplet(n_p * n_p, n_m, tri, list(range(n_m))), 1.0)
+        Lam = ca.mtimes(sel, lam_g[sum(n_c):sum(n_c) + n_m] / ca.vec(ca.mtimes(b, b.T))[tri])
+        Hw = crit_parts(w[:n_m], w[n_m:], b, lam_f, lam_cons)
     else:
         Lam, Hw = crit_parts(mv, w, lam_f, lam_cons)
-        Lams = [Lam] * n_pts
     off = np.cumsum([0] + list(n_c))
     blocks, jacs = [], []
     for i, xi in enumerate(rows):
-        Hi, Ji = hess_row(*xi, lam_g[int(off[i]):int(off[i + 1])], Lams[i])
+        Hi, Ji = hess_row(*xi, lam_g[int(off[i]):int(off[i + 1])], Lam)
         blocks.append(Hi)
         jacs.append(Ji)
     inv = list(np.argsort(idx))
@@ -387,12 +374,11 @@ def _jacobian_of_constraints(dims, n_x: int, functions, n_c: list) -> ca.Functio
     if n_m:
         tri = _tril_index(n_p)
         bb = ca.vec(ca.mtimes(b, b.T))[tri]
-        n_t = n_m // n_pts
-        g += [pt[1][tri] / bb - w[i * n_t:(i + 1) * n_t] for i, pt in enumerate(parts)]
-        per_row = ca.diagcat(*[ca.mtimes(ca.diag(1.0 / bb), pt[3][tri, :]) for pt in parts])
-        blocks.append(ca.horzcat(per_row, -ca.MX.eye(n_m), ca.MX(n_m, n_w - n_m)))
-        cons, Jcons = crit_jac(ca.sum2(ca.reshape(w[:n_m], n_t, n_pts)), w[n_m:], b)
-        blocks.append(ca.horzcat(ca.MX(Jcons.size1(), JM.size2()), ca.mtimes(Jcons, _summation(n_t, n_pts, n_w - n_m))))
+        g.append(mv[tri] / bb - w[:n_m])
+        lifted = ca.horzcat(ca.mtimes(ca.diag(1.0 / bb), JM[tri, :]), -ca.MX.eye(n_m), ca.MX(n_m, n_w - n_m))
+        blocks.append(lifted)
+        cons, Jcons = crit_jac(w[:n_m], w[n_m:], b)
+        blocks.append(ca.horzcat(ca.MX(Jcons.size1(), JM.size2()), Jcons))
     else:
         cons, Jcons = crit_jac(mv, w)
         n_mm = n_p * n_p
@@ -401,8 +387,3 @@ def _jacobian_of_constraints(dims, n_x: int, functions, n_c: list) -> ca.Functio
     inv = list(np.argsort(idx))
     J = ca.vertcat(*blocks)[:, inv]
     return ca.Function("nlp_jac_g", [x, b], [ca.vertcat(*g), J], ["x", "p"], ["g", "jac_g_x"])
-
-
-def _summation(n_t: int, n_pts: int, n_z: int) -> ca.DM:
-    """E = [[I I ... I, 0], [0, I_z]]: d(sum_i m_i, z)/d(m_1, ..., m_n, z)."""
-    return ca.diagcat(ca.repmat(ca.DM.eye(n_t), 1, n_pts), ca.DM.eye(n_z))

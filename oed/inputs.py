@@ -593,7 +593,7 @@ def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
     try:
         x0 = nlp.start(model, p, Xs, lo, span)
         M, n = nlp.matrix(x0), nlp.n_u + nlp.n_y + nlp.n_s
-        x0[n:n + nlp.n_m] = nlp.lifted(x0, var_bounds[2])
+        x0[n:n + nlp.n_m] = nlp.lifted(M, var_bounds[2])
         x0[n + nlp.n_m:] = _extras(crit, M)
         r = solve_nlp(lambda: nlp.problem, x0, var_bounds[0], var_bounds[1], zero, zero, var_bounds[2],
                       settings=ipopt, what="input refinement", key=key, cache=model.cache)

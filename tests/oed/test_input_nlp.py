@@ -37,7 +37,7 @@ def test_assembled_hessian_equals_the_whole_lagrangians(crit, lift_above, monkey
     M = nlp.matrix(x0)
     b = nlp.parameter(M)
     n = nlp.n_u + nlp.n_y + nlp.n_s
-    x0[n:n + nlp.n_m] = nlp.lifted(x0, b)
+    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
     rng = np.random.default_rng(3)
     x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
     x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
@@ -48,7 +48,7 @@ def test_assembled_hessian_equals_the_whole_lagrangians(crit, lift_above, monkey
 
 
 def test_lifted_refinement_reaches_the_same_design(monkeypatch):
-    # two rows: each row's information lifted into its own variables, the criterion at their sum
+    # two rows: the information of both lifted into m, m = tril(sum_i Mt_i) / bb
     cm, _ = _coarse()
     sig = np.full(cm.n_S, 0.01)
     plain = refine_inputs(cm, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
@@ -94,7 +94,7 @@ def test_assembled_jacobian_equals_the_whole_constraints(crit, lift_above, monke
     M = nlp.matrix(x0)
     b = nlp.parameter(M)
     n = nlp.n_u + nlp.n_y + nlp.n_s
-    x0[n:n + nlp.n_m] = nlp.lifted(x0, b)
+    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
     rng = np.random.default_rng(5)
     x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
     x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
