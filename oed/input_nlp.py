@@ -176,6 +176,15 @@ def _row_hessian(row: ca.Function, X) -> ca.Function:
     return ca.Function("row_hess", [u, y, S, lam, Lam], [H, ca.jacobian(mt, xr)])
 
 
+def _row_jacobian(row: ca.Function, X) -> ca.Function:
+    """``(u, y, S) -> (c, vec Mt_i, dc/d(u, y, vec S), d vec Mt_i/d(u, y, vec S))`` of one row, built once and
+    called per row by :func:`_jacobian_of_constraints`."""
+    u, y, S = X.sym("u", row.size_in(0)), X.sym("y", row.size_in(1)), X.sym("S", row.size_in(2))
+    c, mt = row(u, y, S)
+    xr = ca.vertcat(u, y, ca.vec(S))
+    return ca.Function("row_jac", [u, y, S], [c, mt, ca.jacobian(c, xr), ca.jacobian(mt, xr)])
+
+
 def _criterion_parts(X, crit: Criterion, n_p: int, scale, lift: bool):
     """(criterion Function ``(vec Mt, z) -> (f, cons)``, extra variables, parts Function): not lifted,
     ``parts(vec Mt, z, lam_f, lam_cons) -> (gradient over vec Mt, Hessian over (vec Mt, z))`` of
@@ -186,15 +195,18 @@ def _criterion_parts(X, crit: Criterion, n_p: int, scale, lift: bool):
     z = ca.vertcat(*extra) if extra else X.zeros(0, 1)
     fun = ca.Function("crit", [mv, z], [f, ca.vertcat(*cons) if cons else X.zeros(0, 1)])
     lam_f, lam_c = X.sym("lam_f"), X.sym("lam_cons", len(cons))
+    cv = ca.vertcat(*cons) if cons else X.zeros(0, 1)
     if lift:
         m, b = X.sym("m", n_p * (n_p + 1) // 2), X.sym("b", n_p)
         fm, cm = fun(ca.vec(_unlift(X, m, b)), z)
         w = ca.vertcat(m, z)
         H = ca.hessian(lam_f * fm + (ca.dot(lam_c, cm) if cons else 0), w)[0]
-        return fun, extra, ca.Function("crit_parts", [m, z, b, lam_f, lam_c], [H])
-    ell = lam_f * f + (ca.dot(lam_c, ca.vertcat(*cons)) if cons else 0)
+        jac = ca.Function("crit_jac", [m, z, b], [cm, ca.jacobian(cm, w)])
+        return fun, extra, (ca.Function("crit_parts", [m, z, b, lam_f, lam_c], [H]), jac)
+    ell = lam_f * f + (ca.dot(lam_c, cv) if cons else 0)
     H, g = ca.hessian(ell, ca.vertcat(mv, z))
-    return fun, extra, ca.Function("crit_parts", [mv, z, lam_f, lam_c], [g[:n_p * n_p], H])
+    jac = ca.Function("crit_jac", [mv, z], [cv, ca.jacobian(cv, ca.vertcat(mv, z))])
+    return fun, extra, (ca.Function("crit_parts", [mv, z, lam_f, lam_c], [g[:n_p * n_p], H]), jac)
 
 
 def _unlift(X, m, b):
@@ -242,7 +254,7 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     n_dense = n_pts * int(np.count_nonzero(np.asarray(hess_row.sparsity_out(1).colind()[1:])
                                            - np.asarray(hess_row.sparsity_out(1).colind()[:-1])))
     lift = n_dense > LIFT_ABOVE
-    crit_fun, extra, crit_parts = _criterion_parts(X, crit, n_p, scale, lift)
+    crit_fun, extra, (crit_parts, crit_jac) = _criterion_parts(X, crit, n_p, scale, lift)
     _check(deadline, "the criterion's derivatives")
     Us = [X.sym(f"u{i}", d) for i in range(n_pts)]
     Ys = [X.sym(f"y{i}", n_y) for i in range(n_pts)]
@@ -273,7 +285,9 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     hess = _hessian_of_lagrangian((n_pts, d, n_y, n_p, n_m), x.size1(), (row, hess_row, crit_parts), n_c,
                                   cons.size1())
     _check(deadline, "the Hessian of the Lagrangian")
-    return InformationNlp(NlpProblem(x, f, gg, b, hess_lag=hess), U.size1(), Y.size1(), S.size1(),
+    jac = _jacobian_of_constraints((n_pts, d, n_y, n_p, n_m), x.size1(), (_row_jacobian(row, X), crit_jac), n_c)
+    _check(deadline, "the constraints' Jacobian")
+    return InformationNlp(NlpProblem(x, f, gg, b, hess_lag=hess, jac_g=jac), U.size1(), Y.size1(), S.size1(),
                           z.size1(), gg.size1(), info, scale, n_m)
 
 
@@ -322,3 +336,54 @@ def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) ->
         J = ca.diagcat(ca.horzcat(*jacs), ca.MX.eye(n_w))[:, inv] if n_w else ca.horzcat(*jacs)[:, inv]
         H = ca.diagcat(*blocks)[inv, inv] + ca.mtimes([J.T, Hw, J])
     return ca.Function("hess_lag", [x, b, lam_f, lam_g], [ca.triu(H)])
+
+
+def _row_slices(x, dims, n_x: int):
+    """(per row (u_i, y_i, S_i) sliced from x, the positions in x of the rows' variables then (m, z))."""
+    n_pts, d, n_y, n_p, _ = dims
+    n_u, n_s = n_pts * d, n_y * n_p
+    rows, idx = [], []
+    for i in range(n_pts):
+        ix = (list(range(i * d, (i + 1) * d)) + list(range(n_u + i * n_y, n_u + (i + 1) * n_y))
+              + list(range(n_u + n_pts * n_y + i * n_s, n_u + n_pts * n_y + (i + 1) * n_s)))
+        rows.append((x[ix[:d]], x[ix[d:d + n_y]], ca.reshape(x[ix[d + n_y:]], n_y, n_p)))
+        idx += ix
+    return rows, idx + list(range(len(idx), n_x))
+
+
+def _jacobian_of_constraints(dims, n_x: int, functions, n_c: list) -> ca.Function:
+    r"""``(x, b) -> (g, dg/dx)`` assembled in an MX graph: the rows' constraints' Jacobian is block-diagonal
+    (row i's block from one row's Jacobian Function, called per row), the lifted rows
+    :math:`\mathrm{tril}(\sum_i \tilde M_i)/bb - m` read :math:`\partial \mathrm{vec}\,\tilde M_i/\partial x_i`
+    side by side (and -I on m), the criterion's constraints (E) the chain rule through (vec Mt, z) or (m, z).
+    ``functions`` = (:func:`_row_jacobian`'s Function, the criterion's ``crit_jac``); ``n_c`` the rows'
+    constraint counts; ``dims`` = (rows, inputs per row, states, parameters, lifted entries).  The same matrix as
+    CasADi's Jacobian of the whole constraint vector, without differentiating the whole graph at ``nlpsol``."""
+    n_pts, _, _, n_p, n_m = dims
+    row_jac, crit_jac = functions
+    x, b = ca.MX.sym("x", n_x), ca.MX.sym("b", n_p if n_m else 0)
+    rows, idx = _row_slices(x, dims, n_x)
+    n_w = n_x - sum(r[0].size1() + r[1].size1() + r[2].numel() for r in rows)
+    w = x[n_x - n_w:]
+    parts = [row_jac(*xi) for xi in rows]
+    mv = sum((pt[1] for pt in parts), ca.MX.zeros(n_p * n_p, 1))
+    JM = ca.horzcat(*[pt[3] for pt in parts])                     # d vec Mt / d(rows' variables)
+    g = [pt[0] for pt in parts]
+    Jc = ca.horzcat(ca.diagcat(*[pt[2] for pt in parts]), ca.MX(sum(n_c), n_w))
+    blocks = [Jc]
+    if n_m:
+        tri = _tril_index(n_p)
+        bb = ca.vec(ca.mtimes(b, b.T))[tri]
+        g.append(mv[tri] / bb - w[:n_m])
+        lifted = ca.horzcat(ca.mtimes(ca.diag(1.0 / bb), JM[tri, :]), -ca.MX.eye(n_m), ca.MX(n_m, n_w - n_m))
+        blocks.append(lifted)
+        cons, Jcons = crit_jac(w[:n_m], w[n_m:], b)
+        blocks.append(ca.horzcat(ca.MX(Jcons.size1(), JM.size2()), Jcons))
+    else:
+        cons, Jcons = crit_jac(mv, w)
+        n_mm = n_p * n_p
+        blocks.append(ca.horzcat(ca.mtimes(Jcons[:, :n_mm], JM), Jcons[:, n_mm:]))
+    g.append(cons)
+    inv = list(np.argsort(idx))
+    J = ca.vertcat(*blocks)[:, inv]
+    return ca.Function("nlp_jac_g", [x, b], [ca.vertcat(*g), J], ["x", "p"], ["g", "jac_g_x"])

@@ -48,12 +48,13 @@ def test_assembled_hessian_equals_the_whole_lagrangians(crit, lift_above, monkey
 
 
 def test_lifted_refinement_reaches_the_same_design(monkeypatch):
+    # two rows: the information of both lifted into m, m = tril(sum_i Mt_i) / bb
     cm, _ = _coarse()
     sig = np.full(cm.n_S, 0.01)
-    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    plain = refine_inputs(cm, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
     monkeypatch.setattr(input_nlp, "LIFT_ABOVE", 0)
     cm2, _ = _coarse()                          # a fresh model: no NLP cached
-    lifted = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    lifted = refine_inputs(cm2, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
     assert plain.n_failed == 0 and lifted.n_failed == 0
     assert lifted.value == pytest.approx(plain.value, abs=1e-7)
     assert np.allclose(lifted.inputs, plain.inputs, rtol=1e-4, atol=1e-3 * (UPPER - LOWER))
@@ -79,3 +80,47 @@ def test_time_limit_reached_while_building_keeps_the_start_and_says_so():
     assert any(n.startswith("refinement not finished: time limit") and "building the refinement's NLP" in n
                for n in res.notes), res.notes
     assert np.array_equal(res.refined.inputs, res.inputs)
+
+
+@pytest.mark.parametrize("crit", [Criterion.D, Criterion.A, Criterion.E])
+@pytest.mark.parametrize("lift_above", [input_nlp.LIFT_ABOVE, 0])
+def test_assembled_jacobian_equals_the_whole_constraints(crit, lift_above, monkeypatch):
+    # the constraint Jacobian assembled per row (and through the criterion's constraints) is CasADi's Jacobian of
+    # the whole constraint vector, at a point off the constraints; its g output is the NLP's g
+    monkeypatch.setattr(input_nlp, "LIFT_ABOVE", lift_above)
+    cm, w = _coarse()
+    nlp = information_nlp(cm, P, w, 2, LOWER, UPPER - LOWER, crit)
+    x0 = nlp.start(cm, P, ROWS, LOWER, UPPER - LOWER)
+    M = nlp.matrix(x0)
+    b = nlp.parameter(M)
+    n = nlp.n_u + nlp.n_y + nlp.n_s
+    x0[n:n + nlp.n_m] = nlp.lifted(M, b)
+    rng = np.random.default_rng(5)
+    x = x0 * (1 + 1e-3 * rng.standard_normal(x0.size))
+    x[n + nlp.n_m:] = 0.1 + rng.random(nlp.n_extra)
+    pr = nlp.problem
+    g_got, J_got = (np.array(v) for v in pr.jac_g(x, b))
+    ref = ca.Function("J", [pr.x, pr.par], [pr.g, ca.jacobian(pr.g, pr.x)])
+    g_ref, J_ref = (np.array(v) for v in ref(x, b))
+    assert J_got.shape == J_ref.shape == (nlp.n_g, x.size)
+    assert np.max(np.abs(J_got - J_ref)) <= 1e-9 * max(1.0, np.max(np.abs(J_ref)))
+    assert np.max(np.abs(g_got - g_ref)) <= 1e-9 * max(1.0, np.max(np.abs(g_ref)))
+
+
+def test_refinement_without_mumps_scaling_reaches_the_same_design(monkeypatch):
+    # above oed.inputs.UNSCALED_MUMPS_ABOVE variables MUMPS factorises without its own scaling: forced on the
+    # small reactor (below the threshold by default), the refinement reaches the default's value and levels
+    from oed import inputs
+
+    cm, _ = _coarse()
+    sig = np.full(cm.n_S, 0.01)
+    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    monkeypatch.setattr(inputs, "UNSCALED_MUMPS_ABOVE", 0)
+    seen, solve = [], inputs.solve_nlp
+    monkeypatch.setattr(inputs, "solve_nlp", lambda *a, **k: seen.append(k["settings"].extra) or solve(*a, **k))
+    cm2, _ = _coarse()
+    unscaled = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    assert seen and all(("mumps_scaling", 0) in extra for extra in seen)
+    assert plain.n_failed == 0 and unscaled.n_failed == 0
+    assert unscaled.value == pytest.approx(plain.value, abs=1e-7)
+    assert np.allclose(unscaled.inputs, plain.inputs, rtol=1e-4, atol=1e-3 * (UPPER - LOWER))
