@@ -1,8 +1,8 @@
 """Exceptions of the identification package (all subclass ValueError or RuntimeError)."""
 from models.errors import BlowUpError, NumericsError, StateSolveError
 
-__all__ = ["DataError", "IdentificationError", "BadStartError", "BlowUpError", "IdentifiabilityError", "NotBoundedError", "StateSolveError",
-           "ConvergenceError"]
+__all__ = ["DataError", "IdentificationError", "BadStartError", "BlowUpError", "IdentifiabilityError",
+           "NotBoundedError", "StateSolveError", "ConvergenceError"]
 
 
 class DataError(ValueError):
