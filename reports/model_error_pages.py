@@ -256,7 +256,7 @@ def _variant_text(s) -> str:
     parts = [f"{s.variant}: size = {s.size_is}; on {s.grid}; bands of a new reading at {pct}."]
     if s.embedded:
         parts.append("Parameters that carry the error (embedded, varying between conditions): "
-                     + "; ".join(f"{e.name} {relative_spread(e.relative)}" for e in s.embedded) + ".")
+                     + "; ".join(f"{e.name}\u00a0{relative_spread(e.relative)}" for e in s.embedded) + ".")
     if s.next_runs:
         parts.append("Measure next: " + "; ".join(s.next_runs) + f" ({s.next_how}).")
     elif s.next_how:
