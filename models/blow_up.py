@@ -1,7 +1,9 @@
 r"""The diagnosis of an element without a collocation solution: does x' = f(x, p, u(t)) blow up, or is the element
 too stiff for collocation?
 
-Only a diagnostic for the failure message (:func:`models.trajectory.march_failure`), never part of the numerics: the
+Only a diagnostic for the failure message (:func:`models.trajectory.march_failure`), never part of the numerics, and
+lazy: an :class:`ElementFailure` diagnoses when its message is read (or :func:`blow_up_of` is asked, e.g. at the
+start values), so line searches that catch failed state solves and halve pay nothing.  The
 failing experiment is integrated from t = 0 (x0(p, u), not the collocation's states, which a blow-up spoils) by
 SciPy's ``solve_ivp`` (Radau, implicit: stiff trajectories pass) up to the horizon, stopped where max |x| exceeds
 :data:`BLOW_UP_FACTOR` (1 + max |x(0)|).  A trajectory stopped there (or one whose integration stalls with
@@ -14,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BlowUp", "diagnose_element", "BLOW_UP_FACTOR"]
+from .errors import BlowUpError, StateSolveError
+
+__all__ = ["BlowUp", "diagnose_element", "ElementFailure", "blow_up_of", "BLOW_UP_FACTOR"]
 
 #: |x| above BLOW_UP_FACTOR (1 + max |x(0)|) counts as infinite (x' = x^2 from 1 reaches it 1e-6 before t* = 1)
 BLOW_UP_FACTOR = 1e6
@@ -53,14 +57,23 @@ def diagnose_element(dyn, p, q, horizon: float) -> BlowUp | None:
     x_start = np.asarray(dyn.x0_fun(p, dyn.u_at(q, 0.0, 0.0)), float).ravel()
     bound = BLOW_UP_FACTOR * (1.0 + float(np.max(np.abs(x_start), initial=0.0)))
 
+    jac = _rhs_jacobian(dyn)
+
     def f(t, x):
         return np.asarray(dyn.rhs_fun(x, z, p, dyn.u_at(q, t, t)), float).ravel()
+
+    def df(t, x):
+        return np.asarray(jac(x, p, dyn.u_at(q, t, t)), float)
 
     def too_large(t, x):
         return bound - float(np.max(np.abs(x))) if np.all(np.isfinite(x)) else -1.0
     too_large.terminal = True
-    with np.errstate(all="ignore"):
-        sol = solve_ivp(f, (0.0, horizon), x_start, method="Radau", rtol=1e-8, atol=1e-10, events=too_large)
+    try:
+        with np.errstate(all="ignore"):
+            sol = solve_ivp(f, (0.0, horizon), x_start, method="Radau", rtol=1e-8, atol=1e-10, jac=df,
+                            events=too_large)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError):     # e.g. inf in df/dx: undecided
+        return None
     if sol.status == 1:
         return BlowUp(True, float(sol.t_events[0][0]))
     x_last = sol.y[:, -1]
@@ -68,3 +81,52 @@ def diagnose_element(dyn, p, q, horizon: float) -> BlowUp | None:
         grown = not np.all(np.isfinite(x_last)) or np.max(np.abs(x_last)) > np.sqrt(bound)
         return BlowUp(True, float(sol.t[-1])) if grown else None
     return BlowUp(False, float(sol.t[-1]))
+
+
+def _rhs_jacobian(dyn):
+    """df/dx of the right-hand side (CasADi, exact), a function of (x, p, u)."""
+    import casadi as ca
+    x, p, u = ca.SX.sym("x", dyn.n_x), ca.SX.sym("p", dyn.n_p), ca.SX.sym("u", dyn.n_u)
+    return ca.Function("rhs_jac", [x, p, u], [ca.jacobian(dyn.rhs_fun(x, ca.SX(0, 1), p, u), x)])
+
+
+class ElementFailure(StateSolveError):
+    """No collocation solution on an element: the message (``where``, the element and experiment) completed on
+    first reading by the diagnosis of :func:`diagnose_element` (blows up near t, or too stiff for the element).
+
+    Pickles as a plain :class:`models.errors.StateSolveError` with the full message (workers send it back)."""
+
+    def __init__(self, where: str, dyn, p, q, horizon: float):
+        super().__init__(where)
+        self.where, self._args = where, (dyn, np.asarray(p, float), np.asarray(q, float), float(horizon))
+        self._diagnosis, self._done = None, False
+
+    def diagnosis(self) -> BlowUp | None:
+        """The (cached) diagnosis; None for a DAE or an undecided integration."""
+        if not self._done:
+            self._diagnosis, self._done = diagnose_element(*self._args), True
+        return self._diagnosis
+
+    def __str__(self) -> str:
+        d = self.diagnosis()
+        if d is None:
+            return (f"{self.where} (the trajectory blows up or is too stiff for the element); check p and the inputs, "
+                    "or give a finer mesh")
+        if d.blows_up:
+            return f"{self.where}: {d.phrase()}; check p and the inputs"
+        return f"{self.where}: {d.phrase()}; give a finer mesh"
+
+    def __reduce__(self):
+        return StateSolveError, (str(self), self.status)
+
+
+def blow_up_of(exc: BaseException) -> BlowUpError | None:
+    """The :class:`models.errors.BlowUpError` (message and time) of a failed state solve whose trajectory blows up
+    in finite time, else None (diagnosed here if not yet)."""
+    if isinstance(exc, BlowUpError):
+        return exc
+    if isinstance(exc, ElementFailure):
+        d = exc.diagnosis()
+        if d is not None and d.blows_up:
+            return BlowUpError(str(exc), d.t, exc.status)
+    return None

@@ -31,8 +31,8 @@ from typing import Callable, Sequence
 import casadi as ca
 import numpy as np
 
-from .blow_up import diagnose_element
-from .errors import BlowUpError, StateSolveError
+from .blow_up import ElementFailure
+from .errors import StateSolveError
 from .batched import batched_function
 from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
 from .sensitivity import Sensitivities
@@ -105,21 +105,15 @@ def march_functions(cm) -> tuple:
 def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
     """The one failure of the marcher: no collocation solution on element k of experiment j (0-based).
 
-    For an ODE the message says whether the trajectory blows up (then a :class:`models.errors.BlowUpError` with
-    the time) or the element is too stiff (:func:`models.blow_up.diagnose_element`, a SciPy integration of the
-    experiment for the message only, never in the numerics)."""
+    An :class:`models.blow_up.ElementFailure`: for an ODE its message says whether the trajectory blows up (with
+    the time; :func:`models.blow_up.blow_up_of` gives the :class:`models.errors.BlowUpError`) or the element is too
+    stiff, diagnosed by a SciPy integration of the experiment when the message is read (never in the numerics)."""
     b = np.asarray(cm.mesh.boundaries)
     p = p if np.ndim(p) == 1 else np.asarray(p)[j]
     q = np.asarray(inputs)[j]
     where = (f"integration of {cm.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs {q.tolist()}: "
              f"no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j + 1}")
-    diag = diagnose_element(cm.dynamic, p, q, float(b[-1]))
-    if diag is None:
-        return StateSolveError(f"{where} (the trajectory blows up or is too stiff for the element); check p and "
-                               "the inputs, or give a finer mesh")
-    if diag.blows_up:
-        return BlowUpError(f"{where}: {diag.phrase()}; check p and the inputs", diag.t)
-    return StateSolveError(f"{where}: {diag.phrase()}; give a finer mesh")
+    return ElementFailure(where, cm.dynamic, p, q, float(b[-1]))
 
 
 def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:
