@@ -1,8 +1,8 @@
 """Exceptions of the identification package (all subclass ValueError or RuntimeError)."""
-from models.errors import NumericsError, StateSolveError
+from models.errors import BlowUpError, NumericsError, StateSolveError
 
-__all__ = ["DataError", "IdentificationError", "IdentifiabilityError", "NotBoundedError", "StateSolveError",
-           "ConvergenceError"]
+__all__ = ["DataError", "IdentificationError", "BadStartError", "BlowUpError", "IdentifiabilityError",
+           "NotBoundedError", "StateSolveError", "ConvergenceError"]
 
 
 class DataError(ValueError):
@@ -17,6 +17,11 @@ class IdentificationError(NumericsError):
     status : str
         The solver's return status (e.g. Ipopt's ``return_status``).
     """
+
+
+class BadStartError(IdentificationError):
+    """The start values p0 are bad input: the trajectory blows up in finite time within the horizon at p0
+    (a :class:`models.errors.BlowUpError` of the state solve at the start)."""
 
 
 class IdentifiabilityError(IdentificationError):

@@ -149,6 +149,7 @@ class Coulomb:
     """
 
     input_names = ("dir",)
+    input_units = ("",)                  # a sign, dimensionless
 
     def __init__(self, q_c: float):
         q_c = float(q_c)
@@ -189,6 +190,7 @@ class PreisachNetwork:
     c: np.ndarray
     c0: float
     input_names = ("q_prev", "q_min", "q_max")
+    input_units = ("N", "N", "N")        # forces, like q_P
 
     def __post_init__(self):
         W = np.array(self.W, float, ndmin=2)

@@ -124,7 +124,8 @@ def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINA
     friction : object, optional
         A friction model with ``input_names`` (extra input columns after q_P) and
         ``force(qvec)`` returning a CasADi scalar q_fric (N) from the full input vector
-        ``qvec = [q_P, *input_names]``; the vertical force at R becomes q_P - q_fric.
+        ``qvec = [q_P, *input_names]``; the vertical force at R becomes q_P - q_fric.  Its optional
+        ``input_units`` label those columns (default N; "" for a dimensionless sign such as M2's ``dir``).
     k5, k7 : float
         Nominal values (the model's ``p_nominal``), N/mm.
     """
@@ -133,6 +134,7 @@ def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINA
     if extra_sensors:
         sensors += [s for s in mech.all_sensors() if s not in sensors]
     inputs: Sequence[str] = ("q_P",)
+    units: Sequence[str] = ("N",)
     input_map = None
     if friction is not None:
         names = tuple(getattr(friction, "input_names", ()))
@@ -141,10 +143,12 @@ def press_model(extra_sensors: bool = False, friction=None, k5: float = K_NOMINA
         if "q_P" in names:
             raise MechanismError(f"friction {friction!r}: input_names must not repeat 'q_P'")
         inputs = ("q_P",) + names
+        units = ("N",) + tuple(getattr(friction, "input_units", ("N",) * len(names)))
 
         def input_map(qd, qvec):
             return {"q_P": qd["q_P"] - friction.force(qvec)}
     return build_model(mech, sensors=sensors, unknowns=("k5", "k7"), inputs=inputs, input_map=input_map,
+                       input_units=units,
                        name="press_linkage" if friction is None else f"press_linkage+{type(friction).__name__}")
 
 

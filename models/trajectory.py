@@ -31,6 +31,7 @@ from typing import Callable, Sequence
 import casadi as ca
 import numpy as np
 
+from .blow_up import ElementFailure
 from .errors import StateSolveError
 from .batched import batched_function
 from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
@@ -102,14 +103,17 @@ def march_functions(cm) -> tuple:
 
 
 def march_failure(cm, p, inputs, j: int, k: int) -> StateSolveError:
-    """The one failure of the marcher: no collocation solution on element k of experiment j (0-based)."""
+    """The one failure of the marcher: no collocation solution on element k of experiment j (0-based).
+
+    An :class:`models.blow_up.ElementFailure`: for an ODE its message says whether the trajectory blows up (with
+    the time; :func:`models.blow_up.blow_up_of` gives the :class:`models.errors.BlowUpError`) or the element is too
+    stiff, diagnosed by a SciPy integration of the experiment when the message is read (never in the numerics)."""
     b = np.asarray(cm.mesh.boundaries)
     p = p if np.ndim(p) == 1 else np.asarray(p)[j]
-    return StateSolveError(
-        f"integration of {cm.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs "
-        f"{np.asarray(inputs)[j].tolist()}: no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of "
-        f"experiment {j + 1} (the trajectory blows up or is too stiff for the element); check p and the inputs, "
-        "or give a finer mesh")
+    q = np.asarray(inputs)[j]
+    where = (f"integration of {cm.dynamic.name!r} failed at p = {np.asarray(p).tolist()}, inputs {q.tolist()}: "
+             f"no collocation solution on the element [{b[k]:g}, {b[k + 1]:g}] of experiment {j + 1}")
+    return ElementFailure(where, cm.dynamic, p, q, float(b[-1]))
 
 
 def march(cm, W0: np.ndarray, p, U: np.ndarray, inputs) -> np.ndarray:

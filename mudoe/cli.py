@@ -92,13 +92,13 @@ def _version() -> str:
 
 
 def _bad_input_types():
-    from identification.errors import DataError
+    from identification.errors import BadStartError, DataError
     from identification.studies.splits import SplitError
     from models.contract import ModelError
     from .config import ConfigError
     from .console import OutDirError
     from .data_io import DataFileError
-    return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError)
+    return (ConfigError, DataFileError, DataError, SplitError, ModelError, OutDirError, BadStartError)
 
 
 def _located(exc: Exception, args) -> str:

@@ -254,7 +254,7 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
     fit (goodness of fit, trust of its linearisation); failures are recorded, not raised (an estimate the data do
     not bound is recorded as a failure with its reason, "not bounded: ...").  ``[identify] starts`` and ``seed``
     are passed to every fit (a multi-start fit keeps its starts in ``est.diagnostics.starts``)."""
-    from identification.errors import IdentificationError
+    from identification.errors import BadStartError, IdentificationError
     from .fit_assessment import assess
     progress = progress or Progress(False)
     estimates, errors, assessments = dict(results.estimates), dict(results.estimate_errors), dict(results.assessments)
@@ -268,6 +268,8 @@ def run_identify(study: Study, results: StudyResults, progress: Progress | None 
         with progress.step(f"identify {v}"):
             try:
                 est = identify(m, study.data[v], start_values(study, v), starts=ident.starts, seed=ident.seed)
+            except BadStartError as exc:     # bad input (e.g. a blow-up at p0): refused, not a failed fit
+                raise BadStartError(f"variant {v}: {exc}", status=exc.status) from None
             except IdentificationError as exc:
                 errors[v] = f"{type(exc).__name__}: {exc}"
                 continue

@@ -17,6 +17,11 @@ def _ax(ax, figsize=(6.0, 4.0)):
     return ax
 
 
+def _legend_above(ax):
+    """The legend in two columns above the axes: never over the curve (the reactor's trough, issue 31 audit)."""
+    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=2, fontsize=7, frameon=False)
+
+
 def sensitivity_plot(x, sensitivity, reference: float, support, x_label: str, ax=None):
     """The sensitivity function over the checked points ``x`` (one input column), its maximum marked, the line at
     its optimum value ``reference`` (D: n_p) and the ``support`` points of the design on that line."""
@@ -34,7 +39,7 @@ def sensitivity_plot(x, sensitivity, reference: float, support, x_label: str, ax
     ax.set_ylim(lo - 0.05 * abs(reference), reference + 0.15 * abs(reference))
     ax.set_xlabel(x_label)
     ax.set_ylabel("sensitivity (-)")
-    ax.legend(loc="lower right", fontsize=7, frameon=True)
+    _legend_above(ax)
     return ax.figure
 
 
@@ -46,9 +51,11 @@ def efficiency_curve(efficiencies, weights, ax=None):
     order = np.argsort(e)
     cum = np.cumsum(w[order])
     ax.step(np.concatenate([[0.0], cum]), np.concatenate([[e[order][0]], e[order]]), where="pre", color="tab:blue",
-            lw=1.4, label="local design")
-    ax.axhline(1.0, color="tab:green", ls="--", lw=1.0, label="robust design (reference)")
-    ax.axhline(float(w @ e), color="0.4", ls=":", lw=1.0, label=f"prior mean {float(w @ e):.4f}")
+            lw=1.4, label="local design", zorder=2)
+    # the reference thin and beneath, the prior mean thick on top: both show where the mean is 1.0000
+    ax.axhline(1.0, color="tab:green", ls=(0, (5, 3)), lw=0.8, label="robust design (reference)", zorder=1)
+    ax.axhline(float(w @ e), color="0.1", ls=":", lw=2.0, label=f"local design: prior mean {float(w @ e):.4f}",
+               zorder=3)
     lo, hi = min(float(e.min()), 1.0), max(float(e.max()), 1.0)
     pad = max(0.1 * (hi - lo), 0.01)        # at least +-1 %: equal designs read as a flat line at 1
     ax.set_ylim(lo - pad, hi + pad)
@@ -56,5 +63,5 @@ def efficiency_curve(efficiencies, weights, ax=None):
     ax.set_xlim(0.0, 1.0)
     ax.set_xlabel("cumulative prior weight (parameter vectors sorted by efficiency)")
     ax.set_ylabel("efficiency against the robust design (-)")
-    ax.legend(loc="lower right", fontsize=7, frameon=True)
+    _legend_above(ax)
     return ax.figure

@@ -186,6 +186,20 @@ def model_error_pages(results, variant: str):
 
 
 # ---------------------------------------------------------------------------- the engineer's summary
+#: relative spreads below this (a fraction of |p|) print as "< ±0.01 %": digits there are noise for an engineer
+RELATIVE_FLOOR = 1e-4
+
+
+def relative_spread(relative: float) -> str:
+    """"±8.74 %": a parameter's relative spread (a fraction of |p|) in percent to three significant digits, or
+    "< ±0.01 %" below :data:`RELATIVE_FLOOR` (not "±0.00383 %"); no-break spaces keep it on one line."""
+    if relative != relative:
+        return "-"
+    if abs(relative) < RELATIVE_FLOOR:
+        return f"<\u00a0±{100 * RELATIVE_FLOOR:g}\u00a0%"
+    return f"±{100 * relative:.3g}\u00a0%"
+
+
 def _num(x: float, unit: str = "") -> str:
     return "-" if x != x else f"{x:.3g}" + (f" {unit}" if unit else "")
 
@@ -220,8 +234,8 @@ def summary_rows(views) -> tuple:
             rows.append([s.variant if i == 0 else "", test if i == 0 else "", s.kind if i == 0 else "", z.sensor,
                          _num(z.max_abs, u) if s.kind != "none" else "0", _wrap(z.at) if s.kind != "none" else "-",
                          _num(z.rms, u) if s.kind != "none" else "0",
-                         f"+-{z.half_median:.3g} ({z.half_max:.3g}) {u}",
-                         f"+-{z.plain_median:.3g} ({z.plain_max:.3g}) {u}", nxt])
+                         f"±{z.half_median:.3g} ({z.half_max:.3g}) {u}",
+                         f"±{z.plain_median:.3g} ({z.plain_max:.3g}) {u}", nxt])
             sized = s.detected and s.kind != "none"       # detected but no error model chosen: nothing to size
             flags.append([(s.detected and k in (0, 1)) or (sized and k in (4, 7)) for k in range(len(head))])
     return head, rows, flags
@@ -231,9 +245,10 @@ def _ranking_text(views) -> str:
     rank = next((v.ranking for v in views if v.ranking is not None), None)
     if rank is None:
         return "Which model to use: no ranking (no variant has a held-out table: the study has no splits)."
-    return ("Which model to use for prediction: " + rank.sentence() + ".\nVerdict: " + rank.verdict()
+    text = ("Which model to use for prediction: " + rank.sentence() + ".\nVerdict: " + rank.verdict()
             + (" (the held-out log scores differ by less than their noise: either model predicts as well)"
                if not rank.decided and rank.runner_up and rank.comparable else "") + ".")
+    return text.replace(" +- ", " ± ")       # the ranking's plain-text words (also the terminal's) on the page
 
 
 def _variant_text(s) -> str:
@@ -241,7 +256,7 @@ def _variant_text(s) -> str:
     parts = [f"{s.variant}: size = {s.size_is}; on {s.grid}; bands of a new reading at {pct}."]
     if s.embedded:
         parts.append("Parameters that carry the error (embedded, varying between conditions): "
-                     + "; ".join(f"{e.name} +-{100 * e.relative:.3g} %" for e in s.embedded) + ".")
+                     + "; ".join(f"{e.name}\u00a0{relative_spread(e.relative)}" for e in s.embedded) + ".")
     if s.next_runs:
         parts.append("Measure next: " + "; ".join(s.next_runs) + f" ({s.next_how}).")
     elif s.next_how:
@@ -272,7 +287,7 @@ def model_uncertainty_page(results):
     fig.canvas.draw()
     bottom = ax.tables[0].get_window_extent().transformed(fig.transFigure.inverted()).y0
     text = "\n\n".join(_variant_text(v.summary) for v in views)
-    lines = _text(fig, 0.04, bottom - 0.03, text, width=185, size=8)
+    lines = _text(fig, 0.04, bottom - 0.03, text, width=180, size=8)
     curves = [v.summary for v in views if v.summary.x.size and v.summary.kind != "none"]
     room = bottom - 0.03 - 0.0165 * lines - 0.1           # top of the plots, below their title and legend
     if curves and room > 0.15:

@@ -14,10 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sps
 
+from models.blow_up import blow_up_of
 from models.contract import Model
 from models.sensitivity import sensitivities
 from models.state import BATCH_START_MIN, numerics, solve_states
-from identification.errors import DataError, IdentificationError, StateSolveError
+from identification.errors import BadStartError, DataError, IdentificationError, StateSolveError
 from identification.fit import newton as newton_core
 from identification.fit.implicit_start import START_CACHE_SIZE, solve_states_from
 from identification.fit.measurements import Measurements, common_spread
@@ -243,6 +244,9 @@ def make_start(model, data, p0, weights, Y0) -> Start:
         try:
             Y_init = initial_states(model, p0, data.inputs, Y0)
         except StateSolveError as exc:
+            if blow_up_of(exc) is not None:     # bad input, not a failed fit
+                raise BadStartError(f"p0: the trajectory blows up at the start values: {exc}",
+                                    status="state solve failed") from None
             raise IdentificationError(f"p0: the state equation cannot be solved at the start values: {exc}",
                                       status="state solve failed") from None
         # a collocated ODE is solved in the reduced space (no NLP): its scalings are made when Ipopt needs them

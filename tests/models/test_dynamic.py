@@ -1,11 +1,14 @@
 """Dynamic models (models.dynamic) and their Radau IIA collocation (models.collocation)."""
+import pickle
+
 import casadi as ca
 import numpy as np
 import pytest
 
 from models import Model, ModelError
 from models.collocation import CollocatedModel, Mesh, radau_coefficients
-from models.errors import StateSolveError
+from models.blow_up import blow_up_of
+from models.errors import BlowUpError, StateSolveError
 from mudoe.example_reactor import P_TRUE, R_KJ, T_REF, TIMES, build
 
 
@@ -138,8 +141,39 @@ def test_refining_keeps_an_element_too_short_to_split():
 def test_blow_up_names_the_element():
     m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
                   h=lambda x, p, u: x, horizon=2.0)
-    with pytest.raises(StateSolveError, match=r"integration .* on the element \[0.5, 1\]"):
+    with pytest.raises(StateSolveError, match=r"integration .* on the element \[0.5, 1\]") as info:
         m.collocate([0.5, 2.0], max_step=0.5).simulate([1.0], [[1.0]])
+    # x = x0 / (1 - k x0 t): t* = 1 for k = x0 = 1, t* = 0.8 for x0 = 1.25 (element [0.5, 1] too)
+    blow = blow_up_of(info.value)                       # the message's diagnosis, made when read
+    assert isinstance(blow, BlowUpError) and abs(blow.t - 1.0) < 1e-4   # printed to 4 digits
+    assert "(|x| -> inf near t = 1); check p and the inputs" in str(info.value)
+    with pytest.raises(StateSolveError, match=r"element \[0.5, 1\] of experiment 1: the trajectory blows up "
+                                              r"\(\|x\| -> inf near t = 0.8\)") as info:
+        m.collocate([0.5, 2.0], max_step=0.5).simulate([1.0], [[1.25]])
+    assert abs(blow_up_of(info.value).t - 0.8) < 1e-4
+    # a worker sends it back as a plain StateSolveError with the whole message
+    back = pickle.loads(pickle.dumps(info.value))
+    assert type(back) is StateSolveError and str(back) == str(info.value)
+
+
+def test_a_finite_trajectory_on_a_failed_element_is_called_too_stiff():
+    # the diagnosis of the message: x' = -k x stays finite, so an element without a collocation solution is
+    # too stiff for the element, not a blow-up (no BlowUpError; a finer mesh is the advice)
+    from models.blow_up import diagnose_element
+    from models.trajectory import march_failure
+    m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * x, x0=lambda p, u: u[0],
+                  h=lambda x, p, u: x, horizon=2.0)
+    cm = m.collocate([0.5, 2.0], max_step=0.5)
+    diag = diagnose_element(cm.dynamic, [1e4], [1.0], 2.0)
+    assert not diag.blows_up and diag.t == 2.0
+    err = march_failure(cm, [1e4], [[1.0]], 0, 1)
+    assert isinstance(err, StateSolveError) and blow_up_of(err) is None
+    assert str(err).endswith("element [0.5, 1] of experiment 1: the trajectory stays finite up to t = 2: the ODE is "
+                             "too stiff for the element; give a finer mesh"), str(err)
+    blowing = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
+                        h=lambda x, p, u: x, horizon=2.0)
+    blow = march_failure(blowing.collocate([0.5, 2.0], max_step=0.5), [1.0], [[1.0]], 0, 1)
+    assert isinstance(blow_up_of(blow), BlowUpError) and abs(blow_up_of(blow).t - 1.0) < 1e-4
 
 
 def test_trajectory_and_outputs_subset():

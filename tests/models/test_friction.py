@@ -60,6 +60,7 @@ def test_input_errors_name_the_argument():
 def test_coulomb_enters_the_press_as_a_force_at_R():
     m1, m2 = press_model(), press_model(friction=Coulomb(60.0))
     assert m2.inputs == ("q_P", "dir")
+    assert m1.input_units == ("N",) and m2.input_units == ("N", "")       # dir is a sign: no unit ("dir = 1 N" before)
     p = np.array(K_NOMINAL)
     U = model_inputs("M2", Q)
     y2 = solve_states(m2, p, U)
@@ -78,7 +79,7 @@ def test_preisach_network_symbolic_equals_numeric_and_round_trips():
     back = PreisachNetwork.from_dict(net.to_dict())
     np.testing.assert_array_equal(back(U), net(U))
     m3 = press_model(friction=net)
-    assert m3.inputs == ("q_P", "q_prev", "q_min", "q_max")
+    assert m3.inputs == ("q_P", "q_prev", "q_min", "q_max") and m3.input_units == ("N",) * 4    # forces
 
 
 # ---------------------------------------------------------------------------- inverse model and Coulomb force

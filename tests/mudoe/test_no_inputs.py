@@ -68,3 +68,29 @@ def test_cli_init_simulate_identify_without_inputs(tmp_path, capsys, monkeypatch
     assert main(["identify", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--json"]) == 0
     est = json.loads(capsys.readouterr().out)["default"]
     assert abs(est["p"][0] - 2.0) < 0.1 and abs(est["p"][1] - 0.5) < 0.05
+
+
+def test_cli_a_blow_up_at_p0_is_bad_input_naming_the_time(tmp_path, capsys, monkeypatch):
+    # issue 30 (bad input): cA' = k1 cA^2, cA(0) = 1 blows up at t* = 1 / k1 = 1 h at the start k1 = 1 (within the
+    # 2 h horizon; the data's k1 = 0.2 does not): exit 2, one line naming the variant, the model and the time
+    (tmp_path / "blowrun.py").write_text(FACTORY.replace("ca.vertcat(-p[0] * x[0], p[0] * x[0] - p[1] * x[1])",
+                                                         "ca.vertcat(p[0] * x[0] ** 2, -p[1] * x[1])")
+                                         .replace("ca.vertcat(1.0, 0.0)", "ca.vertcat(1.0, 1.0)"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cfg = tmp_path / "study.toml"
+    assert main(["init", "--model", "blowrun:build", str(cfg)]) == 0
+    text = cfg.read_text().replace("[simulate]", "[simulate]\ntruth = {k1 = 0.2, k2 = 0.5}")
+    cfg.write_text(text)
+    assert main(["simulate", str(cfg), "--out", str(tmp_path / "data"), "--quiet"]) == 0
+    head, tail = text.split('name = "k1"', 1)
+    start = tail.index("start = ")
+    end = tail.index("\n", start)
+    cfg.write_text(head + 'name = "k1"' + tail[:start] + "start = 1.0" + tail[end:])
+    capsys.readouterr()
+    rc = main(["identify", str(cfg), "--out", str(tmp_path / "out"), "--quiet"])
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(lines) == 1, lines
+    assert lines[0].startswith("mudoe identify: error: variant default: p0: the trajectory blows up at the start "
+                               "values: integration of 'batch run' failed at p = [1.0, "), lines[0]
+    assert "the trajectory blows up (|x| -> inf near t = 1)" in lines[0], lines[0]
+    assert not (tmp_path / "out").exists()

@@ -1,5 +1,7 @@
 """The page "Model uncertainty" (issue 29 item 4) drawn from records alone: a stub study record whose views hold
 an :class:`identification.studies.records.ErrorSummary` (no study, no fit)."""
+import dataclasses
+
 import matplotlib
 import numpy as np
 
@@ -10,7 +12,7 @@ from identification.studies.model_error_result import EmbeddedParameter  # noqa:
 from identification.studies.model_ranking import ModelRanking  # noqa: E402
 from identification.studies.records import ErrorSummary, ModelErrorView, SensorErrorSize  # noqa: E402
 from reports.builder import page_texts, report_pages  # noqa: E402
-from reports.model_error_pages import model_uncertainty_page, summary_rows  # noqa: E402
+from reports.model_error_pages import model_uncertainty_page, relative_spread, summary_rows  # noqa: E402
 
 from record_stub import stub_record  # noqa: E402
 
@@ -46,12 +48,26 @@ def test_the_page_is_drawn_from_the_records_with_the_verdict_and_the_numbers():
     plt.close(fig)
     assert "Model uncertainty" in texts and "Which model to use for prediction: predict with B" in texts
     assert "Verdict: choose B" in texts
-    assert "10.7 um" in texts and "q = 680 N" in texts and "+-12.7 (13.8) um" in texts and "+-9.71 (9.89) um" in texts
+    assert "10.7 um" in texts and "q = 680 N" in texts and "±12.7 (13.8) um" in texts and "±9.71 (9.89) um" in texts
     assert "12.8 -> 12.7 um" in texts
-    assert "Measure next: q = 1600 N" in texts and "k5 +-3.1 %" in texts
+    assert "Measure next: q = 1600 N" in texts and "k5 ±3.1 %" in texts and "+-" not in texts
     assert "No error model: no runs to learn it." in texts
     assert "Over the data's range: the band to design with (solid)" in texts and "A: band with discrepancy" in texts
     assert "B: band with none" not in texts               # no error model: no curves
+
+
+def test_tiny_relative_spreads_print_as_below_a_hundredth_of_a_percent():
+    # "k5 +-0.00383 %" before: digits below 0.01 % of |p| are noise for the engineer
+    assert relative_spread(0.0874) == "±8.74\u00a0%" and relative_spread(0.031) == "±3.1\u00a0%"    # no-break
+    assert relative_spread(3.83e-5) == "<\u00a0±0.01\u00a0%" and relative_spread(1e-4) == "±0.01\u00a0%"
+    assert relative_spread(float("nan")) == "-"
+    view = _view("A", True)
+    tiny = dataclasses.replace(view.summary, embedded=(EmbeddedParameter("k5", 2.0, 3.83e-5),))
+    rec = stub_record({}, model_error_views={"A": dataclasses.replace(view, summary=tiny)})
+    fig = model_uncertainty_page(rec)
+    texts = " ".join(" ".join(page_texts(fig)).split())
+    plt.close(fig)
+    assert "k5 < ±0.01 %." in texts and "0.00383" not in texts
 
 
 def test_a_tie_says_either_model_predicts_as_well():

@@ -255,13 +255,18 @@ def test_index1_dae_identify():
 def test_blow_up_at_p0_names_the_experiment_and_time():
     import casadi as ca
     from identification import IdentificationError
+    from identification.errors import BadStartError
     from models import Model
     m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: p[0] * x ** 2, x0=lambda p, u: u[0],
                   h=lambda x, p, u: x, horizon=2.0)
     t, q = np.array([0.5, 1.0, 2.0]), np.array([[0.1], [1.0]])
     z = (q / (1 - 0.1 * q * t))[None, :, :, None]
-    with pytest.raises(IdentificationError, match=r"inputs \[1.0\]: no collocation solution on the element"):
+    with pytest.raises(IdentificationError, match=r"inputs \[1.0\]: no collocation solution on the element") as info:
         identify(m, DynamicMeasurements(q, t, z, [0.01]), [1.0])
+    # issue 30: x = 1 / (1 - t) from x(0) = 1 at k = 1 blows up at t* = 1: bad input (not a failed fit) naming
+    # the time, found by the message's diagnostic integration (models.blow_up)
+    assert isinstance(info.value, BadStartError)
+    assert "of experiment 2: the trajectory blows up (|x| -> inf near t = 1); check p" in str(info.value)
 
 
 def test_detect_rejects_a_linear_spring_on_hardening_spring_data():
