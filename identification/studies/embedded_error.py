@@ -21,6 +21,10 @@ discrepancy.  omega maximises the restricted (REML) likelihood
 in c_i = log(omega_i / se_i) (se_i the plain fit's standard error; V_i = dV/dc_i = 2 omega_i^2
 (g_i g_i^T) o S, analytic), by L-BFGS-B from a few starts.  A new condition's output then scatters by
 g*^T Omega g* on top of the parameter uncertainty.
+
+V is block diagonal (S couples only the observations of one condition): the objective is evaluated block by
+block (:func:`block_reml`: one Cholesky per condition, never one of the full N x N matrix), the same numbers as
+the dense :func:`general_reml` to round-off.
 """
 from __future__ import annotations
 
@@ -29,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, optimize
 
-__all__ = ["EmbeddedFit", "fit_embedded", "embedded_objective", "general_reml"]
+__all__ = ["EmbeddedFit", "fit_embedded", "embedded_objective", "general_reml", "block_reml", "condition_blocks",
+           "embedded_block_objective"]
 
 #: bounds of c_i = log(omega_i / se_i): omega from ~3e-4 to ~400 standard errors
 _BOUND = (-8.0, 6.0)
@@ -52,6 +57,72 @@ def general_reml(V: np.ndarray, dVs: list, G: np.ndarray, r: np.ndarray) -> tupl
     return f, np.array([np.sum(P * dV) - alpha @ dV @ alpha for dV in dVs])
 
 
+def block_reml(Vs: list, dVs: list, index: list, G: np.ndarray, r: np.ndarray, n_theta: int) -> tuple:
+    r"""(-2 l_R without constant, gradient (n_theta,)) of :func:`general_reml` for a block-diagonal V.
+
+    -2 l_R = sum_b log|V_b| + log|A| + r^T P r with A = sum_b G_b^T V_b^{-1} G_b and
+    P r = V^{-1} (r - G A^{-1} G^T V^{-1} r) computed block by block; the gradient
+    tr(P V_i) - r^T P V_i P r sums over the blocks b that V_i acts on, with the diagonal block
+    P_bb = V_b^{-1} - (V_b^{-1} G_b) A^{-1} (V_b^{-1} G_b)^T.
+
+    Parameters
+    ----------
+    Vs : list of ndarray (n_b, n_b)      the diagonal blocks of V (unit of r squared)
+    dVs : list of (ndarray of int (m_b,), ndarray (m_b, n_b, n_b))   per block, the hyperparameters acting on it
+                                         and dV_b / d theta of each
+    index : list of ndarray of int (n_b,)   per block, its positions in the stacked r (the blocks partition them)
+    G : ndarray (N, n_p)                 fixed-effect sensitivities
+    r : ndarray (N,)                     residuals
+    n_theta : int                        the number of hyperparameters
+
+    Returns (inf, zeros) when a Cholesky fails.
+    """
+    try:
+        Ls = [linalg.cholesky(V, lower=True) for V in Vs]
+    except linalg.LinAlgError:
+        return np.inf, np.zeros(n_theta)
+    Vinvs = [linalg.cho_solve((L, True), np.eye(len(L))) for L in Ls]
+    VGs = [Vi @ G[idx] for Vi, idx in zip(Vinvs, index)]
+    Vrs = [Vi @ r[idx] for Vi, idx in zip(Vinvs, index)]
+    A = sum(G[idx].T @ VG for idx, VG in zip(index, VGs))
+    try:
+        LA = linalg.cholesky(A, lower=True)
+    except linalg.LinAlgError:
+        return np.inf, np.zeros(n_theta)
+    beta = linalg.cho_solve((LA, True), sum(G[idx].T @ Vr for idx, Vr in zip(index, Vrs)))
+    logdet = sum(2 * np.sum(np.log(np.diag(L))) for L in Ls) + 2 * np.sum(np.log(np.diag(LA)))
+    grad = np.zeros(n_theta)
+    quad = 0.0
+    for idx, Vi, VG, Vr, (which, dV) in zip(index, Vinvs, VGs, Vrs, dVs):
+        alpha = Vr - VG @ beta
+        quad += float(r[idx] @ alpha)
+        if len(which):
+            P = Vi - VG @ linalg.cho_solve((LA, True), VG.T)
+            grad[which] += np.einsum("ij,mij->m", P, dV) - np.einsum("i,mij,j->m", alpha, dV, alpha)
+    return logdet + quad, grad
+
+
+def condition_blocks(rows: np.ndarray) -> list:
+    """The positions (index arrays) of every condition label in ``rows`` (N,), in order of first appearance."""
+    rows = np.asarray(rows)
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    return [np.flatnonzero(inverse == k) for k in order]
+
+
+def _block_covariance(c: np.ndarray, Gs: np.ndarray, index: list, noise: np.ndarray, se: np.ndarray) -> tuple:
+    """(V_b per condition, [(all hyperparameters, dV_b / dc)]) of the embedded error's covariance."""
+    om2 = (se * np.exp(c)) ** 2
+    which = np.arange(len(c))
+    Vs, dVs = [], []
+    for idx in index:
+        g = Gs[idx]
+        parts = g.T[:, :, None] * g.T[:, None, :]                     # (n_p, n_b, n_b): g_i g_i^T
+        Vs.append(np.diag(noise[idx]) + np.tensordot(om2, parts, axes=1))
+        dVs.append((which, 2 * om2[:, None, None] * parts))
+    return Vs, dVs
+
+
 def _covariance(c: np.ndarray, Gs: np.ndarray, same_row: np.ndarray, noise: np.ndarray, se: np.ndarray) -> tuple:
     om2 = (se * np.exp(c)) ** 2
     parts = [np.outer(Gs[:, i], Gs[:, i]) * same_row for i in range(len(c))]
@@ -60,9 +131,18 @@ def _covariance(c: np.ndarray, Gs: np.ndarray, same_row: np.ndarray, noise: np.n
 
 
 def embedded_objective(c, Gs, same_row, noise, se, r) -> tuple:
-    """(-2 l_R(c), exact gradient) of the embedded error in c = log(omega / se)."""
+    """(-2 l_R(c), exact gradient) of the embedded error in c = log(omega / se) (dense V; the reference of
+    :func:`embedded_block_objective`)."""
     V, dVs = _covariance(np.asarray(c, float), Gs, same_row, noise, se)
     return general_reml(V, dVs, Gs, r)
+
+
+def embedded_block_objective(c, Gs, index, noise, se, r) -> tuple:
+    """(-2 l_R(c), exact gradient) of the embedded error in c = log(omega / se), block by block over the
+    conditions ``index`` (:func:`condition_blocks`)."""
+    c = np.asarray(c, float)
+    Vs, dVs = _block_covariance(c, Gs, index, noise, se)
+    return block_reml(Vs, dVs, index, Gs, r, len(c))
 
 
 @dataclass(frozen=True)
@@ -88,13 +168,13 @@ def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.nda
     the plain fit's standard errors se (n_p,) and residuals r (N,), from each of ``starts`` (arrays of c (n_p,);
     None: the constant starts ``_STARTS``).  numpy.linalg.LinAlgError when no start
     gives positive definite V and G^T V^-1 G."""
-    same_row = (rows[:, None] == rows[None, :]).astype(float)
+    index = condition_blocks(rows)
     n_p = Gs.shape[1]
     best = None
     for x0 in (np.full(n_p, st) for st in _STARTS) if starts is None else starts:
-        if not np.isfinite(embedded_objective(x0, Gs, same_row, noise, se, r)[0]):
+        if not np.isfinite(embedded_block_objective(x0, Gs, index, noise, se, r)[0]):
             continue
-        res = optimize.minimize(embedded_objective, x0, args=(Gs, same_row, noise, se, r), jac=True,
+        res = optimize.minimize(embedded_block_objective, x0, args=(Gs, index, noise, se, r), jac=True,
                                 method="L-BFGS-B", bounds=[_BOUND] * n_p, options={"maxiter": 300})
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
@@ -102,4 +182,5 @@ def fit_embedded(Gs: np.ndarray, rows: np.ndarray, noise: np.ndarray, se: np.nda
         raise np.linalg.LinAlgError("the embedded error's covariance V or G^T V^-1 G is not positive definite at "
                                     "any start (Cholesky failed)")
     c = np.asarray(best.x, float)
+    same_row = (rows[:, None] == rows[None, :]).astype(float)
     return EmbeddedFit(se * np.exp(c), c, _covariance(c, Gs, same_row, noise, se)[0], float(best.fun), bool(best.success))
