@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from identification.studies.embedded_error import block_reml, condition_blocks
+from identification.studies.embedded_error import block_reml, condition_blocks, spd_inverse
 
 __all__ = ["InputScaling", "Observations", "GPFit", "fit_discrepancy", "white_lr_test", "WhiteTest",
            "kernel_blocks", "reml_objective", "reml_information", "BOUNDS", "AT_BOUND"]
@@ -260,7 +260,7 @@ def _reml_parts(obs: Observations, theta: np.ndarray, G: np.ndarray, pins: tuple
             except linalg.LinAlgError:
                 return None
             logdet += 2 * np.sum(np.log(np.diag(L)))
-            Vinv[np.ix_(sel, sel)] = linalg.cho_solve((L, True), np.eye(len(sel)))
+            Vinv[np.ix_(sel, sel)] = spd_inverse(L)
         Vi.append(Vinv)
         derivs.append(dV)
     Vinv = linalg.block_diag(*Vi)
