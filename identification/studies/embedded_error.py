@@ -76,31 +76,50 @@ def block_reml(Vs: list, dVs: list, index: list, G: np.ndarray, r: np.ndarray, n
     r : ndarray (N,)                     residuals
     n_theta : int                        the number of hyperparameters
 
-    Returns (inf, zeros) when a Cholesky fails.
+    Returns (inf, zeros) when a Cholesky fails.  Blocks of one size are stacked and factorised together
+    (batched Cholesky and inverse: many small blocks cost one call, not one per block).
     """
-    try:
-        Ls = [linalg.cholesky(V, lower=True) for V in Vs]
-    except linalg.LinAlgError:
-        return np.inf, np.zeros(n_theta)
-    Vinvs = [spd_inverse(L) for L in Ls]
-    VGs = [Vi @ G[idx] for Vi, idx in zip(Vinvs, index)]
-    Vrs = [Vi @ r[idx] for Vi, idx in zip(Vinvs, index)]
-    A = sum(G[idx].T @ VG for idx, VG in zip(index, VGs))
+    groups: dict = {}
+    for b, (V, (which, _)) in enumerate(zip(Vs, dVs)):
+        groups.setdefault((len(V), len(which)), []).append(b)
+    stacks = []
+    for bs in groups.values():
+        Vst = np.stack([Vs[b] for b in bs])
+        try:
+            L = np.linalg.cholesky(Vst)
+        except np.linalg.LinAlgError:
+            return np.inf, np.zeros(n_theta)
+        Vinv = np.stack([spd_inverse(Lb) for Lb in L]) if len(bs) == 1 else _batched_inverse(L)
+        idx = np.stack([index[b] for b in bs])
+        Gb, rb = G[idx], r[idx]                                    # (k, n, n_p), (k, n)
+        VG, Vr = Vinv @ Gb, np.einsum("kij,kj->ki", Vinv, rb)
+        stacks.append((bs, L, Vinv, Gb, rb, VG, Vr))
+    A = sum(np.einsum("kni,knj->ij", Gb, VG) for _, _, _, Gb, _, VG, _ in stacks)
     try:
         LA = linalg.cholesky(A, lower=True)
     except linalg.LinAlgError:
         return np.inf, np.zeros(n_theta)
-    beta = linalg.cho_solve((LA, True), sum(G[idx].T @ Vr for idx, Vr in zip(index, Vrs)))
-    logdet = sum(2 * np.sum(np.log(np.diag(L))) for L in Ls) + 2 * np.sum(np.log(np.diag(LA)))
+    Ainv = linalg.cho_solve((LA, True), np.eye(len(A)))
+    beta = Ainv @ sum(np.einsum("kni,kn->i", Gb, Vr) for _, _, _, Gb, _, _, Vr in stacks)
+    f = 2 * np.sum(np.log(np.diag(LA)))
     grad = np.zeros(n_theta)
-    quad = 0.0
-    for idx, Vi, VG, Vr, (which, dV) in zip(index, Vinvs, VGs, Vrs, dVs):
-        alpha = Vr - VG @ beta
-        quad += float(r[idx] @ alpha)
-        if len(which):
-            P = Vi - VG @ linalg.cho_solve((LA, True), VG.T)
-            grad[which] += np.einsum("ij,mij->m", P, dV) - np.einsum("i,mij,j->m", alpha, dV, alpha)
-    return logdet + quad, grad
+    for bs, L, Vinv, Gb, rb, VG, Vr in stacks:
+        f += 2 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)))
+        alpha = Vr - VG @ beta                                     # (k, n): the blocks of P r
+        f += float(np.sum(rb * alpha))
+        which = np.array([dVs[b][0] for b in bs], int)             # (k, m)
+        if which.shape[1]:
+            dV = np.stack([dVs[b][1] for b in bs])                 # (k, m, n, n)
+            P = Vinv - VG @ Ainv @ np.swapaxes(VG, 1, 2)
+            u = np.einsum("kmij,kj->kmi", dV, alpha)
+            np.add.at(grad, which, np.einsum("kij,kmij->km", P, dV) - np.einsum("ki,kmi->km", alpha, u))
+    return f, grad
+
+
+def _batched_inverse(L: np.ndarray) -> np.ndarray:
+    """V^{-1} (k, n, n) of a stack of lower Cholesky factors L (k, n, n): (L^{-1})^T L^{-1}."""
+    Linv = np.linalg.solve(L, np.broadcast_to(np.eye(L.shape[1]), L.shape))
+    return np.swapaxes(Linv, 1, 2) @ Linv
 
 
 def spd_inverse(L: np.ndarray) -> np.ndarray:
