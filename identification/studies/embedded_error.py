@@ -40,6 +40,8 @@ __all__ = ["EmbeddedFit", "fit_embedded", "embedded_objective", "general_reml", 
 #: bounds of c_i = log(omega_i / se_i): omega from ~3e-4 to ~400 standard errors
 _BOUND = (-8.0, 6.0)
 _STARTS = (0.0, 2.0, -3.0)
+#: blocks smaller than this are inverted together (batched); larger ones one by one by potri (faster there)
+_BATCHED = 48
 
 
 def general_reml(V: np.ndarray, dVs: list, G: np.ndarray, r: np.ndarray) -> tuple:
@@ -77,19 +79,20 @@ def block_reml(Vs: list, dVs: list, index: list, G: np.ndarray, r: np.ndarray, n
     n_theta : int                        the number of hyperparameters
 
     Returns (inf, zeros) when a Cholesky fails.  Blocks of one size are stacked and factorised together
-    (batched Cholesky and inverse: many small blocks cost one call, not one per block).
+    (batched Cholesky, and inverse below ``_BATCHED`` rows: many small blocks cost one call, not one per block).
     """
     groups: dict = {}
     for b, (V, (which, _)) in enumerate(zip(Vs, dVs)):
         groups.setdefault((len(V), len(which)), []).append(b)
     stacks = []
     for bs in groups.values():
+        V = Vs[bs[0]]
         Vst = np.stack([Vs[b] for b in bs])
         try:
             L = np.linalg.cholesky(Vst)
         except np.linalg.LinAlgError:
             return np.inf, np.zeros(n_theta)
-        Vinv = np.stack([spd_inverse(Lb) for Lb in L]) if len(bs) == 1 else _batched_inverse(L)
+        Vinv = _batched_inverse(L) if len(V) < _BATCHED else np.stack([spd_inverse(Lb) for Lb in L])
         idx = np.stack([index[b] for b in bs])
         Gb, rb = G[idx], r[idx]                                    # (k, n, n_p), (k, n)
         VG, Vr = Vinv @ Gb, np.einsum("kij,kj->ki", Vinv, rb)
