@@ -143,15 +143,22 @@ def condition_blocks(rows: np.ndarray) -> list:
 
 
 def _block_covariance(c: np.ndarray, Gs: np.ndarray, index: list, noise: np.ndarray, se: np.ndarray) -> tuple:
-    """(V_b per condition, [(all hyperparameters, dV_b / dc)]) of the embedded error's covariance."""
+    """(V_b per condition, [(all hyperparameters, dV_b / dc)]) of the embedded error's covariance (conditions of
+    one size built together)."""
     om2 = (se * np.exp(c)) ** 2
     which = np.arange(len(c))
-    Vs, dVs = [], []
-    for idx in index:
-        g = Gs[idx]
-        parts = g.T[:, :, None] * g.T[:, None, :]                     # (n_p, n_b, n_b): g_i g_i^T
-        Vs.append(np.diag(noise[idx]) + np.tensordot(om2, parts, axes=1))
-        dVs.append((which, 2 * om2[:, None, None] * parts))
+    Vs, dVs = [None] * len(index), [None] * len(index)
+    sizes = np.array([len(i) for i in index])
+    for n in np.unique(sizes):
+        bs = np.flatnonzero(sizes == n)
+        idx = np.stack([index[b] for b in bs])                       # (k, n)
+        g = Gs[idx]                                                  # (k, n, n_p)
+        parts = g.transpose(0, 2, 1)[:, :, :, None] * g.transpose(0, 2, 1)[:, :, None, :]   # (k, n_p, n, n)
+        V = np.tensordot(parts, om2, axes=([1], [0]))               # (k, n, n)
+        V[:, np.arange(n), np.arange(n)] += noise[idx]
+        dV = 2 * om2[None, :, None, None] * parts
+        for j, b in enumerate(bs):
+            Vs[b], dVs[b] = V[j], (which, dV[j])
     return Vs, dVs
 
 
