@@ -45,7 +45,8 @@ with the exact gradient d(-2 l_R)/d theta_i = tr(P V_i) - r^T P V_i P r (V_i = d
 by L-BFGS-B from a few starts.  The expected information of the REML likelihood, I_ab = tr(P V_a P V_b) / 2
 (:func:`reml_information`), gives the sampling variance of the estimated new-draw variance at a condition not
 seen (:meth:`GPFit.prior_variance_spread`, delta method over the hyperparameters not on a bound).  Every factorisation is a Cholesky; one that fails is reported, never
-replaced by a pseudo-inverse.
+replaced by a pseudo-inverse.  V is block diagonal (by instrument, and within one by condition): it is
+factorised block by block (:func:`identification.studies.embedded_error.block_reml`).
 """
 from __future__ import annotations
 
@@ -53,6 +54,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg, optimize, stats
+
+from identification.studies.embedded_error import block_reml, condition_blocks, spd_inverse
 
 __all__ = ["InputScaling", "Observations", "GPFit", "fit_discrepancy", "white_lr_test", "WhiteTest",
            "kernel_blocks", "reml_objective", "reml_information", "BOUNDS", "AT_BOUND"]
@@ -223,31 +226,42 @@ def rough_weight(x: np.ndarray, ell: float, pins: tuple = ()) -> tuple:
     return W, dW
 
 
-def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple) -> tuple:
-    """(V_k, [dV_k/d theta]) of sensor block i with its hyperparameters th (3,)."""
+def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple, sel: np.ndarray | None = None) -> tuple:
+    """(V_k, [dV_k/d theta]) of sensor block i with its hyperparameters th (3,); ``sel`` (positions within the
+    block, all of one condition): that diagonal sub-block only (None: the whole block)."""
     sig = obs.sigma[i]
     s2, ell, t2 = (sig * np.exp(th[0])) ** 2, float(np.exp(th[1])), (sig * np.exp(th[2])) ** 2
-    x = obs.x[i]
+    x = obs.x[i] if sel is None else obs.x[i][sel]
+    noise = obs.noise[i] if sel is None else obs.noise[i][sel]
     C, dC = kernel_blocks(x, x, ell, pins)
-    S = obs.same_condition(i)
-    C, dC = C * S, dC * S
+    if sel is None:
+        S = obs.same_condition(i)
+        C, dC = C * S, dC * S
     W, dW = rough_weight(x, ell, pins)
-    V = s2 * C + np.diag(t2 * W + obs.noise[i])
+    V = s2 * C + np.diag(t2 * W + noise)
     return V, (2 * s2 * C, s2 * dC + np.diag(t2 * dW), np.diag(2 * t2 * W))
 
 
+def _sub_blocks(obs: Observations) -> list:
+    """Per block i, the positions within the block of each of its conditions (index arrays)."""
+    return [condition_blocks(obs.condition_codes(i)) for i in range(len(obs.blocks))]
+
+
 def _reml_parts(obs: Observations, theta: np.ndarray, G: np.ndarray, pins: tuple):
-    """(f, Vinv blocks, A = G^T V^-1 G factor, block derivatives) or None when a Cholesky fails."""
-    blocks, derivs, Vi, logdet = [], [], [], 0.0
-    for i in range(len(obs.blocks)):
+    """(f, Vinv blocks, A = G^T V^-1 G factor, block derivatives) or None when a Cholesky fails (V_k factorised
+    condition by condition, its blocks)."""
+    derivs, Vi, logdet = [], [], 0.0
+    for i, subs in enumerate(_sub_blocks(obs)):
         V, dV = _block(obs, i, theta[3 * i:3 * i + 3], pins)
-        try:
-            L = linalg.cholesky(V, lower=True)
-        except linalg.LinAlgError:
-            return None
-        logdet += 2 * np.sum(np.log(np.diag(L)))
-        Vi.append(linalg.cho_solve((L, True), np.eye(len(V))))
-        blocks.append(V)
+        Vinv = np.zeros_like(V)
+        for sel in subs:
+            try:
+                L = linalg.cholesky(V[np.ix_(sel, sel)], lower=True)
+            except linalg.LinAlgError:
+                return None
+            logdet += 2 * np.sum(np.log(np.diag(L)))
+            Vinv[np.ix_(sel, sel)] = spd_inverse(L)
+        Vi.append(Vinv)
         derivs.append(dV)
     Vinv = linalg.block_diag(*Vi)
     A = G.T @ Vinv @ G
@@ -259,25 +273,20 @@ def _reml_parts(obs: Observations, theta: np.ndarray, G: np.ndarray, pins: tuple
 
 
 def reml_objective(theta, obs: Observations, G: np.ndarray, r: np.ndarray, pins: tuple = ()) -> tuple:
-    """(-2 l_R(theta) without constant, its exact gradient) for stacked residuals r (N,), G (N, n_p)."""
+    """(-2 l_R(theta) without constant, its exact gradient) for stacked residuals r (N,), G (N, n_p); V is
+    factorised block by block (every instrument, within it every condition: :func:`block_reml`)."""
     theta = np.asarray(theta, float)
-    parts = _reml_parts(obs, theta, G, pins)
-    if parts is None:
-        return np.inf, np.zeros_like(theta)
-    logdets, Vinv, LA, derivs = parts
-    VG = Vinv @ G
-    P = Vinv - VG @ linalg.cho_solve((LA, True), VG.T)
-    alpha = P @ r
-    f = logdets + float(r @ alpha)
-    grad = np.zeros_like(theta)
+    Vs, dVs, index = [], [], []
     start = 0
-    for i, n in enumerate(obs.sizes):
-        sl = slice(start, start + n)
-        Pk, ak = P[sl, sl], alpha[sl]
-        for m, dV in enumerate(derivs[i]):
-            grad[3 * i + m] = np.sum(Pk * dV) - ak @ dV @ ak
-        start += n
-    return f, grad
+    for i, subs in enumerate(_sub_blocks(obs)):
+        which = np.arange(3 * i, 3 * i + 3)
+        for sel in subs:
+            V, dV = _block(obs, i, theta[3 * i:3 * i + 3], pins, sel)
+            Vs.append(V)
+            dVs.append((which, np.array(dV)))
+            index.append(start + sel)
+        start += obs.sizes[i]
+    return block_reml(Vs, dVs, index, G, r, len(theta))
 
 
 def reml_information(theta, obs: Observations, G: np.ndarray, pins: tuple = ()) -> np.ndarray:
