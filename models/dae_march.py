@@ -42,7 +42,7 @@ from .batched import batched_function
 from .errors import StateSolveError
 from .sensitivity import Sensitivities, StateSolve, generic_sensitivities
 from .state import solve_states_generic
-from .trajectory import RESIDUAL_TOL, TrajectoryNumerics, march
+from .trajectory import RESIDUAL_TOL, TrajectoryNumerics, march, output_functions
 
 __all__ = ["DAETrajectoryNumerics", "GenericDAESolve", "dae_numerics", "dae_march_scope", "MAX_FALLBACKS_KEPT"]
 
@@ -106,16 +106,7 @@ class DAETrajectoryNumerics(TrajectoryNumerics):
         self.alg0 = ca.Function("dae_g0", [xa, za, p, q],
                                 [g0, ca.jacobian(g0, za), ca.jacobian(g0, xa), ca.jacobian(g0, p)])
         self.Umap = cm.point_input_map()
-        y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
-        h = cm.h_fun(y, p, q)
-        G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
-        self.output_terms = ca.Function("dae_outputs", [y, yp, p, q], [h, G])
-        self.h_only = ca.Function("dae_h", [y, p, q], [h])
-        lam = ca.SX.sym("lam", cm.n_S)
-        Zh = ca.vertcat(ca.reshape(yp, cm.n_y, n_p), ca.DM.eye(n_p))
-        Hh = ca.hessian(ca.dot(lam, h), ca.vertcat(y, p))[0]
-        self.h_terms = ca.Function("dae_h_terms", [y, yp, p, q, lam],
-                                   [ca.mtimes(ca.jacobian(h, y).T, lam), ca.mtimes(Zh.T, ca.mtimes(Hh, Zh))])
+        self.output_terms, self.h_only, self.h_terms = output_functions(cm, p, q, "dae")
         mu, ze = ca.SX.sym("mu", nd), ca.SX.sym("Z", (nd + n_x) * n_p)
         Ze = ca.vertcat(ca.reshape(ze, nd + n_x, n_p), ca.DM.eye(n_p))
         He = ca.hessian(ca.dot(mu, R), ca.vertcat(V, xs, p))[0]

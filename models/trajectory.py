@@ -39,7 +39,7 @@ from .sensitivity import Sensitivities
 from .state import numerics, solve_states_generic
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states", "march", "march_functions",
-           "march_failure", "element_failures", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
+           "march_failure", "element_failures", "output_functions", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
            "outputs_and_sensitivities", "merging", "REFINED_RESIDUAL_TOL"]
 
 #: the broker of this thread's member fit in :func:`run_merged` (None outside one)
@@ -260,6 +260,23 @@ class _TrajectorySensitivities(Sensitivities):
         return super().output_hessians()
 
 
+
+def output_functions(cm, p, q, prefix: str) -> tuple:
+    r"""(outputs, h, h_terms) of a collocated model's readings h(y, p, q) (CasADi Functions named ``prefix_*``):
+    h and G = dh/dy y'(p) + dh/dp from the states y and their sensitivities y' (flattened column by column),
+    h alone, and the output's second-order terms of L = lam^T h: (dh/dy)^T lam and Z^T grad^2 L Z with
+    Z = [y'; I] (:meth:`TrajectoryNumerics.hessians`)."""
+    n_p = p.numel()
+    y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
+    h = cm.h_fun(y, p, q)
+    G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
+    lam = ca.SX.sym("lam", cm.n_S)
+    Zh = ca.vertcat(ca.reshape(yp, cm.n_y, n_p), ca.DM.eye(n_p))
+    Hh = ca.hessian(ca.dot(lam, h), ca.vertcat(y, p))[0]
+    return (ca.Function(f"{prefix}_outputs", [y, yp, p, q], [h, G]), ca.Function(f"{prefix}_h", [y, p, q], [h]),
+            ca.Function(f"{prefix}_h_terms", [y, yp, p, q, lam],
+                        [ca.mtimes(ca.jacobian(h, y).T, lam), ca.mtimes(Zh.T, ca.mtimes(Hh, Zh))]))
+
 class TrajectoryNumerics:
     """The numerics of one collocated ODE model (:attr:`models.Model.state_numerics`; see the module
     docstring): its trajectories marched element by element, all experiments at once, and their exact
@@ -296,17 +313,8 @@ class TrajectoryNumerics:
         x0 = dyn.x0_fun(p, cm.initial_input(q))
         self.init = ca.Function("traj_x0", [p, q], [x0, ca.jacobian(x0, p)])
         self.Umap = cm.point_input_map()
-        y, yp = ca.SX.sym("y", cm.n_y), ca.SX.sym("yp", cm.n_y * n_p)
-        h = cm.h_fun(y, p, q)
-        G = ca.mtimes(ca.jacobian(h, y), ca.reshape(yp, cm.n_y, n_p)) + ca.jacobian(h, p)
-        self.output_terms = ca.Function("traj_outputs", [y, yp, p, q], [h, G])
-        self.h_only = ca.Function("traj_h", [y, p, q], [h])
         # second order: Z^T grad^2 L Z of L = lam^T h + mu^T E, term by term (see hessians)
-        lam = ca.SX.sym("lam", cm.n_S)
-        Zh = ca.vertcat(ca.reshape(yp, cm.n_y, n_p), ca.DM.eye(n_p))
-        Hh = ca.hessian(ca.dot(lam, h), ca.vertcat(y, p))[0]
-        self.h_terms = ca.Function("traj_h_terms", [y, yp, p, q, lam],
-                                   [ca.mtimes(ca.jacobian(h, y).T, lam), ca.mtimes(Zh.T, ca.mtimes(Hh, Zh))])
+        self.output_terms, self.h_only, self.h_terms = output_functions(cm, p, q, "traj")
         mu = ca.SX.sym("mu", n_x * d)
         ze = ca.SX.sym("Z", (n_x * d + n_x) * n_p)
         Ze = ca.vertcat(ca.reshape(ze, n_x * d + n_x, n_p), ca.DM.eye(n_p))
