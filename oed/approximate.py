@@ -507,13 +507,14 @@ def _check_box(model, bounds, dynamic):
     return lo, hi
 
 
-def _check_prior_points(model, prior: Prior):
+def check_prior_points(model, prior: Prior, where: str = "(a quadrature point)"):
+    """Raise ValueError naming ``prior`` when a prior point lies outside the model's parameter bounds."""
     lower = np.array([q.lower for q in model.params], float)
     upper = np.array([q.upper for q in model.params], float)
     out = (prior.points < lower) | (prior.points > upper)
     if np.any(out):
         s, j = np.argwhere(out)[0]
-        raise ValueError(f"prior: {model.param_names[j]} = {prior.points[s, j]:g} (a quadrature point) lies outside "
+        raise ValueError(f"prior: {model.param_names[j]} = {prior.points[s, j]:g} {where} lies outside "
                          f"the model's bounds [{lower[j]:g}, {upper[j]:g}]; narrow the prior")
 
 
@@ -526,7 +527,7 @@ def _resolve_prior(model, p, prior, robust, settings) -> tuple:
     rule = settings.prior_rule or ("grid" if robust == "maximin" else "gauss")
     pr = make_prior(prior, model, p, rule=rule, order=settings.prior_order, seed=settings.seed)
     check_non_negative(pr, "an approximate design")
-    _check_prior_points(model, pr)
+    check_prior_points(model, pr)
     return pr, robust
 
 

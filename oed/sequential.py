@@ -28,6 +28,7 @@ from identification.vocabulary import renamed_arguments
 from .criteria import DEFAULT_CRITERION, Criterion, Kind
 from .design import DesignResult, select_sensors_from_information
 from .candidate_information import information
+from .approximate import check_prior_points
 from .sequential_robust import RobustStep, recentred, robust_sensor_step
 
 __all__ = ["SequentialStep", "SequentialResult", "sequential_design"]
@@ -211,14 +212,7 @@ def _robust_prior(model, p0, prior, robust, design_kw):
 
 def _robust_choice(model, pr, info_data, criterion, kind, n_sensors, robust, design_kw, k):
     """(RobustStep, DesignResult) of experiment ``k``: the robust choice over ``pr`` (already at the estimate)."""
-    lower = np.array([q.lower for q in model.params], float)
-    upper = np.array([q.upper for q in model.params], float)
-    out = (pr.points < lower) | (pr.points > upper)
-    if np.any(out):
-        s, j = np.argwhere(out)[0]
-        raise ValueError(f"prior: moved to the estimate before experiment {k}, {model.param_names[j]} = "
-                         f"{pr.points[s, j]:g} lies outside the model's bounds [{lower[j]:g}, {upper[j]:g}]; "
-                         "narrow the prior")
+    check_prior_points(model, pr, f"(moved to the estimate before experiment {k})")
     infos = [information(model, ps, data=info_data) for ps in pr.points]
     n_S = infos[0].F.shape[0]
     n = min(model.n_p, n_S) if n_sensors is None else n_sensors

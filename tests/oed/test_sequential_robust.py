@@ -116,7 +116,7 @@ def test_bad_input_names_the_argument(case):
         sequential_design(m, exps, P0, prior=make_prior({"a": ("uniform", 1.5, 2.5), **SPREAD}, m, P0,
                                                         rule="sparse", order=3))
     bounded = m.with_bounds({"b": (0.0, 10.0)})
-    with pytest.raises(ValueError, match=r"prior: moved to the estimate before experiment 1, b = -0\.0967978 lies outside"):
+    with pytest.raises(ValueError, match=r"prior: b = -0\.0967978 \(moved to the estimate before experiment 1\) lies outside"):
         sequential_design(bounded, exps, P0, prior={"b": ("uniform", -0.2, 2.0)})
 
 
