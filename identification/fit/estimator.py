@@ -63,6 +63,33 @@ LAZY_PASS_MAX_ITER = 100
 DATA_LAZY_PASS_MAX_ITER = 25
 
 
+def _ipopt_start(st: Start, settings: IdentifySettings, warm) -> tuple:
+    """(st with the NLP's scalings, the NLP's start trajectories Y_nlp, Ipopt's scaled start x0, the solver
+    cache key) of :func:`_solve_full_space`: from the reduced-space optimum ``warm`` when there is one, else
+    from the predictor, with the trajectories through the data (``settings.init``) where the model allows."""
+    model, data, s_p, s_y = st.model, st.data, st.s_p, st.s_y
+    zbar, cw = st.problem.zbar, st.problem.cw
+    Y_nlp = st.Y_init                           # the NLP's start trajectories: through the data (settings.init)
+    if settings.init == "data" and model.state_numerics.reduced_space and st.Y_init is not None:
+        Y_data = data_trajectories(model, data, st.p0, st.Y_init)
+        Y_nlp = st.Y_init if Y_data is None else Y_data
+    if s_y is None:                             # scalings left for the NLP (see make_start)
+        # cached per (p0, inputs) when Y_init are the start states initial_states keeps (data-independent)
+        cached = model.cache.get("identify.initial_states", (st.p0.tobytes(), data.inputs.tobytes()))
+        s_y, e_scale = scalings(model, st.p0, data.inputs, st.Y_init, cached is st.Y_init)
+        st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
+    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
+    if warm is not None:
+        p_start, Y_start = warm[0].p, warm[0].states
+    else:
+        p_start, Y_start = predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
+                                      settings.predictor_step)
+        if Y_nlp is not st.Y_init:
+            Y_start = Y_nlp
+    x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
+    return st, Y_nlp, x0, key
+
+
 def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock | None = None) -> FullSpaceSolution:
     """Step 2 of :func:`identify`: build (or reuse) the scaled NLP and solve it with Ipopt.
 
@@ -112,26 +139,10 @@ def _solve_full_space(st: Start, settings: IdentifySettings, clock: PhaseClock |
                     clock.lap("reduced-space Newton (collocated trajectories)")
                 return FullSpaceSolution(got[0], 1, got[1].p, got[1].states, np.zeros(model.n_p, bool), got[1],
                                           got[2])
-    Y_nlp = st.Y_init                           # the NLP's start trajectories: through the data (settings.init)
-    if settings.init == "data" and model.state_numerics.reduced_space and st.Y_init is not None:
-        Y_data = data_trajectories(model, data, st.p0, st.Y_init)
-        Y_nlp = st.Y_init if Y_data is None else Y_data
-    if s_y is None:                             # scalings left for the NLP (see make_start)
-        # cached per (p0, inputs) when Y_init are the start states initial_states keeps (data-independent)
-        cached = model.cache.get("identify.initial_states", (st.p0.tobytes(), data.inputs.tobytes()))
-        s_y, e_scale = scalings(model, st.p0, data.inputs, st.Y_init, cached is st.Y_init)
-        st = dataclasses.replace(st, s_y=s_y, e_scale=e_scale)
-    key = (data.inputs.tobytes(), s_p.tobytes(), s_y.tobytes(), st.e_scale.tobytes())
-    if warm is not None:
-        p_start, Y_start = warm[0].p, warm[0].states
-    else:
-        p_start, Y_start = predictor(model, st.p0, data.inputs, st.Y_init, zbar, cw, st.sig, s_p,
-                                      settings.predictor_step)
-        if Y_nlp is not st.Y_init:
-            Y_start = Y_nlp
+    st, Y_nlp, x0, key = _ipopt_start(st, settings, warm)
+    s_y = st.s_y
     if clock is not None:
         clock.lap("start point of Ipopt")
-    x0 = np.concatenate([p_start / s_p, (Y_start / s_y[None, :]).ravel()])   # vec(yt) is column-major: y_j stacked
     free_y = np.full(data.n_q * model.n_y, np.inf)
 
     def solve(x_start, lbx, ubx, lam_g0=None, ipopt=settings.ipopt):
