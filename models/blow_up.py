@@ -1,7 +1,7 @@
 r"""The diagnosis of an element without a collocation solution: does x' = f(x, p, u(t)) blow up, or is the element
 too stiff for collocation?
 
-Only a diagnostic for the failure message (:func:`models.trajectory.march_failure`), never part of the numerics, and
+Only a diagnostic for the failure message (:func:`models.element_march.march_failure`), never part of the numerics, and
 lazy: an :class:`ElementFailure` diagnoses when its message is read (or :func:`blow_up_of` is asked, e.g. at the
 start values), so line searches that catch failed state solves and halve pay nothing.  The
 failing experiment is integrated from t = 0 (x0(p, u), not the collocation's states, which a blow-up spoils) by

@@ -33,7 +33,8 @@ import numpy as np
 from .contract import Model, ModelError
 from .dynamic import DynamicModel, merge_times, register_collocation, same_instant_gaps, time_label, time_tolerance
 from .dae_march import dae_numerics
-from .trajectory import march, march_functions, trajectory_numerics
+from .element_march import march, march_functions
+from .trajectory import trajectory_numerics
 
 __all__ = ["Mesh", "CollocatedModel", "collocate", "radau_coefficients", "pair_name", "DEFAULT_ELEMENTS"]
 
@@ -277,7 +278,7 @@ class CollocatedModel(Model):
         return np.asarray(rf(np.ones(dyn.n_z), ca.DM(0, 1))).ravel()
 
     def march_functions(self):
-        """(march, residuals, Umap) of the element marcher (:func:`models.trajectory.march_functions`)."""
+        """(march, residuals, Umap) of the element marcher (:func:`models.element_march.march_functions`)."""
         return march_functions(self)
 
     # ------------------------------------------------------------------ inputs at the points
@@ -304,7 +305,7 @@ class CollocatedModel(Model):
         return np.asarray(ca.evalf(ca.jacobian(U, q))) if self.dynamic.n_q_dim else np.zeros((U.size1(), 0))
 
     def _integrate(self, p, q) -> np.ndarray:
-        """The collocation solution at (p, q), element by element (:func:`models.trajectory.march`)."""
+        """The collocation solution at (p, q), element by element (:func:`models.element_march.march`)."""
         dyn, N = self.dynamic, self.mesh.n_elements
         p, q = np.asarray(p, float).ravel(), np.asarray(q, float).ravel()
         Umap = march_functions(self)[2]

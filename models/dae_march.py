@@ -15,7 +15,7 @@ with x_{k0} = x_{k-1,d} (only the differential states carry over an element boun
 the discrete equations of :meth:`models.collocation.CollocatedModel.element_residual` (the same residual
 function), block lower-triangular in the elements: z(0) by Newton on g at t = 0 (from z = 1, as the
 collocated model's own state guess), then element after element Newton on the (n_x + n_z) d unknowns of
-one element (:func:`models.trajectory.march`), and the exact sensitivity y'(p) = -(dE/dy)^{-1} dE/dp by
+one element (:func:`models.element_march.march`), and the exact sensitivity y'(p) = -(dE/dy)^{-1} dE/dp by
 forward substitution through the same blocks,
 
 .. math::
@@ -42,7 +42,8 @@ from .batched import batched_function
 from .errors import StateSolveError
 from .sensitivity import Sensitivities, StateSolve, generic_sensitivities
 from .state import solve_states_generic
-from .trajectory import RESIDUAL_TOL, TrajectoryNumerics, march, output_functions
+from .element_march import march
+from .trajectory import RESIDUAL_TOL, TrajectoryNumerics, output_functions
 
 __all__ = ["DAETrajectoryNumerics", "GenericDAESolve", "dae_numerics", "dae_march_scope", "MAX_FALLBACKS_KEPT"]
 

@@ -6,7 +6,7 @@ Element k of a collocated model (:mod:`models.collocation`) has the unknowns V =
 
     R(V; x_{k0}, p, U_k, h_k) = 0 \qquad \text{(the collocation equations of the element)}.
 
-The element marcher (:func:`models.trajectory.march`) solves them by plain Newton from V = (x_k0, ..., x_k0).
+The element marcher (:func:`models.element_march.march`) solves them by plain Newton from V = (x_k0, ..., x_k0).
 On a stiff model (Robertson's kinetics: rates 0.04, 1e4, 3e7 over 1e5 s, or a rough start's rates
 (0.12, 1e5, 3e6) on the element [4931, 14045] s) an element of the size the sampling asks for holds a
 solution (Radau IIA is L-stable) that plain Newton from that guess does not reach (it stalls at

@@ -244,6 +244,6 @@ class StateSolve:
 
     def integrated_outputs(self, p: np.ndarray, inputs: np.ndarray, guess=None) -> np.ndarray:
         """h (n_q, n_S) at the states the model integrates by itself, its own state guess (``y_guess``: for a
-        collocated DAE the element march, :func:`models.trajectory.march`); ``guess`` is not used."""
+        collocated DAE the element march, :func:`models.element_march.march`); ``guess`` is not used."""
         model = self.model
         return np.array([np.asarray(model.h_fun(model.y_guess(p, q), p, q)).ravel() for q in inputs])

@@ -160,7 +160,7 @@ def test_a_finite_trajectory_on_a_failed_element_is_called_too_stiff():
     # the diagnosis of the message: x' = -k x stays finite, so an element without a collocation solution is
     # too stiff for the element, not a blow-up (no BlowUpError; a finer mesh is the advice)
     from models.blow_up import diagnose_element
-    from models.trajectory import march_failure
+    from models.element_march import march_failure
     m = Model.ode(["k"], ["x"], ["x0"], ["x"], rhs=lambda x, p, u: -p[0] * x, x0=lambda p, u: u[0],
                   h=lambda x, p, u: x, horizon=2.0)
     cm = m.collocate([0.5, 2.0], max_step=0.5)

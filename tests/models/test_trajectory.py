@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+import models.element_march as element_march
 import models.trajectory as trajectory
 from identification import DynamicMeasurements, IdentifySettings, identify
 from identification.fit.dynamic_fit import simulate_campaign
@@ -36,7 +37,7 @@ def generic(cm, p, inputs):
 def test_states_and_sensitivities_equal_the_whole_trajectory_solve(monkeypatch, in_casadi):
     cm = collocate(build(), TIMES, max_step=0.25)
     traj = trajectory_numerics(cm)
-    monkeypatch.setattr(trajectory, "MARCH_IN_CASADI_MAX", 100 if in_casadi else 0)
+    monkeypatch.setattr(element_march, "MARCH_IN_CASADI_MAX", 100 if in_casadi else 0)
     Y = traj.states(P, Q)
     Yp = traj.state_derivatives(P, Q, Y)
     h, G = traj.outputs_and_sensitivities(P, Q, Y, Yp)
@@ -57,7 +58,7 @@ def test_blow_up_names_the_experiment_and_element(monkeypatch):
                   h=lambda x, p, u: x, horizon=2.0)
     cm = collocate(m, [0.5, 1.0, 2.0])
     for limit in (100, 0):
-        monkeypatch.setattr(trajectory, "MARCH_IN_CASADI_MAX", limit)
+        monkeypatch.setattr(element_march, "MARCH_IN_CASADI_MAX", limit)
         with pytest.raises(Exception, match=r"inputs \[1.0\]: no collocation solution on the element .* of experiment 2"):
             trajectory_numerics(cm).states([1.0], [[0.1], [1.0]])
 
