@@ -261,3 +261,22 @@ def test_when_no_start_reaches_a_finite_minimum_the_first_run_off_is_returned():
     assert not est.bounded and ms.minima == () and ms.outcome == ("not bounded",) * 4 and ms.best == 0
     assert np.array_equal(est.p, one.p)
     assert est.notes[-1].startswith("multi-start: none of the 4 starts reached a finite minimum")
+
+
+def test_dask_gives_the_serial_estimate_and_table():
+    """identify(..., starts=8) on a local Dask cluster (two worker processes) is the serial multi-start: the same
+    estimate, covariance and note, the same per-start table and the same table of distinct minima."""
+    distributed = pytest.importorskip("distributed")
+    model, data = sinusoid()
+    serial = identify(model, data, P0, starts=8)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
+            distributed.Client(cl) as client:
+        dk = identify(model, data, P0, starts=8, scheduler=client)
+    a, b = serial.diagnostics.starts, dk.diagnostics.starts
+    assert a.backend == "serial" and b.backend.startswith("dask (") and b.backend.endswith(", 2 workers)")
+    assert a.best != 0 and len(a.minima) >= 2          # p0 misses the best minimum: the estimate is a worker's
+    assert np.array_equal(serial.p, dk.p) and np.array_equal(serial.cov, dk.cov)
+    assert serial.objective == dk.objective and serial.notes[:-1] == dk.notes[:-1]
+    assert dk.notes[-1] == serial.notes[-1].replace("serial", b.backend)
+    assert a.to_frame().equals(b.to_frame()) and a.minima_frame().equals(b.minima_frame())
+    assert (a.best, a.reached_best, a.outcome, a.status) == (b.best, b.reached_best, b.outcome, b.status)
