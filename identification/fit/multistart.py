@@ -9,14 +9,14 @@ Every start solves the same problem (paper eq. 3, dimensionless objective units)
 
 with the same settings, by :meth:`identification.fit.problem.Problem.fit` (static and dynamic models alike:
 the multi-start wraps the problem's strategy, it is not a second estimator).  Start 1 is ``p0``; starts 2..N are
-the first N - 1 points u_s in [0, 1)^n_p of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``, Owen-type
-linear matrix scrambling and a digital shift drawn from ``seed``), mapped per parameter by the documented rule of
-:func:`start_rules` (:func:`starts_from_unit`).  The sequence is generated in blocks of a power of two
+the first N - 1 points u_s in [0, 1)^n_p of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``: linear
+matrix scrambling and a digital random shift, both drawn from ``seed``), mapped per parameter by the documented
+rule of :func:`start_rules` (:func:`starts_from_unit`).  The sequence is generated in blocks of a power of two
 (``random_base2``: 2^m >= N - 1 points, the first N - 1 kept), so any N is accepted without scipy's balance
 warning; the starts of a smaller N are the first rows of those of a larger one with the same seed (adding starts
 keeps the earlier ones).  The first 2^m points of the sequence are stratified in every coordinate (one point in
-each interval [k / 2^m, (k + 1) / 2^m)) and, unlike a Latin hypercube, in every pair of the first two coordinates
-too (a (0, m, 2)-net: one point in each elementary box of area 2^-m).  The rules:
+each interval [k / 2^m, (k + 1) / 2^m)) and, unlike a Latin hypercube, jointly in the first two coordinates (a
+(0, m, 2)-net: one point in each elementary box of area 2^-m).  The rules:
 
 * both bounds finite, ``lower > 0`` and ``upper / lower >= 100`` (a positive parameter whose bounds span two
   decades or more): log-uniform in [lower, upper];

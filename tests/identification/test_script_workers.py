@@ -114,7 +114,8 @@ def test_a_notebook_kernel_ships_its_model_to_local_processes(tmp_path):
                                          nbformat.v4.new_code_cell(NOTEBOOK_CALL)])
     nbclient.NotebookClient(nb, km=km, timeout=300, startup_timeout=120, resources={"metadata": {"path": str(tmp_path)}}
                             ).execute()
-    out = json.loads("".join(o.get("text", "") for o in nb.cells[1].outputs if o.get("name") == "stdout"))
+    text = "".join(o.get("text", "") for o in nb.cells[1].outputs if o.get("name") == "stdout")
+    out = json.loads([line for line in text.splitlines() if line.startswith('{"exe"')][-1])
     assert out["exe"] == sys.executable and out["main_file"] is None and out["hazard"] == ""
     assert out["backend"] == "2 local processes" and out["warnings"] == []
     from identification import identify
