@@ -256,7 +256,7 @@ class IdentifyConfig:
 
     Attributes
     ----------
-    starts : int >= 1     fits from the [[parameters]] starts and ``starts - 1`` Latin-hypercube points drawn
+    starts : int >= 1     fits from the [[parameters]] starts and ``starts - 1`` scrambled Sobol points drawn
                           in the bounds (:mod:`identification.fit.multistart`); the best local minimum is the
                           estimate and the report gets a "multi-start" page per variant (1: the single fit)
     seed : int >= 0       draws the further starts

@@ -121,7 +121,7 @@ def _summary(ms) -> str:
     bad = ms.failed
     unb = sum(o == "not bounded" for o in ms.outcome)
     out = [f"The fit was run from {n} starts: p0 (start 1, the [[parameters]] start values) and {n - 1} "
-           f"Latin-hypercube points in the bounds ({'; '.join(ms.rules)}; seed {ms.seed}); {ms.backend}, "
+           f"scrambled Sobol points in the bounds ({'; '.join(ms.rules)}; seed {ms.seed}); {ms.backend}, "
            f"{ms.wall_time:.3g} s in all."]
     if m:
         out.append(f"{ms.reached_best} of {n} starts reached the best minimum (objective within "

@@ -9,8 +9,14 @@ Every start solves the same problem (paper eq. 3, dimensionless objective units)
 
 with the same settings, by :meth:`identification.fit.problem.Problem.fit` (static and dynamic models alike:
 the multi-start wraps the problem's strategy, it is not a second estimator).  Start 1 is ``p0``; starts 2..N are
-the rows of a Latin hypercube (``scipy.stats.qmc.LatinHypercube``, scrambled, drawn from ``seed``) mapped per
-parameter by the documented rule of :func:`start_rules`:
+the first N - 1 points u_s in [0, 1)^n_p of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``: linear
+matrix scrambling and a digital random shift, both drawn from ``seed``), mapped per parameter by the documented
+rule of :func:`start_rules` (:func:`starts_from_unit`).  The sequence is generated in blocks of a power of two
+(``random_base2``: 2^m >= N - 1 points, the first N - 1 kept), so any N is accepted without scipy's balance
+warning; the starts of a smaller N are the first rows of those of a larger one with the same seed (adding starts
+keeps the earlier ones).  The first 2^m points of the sequence are stratified in every coordinate (one point in
+each interval [k / 2^m, (k + 1) / 2^m)) and, unlike a Latin hypercube, jointly in the first two coordinates (a
+(0, m, 2)-net: one point in each elementary box of area 2^-m).  The rules:
 
 * both bounds finite, ``lower > 0`` and ``upper / lower >= 100`` (a positive parameter whose bounds span two
   decades or more): log-uniform in [lower, upper];
@@ -19,7 +25,8 @@ parameter by the documented rule of :func:`start_rules`:
   when p0 is on the bound): log scale around p0, a decade either way, never below the bound; only an upper
   bound: the mirror image;
 * no bound: ``p0 + 3 s U`` with U uniform in (-1, 1) and s the parameter's scale (its declared scale, else
-  |p0|, else 1).
+  |p0|, else 1): linear, not log, around p0, because a parameter without bounds may change sign, which a log
+  scale around p0 never reaches.
 
 A start *reaches a minimum* when its fit passes every check of the estimator (Ipopt's termination or the exact
 Newton verification, the second-order test of a minimum, identifiability, finite standard errors); a start that
@@ -61,7 +68,7 @@ from identification.replicate import ReplicationTask, replicate
 from identification.results_protocol import jsonable
 
 __all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
-           "check_starts", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES"]
+           "check_starts", "sobol_points", "starts_from_unit", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES"]
 
 #: a start reached the best minimum when its objective is within this of the best, relative to max(1, |best|)
 OBJECTIVE_RTOL = 1e-6
@@ -140,13 +147,19 @@ def _rule_text(name: str, rule: tuple) -> str:
             "below": f"{name} = {a:g} - {b:g} 10^U(-1,1)", "around": f"{name} = {a:g} +- 3 x {b:g} U(-1,1)"}[kind]
 
 
-def _latin_hypercube(d: int, n: int, ss: np.random.SeedSequence) -> np.ndarray:
-    rng = np.random.default_rng(ss)
+def sobol_points(d: int, n: int, seed=0) -> np.ndarray:
+    """u_s, s = 1..n: the first ``n`` points of a scrambled Sobol sequence in [0, 1)^d (dimensionless), the
+    scrambling drawn from ``seed`` (an int >= 0, a SeedSequence or None).  Generated as 2^m >= n points by
+    ``random_base2`` (no balance warning for an ``n`` that is not a power of two), the first ``n`` kept: the points
+    of a smaller ``n`` are the first rows of those of a larger one."""
+    rng = np.random.default_rng(_seed_sequence(seed))
     try:
-        engine = qmc.LatinHypercube(d, rng=rng)
+        engine = qmc.Sobol(d, scramble=True, rng=rng)
     except TypeError:                       # scipy < 1.15 names the generator ``seed``
-        engine = qmc.LatinHypercube(d, seed=rng)
-    return engine.random(n)
+        engine = qmc.Sobol(d, scramble=True, seed=rng)
+    if n < 1:
+        return np.empty((0, d))
+    return engine.random_base2(max(0, math.ceil(math.log2(n))))[:n]
 
 
 def _mapped(rule: tuple, u: np.ndarray) -> np.ndarray:
@@ -165,10 +178,25 @@ def _mapped(rule: tuple, u: np.ndarray) -> np.ndarray:
     return a + 3 * b * (2 * u - 1)                 # "around"
 
 
+def starts_from_unit(model, p0, u) -> np.ndarray:
+    """x_si = rule_i(u_si) (:func:`start_rules`), clipped to the bounds: the starts (parameter units) of the points
+    ``u`` (n, n_p) in [0, 1)^n_p (dimensionless), e.g. :func:`sobol_points` or any other design of the unit cube."""
+    p0 = checked_start(model, p0)
+    u = np.asarray(u, float)
+    if u.ndim != 2 or u.shape[1] != model.n_p or np.any(~((u >= 0) & (u <= 1))):
+        raise ValueError(f"u: expected points in [0, 1]^{model.n_p} as an array (n, {model.n_p}), got shape "
+                         f"{u.shape}")
+    out = np.tile(p0, (u.shape[0], 1))
+    for i, rule in enumerate(start_rules(model, p0)):
+        par = model.params[i]
+        out[:, i] = np.clip(_mapped(rule, u[:, i]), par.lower, par.upper)
+    return out
+
+
 def draw_starts(model, p0, n: int, seed=0) -> tuple:
-    """x_s = rule(u_s), u_s in [0, 1)^n_p the rows of a Latin hypercube: the ``n`` starts of a multi-start fit
-    (parameter units); row 0 is p0, rows 1..n-1 the hypercube drawn from ``seed`` (an int >= 0, a SeedSequence,
-    or None for fresh entropy) and mapped by :func:`start_rules`.
+    """x_s = rule(u_s), u_s in [0, 1)^n_p the first n - 1 points of a scrambled Sobol sequence: the ``n`` starts of
+    a multi-start fit (parameter units); row 0 is p0, rows 1..n-1 the points :func:`sobol_points` draws from
+    ``seed`` (an int >= 0, a SeedSequence, or None for fresh entropy) mapped by :func:`start_rules`.
 
     Returns
     -------
@@ -182,10 +210,7 @@ def draw_starts(model, p0, n: int, seed=0) -> tuple:
     rules = start_rules(model, p0)
     out = np.tile(p0, (n, 1))
     if n > 1:
-        u = _latin_hypercube(model.n_p, n - 1, ss)
-        for i, rule in enumerate(rules):
-            par = model.params[i]
-            out[1:, i] = np.clip(_mapped(rule, u[:, i]), par.lower, par.upper)
+        out[1:] = starts_from_unit(model, p0, sobol_points(model.n_p, n - 1, ss))
     names = tuple(par.name for par in model.params)
     return out, tuple(_rule_text(nm, r) for nm, r in zip(names, rules)), int(ss.entropy)
 
@@ -377,7 +402,7 @@ class MultiStartRecord:
             parts.append(f"{len(nb)} start{'s' if len(nb) > 1 else ''} ended on a fit the data do not bound "
                          f"(start{'s' if len(nb) > 1 else ''} {', '.join(str(i + 1) for i in nb[:5])}; the "
                          f"objective tends to {limit:.6g} as the parameters run off{below})")
-        parts.append(f"starts: p0 and {n - 1} Latin-hypercube points ({'; '.join(self.rules)}; seed {self.seed}), "
+        parts.append(f"starts: p0 and {n - 1} Sobol points ({'; '.join(self.rules)}; seed {self.seed}), "
                      f"{self.backend}; the tables: est.diagnostics.starts.to_frame() and .minima_frame()")
         return "; ".join(parts)
 

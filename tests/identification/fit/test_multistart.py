@@ -1,4 +1,6 @@
 """Multi-start fits (identification.fit.multistart): identify(..., starts=N) through Problem.fit (issue 30 item 2)."""
+import warnings
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -6,7 +8,7 @@ import pytest
 from identification import DataError, Measurements, identify, simulate
 from identification.fit.dynamic_fit import simulate_campaign
 from identification.fit.multistart import (OBJECTIVE_RTOL, MultiStartError, MultiStartRecord, draw_starts,
-                                           start_rules)
+                                           sobol_points, start_rules, starts_from_unit)
 from models import Model, Parameter
 from mudoe.example_reactor import P_TRUE, TIMES, build
 
@@ -96,21 +98,48 @@ def test_the_starts_are_reproducible_with_the_seed():
     assert np.array_equal(draw_starts(model, P0, 6, seed=entropy)[0], X)
 
 
-def test_the_rules_log_scale_for_decades_and_around_p0_for_open_bounds():
+def rules_model():
     model = Model.explicit(params=[Parameter("k", 1e-4, 1e2), Parameter("f", 0.0, 1.0), Parameter("c", 0.0),
                                    Parameter("d", upper=5.0), Parameter("e")],
                            inputs=["x"], sensors=["y"], h=lambda p, q: p[0] + p[1] + p[2] + p[3] + p[4] * q[0])
-    p0 = np.array([1.0, 0.5, 2.0, 3.0, -4.0])
+    return model, np.array([1.0, 0.5, 2.0, 3.0, -4.0])
+
+
+def test_the_rules_log_scale_for_decades_and_around_p0_for_open_bounds():
+    model, p0 = rules_model()
     assert [r[0] for r in start_rules(model, p0)] == ["log", "uniform", "above", "below", "around"]
-    X, rules, _ = draw_starts(model, p0, 401, seed=3)
+    X, rules, _ = draw_starts(model, p0, 513, seed=3)
     k, f, c, d, e = X[1:].T
-    # a Latin hypercube: exactly one start in each of the 400 strata of every coordinate
-    assert np.array_equal(np.sort(np.floor(400 * np.log(k / 1e-4) / np.log(1e6)).astype(int)), np.arange(400))
-    assert np.array_equal(np.sort(np.floor(400 * f).astype(int)), np.arange(400))
+    assert np.all((k >= 1e-4) & (k < 1e2)) and np.all((f >= 0.0) & (f < 1.0))
     assert np.all((c > 0.2) & (c < 20.0)) and np.min(c) < 0.25 and np.max(c) > 18.0     # 0 + 2 x 10^U(-1, 1)
     assert np.all((d < 5.0 - 0.2) & (d > 5.0 - 20.0))                                    # 5 - 2 x 10^U(-1, 1)
     assert np.all(np.abs(e + 4.0) < 12.0) and np.max(np.abs(e + 4.0)) > 11.5             # -4 +- 3 x 4 U(-1, 1)
     assert rules[0] == "k log-uniform in [0.0001, 100]" and rules[4] == "e = -4 +- 3 x 4 U(-1,1)"
+
+
+def test_the_drawn_starts_are_scrambled_sobol_points():
+    """The 512 drawn starts are the first 2^9 points of a scrambled Sobol sequence: one in each of the 512 strata
+    of every coordinate (in the rule's scale), and one in each elementary box of area 2^-9 of the first two
+    (a (0, 9, 2)-net, which no Latin hypercube gives); fewer starts are the first rows of more."""
+    model, p0 = rules_model()
+    X, _, _ = draw_starts(model, p0, 513, seed=3)
+    u = np.column_stack([np.log(X[1:, 0] / 1e-4) / np.log(1e6), X[1:, 1],
+                         np.log10((X[1:, 2] - 0.0) / 2.0) / 2 + 0.5, np.log10((5.0 - X[1:, 3]) / 2.0) / 2 + 0.5,
+                         (X[1:, 4] + 4.0) / 24.0 + 0.5])
+    strata = np.floor(512 * u + 1e-9).astype(int)          # 1e-9: round-off of the inverse maps at a stratum edge
+    for i in range(5):
+        assert np.array_equal(np.sort(strata[:, i]), np.arange(512)), model.params[i].name
+    for a in range(10):                                     # boxes 2^-a x 2^-(9 - a) of (k, f)
+        box = np.floor(u[:, 0] * 2 ** a + 1e-9).astype(int) * 2 ** (9 - a) \
+            + np.floor(u[:, 1] * 2 ** (9 - a) + 1e-9).astype(int)
+        assert np.array_equal(np.sort(box), np.arange(512)), a
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                      # no "balance properties" warning for 7 - 1 = 6 points
+        few = draw_starts(model, p0, 7, seed=3)[0]
+    assert np.array_equal(few, X[:7])
+    assert np.array_equal(starts_from_unit(model, p0, sobol_points(5, 512, 3)), X[1:])
+    with pytest.raises(ValueError, match=r"u: expected points in \[0, 1\]\^5"):
+        starts_from_unit(model, p0, np.full((2, 5), 1.5))
 
 
 def test_starts_one_is_the_single_fit_bit_for_bit():
@@ -232,3 +261,22 @@ def test_when_no_start_reaches_a_finite_minimum_the_first_run_off_is_returned():
     assert not est.bounded and ms.minima == () and ms.outcome == ("not bounded",) * 4 and ms.best == 0
     assert np.array_equal(est.p, one.p)
     assert est.notes[-1].startswith("multi-start: none of the 4 starts reached a finite minimum")
+
+
+def test_dask_gives_the_serial_estimate_and_table():
+    """identify(..., starts=8) on a local Dask cluster (two worker processes) is the serial multi-start: the same
+    estimate, covariance and note, the same per-start table and the same table of distinct minima."""
+    distributed = pytest.importorskip("distributed")
+    model, data = sinusoid()
+    serial = identify(model, data, P0, starts=8)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
+            distributed.Client(cl) as client:
+        dk = identify(model, data, P0, starts=8, scheduler=client)
+    a, b = serial.diagnostics.starts, dk.diagnostics.starts
+    assert a.backend == "serial" and b.backend.startswith("dask (") and b.backend.endswith(", 2 workers)")
+    assert a.best != 0 and len(a.minima) >= 2          # p0 misses the best minimum: the estimate is a worker's
+    assert np.array_equal(serial.p, dk.p) and np.array_equal(serial.cov, dk.cov)
+    assert serial.objective == dk.objective and serial.notes[:-1] == dk.notes[:-1]
+    assert dk.notes[-1] == serial.notes[-1].replace("serial", b.backend)
+    assert a.to_frame().equals(b.to_frame()) and a.minima_frame().equals(b.minima_frame())
+    assert (a.best, a.reached_best, a.outcome, a.status) == (b.best, b.reached_best, b.outcome, b.status)
