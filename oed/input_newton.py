@@ -44,7 +44,7 @@ from models.state import solve_states
 from .criteria import Criterion
 from .input_nlp import ReducedParts, variable_scale
 
-__all__ = ["NewtonOutcome", "newton_refine", "criterion_value"]
+__all__ = ["NewtonOutcome", "newton_refine", "criterion_value", "reduced_point"]
 
 #: Armijo's sufficient-decrease fraction and the number of step halvings before a step is refused
 ARMIJO = 1e-4
@@ -191,6 +191,16 @@ def _derivatives(num: _Numerics, rows: _Rows, dims):
     for i, B in enumerate(blocks):
         Hr[i * d:(i + 1) * d, i * d:(i + 1) * d] += B
     return Ta.T @ gM, 0.5 * (Hr + Hr.T)
+
+
+def reduced_point(model, p, parts: ReducedParts, U, box, crit: Criterion):
+    """(phi, its gradient, its Hessian) at the scaled rows U (n_pts, d) (module docstring); ``box`` = (lo, span) with
+    q = lo + span * u.  Raises :class:`identification.errors.StateSolveError` when the rows have no state
+    solution."""
+    U = np.atleast_2d(np.asarray(U, float))
+    rows = _Rows(model, p, parts, _Numerics(parts), U, box)
+    g, H = _derivatives(_Numerics(parts), rows, (U.shape[1], model.n_y, model.n_p))
+    return criterion_value(crit, rows.M), g, H
 
 
 def _direction(g, H, free, radius: float):

@@ -65,11 +65,14 @@ class RefineSettings:
         Seed of the random starts.
     ipopt : IpoptSettings
         Of the full-space route (``method="ipopt"``, and the E criterion).
-    method : {"newton", "ipopt"}
-        "newton" (the default since session 13): the D and A criteria are refined by the reduced-space projected
-        Newton of :mod:`oed.input_newton` (the inputs alone as variables, exact CasADi derivatives; no NLP
-        solver is built); "ipopt": the full-space NLP of :mod:`oed.input_nlp` solved by Ipopt (the only route
-        before; always for E).
+    method : {"auto", "newton", "ipopt"}
+        "newton": the D and A criteria are refined by the reduced-space projected Newton of
+        :mod:`oed.input_newton` (the inputs alone as variables, exact CasADi derivatives; no NLP solver is built;
+        a time limit stops it between iterations with the best point reached); "ipopt": the full-space NLP of
+        :mod:`oed.input_nlp` solved by Ipopt (the only route before session 13; always for E); "auto" (the
+        default): Newton for D, Ipopt for A and E.  (From the same start the two reach the same local optimum
+        on the Pyomo.DoE reactor's D designs; for A with two rows Newton's projected steps settled on a worse
+        local optimum than Ipopt's interior path, 13.79 against 11.53 with 4 starts, hence Ipopt for A.)
     newton_tol, max_newton : float, int
         The Newton's convergence tolerance (largest projected gradient entry over max(1, |value|)) and its
         iteration limit per start.
@@ -80,20 +83,22 @@ class RefineSettings:
         by at most one step that cannot be interrupted (a row's Hessian, CasADi's ``nlpsol`` set-up, one
         Ipopt iteration: about 1.5 s at 10 000 variables on the reference machine); the child costs a
         fresh interpreter and a build that is not cached (about 1.6 s CPU at 10 000 variables).  None: always
-        in this process.  (20000 since session 12, was 5000.)
+        in this process.  (20000 since session 12, was 5000.)  The Ipopt route only: the Newton route always runs
+        in this process (its steps are one row's derivatives and one iteration; stopped between them it keeps
+        the best point reached, which a killed child would lose).
     """
 
     n_starts: int = 4
     seed: int = 0
     ipopt: IpoptSettings = IpoptSettings(tol=1e-9, acceptable_tol=1e-6, max_iter=500, mumps_pivot_order=None)
     child_above: int | None = 20000
-    method: str = "newton"
+    method: str = "auto"
     newton_tol: float = 1e-9
     max_newton: int = 100
 
     def __post_init__(self):
-        if self.method not in ("newton", "ipopt"):
-            raise ValueError(f"method: expected 'newton' or 'ipopt', got {self.method!r}")
+        if self.method not in ("auto", "newton", "ipopt"):
+            raise ValueError(f"method: expected 'auto', 'newton' or 'ipopt', got {self.method!r}")
         if not (isinstance(self.newton_tol, (int, float)) and self.newton_tol > 0):
             raise ValueError(f"newton_tol: expected a positive number, got {self.newton_tol!r}")
         if isinstance(self.max_newton, bool) or not isinstance(self.max_newton, (int, np.integer)) or self.max_newton < 1:
@@ -524,7 +529,7 @@ def refine_inputs(model, p, start, sigma, *, criterion=DEFAULT_CRITERION, sensor
         raise ValueError(f"time_limit: expected a positive number of seconds or None, got {time_limit!r}")
     X0, lo, hi = _check_bounds(model, start, bounds)
     t0 = time.perf_counter()
-    if settings.method == "newton" and crit is not Criterion.E:
+    if (settings.method == "newton" and crit is not Criterion.E) or (settings.method == "auto" and crit is Criterion.D):
         return _refine_newton(model, p, X0, sig, (crit, k_idx, n_series), (lo, hi), settings, time_limit, t0)
     n_vars = X0.shape[0] * (model.n_q_dim + model.n_y * (1 + model.n_p))
     if time_limit is not None and settings.child_above is not None and n_vars > settings.child_above:
