@@ -20,7 +20,8 @@ solved by a projected Newton method (Bertsekas 1982) with the exact reduced deri
     \Lambda^T \mathrm{vec}\,\tilde M_i\bigr)\,[I; Z_i],
 
 every derivative from CasADi (:func:`oed.input_nlp.reduced_parts`); c_w is block lower-triangular with dE/dy on
-its diagonal blocks, so one sparse LU of dE/dy per row and iteration serves every solve.  The Hessian is n_u x n_u (the inputs only): a step costs a state solve per trial point and d + 1
+its diagonal blocks, so one sparse LU of dE/dy per row and point serves every solve (the sensitivities S = -(dE/dy)^-1
+E_p D at each trial point too: the states come from :func:`models.state.solve_states`).  The Hessian is n_u x n_u (the inputs only): a step costs a state solve per trial point and d + 1
 sparse solves per row, against the full-space KKT system of every state and sensitivity that Ipopt factorises
 at each of its (more) iterations.  On the free variables (not at a bound with the gradient pointing out) the
 step is Newton's along the Hessian's eigenvectors of positive curvature and goes downhill by at least the trust
@@ -39,7 +40,6 @@ from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
 from identification.errors import StateSolveError
-from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion
 from .input_nlp import ReducedParts, variable_scale
@@ -93,8 +93,11 @@ class _Call:
             self.buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
             self.buf.set_res(i, memoryview(r))
-        self.patterns = [(fn.sparsity_out(i).shape, np.array(fn.sparsity_out(i).row(), dtype=np.int64),
-                          np.array(fn.sparsity_out(i).colind(), dtype=np.int64)) for i in range(fn.n_out())]
+        # one CSC matrix per output with its fixed pattern (CasADi's column-compressed order is SciPy's canonical
+        # one), whose values are overwritten at each call
+        self.matrices = [csc_matrix((np.zeros(fn.nnz_out(i)), np.array(fn.sparsity_out(i).row(), dtype=np.int32),
+                                     np.array(fn.sparsity_out(i).colind(), dtype=np.int32)),
+                                    shape=fn.sparsity_out(i).shape) for i in range(fn.n_out())]
 
     def __call__(self, *args):
         for a, v in zip(self.args, args):
@@ -103,12 +106,13 @@ class _Call:
         return self.res
 
     def sparse(self, i: int) -> csc_matrix:
-        """Output i as a CSC matrix (its values copied)."""
-        shape, row, colind = self.patterns[i]
-        return csc_matrix((self.res[i].copy(), row, colind), shape=shape)
+        """Output i as a CSC matrix: the same object at every call, holding the last call's values."""
+        m = self.matrices[i]
+        m.data[:] = self.res[i]
+        return m
 
     def dense(self, i: int) -> np.ndarray:
-        """Output i as a dense array (copied)."""
+        """Output i as a dense array (a copy)."""
         return self.sparse(i).toarray()
 
 
@@ -116,8 +120,21 @@ class _Numerics:
     """The Functions of :class:`oed.input_nlp.ReducedParts` as buffered calls, for one Newton run."""
 
     def __init__(self, parts: ReducedParts):
-        self.row, self.jac, self.hess, self.crit = (_Call(f) for f in (parts.row, parts.row_jacobian,
-                                                                       parts.row_hessian, parts.criterion))
+        self.row, self.jac, self.hess, self.crit, self.state_jac = (
+            _Call(f) for f in (parts.row, parts.row_jacobian, parts.row_hessian, parts.criterion, parts.state_jacobian))
+
+
+#: the buffered calls of the last few ReducedParts (by identity; the parts are cached per model and reused)
+_NUMERICS: dict = {}
+
+
+def _numerics(parts: ReducedParts) -> _Numerics:
+    got = _NUMERICS.get(id(parts))
+    if got is None or got[0] is not parts:
+        if len(_NUMERICS) >= 4:
+            _NUMERICS.pop(next(iter(_NUMERICS)))
+        got = _NUMERICS[id(parts)] = (parts, _Numerics(parts))
+    return got[1]
 
 
 class _Rows:
@@ -127,11 +144,17 @@ class _Rows:
         lo, span = box
         Q = lo + span * U
         n_p = model.n_p
+        self.lu = [None] * len(U)
         if model.n_y:
-            Y = solve_states(model, p, Q)
-            S = sensitivities(model, p, Q, Y).state_derivatives * parts.scale[None, None, :]
-            sv = variable_scale(model.n_y)
-            self.rows = [(U[i], Y[i] / sv, S[i] / sv) for i in range(len(U))]
+            # the scaled sensitivities from the rows' own equations: c_S = A S + vec(E_p D) = 0, A = dE/dy (scaled)
+            Y = solve_states(model, p, Q) / variable_scale(model.n_y)
+            zero = np.zeros((model.n_y, n_p))
+            self.rows = []
+            for i in range(len(U)):
+                cS0 = num.row(U[i], Y[i], zero)[0][model.n_y:].reshape(n_p, model.n_y).T
+                num.state_jac(U[i], Y[i])
+                self.lu[i] = splu(num.state_jac.sparse(0).copy())
+                self.rows.append((U[i], Y[i], -self.lu[i].solve(np.ascontiguousarray(cS0))))
         else:
             self.rows = [(U[i], np.zeros(0), np.zeros((0, n_p))) for i in range(len(U))]
         self.mv = sum(num.row(*r)[1].copy() for r in self.rows)
@@ -144,10 +167,10 @@ class _Constraints:
     (the S-rows' diagonal blocks are A too: c_S = vec(E_y S + E_p D) is E_y on every column of S), so one sparse
     LU of A (n_y x n_y) serves every solve."""
 
-    def __init__(self, A: csc_matrix, X: csc_matrix, n_p: int):
-        self.n_y, self.n_p = A.shape[0], n_p
-        self.lu = splu(A)
-        self.X = X
+    def __init__(self, lu, X: csc_matrix, n_p: int):
+        self.n_y, self.n_p = X.shape[1], n_p
+        self.lu = lu
+        self.X = X.copy()
 
     def _blocks(self, R, trans: str) -> np.ndarray:
         m = R.shape[1]
@@ -172,11 +195,11 @@ def _derivatives(num: _Numerics, rows: _Rows, dims):
     num.crit(rows.mv, 1.0)
     gM, HM = num.crit.res[0].copy(), num.crit.dense(1)
     T, blocks = [], []
-    for u, y, S in rows.rows:
+    for (u, y, S), lu in zip(rows.rows, rows.lu):
         num.jac(u, y, S)
         Jm = num.jac.dense(3)
         if n_y:
-            cw = _Constraints(num.jac.sparse(0), num.jac.sparse(1), n_p)
+            cw = _Constraints(lu, num.jac.sparse(1), n_p)
             Z = -cw.solve(num.jac.dense(2))
             lam = cw.solve_transposed(-(Jm[:, d:].T @ gM))
             E = np.vstack([np.eye(d), Z])
@@ -198,8 +221,9 @@ def reduced_point(model, p, parts: ReducedParts, U, box, crit: Criterion):
     q = lo + span * u.  Raises :class:`identification.errors.StateSolveError` when the rows have no state
     solution."""
     U = np.atleast_2d(np.asarray(U, float))
-    rows = _Rows(model, p, parts, _Numerics(parts), U, box)
-    g, H = _derivatives(_Numerics(parts), rows, (U.shape[1], model.n_y, model.n_p))
+    num = _numerics(parts)
+    rows = _Rows(model, p, parts, num, U, box)
+    g, H = _derivatives(num, rows, (U.shape[1], model.n_y, model.n_p))
     return criterion_value(crit, rows.M), g, H
 
 
@@ -228,7 +252,7 @@ def newton_refine(model, p, parts: ReducedParts, U0, box, crit: Criterion, *, to
     n_pts, d = np.shape(U0)
     u = np.clip(np.asarray(U0, float).ravel(), 0.0, np.tile(ub, n_pts))
     ubx = np.tile(ub, n_pts)
-    num = _Numerics(parts)
+    num = _numerics(parts)
     try:
         cur = _Rows(model, p, parts, num, u.reshape(n_pts, d), (lo, span))
     except StateSolveError as exc:

@@ -303,6 +303,7 @@ class ReducedParts:
     row_jacobian : casadi.Function ``(u, y, S) -> (dE/dy, dc_S/dy, dc/du, d vec Mt_i/dx_i)`` (c = (E; c_S), c_S =
                                    vec(E_y S + E_p D); dc/dS is dE/dy on every column of S and not formed)
     row_hessian : casadi.Function  ``(u, y, S, lam, Lam) -> Hessian over x_i of lam^T c + Lam^T vec Mt_i``
+    state_jacobian : casadi.Function ``(u, y) -> dE/dy`` (the first output of ``row_jacobian``)
     criterion : casadi.Function    ``(vec Mt, lam_f) -> (d f/d vec Mt, d^2 f/d vec Mt^2)`` scaled by lam_f
     scale : ndarray (n_p,)         the diagonal of D
     """
@@ -312,6 +313,7 @@ class ReducedParts:
     row_hessian: ca.Function
     criterion: ca.Function
     scale: np.ndarray
+    state_jacobian: ca.Function
 
 
 def reduced_parts(model, p, weights, lo, span, crit: Criterion, deadline: float = np.inf) -> ReducedParts:
@@ -340,13 +342,14 @@ def reduced_parts(model, p, weights, lo, span, crit: Criterion, deadline: float 
     n_y, d = row.size_in(1)[0], row.size_in(0)[0]
     Jc = ca.jacobian(c, ca.vertcat(u, y))
     jac = ca.Function("row_jac_blocks", [u, y, S], [Jc[:n_y, d:], Jc[n_y:, d:], Jc[:, :d], ca.jacobian(mt, xr)])
+    state_jac = ca.Function("row_state_jac", [u, y], [Jc[:n_y, d:]])
     _check(deadline, "one row's Jacobian")
     n_p = model.n_p
     _, _, (parts, _) = _criterion_parts(X, crit, n_p, scale, False)
     mv, lam_f = X.sym("Mt", n_p * n_p), X.sym("lam_f")
     g, H = parts(mv, X.zeros(0, 1), lam_f, X.zeros(0, 1))
     _check(deadline, "the criterion's derivatives")
-    return ReducedParts(row, jac, hess, ca.Function("crit_derivatives", [mv, lam_f], [g, H]), scale)
+    return ReducedParts(row, jac, hess, ca.Function("crit_derivatives", [mv, lam_f], [g, H]), scale, state_jac)
 
 
 def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) -> ca.Function:

@@ -603,8 +603,7 @@ def _refine_newton(model, p, X0, sig, design, box, settings: RefineSettings, tim
     n_pts, d = X0.shape
     rng = np.random.default_rng(settings.seed)
     starts = [X0] + [lo + (hi - lo) * rng.random((n_pts, d)) for _ in range(settings.n_starts - 1)]
-    best = X0
-    best_v = _value(crit, row_information(model, p, X0, sig, n_series)[:, list(k_idx)].sum(axis=(0, 1)))
+    best, best_v = X0, np.inf          # a Newton run never ends above its start: the first start's value is X0's or less
     values, messages = [], []
     for i, Xs in enumerate(starts):
         left = deadline - time.perf_counter()
@@ -620,6 +619,8 @@ def _refine_newton(model, p, X0, sig, design, box, settings: RefineSettings, tim
             best, best_v = lo + span * out.u * (hi > lo), out.value
     if not any(np.isfinite(values)) and not any("time limit" in m for m in messages):
         raise RuntimeError(f"refine: every Newton start failed: {'; '.join(messages)}")
+    if not np.isfinite(best_v):       # no start began or every start failed: X0 kept, valued from its sensitivities
+        best_v = _value(crit, row_information(model, p, X0, sig, n_series)[:, list(k_idx)].sum(axis=(0, 1)))
     return RefinedInputs(inputs=_readonly(best), value=float(best_v), start_values=tuple(float(v) for v in values),
                          n_failed=int(sum(not np.isfinite(v) for v in values)), messages=tuple(messages),
                          lower=_readonly(lo), upper=_readonly(hi), wall_time=time.perf_counter() - t0)
