@@ -19,19 +19,24 @@ solved by a projected Newton method (Bertsekas 1982) with the exact reduced deri
     \nabla^2\phi = T^T\,\nabla^2\Psi\,T + \mathrm{blockdiag}_i\,[I; Z_i]^T\,\nabla^2_{x_i}\bigl(\lambda_i^T c_i +
     \Lambda^T \mathrm{vec}\,\tilde M_i\bigr)\,[I; Z_i],
 
-every derivative from CasADi (:func:`oed.input_nlp.reduced_parts`); c_w is block lower-triangular with dE/dy on
-its diagonal blocks, so one sparse LU of dE/dy per row and point serves every solve (the sensitivities S = -(dE/dy)^-1
-E_p D at each trial point too: the states come from :func:`models.state.solve_states`).  The Hessian is n_u x n_u (the inputs only): a step costs a state solve per trial point and d + 1
-sparse solves per row, against the full-space KKT system of every state and sensitivity that Ipopt factorises
-at each of its (more) iterations.  On the free variables (not at a bound with the gradient pointing out) the
-step is Newton's along the Hessian's eigenvectors of positive curvature and goes downhill by at least the trust
-radius along those of negative curvature, so that it descends where the criterion is not convex; the step is capped at a trust radius (no scaled input moves more than 0.25 at first, up to 1), projected on the box
-and halved until Armijo's condition holds.  Converged when the projected gradient's largest entry is below ``tol`` x max(1, |phi|),
-or where the Hessian is positive semi-definite and the Newton step predicts a decrease below the criterion's
-accuracy (:data:`NOISE` x max(1, |phi|)).
+every derivative from CasADi (:func:`oed.input_nlp.reduced_parts`).  c_w is block lower-triangular with dE/dy on
+its diagonal blocks, so one sparse LU of dE/dy per row and point serves every solve, the sensitivities
+S = -(dE/dy)^-1 E_p D at each trial point included (the states come from :func:`models.state.solve_states`).  The
+Hessian is n_u x n_u (the inputs only): a step costs a state solve per trial point and d + 1 sparse solves per
+row, against the full-space KKT system of every state and sensitivity that Ipopt factorises at each of its (more)
+iterations.
+
+On the free inputs the step is Newton's along the Hessian's eigenvectors of positive curvature and goes downhill
+by at least the trust radius along those of negative curvature, so that it descends where the criterion is not
+convex; the active inputs (within min(1e-3, projected gradient) of a bound, the gradient pointing out) move onto
+that bound.  The step is capped at a trust radius (no scaled input moves more than 0.25 at first, up to 1),
+projected on the box and halved until Armijo's condition holds.  Converged when the projected gradient's largest
+entry is below ``tol`` x max(1, |phi|), or where the Hessian is positive semi-definite on the free inputs and the
+step predicts a decrease below the criterion's accuracy (:data:`NOISE` x max(1, |phi|)).
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 
@@ -124,16 +129,18 @@ class _Numerics:
             _Call(f) for f in (parts.row, parts.row_jacobian, parts.row_hessian, parts.criterion, parts.state_jacobian))
 
 
-#: the buffered calls of the last few ReducedParts (by identity; the parts are cached per model and reused)
+#: the buffered calls of the last few ReducedParts (the parts are cached per model and reused), per thread: a
+#: buffer holds one evaluation at a time
 _NUMERICS: dict = {}
 
 
 def _numerics(parts: ReducedParts) -> _Numerics:
-    got = _NUMERICS.get(id(parts))
+    key = (id(parts), threading.get_ident())
+    got = _NUMERICS.get(key)
     if got is None or got[0] is not parts:
-        if len(_NUMERICS) >= 4:
+        if len(_NUMERICS) >= 8:
             _NUMERICS.pop(next(iter(_NUMERICS)))
-        got = _NUMERICS[id(parts)] = (parts, _Numerics(parts))
+        got = _NUMERICS[key] = (parts, _Numerics(parts))
     return got[1]
 
 
@@ -271,8 +278,10 @@ def newton_refine(model, p, parts: ReducedParts, U0, box, crit: Criterion, *, to
         if pgn <= tol * max(1.0, abs(f)):
             return NewtonOutcome(u.reshape(n_pts, d), f, True, k, f"converged ({k} Newton iterations)")
         eps = min(1e-3, pgn)
-        free = ~(((u <= eps) & (g > 0)) | ((u >= ubx - eps) & (g < 0)) | (ubx <= 0))
+        low, high = (u <= eps) & (g > 0), (u >= ubx - eps) & (g < 0)
+        free = ~(low | high | (ubx <= 0))
         step, convex = _direction(g, H, free, radius)
+        step[low], step[high] = -u[low], (ubx - u)[high]         # the active inputs onto their bounds
         if convex and -(g @ step + 0.5 * step @ H @ step) <= NOISE * max(1.0, abs(f)):
             return NewtonOutcome(u.reshape(n_pts, d), f, True, k, f"converged ({k} Newton iterations; the Newton "
                                  f"step's predicted decrease is below the criterion's accuracy, projected gradient "

@@ -375,12 +375,7 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
                                 n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
                                 settings=refine_settings,
                                 time_limit=max(time_limit - (time.perf_counter() - t0), 0.05 * time_limit))
-        if refined.n_failed and all(msg.startswith("not finished: time limit") for msg in refined.messages):
-            notes.append(f"refinement {refined.messages[0]}: the refined design is the exact design's levels "
-                         "(raise time_limit to refine them)")
-        elif any("time limit" in msg for msg in refined.messages):
-            notes.append(f"refinement stopped by the time limit ({time_limit:.3g} s) before every start converged: the "
-                         "refined design is the best point reached (see its messages; raise time_limit to finish)")
+        notes += _time_limit_notes(refined, time_limit)
     notes += problem.notes()
     if refined is not None and problem.controlled:
         refined, note = _controlled_refinement(problem, p, refined, (sigma, sensors, n_series),
@@ -391,6 +386,22 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
                              proven_optimal=res.proven_optimal, criterion=res.criterion, method=res.method,
                              status=res.status, design=res, refined=refined, notes=tuple(notes), axis=info.axis,
                              chosen=res.chosen)
+
+
+def _time_limit_notes(refined: RefinedInputs, time_limit: float) -> list:
+    """The note on a refinement that the time limit stopped (none when every start finished): the exact design's
+    levels kept, or the best point reached returned (a Newton run or Ipopt's ``Maximum_WallTime_Exceeded``)."""
+    timed = [("time limit" in msg or "WallTime" in msg) for msg in refined.messages]
+    if refined.n_failed and all(msg.startswith("not finished: time limit") for msg in refined.messages):
+        return [f"refinement {refined.messages[0]}: the refined design is the exact design's levels "
+                "(raise time_limit to refine them)"]
+    if refined.n_failed == len(refined.messages) and all(timed):
+        return [f"refinement not finished: every start stopped by the time limit ({time_limit:.3g} s) before reaching "
+                "a point; the refined design is the exact design's levels (raise time_limit to refine them)"]
+    if any(timed):
+        return [f"refinement stopped by the time limit ({time_limit:.3g} s) before every start converged: the refined "
+                "design is the best point reached (see its messages; raise time_limit to finish)"]
+    return []
 
 
 def _controlled_refinement(problem: InputProblem, p, refined: RefinedInputs, asked, settings: RefineSettings,
