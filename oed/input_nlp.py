@@ -342,7 +342,9 @@ def reduced_parts(model, p, weights, lo, span, crit: Criterion, deadline: float 
     n_y, d = row.size_in(1)[0], row.size_in(0)[0]
     Jc = ca.jacobian(c, ca.vertcat(u, y))
     jac = ca.Function("row_jac_blocks", [u, y, S], [Jc[:n_y, d:], Jc[n_y:, d:], Jc[:, :d], ca.jacobian(mt, xr)])
-    state_jac = ca.Function("row_state_jac", [u, y], [Jc[:n_y, d:]])
+    # dE/dy alone: SX's slice of Jc is free of S; an MX graph still holds S, so E is differentiated at S = 0
+    A = Jc[:n_y, d:] if X is ca.SX else ca.jacobian(row(u, y, X.zeros(n_y, S.size2()))[0][:n_y], y)
+    state_jac = ca.Function("row_state_jac", [u, y], [A])
     _check(deadline, "one row's Jacobian")
     n_p = model.n_p
     _, _, (parts, _) = _criterion_parts(X, crit, n_p, scale, False)

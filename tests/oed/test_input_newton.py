@@ -137,3 +137,23 @@ def test_time_limit_notes_name_what_was_returned():
     assert _time_limit_notes(refined([1.0, 2.0], ["converged (3 Newton iterations)", stopped]), 5.0)[0].startswith(
         "refinement stopped by the time limit (5 s) before every start converged: the refined design is the best")
     assert _time_limit_notes(refined([1.0], ["converged (3 Newton iterations)"]), 5.0) == []
+
+
+@pytest.mark.parametrize("symbolic", ["SX", "MX"])
+def test_implicit_static_model_in_either_symbolic_type(symbolic):
+    # E(y, p, q) = y + p0 y^3 - p1 q = 0, h = y, two rows: Newton's design equals Ipopt's (on the SX model: the
+    # full-space route cannot expand an MX model's criterion, "eval_sx not defined for LinsolQr") from the same start
+    from models import Model
+
+    def model(sym):
+        return Model(params=["a", "b"], inputs=["q"], sensors=["y"], n_y=1, symbolic=sym,
+                     E=lambda y, p, q: y[0] + p[0] * y[0] ** 3 - p[1] * q[0], h=lambda y, p, q: y[0])
+
+    kw = dict(bounds=(0.1, 3.0), criterion="D")
+    full = refine_inputs(model("SX"), [0.3, 1.2], [[1.0], [2.0]], [0.01],
+                         settings=RefineSettings(n_starts=1, method="ipopt"), **kw)
+    newton = refine_inputs(model(symbolic), [0.3, 1.2], [[1.0], [2.0]], [0.01], settings=RefineSettings(n_starts=1),
+                           **kw)
+    assert newton.messages[0].startswith("converged") and full.n_failed == 0
+    assert newton.value == pytest.approx(full.value, rel=1e-9, abs=1e-9)
+    assert np.allclose(np.sort(newton.inputs.ravel()), np.sort(full.inputs.ravel()), atol=1e-5)
