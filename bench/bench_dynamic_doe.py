@@ -9,7 +9,8 @@ measured at the grid points with sigma 0.01, parameters scaled by their nominal 
   within 1 % of sigma) against Pyomo.DoE's warm ``compute_FIM``;
 * the continuous D-optimal design of (CA0, T profile) in [1, 5] x [300, 700]^9: mudoe's
   ``select_inputs(model, p, times=t, candidates=[nominal], n_points=1, refine=True, bounds=...)``
-  (exact design, then the full-space refinement, 4 starts) against ``run_doe``;
+  (exact design, then the continuous refinement, 4 starts: the reduced-space Newton of oed.input_newton for D
+  since session 13, the full-space NLP by Ipopt before) against ``run_doe``;
 * the 9 x 9 factorial of (CA0, T0) (T = 300 after t = 0.125): mudoe's
   ``oed.information(..., axis="inputs")`` over the 81 rows against
   ``compute_FIM_full_factorial``;
@@ -125,11 +126,10 @@ def scale_part(step=0.02):
     """Issue 30 item 6 (design speed), each the first call in this process for its model:
 
     * ~1000 states: the ``profile`` batch reactor of mudoe/example_reactor.py collocated with ``max_step``
-      (0.02 h: 939 states per experiment), two experiments refined together, 2 Ipopt starts, ``time_limit=600``
-      (9 400 variables: in this process, below ``RefineSettings.child_above``);
+      (0.02 h: 939 states per experiment), two experiments refined together, 2 starts, ``time_limit=600``;
     * the DC motor of mudoe/example_motor.py (configs/motor.toml): its 4 experiments as candidates, n_points=4,
-      n_series=2, refined within TL in [0, 0.03] N m and u in [-12, 12] V, ``time_limit=60`` (4 starts; 22 808
-      variables: in the child process).
+      n_series=2, refined within TL in [0, 0.03] N m and u in [-12, 12] V, ``time_limit=60`` (4 starts; the
+      Newton route runs in this process, the Ipopt route's 22 808-variable NLP in the child process).
     """
     from mudoe import example_motor as em
     from mudoe import example_reactor as er

@@ -298,7 +298,7 @@ class OEDConfig:
                                    exact by enumeration of the designs)
     n_readings : int or None       mode "discrimination": number of free (set point, sensor) readings
     refine : bool                  mode "inputs": also refine the chosen set points continuously within the
-                                   candidates' range (oed.refine_inputs: Ipopt, multi-start; slow on the press)
+                                   candidates' range (oed.refine_inputs: multi-start; Newton for D, Ipopt for A, E)
     prior : dict                   {parameter: (distribution, *args)}, the parameter uncertainty of a robust
                                    approximate design (mode "inputs") or of the exact robust design of sensors
                                    or sampling times (mode "sensors"; mudoe.config_prior; {} = none: local)

@@ -48,7 +48,8 @@ from models.sensitivity import sensitivities
 from models.state import solve_states
 from .criteria import Criterion
 
-__all__ = ["InformationNlp", "information_nlp", "BuildTimeout", "variable_scale", "LIFT_ABOVE"]
+__all__ = ["InformationNlp", "information_nlp", "BuildTimeout", "variable_scale", "LIFT_ABOVE", "ReducedParts",
+           "reduced_parts"]
 
 
 class BuildTimeout(RuntimeError):
@@ -289,6 +290,68 @@ def information_nlp(model, p, weights, n_pts: int, lo, span, crit: Criterion,
     _check(deadline, "the constraints' Jacobian")
     return InformationNlp(NlpProblem(x, f, gg, b, hess_lag=hess, jac_g=jac), U.size1(), Y.size1(), S.size1(),
                           z.size1(), gg.size1(), info, scale, n_m)
+
+
+@dataclass(frozen=True)
+class ReducedParts:
+    """One row's CasADi Functions for the reduced-space Newton of :mod:`oed.input_newton` (x_i = (u, y / s,
+    vec S / s), s = :func:`variable_scale`; c and Mt_i as in :func:`_row_functions`).
+
+    Attributes
+    ----------
+    row : casadi.Function          ``(u, y, S) -> (c, vec Mt_i)``
+    row_jacobian : casadi.Function ``(u, y, S) -> (dE/dy, dc_S/dy, dc/du, d vec Mt_i/dx_i)`` (c = (E; c_S), c_S =
+                                   vec(E_y S + E_p D); dc/dS is dE/dy on every column of S and not formed)
+    row_hessian : casadi.Function  ``(u, y, S, lam, Lam) -> Hessian over x_i of lam^T c + Lam^T vec Mt_i``
+    state_jacobian : casadi.Function ``(u, y) -> dE/dy`` (the first output of ``row_jacobian``)
+    criterion : casadi.Function    ``(vec Mt, lam_f) -> (d f/d vec Mt, d^2 f/d vec Mt^2)`` scaled by lam_f
+    scale : ndarray (n_p,)         the diagonal of D
+    """
+
+    row: ca.Function
+    row_jacobian: ca.Function
+    row_hessian: ca.Function
+    criterion: ca.Function
+    scale: np.ndarray
+    state_jacobian: ca.Function
+
+
+def reduced_parts(model, p, weights, lo, span, crit: Criterion, deadline: float = np.inf) -> ReducedParts:
+    """The Functions of :class:`ReducedParts` for the D or A criterion (arguments as :func:`information_nlp`;
+    the E criterion has extra variables and stays with the full-space NLP).
+
+    Raises
+    ------
+    ValueError
+        For the E criterion.
+    BuildTimeout
+        When the deadline passed during the construction (its step named).
+    """
+    if crit is Criterion.E:
+        raise ValueError("criterion: the reduced-space Newton takes D or A (E is refined in the full space)")
+    X = ca.SX if model.symbolic == "SX" else ca.MX
+    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    row = _row_functions(model, p, weights, lo, span, X)
+    _check(deadline, "the rows' equations")
+    u, y, S = X.sym("u", row.size_in(0)), X.sym("y", row.size_in(1)), X.sym("S", row.size_in(2))
+    c, mt = row(u, y, S)
+    lam, Lam = X.sym("lam", c.size1()), X.sym("Lam", mt.size1())
+    xr = ca.vertcat(u, y, ca.vec(S))
+    hess = ca.Function("row_hess", [u, y, S, lam, Lam], [ca.hessian(ca.dot(lam, c) + ca.dot(Lam, mt), xr)[0]])
+    _check(deadline, "one row's Hessian")
+    n_y, d = row.size_in(1)[0], row.size_in(0)[0]
+    Jc = ca.jacobian(c, ca.vertcat(u, y))
+    jac = ca.Function("row_jac_blocks", [u, y, S], [Jc[:n_y, d:], Jc[n_y:, d:], Jc[:, :d], ca.jacobian(mt, xr)])
+    # dE/dy alone: SX's slice of Jc is free of S; an MX graph still holds S, so E is differentiated at S = 0
+    A = Jc[:n_y, d:] if X is ca.SX else ca.jacobian(row(u, y, X.zeros(n_y, S.size2()))[0][:n_y], y)
+    state_jac = ca.Function("row_state_jac", [u, y], [A])
+    _check(deadline, "one row's Jacobian")
+    n_p = model.n_p
+    _, _, (parts, _) = _criterion_parts(X, crit, n_p, scale, False)
+    mv, lam_f = X.sym("Mt", n_p * n_p), X.sym("lam_f")
+    g, H = parts(mv, X.zeros(0, 1), lam_f, X.zeros(0, 1))
+    _check(deadline, "the criterion's derivatives")
+    return ReducedParts(row, jac, hess, ca.Function("crit_derivatives", [mv, lam_f], [g, H]), scale, state_jac)
 
 
 def _hessian_of_lagrangian(dims, n_x: int, functions, n_c: list, n_cons: int) -> ca.Function:

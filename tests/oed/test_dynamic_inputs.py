@@ -1,4 +1,6 @@
 """oed.information / select_inputs on a dynamic model: experiment design with control profiles."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,10 @@ from oed.inputs import _share
 
 #: a time limit that never decides a result here (issue 27)
 UNTIMED = 1e9
+
+#: the full-space route (Ipopt on the NLP of oed.input_nlp), one or two starts
+FULL1 = RefineSettings(n_starts=1, method="ipopt")
+FULL2 = RefineSettings(n_starts=2, method="ipopt")
 
 
 def test_factorial_information_equals_the_odes():
@@ -87,22 +93,22 @@ def test_large_refinement_runs_in_a_child_process_ended_at_the_time_limit():
     # design's levels are kept and said to be
     cm = reactor().collocate(GRID, max_step=0.125)
     sig = np.full(cm.n_S, 0.01)
-    here = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1),
+    here = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=FULL1,
                          time_limit=UNTIMED)
     child = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER),
-                          settings=RefineSettings(n_starts=1, child_above=0), time_limit=UNTIMED)
+                          settings=replace(FULL1, child_above=0), time_limit=UNTIMED)
     assert child.n_failed == 0 and np.allclose(child.inputs, here.inputs, rtol=1e-9, atol=1e-9)
     assert child.value == pytest.approx(here.value, rel=1e-12)
-    start = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=2),
+    start = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=FULL2,
                           time_limit=2e-3)                          # in this process: no start finishes
     killed = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER),
-                           settings=RefineSettings(n_starts=2, child_above=0), time_limit=0.05)
+                           settings=replace(FULL2, child_above=0), time_limit=0.05)
     assert np.array_equal(killed.inputs, [NOMINAL]) and killed.n_failed == 2
     assert all(m.startswith("not finished: time limit (0.05 s) reached while building or solving") for m in
                killed.messages), killed.messages
     assert killed.value == pytest.approx(start.value, rel=1e-9)     # the start's value, from its sensitivities
     res = select_inputs(reactor(), P, times=GRID, candidates=[NOMINAL], sigma=0.01, n_points=1, refine=True,
-                        bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1, child_above=0),
+                        bounds=(LOWER, UPPER), refine_settings=replace(FULL1, child_above=0),
                         time_limit=0.05)
     assert any(n.startswith("refinement not finished: time limit") for n in res.notes), res.notes
     assert np.array_equal(res.refined.inputs, res.inputs)

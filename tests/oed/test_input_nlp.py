@@ -1,4 +1,6 @@
 """oed.input_nlp: the refinement NLP's assembled exact Hessian, its lifted form and its time-limited build."""
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -10,6 +12,10 @@ from oed.criteria import Criterion
 from oed.input_nlp import BuildTimeout, information_nlp
 
 ROWS = np.array([NOMINAL, np.r_[2.0, [450.0] * 4, [350.0] * 5]])
+
+#: the full-space route (Ipopt on the NLP of oed.input_nlp), one or two starts
+FULL1 = RefineSettings(n_starts=1, method="ipopt")
+FULL2 = RefineSettings(n_starts=2, method="ipopt")
 
 
 def _coarse():
@@ -51,10 +57,10 @@ def test_lifted_refinement_reaches_the_same_design(monkeypatch):
     # two rows: the information of both lifted into m, m = tril(sum_i Mt_i) / bb
     cm, _ = _coarse()
     sig = np.full(cm.n_S, 0.01)
-    plain = refine_inputs(cm, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    plain = refine_inputs(cm, P, ROWS, sig, bounds=(LOWER, UPPER), settings=FULL1)
     monkeypatch.setattr(input_nlp, "LIFT_ABOVE", 0)
     cm2, _ = _coarse()                          # a fresh model: no NLP cached
-    lifted = refine_inputs(cm2, P, ROWS, sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    lifted = refine_inputs(cm2, P, ROWS, sig, bounds=(LOWER, UPPER), settings=FULL1)
     assert plain.n_failed == 0 and lifted.n_failed == 0
     assert lifted.value == pytest.approx(plain.value, abs=1e-7)
     assert np.allclose(lifted.inputs, plain.inputs, rtol=1e-4, atol=1e-3 * (UPPER - LOWER))
@@ -68,14 +74,14 @@ def test_time_limit_reached_while_building_keeps_the_start_and_says_so():
         information_nlp(cm, P, w, 1, LOWER, UPPER - LOWER, Criterion.D, deadline=0.0)
     sig = np.full(cm.n_S, 0.01)
     r = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER),
-                      settings=RefineSettings(n_starts=3, child_above=None), time_limit=1e-6)
+                      settings=RefineSettings(n_starts=3, child_above=None, method="ipopt"), time_limit=1e-6)
     assert r.n_failed == 3 and np.array_equal(r.inputs, [NOMINAL]) and np.isfinite(r.value)
     assert all(m.startswith("not finished: time limit (1e-06 s) reached while building the refinement's NLP (after")
                and "no Ipopt run started" in m for m in r.messages), r.messages
-    free = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    free = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=FULL1)
     assert free.value < r.value
     res = select_inputs(reactor(), P, times=GRID, candidates=[NOMINAL], sigma=0.01, n_points=1, refine=True,
-                        bounds=(LOWER, UPPER), refine_settings=RefineSettings(n_starts=1, child_above=None),
+                        bounds=(LOWER, UPPER), refine_settings=replace(FULL1, child_above=None),
                         time_limit=1e-6)
     assert any(n.startswith("refinement not finished: time limit") and "building the refinement's NLP" in n
                for n in res.notes), res.notes
@@ -114,12 +120,12 @@ def test_refinement_without_mumps_scaling_reaches_the_same_design(monkeypatch):
 
     cm, _ = _coarse()
     sig = np.full(cm.n_S, 0.01)
-    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    plain = refine_inputs(cm, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=FULL1)
     monkeypatch.setattr(inputs, "UNSCALED_MUMPS_ABOVE", 0)
     seen, solve = [], inputs.solve_nlp
     monkeypatch.setattr(inputs, "solve_nlp", lambda *a, **k: seen.append(k["settings"].extra) or solve(*a, **k))
     cm2, _ = _coarse()
-    unscaled = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=RefineSettings(n_starts=1))
+    unscaled = refine_inputs(cm2, P, [NOMINAL], sig, bounds=(LOWER, UPPER), settings=FULL1)
     assert seen and all(("mumps_scaling", 0) in extra for extra in seen)
     assert plain.n_failed == 0 and unscaled.n_failed == 0
     assert unscaled.value == pytest.approx(plain.value, abs=1e-7)
