@@ -226,3 +226,30 @@ def test_halved_mesh_one_step_is_rejected_by_its_residual_on_a_nonlinear_model()
     finally:
         del traj.integrated_outputs
     assert calls == [1] and np.abs(h - traj.outputs(p, q, traj._states(p, q))).max() <= 1e-11
+
+
+def test_compiled_element_functions_and_block_solves_equal_the_whole_trajectory_solve():
+    """With JIT (jit_scope(True), as Monte Carlo runs): the element functions compiled and their blocks solved in
+    the same compiled call (models.block_solve, LAPACK for blocks that fail its check); states, y'(p), h and G equal
+    the generic whole-trajectory solve to the tolerances of the LAPACK path, through every solve of the strategy:
+    Newton with y' (states_and_sensitivities), the sweep, the halved mesh's one step.  Without a compiler the
+    virtual machine and LAPACK run: the same test."""
+    from models.state import JIT, jit_scope
+    from models.trajectory import interpolate_states
+    coarse = collocate(build(), TIMES, max_step=0.25)
+    Yg, Ypg, hg, Gg = generic(coarse, P, Q)
+    with jit_scope(True):
+        traj = trajectory_numerics(coarse)
+        Y, sens = traj.states_and_sensitivities(P, Q, Yg * (1 + 1e-3))
+        assert np.abs(Y - Yg).max() <= 1e-12 * np.abs(Yg).max()
+        assert np.abs(sens.state_derivatives - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        assert np.abs(sens.h - hg).max() <= 1e-12 and np.abs(sens.G - Gg).max() <= 1e-10 * np.abs(Gg).max()
+        assert np.abs(traj.state_derivatives(P, Q, Yg) - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        if JIT.active():                               # a compiler works: the compiled path was taken
+            assert {("solved", "full_blocks"), ("solved", "blocks")} <= set(traj._maps)
+        fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
+        tf = trajectory_numerics(fine)
+        guess = interpolate_states(coarse, fine, Yg)
+        with jit_scope(False):
+            exact = tf.outputs(P, Q, tf._states(P, Q))
+        assert np.abs(tf.refined_outputs(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
