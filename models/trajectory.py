@@ -208,7 +208,8 @@ class TrajectoryNumerics:
         self.steps = np.diff(b)
         # the rows' order for the element blocks' compiled elimination (models.block_solve, JIT only): partial
         # pivoting of R_V as the element length goes to 0, sum_j C_jr x_j (the collocation matrix times I)
-        self.pivot_rows = pivot_order(np.kron(np.asarray(cm.C, float)[1:, 1:].T, np.eye(n_x)))
+        A0 = np.kron(np.asarray(cm.C, float)[1:, 1:].T, np.eye(n_x))
+        self.pivot_rows, self.pivot_rows_t = pivot_order(A0), pivot_order(A0.T)
         self._maps = {}
 
     # ------------------------------------------------------------------ the strategy's operations
@@ -541,13 +542,16 @@ class TrajectoryNumerics:
             hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
             b = -hyl[:, :, 0]
             bV = b[:, n_x:].reshape(n, N, n_x * d)
-            mu = np.empty((n, N, n_x * d))
-            nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
-            for k in range(N - 1, -1, -1):
-                rhs = bV[:, k].copy()
-                rhs[:, -n_x:] -= nxt
-                mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
-                nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
+            if JIT.active():
+                mu, nxt = self._adjoint_compiled(RV, Rx, bV)
+            else:
+                mu = np.empty((n, N, n_x * d))
+                nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
+                for k in range(N - 1, -1, -1):
+                    rhs = bV[:, k].copy()
+                    rhs[:, -n_x:] -= nxt
+                    mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
+                    nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
             mu0 = b[:, :n_x] - nxt
             He = _mapped_call(self._maps, self.element_hessian, m,
                               [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
@@ -555,6 +559,26 @@ class TrajectoryNumerics:
             H0 = _mapped_call(self._maps, self.x0_hessian, n, [p, inputs, mu0])[0]
             out[a] = Hh + He.reshape(n, N, n_p, n_p).sum(axis=1) - H0
         return 0.5 * (out + out.transpose(0, 1, 3, 2))
+
+    def _adjoint_compiled(self, RV, Rx, bV) -> tuple:
+        r"""(mu (n, N, n_x d), R_x0,0^T mu_0 (n, n_x)) of :meth:`hessian_terms`' backward substitution with every
+        element's transposed block solved at once (:func:`models.block_solve.solve_blocks`, compiled with JIT):
+        Z_k = R_V,k^{-T} (b_k, P) with P the last n_x rows (the element's end point), then backwards
+        mu_k = Z_k^b - Z_k^P nu_k+1 and nu_k = R_x0,k^T mu_k (nu_N = 0), the small recurrence on nu alone."""
+        n, N, nd, n_x = Rx.shape
+        P = np.zeros((nd, n_x))
+        P[-n_x:] = np.eye(n_x)
+        rhs = np.concatenate([bV.reshape(n * N, nd, 1), np.broadcast_to(P, (n * N, nd, n_x))], axis=2)
+        Z = solve_blocks(RV.reshape(n * N, nd, nd).transpose(0, 2, 1), rhs, self._maps, self.pivot_rows_t)
+        Z = Z.reshape(n, N, nd, 1 + n_x)
+        RxT = Rx.transpose(0, 1, 3, 2)
+        Qb, T = (RxT @ Z[..., :1])[..., 0], RxT @ Z[..., 1:]          # R_x0^T Z^b (n, N, n_x), R_x0^T Z^P
+        nus = np.empty((n, N, n_x))
+        nxt = np.zeros((n, n_x))
+        for k in range(N - 1, -1, -1):
+            nus[:, k] = nxt
+            nxt = Qb[:, k] - (T[:, k] @ nxt[:, :, None])[:, :, 0]
+        return Z[..., 0] - (Z[..., 1:] @ nus[..., None])[..., 0], nxt
 
     def outputs_and_sensitivities(self, p, inputs, Y, Yp):
         """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""

@@ -234,6 +234,7 @@ def test_compiled_element_functions_and_block_solves_equal_the_whole_trajectory_
     the generic whole-trajectory solve to the tolerances of the LAPACK path, through every solve of the strategy:
     Newton with y' (states_and_sensitivities), the sweep, the halved mesh's one step.  Without a compiler the
     virtual machine and LAPACK run: the same test."""
+    from models.sensitivity import Sensitivities
     from models.state import JIT, jit_scope
     from models.trajectory import interpolate_states
     coarse = collocate(build(), TIMES, max_step=0.25)
@@ -245,6 +246,11 @@ def test_compiled_element_functions_and_block_solves_equal_the_whole_trajectory_
         assert np.abs(sens.state_derivatives - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
         assert np.abs(sens.h - hg).max() <= 1e-12 and np.abs(sens.G - Gg).max() <= 1e-10 * np.abs(Gg).max()
         assert np.abs(traj.state_derivatives(P, Q, Yg) - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        lam = np.random.default_rng(0).standard_normal((2, Q.shape[0], coarse.n_S))
+        H = sens.hessians(lam)                         # the adjoint with every transposed block solved at once
+        sens._filled()                                 # the generic per-experiment adjoints (sparse LU)
+        Hg = Sensitivities.hessians(sens, lam)
+        assert np.abs(H - Hg).max() <= 1e-10 * np.abs(Hg).max()
         if JIT.active():                               # a compiler works: the compiled path was taken
             assert {("solved", "full_blocks"), ("solved", "blocks")} <= set(traj._maps)
         fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
