@@ -334,6 +334,13 @@ class TrajectoryNumerics:
         M, C = X[..., :n_x].reshape(n, N, nd, n_x), X[..., n_x:].reshape(n, N, nd, k)
         out = np.empty_like(B)
         out[:, :n_x] = prev = B[:, :n_x]                    # the rows of x(0) - x0: identity
+        if solved is not None:       # JIT: the recurrence on the elements' end points, then every element at once
+            Ml, Cl, starts = M[:, :, -n_x:], C[:, :, -n_x:], np.empty((n, N, n_x, k))
+            for e in range(N):
+                starts[:, e] = prev
+                prev = Cl[:, e] - Ml[:, e] @ prev
+            out[:, n_x:] = (C - M @ starts).reshape(n, N * nd, k)
+            return out.reshape(n * n_y, k)
         for e in range(N):
             v = C[:, e] - M[:, e] @ prev
             out[:, n_x + e * nd:n_x + (e + 1) * nd] = v
