@@ -259,3 +259,17 @@ def test_compiled_element_functions_and_block_solves_equal_the_whole_trajectory_
         with jit_scope(False):
             exact = tf.outputs(P, Q, tf._states(P, Q))
         assert np.abs(tf.refined_outputs(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
+
+
+def test_collocate_with_arguments_checked_before_returns_the_same_model_and_still_checks_new_ones():
+    """collocate's cache of checked calls (two calls a refit): the same arguments give the same collocated model
+    (times as a list or an array alike); other arguments are checked as before."""
+    from models.contract import ModelError
+    m = build()
+    cm = collocate(m, TIMES, max_step=0.25)
+    assert collocate(m, list(np.asarray(TIMES, float)), max_step=0.25) is cm
+    assert collocate(m, TIMES, max_step=0.1) is not cm
+    with pytest.raises(ModelError, match="increasing"):
+        collocate(m, np.asarray(TIMES, float)[::-1], max_step=0.25)
+    with pytest.raises(ModelError, match="mesh"):
+        collocate(m, TIMES, mesh=[0.0, 1.0])
