@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
-from .block_solve import accepted, pivot_order, solve_blocks, solved_function
+from .block_solve import MAX_COMPILED_SIZE, accepted, pivot_order, solve_blocks, solved_function
 from .element_march import march, march_failure, march_symbolic
 from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
 from .sensitivity import Sensitivities
@@ -88,11 +88,13 @@ _JIT_NAMES = frozenset({"traj_newton", "traj_blocks", "traj_residual_blocks", "t
 
 def _element_function(cache: dict, f: ca.Function) -> ca.Function:
     """f, or its C-compiled copy when JIT compilation is wanted here (:data:`models.state.JIT`, process-wide
-    or in a :func:`models.state.jit_scope`) and f is one of the element functions (:data:`_JIT_NAMES`, SX);
+    or in a :func:`models.state.jit_scope`) and f is one of the element functions (:data:`_JIT_NAMES`, SX) of
+    an element with at most :data:`models.block_solve.MAX_COMPILED_SIZE` unknowns (n_x d; ``cache["jit_small"]``,
+    set by :class:`TrajectoryNumerics`);
     the copy is kept in ``cache`` (the same numbers: the compiled code does the virtual machine's operations
     in the same order).  Without a working compiler, f."""
     name = f.name()
-    if name not in _JIT_NAMES or not JIT.active():
+    if name not in _JIT_NAMES or not cache.get("jit_small", False) or not JIT.active():
         return f
     g = cache.get(("jit", name))
     if g is None:
@@ -209,8 +211,9 @@ class TrajectoryNumerics:
         # the rows' order for the element blocks' compiled elimination (models.block_solve, JIT only): partial
         # pivoting of R_V as the element length goes to 0, sum_j C_jr x_j (the collocation matrix times I)
         A0 = np.kron(np.asarray(cm.C, float)[1:, 1:].T, np.eye(n_x))
-        self.pivot_rows, self.pivot_rows_t = pivot_order(A0), pivot_order(A0.T)
-        self._maps = {}
+        small = n_x * d <= MAX_COMPILED_SIZE          # larger element blocks: LAPACK and the virtual machine
+        self.pivot_rows, self.pivot_rows_t = (pivot_order(A0), pivot_order(A0.T)) if small else (None, None)
+        self._maps = {"jit_small": small}
 
     # ------------------------------------------------------------------ the strategy's operations
     def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
@@ -350,8 +353,9 @@ class TrajectoryNumerics:
     def _solved(self, name: str):
         """The element function ``name`` (an attribute: blocks, residual_blocks or full_blocks) with the solves
         of its blocks R_V^{-1} (R_x0, R, -R_p) (the columns it has) in the same compiled evaluation
-        (:func:`models.block_solve.solved_function`); None unless JIT compilation is wanted here."""
-        if not JIT.active():
+        (:func:`models.block_solve.solved_function`); None unless JIT compilation is wanted here and the element
+        has at most :data:`models.block_solve.MAX_COMPILED_SIZE` unknowns."""
+        if not JIT.active() or self.pivot_rows is None:
             return None
         f = self._maps.get(("solved", name))
         if f is None:
@@ -549,7 +553,7 @@ class TrajectoryNumerics:
             hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
             b = -hyl[:, :, 0]
             bV = b[:, n_x:].reshape(n, N, n_x * d)
-            if JIT.active():
+            if JIT.active() and self.pivot_rows_t is not None:
                 mu, nxt = self._adjoint_compiled(RV, Rx, bV)
             else:
                 mu = np.empty((n, N, n_x * d))

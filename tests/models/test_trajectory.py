@@ -273,3 +273,23 @@ def test_collocate_with_arguments_checked_before_returns_the_same_model_and_stil
         collocate(m, np.asarray(TIMES, float)[::-1], max_step=0.25)
     with pytest.raises(ModelError, match="mesh"):
         collocate(m, TIMES, mesh=[0.0, 1.0])
+
+
+def test_elements_with_many_unknowns_stay_on_the_virtual_machine_and_lapack_under_jit():
+    """An element of 10 states x 3 points (30 unknowns > MAX_COMPILED_SIZE): with JIT on nothing of the trajectory
+    numerics is compiled, and the states and sensitivities are bit for bit those without JIT."""
+    from models.state import jit_scope
+    n = 10
+    m = Model.ode(["k"], [f"x{i}" for i in range(n)], ["a"], [f"x{n - 1}"],
+                  rhs=lambda x, p, u: ca.vertcat(-p[0] * x[0], *[p[0] * (x[i - 1] - x[i]) for i in range(1, n)]),
+                  x0=lambda p, u: ca.vertcat(u[0], *([0.0] * (n - 1))), h=lambda x, p, u: x[n - 1], horizon=2.0)
+    cm = collocate(m, [0.5, 1.0, 2.0])
+    q = np.array([[1.0], [2.0]])
+    traj = trajectory_numerics(cm)
+    Y = traj.states([0.7], q)
+    yp = traj.state_derivatives([0.7], q, Y)
+    with jit_scope(True):
+        Yj = traj.states([0.7], q)
+        assert np.array_equal(Yj, Y) and np.array_equal(traj.state_derivatives([0.7], q, Yj), yp)
+        assert traj._solved("full_blocks") is None
+    assert not any(isinstance(k, tuple) and k[0] in ("jit", "solved", "block_solve") for k in traj._maps)
