@@ -1,7 +1,8 @@
 """Benchmark (issue 30 items 1 and 6): identification speed against scipy in the same run.
 
 * ``reactor``: bench.dynamic_reference's batch reactor, 20 experiments x 30 samples (seed 0), start (0.7,
-  0.7, 50, 60): mudoe's warm refit (``identify`` repeated on one model, after a first fit) against scipy
+  0.7, 50, 60): mudoe's warm refit (``identify`` repeated on one model, after a first fit; on CasADi's
+  virtual machine, identify's default, and with JIT, ``models.state.jit_scope(True)``) against scipy
   ``least_squares`` with all experiments stacked in one ``solve_ivp`` and the exact sensitivity Jacobian
   (rtol 1e-8; ``bench.dynamic_reference.reference_fit(..., jac="sens", stacked=True)``), alternating.
 * ``published``: the four published benchmarks of :mod:`bench.ode_benchmarks` (chain, gas oil, methanol,
@@ -42,19 +43,27 @@ def _cpu(f):
 
 
 def reactor(rep: int = 7) -> dict:
-    """mudoe's warm refit of the reactor 20 x 30 and scipy's stacked exact-sensitivity fit, alternating."""
+    """mudoe's warm refit of the reactor 20 x 30 and scipy's stacked exact-sensitivity fit, alternating; mudoe
+    both on CasADi's virtual machine (identify's default) and with JIT (``models.state.jit_scope(True)``, as
+    Monte Carlo, bootstrap and validate fit: compiled element functions and block solves)."""
     from identification import identify
+    from models.state import JIT, jit_scope
     from bench.bench_dynamic_fit import _measurements, reactor_model
     ex = dr.batch_reactor()
     d = dr.simulate_data(ex, 20, 30, seed=0)
     data = _measurements(d)
     model = reactor_model()
     est, c_first, w_first = _cpu(lambda: identify(model, data, ex.p_start))
-    m_cpu, m_wall, s_cpu, s_wall = [], [], [], []
+    with jit_scope(True):
+        est_jit, c_first_jit, _ = _cpu(lambda: identify(model, data, ex.p_start))
+    m_cpu, m_wall, j_cpu, s_cpu, s_wall = [], [], [], [], []
     for _ in range(rep):
         est, c, w = _cpu(lambda: identify(model, data, ex.p_start))
         m_cpu.append(c)
         m_wall.append(w)
+        with jit_scope(True):
+            est_jit, c, _ = _cpu(lambda: identify(model, data, ex.p_start))
+        j_cpu.append(c)
         fit = dr.reference_fit(ex, d, rtol=1e-8, jac="sens", stacked=True)
         s_cpu.append(fit.fit_cpu_seconds)
         s_wall.append(fit.fit_seconds)
@@ -63,7 +72,11 @@ def reactor(rep: int = 7) -> dict:
             "iterations": est.iterations, "mudoe_cpu": statistics.median(m_cpu), "mudoe_wall": statistics.median(m_wall),
             "mudoe_first_cpu": c_first, "scipy": "stacked exact-sens (DOP853)", "scipy_cpu": statistics.median(s_cpu),
             "scipy_wall": statistics.median(s_wall), "ratio": statistics.median(s_cpu) / statistics.median(m_cpu),
-            "mudoe_dev_se": float(np.max(np.abs((est.p - ref.p) / ref.se))), "scipy_nfev": fit.nfev}
+            "mudoe_dev_se": float(np.max(np.abs((est.p - ref.p) / ref.se))), "scipy_nfev": fit.nfev,
+            "jit_compiler": not JIT.failed, "mudoe_jit_cpu": statistics.median(j_cpu),
+            "mudoe_jit_first_cpu": c_first_jit, "ratio_jit": statistics.median(s_cpu) / statistics.median(j_cpu),
+            "jit_minus_vm_se": float(np.max(np.abs((est_jit.p - est.p) / est.stderr))),
+            "mudoe_cpu_all": m_cpu, "mudoe_jit_cpu_all": j_cpu, "scipy_cpu_all": s_cpu}
 
 
 def _sse(b, p) -> float:
@@ -179,6 +192,9 @@ def main(argv=None):
         print(f"| reactor 20x30 | (0.7, 0.7, 50, 60) | {r['solver']} {r['iterations']} it, {1e3 * r['mudoe_cpu']:.1f} ms "
               f"(first fit {1e3 * r['mudoe_first_cpu']:.0f} ms) | {r['scipy']} {1e3 * r['scipy_cpu']:.1f} ms | "
               f"{r['ratio']:.2f}x | mudoe {r['mudoe_dev_se']:.1e} se from the rtol 1e-10 fit |", flush=True)
+        print(f"| reactor 20x30, JIT (jit_scope(True)) | (0.7, 0.7, 50, 60) | {1e3 * r['mudoe_jit_cpu']:.1f} ms (first JIT "
+              f"fit {1e3 * r['mudoe_jit_first_cpu']:.0f} ms) | {1e3 * r['scipy_cpu']:.1f} ms | {r['ratio_jit']:.2f}x | "
+              f"{r['jit_minus_vm_se']:.1e} se from the VM's estimate |", flush=True)
     if "published" in parts:
         print("| problem | start | mudoe (init=data) CPU | init=simulate | fastest scipy CPU | ratio | SSE mudoe / scipy "
               "| scipy - mudoe (se) |", flush=True)

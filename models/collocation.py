@@ -338,6 +338,10 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
     """
     if not isinstance(dynamic, DynamicModel):
         raise ModelError(f"dynamic: expected a DynamicModel, got {type(dynamic).__name__}")
+    call = _call_key(times, mesh, degree, max_step, outputs)
+    got = None if call is None else dynamic.cache.get("collocate_call", call)
+    if got is not None:            # the same arguments checked before (every refit): the same collocated model
+        return got
     t = dynamic.check_times(times)
     horizon = dynamic.horizon if dynamic.horizon is not None else float(t[-1])
     if horizon <= 0:
@@ -356,8 +360,26 @@ def collocate(dynamic: DynamicModel, times, mesh: Mesh | None = None, degree: in
         raise ModelError(f"mesh: its boundaries must contain every sampling time and control grid point and end "
                          f"at the horizon {horizon:g}; missing {', '.join(f'{v:g}' for v in missing) or 'the end'}")
     key = (t.tobytes(), mesh, None if outputs is None else tuple((str(k), float(v)) for k, v in outputs))
-    return dynamic.cache.get_or_make("collocated", key, lambda: CollocatedModel(dynamic, t, mesh, outputs),
-                                     maxsize=COLLOCATED_CACHE_SIZE)
+    cm = dynamic.cache.get_or_make("collocated", key, lambda: CollocatedModel(dynamic, t, mesh, outputs),
+                                   maxsize=COLLOCATED_CACHE_SIZE)
+    if call is not None:
+        dynamic.cache.put("collocate_call", call, cm, maxsize=COLLOCATED_CACHE_SIZE)
+    return cm
+
+
+def _call_key(times, mesh, degree, max_step, outputs):
+    """The arguments of :func:`collocate` as a cache key (times' float64 bytes, the mesh, degree, max_step,
+    outputs), or None when they do not make one (the checks then run and name the bad argument): a call with
+    arguments that passed the checks before returns the same collocated model without checking them again
+    (the checks and the default mesh depend on nothing else; about 1 ms a call, two calls a refit)."""
+    try:
+        key = (np.asarray(times, float).tobytes(), np.shape(times), mesh, int(degree),
+               None if max_step is None else float(max_step),
+               None if outputs is None else tuple((str(k), float(v)) for k, v in outputs))
+        hash(key)
+    except (TypeError, ValueError):
+        return None
+    return key
 
 
 register_collocation(collocate)

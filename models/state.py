@@ -42,7 +42,8 @@ class JitConfig:
     only for many repeated fits (the Monte Carlo workers switch it on).
     Only models stated in SX with at most 60 states are compiled, and only when a C compiler
     (``gcc``) works; otherwise the CasADi virtual machine evaluates the functions as usual
-    (same numbers, slower).
+    (same numbers, slower); the trajectories of collocated ODEs with at most 24 unknowns per
+    element are compiled as well, their element blocks solved in the same call (to round-off).
 
     The compiled libraries are kept in an on-disk cache shared by all processes of the user
     (:class:`models.jit_cache.JitCache`, content-addressed by the function, the flags, CasADi and
@@ -133,7 +134,10 @@ def set_jit(enabled: bool) -> bool:
 
     Sets :attr:`JitConfig.enabled` of :data:`JIT`.  Only models stated in SX with at most 60
     states are compiled, and only when a C compiler (``cc``/``gcc``) is on the PATH; otherwise
-    the CasADi virtual machine evaluates them as usual (same numbers, slower).
+    the CasADi virtual machine evaluates them as usual (same numbers, slower).  Collocated ODEs with at
+    most 24 unknowns per element (n_x d) also get their element functions compiled, with the solves of
+    their element blocks in the same compiled call (:mod:`models.block_solve`: numbers equal to LAPACK's
+    to round-off, not bit for bit).
     """
     prev = JIT.enabled
     JIT.enabled = bool(enabled)

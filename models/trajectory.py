@@ -33,10 +33,11 @@ import numpy as np
 
 from .errors import StateSolveError
 from .batched import batched_function
+from .block_solve import MAX_COMPILED_SIZE, accepted, pivot_order, solve_blocks, solved_function
 from .element_march import march, march_failure, march_symbolic
 from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
 from .sensitivity import Sensitivities
-from .state import numerics, solve_states_generic
+from .state import JIT, numerics, solve_states_generic
 
 __all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states",
            "element_failures", "output_functions", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
@@ -70,10 +71,35 @@ def _per_element(p: np.ndarray, N: int) -> np.ndarray:
 def _mapped_call(cache: dict, f: ca.Function, n: int, args) -> list:
     """f at n points: ``args`` are (n, d) arrays (one row a point) or (d,) arrays shared by all
     points; returns one dense (n, r, c) array per output."""
+    f = _element_function(cache, f)
     fm = cache.get((f.name(), n))
     if fm is None:
         fm = cache[(f.name(), n)] = batched_function(f, n)
     return fm(*args)
+
+
+#: the element functions of :class:`TrajectoryNumerics` compiled to C when JIT is on (models.state.set_jit,
+#: jit_scope): their size does not grow with the mesh, and every mesh of a model shares them (the outputs'
+#: functions, whose size grows with the sampling times, stay on CasADi's virtual machine)
+_JIT_NAMES = frozenset({"traj_newton", "traj_blocks", "traj_residual_blocks", "traj_full_blocks", "traj_residual",
+                        "traj_x0", "traj_elem_hess", "traj_x0_hess", "traj_blocks_solved",
+                        "traj_residual_blocks_solved", "traj_full_blocks_solved"})
+
+
+def _element_function(cache: dict, f: ca.Function) -> ca.Function:
+    """f, or its C-compiled copy when JIT compilation is wanted here (:data:`models.state.JIT`, process-wide
+    or in a :func:`models.state.jit_scope`) and f is one of the element functions (:data:`_JIT_NAMES`, SX) of
+    an element with at most :data:`models.block_solve.MAX_COMPILED_SIZE` unknowns (n_x d; ``cache["jit_small"]``,
+    set by :class:`TrajectoryNumerics`);
+    the copy is kept in ``cache`` (the same numbers: the compiled code does the virtual machine's operations
+    in the same order).  Without a working compiler, f."""
+    name = f.name()
+    if name not in _JIT_NAMES or not cache.get("jit_small", False) or not JIT.active():
+        return f
+    g = cache.get(("jit", name))
+    if g is None:
+        g = cache[("jit", name)] = JIT.compile(f) or f
+    return g
 
 
 #: one Newton step from another mesh's trajectories is kept when max |R| <= REFINED_RESIDUAL_TOL (1 + max |V|)
@@ -182,7 +208,12 @@ class TrajectoryNumerics:
         mu0 = ca.SX.sym("mu0", n_x)
         self.x0_hessian = ca.Function("traj_x0_hess", [p, q, mu0], [ca.hessian(ca.dot(mu0, x0), p)[0]])
         self.steps = np.diff(b)
-        self._maps = {}
+        # the rows' order for the element blocks' compiled elimination (models.block_solve, JIT only): partial
+        # pivoting of R_V as the element length goes to 0, sum_j C_jr x_j (the collocation matrix times I)
+        A0 = np.kron(np.asarray(cm.C, float)[1:, 1:].T, np.eye(n_x))
+        small = n_x * d <= MAX_COMPILED_SIZE          # larger element blocks: LAPACK and the virtual machine
+        self.pivot_rows, self.pivot_rows_t = (pivot_order(A0), pivot_order(A0.T)) if small else (None, None)
+        self._maps = {"jit_small": small}
 
     # ------------------------------------------------------------------ the strategy's operations
     def solve_states(self, p: np.ndarray, inputs: np.ndarray, Y0=None) -> np.ndarray:
@@ -233,10 +264,14 @@ class TrajectoryNumerics:
             Y[:, :n_x] = x0
             U, pe, steps = self._controls(inputs).reshape(n * N, -1), _per_element(pv, N), np.tile(self.steps, n)[:, None]
             W, XS = self._elements(Y, n_x)
-            R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N,
-                                     [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps])
+            args = [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps]
+            fused = self._solved("residual_blocks")
+            if fused is not None:
+                R, RV, Rx, X, fails = _mapped_call(self._maps, fused, n * N, args)
+            else:
+                (R, RV, Rx), X, fails = _mapped_call(self._maps, self.residual_blocks, n * N, args), None, None
             E = np.concatenate([np.zeros((n, n_x)), R.reshape(n, -1)], axis=1)
-            Y -= self._stacked_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+            Y -= self._stacked_solve(RV, Rx, E.reshape(-1, 1), None if X is None else (X, fails)).reshape(n, -1)
             W, XS = self._elements(Y, n_x)
             W = W.reshape(n * N, -1)
             R = _mapped_call(self._maps, self.residual, n * N, [W, XS.reshape(n * N, -1), pe, U, steps])[0][:, :, 0]
@@ -280,26 +315,56 @@ class TrajectoryNumerics:
         x0 = _mapped_call(self._maps, self.init, n, [p, inputs])[0][:, :, 0]
         return np.concatenate([x0, march(self.model, x0, p, self._controls(inputs), inputs).reshape(n, -1)], axis=1)
 
-    def _stacked_solve(self, RV, Rx, B):
+    def _stacked_solve(self, RV, Rx, B, solved=None):
         """dE/dy^{-1} B for the stacked experiments (B: (n n_y, k)) by forward substitution through the
-        block-bidiagonal dE/dy: one batched LAPACK solve gives R_V^{-1} R_x0 and R_V^{-1} B of every
-        (experiment, element), then v_k = R_V^{-1} B_k - R_V^{-1} R_x0 v_{k-1, end} element after element
-        (small batched products)."""
+        block-bidiagonal dE/dy: one batched solve gives R_V^{-1} R_x0 and R_V^{-1} B of every
+        (experiment, element) (LAPACK, or with JIT the compiled elimination of :mod:`models.block_solve`), then
+        v_k = R_V^{-1} B_k - R_V^{-1} R_x0 v_{k-1, end} element after element (small batched products).
+        ``solved``: (X, fails) of an element function with its solves (:meth:`_solved`, JIT only), whose first
+        n_x + k columns are R_V^{-1} (R_x0, B's element rows)."""
         n_x = Rx.shape[-1]
         nd, N = n_x * self.d, self.N
         n_y = n_x * (1 + N * self.d)
         n, k = B.shape[0] // n_y, B.shape[1]
         B = B.reshape(n, n_y, k)
-        rhs = np.concatenate([Rx.reshape(n * N, nd, n_x), B[:, n_x:].reshape(n * N, nd, k)], axis=2)
-        X = np.linalg.solve(RV.reshape(n * N, nd, nd), rhs)
+
+        def rhs():
+            return np.concatenate([Rx.reshape(n * N, nd, n_x), B[:, n_x:].reshape(n * N, nd, k)], axis=2)
+        if solved is None:
+            X = solve_blocks(RV.reshape(n * N, nd, nd), rhs(), self._maps, self.pivot_rows)
+        else:
+            X = accepted(solved[0][..., :n_x + k], solved[1], RV.reshape(n * N, nd, nd), rhs)
         M, C = X[..., :n_x].reshape(n, N, nd, n_x), X[..., n_x:].reshape(n, N, nd, k)
         out = np.empty_like(B)
         out[:, :n_x] = prev = B[:, :n_x]                    # the rows of x(0) - x0: identity
+        if solved is not None:       # JIT: the recurrence on the elements' end points, then every element at once
+            Ml, Cl, starts = M[:, :, -n_x:], C[:, :, -n_x:], np.empty((n, N, n_x, k))
+            for e in range(N):
+                starts[:, e] = prev
+                prev = Cl[:, e] - Ml[:, e] @ prev
+            out[:, n_x:] = (C - M @ starts).reshape(n, N * nd, k)
+            return out.reshape(n * n_y, k)
         for e in range(N):
             v = C[:, e] - M[:, e] @ prev
             out[:, n_x + e * nd:n_x + (e + 1) * nd] = v
             prev = v[:, -n_x:]
         return out.reshape(n * n_y, k)
+
+    def _solved(self, name: str):
+        """The element function ``name`` (an attribute: blocks, residual_blocks or full_blocks) with the solves
+        of its blocks R_V^{-1} (R_x0, R, -R_p) (the columns it has) in the same compiled evaluation
+        (:func:`models.block_solve.solved_function`); None unless JIT compilation is wanted here and the element
+        has at most :data:`models.block_solve.MAX_COMPILED_SIZE` unknowns."""
+        if not JIT.active() or self.pivot_rows is None:
+            return None
+        f = self._maps.get(("solved", name))
+        if f is None:
+            base = getattr(self, name)
+            cols = {"blocks": (0, ((1, 1), (2, -1))), "residual_blocks": (1, ((2, 1), (0, 1))),
+                    "full_blocks": (1, ((2, 1), (0, 1), (3, -1)))}[name]
+            f = self._maps[("solved", name)] = solved_function(base, cols[0], cols[1], self.pivot_rows,
+                                                               f"{base.name()}_solved")
+        return f
 
     def _newton(self, p, inputs, Y, sweep: bool = False):
         """Newton on the whole collocation system of every experiment from the guess Y (one mapped
@@ -320,13 +385,18 @@ class TrajectoryNumerics:
         prev, force = np.inf, False
         if sweep:
             x0p = _mapped_call(self._maps, self.init, n, [p, inputs])[1]
+        fused = self._solved("full_blocks" if sweep else "residual_blocks")
+        solved = None
         for _ in range(8):
             W, XS = self._elements(Y, n_x)
             args = [W.reshape(n * N, -1), XS.reshape(n * N, -1), pe, U, steps]
-            if sweep:
-                R, RV, Rx, Rp = _mapped_call(self._maps, self.full_blocks, n * N, args)
+            if fused is not None:
+                *blocks, X, fails = _mapped_call(self._maps, fused, n * N, args)
+                solved = (X, fails)
             else:
-                R, RV, Rx = _mapped_call(self._maps, self.residual_blocks, n * N, args)
+                blocks = _mapped_call(self._maps, self.full_blocks if sweep else self.residual_blocks, n * N, args)
+            R, RV, Rx = blocks[:3]
+            Rp = blocks[3] if sweep else None
             norm = float(np.max(np.abs(R)))
             if not (np.isfinite(norm) and np.all(np.isfinite(RV)) and norm <= prev):
                 return None
@@ -338,10 +408,10 @@ class TrajectoryNumerics:
             if sweep and (force or norm <= 1e-10 * (1 + float(np.max(np.abs(Y))))):
                 n_p = Rp.shape[-1]
                 B = np.concatenate([E[:, :, None], np.concatenate([x0p, -Rp.reshape(n, -1, n_p)], axis=1)], axis=2)
-                out = self._stacked_solve(RV, Rx, B.reshape(-1, 1 + n_p)).reshape(n, -1, 1 + n_p)
+                out = self._stacked_solve(RV, Rx, B.reshape(-1, 1 + n_p), solved).reshape(n, -1, 1 + n_p)
                 dY, yp = out[:, :, 0], out[:, :, 1:]
             else:
-                dY = self._stacked_solve(RV, Rx, E.reshape(-1, 1)).reshape(n, -1)
+                dY = self._stacked_solve(RV, Rx, E.reshape(-1, 1), solved).reshape(n, -1)
             if not np.all(np.isfinite(dY)):
                 return None
             Y -= dY
@@ -441,12 +511,18 @@ class TrajectoryNumerics:
         W, XS = self._elements(Y, n_x)
         U = self._controls(inputs)
         m = n * N
-        RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m,
-                                  [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
-                                   np.tile(self.steps, n)[:, None]])
+        args = [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
+                np.tile(self.steps, n)[:, None]]
+        fused = self._solved("blocks")
+        solved = None
+        if fused is not None:
+            RV, Rx, Rp, X, fails = _mapped_call(self._maps, fused, m, args)
+            solved = (X, fails)
+        else:
+            RV, Rx, Rp = _mapped_call(self._maps, self.blocks, m, args)
         RV, Rx, Rp = (a.reshape((n, N) + a.shape[1:]) for a in (RV, Rx, Rp))
         B = np.concatenate([x0p, -Rp.reshape(n, N * n_x * d, n_p)], axis=1)      # -dE/dp
-        out = self._stacked_solve(RV, Rx, B.reshape(-1, n_p)).reshape(n, -1, n_p)
+        out = self._stacked_solve(RV, Rx, B.reshape(-1, n_p), solved).reshape(n, -1, n_p)
         return out, RV, Rx
 
     def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
@@ -477,13 +553,16 @@ class TrajectoryNumerics:
             hyl, Hh = _mapped_call(self._maps, self.h_terms, n, [Y, ypv, p, inputs, lam[a]])
             b = -hyl[:, :, 0]
             bV = b[:, n_x:].reshape(n, N, n_x * d)
-            mu = np.empty((n, N, n_x * d))
-            nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
-            for k in range(N - 1, -1, -1):
-                rhs = bV[:, k].copy()
-                rhs[:, -n_x:] -= nxt
-                mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
-                nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
+            if JIT.active() and self.pivot_rows_t is not None:
+                mu, nxt = self._adjoint_compiled(RV, Rx, bV)
+            else:
+                mu = np.empty((n, N, n_x * d))
+                nxt = np.zeros((n, n_x))                       # R_x0,k+1^T mu_k+1
+                for k in range(N - 1, -1, -1):
+                    rhs = bV[:, k].copy()
+                    rhs[:, -n_x:] -= nxt
+                    mu[:, k] = np.linalg.solve(RV[:, k].transpose(0, 2, 1), rhs[:, :, None])[:, :, 0]
+                    nxt = np.einsum("jvx,jv->jx", Rx[:, k], mu[:, k])
             mu0 = b[:, :n_x] - nxt
             He = _mapped_call(self._maps, self.element_hessian, m,
                               [W.reshape(m, -1), XS.reshape(m, -1), _per_element(p, N), U.reshape(m, -1),
@@ -491,6 +570,26 @@ class TrajectoryNumerics:
             H0 = _mapped_call(self._maps, self.x0_hessian, n, [p, inputs, mu0])[0]
             out[a] = Hh + He.reshape(n, N, n_p, n_p).sum(axis=1) - H0
         return 0.5 * (out + out.transpose(0, 1, 3, 2))
+
+    def _adjoint_compiled(self, RV, Rx, bV) -> tuple:
+        r"""(mu (n, N, n_x d), R_x0,0^T mu_0 (n, n_x)) of :meth:`hessian_terms`' backward substitution with every
+        element's transposed block solved at once (:func:`models.block_solve.solve_blocks`, compiled with JIT):
+        Z_k = R_V,k^{-T} (b_k, P) with P the last n_x rows (the element's end point), then backwards
+        mu_k = Z_k^b - Z_k^P nu_k+1 and nu_k = R_x0,k^T mu_k (nu_N = 0), the small recurrence on nu alone."""
+        n, N, nd, n_x = Rx.shape
+        P = np.zeros((nd, n_x))
+        P[-n_x:] = np.eye(n_x)
+        rhs = np.concatenate([bV.reshape(n * N, nd, 1), np.broadcast_to(P, (n * N, nd, n_x))], axis=2)
+        Z = solve_blocks(RV.reshape(n * N, nd, nd).transpose(0, 2, 1), rhs, self._maps, self.pivot_rows_t)
+        Z = Z.reshape(n, N, nd, 1 + n_x)
+        RxT = Rx.transpose(0, 1, 3, 2)
+        Qb, T = (RxT @ Z[..., :1])[..., 0], RxT @ Z[..., 1:]          # R_x0^T Z^b (n, N, n_x), R_x0^T Z^P
+        nus = np.empty((n, N, n_x))
+        nxt = np.zeros((n, n_x))
+        for k in range(N - 1, -1, -1):
+            nus[:, k] = nxt
+            nxt = Qb[:, k] - (T[:, k] @ nxt[:, :, None])[:, :, 0]
+        return Z[..., 0] - (Z[..., 1:] @ nus[..., None])[..., 0], nxt
 
     def outputs_and_sensitivities(self, p, inputs, Y, Yp):
         """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""

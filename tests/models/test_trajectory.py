@@ -226,3 +226,70 @@ def test_halved_mesh_one_step_is_rejected_by_its_residual_on_a_nonlinear_model()
     finally:
         del traj.integrated_outputs
     assert calls == [1] and np.abs(h - traj.outputs(p, q, traj._states(p, q))).max() <= 1e-11
+
+
+def test_compiled_element_functions_and_block_solves_equal_the_whole_trajectory_solve():
+    """With JIT (jit_scope(True), as Monte Carlo runs): the element functions compiled and their blocks solved in
+    the same compiled call (models.block_solve, LAPACK for blocks that fail its check); states, y'(p), h and G equal
+    the generic whole-trajectory solve to the tolerances of the LAPACK path, through every solve of the strategy:
+    Newton with y' (states_and_sensitivities), the sweep, the halved mesh's one step.  Without a compiler the
+    virtual machine and LAPACK run: the same test."""
+    from models.sensitivity import Sensitivities
+    from models.state import JIT, jit_scope
+    from models.trajectory import interpolate_states
+    coarse = collocate(build(), TIMES, max_step=0.25)
+    Yg, Ypg, hg, Gg = generic(coarse, P, Q)
+    with jit_scope(True):
+        traj = trajectory_numerics(coarse)
+        Y, sens = traj.states_and_sensitivities(P, Q, Yg * (1 + 1e-3))
+        assert np.abs(Y - Yg).max() <= 1e-12 * np.abs(Yg).max()
+        assert np.abs(sens.state_derivatives - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        assert np.abs(sens.h - hg).max() <= 1e-12 and np.abs(sens.G - Gg).max() <= 1e-10 * np.abs(Gg).max()
+        assert np.abs(traj.state_derivatives(P, Q, Yg) - Ypg).max() <= 1e-10 * np.abs(Ypg).max()
+        lam = np.random.default_rng(0).standard_normal((2, Q.shape[0], coarse.n_S))
+        H = sens.hessians(lam)                         # the adjoint with every transposed block solved at once
+        sens._filled()                                 # the generic per-experiment adjoints (sparse LU)
+        Hg = Sensitivities.hessians(sens, lam)
+        assert np.abs(H - Hg).max() <= 1e-10 * np.abs(Hg).max()
+        if JIT.active():                               # a compiler works: the compiled path was taken
+            assert {("solved", "full_blocks"), ("solved", "blocks")} <= set(traj._maps)
+        fine = collocate(build(), TIMES, mesh=coarse.mesh.refined(2))
+        tf = trajectory_numerics(fine)
+        guess = interpolate_states(coarse, fine, Yg)
+        with jit_scope(False):
+            exact = tf.outputs(P, Q, tf._states(P, Q))
+        assert np.abs(tf.refined_outputs(P, Q, guess) - exact).max() <= 1e-12 * np.abs(exact).max()
+
+
+def test_collocate_with_arguments_checked_before_returns_the_same_model_and_still_checks_new_ones():
+    """collocate's cache of checked calls (two calls a refit): the same arguments give the same collocated model
+    (times as a list or an array alike); other arguments are checked as before."""
+    from models.contract import ModelError
+    m = build()
+    cm = collocate(m, TIMES, max_step=0.25)
+    assert collocate(m, list(np.asarray(TIMES, float)), max_step=0.25) is cm
+    assert collocate(m, TIMES, max_step=0.1) is not cm
+    with pytest.raises(ModelError, match="increasing"):
+        collocate(m, np.asarray(TIMES, float)[::-1], max_step=0.25)
+    with pytest.raises(ModelError, match="mesh"):
+        collocate(m, TIMES, mesh=[0.0, 1.0])
+
+
+def test_elements_with_many_unknowns_stay_on_the_virtual_machine_and_lapack_under_jit():
+    """An element of 10 states x 3 points (30 unknowns > MAX_COMPILED_SIZE): with JIT on nothing of the trajectory
+    numerics is compiled, and the states and sensitivities are bit for bit those without JIT."""
+    from models.state import jit_scope
+    n = 10
+    m = Model.ode(["k"], [f"x{i}" for i in range(n)], ["a"], [f"x{n - 1}"],
+                  rhs=lambda x, p, u: ca.vertcat(-p[0] * x[0], *[p[0] * (x[i - 1] - x[i]) for i in range(1, n)]),
+                  x0=lambda p, u: ca.vertcat(u[0], *([0.0] * (n - 1))), h=lambda x, p, u: x[n - 1], horizon=2.0)
+    cm = collocate(m, [0.5, 1.0, 2.0])
+    q = np.array([[1.0], [2.0]])
+    traj = trajectory_numerics(cm)
+    Y = traj.states([0.7], q)
+    yp = traj.state_derivatives([0.7], q, Y)
+    with jit_scope(True):
+        Yj = traj.states([0.7], q)
+        assert np.array_equal(Yj, Y) and np.array_equal(traj.state_derivatives([0.7], q, Yj), yp)
+        assert traj._solved("full_blocks") is None
+    assert not any(isinstance(k, tuple) and k[0] in ("jit", "solved", "block_solve") for k in traj._maps)
