@@ -7,8 +7,9 @@ first input (a dynamic model: against time, every experiment) with its band, the
 readings of one split, and the held-out coverage table.  Before them the page "Model uncertainty" of every variant
 (:func:`model_uncertainty_page`, the records' :class:`identification.studies.records.ErrorSummary`): how large
 the error is in the sensors' units and where, the band to design with, where to measure next and which model to
-use (the ranking's verdict).  Draws only.  (The records ``ModelErrorView`` and
-``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
+use (the ranking's verdict), and which sensor sigma the bands take as the noise of a reading (``view.noise``).
+Draws only.  (The records ``ModelErrorView`` and ``HeldOutBands`` live in :mod:`identification.studies.records`;
+their old names here still work, deprecated.)
 """
 from __future__ import annotations
 
@@ -137,6 +138,8 @@ def _verdict(view: ModelErrorView) -> str:
                      + "; ".join(f"{e.name} {100 * e.relative:.3g} % of |p|" for e in view.embedded) + ".")
     if not r.identifiable:
         lines.append("The parameters are NOT identifiable under the model error (the discrepancy can mimic them).")
+    if view.noise:
+        lines.append(view.noise)
     return "\n".join(lines)
 
 
@@ -272,8 +275,11 @@ def model_uncertainty_page(results):
     views = [v for v in results.model_error_views.values() if v.summary is not None]
     fig = _page("Model uncertainty: how large the model error is, the band to design with, which model to use")
     n = _text(fig, 0.04, 0.925, _ranking_text(views), width=135, size=10, weight="bold")
-    head, rows, flags = summary_rows(views)
     top = 0.925 - 0.024 * n - 0.035
+    noise = next((v.noise for v in views if v.noise), "")       # which sigma the bands take (the same in every view)
+    if noise:
+        top -= 0.0165 * _text(fig, 0.04, top + 0.02, noise, width=180, size=8) + 0.01
+    head, rows, flags = summary_rows(views)
     heights = [max(str(c).count("\n") + 1 for c in r) for r in rows]
     height = 0.024 * (sum(heights) + 2)
     ax = fig.add_axes([0.04, top - height, 0.92, height])
