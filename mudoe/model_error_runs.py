@@ -52,12 +52,15 @@ class ErrorNoise:
     sigma : ndarray (n_S,) or None   per sensor; None: the study has no sigma (the pure error of the series)
     composed : tuple of str          the sensors whose study sigma is sqrt(sigma_rep^2 + sigma_man^2): here
                                      their sigma_rep
-    sentence : str                   which sigma the bands take and why (the result's first note, the pages)
+    sentence : str                   which sigma the bands take and why (the results' first note, quantify,
+                                     validate)
+    short : str                      the same in one line of a page (the report's model-error pages)
     """
 
     sigma: np.ndarray | None
     composed: tuple
     sentence: str
+    short: str
 
 
 def _listed(study, names, values) -> str:
@@ -77,26 +80,30 @@ def error_noise(study, sensors=None) -> ErrorNoise:
     rows = {r["sensor"]: r for r in study.sigma_table}
     if study.sigma is None:
         return ErrorNoise(None, (), "No sigma given: the model-error bands take the pure error of the repeated series "
-                                    "as the noise of a reading (never the residuals, which hold the model error).")
+                                    "as the noise of a reading (never the residuals, which hold the model error).",
+                          "Bands: noise the pure error of the repeated series (no sigma given), never the residuals.")
     composed = tuple(s for s in study.sensors if s in rows and math.isfinite(rows[s].get("sigma_man", math.nan))
                      and math.isfinite(rows[s].get("sigma_rep", math.nan)))
     sigma = np.array([rows[s]["sigma_rep"] if s in composed else float(study.sigma[k])
                       for k, s in enumerate(study.sensors)], float)
     given = [s for s in shown if s not in composed]
-    said = ("the sigma given in [[sensors]] ({})".format(
-        _listed(study, given, [sigma[study.sensors.index(s)] for s in given])) if given else "")
+    listed = _listed(study, given, [sigma[study.sensors.index(s)] for s in given])
     if not composed:
-        return ErrorNoise(sigma, (), f"The model-error bands take {said} as the noise of a new reading, as the user "
-                                     "states it.")
+        return ErrorNoise(sigma, (), f"The model-error bands take the sigma given in [[sensors]] ({listed}) as the "
+                                     "noise of a new reading, as the user states it.",
+                          f"Bands: noise the sigma given in [[sensors]] ({listed}), as the user states it.")
     mine = [s for s in shown if s in composed]
     k = [study.sensors.index(s) for s in mine]
-    text = (f"The model-error bands take sigma_rep, the repeatability of the series ({_listed(study, mine, sigma[k])}"
-            f"), as the noise of a new reading{', and for the others ' + said + ' as stated' if said else ''}, not the composed "
-            f"sigma sqrt(sigma_rep^2 + sigma_man^2) of the detection ({_listed(study, mine, study.sigma[k])}): "
+    rep, full = _listed(study, mine, sigma[k]), _listed(study, mine, study.sigma[k])
+    others = f", and for the others the sigma given in [[sensors]] ({listed}) as stated" if given else ""
+    text = (f"The model-error bands take sigma_rep, the repeatability of the series ({rep}), as the noise of a new "
+            f"reading{others}, not the composed sigma sqrt(sigma_rep^2 + sigma_man^2) of the detection ({full}): "
             "sigma_man is taken as a systematic error of the sensor (the same at the same reading, unseen by the "
             "differences between series), which the model error already holds; adding it to every reading "
             "would count it twice.")
-    return ErrorNoise(sigma, composed, text)
+    short = (f"Bands: noise sigma_rep ({rep}{'; given: ' + listed if given else ''}), not sqrt(sigma_rep^2 + "
+             "sigma_man^2): sigma_man is systematic, held by the model error; adding it again counts it twice.")
+    return ErrorNoise(sigma, composed, text, short)
 
 
 def error_data(study, variant: str, noise: ErrorNoise):
@@ -390,7 +397,7 @@ def model_error_view(study, results, variant: str):
                               input_label="t" + (f" [{unit}]" if unit else ""),
                               q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
                               embedded=embedded_parameters(results, variant),
-                              curves=curve_labels(m, data.inputs), noise=noise.sentence)
+                              curves=curve_labels(m, data.inputs), noise=noise.short)
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:
@@ -414,7 +421,7 @@ def model_error_view(study, results, variant: str):
     q_label = m.inputs[0] + (f" [{u.input_file}]" if u is not None and u.input_file else "")
     return ModelErrorView(variant=variant, result=r, sensors=r.sensors, units=units, input_label=q_label,
                           q=_first_input(study, data.inputs), discrepancy=disc, heldout=held,
-                          embedded=embedded_parameters(results, variant), noise=noise.sentence)
+                          embedded=embedded_parameters(results, variant), noise=noise.short)
 
 
 def run_model_error_views(study, results):

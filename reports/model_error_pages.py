@@ -150,10 +150,10 @@ def model_error_pages(results, variant: str):
     view = results.model_error_views[variant]
     r = view.result
     fig = _page(f"Model error of {variant}: {'detected' if r.detected else 'not detected'}, error model {r.kind}")
-    n_lines = _text(fig, 0.04, 0.925, _verdict(view), width=175, size=9)
+    n_lines = _text(fig, 0.04, 0.925, _verdict(view), width=160, size=9)    # 160 characters of size 9 fit the page
     n = len(view.sensors)
     top = 0.925 - 0.019 * n_lines - 0.075              # top of the first row of axes
-    h, gap = 0.2, 0.08 if n <= 2 else 0.1
+    h, gap = max(0.16, 0.2 - 0.0095 * max(0, n_lines - 4)), 0.08 if n <= 2 else 0.1   # a long verdict: lower plots
     w = (0.87 - gap * (n - 1)) / n
     if r.kind == "none":                               # no discrepancy: the held-out row moves up
         fig.text(0.04, top + 0.045, "No error model (kind none): no discrepancy to show; the bands are the plain "
@@ -278,7 +278,7 @@ def model_uncertainty_page(results):
     top = 0.925 - 0.024 * n - 0.035
     noise = next((v.noise for v in views if v.noise), "")       # which sigma the bands take (the same in every view)
     if noise:
-        top -= 0.0165 * _text(fig, 0.04, top + 0.02, noise, width=180, size=8) + 0.01
+        top -= 0.0165 * _text(fig, 0.04, top + 0.029, noise, width=180, size=8) + 0.003
     head, rows, flags = summary_rows(views)
     heights = [max(str(c).count("\n") + 1 for c in r) for r in rows]
     height = 0.024 * (sum(heights) + 2)

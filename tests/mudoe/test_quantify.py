@@ -136,7 +136,9 @@ def test_model_error_page_draws_what_the_study_computed(press_views):
     texts = " ".join(page_texts(fig))
     plt.close(fig)
     assert "Model error of M1: detected, error model discrepancy" in texts
-    assert "The model-error bands take sigma_rep, the repeatability of the series" in texts
+    assert view.noise == ("Bands: noise sigma_rep (F_x 3.35 um, B0_y 1.44 um), not sqrt(sigma_rep^2 + sigma_man^2): "
+                          "sigma_man is systematic, held by the model error; adding it again counts it twice.")
+    assert view.noise in " ".join(texts.split())                    # wrapped lines read as one
     assert "discrepancy of F_x [um]" in texts and "loading vs unloading" in texts and "q_P [N]" in texts
 
 
