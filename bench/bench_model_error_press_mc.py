@@ -139,8 +139,9 @@ def binomial_fact() -> None:
               f"{100 * stats.binom.cdf(lo - 1, n, 0.95):.1f} %")
     p28 = [stats.binom.cdf(int(np.floor(TARGET[1] * n + 1e-9)), n, 0.95)
            - stats.binom.cdf(int(np.ceil(TARGET[0] * n - 1e-9)) - 1, n, 0.95) for n in (28, 56)]
-    print(f"  all four splits of one variant (28, 28, 56, 56 readings, independent): {100 * p28[0] ** 2 * p28[1] ** 2:.1f} %;"
-          f" all 12 splits: {100 * (p28[0] ** 2 * p28[1] ** 2) ** 3:.2f} %")
+    four = p28[0] ** 2 * p28[1] ** 2
+    print(f"  all four splits of one variant (28, 28, 56, 56 readings, independent): {100 * four:.1f} %; all 12 "
+          f"splits: {100 * four ** 3:.2f} %")
 
 
 def _inside(c: np.ndarray) -> np.ndarray:
@@ -182,8 +183,9 @@ def table(records, title: str, key: str = "cover", widen: str = "widening") -> N
         for rec in records:
             kk = next((r["kind" if key == "cover" else "kind_composed"] for r in rec.rows if r["variant"] == v), None)
             kinds[kk] = kinds.get(kk, 0) + 1
+        total = sum(a for a, _, _ in per.values()) / sum(b for _, b, _ in per.values())
         print(f"  {v:<7} {'pooled over splits':<32} {'':>3} {100 * pooled.mean():>7.1f} {100 * se:>6.1f} "
-              f"{'':>10} {'':>14} {100 * sum(a for a, _, _ in per.values()) / sum(b for _, b, _ in per.values()):>8.1f} "
+              f"{'':>10} {'':>14} {100 * total:>8.1f} "
               f"{'':>6} {'':>6} {np.median([r[widen] for r in mine]):>6.2f}   every split in [90, 99] %: "
               f"{every} of {len(per)} campaigns; kind {kinds}")
 
@@ -225,8 +227,8 @@ def main(argv=None):
         designs = {}
         for r in recs:
             designs[r.sensors] = designs.get(r.sensors, 0) + 1
-        print(f"{args.n} prototype campaigns (seed {args.seed}): {time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU "
-              f"in the campaigns ({cpu / args.n:.1f} s each), {time.process_time() - c0:.0f} s CPU here; "
+        print(f"{args.n} prototype campaigns (seed {args.seed}): {time.perf_counter() - t0:.0f} s wall, "
+              f"{cpu:.0f} s CPU in the campaigns ({cpu / args.n:.1f} s each), {time.process_time() - c0:.0f} s CPU here; "
               f"designs {designs}; failed {failed or 'none'}")
         table(recs, "prototype campaigns, noise sigma_rep (as of session 13)")
         if args.compare:
