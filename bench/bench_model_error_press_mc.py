@@ -228,7 +228,8 @@ def main(argv=None):
         for r in recs:
             designs[r.sensors] = designs.get(r.sensors, 0) + 1
         print(f"{args.n} prototype campaigns (seed {args.seed}): {time.perf_counter() - t0:.0f} s wall, "
-              f"{cpu:.0f} s CPU in the campaigns ({cpu / args.n:.1f} s each), {time.process_time() - c0:.0f} s CPU here; "
+              f"{cpu:.0f} s CPU in the campaigns ({cpu / args.n:.1f} s each), {time.process_time() - c0:.0f} s "
+              "CPU here; "
               f"designs {designs}; failed {failed or 'none'}")
         table(recs, "prototype campaigns, noise sigma_rep (as of session 13)")
         if args.compare:
