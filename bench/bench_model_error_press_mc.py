@@ -26,8 +26,9 @@ prototype seed from ``SeedSequence(--seed).spawn(n)[r]``).  M2 and M3 use the sh
 (data/press_friction.json, trained on the shipped campaign's series 1-4) on every campaign, as a study of a
 prototype campaign does; the prototype's friction is the same in every campaign.
 
-Run ``python -m bench model_error_press_mc --n=60`` (``--timing`` times one campaign first; ``--save=FILE.json``
-keeps every campaign's rows).
+Run ``python -m bench model_error_press_mc --n=60 --compare`` (``--timing`` times one campaign first;
+``--save=FILE.json`` keeps every campaign's rows; ``--need --n=0 --skip-shipped``: on the shipped campaign the
+factor the discrepancy's bands could shrink by and still hold 95 %, and their width, with either noise).
 """
 from __future__ import annotations
 
@@ -127,6 +128,35 @@ class PressCampaignTask(ReplicationTask):
         return out
 
 
+def shipped_need(sensors, alpha: float = 0.05) -> None:
+    """On the shipped campaign, per variant and split, for each noise (sigma_rep, the composed sigma): the factor
+    the discrepancy's held-out new-reading bands could shrink by and still hold (1 - alpha) of the validation
+    readings (the (1 - alpha) quantile of |z - mean| / half-width; < 1 wider than the error requires) and their
+    median full width (um); readings in a condition not seen are predicted as a new draw, as the held-out table."""
+    from identification.studies.discrepancy_gp import InputScaling
+    from identification.studies.model_error import unseen_rows
+    from identification.studies.model_error_fit import fit_model_error
+    from mudoe.model_error_runs import error_data
+    study = _study(None, sensors)
+    w = np.array([1.0 if s in sensors else 0.0 for s in study.sensors])
+    noise = error_noise(study, sensors)
+    print("shipped campaign: need (width um) of the discrepancy's held-out bands, noise sigma_rep | composed sigma")
+    for v, m in study.models.items():
+        for sp in study.splits:
+            out = []
+            for d in (error_data(study, v, noise), study.data[v]):
+                scaling = InputScaling.of(d.inputs, {}, tuple(m.inputs))
+                cal, val = sp.calibration(d), sp.validation(d)
+                f = fit_model_error(m, cal, study.p0, w, scaling, "discrepancy")
+                b = f.predict(val.inputs, alpha, True, conditions=np.where(unseen_rows(sp, d), -1, 0))
+                z = val.z[:, :, w > 0]
+                ok = np.isfinite(z)
+                e = np.abs(z - b.mean[None][:, :, w > 0]) / (b.upper - b.mean)[None][:, :, w > 0]
+                width = np.broadcast_to((b.upper - b.lower)[None][:, :, w > 0], z.shape)[ok]
+                out.append(f"{float(np.quantile(e[ok], 1 - alpha)):.2f} ({1e3 * float(np.median(width)):.1f})")
+            print(f"  {v:<4} {sp.name:<32} {out[0]:>12} | {out[1]:>12}")
+
+
 # ---------------------------------------------------------------------------- the numbers
 def binomial_fact() -> None:
     """P(one split's coverage in [90, 99] %) for a band of exactly 95 % on n independent readings."""
@@ -200,6 +230,7 @@ def main(argv=None):
     ap.add_argument("--sensors", default=",".join(SENSORS),
                     help='sensors of the model error, comma list, or "oed" (each campaign\'s E-optimal design)')
     ap.add_argument("--skip-shipped", action="store_true", help="no table of the shipped campaign")
+    ap.add_argument("--need", action="store_true", help="the shipped campaign's need and band widths per split")
     ap.add_argument("--save", default="", help="write every campaign's rows to this JSON file")
     args = ap.parse_args(argv or [])
     sensors = args.sensors if args.sensors in ("oed", "all") else tuple(args.sensors.split(","))
@@ -211,6 +242,8 @@ def main(argv=None):
         generate_campaign(seed=1)
         print(f"one prototype campaign (6 series x 29 set points): {time.process_time() - c0:.2f} s CPU, "
               f"{time.perf_counter() - t0:.2f} s wall")
+    if args.need:
+        shipped_need(sensors if isinstance(sensors, tuple) else SENSORS)
     if not args.skip_shipped:
         shipped = campaign_record(0, None, compare=True, sensors=sensors)
         print(f"shipped campaign: {shipped.cpu:.1f} s CPU (with the composed-sigma run), sensors "
