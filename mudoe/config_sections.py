@@ -125,7 +125,9 @@ class SensorConfig:
 
     Give ``sigma`` directly, or ``sigma_man`` (the manufacturer's error): then sigma is
     composed as in the paper, sqrt(sigma_rep^2 + sigma_man^2), with sigma_rep the
-    repeatability seen in the data (differences of consecutive series / sqrt 2).
+    repeatability seen in the data (differences of consecutive series / sqrt 2).  The model
+    error (:mod:`mudoe.model_error_runs`) takes sigma_rep of a composed sigma: sigma_man is
+    taken as systematic and held by the model error; detection takes the composed sigma.
     """
 
     name: str

@@ -4,19 +4,28 @@
 then the error model of the best held-out log score) for every variant on the study's data and splits,
 with the sensors of the tests (``[detect] sensors``), into ``StudyResults.model_error``; a variant whose
 computation fails is recorded with its reason in ``StudyResults.model_error_errors``, never dropped.
+
+The noise of a reading in that analysis (:func:`error_noise`): a sensor whose sigma the study composes,
+sqrt(sigma_rep^2 + sigma_man^2), enters with sigma_rep, the random part the differences between series
+see; sigma_man is taken as a systematic error of the sensor (the same at the same reading), which the model
+error holds, so a new-reading band that added it again would count it twice.  A sigma given directly is the
+user's statement and is kept; without sigma the analysis takes the pure error of the repeated series.
+Detection (Algorithm 1) keeps the study's sigma.
 :func:`quantify_text` and :func:`quantify_dict` are what ``mudoe quantify`` prints and writes: the sizes of
 the error in the unit of each sensor's files.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
 from identification import model_error, rank_models
 from identification.errors import IdentificationError
-from identification.studies.model_error import unseen_rows
+from identification.studies.model_error import pure_error_notes, unseen_rows
 from identification.studies.model_error_result import NEW_CONDITION
 
 from .config import ConfigError
@@ -25,7 +34,97 @@ from .units import convert
 
 __all__ = ["run_model_error", "curve_labels", "run_model_error_pages", "ranking", "embedded_parameters", "pooled_coverage", "sensor_units", "quantify_text", "quantify_text_full",
            "quantify_dict", "model_error_view", "run_model_error_views", "validate_model_error", "plain_result",
-           "next_runs", "error_summary", "error_summaries", "summary_lines"]
+           "next_runs", "error_summary", "error_summaries", "summary_lines", "ErrorNoise", "error_noise",
+           "error_data"]
+
+
+# ---------------------------------------------------------------------------- the noise of the analysis
+#: ``ModelErrorResult.sigma_source`` of a result whose noise is sigma_rep of a composed sigma
+SIGMA_REP_SOURCE = "sigma_rep (the repeatability of the series; sigma_man left to the model error)"
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorNoise:
+    """sigma_k, the standard deviation of one reading of sensor k in the model-error analysis (model units).
+
+    Attributes
+    ----------
+    sigma : ndarray (n_S,) or None   per sensor; None: the study has no sigma (the pure error of the series)
+    composed : tuple of str          the sensors whose study sigma is sqrt(sigma_rep^2 + sigma_man^2): here
+                                     their sigma_rep
+    sentence : str                   which sigma the bands take and why (the results' first note, quantify,
+                                     validate)
+    short : str                      the same in one line of a page (the report's model-error pages)
+    """
+
+    sigma: np.ndarray | None
+    composed: tuple
+    sentence: str
+    short: str
+
+
+def _listed(study, names, values) -> str:
+    """"F_x 3.35 um, B0_y 1.44 um": standard deviations (model units) in the sensors' file units."""
+    units = sensor_units(study)
+    return ", ".join("{} {:.3g} {}".format(n, *_in_file_unit(v, units.get(n, ("", "")))) for n, v in
+                     zip(names, values))
+
+
+def error_noise(study, sensors=None) -> ErrorNoise:
+    """The noise of the model-error analysis of ``study`` (the sentence names ``sensors``, None: all).
+
+    Per sensor of the study's ``sigma_table``: composed sqrt(sigma_rep^2 + sigma_man^2) -> sigma_rep (sigma_man
+    is taken as systematic: the model error holds it); given -> as given; without a study sigma, None (the
+    analysis takes the pure error of the repeated series, never the residuals)."""
+    shown = tuple(sensors) if sensors else tuple(study.sensors)
+    rows = {r["sensor"]: r for r in study.sigma_table}
+    if study.sigma is None:
+        return ErrorNoise(None, (), "No sigma given: the model-error bands take the pure error of the repeated series "
+                                    "as the noise of a reading (never the residuals, which hold the model error).",
+                          "Bands: noise the pure error of the repeated series (no sigma given), never the residuals.")
+    composed = tuple(s for s in study.sensors if s in rows and math.isfinite(rows[s].get("sigma_man", math.nan))
+                     and math.isfinite(rows[s].get("sigma_rep", math.nan)))
+    sigma = np.array([rows[s]["sigma_rep"] if s in composed else float(study.sigma[k])
+                      for k, s in enumerate(study.sensors)], float)
+    given = [s for s in shown if s not in composed]
+    listed = _listed(study, given, [sigma[study.sensors.index(s)] for s in given])
+    if not composed:
+        return ErrorNoise(sigma, (), f"The model-error bands take the sigma given in [[sensors]] ({listed}) as the "
+                                     "noise of a new reading, as the user states it.",
+                          f"Bands: noise the sigma given in [[sensors]] ({listed}), as the user states it.")
+    mine = [s for s in shown if s in composed]
+    k = [study.sensors.index(s) for s in mine]
+    rep, full = _listed(study, mine, sigma[k]), _listed(study, mine, study.sigma[k])
+    others = f", and for the others the sigma given in [[sensors]] ({listed}) as stated" if given else ""
+    text = (f"The model-error bands take sigma_rep, the repeatability of the series ({rep}), as the noise of a new "
+            f"reading{others}, not the composed sigma sqrt(sigma_rep^2 + sigma_man^2) of the detection ({full}): "
+            "sigma_man is taken as a systematic error of the sensor (the same at the same reading, unseen by the "
+            "differences between series), which the model error already holds; adding it to every reading "
+            "would count it twice.")
+    short = (f"Bands: noise sigma_rep ({rep}{'; given: ' + listed if given else ''}), not sqrt(sigma_rep^2 + "
+             "sigma_man^2): sigma_man is systematic, held by the model error; adding it again counts it twice.")
+    return ErrorNoise(sigma, composed, text, short)
+
+
+def error_data(study, variant: str, noise: ErrorNoise):
+    """``variant``'s data with the noise of the model-error analysis (``noise.sigma``; the study's data as they
+    are when no sigma is composed)."""
+    data = study.data[variant]
+    return data.with_sigma(noise.sigma) if noise.composed else data
+
+
+def _with_noise(result, noise: ErrorNoise):
+    """``result`` with ``noise.sentence`` as its first note; a composed sigma: ``sigma_source``
+    :data:`SIGMA_REP_SOURCE` and no check of sigma_rep against the pure error (both measure the series' scatter:
+    sigma_rep is no stated sigma), the checks and notes of the sensors given a sigma kept."""
+    notes, checks, source = tuple(result.notes), result.pure_error, result.sigma_source
+    if noise.composed:
+        old = set(pure_error_notes(checks, result.alpha))
+        checks = tuple(c for c in checks if c.sensor not in noise.composed)
+        notes = tuple(pure_error_notes(checks, result.alpha)) + tuple(n for n in notes if n not in old)
+        source = SIGMA_REP_SOURCE
+    return dataclasses.replace(result, notes=(noise.sentence,) + notes, pure_error=checks, sigma_source=source)
+
 
 def run_model_error(study, results, progress=None, alpha: float = 0.05, variants=None, embedded: bool = True):
     """``results`` with ``model_error``: {variant: ModelErrorResult} on the study's data and splits with the
@@ -46,16 +145,18 @@ def run_model_error(study, results, progress=None, alpha: float = 0.05, variants
     w = np.array([1.0 if s in used else 0.0 for s in study.sensors]) if used else None
     done, failed = dict(results.model_error), dict(results.model_error_errors)
     beside = dict(results.model_error_embedded)
+    noise = error_noise(study, [s for s in study.sensors if s in used])
     for v, m in study.models.items():
         if variants is not None and v not in variants:
             continue
+        data = error_data(study, v, noise)
         with progress.step(f"model error of {v}"):
             try:
-                r = model_error(m, study.data[v], start_values(study, v), splits=study.splits, weights=w,
-                                alpha=alpha)
+                r = _with_noise(model_error(m, data, start_values(study, v), splits=study.splits, weights=w,
+                                            alpha=alpha), noise)
                 if embedded and r.kind != "embedded":          # which parameters would carry it (all data, no splits)
-                    beside[v] = model_error(m, study.data[v], start_values(study, v), kind="embedded", weights=w,
-                                            alpha=alpha)
+                    beside[v] = _with_noise(model_error(m, data, start_values(study, v), kind="embedded", weights=w,
+                                                        alpha=alpha), noise)
                 done[v] = r
             except (IdentificationError, ValueError, np.linalg.LinAlgError) as exc:
                 failed[v] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -182,7 +283,8 @@ def quantify_text(study, results, summaries=None) -> str:
     if rank is not None:
         blocks.append("Ranking: " + rank.sentence() + "\nVerdict: " + rank.verdict())
     sens = ", ".join(results.design_sensors) if results.design_sensors else "all"
-    head = f"Model error (sensors {sens}; {results.design_how or 'as configured'})"
+    head = (f"Model error (sensors {sens}; {results.design_how or 'as configured'})\n"
+            + error_noise(study, results.design_sensors).sentence)
     return head + "\n\n" + "\n\n".join(blocks)
 
 
@@ -193,7 +295,8 @@ def quantify_text_full(study, results, summaries=None) -> str:
 
 
 def quantify_dict(study, results, summaries=None, summary_errors=None) -> dict:
-    """JSON-safe: {"sensors", "design_how", "variants": {variant: ModelErrorResult.to_dict() plus the sizes in
+    """JSON-safe: {"sensors", "design_how", "noise" (:func:`error_noise`'s sentence), "variants": {variant:
+    ModelErrorResult.to_dict() plus the sizes in
     file units, the pooled coverages, "summary" (the :class:`ErrorSummary` as a dict, None if it failed) and
     "summary_error" (why it failed, ``summary_errors``; None)},
     "errors": {variant: reason}, "ranking": ModelRanking.to_dict() or None}."""
@@ -212,7 +315,8 @@ def quantify_dict(study, results, summaries=None, summary_errors=None) -> dict:
         d["summary_error"] = summary_errors.get(v)
         variants[v] = d
     rank = ranking(results)
-    return {"sensors": list(results.design_sensors), "design_how": results.design_how, "variants": variants,
+    return {"sensors": list(results.design_sensors), "design_how": results.design_how,
+            "noise": error_noise(study, results.design_sensors).sentence, "variants": variants,
             "errors": dict(results.model_error_errors), "ranking": None if rank is None else rank.to_dict()}
 
 
@@ -220,9 +324,9 @@ def quantify_dict(study, results, summaries=None, summary_errors=None) -> dict:
 def validate_model_error(study, results, variant: str, progress=None) -> tuple:
     """(text, dict) of ``mudoe validate``'s lines on the model error of the validated ``variant`` on the study's
     data: the held-out coverage of its (1 - alpha) new-reading bands without and with its model error, pooled and
-    per split, as :func:`run_model_error` computes it (kind auto, the study's splits and test sensors; the embedded
-    error beside another chosen error model is not fitted); a failure is a line of the text and the dict's
-    ``error``, never an error of the command."""
+    per split, as :func:`run_model_error` computes it (kind auto, the study's splits and test sensors, the noise of
+    :func:`error_noise`, named in a line and the dict's ``noise``; the embedded error beside another chosen error
+    model is not fitted); a failure is a line of the text and the dict's ``error``, never an error of the command."""
     out = {"variant": variant, "error": None}
     if study.kind.model_error_refusal:
         out["error"] = study.kind.model_error_refusal
@@ -234,6 +338,7 @@ def validate_model_error(study, results, variant: str, progress=None) -> tuple:
     r = results.model_error[variant]
     n = sum(h.n_values for h in r.heldout)
     out.update(detected=r.detected, p_value=r.test.p_value, kind=r.kind, alpha=r.alpha, sensors=list(r.sensors),
+               noise=error_noise(study, r.sensors).sentence,
                n_values=n, coverage_plain=pooled_coverage(r, "none"), coverage_with_error=pooled_coverage(r, r.kind),
                splits=[dict(split=h.split, n_values=h.n_values, coverage_plain=h.coverage_plain,
                             coverage_with_error=h.coverage(r.kind), widening=h.widening(r.kind)) for h in r.heldout])
@@ -243,7 +348,8 @@ def validate_model_error(study, results, variant: str, progress=None) -> tuple:
             f"(p = {r.test.p_value:.3g}), error model: {r.kind}")
     if not r.heldout:
         return head + "\n  no splits: no held-out coverage", out
-    lines = [head, f"  pooled: {100 * out['coverage_plain']:.1f} % without the model error, "
+    lines = [head, "  " + error_noise(study, r.sensors).sentence,
+             f"  pooled: {100 * out['coverage_plain']:.1f} % without the model error, "
                    f"{100 * out['coverage_with_error']:.1f} % with it ({r.kind}), {n} readings in {len(r.heldout)} "
                    "split(s)"]
     lines += [f"  {h.split}: {100 * h.coverage_plain:.1f} % -> {100 * h.coverage(r.kind):.1f} % ({h.n_values} readings, "
@@ -277,7 +383,8 @@ def model_error_view(study, results, variant: str):
     sampling times, without the held-out bands (the coverage table of every split only)."""
     from identification.studies.records import HeldOutBands, ModelErrorView
     r = results.model_error[variant]
-    data, m = study.data[variant], study.models[variant]
+    noise = error_noise(study, r.sensors)
+    data, m = error_data(study, variant, noise), study.models[variant]
     cols = [study.sensors.index(s) for s in r.sensors]
     units = tuple(sensor_units(study)[s][0] or "model unit" for s in r.sensors)
     d = r.discrepancy(data.inputs, r.alpha)
@@ -290,7 +397,7 @@ def model_error_view(study, results, variant: str):
                               input_label="t" + (f" [{unit}]" if unit else ""),
                               q=np.tile(d.grid[0], d.mean.shape[0]), discrepancy=disc, heldout=None,
                               embedded=embedded_parameters(results, variant),
-                              curves=curve_labels(m, data.inputs))
+                              curves=curve_labels(m, data.inputs), noise=noise.short)
     disc = tuple(_to_file_z(study, getattr(d, a)[:, cols], cols) for a in ("mean", "lower", "upper"))
     held = None
     if r.heldout:
@@ -314,7 +421,7 @@ def model_error_view(study, results, variant: str):
     q_label = m.inputs[0] + (f" [{u.input_file}]" if u is not None and u.input_file else "")
     return ModelErrorView(variant=variant, result=r, sensors=r.sensors, units=units, input_label=q_label,
                           q=_first_input(study, data.inputs), discrepancy=disc, heldout=held,
-                          embedded=embedded_parameters(results, variant))
+                          embedded=embedded_parameters(results, variant), noise=noise.short)
 
 
 def run_model_error_views(study, results):

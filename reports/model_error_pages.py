@@ -7,8 +7,9 @@ first input (a dynamic model: against time, every experiment) with its band, the
 readings of one split, and the held-out coverage table.  Before them the page "Model uncertainty" of every variant
 (:func:`model_uncertainty_page`, the records' :class:`identification.studies.records.ErrorSummary`): how large
 the error is in the sensors' units and where, the band to design with, where to measure next and which model to
-use (the ranking's verdict).  Draws only.  (The records ``ModelErrorView`` and
-``HeldOutBands`` live in :mod:`identification.studies.records`; their old names here still work, deprecated.)
+use (the ranking's verdict), and which sensor sigma the bands take as the noise of a reading (``view.noise``).
+Draws only.  (The records ``ModelErrorView`` and ``HeldOutBands`` live in :mod:`identification.studies.records`;
+their old names here still work, deprecated.)
 """
 from __future__ import annotations
 
@@ -137,6 +138,8 @@ def _verdict(view: ModelErrorView) -> str:
                      + "; ".join(f"{e.name} {100 * e.relative:.3g} % of |p|" for e in view.embedded) + ".")
     if not r.identifiable:
         lines.append("The parameters are NOT identifiable under the model error (the discrepancy can mimic them).")
+    if view.noise:
+        lines.append(view.noise)
     return "\n".join(lines)
 
 
@@ -147,10 +150,10 @@ def model_error_pages(results, variant: str):
     view = results.model_error_views[variant]
     r = view.result
     fig = _page(f"Model error of {variant}: {'detected' if r.detected else 'not detected'}, error model {r.kind}")
-    n_lines = _text(fig, 0.04, 0.925, _verdict(view), width=175, size=9)
+    n_lines = _text(fig, 0.04, 0.925, _verdict(view), width=160, size=9)    # 160 characters of size 9 fit the page
     n = len(view.sensors)
     top = 0.925 - 0.019 * n_lines - 0.075              # top of the first row of axes
-    h, gap = 0.2, 0.08 if n <= 2 else 0.1
+    h, gap = max(0.16, 0.2 - 0.0095 * max(0, n_lines - 4)), 0.08 if n <= 2 else 0.1   # a long verdict: lower plots
     w = (0.87 - gap * (n - 1)) / n
     if r.kind == "none":                               # no discrepancy: the held-out row moves up
         fig.text(0.04, top + 0.045, "No error model (kind none): no discrepancy to show; the bands are the plain "
@@ -272,8 +275,11 @@ def model_uncertainty_page(results):
     views = [v for v in results.model_error_views.values() if v.summary is not None]
     fig = _page("Model uncertainty: how large the model error is, the band to design with, which model to use")
     n = _text(fig, 0.04, 0.925, _ranking_text(views), width=135, size=10, weight="bold")
-    head, rows, flags = summary_rows(views)
     top = 0.925 - 0.024 * n - 0.035
+    noise = next((v.noise for v in views if v.noise), "")       # which sigma the bands take (the same in every view)
+    if noise:
+        top -= 0.0165 * _text(fig, 0.04, top + 0.029, noise, width=180, size=8) + 0.003
+    head, rows, flags = summary_rows(views)
     heights = [max(str(c).count("\n") + 1 for c in r) for r in rows]
     height = 0.024 * (sum(heights) + 2)
     ax = fig.add_axes([0.04, top - height, 0.92, height])

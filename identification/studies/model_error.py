@@ -78,7 +78,8 @@ from identification.studies.model_error_result import (EmbeddedParameter, ErrorT
 from identification.studies.splits import Split, SplitError, flat_split
 from models.labels import LabelledModel
 
-__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS", "pure_error_checks"]
+__all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS", "pure_error_checks",
+           "pure_error_notes"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
 KINDS = ("auto", "none", "discrepancy", "embedded")
@@ -208,8 +209,9 @@ def pure_error_checks(data: Measurements, w: np.ndarray, layout) -> tuple:
     return tuple(out)
 
 
-def _pure_error_notes(checks: tuple, alpha: float) -> list:
-    """Notes on the sensors whose pure error is clearly (p < alpha, one-sided) below or above the stated sigma."""
+def pure_error_notes(checks: tuple, alpha: float) -> list:
+    """Notes on the sensors whose pure error is clearly (p < alpha, one-sided) below or above the stated sigma
+    (``checks``: :func:`pure_error_checks`); these are among ``ModelErrorResult.notes``."""
     notes = []
     below = [c for c in checks if c.p_below < alpha]
     above = [c for c in checks if c.p_above < alpha]
@@ -317,7 +319,7 @@ def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
 
 def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
            grouped: bool, checks: tuple = (), alpha: float = 0.05) -> tuple:
-    notes = list(fit.notes) + _pure_error_notes(checks, alpha)
+    notes = list(fit.notes) + pure_error_notes(checks, alpha)
     if grouped and kind == "none":
         notes.append("groups name the conditions of the error models; the 'none' error model does not use them")
     unseen = [f"{h.split} ({h.n_unseen} of {h.n_values})" for h in heldout if h.n_unseen]

@@ -531,6 +531,8 @@ class ModelErrorView:
                                                 and the page draws one curve per experiment against time
     summary : ErrorSummary or None              the engineer's numbers (how large, where, band, next runs)
     ranking : ModelRanking or None              the ranking of the study's variants (the same in every view)
+    noise : str                                 one sentence: which sensor sigma the bands take as the noise of a
+                                                reading, and why ("" : not said)
     """
 
     variant: str
@@ -545,6 +547,7 @@ class ModelErrorView:
     curves: tuple = ()
     summary: ErrorSummary | None = None
     ranking: ModelRanking | None = None
+    noise: str = ""
 
 
 # ---------------------------------------------------------------------------- a dynamic study

@@ -49,7 +49,9 @@ def test_an_adequate_variant_gets_its_coverage_unchanged_by_the_model_error(tmp_
     block = text.rstrip().split("\n\n")[-1]
     assert block.startswith("Held-out coverage of arrhenius's 95 % new-reading bands on the study's data")
     assert f"pooled: {100 * me['coverage_plain']:.1f} % without the model error" in block
-    assert "  cool vs hot: " in block and block.count("\n") == 1 + len(me["splits"])
+    assert "  cool vs hot: " in block and block.count("\n") == 2 + len(me["splits"])
+    assert block.split("\n")[1] == "  " + me["noise"]                  # which sigma the bands take: cstr's as given
+    assert me["noise"].startswith("The model-error bands take the sigma given in [[sensors]] (C_A 0.004 mol/L")
 
 
 def test_a_rejected_variant_gets_its_coverage_with_the_model_error(tmp_path):
@@ -61,6 +63,7 @@ def test_a_rejected_variant_gets_its_coverage_with_the_model_error(tmp_path):
     assert me["coverage_with_error"] > me["coverage_plain"]
     assert all(s["widening"] > 1.0 for s in me["splits"])
     assert "model error DETECTED" in text and f"with it ({me['kind']})" in text
+    assert me["noise"].startswith("The model-error bands take sigma_rep") and "  " + me["noise"] in text
 
 
 def test_the_flag_and_the_config_key_skip_it(tmp_path):

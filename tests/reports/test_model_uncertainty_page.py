@@ -91,3 +91,17 @@ def test_the_page_is_listed_only_when_a_view_has_a_summary():
     without = stub_record({}, model_error_views={"A": dataclasses.replace(_view("A", True), summary=None)})
     assert "model_uncertainty" in [n for n, _ in report_pages(with_summary, with_diagnosis=False, uncertainty="none")]
     assert "model_uncertainty" not in [n for n, _ in report_pages(without, with_diagnosis=False, uncertainty="none")]
+
+
+def test_the_page_says_which_sigma_the_bands_take_once():
+    noise = "The model-error bands take sigma_rep, the repeatability of the series (y 1.2 um), as the noise."
+    rank = _ranking(0.05)
+    views = {v: dataclasses.replace(_view(v, v == "A", rank), noise=noise) for v in ("A", "B")}
+    fig = model_uncertainty_page(stub_record({}, model_error_views=views))
+    texts = " ".join(" ".join(page_texts(fig)).split())
+    plt.close(fig)
+    assert texts.count(noise) == 1 and "Verdict: choose B" in texts and "±12.7 (13.8) um" in texts
+    fig = model_uncertainty_page(stub_record({}, model_error_views={"A": _view("A", True, rank)}))
+    texts = " ".join(" ".join(page_texts(fig)).split())
+    plt.close(fig)
+    assert "the noise" not in texts                        # no sentence given: none drawn
