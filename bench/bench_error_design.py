@@ -22,6 +22,13 @@ then for new runs of ``--repeats`` series at the candidate press forces 0, 100, 
    point over the predicted posterior variance (ratio 1 expected, standard error sqrt(2 / n) per point), pooled
    with its standard error over replications, before and after the runs.
 
+4. **conditions** (``--skip`` without ``conditions``): M1's model error with the direction of motion named
+   (``groups`` loading / unloading: each branch's discrepancy its own draw); the region 0-1600 N on both branches,
+   on loading, on unloading (integrated, 21 nodes); runs of ``--repeats`` series at the 17 forces on the loading
+   branch only, or on either branch (34 candidates): J before and after, the part no run removes, the share of J
+   removed, the runs (N and branch) and the mean half-width per branch before and after; enumeration against
+   branch-and-bound on the same problems.
+
 Run ``python -m bench error_design`` (``--quick``: n <= 4 and 1000 replications).
 """
 from __future__ import annotations
@@ -44,6 +51,7 @@ from mudoe.study import prepare                                   # noqa: E402
 from oed import select_inputs                                     # noqa: E402
 from oed.error_design import error_design_problem, select_error_design   # noqa: E402
 from oed.error_design_search import search                        # noqa: E402
+from models.press import PRESS_LOADING_ROWS                       # noqa: E402
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "press.toml"
 #: the sensors of the study's E-optimal design ([oed] n_sensors = 2): F_x and B0_y
@@ -200,13 +208,66 @@ def monte_carlo(study, r, chosen: tuple, region: np.ndarray, repeats: int, n_mc:
               f"{per_point.max():>9.4f} {int(np.sum(np.abs(z) > 2.58)):>4} of {z.size}")
 
 
+def press_branches(study) -> list:
+    """The branch of every input row of the press data: "loading" (0 .. 1600 N, the peak included) or "unloading"."""
+    return ["loading" if j in PRESS_LOADING_ROWS else "unloading" for j in range(study.data["M1"].n_q)]
+
+
+def conditions(study, sizes, repeats: int) -> None:
+    """Part 4: M1's model error with the branches named; runs on the loading branch only or on either branch."""
+    t0 = time.perf_counter()
+    r = model_error(study.models["M1"], study.data["M1"], study.p0, splits=study.splits, weights=WEIGHTS,
+                    groups=press_branches(study), kind="discrepancy")
+    print(f"\nM1 with the branches named (groups {list(r.groups)}), kind {r.kind}: {time.perf_counter() - t0:.1f} s "
+          f"(load {_load():.1f})")
+    for d in r.discrepancies:
+        print(f"  {d.sensor}: s/sigma {d.amplitude / d.sigma:.3g}, length scale {d.length_scales[0]:.4g} N, "
+              f"tau/sigma {d.rough / d.sigma:.3g}, sigma {d.sigma:.4g}")
+    both = ("loading", "unloading")
+    for region_label, rc in (("both branches", both), ("loading", "loading"), ("unloading", "unloading")):
+        for cand_label, cc in (("loading only", "loading"), ("either branch", None)):
+            prob = error_design_problem(r, CANDIDATES, region={"q_P": (0.0, 1600.0)}, region_size=21, repeats=repeats,
+                                        candidate_conditions=cc, region_conditions=rc)
+            before, floor = prob.value(()), prob.floor
+            conds = np.array(prob.region_conditions, object)
+            hb = prob.half_widths((), r.alpha)
+            print(f"\nregion 0-1600 N on {region_label}, runs on {cand_label} ({prob.n_candidates} candidates): J before "
+                  f"{before:.4f} sigma^2, irreducible {floor:.4f} ({100 * floor / before:.1f} %)")
+            print(f"  {'n':>2} {'runs (N, branch)':<58} {'J':>8} {'of J':>6} {'reducible':>9} "
+                  + " ".join(f"{s + ' ' + b[:2]:>10}" for b in dict.fromkeys(conds) for s in SENSORS) + "  (mean um)")
+            print(f"  {0:>2} {'':<58} {before:>8.4f} {'':>6} {'':>9} " + " ".join(
+                f"{UM * _mean_half(prob, hb, conds, b, j):>10.3f}" for b in dict.fromkeys(conds)
+                for j in range(len(SENSORS))))
+            for n in sizes:
+                t1 = time.perf_counter()
+                e = select_error_design(r, CANDIDATES, n, region={"q_P": (0.0, 1600.0)}, region_size=21,
+                                        repeats=repeats, candidate_conditions=cc, region_conditions=rc)
+                dt = time.perf_counter() - t1
+                b = search(prob.core, n, "bnb", time_limit=120.0)
+                runs = ", ".join(f"{x[0]:g} {c[:2]}" for x, c in zip(e.chosen_inputs, e.chosen_conditions))
+                ha = prob.half_widths(e.chosen, r.alpha)
+                print(f"  {n:>2} {runs:<58.58} {e.value_after:>8.4f} {100 * (before - e.value_after) / before:>5.1f}% "
+                      f"{100 * (before - e.value_after) / (before - floor):>8.1f}% " + " ".join(
+                          f"{UM * _mean_half(prob, ha, conds, bb, j):>10.3f}" for bb in dict.fromkeys(conds)
+                          for j in range(len(SENSORS)))
+                      + f"   [{e.method} {dt:.2f} s; bnb same set {b.indices == e.chosen}, |dJ| "
+                        f"{abs(b.value - e.value_after):.1e}, {b.nodes} nodes{'' if b.proven else ', NOT proven'}]")
+
+
+def _mean_half(prob, h: np.ndarray, conds: np.ndarray, branch: str, j: int) -> float:
+    """The weighted mean half-width of sensor column j over the region's points on ``branch``."""
+    m = conds == branch
+    w = prob.region_weights[m]
+    return float(w @ h[m, j] / w.sum())
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench error_design")
     ap.add_argument("--repeats", type=int, default=2, help="series per new run (the study measured 2)")
     ap.add_argument("--n-mc", type=int, default=20000, help="Monte Carlo replications")
     ap.add_argument("--seed", type=int, default=293)
     ap.add_argument("--quick", action="store_true", help="n <= 4 and 1000 replications")
-    ap.add_argument("--skip", default="", help="comma list of parts to skip: designs,search,mc")
+    ap.add_argument("--skip", default="", help="comma list of parts to skip: designs,search,mc,conditions")
     args = ap.parse_args(argv or [])
     sizes = (1, 2, 4) if args.quick else (1, 2, 4, 6)
     n_mc = 1000 if args.quick else args.n_mc
@@ -223,6 +284,8 @@ def main(argv=None):
         region = np.linspace(0.0, 1600.0, 21)[:, None]
         e = select_error_design(r, CANDIDATES, 4, region=region, repeats=args.repeats)
         monte_carlo(study, r, e.chosen, region, args.repeats, n_mc, args.seed)
+    if "conditions" not in skip:
+        conditions(study, sizes, args.repeats)
 
 
 if __name__ == "__main__":

@@ -24,17 +24,29 @@ Studies: ``cstr`` (configs/cstr.toml, static: 13 temperatures x 4 series, the 3 
 times x 2 series, cA and cB, splits early/late, t < 0.7 h and "cool vs hot").
 
 Run ``python -m bench model_error_adequate --n=200`` (``--studies=cstr`` for one; ``--quick``: 10 each).
+
+``--test-only``: the size of the 'no model error' test alone (the plain fit and the test on every campaign, no
+held-out table): the rate p < alpha under the shipped reference (the 50:50 mixture of chi2_0 and chi2_1) with its
+Clopper-Pearson interval, P(LR = 0) and the LR quantiles against that mixture's (1/2; 0.5 P(chi2_1 > q)) and against
+the exact null distribution of the REML LR for the study's layout (:func:`identification.studies.discrepancy_gp.
+white_lr_null`, the model linearised at the truth, ``--n-ref`` draws), and the rate under that exact reference.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from scipy import stats
+
 from identification import model_error
+from identification.fit.problem import Problem
+from identification.studies.discrepancy_gp import Observations, white_lr_null
+from identification.studies.model_error_fit import outputs_at
 from identification.studies.montecarlo import clopper_pearson
 from mudoe.config import load_config
 from mudoe.study import Progress, StudyResults, design_sensors, prepare, start_values
@@ -133,12 +145,69 @@ def _summary(name, variant, results, rows, seed, seconds) -> dict:
     return dict(n=n, found=found, chosen=chosen, median_widening=float(np.median(widen)))
 
 
+def exact_reference(study, variant: str, data, w: np.ndarray, p: np.ndarray, n_draws: int, seed: int) -> np.ndarray:
+    """Draws of the exact null distribution of the test's LR for the study's layout, the model linear at ``p``."""
+    problem = Problem(study.models[variant], data)
+    layout = problem.columns()
+    model, flat = problem.static(p)
+    cw = layout.column_weights(np.asarray(w, float))
+    G = outputs_at(model, p, flat.inputs)[1]
+    obs = Observations.of(flat.counts(), np.broadcast_to(np.asarray(flat.sigma, float), (flat.n_S,)), cw,
+                          np.zeros((flat.n_q, 1)))
+    return white_lr_null(obs, obs.stack(G), n_draws, seed)
+
+
+def run_size(name: str, n: int, seed: int, n_ref: int, alpha: float = 0.05) -> dict:
+    """The size of the 'no model error' test alone on ``n`` campaigns, against the mixture and the exact reference."""
+    study = prepare(load_config(CONFIGS / f"{name}.toml"))
+    variant = study.cfg.simulate.variant or next(iter(study.models))
+    results = design_sensors(study, StudyResults(study), Progress(False))
+    used = set(results.design_sensors)
+    w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
+    p = _truth(study, variant)
+    campaign, rng = _simulator(study, variant, p), np.random.default_rng(seed)
+    m, p0 = study.models[variant], start_values(study, variant)
+    ref = exact_reference(study, variant, study.data[variant], w, p, n_ref, seed + 1)
+    t0, c0 = time.perf_counter(), time.process_time()
+    lr, pv = np.empty(n), np.empty(n)
+    for i in range(n):
+        t = model_error(m, campaign(rng), p0, kind="none", weights=w).test
+        lr[i], pv[i] = t.statistic, t.p_value
+        if (i + 1) % 100 == 0:
+            print(f"  {name}: {i + 1} campaigns, {int(np.sum(pv[:i + 1] < alpha))} detected, "
+                  f"{time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    k = int(np.sum(pv < alpha))
+    ref_sorted = np.sort(ref)
+    p_exact = 1.0 - np.searchsorted(ref_sorted, lr, side="left") / len(ref)      # P_ref(LR_ref >= lr)
+    p_exact = np.where(lr > 0, p_exact, 1.0)
+    k_ex = int(np.sum(p_exact < alpha))
+    ci, ci_ex = clopper_pearson(k, n), clopper_pearson(k_ex, n)
+    p0_obs = float(np.mean(lr == 0))
+    se0 = math.sqrt(p0_obs * (1 - p0_obs) / n)
+    print(f"{name} ({variant} adequate, sensors {', '.join(results.design_sensors)}; test only; {n} campaigns, seed "
+          f"{seed}; wall {wall:.0f} s, CPU {cpu:.0f} s = {cpu / n:.3f} s per campaign):\n"
+          f"  size, mixture reference (shipped): {k}/{n} = {100 * k / n:.2f} % [Clopper-Pearson 95 % {100 * ci.lo:.2f}, "
+          f"{100 * ci.hi:.2f}]\n"
+          f"  size, exact reference ({n_ref} draws): {k_ex}/{n} = {100 * k_ex / n:.2f} % [{100 * ci_ex.lo:.2f}, "
+          f"{100 * ci_ex.hi:.2f}]; the exact reference's own size under the mixture's critical value "
+          f"{100 * np.mean(ref > stats.chi2.isf(2 * alpha, 1)):.2f} %\n"
+          f"  P(LR = 0): campaigns {p0_obs:.4f} +- {se0:.4f}, mixture 0.5, exact {np.mean(ref == 0):.4f}")
+    print(f"  {'quantile':>8} {'campaigns':>10} {'mixture':>8} {'exact':>8}")
+    for q in (0.5, 0.75, 0.9, 0.95, 0.99):
+        mix = stats.chi2.isf(2 * (1 - q), 1) if q > 0.5 else 0.0
+        print(f"  {q:>8.2f} {np.quantile(lr, q):>10.4f} {mix:>8.4f} {np.quantile(ref, q):>8.4f}", flush=True)
+    return dict(n=n, found=k, found_exact=k_ex, p_lr0=p0_obs)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="bench model_error_adequate")
     ap.add_argument("--n", type=int, default=200, help="campaigns per study")
     ap.add_argument("--studies", default=",".join(STUDIES), help=f"comma list of {', '.join(STUDIES)}")
     ap.add_argument("--seed", type=int, default=2912)
     ap.add_argument("--quick", action="store_true", help="--n=10")
+    ap.add_argument("--test-only", action="store_true", help="the size of the test alone, against the exact reference")
+    ap.add_argument("--n-ref", type=int, default=200000, help="draws of the exact reference (--test-only)")
     args = ap.parse_args(argv or [])
     names = [s for s in args.studies.split(",") if s]
     unknown = [s for s in names if s not in STUDIES]
@@ -148,7 +217,10 @@ def main(argv=None):
     if n < 1:
         ap.error(f"--n: need at least one campaign, got {n}")
     for k, name in enumerate(names):
-        run_study(name, n, args.seed + k)
+        if args.test_only:
+            run_size(name, n, args.seed + k, args.n_ref)
+        else:
+            run_study(name, n, args.seed + k)
 
 
 if __name__ == "__main__":

@@ -43,6 +43,15 @@ noise holds :math:`g\,\Omega\,g^\top` (one b across its sensors) and the target'
 model error (kind "none") :math:`\Sigma = g^\top C g` of the plain fit.  A dynamic model falls out: the points are
 (experiment, instrument, sampling time) columns of the static problem, one process per instrument over inputs and
 time.
+
+**Conditions** (a model error computed with ``groups``, e.g. the loading and unloading branches of a press): the
+discrepancy of each condition g is its own draw :math:`\delta_k(q, g)`, independent between conditions with common
+hyperparameters, so every point above carries its condition and :math:`K(a, b)` holds the factor
+:math:`[g_a = g_b]`, :math:`k_a` the cross-covariance with the data of condition :math:`g_a` only.  A candidate run
+carries its condition (``candidate_conditions``): one the data hold shrinks that condition's discrepancy (and every
+band through the parameters); :data:`identification.studies.model_error_result.NEW_CONDITION` ("new") is the one
+condition the data do not hold (no cross-covariance with the data: a new draw), shared by the runs and the region's
+points in it.  The region names its condition(s) (``region_conditions``: the region in each, equal shares).
 """
 from __future__ import annotations
 
@@ -58,6 +67,7 @@ from scipy import linalg, stats
 from identification.results_protocol import ResultProtocol, jsonable, notes_lines
 from identification.studies.discrepancy_gp import kernel_blocks, rough_weight
 from identification.studies.model_error_fit import outputs_at
+from identification.studies.model_error_result import NEW_CONDITION
 from .error_design_search import SEARCH_METHODS, VarianceProblem, search
 
 __all__ = ["ErrorDesignResult", "ErrorDesignProblem", "error_design_problem", "select_error_design", "CRITERIA",
@@ -150,6 +160,64 @@ def _checked_result(result):
     return fit
 
 
+def _condition_code(result, label, name: str) -> int:
+    """The code of one condition label: the index of a label of ``result.groups``, -1 for :data:`NEW_CONDITION`
+    (a condition the data do not hold), 0 for None without groups (the data's one condition)."""
+    groups = tuple(result.groups)
+    if isinstance(label, str) and label == NEW_CONDITION:
+        return -1
+    if label is None and not groups:
+        return 0
+    for i, g in enumerate(groups):
+        if isinstance(g, str) == isinstance(label, str) and bool(np.all(g == label)):
+            return i
+    allowed = (f"one of the model error's conditions {list(groups)} or {NEW_CONDITION!r} (a condition the data do "
+               "not hold)") if groups else (f"None (the data's one condition) or {NEW_CONDITION!r} (a condition the "
+                                            "data do not hold): the model error names no conditions (groups)")
+    raise ValueError(f"{name}: unknown condition {label!r}; expected {allowed}")
+
+
+def _labels(value) -> list | None:
+    """A sequence of labels as a list, None for one label (a string, a number, None)."""
+    if value is None or isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        return None
+    return list(value)
+
+
+def _region_conditions(result, value) -> tuple:
+    """The conditions the region is used in (labels, codes): ``value`` one label or a sequence of them (the region
+    in each, an equal share of the weight); None: every condition the data hold (the data's one without groups)."""
+    if value is None:
+        labels = list(result.groups) if result.groups else [None]
+    else:
+        seq = _labels(value)
+        labels = [value] if seq is None else seq
+        if not labels:
+            raise ValueError("region_conditions: expected a condition label or a non-empty sequence of them")
+    codes = [_condition_code(result, lab, "region_conditions") for lab in labels]
+    if len(set(codes)) != len(codes):
+        raise ValueError(f"region_conditions: a condition is named twice in {labels!r}")
+    return tuple(labels), np.array(codes, int)
+
+
+def _candidate_conditions(result, value, n_c: int) -> tuple:
+    """(rows (n_e,), labels (n_e,), codes (n_e,)): every candidate run as an input row in its condition; ``value``
+    one label (every row in it), one per candidate row (n_c,), or None (every row in every condition the data hold;
+    the data's one without groups)."""
+    if value is None:
+        labels = list(result.groups) if result.groups else [None]
+        rows = np.repeat(np.arange(n_c), len(labels))
+        return rows, tuple(labels) * n_c, np.tile([_condition_code(result, g, "candidate_conditions")
+                                                  for g in labels], n_c)
+    seq = _labels(value)
+    if seq is not None and len(seq) != n_c:
+        raise ValueError(f"candidate_conditions: expected one condition label or one per candidate row ({n_c}), "
+                         f"got {len(seq)}")
+    labels = [value] * n_c if seq is None else seq
+    return np.arange(n_c), tuple(labels), np.array([_condition_code(result, g, "candidate_conditions")
+                                                   for g in labels], int)
+
+
 def _int_in(v, lo: int, hi: int, name: str) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
         raise ValueError(f"{name}: expected an integer in {lo}..{hi}, got {v!r}")
@@ -159,20 +227,26 @@ def _int_in(v, lo: int, hi: int, name: str) -> int:
 # ---------------------------------------------------------------------------- the posterior covariance
 @dataclass(frozen=True)
 class _Points:
-    """Latent points: input rows q (n, d_q), static-problem columns k (n,), and h's sensitivities g (n, n_p)."""
+    """Latent points: input rows q (n, d_q), static-problem columns k (n,), h's sensitivities g (n, n_p) and the
+    condition code of each (n,) (a code of the data's conditions, -1 a condition the data do not hold)."""
 
     q: np.ndarray
     col: np.ndarray
     g: np.ndarray
+    cond: np.ndarray
+
+    def take(self, idx) -> "_Points":
+        return _Points(self.q[idx], self.col[idx], self.g[idx], self.cond[idx])
 
 
-def _points(fit, p, rows: np.ndarray, cols: np.ndarray) -> _Points:
-    """Every (row, column) pair, row-major, with g = dh_k/dp at the row (exact, CasADi)."""
+def _points(fit, p, rows: np.ndarray, cols: np.ndarray, codes: np.ndarray) -> _Points:
+    """Every (row, column) pair, row-major, with g = dh_k/dp at the row (exact, CasADi), in the rows' conditions
+    ``codes`` (n_rows,)."""
     _, G = outputs_at(fit.model, p, rows)
     q = np.repeat(rows, len(cols), axis=0)
     c = np.tile(cols, len(rows))
     g = G[:, cols, :].reshape(len(rows) * len(cols), -1)
-    return _Points(q, c, g)
+    return _Points(q, c, g, np.repeat(np.asarray(codes, int), len(cols)))
 
 
 def _scaled(fit, pts: _Points) -> tuple:
@@ -197,8 +271,9 @@ def _covariance(fit, C: np.ndarray, pts: _Points) -> tuple:
     for i in np.unique(blk):
         m = blk == i
         ell = gp.length_scale(int(i))
-        K[np.ix_(m, m)] = gp.amplitude(int(i)) ** 2 * kernel_blocks(x[m], x[m], ell, gp.pins)[0]
-        kx[m] = gp.cross(int(i), x[m])[0]
+        same = pts.cond[m][:, None] == pts.cond[m][None, :]          # one draw of the discrepancy per condition
+        K[np.ix_(m, m)] = gp.amplitude(int(i)) ** 2 * kernel_blocks(x[m], x[m], ell, gp.pins)[0] * same
+        kx[m] = gp.cross(int(i), x[m], pts.cond[m])[0]
         nu[m] = gp.rough(int(i)) ** 2 * rough_weight(x[m], ell, gp.pins)[0]
     u = pts.g - kx @ fit.Vinv_G
     S = K - kx @ fit.Vinv @ kx.T + u @ C @ u.T
@@ -227,6 +302,10 @@ class ErrorDesignProblem:
     irreducible : ndarray (n_T,)          the targets' variance no run removes (rough part or embedded deviation,
                                           sigma^2 units, region-major like ``core.d``)
     target_sensors : tuple of str         the sensor of every target column
+    candidate_conditions : tuple          the condition label of every candidate (None: the data's one condition;
+                                          :data:`NEW_CONDITION`: a condition the data do not hold)
+    region_conditions : tuple             the condition label of every region point (the region's points repeated
+                                          in each condition named, condition-major)
     """
 
     core: VarianceProblem
@@ -242,6 +321,8 @@ class ErrorDesignProblem:
     input_names: tuple
     irreducible: np.ndarray
     target_sensors: tuple
+    candidate_conditions: tuple = ()
+    region_conditions: tuple = ()
 
     @property
     def floor(self) -> float:
@@ -302,7 +383,8 @@ def _noise(result, fit, pts: _Points, nu: np.ndarray, repeats: int) -> np.ndarra
 
 def error_design_problem(result, candidates, *, region, region_weights=None, criterion: str = "integrated",
                          sensors=None, measure=None, pairs: bool = False, repeats: int = 1,
-                         region_size: int = 9) -> ErrorDesignProblem:
+                         region_size: int = 9, candidate_conditions=None,
+                         region_conditions=None) -> ErrorDesignProblem:
     r"""The problem :math:`\min_{|S|=n} J(S)` of the module docstring for a model error ``result``, without
     solving it (:meth:`ErrorDesignProblem.value` of any set; :func:`select_error_design` solves it).
 
@@ -320,11 +402,20 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
     pairs : bool                      candidates are (row, sensor) pairs (one reading each) instead of rows
     repeats : int >= 1                series averaged per run (the noise sigma^2 / repeats; the rough part stays)
     region_size : int                 nodes per input of a box region
+    candidate_conditions : label, sequence of n_c labels, or None
+        the condition of every candidate row (the discrepancy only): a label of ``result.groups`` (a run there
+        shrinks that condition's discrepancy), :data:`NEW_CONDITION` ("new": the one condition the data do not hold,
+        shared with the region's points in it), one label for every row, or None: every row offered in every
+        condition the data hold (without groups: the data's one condition)
+    region_conditions : label, sequence of labels, or None
+        the condition(s) the model will be used in (the discrepancy only): the region in each of them, an equal share
+        of the weight each; None: every condition the data hold (without groups: the data's one condition)
     """
     fit = _checked_result(result)
-    if result.groups and result.kind == "discrepancy":
-        raise ValueError(f"result: its discrepancy has named conditions ({', '.join(map(str, result.groups))}); a design "
-                         "for runs in one of them is not implemented: compute the model error without groups")
+    if result.kind != "discrepancy" and (candidate_conditions is not None or region_conditions is not None):
+        raise ValueError(f"{'candidate' if candidate_conditions is not None else 'region'}_conditions: runs and "
+                         f"regions in named conditions need the discrepancy (kind 'discrepancy'); the error model is "
+                         f"{result.kind!r}")
     if criterion not in CRITERIA:
         raise ValueError(f"criterion: expected one of {CRITERIA}, got {criterion!r}")
     names = tuple(fit.model.inputs)
@@ -336,26 +427,35 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
     if not isinstance(pairs, (bool, np.bool_)):
         raise ValueError(f"pairs: expected True or False, got {pairs!r}")
     lay = fit.layout
+    if result.kind == "discrepancy":
+        r_labels, r_codes = _region_conditions(result, region_conditions)
+        e_rows, e_labels, e_codes = _candidate_conditions(result, candidate_conditions, len(cand))
+    else:                              # no discrepancy: every run a new condition, the region in the data's
+        r_labels, r_codes = (None,), np.zeros(1, int)
+        e_rows, e_labels, e_codes = np.arange(len(cand)), (None,) * len(cand), np.zeros(len(cand), int)
+    n_r0 = len(pts_r)
+    pts_r, w_r = np.vstack([pts_r] * len(r_codes)), np.tile(w_r, len(r_codes)) / len(r_codes)
     tcols, mcols = _columns(fit, targets), _columns(fit, measured)
-    T = _points(fit, fit.p, pts_r, tcols)
-    O = _points(fit, fit.p, cand, mcols)
-    allp = _Points(np.vstack([T.q, O.q]), np.concatenate([T.col, O.col]), np.vstack([T.g, O.g]))
+    T = _points(fit, fit.p, pts_r, tcols, np.repeat(r_codes, n_r0))
+    O = _points(fit, fit.p, cand[e_rows], mcols, e_codes)
+    allp = _Points(np.vstack([T.q, O.q]), np.concatenate([T.col, O.col]), np.vstack([T.g, O.g]),
+                   np.concatenate([T.cond, O.cond]))
     S, nu = _covariance(fit, np.asarray(result.cov, float), allp)
     nT = len(T.col)
-    groups, rows, sens = [], [], []
+    groups, rows, sens, conds = [], [], [], []
     inst = lay.instrument[mcols]
-    for j in range(len(cand)):
+    for j in range(len(e_rows)):
         base = j * len(mcols)
         parts = ([np.arange(len(mcols))] if not pairs else
                  [np.flatnonzero(inst == g) for g in dict.fromkeys(inst.tolist())])
         for part in parts:
             groups.append(base + part)
-            rows.append(j)
+            rows.append(int(e_rows[j]))
+            conds.append(e_labels[j])
             sens.append(tuple(dict.fromkeys(lay.names[lay.instrument[mcols[m]]] for m in part)))
     Linv = np.zeros((len(O.col), len(O.col)))
     for gr in groups:
-        sub = _Points(O.q[gr], O.col[gr], O.g[gr])
-        N = _noise(result, fit, sub, nu[nT + gr], repeats)
+        N = _noise(result, fit, O.take(gr), nu[nT + gr], repeats)
         try:
             L = linalg.cholesky(N, lower=True)
         except linalg.LinAlgError:
@@ -375,7 +475,8 @@ def error_design_problem(result, candidates, *, region, region_weights=None, cri
                            criterion == "worst")
     return ErrorDesignProblem(core, pts_r, w_r, cand, np.array(rows, int), tuple(sens),
                               tuple(_label(lay, int(k)) for k in tcols), fit.sigma[tcols].copy(), criterion, repeats,
-                              names, floor / sig_t ** 2, tuple(lay.names[lay.instrument[k]] for k in tcols))
+                              names, floor / sig_t ** 2, tuple(lay.names[lay.instrument[k]] for k in tcols),
+                              tuple(conds), tuple(lab for lab in r_labels for _ in range(n_r0)))
 
 
 # ---------------------------------------------------------------------------- the result
@@ -411,6 +512,9 @@ class ErrorDesignResult(ResultProtocol):
     parameter_prior : str
     wall_time : float                    seconds
     notes : tuple of str
+    chosen_conditions : tuple            the condition of each chosen run (None: the data's one condition;
+                                         :data:`NEW_CONDITION`: the condition the data do not hold)
+    region_conditions : tuple            the condition of every region point (None: the data's one condition)
     """
 
     model_name: str
@@ -441,11 +545,19 @@ class ErrorDesignResult(ResultProtocol):
     parameter_prior: str = PARAMETER_PRIOR
     wall_time: float = 0.0
     notes: tuple = ()
+    chosen_conditions: tuple = ()
+    region_conditions: tuple = ()
+
+    @property
+    def _named(self) -> bool:
+        """Conditions are named (a label other than the data's one condition)."""
+        return any(c is not None for c in tuple(self.chosen_conditions) + tuple(self.region_conditions))
 
     def _runs(self) -> str:
+        conds = self.chosen_conditions if self._named else (None,) * len(self.chosen_sensors)
         return "; ".join(", ".join(f"{n} = {v:.6g}" for n, v in zip(self.input_names, row))
-                         + f" [{', '.join(sens)}]"
-                         for row, sens in zip(np.asarray(self.chosen_inputs), self.chosen_sensors))
+                         + f" [{', '.join(sens)}]" + ("" if c is None else f" in {c}")
+                         for row, sens, c in zip(np.asarray(self.chosen_inputs), self.chosen_sensors, conds))
 
     def summary(self) -> str:
         """The chosen runs, the criterion before and after with the proof, the band per target over the region
@@ -458,7 +570,9 @@ class ErrorDesignResult(ResultProtocol):
         lines = [f"Design that learns the model error of {self.model_name or 'the model'} ({self.kind}): "
                  f"{len(self.chosen)} run(s), {self.repeats} series each",
                  f"  runs: {self._runs()}",
-                 f"  {what} posterior prediction variance over the region ({len(self.region)} points, sigma^2 units): "
+                 f"  {what} posterior prediction variance over the region ({len(self.region)} points"
+                 + (f" in {', '.join(map(str, dict.fromkeys(self.region_conditions)))}" if self._named else "")
+                 + ", sigma^2 units): "
                  f"{self.value_before:.6g} -> {self.value_after:.6g}, of which no run removes {self.irreducible:.6g} "
                  f"({proof}; {via}, {self.n_evaluated} sets evaluated, {self.wall_time:.2f} s)", "",
                  "band half-width (unit of the sensor; over the region" + (" and the sampling times" if
@@ -479,6 +593,8 @@ class ErrorDesignResult(ResultProtocol):
         import pandas as pd
         n_r, n_t = self.half_before.shape
         df = pd.DataFrame(np.repeat(np.asarray(self.region), n_t, axis=0), columns=list(self.input_names))
+        if self._named:
+            df["condition"] = [str(c) for c in np.repeat(np.array(self.region_conditions, object), n_t)]
         df["target"] = list(self.target_labels) * n_r
         df["weight"] = np.repeat(np.asarray(self.region_weights), n_t)
         df["half_before"] = np.asarray(self.half_before).ravel()
@@ -487,7 +603,8 @@ class ErrorDesignResult(ResultProtocol):
             df["shrink"] = df["half_after"] / df["half_before"]
         df.attrs.update(criterion=self.criterion, value_before=self.value_before, value_after=self.value_after,
                         lower_bound=self.lower_bound, gap=self.gap, proven=self.proven, method=self.method,
-                        chosen=list(self.chosen), chosen_inputs=np.asarray(self.chosen_inputs).tolist())
+                        chosen=list(self.chosen), chosen_inputs=np.asarray(self.chosen_inputs).tolist(),
+                        chosen_conditions=[None if c is None else str(c) for c in self.chosen_conditions])
         return df
 
     def to_dict(self) -> dict:
@@ -502,15 +619,18 @@ class ErrorDesignResult(ResultProtocol):
 def select_error_design(result, candidates, n: int, *, region, region_weights=None, criterion: str = "integrated",
                         sensors=None, measure=None, pairs: bool = False, repeats: int = 1, region_size: int = 9,
                         alpha: float | None = None, method: str = "auto", time_limit: float = 60.0,
-                        enumeration_limit: int = 20_000, gap_tol: float = 1e-9) -> ErrorDesignResult:
+                        enumeration_limit: int = 20_000, gap_tol: float = 1e-9, candidate_conditions=None,
+                        region_conditions=None) -> ErrorDesignResult:
     r""":math:`\min_{|S| = n} J(S)`: the n candidate runs after which the posterior prediction variance of model
     plus model error over the region is smallest (weighted mean or largest, each sensor in its sigma^2 units;
     module docstring), with its proof.
 
     Parameters
     ----------
-    result, candidates, region, region_weights, criterion, sensors, measure, pairs, repeats, region_size
-        As :func:`error_design_problem`.
+    result, candidates, region, region_weights, criterion, sensors, measure, pairs, repeats, region_size,
+    candidate_conditions, region_conditions
+        As :func:`error_design_problem` (a candidate offered in several conditions is one candidate per condition:
+        ``chosen`` indexes those, ``chosen_conditions`` names them).
     n : int                 runs (distinct candidates; list a row twice to allow a repeat)
     alpha : float, optional the bands' miss probability (None: the result's)
     method : "auto", "enumerate", "bnb" or "greedy"
@@ -533,7 +653,8 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
     t0 = time.perf_counter()
     prob = error_design_problem(result, candidates, region=region, region_weights=region_weights,
                                 criterion=criterion, sensors=sensors, measure=measure, pairs=pairs, repeats=repeats,
-                                region_size=region_size)
+                                region_size=region_size, candidate_conditions=candidate_conditions,
+                                region_conditions=region_conditions)
     n = _int_in(n, 1, prob.n_candidates, "n")
     alpha = result.alpha if alpha is None else alpha
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha < 1:
@@ -557,6 +678,11 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
         if out.status in ("time_limit", "node_limit"):
             warnings.warn(f"select_error_design stopped at its {out.status} (time_limit={time_limit:g} s): the design "
                           f"is not proven optimal; proven gap {out.gap:.3g}", RuntimeWarning, stacklevel=2)
+    if any(c is not None for c in prob.candidate_conditions + prob.region_conditions):
+        notes.append("conditions: the discrepancy of each condition is its own draw (independent between conditions, "
+                     "common hyperparameters); a run in a condition the data hold shrinks that condition's discrepancy "
+                     f"(and, through the parameters, every condition's band); a run in {NEW_CONDITION!r} is a draw of "
+                     "the one condition the data do not hold, shared with the region's points there")
     if not result.identifiable:
         notes.append("the model error and the parameters cannot be told apart (result.identifiable False): the "
                      "band is that of the prediction, not of the parameters")
@@ -570,4 +696,6 @@ def select_error_design(result, candidates, n: int, *, region, region_weights=No
         method=out.method, nodes=out.nodes, n_evaluated=out.n_evaluated, region=prob.region.copy(),
         region_weights=prob.region_weights.copy(), half_before=prob.half_widths((), alpha),
         half_after=prob.half_widths(chosen, alpha), alpha=alpha, repeats=prob.repeats,
-        wall_time=time.perf_counter() - t0, notes=tuple(notes))
+        wall_time=time.perf_counter() - t0, notes=tuple(notes),
+        chosen_conditions=tuple(prob.candidate_conditions[c] for c in chosen),
+        region_conditions=prob.region_conditions)

@@ -58,7 +58,7 @@ from scipy import linalg, optimize, stats
 from identification.studies.embedded_error import block_reml, condition_blocks, spd_inverse
 
 __all__ = ["InputScaling", "Observations", "GPFit", "fit_discrepancy", "white_lr_test", "WhiteTest",
-           "kernel_blocks", "reml_objective", "reml_information", "BOUNDS", "AT_BOUND"]
+           "white_lr_null", "kernel_blocks", "reml_objective", "reml_information", "BOUNDS", "AT_BOUND"]
 
 #: bounds of (log(s / sigma), log l, log(tau / sigma)): s, tau from ~3e-4 sigma (effectively zero) to 150 sigma
 BOUNDS = ((-8.0, 5.0), (float(np.log(0.03)), float(np.log(5.0))), (-8.0, 5.0))
@@ -460,3 +460,44 @@ def white_lr_test(obs: Observations, G: np.ndarray, r: np.ndarray) -> WhiteTest:
     lam = float(np.exp(res.x)) if lr > 0 else 0.0
     p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
     return WhiteTest(lr, p, lam, int(len(r) - G.shape[1]))
+
+
+def white_lr_null(obs: Observations, G: np.ndarray, n_draws: int, seed: int = 0) -> np.ndarray:
+    r"""Draws (n_draws,) of the exact null distribution of the statistic of :func:`white_lr_test` for the layout
+    ``obs`` and the sensitivities G (N, n_p) (the model linear in p near its estimate; chi^2 units).
+
+    Whitened by D^{-1/2}, V(lambda) = I + lambda M with M = diag(sigma_k^2 / noise) (the series counts n_jk); the
+    REML likelihood is that of the error contrasts K^T y (K an orthonormal basis of the complement of D^{-1/2} G),
+    N(0, I + lambda K^T M K).  With mu_s the eigenvalues of K^T M K and w_s iid N(0, 1) under H0
+    (Crainiceanu and Ruppert 2004, one variance component, known noise scale),
+
+    .. math::
+
+        LR = \sup_{\lambda \ge 0} \sum_s \Big[ w_s^2 \frac{\lambda \mu_s}{1 + \lambda \mu_s}
+        - \log(1 + \lambda \mu_s) \Big];
+
+    with equal mu (every mean of n series) LR = nu (x - 1 - log x) for x = chi2_nu / nu > 1, else 0.  The supremum
+    over a log grid of lambda, refined by golden-section search in its bracket.
+    """
+    noise = np.concatenate(obs.noise)
+    m = np.concatenate([np.full(len(nz), s ** 2) for nz, s in zip(obs.noise, obs.sigma)]) / noise
+    X = G / np.sqrt(noise)[:, None]
+    Q, _ = linalg.qr(X, mode="full")
+    K = Q[:, X.shape[1]:]
+    mu = np.clip(linalg.eigvalsh(K.T @ (K * m[:, None])), 0.0, None)
+    w2 = np.random.default_rng(seed).standard_normal((n_draws, len(mu))) ** 2
+
+    def f(lam):                                    # lam (n_draws,) -> the log-likelihood ratio at lam
+        t = lam[:, None] * mu[None]
+        return np.sum(w2 * t / (1 + t) - np.log1p(t), axis=1)
+    grid = np.exp(np.linspace(np.log(1e-6 / mu.max()), np.log(1e6 / max(mu.min(), 1e-12 * mu.max())), 241))
+    vals = np.stack([f(np.full(n_draws, g)) for g in grid], axis=1)
+    best = np.argmax(vals, axis=1)
+    lo = np.log(grid[np.clip(best - 1, 0, len(grid) - 1)])
+    hi = np.log(grid[np.clip(best + 1, 0, len(grid) - 1)])
+    r = (np.sqrt(5) - 1) / 2
+    for _ in range(60):                            # golden section on log lambda within the bracket
+        a, b = hi - r * (hi - lo), lo + r * (hi - lo)
+        left = f(np.exp(a)) > f(np.exp(b))
+        hi, lo = np.where(left, b, hi), np.where(left, lo, a)
+    return np.maximum(np.maximum(vals.max(axis=1), f(np.exp((lo + hi) / 2))), 0.0)

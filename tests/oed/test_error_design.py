@@ -58,37 +58,40 @@ def _pinned(xa, xb, ell, pin):
     return e - np.exp(-(a ** 2 + b ** 2) / 2) * (1 + a * b), 1 - np.exp(-a2) * (1 + a2)
 
 
-def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditioning=False, pin=None):
+def _brute(res, data, targets, new, measured, repeats=1, prior=None, conditioning=False, pin=None, cond=None):
     """Posterior variances (n_targets, 2) of f_k(x*) plus its rough part after the old data and new runs at ``new``
     reading the sensors ``measured``: by one universal-kriging solve on the stacked data with p flat (``prior``
     None) or p ~ N(0, prior I), or (``conditioning``) by plain Gaussian conditioning of the joint normal vector
-    (targets, readings) with p ~ N(0, prior I)."""
+    (targets, readings) with p ~ N(0, prior I).  ``cond`` = (the condition code of every data row (9,), of the
+    targets (one code), of the new runs (len(new),)): the discrepancy of each condition its own draw (None: one)."""
+    cd, ct, cn = (np.zeros(X.size), 0, np.zeros(len(new))) if cond is None else cond
     hyp = {d.sensor: (d.amplitude, d.length_scales[0], d.rough) for d in res.discrepancies}
     names = ("y1", "y2")
     counts = data.counts()
 
     def rough(x, k):
         return hyp[names[k]][2] ** 2 * _pinned(np.array([x]), np.array([x]), hyp[names[k]][1], pin)[1][0]
-    obs = [(x, k, rough(x, k) + SIGMA[k] ** 2 / counts[j, k]) for k in range(2) for j, x in enumerate(X)]
-    obs += [(x, k, rough(x, k) + SIGMA[k] ** 2 / repeats) for x in new for k in measured]
-    xo, ko, no = (np.array(v) for v in zip(*obs))
+    obs = [(x, k, rough(x, k) + SIGMA[k] ** 2 / counts[j, k], cd[j]) for k in range(2) for j, x in enumerate(X)]
+    obs += [(x, k, rough(x, k) + SIGMA[k] ** 2 / repeats, c) for x, c in zip(new, cn) for k in measured]
+    xo, ko, no, co = (np.array(v) for v in zip(*obs))
     lat = [(x, k) for x in targets for k in range(2)]
     xt, kt = (np.array(v) for v in zip(*lat))
+    cnt = np.full(len(xt), ct)
 
-    def K(xa, ka, xb, kb):
+    def K(xa, ka, ca, xb, kb, cb):
         out = np.zeros((len(xa), len(xb)))
         for k in range(2):
             s, ell, _ = hyp[names[k]]
-            m = np.outer(ka == k, kb == k)
+            m = np.outer(ka == k, kb == k) & (ca[:, None] == cb[None, :])
             out += m * s ** 2 * _pinned(xa, xb, ell, pin)[0]
         return out
 
     Go = _g(xo)[np.arange(len(xo)), ko.astype(int)]
     Gt = _g(xt)[np.arange(len(xt)), kt.astype(int)]
-    V = K(xo, ko, xo, ko) + np.diag(no)              # rough part and noise of every reading (a condition each)
-    kt_o = K(xt, kt, xo, ko)
+    V = K(xo, ko, co, xo, ko, co) + np.diag(no)      # rough part and noise of every reading (a condition each)
+    kt_o = K(xt, kt, cnt, xo, ko, co)
     rough_t = np.array([rough(x, int(k)) for x, k in zip(xt, kt)])
-    prior_t = np.diag(K(xt, kt, xt, kt)) + rough_t
+    prior_t = np.diag(K(xt, kt, cnt, xt, kt, cnt)) + rough_t
     if not conditioning:
         Vi = np.linalg.inv(V)
         C = np.linalg.inv(Go.T @ Vi @ Go + (0.0 if prior is None else np.eye(2) / prior))
@@ -325,9 +328,127 @@ def test_embedded_error_after_runs_equals_brute_force(case):
     np.testing.assert_allclose(prob.variances(new), want, rtol=1e-9)
 
 
-def test_a_discrepancy_with_named_conditions_is_refused_naming_the_result(case):
+DAYS = np.where(X < 1.0, "day 1", "day 2")            # rows 0-3 day 1, 4-8 day 2
+CODES = {"day 1": 0, "day 2": 1, "new": -1}
+CAND_DAYS = ["day 1", "day 2", "new", "day 2", "new", "day 1"]
+
+
+@pytest.fixture(scope="module")
+def named(case):
+    """The discrepancy with the data's two days named as conditions (each day's discrepancy its own draw)."""
     res, data = case
-    groups = np.repeat(["day 1", "day 2"], (X.size + 1) // 2)[:X.size]
-    named = model_error(res.fit.model, data, [1.0, 0.5], kind="discrepancy", groups=groups)
-    with pytest.raises(ValueError, match="result: its discrepancy has named conditions"):
-        select_error_design(named, CAND, 1, region=REGION)
+    return model_error(res.fit.model, data, [1.0, 0.5], kind="discrepancy", groups=DAYS), data
+
+
+def _brute_days(res, data, region, new, days, prior=None, conditioning=False):
+    """_brute per region condition, stacked condition-major (the order of the problem's region)."""
+    cd = np.array([CODES[d] for d in DAYS])
+    cn = np.array([CODES[CAND_DAYS[c]] for c in new])
+    return np.vstack([_brute(res, data, region, CAND[list(new)], (0, 1), prior=prior, conditioning=conditioning,
+                             cond=(cd, CODES[day], cn)) for day in days])
+
+
+def test_runs_in_named_conditions_equal_brute_force_conditioning(named):
+    """A run in day 1 shrinks day 1's discrepancy, a run in "new" the one of the condition the data do not hold,
+    shared with the region's points there; every variance after runs equals the brute force (1e-9), and that
+    kriging formula equals plain Gaussian conditioning with a normal prior on p (1e-8)."""
+    res, data = named
+    assert res.groups == ("day 1", "day 2") and res.kind == "discrepancy"
+    days = ("day 1", "day 2", "new")
+    prob = error_design_problem(res, CAND, region=REGION, region_weights=RW, candidate_conditions=CAND_DAYS,
+                                region_conditions=days)
+    assert prob.candidate_conditions == tuple(CAND_DAYS) and prob.region_conditions[::REGION.size] == days
+    for new in ((), (0,), (2,), (1, 4), (0, 2, 3, 5)):
+        np.testing.assert_allclose(prob.variances(new), _brute_days(res, data, REGION, new, days), rtol=1e-9, atol=0)
+        for c in (0.1, 3.0):
+            np.testing.assert_allclose(_brute_days(res, data, REGION, new, days, prior=c),
+                                       _brute_days(res, data, REGION, new, days, prior=c, conditioning=True),
+                                       rtol=1e-8)
+    v0, v_new = prob.variances(()), prob.variances((2,))          # a run in "new" at x = 1.1
+    n_r = REGION.size
+    assert np.all(v_new[2 * n_r:] < v0[2 * n_r:]) and v_new[2 * n_r + 2].sum() < 0.5 * v0[2 * n_r + 2].sum()
+    crit = np.mean(_brute_days(res, data, REGION, (1, 4), days) / SIGMA ** 2, axis=1) @ (np.tile(RW, 3) / RW.sum() / 3)
+    assert prob.value((1, 4)) == pytest.approx(crit, rel=1e-9)
+
+
+def test_band_before_runs_in_a_condition_is_the_band_of_predict(named):
+    res, _ = named
+    for day in ("day 1", "day 2", "new"):
+        prob = error_design_problem(res, CAND, region=REGION, region_conditions=day)
+        b = res.predict(REGION[:, None], alpha=0.1, condition=day)
+        np.testing.assert_allclose(prob.half_widths((), alpha=0.1), b.upper - b.mean, rtol=1e-10)
+
+
+def test_new_condition_without_groups_is_the_band_of_predict(case):
+    res, data = case
+    prob = error_design_problem(res, CAND, region=REGION, region_conditions="new",
+                                candidate_conditions=["new"] * 3 + [None] * 3)
+    b = res.predict(REGION[:, None], alpha=0.1, condition="new")
+    np.testing.assert_allclose(prob.half_widths((), alpha=0.1), b.upper - b.mean, rtol=1e-10)
+    cd, cn = np.zeros(X.size), np.array([-1, 0])
+    np.testing.assert_allclose(prob.variances((1, 4)), _brute(res, data, REGION, CAND[[1, 4]], (0, 1),
+                                                              cond=(cd, -1, cn)), rtol=1e-9)
+
+
+@pytest.mark.parametrize("criterion", ["integrated", "worst"])
+@pytest.mark.parametrize("n", [1, 2])
+def test_runs_offered_in_every_condition_the_best_set_among_all(named, criterion, n):
+    """candidate_conditions None: every row in every condition the data hold (12 candidates); the chosen set is the
+    best of every set scored by the brute force; the region in both days (default)."""
+    res, data = named
+    d = select_error_design(res, CAND, n, region=REGION, region_weights=RW, criterion=criterion)
+    assert d.proven and d.method == "enumerate" and d.region_conditions[::REGION.size] == ("day 1", "day 2")
+    cd = np.array([CODES[x] for x in DAYS])
+    offered = [(j, day) for j in range(CAND.size) for day in ("day 1", "day 2")]
+    scores = {}
+    for s in itertools.combinations(range(len(offered)), n):
+        cn = np.array([CODES[offered[i][1]] for i in s])
+        x = CAND[[offered[i][0] for i in s]]
+        v = np.vstack([_brute(res, data, REGION, x, (0, 1), cond=(cd, CODES[day], cn))
+                       for day in ("day 1", "day 2")]) / SIGMA ** 2
+        scores[s] = v.max() if criterion == "worst" else np.mean(v, axis=1) @ (np.tile(RW, 2) / RW.sum() / 2)
+    best = min(scores, key=scores.get)
+    assert d.chosen == best and d.value_after == pytest.approx(scores[best], rel=1e-9)
+    assert d.chosen_conditions == tuple(offered[i][1] for i in best)
+    np.testing.assert_allclose(d.chosen_inputs.ravel(), CAND[[offered[i][0] for i in best]])
+    assert all(f"in {c}" in d.summary() for c in d.chosen_conditions)
+    df = d.to_frame()
+    assert list(df.columns[:3]) == ["x", "condition", "target"] and len(df) == 2 * REGION.size * 2
+    json.dumps(d.to_dict(), allow_nan=False)
+
+
+@pytest.mark.parametrize("criterion", ["integrated", "worst"])
+def test_branch_and_bound_and_enumeration_agree_with_conditions(named, criterion):
+    res, _ = named
+    many = np.linspace(0.0, 3.0, 7)
+    prob = error_design_problem(res, many, region=REGION, criterion=criterion,
+                                region_conditions=("day 1", "day 2", "new"),
+                                candidate_conditions=None)
+    assert prob.n_candidates == 14
+    for n in (2, 3):
+        e, b = search(prob.core, n, "enumerate"), search(prob.core, n, "bnb")
+        assert e.proven and b.proven and b.value == pytest.approx(e.value, rel=1e-9)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(candidate_conditions="day 3"), "candidate_conditions: unknown condition 'day 3'"),
+    (dict(candidate_conditions=["day 1"] * 5), "candidate_conditions: expected one condition label or one per"),
+    (dict(region_conditions=["day 1", "monday"]), "region_conditions: unknown condition 'monday'"),
+    (dict(region_conditions=["day 1", "day 1"]), "region_conditions: a condition is named twice"),
+    (dict(region_conditions=[]), "region_conditions: expected a condition label"),
+    (dict(region_conditions=None, candidate_conditions=[None] * 6), "candidate_conditions: unknown condition None"),
+])
+def test_bad_conditions_name_the_argument(named, kwargs, match):
+    res, _ = named
+    with pytest.raises(ValueError, match=match):
+        select_error_design(res, CAND, 1, region=REGION, **kwargs)
+
+
+def test_conditions_without_groups_or_discrepancy_name_the_argument(case):
+    res, data = case
+    with pytest.raises(ValueError, match="region_conditions: unknown condition 'day 1'; expected None"):
+        select_error_design(res, CAND, 1, region=REGION, region_conditions="day 1")
+    emb = model_error(res.fit.model, data, [1.0, 0.5], kind="embedded", groups=DAYS)
+    with pytest.raises(ValueError, match="candidate_conditions: runs and regions in named conditions need the "
+                                         "discrepancy"):
+        select_error_design(emb, CAND, 1, region=REGION, candidate_conditions="day 1")
