@@ -5,7 +5,9 @@ Each command runs in a fresh process (``python -m mudoe COMMAND CONFIG --out TMP
 is timed by wall clock and by CPU (user + system of the child, ``resource.getrusage(RUSAGE_CHILDREN)``,
 which counts the spawned validate workers once they have finished).  The machine may be shared: the load
 average (``os.getloadavg``) is printed beside every row and the motor is compared with the reactor of the
-same run as a ratio (CPU ratios are the ones to read under load).  ``--trees A,B`` times the same
+same run as a ratio (CPU ratios are the ones to read under load).  The children inherit this process's
+environment: with OPENBLAS_NUM_THREADS or OMP_NUM_THREADS set, a tree before mudoe.blas_threads runs with that
+many threads too (the header line names them).  ``--trees A,B`` times the same
 commands on other source trees (e.g. an export of the integration commit) interleaved with this one, so a
 before/after table comes from one run::
 
@@ -72,8 +74,10 @@ def main(argv: list[str] | None = None) -> None:
     trees = [(HERE if t == "." else Path(t).resolve()) for t in args.trees.split(",") if t]
     configs = [c for c in args.configs.split(",") if c]
     when = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())
+    threads = ", ".join(f"{v}={os.environ[v]}" for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+                        if v in os.environ) or "no BLAS thread variable set (mudoe then uses one thread)"
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {when}; validate --runs {args.runs} "
-          f"--workers {args.workers}")
+          f"--workers {args.workers}; {threads}")
     print("| tree | command | config | wall s | CPU s | load | CPU / reactor's |")
     print("|---|---|---|---|---|---|---|")
     for command in commands:

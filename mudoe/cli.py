@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 import time
 from pathlib import Path
@@ -32,6 +31,9 @@ _COMMANDS = {
                 "coverage of the variant's bands with and without its model error",
     "simulate": "simulate a campaign of the study ([simulate] section; the press: its virtual prototype) as CSV",
 }
+_THREADS_HELP = ("Threads: every command runs its linear algebra on one BLAS thread per process (itself and its "
+                 "--workers), faster for a study's many small matrices; set OPENBLAS_NUM_THREADS (or "
+                 "OMP_NUM_THREADS, MKL_NUM_THREADS) to choose another number, mudoe then keeps it.")
 _INIT_HELP = "write a commented study config template for your own model factory (never overwrites)"
 
 
@@ -49,11 +51,12 @@ class _UsageError(Exception):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (``--help`` on every subcommand)."""
     p = _Parser(prog="mudoe", description="Model uncertainty via optimal design of experiments. "
-                "Each command takes a study config (TOML); see README 'Commands' and 'Config reference'.")
+                "Each command takes a study config (TOML); see README 'Commands' and 'Config reference'.",
+                epilog=_THREADS_HELP)
     p.add_argument("--version", action="version", version=f"mudoe {_version()}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, help_ in _COMMANDS.items():
-        sp = sub.add_parser(name, help=help_, description=help_ + ".")
+        sp = sub.add_parser(name, help=help_, description=help_ + ".", epilog=_THREADS_HELP)
         sp.add_argument("config", metavar="CONFIG", help="study config file (TOML), e.g. configs/press.toml")
         sp.add_argument("--out", metavar="DIR", default="results",
                         help="output folder (default: results/); files are written atomically")
@@ -116,15 +119,22 @@ def _print_line(msg: str) -> None:
 
 
 def main(argv=None) -> int:
-    """Run the CLI; returns the exit code (never raises for bad input)."""
-    from .signals import INTERRUPT
-    INTERRUPT.install()
-    try:
-        return _main(argv)
-    except KeyboardInterrupt:
-        return INTERRUPT.announce(_print_line)
-    finally:
-        INTERRUPT.finish()               # after SIGINT / SIGTERM: ends the process with 130 / 143
+    """Run the CLI; returns the exit code (never raises for bad input).
+
+    The run has one BLAS thread, in this process and in the workers it starts, unless the user set
+    OPENBLAS_NUM_THREADS, OMP_NUM_THREADS or the like (:mod:`mudoe.blas_threads`); entered first, before
+    anything imports numpy.
+    """
+    from .blas_threads import one_blas_thread
+    with one_blas_thread():
+        from .signals import INTERRUPT
+        INTERRUPT.install()
+        try:
+            return _main(argv)
+        except KeyboardInterrupt:
+            return INTERRUPT.announce(_print_line)
+        finally:
+            INTERRUPT.finish()               # after SIGINT / SIGTERM: ends the process with 130 / 143
 
 
 def _main(argv) -> int:
@@ -139,7 +149,6 @@ def _main(argv) -> int:
     if not args.command:
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from .signals import INTERRUPT
     try:
         code = _run(args)

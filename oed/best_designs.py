@@ -64,38 +64,41 @@ def best_designs(F, S, sensor_names, size: int, criterion: str, *, kind: str = "
         raise ValueError(f"size: expected 1..{n}, got {size}")
     if criterion not in ("A", "D", "E"):
         raise ValueError(f"criterion: expected 'A', 'D' or 'E', got {criterion!r}")
+    if top < 0:
+        raise ValueError(f"top: expected a non-negative number of designs, got {top}")
     total = comb(n, size)
     exhaustive = total <= max_enumerate or not chosen
     if not exhaustive and len(chosen) != size:
         raise ValueError(f"chosen: {len(chosen)} candidates, but the designs have {size}")
     kind_e = Kind.parse(kind)
-    found = {}
+    c = tuple(sorted(chosen))
+    found, n_ranked = {}, 0
     it = _masks(n, size, chosen, exhaustive)
     while True:
         idx = list(itertools.islice(it, _BATCH))
         if not idx:
             break
         W = np.zeros((len(idx), n))
-        for r, c in enumerate(idx):
-            W[r, list(c)] = 1.0
+        W[np.arange(len(idx))[:, None], np.array(idx, dtype=np.intp).reshape(len(idx), size)] = 1.0
         res = batch_criteria(F, S, W, kind_e, validated=True)
         val = {"A": res.A, "D": res.logdet, "E": res.E}[criterion]
-        for r, c in enumerate(idx):
-            v = float(val[r]) if not res.singular[r] and np.isfinite(val[r]) else np.inf
+        v = np.where(~res.singular & np.isfinite(val), val, np.inf)
+        # only a batch's `top` best (stable: ties in enumeration order) can be among the `top` best of all
+        keep = set(np.argsort(v, kind="stable")[:top].tolist()) | {r for r, m in enumerate(idx) if m == c}
+        for r in sorted(keep):
+            m = idx[r]
             flag = "singular" if res.singular[r] else ("near-singular" if res.near_singular[r] else "")
-            found[c] = (v, DesignRow(mask="".join("1" if k in c else "0" for k in range(n)),
-                                     sensors=tuple(sensor_names[k] for k in c), A=float(res.A[r]),
-                                     det=float(res.det[r]), logdet=float(res.logdet[r]), E=float(res.E[r]),
-                                     flag=flag, reason=res.reason[r]))
-        if len(found) > 4 * max(top, 1) * _BATCH:          # keep memory bounded on long enumerations
-            found = dict(sorted(found.items(), key=lambda kv: kv[1][0])[:top])
+            found[m] = (float(v[r]), DesignRow(mask="".join("1" if k in m else "0" for k in range(n)),
+                                               sensors=tuple(sensor_names[k] for k in m), A=float(res.A[r]),
+                                               det=float(res.det[r]), logdet=float(res.logdet[r]),
+                                               E=float(res.E[r]), flag=flag, reason=res.reason[r]))
+        n_ranked += len(idx)
     ranked = sorted(found.items(), key=lambda kv: kv[1][0])
     rows = [r for _, (_, r) in ranked[:top]]
-    c = tuple(sorted(chosen))
     if c and c in found and found[c][1] not in rows:
         rows.append(found[c][1])
     what = (f"the {min(top, total)} best of all {total} designs of {size}" if exhaustive else
-            f"the best of the chosen design and its {len(found) - 1} neighbours (one candidate exchanged); the "
+            f"the best of the chosen design and its {n_ranked - 1} neighbours (one candidate exchanged); the "
             f"{total:.3g} designs of {size} are too many to rank")
     return RankedDesignTable(kind=kind_e.value, rows=tuple(rows), note=what)
 

@@ -248,18 +248,15 @@ def batch_criteria(F, S, W, kind="gauss_newton", *, settings: CriteriaSettings =
     nb = W.shape[0]
     F_scale = np.max(np.einsum("kii->ki", F), axis=0) if n_S else np.ones(n_p)   # per parameter (units)
     Fflat = F.reshape(n_S, -1)
-    G = ((W * W) @ Fflat).reshape(nb, n_p, n_p)
+    gauss_newton = kind is Kind.GAUSS_NEWTON
+    G = ((W if gauss_newton else W * W) @ Fflat).reshape(nb, n_p, n_p)     # C_GN(w)^-1 = sum_k w_k F_k
     singular, cond = _scaled_eigs(G, F_scale, settings)
     reason = [""] * nb
     A = np.full(nb, np.inf)
     logdet = np.full(nb, np.inf)
     E = np.full(nb, np.inf)
     ok = ~singular
-    if kind is Kind.GAUSS_NEWTON or S is None and np.array_equal(W * W, W):
-        if kind is Kind.GAUSS_NEWTON:
-            G = (W @ Fflat).reshape(nb, n_p, n_p)
-            singular, cond = _scaled_eigs(G, F_scale, settings)
-            ok = ~singular
+    if gauss_newton or S is None and np.array_equal(W * W, W):
         if ok.any():
             Gs, sc, log_d = _diag_scaled(G[ok])
             lam = np.linalg.eigvalsh(Gs)
