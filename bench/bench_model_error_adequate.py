@@ -102,14 +102,19 @@ def _one(study, variant: str, data, w) -> dict:
                 chosen=float(np.sum(n * [h.coverage(r.kind) for h in r.heldout]) / n.sum()))
 
 
-def run_study(name: str, n: int, seed: int) -> dict:
-    """``n`` campaigns of the study ``name``; prints and returns the summary numbers."""
+def _setup(name: str):
+    """The study ``name``, its simulated variant, its sensor design, the sensor weights and the truth."""
     study = prepare(load_config(CONFIGS / f"{name}.toml"))
     variant = study.cfg.simulate.variant or next(iter(study.models))
     results = design_sensors(study, StudyResults(study), Progress(False))
     used = set(results.design_sensors)
     w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
-    p = _truth(study, variant)
+    return study, variant, results, w, _truth(study, variant)
+
+
+def run_study(name: str, n: int, seed: int) -> dict:
+    """``n`` campaigns of the study ``name``; prints and returns the summary numbers."""
+    study, variant, results, w, p = _setup(name)
     campaign, rng, t0 = _simulator(study, variant, p), np.random.default_rng(seed), time.perf_counter()
     rows = []
     for i in range(n):
@@ -159,12 +164,7 @@ def exact_reference(study, variant: str, data, w: np.ndarray, p: np.ndarray, n_d
 
 def run_size(name: str, n: int, seed: int, n_ref: int, alpha: float = 0.05) -> dict:
     """The size of the 'no model error' test alone on ``n`` campaigns, against the mixture and the exact reference."""
-    study = prepare(load_config(CONFIGS / f"{name}.toml"))
-    variant = study.cfg.simulate.variant or next(iter(study.models))
-    results = design_sensors(study, StudyResults(study), Progress(False))
-    used = set(results.design_sensors)
-    w = np.array([1.0 if s in used else 0.0 for s in study.sensors])
-    p = _truth(study, variant)
+    study, variant, results, w, p = _setup(name)
     campaign, rng = _simulator(study, variant, p), np.random.default_rng(seed)
     m, p0 = study.models[variant], start_values(study, variant)
     ref = exact_reference(study, variant, study.data[variant], w, p, n_ref, seed + 1)
