@@ -86,7 +86,7 @@ from identification.results_protocol import jsonable
 
 __all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
            "check_starts", "sobol_points", "starts_from_unit", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES",
-           "VALLEY_CHI2", "VALLEY_POINTS", "static_objective"]
+           "VALLEY_CHI2", "VALLEY_POINTS", "static_objective", "distinct_minima", "StartFit"]
 
 #: a start reached the best minimum when its objective is within this of the best, relative to max(1, |best|)
 OBJECTIVE_RTOL = 1e-6
@@ -582,7 +582,7 @@ def _merged(groups, fits, objective, se, vtol: float, phi) -> list:
     return out
 
 
-def _minima(fits, objective, tol, se, chosen: int, *, vtol: float = -1.0, phi=None, names=(), model=None) -> tuple:
+def distinct_minima(fits, objective, tol, se, chosen: int, *, vtol: float = -1.0, phi=None, names=(), model=None) -> tuple:
     """The distinct minima among the starts that reached one (:func:`_clusters`), those along one flat valley merged
     (:func:`_merged`, objectives within ``vtol``; ``phi`` the static objective, None: objectives only): the minimum
     of the ``chosen`` start first, then the others by objective."""
@@ -729,7 +729,7 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         se = np.where(np.isfinite(rec.stderr) & (rec.stderr > 0), rec.stderr, param_scale(model, X[0]))
         vtol = min(tol, VALLEY_CHI2 / 2)
         phi = None if problem.strategy.takes_time_series else static_objective(problem, rec.weights, rec.sigma)
-        minima = _minima(fits, objective, tol, se, chosen, vtol=vtol, phi=phi,
+        minima = distinct_minima(fits, objective, tol, se, chosen, vtol=vtol, phi=phi,
                          names=tuple(par.name for par in model.params), model=model)
     ms = MultiStartRecord(param_names=tuple(par.name for par in model.params), starts=X,
                           p=np.array([f.p for f in fits]), objective=objective,
