@@ -584,8 +584,11 @@ def _merged(groups, fits, objective, se, vtol: float, phi) -> list:
 
 def distinct_minima(fits, objective, tol, se, chosen: int, *, vtol: float = -1.0, phi=None, names=(), model=None) -> tuple:
     """The distinct minima among the starts that reached one (:func:`_clusters`), those along one flat valley merged
-    (:func:`_merged`, objectives within ``vtol``; ``phi`` the static objective, None: objectives only): the minimum
-    of the ``chosen`` start first, then the others by objective."""
+    (:func:`_merged`, objectives within ``vtol``, objective units, < 0: no merging, the point rule alone; ``phi``
+    the static objective p -> Phi (:func:`static_objective`), None: objectives only): the minimum of the ``chosen``
+    start first, then the others by objective.  ``fits``: StartFit per start; ``objective`` (N,) their Phi; ``tol``
+    and ``se`` (n_p,) the point rule's objective tolerance and scale; ``names`` the parameters; ``model`` (its
+    bounds) for the note's bound test."""
     out = []
     for (obj, p, _), members in _merged(_clusters(fits, objective, tol, se, chosen), fits, objective, se, vtol, phi):
         P = np.array([fits[i].p for i in members])
