@@ -10,9 +10,14 @@ from p0 and N - 1 further starts (:mod:`identification.fit.multistart`); the stu
 :class:`identification.fit.multistart.MultiStartRecord` of the estimate (``est.diagnostics.starts``).  The page
 draws it: the waterfall of the starts' final objectives (sorted, the distinct minima as plateaus, the best
 marked) and the table of the distinct minima (objective, how many starts reached each, the parameters there).
+Starts that ended along one flat valley (objectives equal within the valley tolerance, no barrier between them)
+are one entry: its row gives the range of each parameter that moves along the valley ("lo to hi") and the page
+the note saying which parameters the data do not determine, over what range, at what objective.
 Draws only: it fits nothing.
 """
 from __future__ import annotations
+
+import textwrap
 
 import numpy as np
 
@@ -64,9 +69,10 @@ def waterfall_plot(ms, ax=None, label: str = ""):
         r = rank[list(m.starts)]
         colour = _BEST if k == 0 else _OTHERS[(k - 1) % len(_OTHERS)]
         ax.hlines(m.objective, r.min() - 0.4, r.max() + 0.4, color=colour, lw=2.5, alpha=0.8, zorder=2)
+        flat = f" (flat valley in {', '.join(m.flat)})" if m.flat else ""
         ax.plot(r, obj[list(m.starts)], "o", color=colour, ms=5, zorder=3,
-                label=(f"best minimum: {m.count} start{'s' if m.count > 1 else ''}" if k == 0 else
-                       f"minimum {k + 1}: {m.count} start{'s' if m.count > 1 else ''}") if k < 6 else None)
+                label=(f"best minimum{flat}: {m.count} start{'s' if m.count > 1 else ''}" if k == 0 else
+                       f"minimum {k + 1}{flat}: {m.count} start{'s' if m.count > 1 else ''}") if k < 6 else None)
     unb = [i for i, o in enumerate(ms.outcome) if o == "not bounded"]
     if unb:
         ax.plot(rank[unb], obj[unb], "^", mfc="none", color=_UNBOUNDED, ms=6, zorder=3,
@@ -96,7 +102,9 @@ def waterfall_plot(ms, ax=None, label: str = ""):
 
 def minima_rows(ms, units=(), params: slice = slice(None)) -> tuple:
     """(head, rows) of the distinct minima, best first: minimum, objective Phi, how many starts reached it,
-    which (1-based; start 1 is p0) and the parameters ``params`` there (``units``: one per parameter)."""
+    which (1-based; start 1 is p0) and the parameters ``params`` there (``units``: one per parameter); an entry
+    along a flat valley is labelled "(valley)", its objective and the parameters that move along it given as
+    ranges over its starts ("lo to hi")."""
     names = ms.param_names[params]
     units = tuple(units)[params] if units else ("",) * len(names)
     head = ["minimum", "objective Phi", "starts", "reached from"] + [
@@ -104,8 +112,15 @@ def minima_rows(ms, units=(), params: slice = slice(None)) -> tuple:
     rows = []
     for k, m in enumerate(ms.minima[:MINIMA_ROWS], 1):
         which = ", ".join(str(i + 1) for i in m.starts[:12]) + (", ..." if m.count > 12 else "")
-        rows.append([f"{k} (best)" if k == 1 else str(k), f"{m.objective:.8g}", str(m.count), which]
-                    + [f"{v:.6g}" for v in np.asarray(m.p)[params]])
+        flat = tuple(m.flat)
+        label = ("1 (best)" if k == 1 else str(k)) + (" (valley)" if flat else "")
+        phi = f"{m.objective:.8g}"
+        if flat:
+            high = f"{m.objective_high:.8g}"
+            phi += f" to {high}" if high != phi else f" (all within {m.objective_high - m.objective:.1g})"
+        cells = [f"{lo:.6g} to {hi:.6g}" if nm in flat else f"{v:.6g}" for nm, v, lo, hi in
+                 zip(names, np.asarray(m.p)[params], np.asarray(m.p_low)[params], np.asarray(m.p_high)[params])]
+        rows.append([label, phi, str(m.count), which] + cells)
     return head, rows
 
 
@@ -127,8 +142,17 @@ def _summary(ms) -> str:
         out.append(f"{ms.reached_best} of {n} starts reached the best minimum (objective within "
                    f"{ms.objective_tol:.2g}); {m} distinct local minim{'um' if m == 1 else 'a'} (two starts share "
                    f"a minimum when their objectives agree within that tolerance and their parameters within "
-                   f"{ms.parameter_tol_se:g} standard errors). The estimate is that of start {ms.best + 1}"
+                   f"{ms.parameter_tol_se:g} standard errors"
+                   + (f"; starts along one flat valley, their objectives within {ms.valley_tol:.2g} and no barrier "
+                      "between them, are one entry with the range of each parameter" if np.isfinite(ms.valley_tol)
+                      else "")
+                   + f"). The estimate is that of start {ms.best + 1}"
                    + (" (p0)." if ms.best == 0 else f"; p0 ended {_p0_end(ms)}."))
+        valleys = [str(k) for k, m in enumerate(ms.minima, 1) if m.valley]
+        if valleys:
+            out.append(f"Minim{'um' if len(valleys) == 1 else 'a'} {', '.join(valleys)} "
+                       f"{'is a flat valley' if len(valleys) == 1 else 'are flat valleys'}, not isolated: see the "
+                       "box on the right.")
     else:
         out.append(f"None of the {n} starts reached a finite minimum.")
     if bad:
@@ -142,6 +166,24 @@ def _summary(ms) -> str:
         out.append("Several minima: the objective is not convex over the bounds; the estimate is the lowest one "
                    "found, and a minimum reached by few starts may hide others (more starts, tighter bounds).")
     return " ".join(out)
+
+
+def _valley_box(fig, ms, y: float, bottom: float) -> None:
+    """The notes on the flat valleys under the reading of the waterfall, from height ``y`` down to ``bottom``
+    (those that do not fit are named: their notes are in the estimate's summary and results.json)."""
+    notes = [(k, m.valley) for k, m in enumerate(ms.minima, 1) if m.valley]
+    if not notes:
+        return
+    fig.text(0.66, y, "Not isolated: flat valleys", fontsize=10, weight="bold", va="top", color="#b03000")
+    y -= 0.03
+    for n, (k, text) in enumerate(notes):
+        lines = len(textwrap.wrap(f"Minimum {k}: {text}.", 60))
+        if y - 0.0185 * lines < bottom:
+            _text(fig, 0.66, y, "Also flat valleys: minima " + ", ".join(str(j) for j, _ in notes[n:])
+                  + " (their notes: the estimate's summary, results.json).", width=60, size=8.5)
+            return
+        y -= 0.0185 * _text(fig, 0.66, y, f"Minimum {k}{' (best)' if k == 1 else ''}: {text}.", width=60,
+                            size=8.5) + 0.01
 
 
 def _p0_end(ms) -> str:
@@ -176,10 +218,14 @@ def multistart_pages(results, variant: str):
         widths, size = content_widths(head, rows, 8.5, 0.92 * PAGE_SIZE[0])
         draw_table(ax, head, rows, fontsize=size, col_widths=widths)
         fig.text(0.66, top - 0.01, "Reading the waterfall", fontsize=10, weight="bold", va="top")
-        _text(fig, 0.66, top - 0.04, "Each point is one start's final objective, the starts sorted from the lowest. "
-              "A flat step (a plateau) is a local minimum that several starts reached; the lowest, green, is the "
-              "estimate (black star). One long lowest plateau: the starts agree on the minimum. Steps above it: "
-              "other local minima, worse fits of the same data; a plateau of one point: a minimum only one start "
-              "found. Open grey triangles: fits the data do not bound, at the objective's limit.", width=60, size=8.5)
+        lines = _text(fig, 0.66, top - 0.04, "Each point is one start's final objective, the starts sorted from the "
+                      "lowest. A flat step (a plateau) is a local minimum that several starts reached; the lowest, "
+                      "green, is the estimate (black star). One long lowest plateau: the starts agree on the minimum. "
+                      "Steps above it: other local minima, worse fits of the same data; a plateau of one point: a "
+                      "minimum only one start found; a plateau marked 'flat valley': starts that stopped at "
+                      "different points of a direction the data do not determine, one minimum that is not "
+                      "isolated (the table gives its range). Open grey triangles: fits the data do not bound, at "
+                      "the objective's limit.", width=60, size=8.5)
+        _valley_box(fig, ms, top - 0.04 - 0.0185 * lines - 0.03, top - 0.51)
         figs.append(fig)
     return figs

@@ -36,6 +36,23 @@ tolerance of it (:data:`OBJECTIVE_RTOL`), the first (p0 first): when p0 reaches 
 is the single-start one, bit for bit.  Two starts found the same minimum when their objectives agree within the
 tolerance and their parameters within :data:`PARAMETER_TOL_SE` standard errors of the best estimate.
 
+*Flat valleys.*  Starts that run along a direction the data do not determine stop at different points of it with
+the same objective; the parameter rule above then splits them into many "minima" that are one.  Two minima are
+merged (single linkage: a chain of merges is one entry) when their objectives agree within the valley tolerance
+:math:`\tau_v = \min(\tau, \chi^2_v / 2)` (:math:`\tau` the objective tolerance above, OBJECTIVE_RTOL
+max(1, |Phi_best|); :data:`VALLEY_CHI2` = 0.01, so that :math:`2 \Delta\Phi`, the change of the chi-square statistic
+of the likelihood ratio, stays far below 1, let alone the 3.84 of one parameter's 95 % chi-square quantile) *and*
+they are connected: for a static model Phi is evaluated at :data:`VALLEY_POINTS` evenly spaced interior points of
+the straight segment between the closest members of the two (the outputs h(y(p), p, q_j) by
+:func:`models.state.simulate`, the weights and sigmas of the estimate) and the segment rises nowhere more than
+:math:`\tau_v` above the higher end (no barrier); for a dynamic model, whose objective at a point needs a
+controlled integration, the segment is not evaluated and the objectives alone decide (the entry says so).  A
+merged entry reports the range of each parameter over its starts; the parameters whose range exceeds
+:data:`PARAMETER_TOL_SE` standard errors are those that move along the valley, and the note names them, their
+range and the objective; for one such parameter of a static model, Phi at its bound (the member nearest the bound
+moved onto it) says whether the valley runs on to the bound.  Minima with different objectives, or with a barrier
+between them, stay apart.
+
 With sigma unknown every fit estimates its own s, and its objective is 0.5 (n - n_p) by construction; starts are
 then compared by 0.5 sum w_k r^2 / s_best^2 (the objective of each start with the best estimate's s), so that
 the best start's value is the estimate's objective.
@@ -59,7 +76,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import qmc
 
-from models.state import jit_enabled
+from models.state import jit_enabled, simulate
 from identification import cluster
 from identification.errors import DataError, IdentificationError
 from identification.fit.record import FitRecord
@@ -68,7 +85,8 @@ from identification.replicate import ReplicationTask, replicate
 from identification.results_protocol import jsonable
 
 __all__ = ["MultiStartRecord", "LocalMinimum", "MultiStartError", "draw_starts", "start_rules", "fit_starts",
-           "check_starts", "sobol_points", "starts_from_unit", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES"]
+           "check_starts", "sobol_points", "starts_from_unit", "OBJECTIVE_RTOL", "PARAMETER_TOL_SE", "LOG_DECADES",
+           "VALLEY_CHI2", "VALLEY_POINTS", "static_objective", "distinct_minima", "StartFit"]
 
 #: a start reached the best minimum when its objective is within this of the best, relative to max(1, |best|)
 OBJECTIVE_RTOL = 1e-6
@@ -76,6 +94,11 @@ OBJECTIVE_RTOL = 1e-6
 PARAMETER_TOL_SE = 1e-2
 #: a positive parameter whose bounds span this ratio (two decades) or more is sampled in log scale
 LOG_DECADES = 100.0
+
+#: two minima on one flat valley: 2 x their objective difference (chi-square units) below this, whatever Phi
+VALLEY_CHI2 = 1e-2
+#: interior points of the segment between two minima at which a static model's objective is evaluated
+VALLEY_POINTS = 5
 
 #: the outcomes of a start
 MINIMUM, NOT_BOUNDED, FAILED = "minimum", "not bounded", "failed"
@@ -304,15 +327,40 @@ class LocalMinimum:
     p : ndarray (n_p,)       the parameters there (the best minimum: the estimate's; another: those of its
                              start of lowest objective)
     starts : tuple of int    the starts (0-based rows) that reached it
+    p_low, p_high : ndarray (n_p,)   the smallest and largest value of each parameter over those starts (default p)
+    objective_high : float   the largest objective over those starts (default ``objective``)
+    flat : tuple of str      the parameters that move along a flat valley through its starts (their range exceeds
+                             PARAMETER_TOL_SE standard errors); () for an isolated minimum
+    connection : str         how the valley's starts were found connected: "segment" (Phi evaluated between
+                             them), "objective" (objectives only: a dynamic model); "" when isolated
+    valley : str             the sentence of the note on the valley ("" when isolated)
     """
 
     objective: float
     p: np.ndarray
     starts: tuple
+    p_low: np.ndarray | None = None
+    p_high: np.ndarray | None = None
+    objective_high: float = float("nan")
+    flat: tuple = ()
+    connection: str = ""
+    valley: str = ""
+
+    def __post_init__(self):
+        for name in ("p_low", "p_high"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.array(self.p, float))
+        if math.isnan(self.objective_high):
+            object.__setattr__(self, "objective_high", float(self.objective))
 
     @property
     def count(self) -> int:
         return len(self.starts)
+
+    @property
+    def is_valley(self) -> bool:
+        """Its starts lie along a flat valley (not an isolated minimum)."""
+        return bool(self.flat)
 
 
 @dataclass(frozen=True, eq=False)
@@ -341,6 +389,8 @@ class MultiStartRecord:
     seed : int                    the entropy of the seed (``seed=`` draws the same starts)
     backend : str                 where the starts ran ("serial", "2 local processes", ...)
     wall_time : float             s, all starts
+    valley_tol : float            objective units: minima on one flat valley agree within this (min(objective_tol,
+                                  VALLEY_CHI2 / 2); NaN when not recorded)
     """
 
     param_names: tuple
@@ -361,6 +411,7 @@ class MultiStartRecord:
     seed: int
     backend: str
     wall_time: float
+    valley_tol: float = float("nan")
 
     @property
     def n_starts(self) -> int:
@@ -384,6 +435,7 @@ class MultiStartRecord:
             parts[0] += (f", the next best at objective {nxt.objective:.6g}{same} ("
                          + ", ".join(f"{nm} = {v:.4g}" for nm, v in zip(self.param_names, nxt.p))
                          + f"; {nxt.count} start{'s' if nxt.count > 1 else ''})")
+        parts += [m.valley for m in self.minima if m.valley]
         if self.best != 0:
             p0_end = (f"ended at objective {self.objective[0]:.6g}" if self.outcome[0] == MINIMUM
                       else f"{self.outcome[0]} ({self.status[0]})")
@@ -415,19 +467,27 @@ class MultiStartRecord:
                              p=self.p, objective=self.objective, outcome=list(self.outcome),
                              status=list(self.status), errors=list(self.errors), fit_time=self.fit_time,
                              best=self.best + 1, reached_best=self.reached_best,
-                             minima=[dict(objective=m.objective, p=m.p, starts=[i + 1 for i in m.starts])
+                             minima=[dict(objective=m.objective, p=m.p, starts=[i + 1 for i in m.starts],
+                                          p_low=m.p_low, p_high=m.p_high, objective_high=m.objective_high,
+                                          flat=list(m.flat), connection=m.connection, valley=m.valley)
                                      for m in self.minima],
                              objective_tol=self.objective_tol, parameter_tol_se=self.parameter_tol_se,
+                             valley_tol=self.valley_tol,
                              rules=list(self.rules), seed=self.seed, backend=self.backend,
                              wall_time=self.wall_time))
 
     def minima_frame(self):
         """The distinct local minima, best first (``minimum`` 1, 2, ...): objective, how many starts reached each,
-        which (numbered from 1) and the parameters there."""
+        which (numbered from 1), the parameters there, the parameters that move along a flat valley through its
+        starts ("" when isolated) and each parameter's range over its starts (``<name> low``, ``<name> high``)."""
         import pandas as pd
         cols = {"objective": [m.objective for m in self.minima], "starts": [m.count for m in self.minima],
                 "reached from": [", ".join(str(i + 1) for i in m.starts) for m in self.minima]}
         cols.update({nm: [m.p[i] for m in self.minima] for i, nm in enumerate(self.param_names)})
+        cols["flat"] = [", ".join(m.flat) for m in self.minima]
+        for i, nm in enumerate(self.param_names):
+            cols[f"{nm} low"] = [m.p_low[i] for m in self.minima]
+            cols[f"{nm} high"] = [m.p_high[i] for m in self.minima]
         return pd.DataFrame(cols, index=pd.Index(np.arange(1, len(self.minima) + 1), name="minimum"))
 
     def to_frame(self):
@@ -446,9 +506,10 @@ class MultiStartRecord:
 
 
 # ---------------------------------------------------------------------------- the driver
-def _minima(fits, objective, tol, se, chosen: int) -> tuple:
-    """The distinct minima among the starts that reached one: the minimum of the ``chosen`` start first (its
-    objective and parameters), then the others by objective (each with its lowest start's values)."""
+def _clusters(fits, objective, tol, se, chosen: int) -> list:
+    """The starts that reached a minimum, grouped by the point rule (objectives within ``tol``, parameters within
+    PARAMETER_TOL_SE ``se``): [objective, p, members], the group of the ``chosen`` start first (its objective and
+    parameters), then the others by objective (each with its lowest start's values)."""
     order = [chosen] + sorted((f.index for f in fits if f.outcome == MINIMUM and f.index != chosen),
                               key=lambda i: (objective[i], i))
     groups = []
@@ -460,8 +521,147 @@ def _minima(fits, objective, tol, se, chosen: int) -> tuple:
                 break
         else:
             groups.append((objective[i], p, [i]))
-    groups = groups[:1] + sorted(groups[1:], key=lambda g: g[0])
-    return tuple(LocalMinimum(float(o), np.array(p), tuple(sorted(s))) for o, p, s in groups)
+    return groups[:1] + sorted(groups[1:], key=lambda g: g[0])
+
+
+def static_objective(problem, weights, sigma):
+    r"""p -> Phi(p) = 0.5 sum_k w_k sum_ij ((z_ijk - h_k(y_j(p), p, q_j)) / sigma_k)^2 (dimensionless, paper eq. 3)
+    of a static problem, the states solved at p (:func:`models.state.simulate`), ``weights`` and ``sigma`` (n_S,)
+    those of the estimate; NaN values of z are skipped; inf where the states cannot be solved or h is not
+    finite."""
+    z = np.asarray(problem.data.z, float)
+    c = np.asarray(weights, float) / np.asarray(sigma, float) ** 2
+    inputs = problem.data.inputs
+
+    def phi(p) -> float:
+        try:
+            h = simulate(problem.model, p, inputs)
+        except (RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            return float("inf")
+        if not np.all(np.isfinite(h)):
+            return float("inf")
+        return 0.5 * float(np.nansum(c * (z - h[None]) ** 2))
+    return phi
+
+
+def _connected(phi, pa: np.ndarray, pb: np.ndarray, tol: float) -> bool:
+    """No barrier between pa and pb: Phi at VALLEY_POINTS interior points of the straight segment rises at most
+    ``tol`` (objective units) above the higher of Phi(pa), Phi(pb) (both evaluated by ``phi`` as well)."""
+    ends = max(phi(pa), phi(pb))
+    if not math.isfinite(ends):
+        return False
+    for t in np.arange(1, VALLEY_POINTS + 1) / (VALLEY_POINTS + 1):
+        if not phi(pa + t * (pb - pa)) - ends <= tol:
+            return False
+    return True
+
+
+def _merged(groups, fits, objective, se, vtol: float, phi) -> list:
+    """Single linkage of the point groups along flat valleys: two groups join when the closest pair of their starts
+    (in standard errors) has objectives within ``vtol`` and, with ``phi`` (a static model), no barrier between
+    them (:func:`_connected`).  [root group, members] per entry, in the order of ``groups``."""
+    root = list(range(len(groups)))
+
+    def find(a):
+        while root[a] != a:
+            a = root[a]
+        return a
+    for a in range(len(groups)):
+        for b in range(a + 1, len(groups)):
+            if find(a) == find(b):
+                continue
+            i, j = min(((i, j) for i in groups[a][2] for j in groups[b][2]),
+                       key=lambda ij: float(np.sum(((fits[ij[0]].p - fits[ij[1]].p) / se) ** 2)))
+            if abs(objective[i] - objective[j]) <= vtol and (phi is None or _connected(phi, fits[i].p, fits[j].p,
+                                                                                          vtol)):
+                root[find(b)] = find(a)
+    out = []
+    for a in range(len(groups)):
+        if find(a) == a:
+            out.append((groups[a], [i for b in range(len(groups)) if find(b) == a for i in groups[b][2]]))
+    return out
+
+
+def distinct_minima(fits, objective, tol, se, chosen: int, *, vtol: float = -1.0, phi=None, names=(), model=None) -> tuple:
+    """The distinct minima among the starts that reached one (:func:`_clusters`), those along one flat valley merged
+    (:func:`_merged`, objectives within ``vtol``, objective units, < 0: no merging, the point rule alone; ``phi``
+    the static objective p -> Phi (:func:`static_objective`), None: objectives only): the minimum of the ``chosen``
+    start first, then the others by objective.  ``fits``: StartFit per start; ``objective`` (N,) their Phi; ``tol``
+    and ``se`` (n_p,) the point rule's objective tolerance and scale; ``names`` the parameters; ``model`` (its
+    bounds) for the note's bound test."""
+    out = []
+    for (obj, p, _), members in _merged(_clusters(fits, objective, tol, se, chosen), fits, objective, se, vtol, phi):
+        P = np.array([fits[i].p for i in members])
+        lo, hi = P.min(axis=0), P.max(axis=0)
+        flat = tuple(nm for nm, d, s in zip(names, hi - lo, se) if d > PARAMETER_TOL_SE * s)
+        ohi = float(max(objective[i] for i in members))
+        m = LocalMinimum(float(obj), np.array(p), tuple(sorted(members)), lo, hi, ohi, flat,
+                         ("segment" if phi is not None else "objective") if flat else "")
+        if flat:
+            m = dataclasses.replace(m, valley=_valley_text(m, P, tuple(names), model, phi, vtol))
+        out.append(m)
+    return tuple(out)
+
+
+def _to_bound(P: np.ndarray, k: int, phi_high: float, model, phi, vtol: float) -> str:
+    """"upper" / "lower" when Phi is as low (within ``vtol`` of ``phi_high``, the valley's highest objective) at
+    parameter k's bound, the valley's start nearest that bound moved onto it (``P``: the starts' parameters, one row
+    each), as along the valley; "" otherwise, when the starts end far from the bound (farther than their own range)
+    or without ``phi``."""
+    if phi is None or model is None:
+        return ""
+    par = model.params[k]
+    span = float(np.ptp(P[:, k]))
+    for side, bound, row in (("upper", par.upper, int(np.argmax(P[:, k]))),
+                             ("lower", par.lower, int(np.argmin(P[:, k])))):
+        if not math.isfinite(bound) or abs(bound - P[row, k]) > span:
+            continue
+        q = np.array(P[row], float)
+        q[k] = bound
+        if phi(q) - phi_high <= vtol:
+            return side
+    return ""
+
+
+def _valley_text(m: LocalMinimum, P: np.ndarray, names: tuple, model, phi, vtol: float) -> str:
+    """The note's sentence on a flat valley: which parameters move, over what range, at what objective, how the
+    starts were found connected."""
+    idx = [names.index(nm) for nm in m.flat]
+    n = m.count
+    rest = [f"{nm} stays between {m.p_low[i]:.6g} and {m.p_high[i]:.6g}" if m.p_high[i] > m.p_low[i] else
+            f"{nm} stays at {m.p[i]:.6g}" for i, nm in enumerate(names) if nm not in m.flat]
+    kept = f"; along it {', '.join(rest)}" if rest else ""
+    if len(idx) == 1:
+        k, nm = idx[0], m.flat[0]
+        lo, hi = m.p_low[k], m.p_high[k]
+        side = _to_bound(P, k, m.objective_high, model, phi, vtol)
+        if side:
+            b = model.params[k].upper if side == "upper" else model.params[k].lower
+            head = (f"{nm} is not determined by the data {'above' if side == 'upper' else 'below'} "
+                    f"{_num(lo if side == 'upper' else hi)}: {n} starts ended along a flat valley from {_num(lo)} to "
+                    f"{_num(hi)}, which runs on to its {side} bound {_num(b)} (the objective there is the same)")
+        else:
+            head = (f"{nm} is not determined by the data between {_num(lo)} and {_num(hi)}: {n} starts ended along "
+                    f"a flat valley over that range")
+    else:
+        head = (f"{' and '.join(m.flat)} are not determined separately by the data: {n} starts ended along a flat "
+                f"valley (" + ", ".join(f"{names[k]} from {_num(m.p_low[k])} to {_num(m.p_high[k])}" for k in idx)
+                + ")")
+    how = (f"no barrier at {VALLEY_POINTS} points of the segment between neighbouring starts" if m.connection ==
+           "segment" else "the objective between them not evaluated (a dynamic model): merged by the objectives alone")
+    return (f"{head}{kept} (objective {m.objective:.8g} to {m.objective_high:.8g} over starts "
+            f"{', '.join(str(i + 1) for i in m.starts[:8])}{', ...' if n > 8 else ''}: equal within "
+            f"{_num(m.objective_high - m.objective, 2)}, below the valley tolerance {_num(vtol, 2)} ("
+            f"{_num(2 * vtol, 2)} in chi-square units, far below 1), and {how}: one valley, not distinct minima)")
+
+
+def _num(x: float, digits: int = 3) -> str:
+    """x with ``digits`` significant digits, an exponent without '+' and leading zeros (3.1e4, 1e5, 2.5e-6)."""
+    text = f"{x:.{digits}g}"
+    if "e" not in text:
+        return text
+    mant, exp = text.split("e")
+    return f"{mant}e{int(exp)}"
 
 
 def _short(text: str, limit: int = 160) -> str:
@@ -519,7 +719,7 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
             raise _failure(fits, n, X)
         chosen = unb[0].index       # no finite minimum: the first fit that runs off, as one start would give
         objective = np.array([f.objective if f.outcome == NOT_BOUNDED else np.nan for f in fits])
-        tol, minima, reached = float("nan"), (), 0
+        tol, vtol, minima, reached = float("nan"), float("nan"), (), 0
         rec = _record(problem, fits[chosen], X, weights, settings, Y0)
     else:
         raw = np.array([f.objective * f.sigma0 ** 2 for f in fits])
@@ -530,14 +730,18 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         chosen, reached = near[0], len(near)
         rec = _record(problem, fits[chosen], X, weights, settings, Y0)
         se = np.where(np.isfinite(rec.stderr) & (rec.stderr > 0), rec.stderr, param_scale(model, X[0]))
-        minima = _minima(fits, objective, tol, se, chosen)
+        vtol = min(tol, VALLEY_CHI2 / 2)
+        phi = None if problem.strategy.takes_time_series else static_objective(problem, rec.weights, rec.sigma)
+        minima = distinct_minima(fits, objective, tol, se, chosen, vtol=vtol, phi=phi,
+                         names=tuple(par.name for par in model.params), model=model)
     ms = MultiStartRecord(param_names=tuple(par.name for par in model.params), starts=X,
                           p=np.array([f.p for f in fits]), objective=objective,
                           outcome=tuple(f.outcome for f in fits), status=tuple(f.status for f in fits),
                           errors=tuple(f.error for f in fits), warnings=tuple(f.warnings for f in fits),
                           fit_time=np.array([f.fit_time for f in fits]), best=chosen, reached_best=reached,
                           minima=minima, objective_tol=tol, parameter_tol_se=PARAMETER_TOL_SE, rules=rules,
-                          seed=entropy, backend=str(reps.backend), wall_time=time.perf_counter() - t0)
+                          seed=entropy, backend=str(reps.backend), wall_time=time.perf_counter() - t0,
+                          valley_tol=vtol)
     note = ms.note() if minima else (f"multi-start: none of the {n} starts reached a finite minimum; the estimate is "
                                      f"that of start {chosen + 1}, whose fit the data do not bound")
     return _with_starts(rec, ms, note)

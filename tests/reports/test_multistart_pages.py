@@ -65,3 +65,23 @@ def test_minima_table_and_page():
     assert "Multi-start fit of A" in text and "3 of 8 starts reached the best minimum" in text
     assert "start 5: ConvergenceError: no step" in text and "3 distinct local minima" in text
     assert "seed 7" in text and "1 start ended on a fit the data do not bound" in text
+
+
+def test_a_flat_valley_shows_its_ranges_and_its_note():
+    """Minimum 2 of the record is a flat valley in c (starts 3 and 7 at c = 0.5 and 40): the row gives the range, the
+    legend and the page name it, the page carries its note."""
+    ms = record()
+    valley = LocalMinimum(40.0, np.array([3.0, 0.5]), (2, 6), np.array([3.0, 0.5]), np.array([3.0, 40.0]), 40.0 + 1e-9,
+                          ("c",), "segment", "c is not determined by the data between 0.5 and 40: 2 starts ended along "
+                          "a flat valley over that range")
+    ms = MultiStartRecord(**{**{f: getattr(ms, f) for f in ms.__dataclass_fields__},
+                             "minima": (ms.minima[0], valley, ms.minima[2]), "valley_tol": 1.5e-6})
+    head, rows = minima_rows(ms, ("N/mm", ""))
+    assert rows[1] == ["2 (valley)", "40 (all within 1e-09)", "2", "3, 7", "3", "0.5 to 40"]
+    labels = [t.get_text() for t in waterfall_plot(ms).axes[0].get_legend().get_texts()]
+    assert "minimum 2 (flat valley in c): 2 starts" in labels
+    est = SimpleNamespace(diagnostics=SimpleNamespace(starts=ms), param_units=("N/mm", ""))
+    text = " ".join(" ".join(page_texts(multistart_pages(SimpleNamespace(estimates={"A": est}), "A")[0])).split())
+    assert "Minimum 2 is a flat valley, not isolated" in text and "Not isolated: flat valleys" in text
+    assert "Minimum 2: c is not determined by the data between 0.5 and 40: 2 starts ended along a flat valley" in text
+    assert "objectives within 1.5e-06 and no barrier between them" in text

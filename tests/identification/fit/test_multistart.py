@@ -7,9 +7,12 @@ import pytest
 
 from identification import DataError, Measurements, identify, simulate
 from identification.fit.dynamic_fit import simulate_campaign
-from identification.fit.multistart import (OBJECTIVE_RTOL, MultiStartError, MultiStartRecord, draw_starts,
-                                           sobol_points, start_rules, starts_from_unit)
+from identification.fit.multistart import (OBJECTIVE_RTOL, PARAMETER_TOL_SE, VALLEY_CHI2, MultiStartError,
+                                           MultiStartRecord, StartFit, distinct_minima, draw_starts, sobol_points,
+                                           start_rules, starts_from_unit, static_objective)
+from identification.fit.problem import Problem
 from models import Model, Parameter
+from models.library import two_bar_truss
 from mudoe.example_reactor import P_TRUE, TIMES, build
 
 T = np.linspace(0.0, 10.0, 41)
@@ -69,6 +72,9 @@ def test_the_record_counts_the_starts_and_the_distinct_minima(twenty):
     assert sum(m.count for m in ms.minima) == int(ok.sum())
     objs = [m.objective for m in ms.minima]
     assert objs == sorted(objs) and len(ms.minima) >= 3
+    # the sinusoid's minima are isolated (different objectives): none is merged into a flat valley
+    assert all(not m.is_valley and m.valley == "" and np.array_equal(m.p_low, m.p) for m in ms.minima if m.count == 1)
+    assert not any(m.is_valley for m in ms.minima) and "flat valley" not in est.notes[-1]
     assert ms.objective[0] == one.objective                     # start 1 is p0, which ends where identify does
     assert 0 in ms.minima[1].starts or any(0 in m.starts for m in ms.minima[1:])
     note = est.notes[-1]
@@ -280,3 +286,91 @@ def test_dask_gives_the_serial_estimate_and_table():
     assert dk.notes[-1] == serial.notes[-1].replace("serial", b.backend)
     assert a.to_frame().equals(b.to_frame()) and a.minima_frame().equals(b.minima_frame())
     assert (a.best, a.reached_best, a.outcome, a.status) == (b.best, b.reached_best, b.outcome, b.status)
+
+
+# ---------------------------------------------------------------------------- flat valleys
+TRUSS_DATA = __file__.rsplit("/tests/", 1)[0] + "/data/truss_one_sensor/measurements_P_x.csv"
+
+
+@pytest.fixture(scope="module")
+def truss():
+    """The README truss measured by P_x only (configs/truss_one_sensor.toml's data, um -> mm, sigma 4 um): from 8
+    starts, 3 reach the best minimum and 5 run along k2 -> its upper bound 1e5, where P_x no longer depends on k2."""
+    raw = np.loadtxt(TRUSS_DATA, delimiter=",", skiprows=1)
+    data = Measurements(raw[:, :1], (raw[:, 1:].T / 1000.0)[:, :, None], [0.004])
+    model = two_bar_truss(sensors=("P_x",))
+    return model, data, identify(model, data, [200.0, 300.0]), identify(model, data, [200.0, 300.0], starts=8)
+
+
+def test_starts_along_a_flat_valley_are_one_entry_with_ranges_and_a_note(truss):
+    model, data, one, est = truss
+    ms = est.diagnostics.starts
+    assert np.array_equal(one.p, est.p) and np.array_equal(one.cov, est.cov) and ms.best == 0
+    valley = [i for i in range(8) if ms.p[i, 1] > 9e4]
+    assert len(valley) == 5 and len(ms.minima) == 2               # before: 4 "distinct" minima along the valley
+    best, flat = ms.minima
+    assert best.starts == (0, 4, 7) and not best.is_valley
+    assert flat.starts == tuple(valley) and flat.flat == ("k2",) and flat.connection == "segment"
+    assert flat.p_low[1] == ms.p[valley, 1].min() < 99500.0 and flat.p_high[1] == ms.p[valley, 1].max() > 99990.0
+    assert flat.objective == ms.objective[valley].min() and flat.objective_high == ms.objective[valley].max()
+    # the members differ by far more than the point rule allows, at objectives equal within the valley tolerance
+    assert flat.p_high[1] - flat.p_low[1] > 1e3 * PARAMETER_TOL_SE * est.stderr[1]
+    assert ms.valley_tol == min(ms.objective_tol, VALLEY_CHI2 / 2) and flat.objective_high - flat.objective <= ms.valley_tol
+    assert flat.objective - best.objective > 3.0                 # a genuinely worse minimum, kept apart
+    assert flat.valley.startswith("k2 is not determined by the data above 9.94e4: 5 starts ended along a flat "
+                                  "valley from 9.94e4 to 1e5, which runs on to its upper bound 1e5")
+    assert "no barrier at 5 points of the segment" in flat.valley and flat.valley in est.notes[-1]
+    frame = ms.minima_frame()
+    assert list(frame["flat"]) == ["", "k2"] and frame["k2 low"].iloc[1] == flat.p_low[1]
+    assert ms.to_dict()["minima"][1]["flat"] == ["k2"]
+
+
+def test_the_valley_objective_is_the_fits_objective(truss):
+    """static_objective at each start's estimate is the objective its fit reported (the same Phi, paper eq. 3)."""
+    model, data, _, est = truss
+    ms = est.diagnostics.starts
+    phi = static_objective(Problem(model, data), est.weights, est.sigma)
+    for i in range(8):
+        assert abs(phi(ms.p[i]) - ms.objective[i]) <= 1e-9 * ms.objective[i]
+
+
+def test_equal_objectives_with_a_barrier_between_stay_apart():
+    """y = a^2 x: a = +-sqrt(2) fit equally well (objectives equal to round-off), with a barrier at a = 0."""
+    model = Model.explicit(params=[Parameter("a", -3.0, 3.0)], inputs=["x"], sensors=["y"],
+                           h=lambda p, q: p[0] ** 2 * q[0], name="square")
+    x = np.linspace(0.1, 1.0, 10)
+    z = (2.0 * x)[None, :, None] + 0.01 * np.random.default_rng(1).standard_normal((1, x.size, 1))
+    est = identify(model, Measurements(x[:, None], z, [0.01]), [1.0], starts=6)
+    ms = est.diagnostics.starts
+    assert len(ms.minima) == 2 and not any(m.is_valley for m in ms.minima)
+    assert abs(ms.minima[0].objective - ms.minima[1].objective) <= ms.valley_tol
+    assert ms.minima[0].p[0] == pytest.approx(-ms.minima[1].p[0], rel=1e-6)
+    assert "the same objective at other parameters: the minimum is not unique" in est.notes[-1]
+
+
+def _fits(points, objective):
+    return [StartFit(index=i, outcome="minimum", p=np.array(p, float), objective=float(o), sigma0=1.0, status="ok",
+                     error="", warnings=(), fit_time=0.0) for i, (p, o) in enumerate(zip(points, objective))]
+
+
+def test_distinct_minima_merges_a_flat_direction_and_keeps_a_barrier():
+    """Phi(p) = (p1 - 1)^2 + b(p2): flat in p2 when b = 0; with a bump b between p2 = 0 and 5 the points stay apart;
+    without an objective (a dynamic model) the objectives alone merge them and the note says so."""
+    points = [(1.0, 0.0), (1.0, 5.0), (1.0, 10.0), (3.0, 2.0)]
+    obj = np.array([0.0, 1e-9, 2e-9, 4.0])
+    fits, se = _fits(points, obj), np.array([0.1, 0.1])
+    flat = distinct_minima(fits, obj, 1e-6, se, 0, vtol=1e-6, phi=lambda p: (p[0] - 1.0) ** 2, names=("p1", "p2"))
+    assert [m.starts for m in flat] == [(0, 1, 2), (3,)] and flat[0].flat == ("p2",)
+    assert flat[0].p_high[1] == 10.0 and flat[0].p_low[1] == 0.0 and flat[0].objective_high == 2e-9
+    assert flat[0].valley.startswith("p2 is not determined by the data between 0 and 10: 3 starts ended along")
+    assert "along it p1 stays at 1" in flat[0].valley
+    bump = distinct_minima(fits, obj, 1e-6, se, 0, vtol=1e-6, names=("p1", "p2"),
+                           phi=lambda p: (p[0] - 1.0) ** 2 + (0.5 if 1.0 < p[1] < 4.0 else 0.0))
+    assert [m.starts for m in bump] == [(0,), (1, 2), (3,)] and bump[1].flat == ("p2",)
+    blind = distinct_minima(fits, obj, 1e-6, se, 0, vtol=1e-6, phi=None, names=("p1", "p2"))
+    assert [m.starts for m in blind] == [(0, 1, 2), (3,)] and blind[0].connection == "objective"
+    assert "not evaluated (a dynamic model): merged by the objectives alone" in blind[0].valley
+    # objectives that differ by more than the valley tolerance are never merged, flat or not
+    far = distinct_minima(fits, np.array([0.0, 1e-5, 2e-5, 4.0]), 1e-4, se, 0, vtol=1e-6,
+                          phi=lambda p: (p[0] - 1.0) ** 2, names=("p1", "p2"))
+    assert [m.starts for m in far] == [(0,), (1,), (2,), (3,)]
