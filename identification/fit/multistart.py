@@ -46,7 +46,9 @@ they are connected: for a static model Phi is evaluated at :data:`VALLEY_POINTS`
 the straight segment between the closest members of the two (the outputs h(y(p), p, q_j) by
 :func:`models.state.simulate`, the weights and sigmas of the estimate) and the segment rises nowhere more than
 :math:`\tau_v` above the higher end (no barrier); for a dynamic model, whose objective at a point needs a
-controlled integration, the segment is not evaluated and the objectives alone decide (the entry says so).  A
+controlled integration, the segment is not evaluated and nothing is merged: equal objectives alone cannot tell a
+valley from symmetric minima (the note says the minimum is not unique; :func:`distinct_minima` with ``phi=None``
+merges by the objectives alone and says so, for callers that know their minima are connected).  A
 merged entry reports the range of each parameter over its starts; the parameters whose range exceeds
 :data:`PARAMETER_TOL_SE` standard errors are those that move along the valley, and the note names them, their
 range and the objective; for one such parameter of a static model, Phi at its bound (the member nearest the bound
@@ -390,7 +392,7 @@ class MultiStartRecord:
     backend : str                 where the starts ran ("serial", "2 local processes", ...)
     wall_time : float             s, all starts
     valley_tol : float            objective units: minima on one flat valley agree within this (min(objective_tol,
-                                  VALLEY_CHI2 / 2); NaN when not recorded)
+                                  VALLEY_CHI2 / 2)); NaN: nothing merged (a dynamic model, no minimum, not recorded)
     """
 
     param_names: tuple
@@ -730,9 +732,9 @@ def fit_starts(problem, p0, starts: int, *, weights=None, settings=None, Y0=None
         chosen, reached = near[0], len(near)
         rec = _record(problem, fits[chosen], X, weights, settings, Y0)
         se = np.where(np.isfinite(rec.stderr) & (rec.stderr > 0), rec.stderr, param_scale(model, X[0]))
-        vtol = min(tol, VALLEY_CHI2 / 2)
         phi = None if problem.strategy.takes_time_series else static_objective(problem, rec.weights, rec.sigma)
-        minima = distinct_minima(fits, objective, tol, se, chosen, vtol=vtol, phi=phi,
+        vtol = min(tol, VALLEY_CHI2 / 2) if phi is not None else float("nan")      # dynamic: no valley merging
+        minima = distinct_minima(fits, objective, tol, se, chosen, vtol=vtol if phi is not None else -1.0, phi=phi,
                          names=tuple(par.name for par in model.params), model=model)
     ms = MultiStartRecord(param_names=tuple(par.name for par in model.params), starts=X,
                           p=np.array([f.p for f in fits]), objective=objective,
