@@ -320,17 +320,23 @@ def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np
 
 def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
                     plain: Estimate | None = None, groups: np.ndarray | None = None,
-                    layout: ColumnLayout | None = None) -> ErrorFit:
+                    layout: ColumnLayout | None = None, condition_term: bool = False) -> ErrorFit:
     """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
     plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
     the plain fit when already done; ``groups`` (n_q,) integer condition of every input row: of the embedded error
     (None: each row its own) and of the discrepancy (independent between conditions; None: one condition); ``layout`` the columns' instruments and coordinates (one discrepancy per instrument
-    over inputs and coordinates; None: one per column over inputs).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    over inputs and coordinates; None: one per column over inputs); ``condition_term`` the discrepancy's third
+    hyperparameter an offset per condition (omega_k^2 [g = g']) instead of the rough part (not the default, measured
+    in bench/RESULTS.md "Issue 29: bands for a condition not seen"; no ``exact_at`` pins with it).  Raises
+    numpy.linalg.LinAlgError when a covariance is not positive definite, ValueError for pins with ``condition_term``."""
+    if condition_term and scaling.pins:
+        raise ValueError("condition_term: an offset per condition cannot vanish at exact_at; give one or the other")
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
-    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs), conditions=groups) if layout is None
+    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs), conditions=groups,
+                           condition_term=condition_term) if layout is None
            else Observations.of(data.counts(), sigma, weights, scaling(data.inputs), layout.instrument,
-                                scaling.coordinates(layout.coords), conditions=groups))
+                                scaling.coordinates(layout.coords), conditions=groups, condition_term=condition_term))
     zbar_s = obs.stack(np.nan_to_num(data.means()))
     Gs = obs.stack(np.asarray(est.G, float))
     r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))
