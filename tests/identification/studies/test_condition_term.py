@@ -117,3 +117,27 @@ def test_the_offset_term_is_an_option_and_refuses_exact_at():
     pinned = InputScaling.of(d.inputs, {"x": 0.2}, ("x",))
     with pytest.raises(ValueError, match="condition_term"):
         fit_model_error(_model(), d, [1.0, 1.0], np.ones(2), pinned, "discrepancy", groups=cond, condition_term=True)
+
+
+def test_the_band_on_c_minus_1_dof_at_a_condition_not_seen():
+    from scipy import stats
+    d, cond = _data()
+    sc = InputScaling.of(d.inputs, {}, ("x",))
+    f = fit_model_error(_model(), d, [1.0, 1.0], np.ones(2), sc, "discrepancy", groups=cond, condition_term=True)
+    q = np.array([[0.5], [1.2]])
+    codes = np.array([1, 9])                                      # condition 1 seen, 9 not seen
+    plug = f.predict(q, 0.05, True, conditions=codes)
+    band = f.predict(q, 0.05, True, conditions=codes, variance_aware="conditions")
+    np.testing.assert_allclose(band.mean, plug.mean, rtol=0, atol=0)
+    var = ((plug.upper - plug.mean) / stats.norm.ppf(0.975)) ** 2
+    A = np.array([f.gp.cross(i, sc(q[1:]), codes[1:])[1][0] for i in range(2)])
+    nu = var[1] ** 2 * (3 - 1) / A ** 2                              # three conditions in the data
+    np.testing.assert_allclose(band.dof[1], nu, rtol=1e-12)
+    np.testing.assert_allclose(band.upper[1] - band.mean[1], stats.t.ppf(0.975, nu) * np.sqrt(var[1]), rtol=1e-10)
+    assert np.all(np.isinf(band.dof[0]))                          # a condition seen: the normal band
+    np.testing.assert_allclose(band.upper[0], plug.upper[0], rtol=1e-14)
+    one = fit_model_error(_model(), d, [1.0, 1.0], np.ones(2), sc, "discrepancy", condition_term=True)
+    b1 = one.predict(q, 0.05, True, conditions=np.array([-1, -1]), variance_aware="conditions")
+    assert np.all(np.isinf(b1.upper)) and np.all(b1.dof == 0)    # one condition: nothing calibrates a band
+    with pytest.raises(ValueError, match="variance_aware"):
+        f.predict(q, 0.05, True, conditions=codes, variance_aware="c-1")
