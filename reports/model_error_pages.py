@@ -208,7 +208,7 @@ def model_error_pages(results, variant: str):
     head, rows = coverage_rows(r)
     low = 0.035 if foot else 0.01                       # room for the footnote's line under the table
     ax = fig.add_axes([0.07, low, 0.86, row2 - h - 0.1 - low])
-    draw_table(ax, head, rows, fontsize=8, col_widths=[0.26, 0.07, 0.07, 0.1, 0.07, 0.09, 0.07, 0.1, 0.12],
+    draw_table(ax, head, rows, fontsize=8, col_widths=[0.26, 0.07, 0.07, 0.1, 0.07, 0.09, 0.07, 0.115, 0.105],
                title=f"Held-out coverage of the {100 * (1 - r.alpha):g} % new-reading bands (each split's "
                      "validation readings predicted from a fit on its calibration part)")
     if foot:
