@@ -176,18 +176,20 @@ def _offset_campaign(rng, n_cond: int):
     return Measurements(q[:, None], z, OFFSET_SIGMA, sensors=["y1", "y2"], input_names=["x"]), cond
 
 
-def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None, aware: tuple = (False,)) -> list:
+def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None, aware: tuple = (False,),
+                    condition_term: bool = False) -> list:
     """[(coverage, median widening against the plain bands, median full width / (2 * 1.96 sigma))] of the
     discrepancy's 95 % new-reading bands fitted on rows ``cal`` of ``d`` at rows ``val`` (``groups`` the rows'
     condition codes, None: one; ``unseen`` bool per validation row: predicted as a condition not seen), as the
     held-out table of ``model_error`` computes them, one per ``aware`` (ErrorFit.predict's variance_aware: the
-    Student-t band at a condition not seen, or the normal plug-in band)."""
+    Student-t band at a condition not seen, or the normal plug-in band); ``condition_term`` the discrepancy with an
+    offset per condition in place of the rough part (fit_model_error's option), without the oracle."""
     scaling = InputScaling.of(d.inputs, {}, ("x",))
     dc, dv = d.subset(inputs=cal), d.subset(inputs=val)
     w = np.ones(2)
     plain = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "none")
     f = fit_model_error(m, dc, [1.0, 1.0], w, scaling, "discrepancy", plain=plain.plain,
-                        groups=None if groups is None else np.asarray(groups)[cal])
+                        groups=None if groups is None else np.asarray(groups)[cal], condition_term=condition_term)
     codes = np.zeros(len(val), int) if groups is None else np.asarray(groups)[val]
     b0 = plain.predict(dv.inputs, 0.05, True)
     out = []
@@ -197,13 +199,20 @@ def _offset_heldout(m, d, cal: list, val: list, groups=None, unseen=None, aware:
         cover = float(np.mean((dv.z >= b.lower[None]) & (dv.z <= b.upper[None])))
         out.append((cover, float(np.median((b.upper - b.lower) / (b0.upper - b0.lower))),
                     float(np.median((b.upper - b.lower) / (2 * 1.96 * OFFSET_SIGMA)))))
-    if unseen is not None and len(aware) > 1:     # the oracle: the true offset variance for the estimated new draw
+    if unseen is not None and len(aware) > 1 and not condition_term:     # the oracle: the true offset variance for the estimated new draw
         A = np.stack([f.gp.cross(i, scaling(dv.inputs), cc)[1] for i in range(2)], axis=1)
         b = f.predict(dv.inputs, 0.05, True, conditions=cc, variance_aware=False)
         T = ((b.upper - b.mean) / stats.norm.ppf(0.975)) ** 2 - A + OFFSET_KAPPA ** 2
         cover = float(np.mean(np.abs(dv.z - b.mean[None]) <= stats.norm.ppf(0.975) * np.sqrt(T)[None]))
         out.append((cover, float(np.median(np.sqrt(A[unseen]))) / OFFSET_KAPPA, np.nan))
     return out
+
+
+def _quantile90(a: np.ndarray) -> float:
+    """The 90 % quantile of ``a`` (inf when infinite widths reach it: no band)."""
+    with np.errstate(invalid="ignore"):
+        q = float(np.quantile(a, 0.9))
+    return np.inf if q != q and np.isinf(a).any() else q
 
 
 #: the numbers of conditions in the calibration part of the condition-offset study
@@ -220,11 +229,14 @@ def condition_offset_study(n: int, seed: int) -> None:
     degrees of freedom of the estimated new-draw variance); mean over campaigns with its standard error, against
     the coverage P(|t_c| < 1.96) of a band whose variance is estimated from c draws of the offset (noise and fixed
     effects neglected); oracle: the plug-in band with the true offset variance kappa^2 in place of the estimated
-    new-draw variance (is the band's shape right?), with the estimated new-draw sd over kappa; widths: median widening against the plain bands (median over campaigns) and the mean of
+    new-draw variance (is the band's shape right?), with the estimated new-draw sd over kappa; term and term t:
+    the discrepancy with an offset per condition in place of the rough part (``condition_term``), plug-in and
+    Student-t (Satterthwaite); term c-1: the same with the new-draw variance on c - 1 dof (``variance_aware=
+    "conditions"``; c = 1: no band, infinite); widths: median widening against the plain bands (median over campaigns) and the mean of
     the median full width in units of the plain noise band 2 x 1.96 sigma."""
     rng, t0 = np.random.default_rng(seed), time.perf_counter()
     m, nq = _offset_model(), OFFSET_Q.size
-    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after", "t", "oracle")}
+    rows = {(c, k): [] for c in OFFSET_CALIBRATION for k in ("before", "after", "t", "oracle", "term", "term t", "term c-1")}
     for _ in range(n):
         for c in OFFSET_CALIBRATION:
             d, cond = _offset_campaign(rng, c + 1)
@@ -240,6 +252,12 @@ def condition_offset_study(n: int, seed: int) -> None:
             rows[c, "after"].append(after[0])
             rows[c, "t"].append(after[1])
             rows[c, "oracle"].append(after[2])
+            g = None if c == 1 else cond
+            term = _offset_heldout(m, d, cal, val, groups=g, unseen=unseen_rows(sp, d, g),
+                                   aware=(False, True, "conditions"), condition_term=True)
+            rows[c, "term"].append(term[0])
+            rows[c, "term t"].append(term[1])
+            rows[c, "term c-1"].append(term[2])
     print(f"condition offset the model lacks (kappa {OFFSET_KAPPA} = {OFFSET_KAPPA / OFFSET_SIGMA:g} sigma per "
           f"condition and sensor), {n} campaigns, seed {seed}: held-out coverage of the discrepancy's 95 % "
           f"new-reading bands at a condition not seen ({2 * 2 * nq} readings per campaign; mean over campaigns "
@@ -254,10 +272,12 @@ def condition_offset_study(n: int, seed: int) -> None:
             continue
         how = {"before": "one condition named, kriged" if c == 1 else "no groups, kriged + rough part",
                "after": "new draw, normal plug-in" if c == 1 else "groups named, new draw, plug-in",
-               "t": "new draw, Student-t" if c == 1 else "groups named, new draw, Student-t"}[k]
+               "t": "new draw, Student-t" if c == 1 else "groups named, new draw, Student-t",
+               "term": "offset term, new draw, plug-in", "term t": "offset term, new draw, Student-t",
+               "term c-1": "offset term, Student-t on c - 1 dof"}[k]
         print(f"  {c} calibration condition(s), {k:<6} ({how:<34}) {100 * a[:, 0].mean():6.1f} +- "
               f"{100 * a[:, 0].std(ddof=1) / np.sqrt(n):4.1f} %  widening {np.median(a[:, 1]):.2f}  width "
-              f"{a[:, 2].mean():.2f} (90 % {np.quantile(a[:, 2], 0.9):.2f})"
+              f"{a[:, 2].mean():.2f} (90 % {_quantile90(a[:, 2]):.2f})"
               + (f"   [P(|t_{c}| < 1.96) = {100 * (1 - 2 * stats.t.sf(1.96, c)):.1f} %]" if k == "after" else ""))
     print(f"  {time.perf_counter() - t0:.0f} s")
 

@@ -157,6 +157,8 @@ def _checked_result(result):
         raise ValueError("result: expected the ModelErrorResult of identification.model_error (with its fit)")
     if result.kind == "discrepancy" and fit.gp is None:
         raise ValueError("result: kind 'discrepancy' without its Gaussian process")
+    if fit.gp is not None and fit.gp.obs.condition_term:      # its third hyperparameter is no rough part
+        raise ValueError("result: a discrepancy with an offset per condition (condition_term) has no error design")
     return fit
 
 

@@ -18,12 +18,13 @@ import numpy as np
 from typing import TYPE_CHECKING
 
 import identification.studies.records as _records
+from identification.studies.model_error import UNSEEN_COVERAGE_CAMPAIGNS, UNSEEN_COVERAGE_MC
 
 from .moved import moved
 from .page_layout import draw_text as _text, new_page as _page
 
 __all__ = ["discrepancy_plot", "heldout_band_plot", "coverage_rows", "spread", "model_error_pages", "summary_rows",
-           "model_uncertainty_page"]
+           "model_uncertainty_page", "unseen_footnote", "UNSEEN_MARK"]
 
 __getattr__ = moved(__name__, _records, ("HeldOutBands", "ModelErrorView"))
 
@@ -104,8 +105,10 @@ def heldout_band_plot(view: ModelErrorView, k: int, ax=None):
     ax.vlines(x - dx, h.plain[0][:, k], h.plain[1][:, k], color="0.45", lw=2.5, alpha=0.6,
               label=f"plain: {100 * h.coverage_plain:.0f} % covered")
     if h.with_error is not None:
+        row = next((r for r in view.result.heldout if r.split == h.split), None)
+        mark = f" {UNSEEN_MARK}" if view.result.kind == "discrepancy" and row is not None and row.unseen_from_one else ""
         ax.vlines(x + dx, h.with_error[0][:, k], h.with_error[1][:, k], color="#d62728", lw=2.5, alpha=0.45,
-                  label=f"with {view.result.kind}: {100 * h.coverage_error:.0f} % covered")
+                  label=f"with {view.result.kind}: {100 * h.coverage_error:.0f} % covered{mark}")
     z = np.asarray(h.readings, float)[:, :, k]
     qq = np.broadcast_to(x[None, :], z.shape)
     ok = np.isfinite(z)
@@ -117,11 +120,31 @@ def heldout_band_plot(view: ModelErrorView, k: int, ax=None):
     return ax.figure
 
 
+#: the mark of a held-out coverage at a condition not seen, predicted from one condition (not calibrated)
+UNSEEN_MARK = "\u2020"
+
+
+def unseen_footnote(result) -> str:
+    """One line under the held-out table when a split predicts a condition not seen from one condition ("" when
+    none does): such a coverage is a plug-in from one realisation, with its Monte Carlo coverage."""
+    if not any(h.unseen_from_one for h in result.heldout):
+        return ""
+    c1 = UNSEEN_COVERAGE_MC[0]
+    return (f"{UNSEEN_MARK} 'not seen': readings in a condition the calibration part lacks, predicted from one "
+            f"condition: not calibrated (such bands covered {UNSEEN_COVERAGE_CAMPAIGNS[1]:.0f}-{c1[1]:.0f} % in "
+            "Monte Carlo), a lower bound of the error.")
+
+
 def coverage_rows(result) -> tuple:
-    """(head, rows) of the held-out table: coverage % and median widening of each error model per split."""
-    head = ["split", "readings", "plain %", "discrepancy %", "widening", "embedded %", "widening"]
-    rows = [[h.split, h.n_values, f"{100 * h.coverage_plain:.1f}", f"{100 * h.coverage_discrepancy:.1f}",
-             f"{h.widening_discrepancy:.2f}", f"{100 * h.coverage_embedded:.1f}", f"{h.widening_embedded:.2f}"]
+    """(head, rows) of the held-out table: coverage % and median widening of each error model per split, the
+    conditions its calibration part holds and the readings in a condition it has not seen (the discrepancy's
+    coverage marked :data:`UNSEEN_MARK` when they are predicted from one condition)."""
+    head = ["split", "readings", "plain %", "discrepancy %", "widening", "embedded %", "widening",
+            "cal. conditions", "not seen"]
+    rows = [[h.split, h.n_values, f"{100 * h.coverage_plain:.1f}",
+             f"{100 * h.coverage_discrepancy:.1f}" + (f" {UNSEEN_MARK}" if h.unseen_from_one else ""),
+             f"{h.widening_discrepancy:.2f}", f"{100 * h.coverage_embedded:.1f}", f"{h.widening_embedded:.2f}",
+             h.n_conditions, h.n_unseen if h.unseen else "-"]
             for h in result.heldout]
     return head, rows
 
@@ -154,6 +177,8 @@ def model_error_pages(results, variant: str):
     n = len(view.sensors)
     top = 0.925 - 0.019 * n_lines - 0.075              # top of the first row of axes
     h, gap = max(0.16, 0.2 - 0.0095 * max(0, n_lines - 4)), 0.08 if n <= 2 else 0.1   # a long verdict: lower plots
+    foot = unseen_footnote(r)
+    h -= 0.0125 if foot else 0.0                       # two plot rows give room for the table's footnote
     w = (0.87 - gap * (n - 1)) / n
     if r.kind == "none":                               # no discrepancy: the held-out row moves up
         fig.text(0.04, top + 0.045, "No error model (kind none): no discrepancy to show; the bands are the plain "
@@ -181,10 +206,15 @@ def model_error_pages(results, variant: str):
         if view.heldout is not None:
             heldout_band_plot(view, k, fig.add_axes([x, row2 - h, w, h]))
     head, rows = coverage_rows(r)
-    ax = fig.add_axes([0.07, 0.01, 0.86, row2 - h - 0.11])
-    draw_table(ax, head, rows, fontsize=8, col_widths=[0.32, 0.09, 0.09, 0.13, 0.09, 0.12, 0.09],
+    low = 0.035 if foot else 0.01                       # room for the footnote's line under the table
+    ax = fig.add_axes([0.07, low, 0.86, row2 - h - 0.1 - low])
+    draw_table(ax, head, rows, fontsize=8, col_widths=[0.26, 0.07, 0.07, 0.1, 0.07, 0.09, 0.07, 0.115, 0.105],
                title=f"Held-out coverage of the {100 * (1 - r.alpha):g} % new-reading bands (each split's "
                      "validation readings predicted from a fit on its calibration part)")
+    if foot:
+        fig.canvas.draw()                                # under the table as drawn, on the page
+        bottom = ax.tables[0].get_window_extent().transformed(fig.transFigure.inverted()).y0
+        fig.text(0.07, max(0.008, bottom - 0.022), foot, fontsize=8, style="italic")
     return fig
 
 

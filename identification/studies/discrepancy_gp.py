@@ -120,6 +120,9 @@ class Observations:
     blocks : tuple of ndarray    per block, its selected columns
     conditions : tuple of ndarray or None   per block, the condition code of each observation (None: one
                                  condition, code 0)
+    condition_term : bool        the third hyperparameter is a constant per condition (an offset omega_k of
+                                 every condition, V gets omega_k^2 S) instead of the rough part (tau_k^2 W,
+                                 independent between rows); no pins (exact_at) with it
     """
 
     sensors: tuple
@@ -130,14 +133,17 @@ class Observations:
     cols: tuple
     blocks: tuple
     conditions: tuple | None = None
+    condition_term: bool = False
 
     @classmethod
     def of(cls, counts: np.ndarray, sigma: np.ndarray, w: np.ndarray, x: np.ndarray, instrument=None,
-           coords: np.ndarray | None = None, conditions: np.ndarray | None = None) -> "Observations":
+           coords: np.ndarray | None = None, conditions: np.ndarray | None = None,
+           condition_term: bool = False) -> "Observations":
         """From the counts (n_q, n_S) of a campaign, sigma (n_S,), the weights (n_S,), the scaled inputs (n_q,
         d_q) and, for columns grouped into instruments, the instrument of every column (n_S,) and the columns'
         scaled coordinates (n_S, d_c) (None: every column its own block, no coordinates); ``conditions`` the
-        integer condition code of every input row (n_q,) (None: one condition)."""
+        integer condition code of every input row (n_q,) (None: one condition); ``condition_term`` the third
+        hyperparameter an offset per condition, not the rough part (:class:`Observations`)."""
         n_S = counts.shape[1]
         instrument = np.arange(n_S) if instrument is None else np.asarray(instrument)
         coords = np.zeros((n_S, 0)) if coords is None else np.asarray(coords, float)
@@ -154,7 +160,8 @@ class Observations:
                                       for k, rk in zip(b, r)], axis=0))
             sig.append(float(sigma[b[0]]))
         conds = None if conditions is None else tuple(np.asarray(conditions, int)[r] for r in rows)
-        return cls(sens, tuple(rows), tuple(noise), np.array(sig), tuple(xs), tuple(cols), blocks, conds)
+        return cls(sens, tuple(rows), tuple(noise), np.array(sig), tuple(xs), tuple(cols), blocks, conds,
+                   bool(condition_term))
 
     def condition_codes(self, i: int) -> np.ndarray:
         """The condition code of every observation of block i (n_i,) (zeros for one condition)."""
@@ -234,9 +241,11 @@ def _block(obs: Observations, i: int, th: np.ndarray, pins: tuple, sel: np.ndarr
     x = obs.x[i] if sel is None else obs.x[i][sel]
     noise = obs.noise[i] if sel is None else obs.noise[i][sel]
     C, dC = kernel_blocks(x, x, ell, pins)
-    if sel is None:
-        S = obs.same_condition(i)
-        C, dC = C * S, dC * S
+    S = obs.same_condition(i) if sel is None else 1.0
+    C, dC = C * S, dC * S
+    if obs.condition_term:                          # an offset per condition: omega^2 [g(o) = g(o')]
+        O = np.broadcast_to(S, C.shape)
+        return s2 * C + t2 * O + np.diag(noise), (2 * s2 * C, s2 * dC, 2 * t2 * O)
     W, dW = rough_weight(x, ell, pins)
     V = s2 * C + np.diag(t2 * W + noise)
     return V, (2 * s2 * C, s2 * dC + np.diag(t2 * dW), np.diag(2 * t2 * W))
@@ -369,7 +378,8 @@ class GPFit:
         C, _ = kernel_blocks(xs, self.obs.x[i], ell, self.pins)
         codes = None if conditions is None and self.obs.conditions is None else (
             np.zeros(xs.shape[0], int) if conditions is None else conditions)
-        k[:, start:start + self.obs.sizes[i]] = s2 * C * self.obs.same_condition(i, codes)
+        S = self.obs.same_condition(i, codes)
+        k[:, start:start + self.obs.sizes[i]] = s2 * C * S + (t2 * S if self.obs.condition_term else 0.0)
         prior = s2 * np.diag(kernel_blocks(xs, xs, ell, self.pins)[0]) + t2 * rough_weight(xs, ell, self.pins)[0]
         return k, prior
 

@@ -79,7 +79,7 @@ from identification.studies.splits import Split, SplitError, flat_split
 from models.labels import LabelledModel
 
 __all__ = ["model_error", "ModelErrorResult", "KINDS", "unseen_rows", "SAME_INPUTS", "pure_error_checks",
-           "pure_error_notes"]
+           "pure_error_notes", "unseen_note", "UNSEEN_COVERAGE_MC", "UNSEEN_COVERAGE_CAMPAIGNS"]
 
 #: the error models model_error chooses from ("auto": by held-out log score)
 KINDS = ("auto", "none", "discrepancy", "embedded")
@@ -281,7 +281,8 @@ def _held_out(model, data, p0, w, scaling, split: Split, alpha: float, groups, l
         width.append(np.broadcast_to(hi - lo, z.shape)[ok])
     n_new = int(np.broadcast_to(new[None, :, None], z.shape)[ok].sum())
     return HeldOut(split.name, int(ok.sum()), cover[0], cover[1], cover[2], float(np.median(width[1] / width[0])),
-                   float(np.median(width[2] / width[0])), score[0], score[1], score[2], n_new)
+                   float(np.median(width[2] / width[0])), score[0], score[1], score[2], n_new,
+                   1 if g is None else int(np.unique(g).size))
 
 
 def _choose(kind: str, detected: bool, heldout: tuple) -> tuple:
@@ -317,16 +318,41 @@ def _discrepancies(fit: ErrorFit, layout, scaling: InputScaling) -> tuple:
     return tuple(out)
 
 
+#: Monte Carlo coverage (mean % and its standard error over campaigns) of the discrepancy's 95 % new-reading band
+#: at a condition the calibration part has not seen, by the number of conditions the calibration part holds:
+#: condition offsets (``python -m bench model_error --n-offset=100``, 100 campaigns, bench/RESULTS.md "Issue 29:
+#: press bands (session 12, pressband)") and, with one condition, 60 prototype campaigns of a measured study
+#: (bench/RESULTS.md "Issue 29: press coverage over prototype campaigns (session 13, pressmc)")
+UNSEEN_COVERAGE_MC = ((1, 75.7, 2.6), (4, 84.0, 2.2), (9, 89.6, 1.9))
+UNSEEN_COVERAGE_CAMPAIGNS = (1, 69.0, 2.0)
+
+
+def unseen_note(heldout: tuple) -> str:
+    """The note on the held-out readings in a condition not seen: which splits hold them, how many conditions
+    each calibration part holds, and what such bands covered in Monte Carlo (:data:`UNSEEN_COVERAGE_MC`)."""
+    parts = [f"{h.split} ({h.n_unseen} of {h.n_values} readings; {h.n_conditions} condition"
+             f"{'' if h.n_conditions == 1 else 's'} in its calibration part)" for h in heldout if h.unseen]
+    mc = " / ".join(f"{m:.1f} +- {e:.1f}" for _, m, e in UNSEEN_COVERAGE_MC)
+    cs = " / ".join(str(c) for c, _, _ in UNSEEN_COVERAGE_MC)
+    one = (" With one condition no band there is calibrated without an assumption: it is a plug-in from one "
+           "realisation of the error." if any(h.unseen_from_one for h in heldout) else "")
+    return ("held-out readings in a condition the calibration part has not seen, predicted as a new draw of the "
+            "discrepancy with its amplitude estimated from the conditions the calibration part holds (no share "
+            "common to the conditions is assumed): " + ", ".join(parts) + "." + one + " The amplitude is "
+            f"underestimated with few conditions: such 95 % bands covered {mc} % of the readings with {cs} "
+            "conditions in Monte Carlo (condition offsets, python -m bench model_error --n-offset=100) and "
+            f"{UNSEEN_COVERAGE_CAMPAIGNS[1]:.1f} +- {UNSEEN_COVERAGE_CAMPAIGNS[2]:.1f} % with one condition on 60 "
+            "prototype campaigns (bench/RESULTS.md, issue 29): read their coverage and width as a lower bound of "
+            "the error there.")
+
+
 def _notes(fit: ErrorFit, kind: str, exact_at: dict, detected: bool, heldout: tuple, sigma_source: str,
            grouped: bool, checks: tuple = (), alpha: float = 0.05) -> tuple:
     notes = list(fit.notes) + pure_error_notes(checks, alpha)
     if grouped and kind == "none":
         notes.append("groups name the conditions of the error models; the 'none' error model does not use them")
-    unseen = [f"{h.split} ({h.n_unseen} of {h.n_values})" for h in heldout if h.n_unseen]
-    if unseen and kind == "discrepancy":
-        notes.append("held-out readings in a condition the calibration part has not seen, predicted as a new draw of "
-                     "the discrepancy (no share common to the conditions is assumed; with one condition in the "
-                     "calibration part it is not identifiable): " + ", ".join(unseen))
+    if kind == "discrepancy" and any(h.unseen for h in heldout):
+        notes.append(unseen_note(heldout))
     if sigma_source != "given":
         notes.append("sigma is the pure error of the repeated series, taken as known: the test's reference "
                      "distribution is then approximate")

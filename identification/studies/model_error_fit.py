@@ -35,6 +35,10 @@ Satterthwaite degrees of freedom nu = 2 var^2 / var(A^) of the estimated new-dra
 :meth:`identification.studies.discrepancy_gp.GPFit.prior_variance_spread`); measured in
 bench/bench_model_error.py (``--n-offset``) and not adopted: it does not bring 4 calibration conditions to
 nominal coverage and makes the bands of one condition absurdly wide in some campaigns;
+``variance_aware="conditions"`` takes var(A^) = 2 A^2 / (c - 1) instead, c the conditions the fit's data hold (a
+chi-square variance on c - 1 degrees of freedom; one dof goes to the fixed effects), the rest taken as known
+(nu = var^2 (c - 1) / A^2; with c = 1 the band is infinite: nothing calibrates it); with the offset per condition
+(``condition_term``) measured in bench/RESULTS.md "Issue 29: bands for a condition not seen", not the default;
 with the embedded error (kind "embedded", :mod:`identification.studies.embedded_error`: p + b at a new
 condition, b ~ N(0, Omega)) mean h(q*, p^ME) and variance g*^T (C^ME + Omega) g* [+ sigma_k^2];
 without model error (kind "none") mean h(q*, p_hat) and variance g*^T C g* [+ sigma_k^2] (the
@@ -57,12 +61,15 @@ from models.errors import NumericsError
 from models.sensitivity import sensitivities
 from models.state import solve_states
 
-__all__ = ["ErrorFit", "Band", "band_quantile", "band_logpdf", "VARIANCE_AWARE", "fit_model_error", "outputs_at", "pure_error_sigma", "CONFOUNDED_INFORMATION",
+__all__ = ["ErrorFit", "Band", "band_quantile", "band_logpdf", "VARIANCE_AWARE", "VARIANCE_AWARE_MODES", "fit_model_error", "outputs_at", "pure_error_sigma", "CONFOUNDED_INFORMATION",
            "CONFOUNDED_CORRELATION"]
 
 #: bands at a condition not seen are Student-t on the effective degrees of freedom of the estimated new-draw
-#: variance (ErrorFit.predict's ``variance_aware``); False: the normal plug-in band
+#: variance (ErrorFit.predict's ``variance_aware``: True Satterthwaite from the REML information, "conditions" on
+#: c - 1 degrees of freedom for c conditions); False: the normal plug-in band
 VARIANCE_AWARE = False
+#: the ``variance_aware`` values ErrorFit.predict accepts
+VARIANCE_AWARE_MODES = (False, True, "conditions")
 #: rounds of (REML hyperparameters at the current linearisation, generalised least squares in p)
 OUTER_ITERATIONS = 5
 #: identifiable is False when, along some direction of p, the model error leaves less than this share of the
@@ -156,12 +163,16 @@ class ErrorFit:
         return self.information_kept >= CONFOUNDED_INFORMATION or self.correlation_kept >= CONFOUNDED_CORRELATION
 
     def predict(self, inputs: np.ndarray, alpha: float, new_reading: bool, conditions: np.ndarray | None = None,
-                variance_aware: bool = VARIANCE_AWARE) -> Band:
+                variance_aware: bool | str = VARIANCE_AWARE) -> Band:
         """The (1 - alpha) band of the outputs (``new_reading``: of one new reading) at input rows (n*, d_q) in the
         conditions ``conditions`` (n*,) integer codes (None: the data's one condition; a code the fit's data do not
         hold: a condition not seen, whose discrepancy is a new draw of the process; the discrepancy only);
         ``variance_aware``: at a condition not seen, a Student-t band on the effective degrees of freedom of the
-        estimated new-draw variance (:meth:`_dof`), else the normal plug-in band."""
+        estimated new-draw variance (:meth:`_dof`; True: Satterthwaite from the REML information, "conditions": the
+        new-draw variance on c - 1 degrees of freedom, c the conditions of the fit's data), else (False) the normal
+        plug-in band."""
+        if not any(variance_aware is m or (isinstance(m, str) and variance_aware == m) for m in VARIANCE_AWARE_MODES):
+            raise ValueError(f"variance_aware: expected one of {VARIANCE_AWARE_MODES}, got {variance_aware!r}")
         h, G = outputs_at(self.model, self.p, inputs)
         sel = self.weights > 0
         spread = None
@@ -176,7 +187,7 @@ class ErrorFit:
         return self._band(mean, var, sel, alpha, "prediction", new_reading, self._dof(var, spread))
 
     def discrepancy(self, inputs: np.ndarray, alpha: float, conditions: np.ndarray | None = None,
-                    variance_aware: bool = VARIANCE_AWARE) -> Band:
+                    variance_aware: bool | str = VARIANCE_AWARE) -> Band:
         """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error) in the conditions
         ``conditions`` (as :meth:`predict`)."""
         n = np.atleast_2d(inputs).shape[0]
@@ -220,8 +231,12 @@ class ErrorFit:
             u = (G[:, k, :] if include_g else 0.0) - kx @ self.Vinv_G
             var[:, k] = prior - np.einsum("an,nm,am->a", kx, self.Vinv, kx) + np.einsum("ap,pq,aq->a", u, self.cov, u)
             if spread and codes is not None:
-                unseen = ~np.isin(codes, self.gp.obs.condition_codes(i))
-                if unseen.any():
+                seen = self.gp.obs.condition_codes(i)
+                unseen = ~np.isin(codes, seen)
+                if unseen.any() and spread == "conditions":      # a chi-square variance on c - 1 dof
+                    c = np.unique(seen).size
+                    spr[unseen, k] = 2 * prior[unseen] ** 2 / (c - 1) if c > 1 else np.inf
+                elif unseen.any():
                     spr[unseen, k] = self.gp.prior_variance_spread(i, x[unseen])
         return mean, var, spr
 
@@ -240,8 +255,10 @@ def band_quantile(alpha: float, dof: np.ndarray | None = None):
     if dof is None:
         return z
     dof = np.asarray(dof, float)
+    fin = np.isfinite(dof) & (dof > 0)
     with np.errstate(invalid="ignore"):
-        return np.where(np.isfinite(dof), stats.t.ppf(1 - alpha / 2, np.where(np.isfinite(dof), dof, 1.0)), z)
+        t = np.where(fin, stats.t.ppf(1 - alpha / 2, np.where(fin, dof, 1.0)), z)
+    return np.where(dof == 0, np.inf, t)                 # no degree of freedom: no band
 
 
 def band_logpdf(band: Band, z: np.ndarray) -> np.ndarray:
@@ -320,17 +337,23 @@ def _information_kept(Gs: np.ndarray, V: np.ndarray, Vinv: np.ndarray, noise: np
 
 def fit_model_error(model, data, p0, weights: np.ndarray, scaling: InputScaling, kind: str,
                     plain: Estimate | None = None, groups: np.ndarray | None = None,
-                    layout: ColumnLayout | None = None) -> ErrorFit:
+                    layout: ColumnLayout | None = None, condition_term: bool = False) -> ErrorFit:
     """The :class:`ErrorFit` of ``data`` (sigma known) for ``kind`` "none", "discrepancy" or "embedded": the
     plain fit, the test and the error model (REML) with the generalised least-squares refit of p.  ``plain``:
     the plain fit when already done; ``groups`` (n_q,) integer condition of every input row: of the embedded error
     (None: each row its own) and of the discrepancy (independent between conditions; None: one condition); ``layout`` the columns' instruments and coordinates (one discrepancy per instrument
-    over inputs and coordinates; None: one per column over inputs).  Raises numpy.linalg.LinAlgError when a covariance is not positive definite."""
+    over inputs and coordinates; None: one per column over inputs); ``condition_term`` the discrepancy's third
+    hyperparameter an offset per condition (omega_k^2 [g = g']) instead of the rough part (not the default, measured
+    in bench/RESULTS.md "Issue 29: bands for a condition not seen"; no ``exact_at`` pins with it).  Raises
+    numpy.linalg.LinAlgError when a covariance is not positive definite, ValueError for pins with ``condition_term``."""
+    if condition_term and scaling.pins:
+        raise ValueError("condition_term: an offset per condition cannot vanish at exact_at; give one or the other")
     est = plain if plain is not None else identify(model, data, p0, weights=weights)
     sigma = np.asarray(data.sigma, float)
-    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs), conditions=groups) if layout is None
+    obs = (Observations.of(data.counts(), sigma, weights, scaling(data.inputs), conditions=groups,
+                           condition_term=condition_term) if layout is None
            else Observations.of(data.counts(), sigma, weights, scaling(data.inputs), layout.instrument,
-                                scaling.coordinates(layout.coords), conditions=groups))
+                                scaling.coordinates(layout.coords), conditions=groups, condition_term=condition_term))
     zbar_s = obs.stack(np.nan_to_num(data.means()))
     Gs = obs.stack(np.asarray(est.G, float))
     r0 = zbar_s - obs.stack(np.asarray(est.fitted, float))

@@ -106,7 +106,11 @@ class HeldOut:
     error; ``widening_*`` the median ratio of the band widths (with / without); ``log_score_*`` the mean
     log predictive density of a reading (log of 1 / unit of z); ``n_values`` the readings counted; ``n_unseen``
     those of them at rows in a condition the calibration part has not seen
-    (:func:`identification.studies.model_error.unseen_rows`: the discrepancy predicts them as a new draw).
+    (:func:`identification.studies.model_error.unseen_rows`: the discrepancy predicts them as a new draw);
+    ``n_conditions`` the conditions the calibration part holds (the named groups among its rows; without
+    groups 1).  A band at a condition not seen rests on the discrepancy's amplitude estimated from those
+    ``n_conditions`` conditions: with one it is a plug-in from one realisation, calibrated by no assumption
+    (:attr:`unseen_from_one`; Monte Carlo: :data:`identification.studies.model_error.UNSEEN_COVERAGE_MC`).
     """
 
     split: str
@@ -120,6 +124,18 @@ class HeldOut:
     log_score_discrepancy: float
     log_score_embedded: float
     n_unseen: int = 0
+    n_conditions: int = 1
+
+    @property
+    def unseen(self) -> bool:
+        """True when some validation readings lie in a condition the calibration part has not seen."""
+        return self.n_unseen > 0
+
+    @property
+    def unseen_from_one(self) -> bool:
+        """True when the split predicts a condition not seen from a calibration part of one condition: the
+        discrepancy's band there is a plug-in from one realisation of the error, not calibrated."""
+        return self.unseen and self.n_conditions <= 1
 
     def coverage(self, kind: str) -> float:
         """The coverage of the ``kind`` ("none", "discrepancy", "embedded") bands."""
@@ -334,10 +350,15 @@ class ModelErrorResult(ResultProtocol):
             lines += [f"{e.name:<10} {e.omega:>12.4g} {e.relative:>10.3g}" for e in self.embedded]
         if self.heldout:
             lines += ["", f"held-out {100 * (1 - self.alpha):g} % new-reading bands (coverage %, median widening)",
-                      f"  {'split':<34} {'n':>4} {'plain':>6} {'discr.':>6} {'widen':>6} {'embed.':>6} {'widen':>6}"]
+                      f"  {'split':<34} {'n':>4} {'plain':>6} {'discr.':>7} {'widen':>6} {'embed.':>6} {'widen':>6} "
+                      f"{'cal. cond.':>10} {'unseen':>6}"]
             lines += [f"  {h.split:<34.34} {h.n_values:>4} {100 * h.coverage_plain:>6.1f} "
-                      f"{100 * h.coverage_discrepancy:>6.1f} {h.widening_discrepancy:>6.2f} "
-                      f"{100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f}" for h in self.heldout]
+                      f"{100 * h.coverage_discrepancy:>6.1f}{'*' if h.unseen_from_one else ' '} "
+                      f"{h.widening_discrepancy:>6.2f} {100 * h.coverage_embedded:>6.1f} {h.widening_embedded:>6.2f} "
+                      f"{h.n_conditions:>10} {h.n_unseen:>6}" for h in self.heldout]
+            if any(h.unseen_from_one for h in self.heldout):
+                lines.append("  * readings in a condition not seen, predicted from one condition: not calibrated, "
+                             "a lower bound of the error (notes)")
         if self.notes:
             lines += ["", "Notes:"] + [f"[{k}] {n}" for k, n in enumerate(self.notes, 1)]
         return "\n".join(lines)

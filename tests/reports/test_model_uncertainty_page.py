@@ -105,3 +105,26 @@ def test_the_page_says_which_sigma_the_bands_take_once():
     texts = " ".join(" ".join(page_texts(fig)).split())
     plt.close(fig)
     assert "the noise" not in texts                        # no sentence given: none drawn
+
+
+def test_the_coverage_table_marks_a_condition_not_seen_predicted_from_one_condition():
+    from identification.studies.model_error_result import HeldOut
+    from reports.model_error_pages import UNSEEN_MARK, coverage_rows, unseen_footnote
+
+    def held(name, n_unseen, n_cond):
+        return HeldOut(name, 56, 0.2, 0.964, 0.6, 3.6, 3.0, -1.0, 1.0, 0.5, n_unseen, n_cond)
+
+    class Result:
+        heldout = (held("odd vs even", 0, 1), held("loading vs unloading", 52, 1), held("days 1-4 vs 5", 28, 4))
+
+    head, rows = coverage_rows(Result)
+    assert head[-2:] == ["cal. conditions", "not seen"]
+    assert [r[3] for r in rows] == ["96.4", f"96.4 {UNSEEN_MARK}", "96.4"]
+    assert [r[-2:] for r in rows] == [[1, "-"], [1, 52], [4, 28]]
+    foot = unseen_footnote(Result)
+    assert foot.startswith(UNSEEN_MARK) and "69-76 % in Monte Carlo" in foot and "lower bound" in foot
+
+    class Calibrated:
+        heldout = (held("days 1-4 vs 5", 28, 4),)
+
+    assert unseen_footnote(Calibrated) == ""

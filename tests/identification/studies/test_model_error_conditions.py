@@ -111,6 +111,8 @@ def test_a_known_offset_of_a_condition_not_seen_is_held_by_the_new_draw_band():
     before = model_error(_model(), d, P0, splits=sp, kind="discrepancy",
                          groups=np.zeros(2 * Q.size, int)).heldout[0]      # one condition named: kriged
     assert after.n_unseen == after.n_values == 40 and before.n_unseen == 0
+    assert after.n_conditions == before.n_conditions == 1
+    assert after.unseen_from_one and not before.unseen and not before.unseen_from_one
     assert before.coverage_discrepancy < 0.2
     assert after.coverage_discrepancy >= 0.9
     assert after.widening_discrepancy > before.widening_discrepancy
@@ -120,3 +122,38 @@ def test_condition_of_the_wrong_length_is_refused():
     r = model_error(_model(), _data([0.3]), P0, kind="discrepancy")
     with pytest.raises(ValueError, match="condition"):
         r.predict(np.array([[0.5], [1.0]]), condition=["a", "b", "c"])
+
+
+def test_the_table_and_the_note_say_how_many_conditions_a_band_at_a_condition_not_seen_rests_on():
+    # three conditions; calibrated on two of them (two conditions) or on one, validated on the third
+    d = _data([0.3, -0.3, 0.1])
+    third = list(range(2 * Q.size, 3 * Q.size))
+    groups = np.repeat(["a", "b", "c"], Q.size)
+    splits = [Split("a, b vs c", FIRST + SECOND, third), Split("a vs c", FIRST, third),
+              Split("a: odd vs even", FIRST[::2], FIRST[1::2])]
+    r = model_error(_model(), d, P0, splits=splits, kind="discrepancy", groups=groups)
+    two, one, same = r.heldout
+    assert (two.n_conditions, one.n_conditions, same.n_conditions) == (2, 1, 1)
+    assert (two.n_unseen, one.n_unseen, same.n_unseen) == (40, 40, 0)
+    assert not two.unseen_from_one and one.unseen_from_one and not same.unseen
+    note = next(n for n in r.notes if n.startswith("held-out readings in a condition"))
+    assert "a, b vs c (40 of 40 readings; 2 conditions in its calibration part)" in note
+    assert "a vs c (40 of 40 readings; 1 condition in its calibration part)" in note
+    assert "a: odd vs even" not in note and "plug-in from one realisation" in note
+    assert "75.7 +- 2.6 / 84.0 +- 2.2 / 89.6 +- 1.9 %" in note and "lower bound" in note
+    frame = r.to_frame()
+    assert frame["n_conditions"].tolist() == [2, 1, 1] and frame["n_unseen"].tolist() == [40, 40, 0]
+    text = r.summary()
+    assert "cal. cond." in text and "* readings in a condition not seen, predicted from one condition" in text
+    row = next(line for line in text.splitlines() if line.strip().startswith("a vs c"))
+    assert "*" in row
+
+
+def test_no_plug_in_sentence_when_every_calibration_part_holds_several_conditions():
+    d = _data([0.3, -0.3, 0.1])
+    groups = np.repeat(["a", "b", "c"], Q.size)
+    sp = Split("a, b vs c", FIRST + SECOND, list(range(2 * Q.size, 3 * Q.size)))
+    r = model_error(_model(), d, P0, splits=sp, kind="discrepancy", groups=groups)
+    note = next(n for n in r.notes if n.startswith("held-out readings in a condition"))
+    assert "2 conditions in its calibration part" in note and "plug-in from one realisation" not in note
+    assert "*" not in r.summary().split("held-out")[1].split("Notes:")[0]
