@@ -14,6 +14,7 @@ before/after table comes from one run::
     python -m bench.bench_study_speed                         # this tree: detect, report, validate
     python -m bench.bench_study_speed --commands detect --trees /tmp/base,.
     python -m bench.bench_study_speed --runs 20 --workers 1   # validate's replications and workers
+    python -m bench.bench_study_speed --commands report --trees /tmp/base,. --repeat 2   # A B A B
 
 Prints a markdown table (one row per tree, command and config).
 """
@@ -66,6 +67,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", type=int, default=20, help="validate: replications (default 20)")
     ap.add_argument("--workers", type=int, default=1, help="validate: local workers (default 1)")
     ap.add_argument("--keep", default=None, help="keep every command's output under this folder")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="run the trees this many times, interleaved (A B A B ...; default 1)")
     args = ap.parse_args(argv)
     commands = [c for c in args.commands.split(",") if c]
     bad = [c for c in commands if c not in COMMANDS]
@@ -80,8 +83,10 @@ def main(argv: list[str] | None = None) -> None:
           f"--workers {args.workers}; {threads}")
     print("| tree | command | config | wall s | CPU s | load | CPU / reactor's |")
     print("|---|---|---|---|---|---|---|")
+    if args.repeat < 1:
+        raise SystemExit(f"bench_study_speed: --repeat: need at least 1, got {args.repeat}")
     for command in commands:
-        for tree in trees:
+        for tree in trees * args.repeat:
             keep = None if args.keep is None else Path(args.keep)
             got = {c: run_command(tree, command, c, args.runs, args.workers, keep) for c in configs}
             ref = got.get("reactor")
