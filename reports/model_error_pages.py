@@ -320,7 +320,7 @@ def model_uncertainty_page(results):
     for (r, _), cell in ax.tables[0].get_celld().items():       # rows of two lines (test, a long "where")
         if r > 0 and heights[r - 1] > 1:
             cell.set_height(cell.get_height() * heights[r - 1])
-    fig.canvas.draw()
+    # the table lays itself out in get_window_extent: no draw of the whole page needed
     bottom = ax.tables[0].get_window_extent().transformed(fig.transFigure.inverted()).y0
     text = "\n\n".join(_variant_text(v.summary) for v in views)
     lines = _text(fig, 0.04, bottom - 0.03, text, width=180, size=8)
