@@ -171,8 +171,7 @@ class ErrorFit:
         estimated new-draw variance (:meth:`_dof`; True: Satterthwaite from the REML information, "conditions": the
         new-draw variance on c - 1 degrees of freedom, c the conditions of the fit's data), else (False) the normal
         plug-in band."""
-        if not any(variance_aware is m or (isinstance(m, str) and variance_aware == m) for m in VARIANCE_AWARE_MODES):
-            raise ValueError(f"variance_aware: expected one of {VARIANCE_AWARE_MODES}, got {variance_aware!r}")
+        _check_variance_aware(variance_aware)
         h, G = outputs_at(self.model, self.p, inputs)
         sel = self.weights > 0
         spread = None
@@ -190,6 +189,7 @@ class ErrorFit:
                     variance_aware: bool | str = VARIANCE_AWARE) -> Band:
         """The (1 - alpha) band of the discrepancy delta(q*) (zero without model error) in the conditions
         ``conditions`` (as :meth:`predict`)."""
+        _check_variance_aware(variance_aware)
         n = np.atleast_2d(inputs).shape[0]
         sel = self.weights > 0
         if self.embedded is not None:
@@ -246,6 +246,13 @@ class ErrorFit:
         half = c * np.sqrt(np.where(sel, var, np.nan))
         return Band(mean, mean - half, mean + half, alpha, tuple(self.plain.sensors), what, new_reading,
                     dof=None if dof is None else np.where(sel, dof, np.nan))
+
+
+def _check_variance_aware(variance_aware) -> None:
+    """Raise ValueError naming ``variance_aware`` unless it is one of :data:`VARIANCE_AWARE_MODES` (False and True by
+    identity, so that a truthy typo such as "condition" is refused instead of taken as True)."""
+    if not any(variance_aware is m or (isinstance(m, str) and variance_aware == m) for m in VARIANCE_AWARE_MODES):
+        raise ValueError(f"variance_aware: expected one of {VARIANCE_AWARE_MODES}, got {variance_aware!r}")
 
 
 def band_quantile(alpha: float, dof: np.ndarray | None = None):

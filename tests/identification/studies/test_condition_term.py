@@ -141,3 +141,5 @@ def test_the_band_on_c_minus_1_dof_at_a_condition_not_seen():
     assert np.all(np.isinf(b1.upper)) and np.all(b1.dof == 0)    # one condition: nothing calibrates a band
     with pytest.raises(ValueError, match="variance_aware"):
         f.predict(q, 0.05, True, conditions=codes, variance_aware="c-1")
+    with pytest.raises(ValueError, match="variance_aware: expected one of"):      # a truthy typo is no True
+        f.discrepancy(q, 0.05, conditions=codes, variance_aware="condition")
