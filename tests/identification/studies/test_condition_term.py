@@ -61,7 +61,7 @@ def test_the_reml_gradient_and_information_are_exact_with_the_offset_term():
     V = GPFit(th, obs, (), 0.0, True).covariance()
     Vi = np.linalg.inv(V)
     P = Vi - Vi @ G @ np.linalg.inv(G.T @ Vi @ G) @ G.T @ Vi
-    dense, n = [], obs.sizes
+    dense = []
     for i in range(2):
         for k in range(3):
             e = np.zeros(6)
