@@ -50,7 +50,7 @@ from .robust_inputs import robust_exact_inputs
 from . import refine_child
 
 __all__ = ["InputDesignResult", "RefinedInputs", "RefineSettings", "select_inputs", "refine_inputs",
-           "input_information", "dynamic_input_information", "select_dynamic_inputs"]
+           "input_information", "dynamic_input_information", "select_dynamic_inputs", "time_limit_notes"]
 
 
 @dataclass(frozen=True)
@@ -375,7 +375,7 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
                                 n_series=n_series, bounds=bounds if bounds is not None else (Q.min(0), Q.max(0)),
                                 settings=refine_settings,
                                 time_limit=max(time_limit - (time.perf_counter() - t0), 0.05 * time_limit))
-        notes += _time_limit_notes(refined, time_limit)
+        notes += time_limit_notes(refined, time_limit)
     notes += problem.notes()
     if refined is not None and problem.controlled:
         refined, note = _controlled_refinement(problem, p, refined, (sigma, sensors, n_series),
@@ -388,9 +388,22 @@ def select_inputs(model, p, *, candidates, sigma, n_points=None, sensors=None, c
                              chosen=res.chosen)
 
 
-def _time_limit_notes(refined: RefinedInputs, time_limit: float) -> list:
+def time_limit_notes(refined: RefinedInputs, time_limit: float) -> list:
     """The note on a refinement that the time limit stopped (none when every start finished): the exact design's
-    levels kept, or the best point reached returned (a Newton run or Ipopt's ``Maximum_WallTime_Exceeded``)."""
+    levels kept, or the best point reached returned (a Newton run or Ipopt's ``Maximum_WallTime_Exceeded``).
+
+    Parameters
+    ----------
+    refined : RefinedInputs
+        The refinement (:func:`refine_inputs`), read through its ``messages`` and ``n_failed``.
+    time_limit : float
+        The limit it ran under (s), quoted in the note.
+
+    Returns
+    -------
+    list of str
+        One note (the notes of :func:`select_inputs`), or none.
+    """
     timed = [("time limit" in msg or "WallTime" in msg) for msg in refined.messages]
     if refined.n_failed and all(msg.startswith("not finished: time limit") for msg in refined.messages):
         return [f"refinement {refined.messages[0]}: the refined design is the exact design's levels "

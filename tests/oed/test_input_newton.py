@@ -123,7 +123,7 @@ def test_bad_settings_name_the_argument(kw, match):
 def test_time_limit_notes_name_what_was_returned():
     # Ipopt's wall-time stop on every start (the motor under load before session 13: no note then), a Newton run
     # stopped with its best point, a finished refinement
-    from oed.inputs import RefinedInputs, _time_limit_notes
+    from oed.inputs import RefinedInputs, time_limit_notes
 
     def refined(values, messages):
         return RefinedInputs(inputs=np.zeros((1, 2)), value=1.0, start_values=tuple(values),
@@ -131,12 +131,12 @@ def test_time_limit_notes_name_what_was_returned():
                              lower=np.zeros(2), upper=np.ones(2), wall_time=0.0)
 
     wall = "Ipopt failed on the input refinement: Maximum_WallTime_Exceeded"
-    assert _time_limit_notes(refined([np.inf] * 2, [wall] * 2), 60.0)[0].startswith(
+    assert time_limit_notes(refined([np.inf] * 2, [wall] * 2), 60.0)[0].startswith(
         "refinement not finished: every start stopped by the time limit (60 s)")
     stopped = "stopped by the time limit after 3 Newton iterations: the best point so far is kept (not converged)"
-    assert _time_limit_notes(refined([1.0, 2.0], ["converged (3 Newton iterations)", stopped]), 5.0)[0].startswith(
+    assert time_limit_notes(refined([1.0, 2.0], ["converged (3 Newton iterations)", stopped]), 5.0)[0].startswith(
         "refinement stopped by the time limit (5 s) before every start converged: the refined design is the best")
-    assert _time_limit_notes(refined([1.0], ["converged (3 Newton iterations)"]), 5.0) == []
+    assert time_limit_notes(refined([1.0], ["converged (3 Newton iterations)"]), 5.0) == []
 
 
 @pytest.mark.parametrize("symbolic", ["SX", "MX"])
