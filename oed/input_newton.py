@@ -251,10 +251,36 @@ def _direction(g, H, free, radius: float):
 
 def newton_refine(model, p, parts: ReducedParts, U0, box, crit: Criterion, *, tol: float = 1e-9,
                   max_iter: int = 100, deadline: float = np.inf) -> NewtonOutcome:
-    """The projected Newton of the module docstring from the scaled rows U0 (n_pts, d) in [0, ub];
-    ``box`` = (lo, span, ub) with q = lo + span * u.  Past ``deadline`` (a ``time.perf_counter()`` value, checked
-    before each iteration) it stops and returns the best point reached so far (every point is a design within
-    the bounds), not converged, saying so."""
+    r"""u* = argmin over 0 <= u <= ub of phi(u) = Psi(sum_i Mt_i(u_i, w_i(u_i))) (the criterion of the scaled
+    information, dimensionless; u the scaled inputs, q = lo + span * u in the inputs' units) by the projected Newton
+    of the module docstring, from the scaled rows U0.
+
+    Parameters
+    ----------
+    model, p
+        The model and its parameters (those of ``parts``).
+    parts : ReducedParts
+        :func:`oed.input_nlp.reduced_parts` of the same p, weights, bounds and criterion.
+    U0 : ndarray (n_pts, d)
+        The start: scaled inputs in [0, ub] (clipped onto it).
+    box : tuple
+        (lo, span, ub) with q = lo + span * u; ub (d,) is 1, or 0 for an input whose bounds are equal.
+    crit : Criterion
+        D or A.
+    tol : float
+        Converged when the largest entry of the projected gradient is below ``tol`` x max(1, |phi|).
+    max_iter : int
+        Newton iterations at most.
+    deadline : float
+        A ``time.perf_counter()`` value (s), checked before each iteration: past it the run stops and returns the
+        best point reached so far (every point is a design within the bounds), not converged, saying so.
+
+    Returns
+    -------
+    NewtonOutcome
+        The rows reached, phi there (inf without a state solution at the start), whether it converged, the
+        iterations and why it stopped.
+    """
     lo, span, ub = box
     n_pts, d = np.shape(U0)
     u = np.clip(np.asarray(U0, float).ravel(), 0.0, np.tile(ub, n_pts))
