@@ -99,7 +99,8 @@ class RefineSettings:
     def __post_init__(self):
         if self.method not in ("auto", "newton", "ipopt"):
             raise ValueError(f"method: expected 'auto', 'newton' or 'ipopt', got {self.method!r}")
-        if not (isinstance(self.newton_tol, (int, float)) and self.newton_tol > 0):
+        if (isinstance(self.newton_tol, bool) or not isinstance(self.newton_tol, (int, float))
+                or not 0 < self.newton_tol < np.inf):
             raise ValueError(f"newton_tol: expected a positive number, got {self.newton_tol!r}")
         if isinstance(self.max_newton, bool) or not isinstance(self.max_newton, (int, np.integer)) or self.max_newton < 1:
             raise ValueError(f"max_newton: expected an integer >= 1, got {self.max_newton!r}")

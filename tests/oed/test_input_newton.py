@@ -114,6 +114,8 @@ def test_build_past_its_deadline_keeps_the_start():
 
 @pytest.mark.parametrize("kw, match", [(dict(method="bfgs"), "method: expected"),
                                        (dict(newton_tol=0.0), "newton_tol: expected"),
+                                       (dict(newton_tol=True), "newton_tol: expected"),
+                                       (dict(newton_tol=float("inf")), "newton_tol: expected"),
                                        (dict(max_newton=0), "max_newton: expected")])
 def test_bad_settings_name_the_argument(kw, match):
     with pytest.raises(ValueError, match=match):
