@@ -49,7 +49,7 @@ from models.state import solve_states
 from .criteria import Criterion
 from .input_nlp import ReducedParts, variable_scale
 
-__all__ = ["NewtonOutcome", "newton_refine", "criterion_value", "reduced_point"]
+__all__ = ["NewtonOutcome", "newton_refine", "information_value", "reduced_point"]
 
 #: Armijo's sufficient-decrease fraction and the number of step halvings before a step is refused
 ARMIJO = 1e-4
@@ -74,7 +74,7 @@ class NewtonOutcome:
     message: str
 
 
-def criterion_value(crit: Criterion, M) -> float:
+def information_value(crit: Criterion, M) -> float:
     """Psi(M^-1) evaluated exactly from the eigenvalues of M (D: log det C = -log det M); inf when M is singular."""
     ev = np.linalg.eigvalsh(0.5 * (M + M.T))
     if ev[0] <= 0:
@@ -231,7 +231,7 @@ def reduced_point(model, p, parts: ReducedParts, U, box, crit: Criterion):
     num = _numerics(parts)
     rows = _Rows(model, p, parts, num, U, box)
     g, H = _derivatives(num, rows, (U.shape[1], model.n_y, model.n_p))
-    return criterion_value(crit, rows.M), g, H
+    return information_value(crit, rows.M), g, H
 
 
 def _direction(g, H, free, radius: float):
@@ -290,7 +290,7 @@ def newton_refine(model, p, parts: ReducedParts, U0, box, crit: Criterion, *, to
         cur = _Rows(model, p, parts, num, u.reshape(n_pts, d), (lo, span))
     except StateSolveError as exc:
         return NewtonOutcome(u.reshape(n_pts, d), np.inf, False, 0, f"no state solution at the start ({exc})")
-    f = criterion_value(crit, cur.M)
+    f = information_value(crit, cur.M)
     if not np.isfinite(f):
         return NewtonOutcome(u.reshape(n_pts, d), np.inf, False, 0, "singular information at the start")
     radius = START_RADIUS
@@ -319,7 +319,7 @@ def newton_refine(model, p, parts: ReducedParts, U0, box, crit: Criterion, *, to
             un = np.clip(u + step, 0.0, ubx)
             try:
                 trial = _Rows(model, p, parts, num, un.reshape(n_pts, d), (lo, span))
-                fn = criterion_value(crit, trial.M)
+                fn = information_value(crit, trial.M)
             except StateSolveError:
                 fn = np.inf
             if np.isfinite(fn) and fn <= f + ARMIJO * float(g @ (un - u)):

@@ -44,7 +44,7 @@ from .criteria import DEFAULT_CRITERION, Criterion, Kind
 from .design import DesignResult, DesignSettings, select_sensors_from_information
 from .candidate_information import (InputProblem, candidate_rows, check_candidates, check_p, check_sigma, information,
                           input_problem, measured_sensors, row_information)
-from .input_newton import criterion_value, newton_refine
+from .input_newton import information_value, newton_refine
 from .input_nlp import BuildTimeout, information_nlp, reduced_parts
 from .robust_inputs import robust_exact_inputs
 from . import refine_child
@@ -704,5 +704,5 @@ def _one_start(model, p, nlp, Xs, box, crit, var_bounds, ipopt, key):
 
 
 def _value(crit: Criterion, M) -> float:
-    """Psi(M^-1) evaluated exactly (D: log det C); inf when M is singular (:func:`oed.input_newton.criterion_value`)."""
-    return criterion_value(crit, M)
+    """Psi(M^-1) evaluated exactly (D: log det C); inf when M is singular (:func:`oed.input_newton.information_value`)."""
+    return information_value(crit, M)
