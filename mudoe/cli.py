@@ -277,12 +277,6 @@ def _identify(study, results, args, progress, out) -> int:
     return EXIT_OK
 
 
-def _oed_text(results) -> str:
-    from reports.tables import oed_table_text
-    from .report_record import study_record
-    return oed_table_text(study_record(results))
-
-
 def _oed_planned(cfg, args, progress, out, t0) -> int:
     """``[oed] planned = true``: the design before data (no data read), oed.json / oed.txt."""
     from reports.serialize import dumps

@@ -80,7 +80,7 @@ from scipy.stats import qmc
 
 from models.state import jit_enabled, simulate
 from identification import cluster
-from identification.errors import DataError, IdentificationError
+from identification.errors import IdentificationError
 from identification.fit.record import FitRecord
 from identification.fit.start import checked_start, param_scale
 from identification.replicate import ReplicationTask, replicate
