@@ -25,8 +25,6 @@ algebraic states): index-1 DAEs march in :mod:`models.dae_march` (the same schem
 """
 from __future__ import annotations
 
-import threading
-from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
@@ -36,25 +34,18 @@ from .batched import batched_function
 from .block_solve import MAX_COMPILED_SIZE, accepted, pivot_order, solve_blocks, solved_function
 from .element_march import march, march_failure, march_symbolic
 from .element_rescue import RESIDUAL_TOL, element_failures, rescue_elements
+from .merged_calls import current_broker
 from .sensitivity import Sensitivities
 from .state import JIT, numerics, solve_states_generic
 
-__all__ = ["TrajectoryNumerics", "trajectory_numerics", "run_merged", "interpolate_states",
+__all__ = ["TrajectoryNumerics", "trajectory_numerics", "interpolate_states",
            "element_failures", "output_functions", "RESIDUAL_TOL", "output_sensitivity_function", "mapped_outputs",
-           "outputs_and_sensitivities", "merging", "REFINED_RESIDUAL_TOL"]
+           "outputs_and_sensitivities", "REFINED_RESIDUAL_TOL"]
 
-#: the broker of this thread's member fit in :func:`run_merged` (None outside one)
-_LOCAL = threading.local()
 
 #: Newton iterations per element before the element counts as failed (CasADi's rootfinder of
 #: :meth:`models.collocation.CollocatedModel.element_functions` allows the same)
 _MAX_ITER = 60
-
-
-def merging() -> bool:
-    """True inside one fit of :func:`run_merged` (this thread's trajectory evaluations are merged with other
-    fits': their numbers depend on the merged batch, so a value computed outside it is not reused inside)."""
-    return getattr(_LOCAL, "broker", None) is not None
 
 
 def _params(p, n: int) -> np.ndarray:
@@ -173,7 +164,7 @@ class TrajectoryNumerics:
     reduced_space : bool    True: the states are solved to round-off for any number of experiments, so a
                             fit stays in the reduced space (no NLP, no state scalings)
     merges_fits : bool      True: batched fits run every member's fit with their evaluations merged
-                            (:func:`run_merged`)
+                            (:func:`models.merged_calls.run_merged`)
     """
 
     reduced_space = True
@@ -253,7 +244,7 @@ class TrajectoryNumerics:
         distance delta the step leaves O(delta^2), and the residual test bounds what is left); else Newton to
         convergence as :meth:`integrated_outputs`."""
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        if getattr(_LOCAL, "broker", None) is not None:
+        if current_broker() is not None:
             return self.integrated_outputs(p, inputs, guess)
         n, N = inputs.shape[0], self.N
         pv = _params(p, n)
@@ -301,7 +292,7 @@ class TrajectoryNumerics:
         Raises StateSolveError naming the experiment and the element where Newton fails (the
         trajectory blows up or is too stiff for the element)."""
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        broker = getattr(_LOCAL, "broker", None)
+        broker = current_broker()
         if broker is not None:
             return broker.call(self, "states", p, inputs, guess)
         return self._states(_params(p, inputs.shape[0]), inputs, guess)
@@ -431,9 +422,9 @@ class TrajectoryNumerics:
         before its step, which is |dy| <= 1e-12 (1 + |y|), so y'(p) differs from the sweep's at the
         converged states (:meth:`sensitivities`) by O(1e-12) relative: one mapped evaluation and one
         batched solve fewer per point.  None when Newton does not converge from ``guess`` (or inside
-        :func:`run_merged`, whose evaluations are merged call by call): the caller then solves the
+        :func:`models.merged_calls.run_merged`, whose evaluations are merged call by call): the caller then solves the
         states and sweeps as usual."""
-        if getattr(_LOCAL, "broker", None) is not None or guess is None:
+        if current_broker() is not None or guess is None:
             return None
         inputs = np.atleast_2d(np.asarray(inputs, float))
         p = _params(p, inputs.shape[0])
@@ -499,7 +490,7 @@ class TrajectoryNumerics:
     def sweep(self, p, inputs, Y):
         """(y'(p) (n_q, n_y, n_p), R_V (n_q, N, n_x d, n_x d), R_x0 (n_q, N, n_x d, n_x)) at the states Y."""
         inputs = np.atleast_2d(np.asarray(inputs, float))
-        broker = getattr(_LOCAL, "broker", None)
+        broker = current_broker()
         if broker is not None:
             return broker.call(self, "sweep", p, inputs, np.asarray(Y, float))
         return self._sweep(_params(p, inputs.shape[0]), inputs, np.asarray(Y, float))
@@ -527,7 +518,7 @@ class TrajectoryNumerics:
 
     def hessians(self, p, inputs, Y, yp, RV, Rx, lam) -> np.ndarray:
         """See :meth:`hessian_terms`: their sum over the experiments, shape (m, n_p, n_p)."""
-        broker = getattr(_LOCAL, "broker", None)
+        broker = current_broker()
         if broker is not None:
             return broker.call(self, "hessians", p, inputs, Y, yp, RV, Rx, lam)
         return self.hessian_terms(_params(p, inputs.shape[0]), inputs, Y, yp, RV, Rx, lam).sum(axis=1)
@@ -593,7 +584,7 @@ class TrajectoryNumerics:
 
     def outputs_and_sensitivities(self, p, inputs, Y, Yp):
         """(h (n_q, n_S), G (n_q, n_S, n_p)) from the states and their derivatives."""
-        broker = getattr(_LOCAL, "broker", None)
+        broker = current_broker()
         if broker is not None:
             return broker.call(self, "outputs_and_sensitivities", p, inputs, Y, Yp)
         return self._outputs_and_sensitivities(p, inputs, Y, Yp)
@@ -611,6 +602,46 @@ class TrajectoryNumerics:
         Y = self.states(p, inputs) if Y is None else Y
         return _mapped_call(self._maps, self.h_only, inputs.shape[0], [Y, _params(p, inputs.shape[0]), inputs])[0][:, :, 0]
 
+    # ------------------------------------------------------------------ merged calls (models.merged_calls)
+    def merge_key(self, kind: str, rest: tuple) -> int:
+        """Calls of one kind merge when this key agrees too: the number of multiplier sets of a Hessian call."""
+        return int(np.shape(rest[-1])[0]) if kind == "hessians" else 0
+
+    def evaluate_one(self, kind: str, p, inputs, rest: tuple):
+        """One task's call ``kind`` evaluated alone (a merged evaluation failed: each error to its own task)."""
+        n = inputs.shape[0]
+        if kind == "states":
+            return self._states(_params(p, n), inputs, rest[0])
+        if kind == "sweep":
+            return self._sweep(_params(p, n), inputs, *rest)
+        if kind == "outputs_and_sensitivities":
+            return self._outputs_and_sensitivities(p, inputs, *rest)
+        return self.hessian_terms(_params(p, n), inputs, *rest).sum(axis=1)
+
+    def evaluate_merged(self, kind: str, calls) -> list:
+        """The pending calls of one kind (:class:`models.merged_calls.PendingCall`) evaluated together, every
+        experiment at its own call's p; each call's rows back, in order."""
+        sizes = [c.inputs.shape[0] for c in calls]
+        n_p = self.model.n_p
+        P = np.concatenate([np.broadcast_to(_params(c.p, n), (n, n_p)) for c, n in zip(calls, sizes)])
+        Q = np.concatenate([c.inputs for c in calls])
+        if kind == "states":
+            guesses = [c.rest[0] for c in calls]
+            guess = None if any(g is None for g in guesses) else np.concatenate(guesses)
+            return _split(self._states(P, Q, guess), sizes)
+        if kind == "sweep":
+            outs = self._sweep(P, Q, np.concatenate([c.rest[0] for c in calls]))
+            return list(zip(*(_split(o, sizes) for o in outs)))
+        if kind == "outputs_and_sensitivities":
+            outs = self._outputs_and_sensitivities(P, Q, *(np.concatenate([c.rest[i] for c in calls])
+                                                           for i in range(2)))
+            return list(zip(*(_split(o, sizes) for o in outs)))
+        Y, yp, RV, Rx = (np.concatenate([c.rest[i] for c in calls]) for i in range(4))
+        lam = np.concatenate([c.rest[4] for c in calls], axis=1)
+        terms = self.hessian_terms(P, Q, Y, yp, RV, Rx, lam)          # (m, n, n_p, n_p)
+        return [t.sum(axis=1) for t in np.split(terms, np.cumsum(sizes)[:-1], axis=1)]
+
+
 
 def trajectory_numerics(cm) -> TrajectoryNumerics | None:
     """The :class:`TrajectoryNumerics` of a collocated model (kept in its cache), or None for a model
@@ -626,134 +657,6 @@ def trajectory_numerics(cm) -> TrajectoryNumerics | None:
 
 def _split(a: np.ndarray, sizes) -> list:
     return np.split(a, np.cumsum(sizes)[:-1], axis=0)
-
-
-class _Broker:
-    """Merges the trajectory evaluations of the threads of :func:`run_merged`: a thread's call waits
-    until every running thread has one pending (or has finished); the calls are then evaluated
-    together, kind by kind, with each experiment at its own thread's p (one set of mapped calls and
-    batched solves for all), and each thread gets its own rows back.  A merged evaluation that fails
-    (a state solve of one thread's p) is redone thread by thread, so that the error reaches its own
-    thread only."""
-
-    def __init__(self, n_running: int):
-        self._cv = threading.Condition(threading.RLock())
-        self._running = n_running
-        self._pending = []
-
-    @property
-    def turn(self):
-        """The lock a task of :func:`run_merged` holds while it runs (released while it waits here)."""
-        return self._cv
-
-    def call(self, traj: "TrajectoryNumerics", kind: str, p, inputs, *rest):
-        slot = {}
-        with self._cv:
-            self._pending.append((traj, kind, p, inputs, rest, slot))
-            self._flush_if_ready()
-            while "out" not in slot and "error" not in slot:
-                self._cv.wait()
-        if "error" in slot:
-            raise slot["error"]
-        return slot["out"]
-
-    def finished(self) -> None:
-        with self._cv:
-            self._running -= 1
-            self._flush_if_ready()
-
-    def _flush_if_ready(self) -> None:
-        if not self._pending or len(self._pending) < self._running:
-            return
-        pending, self._pending = self._pending, []
-        groups = {}
-        for item in pending:
-            groups.setdefault((id(item[0]), item[1], _lam_sets(item)), []).append(item)
-        for items in groups.values():
-            try:
-                outs = _merged(items)
-            except Exception:                    # noqa: BLE001 - redone one by one: each error to its own thread
-                outs = None
-            for i, item in enumerate(items):
-                slot = item[5]
-                if outs is not None:
-                    slot["out"] = outs[i]
-                    continue
-                try:
-                    slot["out"] = _direct(*item[:5])
-                except Exception as exc:         # noqa: BLE001 - re-raised in the calling thread
-                    slot["error"] = exc
-        self._cv.notify_all()
-
-
-def _lam_sets(item) -> int:
-    return int(np.shape(item[4][-1])[0]) if item[1] == "hessians" else 0
-
-
-def _direct(traj, kind, p, inputs, rest):
-    n = inputs.shape[0]
-    if kind == "states":
-        return traj._states(_params(p, n), inputs, rest[0])
-    if kind == "sweep":
-        return traj._sweep(_params(p, n), inputs, *rest)
-    if kind == "outputs_and_sensitivities":
-        return traj._outputs_and_sensitivities(p, inputs, *rest)
-    return traj.hessian_terms(_params(p, n), inputs, *rest).sum(axis=1)
-
-
-def _merged(items) -> list:
-    """The calls of one kind evaluated together (see :class:`_Broker`)."""
-    traj, kind = items[0][0], items[0][1]
-    sizes = [it[3].shape[0] for it in items]
-    n_p = traj.model.n_p
-    P = np.concatenate([np.broadcast_to(_params(it[2], n), (n, n_p)) for it, n in zip(items, sizes)])
-    Q = np.concatenate([it[3] for it in items])
-    if kind == "states":
-        guesses = [it[4][0] for it in items]
-        guess = None if any(g is None for g in guesses) else np.concatenate(guesses)
-        return _split(traj._states(P, Q, guess), sizes)
-    if kind == "sweep":
-        outs = traj._sweep(P, Q, np.concatenate([it[4][0] for it in items]))
-        return list(zip(*(_split(o, sizes) for o in outs)))
-    if kind == "outputs_and_sensitivities":
-        outs = traj._outputs_and_sensitivities(P, Q, *(np.concatenate([it[4][i] for it in items]) for i in range(2)))
-        return list(zip(*(_split(o, sizes) for o in outs)))
-    Y, yp, RV, Rx = (np.concatenate([it[4][i] for it in items]) for i in range(4))
-    lam = np.concatenate([it[4][4] for it in items], axis=1)
-    terms = traj.hessian_terms(P, Q, Y, yp, RV, Rx, lam)          # (m, n, n_p, n_p)
-    return [t.sum(axis=1) for t in np.split(terms, np.cumsum(sizes)[:-1], axis=1)]
-
-
-def run_merged(tasks: Sequence[Callable[[], object]]) -> list:
-    """Run the tasks (e.g. one fit of a collocated model per data set) each in its own thread, with
-    their evaluations of :class:`TrajectoryNumerics` merged (see :class:`_Broker`): the same
-    computations as running them one after the other, with one set of mapped CasADi calls and
-    batched solves per step for all of them.  Returns each task's result, or the exception it raised."""
-    broker = _Broker(len(tasks))
-    results = [None] * len(tasks)
-
-    def run(i):
-        _LOCAL.broker = broker
-        # One thread runs at a time: a task holds the broker's (re-entrant) lock from start to end and
-        # gives it up only while it waits in Broker.call for the merged evaluation.  CasADi is not
-        # thread-safe (building a Function or an Ipopt solver, or calling one, from two threads at
-        # once crashed the process: exit 139/134 in validate on a collocated model), and the merge
-        # needs no concurrency, only a pending call of every running task.
-        with broker.turn:
-            try:
-                results[i] = tasks[i]()
-            except Exception as exc:             # noqa: BLE001 - handed back to the caller as the task's result
-                results[i] = exc
-            finally:
-                _LOCAL.broker = None
-                broker.finished()
-
-    threads = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(tasks))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return results
 
 
 def interpolate_states(coarse, fine, Y) -> np.ndarray:

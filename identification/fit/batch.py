@@ -77,7 +77,7 @@ import numpy as np
 
 from models.contract import Model
 from models.state import numerics, solve_states
-from models.trajectory import run_merged
+from models.merged_calls import run_merged
 from identification.errors import DataError, IdentificationError, StateSolveError
 from identification.fit.assembly import sigma_rescaling
 from identification.fit.batch_data import (LEFT_BOUNDS, BatchData, BatchFit, BatchMember, BatchSettings,
@@ -388,7 +388,7 @@ class _BatchRun:
 # derivatives element by element for all experiments at once.  Here every member is fitted by
 # :func:`identification.identify` itself (reduced-space Newton on the trajectories, its checks,
 # refinement and covariance) in its own thread, and the members' trajectory evaluations are merged
-# (:func:`models.trajectory.run_merged`): each step evaluates all members' experiments, each at its
+# (:func:`models.merged_calls.run_merged`): each step evaluates all members' experiments, each at its
 # own member's p, in one set of mapped CasADi calls and batched LAPACK solves.  The estimates are
 # identify's (the same computations, to round-off).
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from models.errors import StateSolveError
 from models.state import numerics
-from models.trajectory import merging
+from models.merged_calls import merging
 from identification.fit import dense
 from identification.fit import newton as newton_core
 from identification.fit.explicit_kernel import ExplicitTerms, explicit_terms

@@ -12,6 +12,7 @@ from identification import DynamicMeasurements, IdentifySettings, identify
 from identification.fit.dynamic_fit import simulate_campaign
 from models import Model
 from models.collocation import collocate
+from models.merged_calls import run_merged
 from models.state import numerics, solve_state
 from models.trajectory import trajectory_numerics
 from mudoe.example_reactor import P_TRUE, TIMES, build
@@ -181,7 +182,7 @@ def test_fused_newton_sensitivities_equal_the_separate_sweep():
         assert np.abs(sens.h - hg).max() <= 1e-12 and np.abs(sens.G - Gg).max() <= 1e-10 * np.abs(Gg).max()
     assert traj.states_and_sensitivities(P, Q, None) is None
     assert traj.states_and_sensitivities(P, Q, np.full_like(Yg, np.nan)) is None
-    assert trajectory.run_merged([lambda: traj.states_and_sensitivities(P, Q, Yg)]) == [None]
+    assert run_merged([lambda: traj.states_and_sensitivities(P, Q, Yg)]) == [None]
 
 
 def test_halved_mesh_outputs_by_one_newton_step_equal_the_converged_ones():

@@ -74,7 +74,7 @@ print(json.dumps(np.asarray(r.alpha_lr).tolist()))
 
 def test_merged_batch_fits_of_a_collocated_model_run_and_equal_the_per_fit_path(campaign):
     """The batch engine fits a collocated model's members in threads with merged evaluations
-    (models.trajectory.run_merged).  Two threads in CasADi at once crashed the interpreter (exit 139 in
+    (models.merged_calls.run_merged).  Two threads in CasADi at once crashed the interpreter (exit 139 in
     4 of 4 runs of this script); one thread now runs at a time.  In a subprocess, so a crash fails the test."""
     import json
     import os
