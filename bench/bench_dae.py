@@ -29,13 +29,8 @@ TIMES = np.linspace(0.25, 3.0, 12)
 
 
 def equilibrium():
-    from models import Model
-    return Model.ode(["k1", "k2", "K"], ["cA", "cS"], ["cA0"], ["cA", "cB", "cC"],
-                     rhs=lambda x, z, p, u: ca.vertcat(-p[0] * x[0] + u[1], p[0] * x[0] - p[1] * z[0]),
-                     alg=lambda x, z, p, u: ca.vertcat(z[0] + z[1] - x[1], z[1] - p[2] * z[0] ** 2),
-                     algebraic=["cB", "cC"], x0=lambda p, u: ca.vertcat(u[0], 0.0),
-                     h=lambda x, z, p, u: ca.vertcat(x[0], z[0], z[1]),
-                     controls={"feed": {"grid": [0.0, 1.0, 2.0]}}, horizon=3.0, name="equilibrium DAE (bench)")
+    from models.library import equilibrium_dae
+    return equilibrium_dae(name="equilibrium DAE (bench)")
 
 
 def toy():

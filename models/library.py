@@ -6,7 +6,7 @@ import numpy as np
 
 from .contract import Model, Parameter
 
-__all__ = ["spring_chain", "linear_model", "two_bar_truss"]
+__all__ = ["spring_chain", "linear_model", "two_bar_truss", "equilibrium_dae"]
 
 
 def spring_chain(n_y: int = 30, n_sensors: int = 4, n_groups: int = 1) -> Model:
@@ -80,3 +80,22 @@ def two_bar_truss(name: str = "two-bar truss", sensors: tuple = ("P_x", "P_y")) 
                     MechParameter("k2", 300.0, 1.0, 1e5, 300.0, "N/mm")],
         inputs=("F",), sensors=tuple(sensors))
     return build_model(mech, unknowns=("k1", "k2"), name=name)
+
+
+def equilibrium_dae(name: str = "dynamic model"):
+    r"""An index-1 DAE: A -> S (k1), S = B + C in fast equilibrium C = K B^2, B consumed (k2).
+
+    .. math::
+
+        c_A' = -k_1 c_A + u_\mathrm{feed}(t), \quad c_S' = k_1 c_A - k_2 c_B, \quad
+        0 = c_B + c_C - c_S, \quad 0 = c_C - K c_B^2   \qquad [\mathrm{mol/L},\ \mathrm{h}],
+
+    c_A(0) = cA0 (the input), c_S(0) = 0; a piecewise-constant feed of A on the grid 0, 1, 2 h over a horizon of
+    3 h; outputs cA, cB, cC.  Parameters k1, k2 (1/h), K (L/mol).  Used by the DAE tests and benchmark.
+    """
+    return Model.ode(["k1", "k2", "K"], ["cA", "cS"], ["cA0"], ["cA", "cB", "cC"],
+                     rhs=lambda x, z, p, u: ca.vertcat(-p[0] * x[0] + u[1], p[0] * x[0] - p[1] * z[0]),
+                     alg=lambda x, z, p, u: ca.vertcat(z[0] + z[1] - x[1], z[1] - p[2] * z[0] ** 2),
+                     algebraic=["cB", "cC"], x0=lambda p, u: ca.vertcat(u[0], 0.0),
+                     h=lambda x, z, p, u: ca.vertcat(x[0], z[0], z[1]),
+                     controls={"feed": {"grid": [0.0, 1.0, 2.0]}}, horizon=3.0, name=name)

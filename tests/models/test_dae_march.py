@@ -10,6 +10,7 @@ from models import Model
 from models.collocation import collocate
 from models.dae_march import DAETrajectoryNumerics, GenericDAESolve, dae_march_scope
 from models.errors import StateSolveError
+from models.library import equilibrium_dae
 from models.sensitivity import generic_sensitivities
 from models.state import solve_states_generic
 
@@ -25,12 +26,7 @@ def toy():
 
 def equilibrium():
     """A -> S (k1), S = B + C in fast equilibrium C = K B^2, B consumed (k2); a piecewise-constant feed of A."""
-    return Model.ode(["k1", "k2", "K"], ["cA", "cS"], ["cA0"], ["cA", "cB", "cC"],
-                     rhs=lambda x, z, p, u: ca.vertcat(-p[0] * x[0] + u[1], p[0] * x[0] - p[1] * z[0]),
-                     alg=lambda x, z, p, u: ca.vertcat(z[0] + z[1] - x[1], z[1] - p[2] * z[0] ** 2),
-                     algebraic=["cB", "cC"], x0=lambda p, u: ca.vertcat(u[0], 0.0),
-                     h=lambda x, z, p, u: ca.vertcat(x[0], z[0], z[1]),
-                     controls={"feed": {"grid": [0.0, 1.0, 2.0]}}, horizon=3.0)
+    return equilibrium_dae()
 
 
 CASES = {
