@@ -208,7 +208,7 @@ def model_error_pages(results, variant: str):
     head, rows = coverage_rows(r)
     low = 0.035 if foot else 0.01                       # room for the footnote's line under the table
     ax = fig.add_axes([0.07, low, 0.86, row2 - h - 0.1 - low])
-    draw_table(ax, head, rows, fontsize=8, col_widths=[0.26, 0.07, 0.07, 0.1, 0.07, 0.09, 0.07, 0.115, 0.105],
+    draw_table(ax, head, rows, fontsize=8, col_widths=[0.24, 0.07, 0.07, 0.11, 0.07, 0.10, 0.07, 0.115, 0.105],
                title=f"Held-out coverage of the {100 * (1 - r.alpha):g} % new-reading bands (each split's "
                      "validation readings predicted from a fit on its calibration part)")
     if foot:
@@ -314,7 +314,8 @@ def model_uncertainty_page(results):
     height = 0.024 * (sum(heights) + 2)
     ax = fig.add_axes([0.04, top - height, 0.92, height])
     where = min(0.2, max(0.1, 0.0058 * max((len(line) for r in rows for line in str(r[5]).split("\n")), default=0)))
-    widths = np.array([0.05, 0.08, 0.075, 0.05, 0.075, where, 0.07, 0.14, 0.14, 0.13])
+    name = max(0.05, 0.0065 * max((len(str(r[0])) for r in rows), default=0) + 0.01)    # the longest variant name
+    widths = np.array([name, 0.08, 0.075, 0.05, 0.075, where, 0.07, 0.14, 0.14, 0.13])
     draw_table(ax, head, rows, flags=flags, fontsize=7.5, highlight="#fbe3e1", col_widths=list(widths / widths.sum()),
                title="The model error per sensor over the data's range (the sensors' file units; shaded: detected)")
     for (r, _), cell in ax.tables[0].get_celld().items():       # rows of two lines (test, a long "where")
